@@ -1,0 +1,58 @@
+"""Exception hierarchy of pige_sym.
+
+Every error the tool raises on purpose derives from :class:`PigeError`.  The CLI
+turns a :class:`PigeError` into one line on stderr and exit status 2 (bad input);
+anything else is a bug and keeps its traceback.  Messages say what to fix.
+"""
+
+from __future__ import annotations
+
+
+class PigeError(Exception):
+    """Base class of every error pige_sym raises deliberately."""
+
+
+class MachineCodeError(PigeError, ValueError):
+    """A machine structure code does not follow the grammar (CONVENTIONS §1).
+
+    Attributes
+    ----------
+    code : str
+        The code as given.
+    position : int
+        0-based index of the offending character in ``code`` (``len(code)``
+        when the code ends too early).
+    """
+
+    def __init__(self, code: str, position: int, problem: str) -> None:
+        self.code = code
+        self.position = position
+        self.problem = problem
+        if position < len(code):
+            where = f"character {code[position]!r} at position {position}"
+        else:
+            where = f"end of code at position {position}"
+        super().__init__(f"machine code {code!r}: {where}: {problem}")
+
+
+class UnsupportedMachineError(PigeError):
+    """A well-formed machine code the model cannot handle (e.g. no rotary axis)."""
+
+
+class KernelError(PigeError):
+    """Generated kernels are missing, stale or called with inconsistent inputs."""
+
+
+class InputError(PigeError, ValueError):
+    """A value given by the user (option, array shape, parameter name) is invalid."""
+
+
+class FileFormatError(PigeError):
+    """A data file breaks its format; the message names file, line and problem."""
+
+    def __init__(self, path: str, line: int | None, problem: str) -> None:
+        self.path = str(path)
+        self.line = line
+        self.problem = problem
+        loc = f"{self.path}:{line}" if line is not None else self.path
+        super().__init__(f"{loc}: {problem}")
