@@ -1,0 +1,49 @@
+# pige_sym — make targets.  `make help` lists them.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+MACHINE ?= wC'A'bXYZ(C1)t
+# Machines whose kernels are shipped in generated/ (checked by `make check-generated`).
+SHIPPED := "wC'A'bXYZ(C1)t" "wC'B'bXYZ(C1)t" "wbXYZCA(C1)t" "wC'bXYZB(C1)t"
+
+.PHONY: help venv gen gen-all check-generated test test-slow lint demo bench clean
+
+help:  ## list targets
+	@grep -E '^[a-zA-Z_-]+:.*## ' Makefile | sed -E 's/:.*## /\t/' | expand -t 18
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+venv: $(STAMP)  ## create .venv and install pige_sym with dev tools
+
+gen: $(STAMP)  ## generate kernels for MACHINE="..." into generated/
+	$(PY) -m pige_sym gen "$(MACHINE)"
+
+gen-all: $(STAMP)  ## regenerate every shipped machine's kernels
+	$(PY) -m pige_sym gen $(SHIPPED)
+
+check-generated: $(STAMP)  ## regenerate shipped kernels in a temp dir and fail on any difference
+	$(PY) -m pige_sym gen --check $(SHIPPED)
+
+test: $(STAMP)  ## run the default test suite (slow studies excluded)
+	$(PY) -m pytest -q
+
+test-slow: $(STAMP)  ## run the slow studies too
+	$(PY) -m pytest -q -m ''
+
+lint: $(STAMP)  ## ruff + mypy on pige_sym/
+	$(VENV)/bin/ruff check pige_sym tests benchmarks
+	$(VENV)/bin/mypy pige_sym
+
+demo: $(STAMP)  ## the whole story on the default AC machine
+	$(PY) -m pige_sym demo
+
+bench: $(STAMP)  ## run benchmarks/ and write benchmarks/RESULTS.md
+	$(PY) benchmarks/run.py
+
+clean:  ## remove the virtual environment and caches
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache
