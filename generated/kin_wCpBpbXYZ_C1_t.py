@@ -14,7 +14,7 @@
 #    8  EB0B     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 83850e9a4fdec49e
+# input hash   : 7b8ff6f4fa012b58
 """R-test kernels for wC'B'bXYZ(C1)t (generated; do not edit — make gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -36,7 +36,7 @@ UNITS = {'EX0B': 'um', 'EZ0B': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EA0B': 'urad',
 BASIS = ('1', 'cos(B)', 'sin(B)', 'cos(C)', 'sin(C)', 'cos(B)*cos(C)', 'cos(B)*sin(C)', 'sin(B)*cos(C)', 'sin(B)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '83850e9a4fdec49e'
+GENERATOR_HASH = '7b8ff6f4fa012b58'
 
 
 def _angles(angles_deg):
@@ -226,6 +226,26 @@ def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
     p = _params(params)
     g = coefficients(ball_mm, pivots_mm, tool_mm)
     return basis(angles_deg) @ (g @ p)
+
+
+def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
+    """Un-zeroed offset Jacobian at the reference pose J_raw(0), shape=(3, P) [µm per µm or µrad].
+
+    The ball-minus-nest offset before zeroing is, at any pose,
+    ``(jacobian + workpiece_rotation @ reference_jacobian) @ params``; effects whose
+    size changes with the pose (angle-dependent errors) need it.
+    """
+    ball_x, ball_y, ball_z = _vec3(ball_mm, 'ball_mm')
+    pivots = _pivots(pivots_mm)
+    pB_x, pB_y, pB_z = pivots['B']
+    pC_x, pC_y, pC_z = pivots['C']
+    tool_x, tool_y, tool_z = _tool(tool_mm)
+    out = np.zeros((3, 10))
+    out[0, 8] = (0.001)*ball_z - 0.001*pB_z
+    out[0, 9] = -0.001*ball_y + (0.001)*pC_y
+    out[1, 9] = (0.001)*ball_x - 0.001*pC_x
+    out[2, 8] = -0.001*ball_x + (0.001)*pB_x
+    return out
 
 
 def workpiece_rotation(angles_deg):

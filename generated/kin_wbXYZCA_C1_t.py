@@ -14,7 +14,7 @@
 #    8  EA0A     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : a4526f4388b11bbb
+# input hash   : a431511d3b67fe2f
 """R-test kernels for wbXYZCA(C1)t (generated; do not edit — make gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -36,7 +36,7 @@ UNITS = {'EY0A': 'um', 'EZ0A': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EB0A': 'urad',
 BASIS = ('1', 'cos(A)', 'sin(A)', 'cos(C)', 'sin(C)', 'cos(A)*cos(C)', 'cos(A)*sin(C)', 'sin(A)*cos(C)', 'sin(A)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = 'a4526f4388b11bbb'
+GENERATOR_HASH = 'a431511d3b67fe2f'
 
 
 def _angles(angles_deg):
@@ -233,6 +233,26 @@ def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
     p = _params(params)
     g = coefficients(ball_mm, pivots_mm, tool_mm)
     return basis(angles_deg) @ (g @ p)
+
+
+def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
+    """Un-zeroed offset Jacobian at the reference pose J_raw(0), shape=(3, P) [µm per µm or µrad].
+
+    The ball-minus-nest offset before zeroing is, at any pose,
+    ``(jacobian + workpiece_rotation @ reference_jacobian) @ params``; effects whose
+    size changes with the pose (angle-dependent errors) need it.
+    """
+    ball_x, ball_y, ball_z = _vec3(ball_mm, 'ball_mm')
+    pivots = _pivots(pivots_mm)
+    pA_x, pA_y, pA_z = pivots['A']
+    pC_x, pC_y, pC_z = pivots['C']
+    tool_x, tool_y, tool_z = _tool(tool_mm)
+    out = np.zeros((3, 10))
+    out[0, 9] = -0.001*pA_y + (0.001)*pC_y - 0.001*tool_y
+    out[1, 8] = -0.001*tool_z
+    out[1, 9] = (0.001)*pA_x - 0.001*pC_x + (0.001)*tool_x
+    out[2, 8] = (0.001)*tool_y
+    return out
 
 
 def workpiece_rotation(angles_deg):

@@ -269,6 +269,23 @@ def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
     g = coefficients(ball_mm, pivots_mm, tool_mm)
     return basis(angles_deg) @ (g @ p)'''
     )
+    lines = [
+        "def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):",
+        '    """Un-zeroed offset Jacobian at the reference pose J_raw(0), shape=(3, P) [µm per µm or µrad].',
+        "",
+        "    The ball-minus-nest offset before zeroing is, at any pose,",
+        "    ``(jacobian + workpiece_rotation @ reference_jacobian) @ params``; effects whose",
+        "    size changes with the pose (angle-dependent errors) need it.",
+        '    """',
+    ]
+    lines += _symbol_locals(model, "    ")
+    lines.append(f"    out = np.zeros((3, {n_par}))")
+    for i in range(3):
+        for j in range(n_par):
+            if model.reference_jacobian[i, j] != 0:
+                lines.append(f"    out[{i}, {j}] = {_code(model.reference_jacobian[i, j])}")
+    lines.append("    return out")
+    parts.append("\n".join(lines))
     parts.append(
         _matrix_function(
             model, model.workpiece_rotation, "workpiece_rotation",

@@ -131,6 +131,10 @@ class SymbolicModel:
         the reference pose.
     tool_direction : sympy.Matrix, shape (3, 1)
         Spindle direction expressed in the workpiece frame W.
+    reference_jacobian : sympy.Matrix, shape (3, P)
+        Jacobian of the un-zeroed ball-minus-nest offset at the reference pose,
+        ``J_raw(0)``; the un-zeroed Jacobian at any pose is
+        ``jacobian + workpiece_rotation @ reference_jacobian``.
     """
 
     structure: MachineStructure
@@ -144,6 +148,7 @@ class SymbolicModel:
     tool_rotation: sp.Matrix
     linear_commands: sp.Matrix
     tool_direction: sp.Matrix
+    reference_jacobian: sp.Matrix
     spindle_direction: int
     has_tool_rotary: bool
     units: dict[str, str] = field(default_factory=dict)
@@ -326,6 +331,7 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
         tool_rotation=rot_t,
         linear_commands=linear_commands,
         tool_direction=tool_direction,
+        reference_jacobian=red(jac_ref),
         spindle_direction=spindle_dir,
         has_tool_rotary=any(a.kind == "rotary" for a in structure.tool_axes),
         units=units,
