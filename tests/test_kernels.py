@@ -1,0 +1,298 @@
+"""Generated kernels vs an independent exact NumPy chain, finite differences and reference data."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import REPO, load_reference, reference_files, require_shared
+from pige_sym import load_kernels, parse_machine_code
+from pige_sym.errors import UnsupportedMachineError
+from pige_sym.kernels import SHIPPED_MACHINES
+
+UNIT = {0: np.array([1.0, 0, 0]), 1: np.array([0, 1.0, 0]), 2: np.array([0, 0, 1.0])}
+# per rotary letter: the machine-axis index of (position error 1, position error 2, orientation 1, orientation 2)
+LOCATION_INDEX = {"A": (1, 2, 1, 2), "B": (0, 2, 0, 2), "C": (0, 1, 0, 1)}
+
+
+def rodrigues(u: np.ndarray, angle: float) -> np.ndarray:
+    u = u / np.linalg.norm(u)
+    k = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+class ExactChain:
+    """Exact rigid-body chain of CONVENTIONS §2–4, written independently of the generator.
+
+    Linear axes are assumed to sit outside the rotary axes (true for every machine tested),
+    so they only add the RTCP translation, which cancels in ball − nest.
+    """
+
+    def __init__(self, code: str, ball, pivots=None, tool=None):
+        self.m = parse_machine_code(code)
+        self.ball = np.asarray(ball, float)
+        self.pivots = {a.name: np.zeros(3) for a in self.m.rotary_axes}
+        self.pivots.update({k: np.asarray(v, float) for k, v in (pivots or {}).items()})
+        tool_rot = [a for a in self.m.tool_axes if a.kind == "rotary"]
+        self.y_ball = self.pivots[tool_rot[-1].name] + np.asarray(tool, float) if tool_rot else self.ball
+        self.names = [a.name for a in self.m.rotary_axes]
+
+    def _motion(self, axis, theta, x, err):
+        u = UNIT[axis.direction].copy()
+        q = self.pivots[axis.name].copy()
+        e = 0.0
+        if err is not None:
+            i1, i2, j1, j2 = LOCATION_INDEX[axis.letter]
+            loc = err.get(axis.name, (0, 0, 0, 0, 0))
+            delta = np.zeros(3)
+            delta[i1], delta[i2] = loc[0] * 1e-3, loc[1] * 1e-3
+            eps = np.zeros(3)
+            eps[j1], eps[j2] = loc[2] * 1e-6, loc[3] * 1e-6
+            u = u + np.cross(eps, u)
+            q = q + delta
+            e = loc[4] * 1e-6
+        return q + rodrigues(u, axis.sign * (theta + e)) @ (x - q)
+
+    def raw(self, angles_deg, err):
+        th = dict(zip(self.names, np.radians(angles_deg), strict=True))
+        x = self.ball.copy()
+        for ax in self.m.workpiece_axes:
+            if ax.kind == "rotary":
+                x = self._motion(ax, th[ax.name], x, err)
+        y = self.y_ball.copy()
+        for ax in reversed(self.m.tool_axes):
+            if ax.kind == "rotary":
+                y = self._motion(ax, th[ax.name], y, err)
+        return y - x
+
+    def rot_w(self, angles_deg):
+        th = dict(zip(self.names, np.radians(angles_deg), strict=True))
+        r = np.eye(3)
+        for ax in self.m.workpiece_axes:
+            if ax.kind == "rotary":
+                r = rodrigues(UNIT[ax.direction], -th[ax.name]) @ r
+        return r
+
+    def deviation(self, angles_deg, err):
+        """Ball minus nest [µm], zeroed in the nest frame at the reference pose."""
+        zero = np.zeros(len(self.names))
+        out = []
+        for a in np.atleast_2d(angles_deg):
+            d = self.raw(a, err) - self.raw(a, None)
+            d0 = self.raw(zero, err) - self.raw(zero, None)
+            out.append((d - self.rot_w(a) @ d0) * 1e3)
+        return np.array(out)
+
+    def nest_position(self, angles_deg):
+        """Nominal position of the nest in M [mm]."""
+        th = dict(zip(self.names, np.radians(angles_deg), strict=True))
+        x = self.ball.copy()
+        for ax in self.m.workpiece_axes:
+            if ax.kind == "rotary":
+                x = self._motion(ax, th[ax.name], x, None)
+        return x
+
+
+def errors_dict(kern, params):
+    """Map a kernel parameter vector to {axis: (pos1, pos2, ori1, ori2, zero)}."""
+    out = {}
+    for i, ax in enumerate(kern.ROTARY_AXES):
+        loc = list(params[4 * i : 4 * i + 4])
+        zero = params[len(kern.LOCATION_PARAMETERS) + i]
+        out[ax] = (*loc, zero)
+    return out
+
+
+CASES = [
+    ("wC'A'bXYZ(C1)t", None),
+    ("wC'B'bXYZ(C1)t", None),
+    ("wbXYZCA(C1)t", (0.0, 0.0, -250.0)),
+    ("wC'bXYZB(C1)t", (0.0, 0.0, -180.0)),
+]
+
+
+@pytest.mark.parametrize(("code", "tool"), CASES)
+def test_kernel_matches_exact_chain(code, tool) -> None:
+    rng = np.random.default_rng(7)
+    kern = load_kernels(code)
+    for trial in range(4):
+        ball = rng.uniform(-150, 150, 3)
+        pivots = {ax: rng.uniform(-100, 100, 3) for ax in kern.ROTARY_AXES} if trial % 2 else None
+        params = rng.uniform(-15, 15, len(kern.PARAMETERS)) * 1e-3  # small errors: 2nd order negligible
+        angles = rng.uniform(-120, 120, (12, len(kern.ROTARY_AXES)))
+        chain = ExactChain(code, ball, pivots, tool)
+        exact = chain.deviation(angles, errors_dict(kern, params))
+        ours = kern.deviation(angles, params, ball, pivots, tool)
+        scale = np.abs(exact).max()
+        assert scale > 0
+        np.testing.assert_allclose(ours, exact, rtol=0, atol=1e-6 * scale)
+
+
+@pytest.mark.parametrize(("code", "tool"), CASES)
+def test_kernel_second_order_is_small_for_realistic_errors(code, tool) -> None:
+    rng = np.random.default_rng(11)
+    kern = load_kernels(code)
+    ball = np.array([120.0, -40.0, 80.0])
+    params = rng.uniform(-15, 15, len(kern.PARAMETERS))
+    angles = rng.uniform(-90, 90, (20, len(kern.ROTARY_AXES)))
+    exact = ExactChain(code, ball, None, tool).deviation(angles, errors_dict(kern, params))
+    ours = kern.deviation(angles, params, ball, None, tool)
+    assert np.abs(ours - exact).max() < 5e-3  # µm: 2nd-order terms of 15 µm / 15 µrad errors
+
+
+@pytest.mark.parametrize(("code", "tool"), CASES)
+def test_jacobian_matches_central_differences_of_exact_chain(code, tool) -> None:
+    rng = np.random.default_rng(3)
+    kern = load_kernels(code)
+    ball = rng.uniform(-100, 100, 3)
+    pivots = {ax: rng.uniform(-50, 50, 3) for ax in kern.ROTARY_AXES}
+    angles = rng.uniform(-100, 100, (6, len(kern.ROTARY_AXES)))
+    chain = ExactChain(code, ball, pivots, tool)
+    jac = kern.jacobian(angles, None, ball, pivots, tool)
+    h = 1e-2
+    for j in range(len(kern.PARAMETERS)):
+        step = np.zeros(len(kern.PARAMETERS))
+        step[j] = h
+        fd = (chain.deviation(angles, errors_dict(kern, step)) - chain.deviation(angles, errors_dict(kern, -step))) / (
+            2 * h
+        )
+        # rounding of the mm-scale chain limits absolute agreement to ~1e-9 of the largest entry
+        np.testing.assert_allclose(jac[:, :, j], fd, rtol=1e-6, atol=1e-6 * np.abs(jac).max())
+
+
+@pytest.mark.parametrize(("code", "tool"), CASES)
+def test_jacobian_equals_central_differences_of_deviation_kernel(code, tool) -> None:
+    rng = np.random.default_rng(5)
+    kern = load_kernels(code)
+    ball = rng.uniform(-100, 100, 3)
+    angles = rng.uniform(-100, 100, (9, len(kern.ROTARY_AXES)))
+    p0 = rng.uniform(-10, 10, len(kern.PARAMETERS))
+    jac = kern.jacobian(angles, p0, ball, None, tool)
+    for j in range(len(p0)):
+        e = np.zeros_like(p0)
+        e[j] = 1e-3
+        fd = (kern.deviation(angles, p0 + e, ball, None, tool) - kern.deviation(angles, p0 - e, ball, None, tool)) / 2e-3
+        np.testing.assert_allclose(jac[:, :, j], fd, rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize(("code", "tool"), CASES)
+def test_reference_pose_gives_zero_deviation_and_reference_jacobian(code, tool) -> None:
+    kern = load_kernels(code)
+    ball = np.array([50.0, 60.0, 70.0])
+    params = np.arange(1, len(kern.PARAMETERS) + 1, dtype=float)
+    zero = np.zeros((1, len(kern.ROTARY_AXES)))
+    assert np.abs(kern.deviation(zero, params, ball, None, tool)).max() < 1e-12
+    chain = ExactChain(code, ball, None, tool)
+    raw0 = (chain.raw(zero[0], errors_dict(kern, params * 1e-3)) - chain.raw(zero[0], None)) * 1e3
+    np.testing.assert_allclose(kern.reference_jacobian(ball, None, tool) @ (params * 1e-3), raw0, atol=1e-9)
+
+
+def test_nominal_kinematics_of_ac_table_with_offset_pivots() -> None:
+    kern = load_kernels("wC'A'bXYZ(C1)t")
+    ball = np.array([120.0, 10.0, 80.0])
+    pivots = {"A": np.array([0.0, 15.0, -40.0]), "C": np.array([3.0, -5.0, 0.0])}
+    rng = np.random.default_rng(1)
+    angles = rng.uniform(-110, 110, (10, 2))
+    chain = ExactChain("wC'A'bXYZ(C1)t", ball, pivots)
+    expect = np.array([chain.nest_position(a) for a in angles])
+    np.testing.assert_allclose(kern.linear_commands(angles, ball, pivots), expect, atol=1e-10)
+    rw = kern.workpiece_rotation(angles)
+    for a, r in zip(angles, rw, strict=True):
+        np.testing.assert_allclose(r, chain.rot_w(a), atol=1e-12)
+        np.testing.assert_allclose(kern.tool_direction(a[None])[0], r.T @ np.array([0, 0, 1.0]), atol=1e-12)
+
+
+@pytest.mark.parametrize("code", ["wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t", "wbXYZCA(C1)t", "wC'bXYZB(C1)t"])
+def test_angles_for_direction_inverts_tool_direction(code) -> None:
+    kern = load_kernels(code)
+    rng = np.random.default_rng(2)
+    angles = np.column_stack([rng.uniform(5, 80, 40), rng.uniform(-170, 170, 40)])
+    v = kern.tool_direction(angles)
+    for branch in (1, -1):
+        back = kern.angles_for_direction(v, branch=branch)
+        np.testing.assert_allclose(kern.tool_direction(back), v, atol=1e-12)
+
+
+@pytest.mark.parametrize("path", reference_files("*_exact.csv"), ids=lambda p: p.name)
+def test_reference_exact_files_reproduced(path) -> None:
+    require_shared()
+    meta, cols, truth = load_reference(path)
+    kern = load_kernels(meta["machine"])
+    angles = np.column_stack([cols[f"{a}_deg"] for a in kern.ROTARY_AXES])
+    ball = [float(x) for x in meta["ball_mm"].split(",")]
+    params = [truth["pige"][n] for n in kern.LOCATION_PARAMETERS]
+    dev = kern.deviation(angles, params, ball)
+    measured = np.column_stack([cols["dx_um"], cols["dy_um"], cols["dz_um"]])
+    assert np.abs(dev - measured).max() < 1e-3
+
+
+def test_reference_data_present_or_skipped() -> None:
+    if not reference_files("*_exact.csv"):
+        pytest.skip("../shared/reference is absent")
+    assert len(reference_files("*_exact.csv")) >= 3
+
+
+def test_params_of_location_errors_only_are_accepted() -> None:
+    kern = load_kernels("wC'A'bXYZ(C1)t")
+    angles = np.array([[10.0, 20.0], [30.0, -40.0]])
+    p8 = np.arange(8.0)
+    np.testing.assert_allclose(
+        kern.deviation(angles, p8, [1, 2, 3]), kern.deviation(angles, np.r_[p8, 0, 0], [1, 2, 3])
+    )
+    with pytest.raises(ValueError, match="location errors"):
+        kern.deviation(angles, np.arange(5.0), [1, 2, 3])
+    with pytest.raises(ValueError, match="angles_deg must have shape"):
+        kern.deviation(np.zeros((3, 3)), p8, [1, 2, 3])
+    with pytest.raises(ValueError, match="not a rotary axis"):
+        kern.deviation(angles, p8, [1, 2, 3], {"B": [0, 0, 0]})
+
+
+def test_generated_modules_do_not_import_sympy() -> None:
+    code = (
+        "import sys, pige_sym\n"
+        "from pige_sym import load_kernels\n"
+        "for c in " + repr(list(SHIPPED_MACHINES)) + ": load_kernels(c)\n"
+        "assert 'sympy' not in sys.modules, 'sympy imported at run time'\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO, timeout=60)
+
+
+def test_on_demand_generation_for_a_new_machine(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("PIGE_GENERATED_DIR", str(tmp_path))
+    from pige_sym import kernels
+
+    monkeypatch.setattr(kernels, "_CACHE", {})
+    kern = load_kernels("wC'A'Y'X'bZ(C1)t")
+    assert (tmp_path / "kin_wCpApYpXpbZ_C1_t.py").exists()
+    angles = np.array([[20.0, 30.0]])
+    monkeypatch.setattr(kernels, "_CACHE", {})
+    monkeypatch.delenv("PIGE_GENERATED_DIR")
+    ac = load_kernels("wC'A'bXYZ(C1)t")
+    p = np.arange(1.0, 9.0)
+    # linear axes on the workpiece side do not change the rotary-axis error model
+    np.testing.assert_allclose(kern.deviation(angles, p, [10, 20, 30]), ac.deviation(angles, p, [10, 20, 30]))
+
+
+@pytest.mark.parametrize(
+    ("code", "fragment"),
+    [("wbXYZ(C1)t", "no rotary axis"), ("wC'A'bXY(C1)t", "no linear axis along Z"), ("wX'C'bYZ(C1)t", "singular")],
+)
+def test_unsupported_machines_are_refused(code, fragment) -> None:
+    from pige_sym.symbolic import build_model
+
+    with pytest.raises(UnsupportedMachineError, match=fragment):
+        build_model(code)
+
+
+def test_check_generated_is_clean() -> None:
+    env = dict(os.environ)
+    env.pop("PIGE_GENERATED_DIR", None)
+    proc = subprocess.run(
+        [sys.executable, "-m", "pige_sym", "gen", "--check", *SHIPPED_MACHINES],
+        capture_output=True, text=True, cwd=REPO, env=env, timeout=120,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
