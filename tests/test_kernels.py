@@ -175,7 +175,8 @@ def test_jacobian_equals_central_differences_of_deviation_kernel(code, tool) -> 
     for j in range(len(p0)):
         e = np.zeros_like(p0)
         e[j] = 1e-3
-        fd = (kern.deviation(angles, p0 + e, ball, None, tool) - kern.deviation(angles, p0 - e, ball, None, tool)) / 2e-3
+        plus = kern.deviation(angles, p0 + e, ball, None, tool)
+        fd = (plus - kern.deviation(angles, p0 - e, ball, None, tool)) / 2e-3
         np.testing.assert_allclose(jac[:, :, j], fd, rtol=1e-6, atol=1e-9)
 
 
