@@ -14,7 +14,7 @@
 #    8  EA0A     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 1209c5906d9f99aa
+# input hash   : db98579b9c1d8696
 """R-test kernels for wC'A'bXYZ(C1)t (generated; do not edit — make gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -36,7 +36,7 @@ UNITS = {'EY0A': 'um', 'EZ0A': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EB0A': 'urad',
 BASIS = ('1', 'cos(A)', 'sin(A)', 'cos(C)', 'sin(C)', 'cos(A)*cos(C)', 'cos(A)*sin(C)', 'sin(A)*cos(C)', 'sin(A)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '1209c5906d9f99aa'
+GENERATOR_HASH = 'db98579b9c1d8696'
 
 
 def _angles(angles_deg):
@@ -245,6 +245,39 @@ def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     out[1, 8] = -0.001*ball_z + (0.001)*pA_z
     out[1, 9] = (0.001)*ball_x - 0.001*pC_x
     out[2, 8] = (0.001)*ball_y - 0.001*pA_y
+    return out
+
+
+def orientation_jacobian(angles_deg):
+    """Tool-orientation error Jacobian, shape=(n, 3, P) [µrad per µm or µrad].
+
+    ω = orientation_jacobian @ params is the small rotation of the spindle frame
+    relative to the workpiece, expressed in W: R_rel_actual = (I + [ω]x) R_rel_nominal.
+    """
+    th = np.radians(_angles(angles_deg))
+    c_A = np.cos(th[:, 0])
+    s_A = np.sin(th[:, 0])
+    c_C = np.cos(th[:, 1])
+    s_C = np.sin(th[:, 1])
+    out = np.zeros((th.shape[0], 3, 10))
+    out[:, 0, 6] += 1 * 1.0
+    out[:, 1, 7] += 1 * 1.0
+    out[:, 2, 3] += 1 * 1.0
+    out[:, 2, 9] += 1 * 1.0
+    out[:, 2, 3] += -1 * c_A
+    out[:, 2, 2] += -1 * s_A
+    out[:, 0, 6] += -1 * c_C
+    out[:, 0, 8] += 1 * c_C
+    out[:, 1, 2] += 1 * c_C
+    out[:, 1, 7] += -1 * c_C
+    out[:, 0, 2] += -1 * s_C
+    out[:, 0, 7] += 1 * s_C
+    out[:, 1, 6] += -1 * s_C
+    out[:, 1, 8] += 1 * s_C
+    out[:, 1, 2] += -1 * c_A * c_C
+    out[:, 0, 2] += 1 * c_A * s_C
+    out[:, 1, 3] += 1 * s_A * c_C
+    out[:, 0, 3] += -1 * s_A * s_C
     return out
 
 

@@ -14,7 +14,7 @@
 #    8  EB0B     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 7b8ff6f4fa012b58
+# input hash   : 449b70766a9045b9
 """R-test kernels for wC'B'bXYZ(C1)t (generated; do not edit — make gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -36,7 +36,7 @@ UNITS = {'EX0B': 'um', 'EZ0B': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EA0B': 'urad',
 BASIS = ('1', 'cos(B)', 'sin(B)', 'cos(C)', 'sin(C)', 'cos(B)*cos(C)', 'cos(B)*sin(C)', 'sin(B)*cos(C)', 'sin(B)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '7b8ff6f4fa012b58'
+GENERATOR_HASH = '449b70766a9045b9'
 
 
 def _angles(angles_deg):
@@ -245,6 +245,39 @@ def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     out[0, 9] = -0.001*ball_y + (0.001)*pC_y
     out[1, 9] = (0.001)*ball_x - 0.001*pC_x
     out[2, 8] = -0.001*ball_x + (0.001)*pB_x
+    return out
+
+
+def orientation_jacobian(angles_deg):
+    """Tool-orientation error Jacobian, shape=(n, 3, P) [µrad per µm or µrad].
+
+    ω = orientation_jacobian @ params is the small rotation of the spindle frame
+    relative to the workpiece, expressed in W: R_rel_actual = (I + [ω]x) R_rel_nominal.
+    """
+    th = np.radians(_angles(angles_deg))
+    c_B = np.cos(th[:, 0])
+    s_B = np.sin(th[:, 0])
+    c_C = np.cos(th[:, 1])
+    s_C = np.sin(th[:, 1])
+    out = np.zeros((th.shape[0], 3, 10))
+    out[:, 0, 6] += 1 * 1.0
+    out[:, 1, 7] += 1 * 1.0
+    out[:, 2, 3] += 1 * 1.0
+    out[:, 2, 9] += 1 * 1.0
+    out[:, 2, 3] += -1 * c_B
+    out[:, 2, 2] += 1 * s_B
+    out[:, 0, 2] += 1 * c_C
+    out[:, 0, 6] += -1 * c_C
+    out[:, 1, 7] += -1 * c_C
+    out[:, 1, 8] += 1 * c_C
+    out[:, 0, 7] += 1 * s_C
+    out[:, 0, 8] += -1 * s_C
+    out[:, 1, 2] += 1 * s_C
+    out[:, 1, 6] += -1 * s_C
+    out[:, 0, 2] += -1 * c_B * c_C
+    out[:, 1, 2] += -1 * c_B * s_C
+    out[:, 0, 3] += -1 * s_B * c_C
+    out[:, 1, 3] += -1 * s_B * s_C
     return out
 
 

@@ -286,6 +286,25 @@ def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
                 lines.append(f"    out[{i}, {j}] = {_code(model.reference_jacobian[i, j])}")
     lines.append("    return out")
     parts.append("\n".join(lines))
+    ori = trig_basis(model.orientation_jacobian, model.trig_pairs)
+    lines = [
+        "def orientation_jacobian(angles_deg):",
+        '    """Tool-orientation error Jacobian, shape=(n, 3, P) [µrad per µm or µrad].',
+        "",
+        "    ω = orientation_jacobian @ params is the small rotation of the spindle frame",
+        "    relative to the workpiece, expressed in W: R_rel_actual = (I + [ω]x) R_rel_nominal.",
+        '    """',
+    ]
+    lines += _trig_locals(model, "    ")
+    lines.append(f"    out = np.zeros((th.shape[0], 3, {n_par}))")
+    for m, cm in zip(ori.monomials, ori.coefficients, strict=True):
+        for i in range(3):
+            for j in range(n_par):
+                if cm[i, j] != 0:
+                    term = monomial_code(m)
+                    lines.append(f"    out[:, {i}, {j}] += {_code(cm[i, j])} * {term}")
+    lines.append("    return out")
+    parts.append("\n".join(lines))
     parts.append(
         _matrix_function(
             model, model.workpiece_rotation, "workpiece_rotation",

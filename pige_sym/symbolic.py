@@ -135,6 +135,11 @@ class SymbolicModel:
         Jacobian of the un-zeroed ball-minus-nest offset at the reference pose,
         ``J_raw(0)``; the un-zeroed Jacobian at any pose is
         ``jacobian + workpiece_rotation @ reference_jacobian``.
+    orientation_jacobian : sympy.Matrix, shape (3, P)
+        Small rotation ω [µrad per µm or µrad] of the spindle frame relative to the
+        workpiece frame, expressed in W: ``R_rel_actual = (I + [ω]×) R_rel_nominal``
+        with ``R_rel = workpiece_rotationᵀ · tool_rotation``.  Not zeroed (nothing
+        measures orientation at the reference pose).
     """
 
     structure: MachineStructure
@@ -149,6 +154,7 @@ class SymbolicModel:
     linear_commands: sp.Matrix
     tool_direction: sp.Matrix
     reference_jacobian: sp.Matrix
+    orientation_jacobian: sp.Matrix
     spindle_direction: int
     has_tool_rotary: bool
     units: dict[str, str] = field(default_factory=dict)
@@ -221,7 +227,7 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
     lin_syms = {d: sp.Symbol(f"L_{'XYZ'[d]}", real=True) for d in range(3)}
 
     def rotary_motion(r: RotaryAxisSymbols, x: sp.Matrix, perturbed: bool) -> tuple[sp.Matrix, sp.Matrix]:
-        """Return (moved point, nominal rotation matrix) for rotary axis r."""
+        """Return (moved point, rotation matrix) for rotary axis r (perturbed or nominal)."""
         ax = r.axis
         u = _unit(ax.direction)
         sigma = ax.sign
@@ -243,9 +249,7 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
             u_act, q, cos_phi, sin_phi = u, r.pivot, c, sigma * s
         k_mat = _cross_matrix(u_act)
         rot = sp.eye(3) + sin_phi * k_mat + (1 - cos_phi) * k_mat * k_mat
-        k0 = _cross_matrix(u)
-        rot_nominal = sp.eye(3) + sigma * s * k0 + (1 - c) * k0 * k0
-        return q + rot * (x - q), rot_nominal
+        return q + rot * (x - q), rot
 
     def linear_motion(ax: Axis, x: sp.Matrix) -> sp.Matrix:
         if commanded[ax.direction] is not ax:
@@ -295,7 +299,7 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
     lin_solution = red(-(a_mat.adjugate() / det) * r0)
     lin_subs = {lin_vec[d]: lin_solution[d] for d in range(3)}
 
-    ball_act, nest_act, _, _ = chain(perturbed=True)
+    ball_act, nest_act, rot_w_act, rot_t_act = chain(perturbed=True)
     r_act = ball_act - nest_act
     zero_subs = {p: 0 for p in param_syms}
     jac_cols = []
@@ -306,6 +310,16 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
     at_reference = {r.cos: 1 for r in ordered} | {r.sin: 0 for r in ordered}
     jac_ref = jac_raw.subs(at_reference)
     jacobian = red(jac_raw - rot_w * jac_ref)
+
+    # Orientation error of the spindle frame relative to W, as a small rotation vector ω in W:
+    # R_rel_act = (I + [ω]x) R_rel_nom with R_rel = R_w^T R_t.
+    rel_act = rot_w_act.T * rot_t_act
+    rel_nom = rot_w.T * rot_t
+    ori_cols = []
+    for p in param_syms:
+        dm = (rel_act.diff(p).subs(zero_subs)) * rel_nom.T
+        ori_cols.append(sp.Matrix([dm[2, 1], dm[0, 2], dm[1, 0]]))
+    orientation_jacobian = red(sp.Matrix.hstack(*ori_cols) * 10**6)
 
     # Commanded X, Y, Z: equal to ball_mm at the reference pose.
     lin_ref = lin_solution.subs(at_reference)
@@ -332,6 +346,7 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
         linear_commands=linear_commands,
         tool_direction=tool_direction,
         reference_jacobian=red(jac_ref),
+        orientation_jacobian=orientation_jacobian,
         spindle_direction=spindle_dir,
         has_tool_rotary=any(a.kind == "rotary" for a in structure.tool_axes),
         units=units,

@@ -69,6 +69,23 @@ class ExactChain:
                 y = self._motion(ax, th[ax.name], y, err)
         return y - x
 
+    def relative_rotation(self, angles_deg, err):
+        """Rotation of the spindle frame relative to W (exact, with errors)."""
+        th = dict(zip(self.names, np.radians(angles_deg), strict=True))
+        origin = np.zeros(3)
+        basis = np.eye(3)
+
+        def rotate(axes, reverse):
+            r = np.eye(3)
+            for ax in (reversed(axes) if reverse else axes):
+                if ax.kind == "rotary":
+                    moved = np.array([self._motion(ax, th[ax.name], v, err) for v in basis])
+                    lin = (moved - self._motion(ax, th[ax.name], origin, err)).T
+                    r = lin @ r
+            return r
+
+        return rotate(self.m.workpiece_axes, False).T @ rotate(self.m.tool_axes, True)
+
     def rot_w(self, angles_deg):
         th = dict(zip(self.names, np.radians(angles_deg), strict=True))
         r = np.eye(3)
@@ -297,3 +314,23 @@ def test_check_generated_is_clean() -> None:
         capture_output=True, text=True, cwd=REPO, env=env, timeout=120,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+@pytest.mark.parametrize(("code", "tool"), CASES)
+def test_orientation_jacobian_matches_exact_chain(code, tool) -> None:
+    rng = np.random.default_rng(13)
+    kern = load_kernels(code)
+    chain = ExactChain(code, [10.0, 20.0, 30.0], None, tool)
+    angles = rng.uniform(-100, 100, (5, len(kern.ROTARY_AXES)))
+    jac = kern.orientation_jacobian(angles)
+    h = 1e-2
+    for i, a in enumerate(angles):
+        nominal = chain.relative_rotation(a, None)
+        for j in range(len(kern.PARAMETERS)):
+            step = np.zeros(len(kern.PARAMETERS))
+            step[j] = h
+            plus = chain.relative_rotation(a, errors_dict(kern, step))
+            minus = chain.relative_rotation(a, errors_dict(kern, -step))
+            skew = (plus - minus) @ nominal.T / (2 * h) * 1e6
+            omega = np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
+            np.testing.assert_allclose(jac[i, :, j], omega, atol=1e-5)
