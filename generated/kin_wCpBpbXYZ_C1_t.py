@@ -14,7 +14,7 @@
 #    8  EB0B     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 449b70766a9045b9
+# input hash   : 8690dd5d0a415002
 """R-test kernels for wC'B'bXYZ(C1)t (generated; do not edit — make gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -32,11 +32,12 @@ TOOL_ROTARY = ()
 PARAMETERS = ('EX0B', 'EZ0B', 'EA0B', 'EC0B', 'EX0C', 'EY0C', 'EA0C', 'EB0C', 'EB0B', 'EC0C')
 LOCATION_PARAMETERS = ('EX0B', 'EZ0B', 'EA0B', 'EC0B', 'EX0C', 'EY0C', 'EA0C', 'EB0C')
 ZERO_PARAMETERS = ('EB0B', 'EC0C')
+MOTION_PARAMETERS = ('B_dx', 'B_dy', 'B_dz', 'B_rx', 'B_ry', 'B_rz', 'C_dx', 'C_dy', 'C_dz', 'C_rx', 'C_ry', 'C_rz')
 UNITS = {'EX0B': 'um', 'EZ0B': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EA0B': 'urad', 'EC0B': 'urad', 'EA0C': 'urad', 'EB0C': 'urad', 'EB0B': 'urad', 'EC0C': 'urad'}
 BASIS = ('1', 'cos(B)', 'sin(B)', 'cos(C)', 'sin(C)', 'cos(B)*cos(C)', 'cos(B)*sin(C)', 'sin(B)*cos(C)', 'sin(B)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '449b70766a9045b9'
+GENERATOR_HASH = '8690dd5d0a415002'
 
 
 def _angles(angles_deg):
@@ -246,6 +247,85 @@ def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     out[1, 9] = (0.001)*ball_x - 0.001*pC_x
     out[2, 8] = -0.001*ball_x + (0.001)*pB_x
     return out
+
+
+def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
+    """Un-zeroed offset per unit error motion, shape=(n, 3, 6k) [µm per µm or µrad].
+
+    Columns MOTION_PARAMETERS: per rotary axis dx, dy, dz [µm] and rx, ry, rz [µrad],
+    a small rigid motion of the body the axis carries (carrier frame, rotations about
+    the nominal pivot) applied after the axis' own motion.  Zeroing at the reference
+    pose is the caller's business (subtract workpiece_rotation @ value at the reference).
+    """
+    th = np.radians(_angles(angles_deg))
+    c_B = np.cos(th[:, 0])
+    s_B = np.sin(th[:, 0])
+    c_C = np.cos(th[:, 1])
+    s_C = np.sin(th[:, 1])
+    ball_x, ball_y, ball_z = _vec3(ball_mm, 'ball_mm')
+    pivots = _pivots(pivots_mm)
+    pB_x, pB_y, pB_z = pivots['B']
+    pC_x, pC_y, pC_z = pivots['C']
+    tool_x, tool_y, tool_z = _tool(tool_mm)
+    b = np.empty((th.shape[0], 9))
+    b[:, 0] = 1.0
+    b[:, 1] = c_B
+    b[:, 2] = s_B
+    b[:, 3] = c_C
+    b[:, 4] = s_C
+    b[:, 5] = c_B * c_C
+    b[:, 6] = c_B * s_C
+    b[:, 7] = s_B * c_C
+    b[:, 8] = s_B * s_C
+    g = np.zeros((9, 3, 12))
+    g[0, 0, 0] = -1
+    g[0, 0, 5] = -0.001*pB_y + (0.001)*pC_y
+    g[0, 1, 1] = -1
+    g[0, 1, 7] = -1
+    g[0, 1, 9] = (0.001)*ball_z - 0.001*pC_z
+    g[0, 2, 2] = -1
+    g[0, 2, 3] = (0.001)*pB_y - 0.001*pC_y
+    g[1, 0, 4] = -0.001*ball_z + (0.001)*pB_z
+    g[1, 0, 6] = -1
+    g[1, 0, 10] = -0.001*ball_z + (0.001)*pC_z
+    g[1, 1, 3] = (0.001)*ball_z - 0.001*pB_z
+    g[1, 1, 5] = (0.001)*pB_x - 0.001*pC_x
+    g[1, 2, 4] = -0.001*pB_x + (0.001)*pC_x
+    g[1, 2, 8] = -1
+    g[2, 0, 4] = (0.001)*pB_x - 0.001*pC_x
+    g[2, 0, 8] = 1
+    g[2, 1, 3] = -0.001*pB_x + (0.001)*pC_x
+    g[2, 1, 5] = (0.001)*ball_z - 0.001*pB_z
+    g[2, 2, 4] = -0.001*ball_z + (0.001)*pB_z
+    g[2, 2, 6] = -1
+    g[2, 2, 10] = -0.001*ball_z + (0.001)*pC_z
+    g[3, 0, 5] = (0.001)*ball_y - 0.001*pC_y
+    g[3, 1, 11] = -0.001*ball_x + (0.001)*pC_x
+    g[3, 2, 3] = -0.001*ball_y + (0.001)*pC_y
+    g[4, 0, 5] = -0.001*ball_x + (0.001)*pC_x
+    g[4, 1, 11] = -0.001*ball_y + (0.001)*pC_y
+    g[4, 2, 3] = (0.001)*ball_x - 0.001*pC_x
+    g[5, 0, 11] = (0.001)*ball_y - 0.001*pC_y
+    g[5, 1, 5] = -0.001*ball_x + (0.001)*pC_x
+    g[5, 2, 4] = (0.001)*ball_x - 0.001*pC_x
+    g[5, 2, 9] = -0.001*ball_y + (0.001)*pC_y
+    g[5, 2, 10] = (0.001)*ball_x - 0.001*pC_x
+    g[6, 0, 11] = -0.001*ball_x + (0.001)*pC_x
+    g[6, 1, 5] = -0.001*ball_y + (0.001)*pC_y
+    g[6, 2, 4] = (0.001)*ball_y - 0.001*pC_y
+    g[6, 2, 9] = (0.001)*ball_x - 0.001*pC_x
+    g[6, 2, 10] = (0.001)*ball_y - 0.001*pC_y
+    g[7, 0, 4] = -0.001*ball_x + (0.001)*pC_x
+    g[7, 0, 9] = (0.001)*ball_y - 0.001*pC_y
+    g[7, 0, 10] = -0.001*ball_x + (0.001)*pC_x
+    g[7, 1, 3] = (0.001)*ball_x - 0.001*pC_x
+    g[7, 2, 11] = (0.001)*ball_y - 0.001*pC_y
+    g[8, 0, 4] = -0.001*ball_y + (0.001)*pC_y
+    g[8, 0, 9] = -0.001*ball_x + (0.001)*pC_x
+    g[8, 0, 10] = -0.001*ball_y + (0.001)*pC_y
+    g[8, 1, 3] = (0.001)*ball_y - 0.001*pC_y
+    g[8, 2, 11] = -0.001*ball_x + (0.001)*pC_x
+    return (b @ g.reshape(9, -1)).reshape(th.shape[0], 3, 12)
 
 
 def orientation_jacobian(angles_deg):

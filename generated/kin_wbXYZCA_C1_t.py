@@ -14,7 +14,7 @@
 #    8  EA0A     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 742edb4fd170b5c4
+# input hash   : 6c0ff9fc63474ae1
 """R-test kernels for wbXYZCA(C1)t (generated; do not edit — make gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -32,11 +32,12 @@ TOOL_ROTARY = ('C', 'A')
 PARAMETERS = ('EY0A', 'EZ0A', 'EB0A', 'EC0A', 'EX0C', 'EY0C', 'EA0C', 'EB0C', 'EA0A', 'EC0C')
 LOCATION_PARAMETERS = ('EY0A', 'EZ0A', 'EB0A', 'EC0A', 'EX0C', 'EY0C', 'EA0C', 'EB0C')
 ZERO_PARAMETERS = ('EA0A', 'EC0C')
+MOTION_PARAMETERS = ('A_dx', 'A_dy', 'A_dz', 'A_rx', 'A_ry', 'A_rz', 'C_dx', 'C_dy', 'C_dz', 'C_rx', 'C_ry', 'C_rz')
 UNITS = {'EY0A': 'um', 'EZ0A': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EB0A': 'urad', 'EC0A': 'urad', 'EA0C': 'urad', 'EB0C': 'urad', 'EA0A': 'urad', 'EC0C': 'urad'}
 BASIS = ('1', 'cos(A)', 'sin(A)', 'cos(C)', 'sin(C)', 'cos(A)*cos(C)', 'cos(A)*sin(C)', 'sin(A)*cos(C)', 'sin(A)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '742edb4fd170b5c4'
+GENERATOR_HASH = '6c0ff9fc63474ae1'
 
 
 def _angles(angles_deg):
@@ -253,6 +254,85 @@ def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     out[1, 9] = (0.001)*pA_x - 0.001*pC_x + (0.001)*tool_x
     out[2, 8] = (0.001)*tool_y
     return out
+
+
+def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
+    """Un-zeroed offset per unit error motion, shape=(n, 3, 6k) [µm per µm or µrad].
+
+    Columns MOTION_PARAMETERS: per rotary axis dx, dy, dz [µm] and rx, ry, rz [µrad],
+    a small rigid motion of the body the axis carries (carrier frame, rotations about
+    the nominal pivot) applied after the axis' own motion.  Zeroing at the reference
+    pose is the caller's business (subtract workpiece_rotation @ value at the reference).
+    """
+    th = np.radians(_angles(angles_deg))
+    c_A = np.cos(th[:, 0])
+    s_A = np.sin(th[:, 0])
+    c_C = np.cos(th[:, 1])
+    s_C = np.sin(th[:, 1])
+    ball_x, ball_y, ball_z = _vec3(ball_mm, 'ball_mm')
+    pivots = _pivots(pivots_mm)
+    pA_x, pA_y, pA_z = pivots['A']
+    pC_x, pC_y, pC_z = pivots['C']
+    tool_x, tool_y, tool_z = _tool(tool_mm)
+    b = np.empty((th.shape[0], 9))
+    b[:, 0] = 1.0
+    b[:, 1] = c_A
+    b[:, 2] = s_A
+    b[:, 3] = c_C
+    b[:, 4] = s_C
+    b[:, 5] = c_A * c_C
+    b[:, 6] = c_A * s_C
+    b[:, 7] = s_A * c_C
+    b[:, 8] = s_A * s_C
+    g = np.zeros((9, 3, 12))
+    g[0, 0, 6] = 1
+    g[0, 0, 10] = (0.001)*pA_z - 0.001*pC_z
+    g[0, 1, 7] = 1
+    g[0, 1, 9] = -0.001*pA_z + (0.001)*pC_z
+    g[0, 2, 2] = 1
+    g[0, 2, 4] = -0.001*tool_x
+    g[0, 2, 8] = 1
+    g[1, 0, 10] = (0.001)*tool_z
+    g[1, 1, 9] = -0.001*tool_z
+    g[1, 2, 3] = (0.001)*tool_y
+    g[2, 0, 10] = (0.001)*tool_y
+    g[2, 1, 9] = -0.001*tool_y
+    g[2, 2, 3] = -0.001*tool_z
+    g[3, 0, 0] = 1
+    g[3, 0, 11] = -0.001*pA_y + (0.001)*pC_y
+    g[3, 1, 1] = 1
+    g[3, 1, 5] = (0.001)*tool_x
+    g[3, 1, 11] = (0.001)*pA_x - 0.001*pC_x + (0.001)*tool_x
+    g[3, 2, 9] = (0.001)*pA_y - 0.001*pC_y
+    g[3, 2, 10] = -0.001*pA_x + (0.001)*pC_x - 0.001*tool_x
+    g[4, 0, 1] = -1
+    g[4, 0, 5] = -0.001*tool_x
+    g[4, 0, 11] = -0.001*pA_x + (0.001)*pC_x - 0.001*tool_x
+    g[4, 1, 0] = 1
+    g[4, 1, 11] = -0.001*pA_y + (0.001)*pC_y
+    g[4, 2, 9] = (0.001)*pA_x - 0.001*pC_x + (0.001)*tool_x
+    g[4, 2, 10] = (0.001)*pA_y - 0.001*pC_y
+    g[5, 0, 4] = (0.001)*tool_z
+    g[5, 0, 5] = -0.001*tool_y
+    g[5, 0, 11] = -0.001*tool_y
+    g[5, 1, 3] = -0.001*tool_z
+    g[5, 2, 9] = (0.001)*tool_y
+    g[6, 0, 3] = (0.001)*tool_z
+    g[6, 1, 4] = (0.001)*tool_z
+    g[6, 1, 5] = -0.001*tool_y
+    g[6, 1, 11] = -0.001*tool_y
+    g[6, 2, 10] = (0.001)*tool_y
+    g[7, 0, 4] = (0.001)*tool_y
+    g[7, 0, 5] = (0.001)*tool_z
+    g[7, 0, 11] = (0.001)*tool_z
+    g[7, 1, 3] = -0.001*tool_y
+    g[7, 2, 9] = -0.001*tool_z
+    g[8, 0, 3] = (0.001)*tool_y
+    g[8, 1, 4] = (0.001)*tool_y
+    g[8, 1, 5] = (0.001)*tool_z
+    g[8, 1, 11] = (0.001)*tool_z
+    g[8, 2, 10] = -0.001*tool_z
+    return (b @ g.reshape(9, -1)).reshape(th.shape[0], 3, 12)
 
 
 def orientation_jacobian(angles_deg):

@@ -202,6 +202,7 @@ TOOL_ROTARY = {tl_rot!r}
 PARAMETERS = {model.parameters!r}
 LOCATION_PARAMETERS = {model.parameters[: model.n_location]!r}
 ZERO_PARAMETERS = {model.parameters[model.n_location:]!r}
+MOTION_PARAMETERS = {model.motion_parameters!r}
 UNITS = {dict(model.units)!r}
 BASIS = {tuple(monomial_name(m) for m in basis.monomials)!r}
 SPINDLE_DIRECTION = {model.spindle_direction}
@@ -285,6 +286,31 @@ def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
             if model.reference_jacobian[i, j] != 0:
                 lines.append(f"    out[{i}, {j}] = {_code(model.reference_jacobian[i, j])}")
     lines.append("    return out")
+    parts.append("\n".join(lines))
+    mot = trig_basis(model.motion_jacobian, model.trig_pairs)
+    n_mot = len(model.motion_parameters)
+    lines = [
+        "def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):",
+        '    """Un-zeroed offset per unit error motion, shape=(n, 3, 6k) [µm per µm or µrad].',
+        "",
+        "    Columns MOTION_PARAMETERS: per rotary axis dx, dy, dz [µm] and rx, ry, rz [µrad],",
+        "    a small rigid motion of the body the axis carries (carrier frame, rotations about",
+        "    the nominal pivot) applied after the axis' own motion.  Zeroing at the reference",
+        "    pose is the caller's business (subtract workpiece_rotation @ value at the reference).",
+        '    """',
+    ]
+    lines += _trig_locals(model, "    ")
+    lines += _symbol_locals(model, "    ")
+    lines.append(f"    b = np.empty((th.shape[0], {len(mot.monomials)}))")
+    for k, m in enumerate(mot.monomials):
+        lines.append(f"    b[:, {k}] = {monomial_code(m)}")
+    lines.append(f"    g = np.zeros(({len(mot.monomials)}, 3, {n_mot}))")
+    for k, cm in enumerate(mot.coefficients):
+        for i in range(3):
+            for j in range(n_mot):
+                if cm[i, j] != 0:
+                    lines.append(f"    g[{k}, {i}, {j}] = {_code(cm[i, j])}")
+    lines.append(f"    return (b @ g.reshape({len(mot.monomials)}, -1)).reshape(th.shape[0], 3, {n_mot})")
     parts.append("\n".join(lines))
     ori = trig_basis(model.orientation_jacobian, model.trig_pairs)
     lines = [

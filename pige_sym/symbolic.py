@@ -55,6 +55,9 @@ _LOCATION = {
 }
 _ROTARY_FOR_INDEX = "ABC"
 UM_TO_MM = sp.Rational(1, 1000)
+#: Error-motion components of the body carried by a rotary axis, in the carrier frame:
+#: translations [µm] and small rotations about the nominal pivot [µrad].
+MOTION_COMPONENTS = ("dx", "dy", "dz", "rx", "ry", "rz")
 URAD_TO_RAD = sp.Rational(1, 10**6)
 MM_TO_UM = 1000
 
@@ -106,6 +109,7 @@ class RotaryAxisSymbols:
     pivot: sp.Matrix
     location: list[sp.Symbol]
     zero: sp.Symbol
+    motion: list[sp.Symbol]
 
 
 @dataclass
@@ -140,6 +144,13 @@ class SymbolicModel:
         workpiece frame, expressed in W: ``R_rel_actual = (I + [ω]×) R_rel_nominal``
         with ``R_rel = workpiece_rotationᵀ · tool_rotation``.  Not zeroed (nothing
         measures orientation at the reference pose).
+    motion_jacobian : sympy.Matrix, shape (3, 6k)
+        Un-zeroed ball-minus-nest offset [µm] per unit error motion of the body carried
+        by each rotary axis (column order; per axis ``dx, dy, dz`` [µm] translations and
+        ``rx, ry, rz`` [µrad] small rotations about the nominal pivot, in the carrier's
+        frame, applied after the axis' own motion).  Angle-dependent error motions
+        (angular positioning, tilt/wobble, radial runout, backlash) are these columns
+        times functions of the angles.
     """
 
     structure: MachineStructure
@@ -155,6 +166,8 @@ class SymbolicModel:
     tool_direction: sp.Matrix
     reference_jacobian: sp.Matrix
     orientation_jacobian: sp.Matrix
+    motion_jacobian: sp.Matrix
+    motion_parameters: tuple[str, ...]
     spindle_direction: int
     has_tool_rotary: bool
     units: dict[str, str] = field(default_factory=dict)
@@ -206,6 +219,7 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
             pivot=sp.Matrix(sp.symbols(f"p{nm}_x p{nm}_y p{nm}_z", real=True)),
             location=[sp.Symbol(n, real=True) for n in location_parameter_names(nm)],
             zero=sp.Symbol(zero_parameter_name(nm), real=True),
+            motion=[sp.Symbol(f"{nm}_{c}", real=True) for c in MOTION_COMPONENTS],
         )
     ordered = [rotary[a.name] for a in rotary_axes]
     location_syms = [s for r in ordered for s in r.location]
@@ -226,21 +240,26 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
         )
     lin_syms = {d: sp.Symbol(f"L_{'XYZ'[d]}", real=True) for d in range(3)}
 
-    def rotary_motion(r: RotaryAxisSymbols, x: sp.Matrix, perturbed: bool) -> tuple[sp.Matrix, sp.Matrix]:
-        """Return (moved point, rotation matrix) for rotary axis r (perturbed or nominal)."""
+    def only(sym: sp.Symbol, active: sp.Symbol | None) -> sp.Expr:
+        """The error symbol itself if it is the active one, else 0 (one derivative at a time)."""
+        return sym if sym == active else sp.Integer(0)
+
+    def rotary_motion(r: RotaryAxisSymbols, x: sp.Matrix, active: sp.Symbol | None) -> tuple[sp.Matrix, sp.Matrix]:
+        """Return (moved point, rotation matrix) for rotary axis r, perturbed by the active error only."""
         ax = r.axis
         u = _unit(ax.direction)
         sigma = ax.sign
         c, s = r.cos, r.sin
+        perturbed = active is not None and (active in r.location or active == r.zero or active in r.motion)
         if perturbed:
             names = _LOCATION[ax.letter]
             delta = sp.zeros(3, 1)
             eps = sp.zeros(3, 1)
-            delta[names[0][1]] = r.location[0] * UM_TO_MM
-            delta[names[1][1]] = r.location[1] * UM_TO_MM
-            eps[names[2][1]] = r.location[2] * URAD_TO_RAD
-            eps[names[3][1]] = r.location[3] * URAD_TO_RAD
-            e = r.zero * URAD_TO_RAD
+            delta[names[0][1]] = only(r.location[0], active) * UM_TO_MM
+            delta[names[1][1]] = only(r.location[1], active) * UM_TO_MM
+            eps[names[2][1]] = only(r.location[2], active) * URAD_TO_RAD
+            eps[names[3][1]] = only(r.location[3], active) * URAD_TO_RAD
+            e = only(r.zero, active) * URAD_TO_RAD
             u_act = u + eps.cross(u)
             q = r.pivot + delta
             cos_phi = c - e * s
@@ -249,20 +268,27 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
             u_act, q, cos_phi, sin_phi = u, r.pivot, c, sigma * s
         k_mat = _cross_matrix(u_act)
         rot = sp.eye(3) + sin_phi * k_mat + (1 - cos_phi) * k_mat * k_mat
-        return q + rot * (x - q), rot
+        moved = q + rot * (x - q)
+        if perturbed:
+            # error motion of the carried body, applied after the axis' own motion
+            d = sp.Matrix([only(m, active) for m in r.motion[:3]]) * UM_TO_MM
+            w = sp.Matrix([only(m, active) for m in r.motion[3:]]) * URAD_TO_RAD
+            moved = moved + d + w.cross(moved - r.pivot)
+            rot = rot + _cross_matrix(w) * rot
+        return moved, rot
 
     def linear_motion(ax: Axis, x: sp.Matrix) -> sp.Matrix:
         if commanded[ax.direction] is not ax:
             return x  # parallel secondary axis held at its reference position
         return x + ax.sign * lin_syms[ax.direction] * _unit(ax.direction)
 
-    def chain(perturbed: bool) -> tuple[sp.Matrix, sp.Matrix, sp.Matrix, sp.Matrix]:
+    def chain(active: sp.Symbol | None) -> tuple[sp.Matrix, sp.Matrix, sp.Matrix, sp.Matrix]:
         # workpiece side: nest point, from the workpiece outward
         x = ball
         rot_w = sp.eye(3)
         for ax in structure.workpiece_axes:
             if ax.kind == "rotary":
-                x, rot = rotary_motion(rotary[ax.name], x, perturbed)
+                x, rot = rotary_motion(rotary[ax.name], x, active)
                 rot_w = rot * rot_w
             else:
                 x = linear_motion(ax, x)
@@ -272,7 +298,7 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
         rot_t = sp.eye(3)
         for ax in reversed(structure.tool_axes):
             if ax.kind == "rotary":
-                y, rot = rotary_motion(rotary[ax.name], y, perturbed)
+                y, rot = rotary_motion(rotary[ax.name], y, active)
                 rot_t = rot * rot_t
             else:
                 y = linear_motion(ax, y)
@@ -283,7 +309,7 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
     def red(m: sp.Matrix) -> sp.Matrix:
         return m.applyfunc(lambda e: reduce_trig(e, pairs))
 
-    ball_nom, nest_nom, rot_w, rot_t = chain(perturbed=False)
+    ball_nom, nest_nom, rot_w, rot_t = chain(None)
     rot_w = red(rot_w)
     rot_t = red(rot_t)
     r_nom = ball_nom - nest_nom
@@ -299,26 +325,26 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
     lin_solution = red(-(a_mat.adjugate() / det) * r0)
     lin_subs = {lin_vec[d]: lin_solution[d] for d in range(3)}
 
-    ball_act, nest_act, rot_w_act, rot_t_act = chain(perturbed=True)
-    r_act = ball_act - nest_act
-    zero_subs = {p: 0 for p in param_syms}
-    jac_cols = []
-    for p in param_syms:
-        col = r_act.diff(p).subs(zero_subs).subs(lin_subs)
+    # First-order derivatives, one error symbol at a time (the others are 0 in the chain,
+    # so the expressions stay small).
+    rel_nom = rot_w.T * rot_t
+    motion_syms = [m for r in ordered for m in r.motion]
+    jac_cols, ori_cols, motion_cols = [], [], []
+    for sym in param_syms + motion_syms:
+        ball_act, nest_act, rot_w_act, rot_t_act = chain(sym)
+        col = (ball_act - nest_act).diff(sym).subs(sym, 0).subs(lin_subs)
+        if sym in motion_syms:
+            motion_cols.append(col)
+            continue
         jac_cols.append(col)
+        # orientation of the spindle frame relative to W: R_rel_act = (I + [ω]x) R_rel_nom
+        dm = (rot_w_act.T * rot_t_act).diff(sym).subs(sym, 0) * rel_nom.T
+        ori_cols.append(sp.Matrix([dm[2, 1], dm[0, 2], dm[1, 0]]))
     jac_raw = sp.Matrix.hstack(*jac_cols) * MM_TO_UM
+    motion_jacobian = red(sp.Matrix.hstack(*motion_cols) * MM_TO_UM)
     at_reference = {r.cos: 1 for r in ordered} | {r.sin: 0 for r in ordered}
     jac_ref = jac_raw.subs(at_reference)
     jacobian = red(jac_raw - rot_w * jac_ref)
-
-    # Orientation error of the spindle frame relative to W, as a small rotation vector ω in W:
-    # R_rel_act = (I + [ω]x) R_rel_nom with R_rel = R_w^T R_t.
-    rel_act = rot_w_act.T * rot_t_act
-    rel_nom = rot_w.T * rot_t
-    ori_cols = []
-    for p in param_syms:
-        dm = (rel_act.diff(p).subs(zero_subs)) * rel_nom.T
-        ori_cols.append(sp.Matrix([dm[2, 1], dm[0, 2], dm[1, 0]]))
     orientation_jacobian = red(sp.Matrix.hstack(*ori_cols) * 10**6)
 
     # Commanded X, Y, Z: equal to ball_mm at the reference pose.
@@ -347,6 +373,8 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
         tool_direction=tool_direction,
         reference_jacobian=red(jac_ref),
         orientation_jacobian=orientation_jacobian,
+        motion_jacobian=motion_jacobian,
+        motion_parameters=tuple(m.name for m in motion_syms),
         spindle_direction=spindle_dir,
         has_tool_rotary=any(a.kind == "rotary" for a in structure.tool_axes),
         units=units,

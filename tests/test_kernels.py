@@ -55,7 +55,13 @@ class ExactChain:
             u = u + np.cross(eps, u)
             q = q + delta
             e = loc[4] * 1e-6
-        return q + rodrigues(u, axis.sign * (theta + e)) @ (x - q)
+        moved = q + rodrigues(u, axis.sign * (theta + e)) @ (x - q)
+        motion = (err or {}).get("motion:" + axis.name)
+        if motion is not None:  # small rigid error motion of the carried body, carrier frame
+            d, w = np.asarray(motion[:3]) * 1e-3, np.asarray(motion[3:]) * 1e-6
+            p = self.pivots[axis.name]
+            moved = p + rodrigues(w, np.linalg.norm(w)) @ (moved - p) + d if np.linalg.norm(w) else moved + d
+        return moved
 
     def raw(self, angles_deg, err):
         th = dict(zip(self.names, np.radians(angles_deg), strict=True))
@@ -334,3 +340,25 @@ def test_orientation_jacobian_matches_exact_chain(code, tool) -> None:
             skew = (plus - minus) @ nominal.T / (2 * h) * 1e6
             omega = np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
             np.testing.assert_allclose(jac[i, :, j], omega, atol=1e-5)
+
+
+@pytest.mark.parametrize(("code", "tool"), CASES)
+def test_motion_jacobian_matches_exact_chain(code, tool) -> None:
+    rng = np.random.default_rng(17)
+    kern = load_kernels(code)
+    ball = rng.uniform(-100, 100, 3)
+    pivots = {ax: rng.uniform(-50, 50, 3) for ax in kern.ROTARY_AXES}
+    chain = ExactChain(code, ball, pivots, tool)
+    angles = rng.uniform(-100, 100, (5, len(kern.ROTARY_AXES)))
+    jac = kern.motion_jacobian(angles, ball, pivots, tool)
+    assert jac.shape == (5, 3, 6 * len(kern.ROTARY_AXES))
+    h = 1e-2
+    for j, name in enumerate(kern.MOTION_PARAMETERS):
+        axis, comp = name.split("_")
+        vec = np.zeros(6)
+        vec["dx dy dz rx ry rz".split().index(comp)] = h
+        fd = np.array([
+            (chain.raw(a, {"motion:" + axis: vec}) - chain.raw(a, {"motion:" + axis: -vec})) / (2 * h) * 1e3
+            for a in angles
+        ])
+        np.testing.assert_allclose(jac[:, :, j], fd, rtol=1e-6, atol=1e-6 * np.abs(jac).max())
