@@ -1,0 +1,130 @@
+"""Identification: round trips, honest uncertainty, identifiability, robust loss, references."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import REPO, reference_files, require_shared
+from pige_sym.effects import parse_effect
+from pige_sym.identification import IdentificationResult, identify
+from pige_sym.io import read_measurement
+from pige_sym.simulator import random_pige, simulate
+from pige_sym.trajectories import cone_frustum, figure_eight
+
+AC, BC = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t"
+BALLS = {AC: (120.0, 0.0, 80.0), BC: (60.0, 90.0, 110.0)}
+
+
+def trajectory(code: str, name: str):
+    return cone_frustum(code, incl_axis="X" if code == AC else "Y") if name == "cone" else figure_eight(code)
+
+
+@pytest.mark.parametrize("code", [AC, BC])
+@pytest.mark.parametrize("traj", ["cone", "fig8"])
+@pytest.mark.parametrize("method", ["gauss-newton", "double-differential"])
+def test_round_trip_within_four_standard_errors(code, traj, method) -> None:
+    tr = trajectory(code, traj)
+    for seed in range(5):
+        truth = random_pige(code, seed)
+        sim = simulate(code, tr, pige=truth, ball_mm=BALLS[code], noise_um=0.25, seed=100 + seed)
+        res = identify(sim.measurement, method=method)
+        assert res.rank == 8 and not res.unidentifiable
+        z = [(res.value(p) - truth[p]) / res.std[i] for i, p in enumerate(res.parameters)]
+        assert np.max(np.abs(z)) < 4, (seed, np.round(z, 2))
+        assert 0.15 < res.rms_um < 0.35
+
+
+@pytest.mark.parametrize("code", [AC, BC])
+def test_standard_errors_match_spread_of_repeated_simulations(code) -> None:
+    tr = cone_frustum(code, incl_axis="X" if code == AC else "Y")
+    truth = random_pige(code, 7)
+    estimates, stds = [], []
+    for seed in range(500):  # the sample std of 500 draws is good to ~3 %
+        sim = simulate(code, tr, pige=truth, ball_mm=BALLS[code], noise_um=0.3, seed=seed)
+        res = identify(sim.measurement)
+        estimates.append(res.values)
+        stds.append(res.std)
+    spread = np.std(estimates, axis=0, ddof=1)
+    mean_std = np.mean(stds, axis=0)
+    np.testing.assert_allclose(mean_std / spread, 1.0, atol=0.25)
+
+
+@pytest.mark.parametrize("path", reference_files("*clean*.csv"), ids=lambda p: p.name)
+@pytest.mark.parametrize("method", ["gauss-newton", "double-differential"])
+def test_reference_clean_files_within_four_standard_errors(path, method) -> None:
+    require_shared()
+    m = read_measurement(path)
+    truth = json.loads(path.with_name(path.stem + ".truth.json").read_text())["pige"]
+    res = identify(m, method=method)
+    for i, p in enumerate(res.parameters):
+        assert abs(res.values[i] - truth[p]) < 4 * res.std[i], (p, res.values[i], truth[p], res.std[i])
+
+
+def test_projection_x_on_ac_reports_unidentifiable_instead_of_numbers() -> None:
+    sim = simulate(AC, cone_frustum(AC), pige=random_pige(AC, 1), noise_um=0.25, seed=1)
+    res = identify(sim.measurement, projection="x")
+    assert res.rank < 8 and res.unidentifiable
+    d = res.to_dict()
+    undetermined = [p for p, v in d["pige"].items() if v is None]
+    assert {"EY0A", "EZ0A"} <= set(undetermined)
+    assert all(d["std"][p] is None for p in undetermined)
+    assert any("EY0A" in c for c in d["unidentifiable"])
+    assert np.isinf(res.condition) and d["condition"] is None
+
+
+def test_robust_loss_flags_injected_outliers() -> None:
+    eff = parse_effect("outliers:count=3,size_um=8", ("A", "C"))
+    sim = simulate(AC, cone_frustum(AC, points=40), pige=random_pige(AC, 2), effects=[eff], noise_um=0.25, seed=5)
+    res = identify(sim.measurement, loss="soft_l1")
+    assert res.outlier_rows == sim.truth["outlier_rows"]
+    truth = sim.truth["pige"]
+    z = [(res.value(p) - truth[p]) / res.std[i] for i, p in enumerate(res.parameters)]
+    assert np.max(np.abs(z)) < 4
+    clean = identify(simulate(AC, cone_frustum(AC, points=40), pige=truth, noise_um=0.25, seed=5).measurement,
+                     loss="soft_l1")
+    assert clean.outlier_rows == []
+
+
+def test_double_differential_reports_stages() -> None:
+    sim = simulate(AC, cone_frustum(AC), pige=random_pige(AC, 3), noise_um=0.25, seed=3)
+    res = identify(sim.measurement, method="double-differential", projection="y")
+    d = res.to_dict()
+    assert d["stages"][0]["solved"] == res.parameters
+    fixed = [p for s in d["stages"] for p in s["fixed"]]
+    assert len(fixed) == len(set(fixed))
+    # projection y on AC leaves a combination undetermined: no number for the parameters in it
+    assert res.unidentifiable and any(v is None for v in d["pige"].values())
+
+
+def test_json_round_trip_and_cli(tmp_path) -> None:
+    sim = simulate(AC, cone_frustum(AC), pige=random_pige(AC, 4), noise_um=0.25, seed=4)
+    path = tmp_path / "run.csv"
+    sim.write(path)
+    proc = subprocess.run([sys.executable, "-m", "pige_sym", "identify", str(path), "--json", "--method",
+                           "double-differential"], capture_output=True, text=True, cwd=REPO, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads(proc.stdout)
+    for key in ("pige", "std", "units", "rank", "condition", "rms_um", "method", "unidentifiable", "outlier_rows",
+                "stages"):
+        assert key in d
+    back = IdentificationResult.from_dict(d)
+    assert back.parameters == list(d["pige"])
+    bad = subprocess.run([sys.executable, "-m", "pige_sym", "identify", str(path), "--projection", "q"],
+                         capture_output=True, text=True, cwd=REPO, timeout=60)
+    assert bad.returncode == 2 and "projection" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_large_input_uses_basis_sums() -> None:
+    from pige_sym.identification import build_problem
+
+    tr = cone_frustum(AC, points=20000)
+    sim = simulate(AC, tr, pige=random_pige(AC, 5), noise_um=0.25, seed=5)
+    prob = build_problem(sim.measurement, "xyz", explicit=False)
+    assert prob.design is None
+    res = identify(sim.measurement)
+    assert np.all(np.abs(res.values - np.array([sim.truth["pige"][p] for p in res.parameters])) < 4 * res.std)
