@@ -86,6 +86,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except PigeError as exc:
         print(f"pige {args.command}: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into head & co.
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print(f"pige {args.command}: interrupted", file=sys.stderr)
         return 130
