@@ -245,32 +245,14 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
     ctx = EffectContext(kern, m.angles_deg, m.t_s, m.ball_mm, m.pivots_mm or None, m.tool_mm)
     rows = np.arange(1, m.n_rows)
     base = _fit(m, rows, None)
-    n0 = base.n_obs
     findings: list[Finding] = []
     rejected: list[Rejected] = []
 
-    # 1. outliers
-    robust = identify(m, loss="soft_l1")
-    outliers = list(robust.outlier_rows)
-    if outliers:
-        kept = np.setdiff1d(rows, outliers)
-        after = _fit(m, kept, None)
-        # each dropped row counts as 3 free parameters in the BIC on the full data
-        dbic = _bic(after.rss, n0, after.k + 3 * len(outliers)) - _bic(base.rss, n0, base.k)
-        if dbic <= delta_bic_max:
-            findings.append(Finding(
-                effect="outliers", options={}, params={"rows": float(len(outliers))}, std={"rows": 0.0},
-                units={"rows": "count"}, delta_bic=dbic, f_statistic=float("nan"), p_value=float("nan"),
-                rms_um_before=math.sqrt(base.rss / base.n_obs), rms_um_after=math.sqrt(after.rss / after.n_obs),
-                heldout_rms_um_before=base.heldout_rms, heldout_rms_um_after=after.heldout_rms,
-                pige_shift=_shift(base.result, after.result),
-                evidence=f"rows {outliers} lie far beyond the robust noise level", explained=float("nan"),
-            ))
-            rows = kept
-        else:
-            rejected.append(Rejected("outliers", {}, f"rows {outliers} flagged but dropping them is not supported "
-                                     f"(ΔBIC {dbic:.1f})", dbic))
-            outliers = []
+    # rows a robust fit flags are kept out of the search; whether they are outliers is
+    # decided at the end, against the extended model (a missing effect can look like outliers)
+    suspects = list(identify(m, loss="soft_l1").outlier_rows)
+    all_rows = rows
+    rows = np.setdiff1d(all_rows, suspects)
     current = _fit(m, rows, None)
     baseline_fit = current
     accepted: list[EffectSpec] = []
@@ -314,9 +296,13 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
                                 f"held-out gain {gain:.1%})")
             rejected += list(tried.values())
             break
+        if spec.kind == "thermal_drift":
+            spec, fit, tau_std = _refine_tau(m, rows, accepted, spec, ctx, fit)
         names = fit.result.parameters
         params = {p: fit.result.value(f"{spec.id}.{p}") for p in spec.param_names}
         std = {p: float(fit.result.std[names.index(f"{spec.id}.{p}")]) for p in spec.param_names}
+        if spec.kind == "thermal_drift":
+            params["tau_s"], std["tau_s"] = float(spec.options["tau_s"]), tau_std
         explained = 1.0 - fit.rss / current.rss if current.rss > 0 else 0.0
         h = int(spec.options.get("harmonic", 1))
         evidence = _EVIDENCE[spec.kind].format(axis=spec.axis, h=h)
@@ -330,12 +316,75 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
         accepted.append(spec)
         current = fit
         pool = [c for c in pool if c.id != spec.id]
+    # outliers, against the extended model, on all rows
+    extra = _extra(accepted, ctx)
+    final_all = _fit(m, all_rows, extra)
+    outliers = list(identify(m, loss="soft_l1", extra=extra).outlier_rows)
+    current = final_all
+    if outliers:
+        kept = np.setdiff1d(all_rows, outliers)
+        after = _fit(m, kept, extra)
+        # each dropped row counts as 3 free parameters in the BIC on the full data
+        dbic = _bic(after.rss, final_all.n_obs, after.k + 3 * len(outliers)) - _bic(
+            final_all.rss, final_all.n_obs, final_all.k)
+        if dbic <= delta_bic_max:
+            findings.append(Finding(
+                effect="outliers", options={}, params={"rows": float(len(outliers))}, std={"rows": 0.0},
+                units={"rows": "count"}, delta_bic=dbic, f_statistic=float("nan"), p_value=float("nan"),
+                rms_um_before=math.sqrt(final_all.rss / final_all.n_obs),
+                rms_um_after=math.sqrt(after.rss / after.n_obs), heldout_rms_um_before=final_all.heldout_rms,
+                heldout_rms_um_after=after.heldout_rms, pige_shift=_shift(final_all.result, after.result),
+                evidence=f"rows {outliers} lie far beyond the robust noise level of the fit", explained=float("nan"),
+            ))
+            current = after
+        else:
+            rejected.append(Rejected("outliers", {}, f"rows {outliers} flagged by the robust fit but dropping them "
+                                     f"is not supported (ΔBIC {dbic:.1f})", dbic))
+            outliers = []
+    else:
+        rejected.append(Rejected("outliers", {}, "the robust fit flags no row"))
+    if not suspects:
+        baseline_fit = base
     return DiagnosisResult(
         machine=kern.MACHINE_CODE, baseline_rms_um=math.sqrt(baseline_fit.rss / baseline_fit.n_obs),
         baseline_bic=_bic(baseline_fit.rss, baseline_fit.n_obs, baseline_fit.k),
         baseline_heldout_rms_um=baseline_fit.heldout_rms, findings=findings,
         rejected=_dedupe(rejected), final=current.result, baseline=base.result, outlier_rows=sorted(outliers),
     )
+
+
+def _refine_tau(m: Measurement, rows: np.ndarray, accepted: list[EffectSpec], spec: EffectSpec,
+                ctx: EffectContext, fit: _Fit) -> tuple[EffectSpec, _Fit, float]:
+    """Refine the thermal time constant (1-D search on log τ) and propagate its uncertainty.
+
+    Returns the refined spec, a fit whose standard errors include the τ direction
+    (Gauss–Newton covariance with the ∂/∂τ column), and the standard error of τ [s].
+    """
+    from scipy.optimize import minimize_scalar
+
+    tau0 = float(spec.options["tau_s"])
+
+    def rss(log_tau: float) -> float:
+        s2 = EffectSpec(spec.id, {"tau_s": float(np.exp(log_tau))})
+        return _fit(m, rows, _extra(accepted + [s2], ctx)).rss
+
+    opt = minimize_scalar(rss, bounds=(np.log(tau0) - 1.2, np.log(tau0) + 1.2), method="bounded",
+                          options={"xatol": 1e-3})
+    tau = float(np.exp(opt.x))
+    best = EffectSpec(spec.id, {"tau_s": tau})
+    extra = _extra(accepted + [best], ctx)
+    assert extra is not None
+    fit = _fit(m, rows, extra)
+    v = np.array([fit.result.value(f"{spec.id}.{p}") for p in best.param_names])
+    h = 1e-4 * tau
+    dcols = EffectSpec(spec.id, {"tau_s": tau + h}).columns(ctx) - EffectSpec(spec.id, {"tau_s": tau - h}).columns(ctx)
+    tau_col = (dcols / (2 * h)) @ v
+    aug = ExtraColumns(extra.names + [f"{spec.id}.tau_s"], extra.units | {f"{spec.id}.tau_s": "s"},
+                       np.concatenate([extra.columns, tau_col[:, :, None]], axis=2))
+    with_tau = identify(m, extra=aug, rows=rows)
+    fit.result.std = np.concatenate([with_tau.std[:-1]])
+    tau_std = float(with_tau.std[-1])
+    return best, fit, tau_std
 
 
 def _dedupe(rejected: list[Rejected]) -> list[Rejected]:
