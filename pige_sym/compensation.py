@@ -1,0 +1,386 @@
+"""Compensation: commands that put the tool where the nominal program intended.
+
+For a programmed pose (rotary angles θ, workpiece point x_W, tool direction v_W
+from the nominal kinematics) and identified parameters p:
+
+1. **Orientation (first order).**  The actual tool direction relative to the
+   workpiece is ``v + ω(θ)×v`` with ``ω = orientation_jacobian(θ)·p`` [µrad].  The
+   rotary angles are corrected by Δθ solving ``(∂v/∂θ)·Δθ = −ω×v`` in least squares
+   (∂v/∂θ by central differences of the nominal ``tool_direction``).
+2. **Position (exact to the model).**  At the corrected angles θ', the linear axes
+   are commanded to ``L_nom(θ', x_W) − d_raw(θ', x_W)`` where d_raw is the un-zeroed
+   ball-minus-nest offset of the tool point ``(jacobian + R_w·reference_jacobian)·p``:
+   the tool point lands on x_W up to second order in the errors.
+
+Programs in machine coordinates (``TRAFOOF``) give X/Y/Z of the tool point (the ball
+centre of an R-test program); the intended workpiece point is found by inverting the
+nominal kinematics (``linear_commands`` is affine in the point).  With ``TRAORI`` the
+program holds workpiece coordinates; the compensated program stays in workpiece
+coordinates: the point is shifted by ``−R_wᵀ·d_raw`` and the angles by Δθ.
+
+Only the PIGEs and zero-position errors are compensated; accepted diagnosis
+extensions are reported but not compensated (yet).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import FileFormatError, InputError, PigeError
+from .kernels import load_kernels
+from .ncprogram import NCBlock, parse_program, rewrite_program, to_fanuc
+
+
+class CompensationError(PigeError):
+    """The parameters cannot be used for compensation as they are."""
+
+
+@dataclass
+class CompensationParameters:
+    """Parameters read from an identify/diagnose JSON result."""
+
+    machine: str
+    values: dict[str, float]
+    units: dict[str, str]
+    tool_mm: list[float] | None
+    pivots_mm: dict[str, list[float]]
+    source: str
+    ignored: list[str]
+
+
+def load_parameters(path: str | os.PathLike[str], machine: str | None = None, *,
+                    allow_unidentifiable: bool = False) -> CompensationParameters:
+    """Read ``pige identify --json`` / ``pige diagnose --json`` output.
+
+    Parameters with no value (not identifiable) are refused unless
+    ``allow_unidentifiable`` (then they are set to 0 and listed in ``ignored``).
+    """
+    p = str(path)
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise FileFormatError(p, None, "file not found") from None
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(p, exc.lineno, f"not valid JSON: {exc.msg}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("pige"), dict):
+        raise FileFormatError(p, None, 'expected the JSON printed by "pige identify --json" (a "pige" object)')
+    code = machine or data.get("machine")
+    if not code:
+        raise InputError(f"{p} names no machine: give --machine")
+    kern = load_kernels(code)
+    values, ignored = {}, []
+    for name, v in data["pige"].items():
+        if "." in name:
+            ignored.append(name)  # an extension parameter: not compensated
+            continue
+        if name not in kern.PARAMETERS:
+            raise FileFormatError(p, None, f"parameter {name!r} does not belong to {kern.MACHINE_CODE}")
+        if v is None:
+            if not allow_unidentifiable:
+                raise CompensationError(f"{p}: {name} was not identifiable from the data; compensating with it is "
+                                        "guesswork (use --allow-unidentifiable to set it to 0)")
+            ignored.append(name)
+            v = 0.0
+        values[name] = float(v)
+    return CompensationParameters(kern.MACHINE_CODE, values, dict(data.get("units", {})), data.get("tool_mm"),
+                                  dict(data.get("pivots_mm", {})), p, ignored)
+
+
+def _param_vector(kern: Any, values: dict[str, float]) -> np.ndarray:
+    return np.array([values.get(n, 0.0) for n in kern.PARAMETERS])
+
+
+def raw_offset(kern: Any, angles_deg: np.ndarray, points_mm: np.ndarray, params: np.ndarray,
+               pivots: dict | None, tool: Any) -> np.ndarray:
+    """Un-zeroed tool-point minus workpiece-point error per pose, shape=(n, 3) [µm]."""
+    out = np.empty((angles_deg.shape[0], 3))
+    rot = kern.workpiece_rotation(angles_deg)
+    for i in range(angles_deg.shape[0]):
+        a = angles_deg[i : i + 1]
+        jac = kern.jacobian(a, None, points_mm[i], pivots, tool)[0]
+        ref = kern.reference_jacobian(points_mm[i], pivots, tool)
+        out[i] = (jac + rot[i] @ ref) @ params
+    return out
+
+
+def workpiece_points(kern: Any, angles_deg: np.ndarray, xyz_mm: np.ndarray, pivots: dict | None,
+                     tool: Any) -> np.ndarray:
+    """Invert the nominal kinematics: workpiece points whose RTCP commands are ``xyz_mm``, shape=(n, 3)."""
+    out = np.empty_like(xyz_mm, dtype=float)
+    for i in range(angles_deg.shape[0]):
+        a = angles_deg[i : i + 1]
+        base = kern.linear_commands(a, np.zeros(3), pivots, tool)[0]
+        cols = np.column_stack([kern.linear_commands(a, e, pivots, tool)[0] - base for e in np.eye(3)])
+        out[i] = np.linalg.solve(cols, xyz_mm[i] - base)
+    return out
+
+
+@dataclass
+class CompensatedPoses:
+    """Original and compensated commands."""
+
+    angles_deg: np.ndarray
+    xyz_mm: np.ndarray
+    points_mm: np.ndarray
+    new_angles_deg: np.ndarray
+    new_xyz_mm: np.ndarray
+    rtcp: bool
+
+
+def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndarray, xyz_mm: np.ndarray, *,
+                     rtcp: bool = False, pivots_mm: dict | None = None, tool_mm: Any = None) -> CompensatedPoses:
+    """Compensated commands for programmed poses (module docstring).
+
+    Parameters
+    ----------
+    angles_deg : (n, k) [deg]
+    xyz_mm : (n, 3) [mm]
+        Machine positions of the tool point (``rtcp=False``) or workpiece coordinates (``rtcp=True``).
+    """
+    kern = load_kernels(machine)
+    p = _param_vector(kern, values)
+    a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    xyz = np.atleast_2d(np.asarray(xyz_mm, dtype=float))
+    pts = xyz if rtcp else workpiece_points(kern, a, xyz, pivots_mm, tool_mm)
+    new_a = a.copy()
+    if kern.HAS_DIRECTION_SOLVER:
+        v = kern.tool_direction(a)
+        omega = np.einsum("nip,p->ni", kern.orientation_jacobian(a), p) * 1e-6
+        target = -np.cross(omega, v)
+        h = 1e-4
+        for i in range(a.shape[0]):
+            dv = np.column_stack([
+                (kern.tool_direction(a[i : i + 1] + h * e)[0] - kern.tool_direction(a[i : i + 1] - h * e)[0]) / (2 * h)
+                for e in np.eye(a.shape[1])
+            ])  # per degree
+            step, *_ = np.linalg.lstsq(dv, target[i], rcond=1e-9)
+            new_a[i] = a[i] + step
+    d_raw = raw_offset(kern, new_a, pts, p, pivots_mm, tool_mm) * 1e-3  # mm
+    if rtcp:
+        rot = kern.workpiece_rotation(new_a)
+        new_xyz = pts - np.einsum("nji,nj->ni", rot, d_raw)
+    else:
+        nominal = np.array([kern.linear_commands(new_a[i : i + 1], pts[i], pivots_mm, tool_mm)[0]
+                            for i in range(a.shape[0])])
+        new_xyz = nominal - d_raw
+    return CompensatedPoses(a, xyz, pts, new_a, new_xyz, rtcp)
+
+
+def compensate_program(program_text: str, params: CompensationParameters, *, path: str = "<program>",
+                       dialect: str = "siemens", pass_through: bool = False, decimals: int = 4) -> str:
+    """Compensated program text (Siemens subset in, Siemens or Fanuc out)."""
+    kern = load_kernels(params.machine)
+    program = parse_program(program_text, path=path, rotary_axes=tuple(kern.ROTARY_AXES), pass_through=pass_through)
+    motion = [b for b in program.blocks if b.is_motion]
+    axes = ("X", "Y", "Z", *kern.ROTARY_AXES)
+    new: dict[int, dict[str, float]] = {}
+    tool = params.tool_mm
+    pivots = {k: np.asarray(v) for k, v in params.pivots_mm.items()} or None
+    for b in motion:
+        missing = [ax for ax in axes if b.position.get(ax) is None]
+        if missing:
+            raise CompensationError(f"{path}:{b.line_no}: position of {', '.join(missing)} unknown at this block; "
+                                    "program every axis before the first move")
+        a = np.array([[b.position[ax] for ax in kern.ROTARY_AXES]], dtype=float)
+        xyz = np.array([[b.position[ax] for ax in ("X", "Y", "Z")]], dtype=float)
+        c = compensate_poses(params.machine, params.values, a, xyz, rtcp=b.rtcp, pivots_mm=pivots, tool_mm=tool)
+        new[b.line_no] = {"X": c.new_xyz_mm[0, 0], "Y": c.new_xyz_mm[0, 1], "Z": c.new_xyz_mm[0, 2]} | {
+            ax: c.new_angles_deg[0, i] for i, ax in enumerate(kern.ROTARY_AXES)}
+    header = [f"compensated by pige_sym for {params.machine} with {params.source}",
+              "parameters: " + ", ".join(f"{k}={v:.4g}" for k, v in params.values.items())]
+    if params.ignored:
+        header.append("not compensated: " + ", ".join(params.ignored))
+
+    def positions(b: NCBlock) -> dict[str, float] | None:
+        return new.get(b.line_no)
+
+    if dialect == "siemens":
+        return rewrite_program(program, positions, header_lines=header, decimals=decimals)
+    if dialect == "fanuc":
+        return to_fanuc(program, positions, header_lines=header, decimals=decimals)
+    raise InputError(f"unknown dialect {dialect!r}: use siemens or fanuc")
+
+
+def controller_corrections(params: CompensationParameters) -> list[dict[str, Any]]:
+    """Corrected axis lines: per rotary axis the pivot point [mm] and unit direction, machine frame."""
+    kern = load_kernels(params.machine)
+    out = []
+    pos_idx = {"A": (1, 2), "B": (0, 2), "C": (0, 1)}
+    for ax in kern.ROTARY_AXES:
+        names = [n for n in kern.LOCATION_PARAMETERS if n.endswith("0" + ax)]
+        vals = [params.values.get(n, 0.0) for n in names]
+        d = "ABC".index(ax[0])
+        u = np.eye(3)[d]
+        pivot = np.asarray(params.pivots_mm.get(ax, [0.0, 0.0, 0.0]), dtype=float).copy()
+        i1, i2 = pos_idx[ax[0]]
+        pivot[i1] += vals[0] * 1e-3
+        pivot[i2] += vals[1] * 1e-3
+        eps = np.zeros(3)
+        eps[i1], eps[i2] = vals[2] * 1e-6, vals[3] * 1e-6
+        direction = u + np.cross(eps, u)
+        direction /= np.linalg.norm(direction)
+        zero = params.values.get(f"E{ax[0]}0{ax}", 0.0)
+        side = "workpiece" if ax in kern.WORKPIECE_ROTARY else "tool"
+        out.append({"axis": ax, "side": side, "pivot_mm": pivot.tolist(), "direction": direction.tolist(),
+                    "zero_offset_deg": float(np.degrees(zero * 1e-6))})
+    return out
+
+
+def format_controller(params: CompensationParameters, style: str = "table") -> str:
+    """Print the corrected kinematic chain as a table or a Siemens ``$TC_CARR`` swivel data record.
+
+    Siemens mapping (see docs/controller-corrections.md): the first axis of the chain
+    (nearest the bed) is axis 1 (``$TC_CARR7..9`` direction v1), the second axis 2
+    (``$TC_CARR10..12`` v2); offsets ``l2 = pivot_1`` (``$TC_CARR4..6``) and
+    ``l3 = pivot_2 − pivot_1`` (``$TC_CARR15..17``), ``l4 = −pivot_2`` (``$TC_CARR18..20``)
+    close the chain; zero offsets go to ``$TC_CARR24/25``.
+    """
+    rows = controller_corrections(params)
+    if style == "table":
+        lines = [f"corrected kinematic chain of {params.machine} (machine frame, reference pose)",
+                 f"{'axis':<5}{'side':<11}{'pivot x,y,z [mm]':<36}{'direction':<40}zero [deg]"]
+        for r in rows:
+            piv = ", ".join(f"{x:.6f}" for x in r["pivot_mm"])
+            dirs = ", ".join(f"{x:.9f}" for x in r["direction"])
+            lines.append(f"{r['axis']:<5}{r['side']:<11}{piv:<36}{dirs:<40}{r['zero_offset_deg']:.7f}")
+        return "\n".join(lines)
+    if style != "siemens":
+        raise InputError(f"unknown controller style {style!r}: use table or siemens")
+    kern = load_kernels(params.machine)
+    chain = [a.name for a in reversed(kern_axes(params.machine, "workpiece"))] + kern_axes_names(params.machine)
+    by = {r["axis"]: r for r in rows}
+    first, second = by[chain[0]], by[chain[1]]
+    p1, p2 = np.array(first["pivot_mm"]), np.array(second["pivot_mm"])
+    vec = {4: p1, 7: np.array(first["direction"]), 10: np.array(second["direction"]), 15: p2 - p1, 18: -p2}
+    lines = [f"; $TC_CARR swivel data record for {kern.MACHINE_CODE} (axis 1 = {chain[0]}, axis 2 = {chain[1]})",
+             "; ASSUMED mapping, not verified on a controller: see docs/controller-corrections.md"]
+    for start, v in sorted(vec.items()):
+        for k in range(3):
+            lines.append(f"$TC_CARR{start + k}[1]={v[k]:.6f}")
+    lines.append(f"$TC_CARR24[1]={first['zero_offset_deg']:.7f}")
+    lines.append(f"$TC_CARR25[1]={second['zero_offset_deg']:.7f}")
+    return "\n".join(lines)
+
+
+def kern_axes(machine: str, side: str) -> list[Any]:
+    from .machine_code import parse_machine_code
+
+    st = parse_machine_code(machine)
+    axes = st.workpiece_axes if side == "workpiece" else st.tool_axes
+    return [a for a in axes if a.kind == "rotary"]
+
+
+def kern_axes_names(machine: str) -> list[str]:
+    return [a.name for a in kern_axes(machine, "tool")]
+
+
+def read_program(path: str | os.PathLike[str]) -> str:
+    """Read a program keeping its line endings exactly."""
+    try:
+        with open(path, encoding="utf-8", newline="") as fh:
+            return fh.read()
+    except FileNotFoundError:
+        raise FileFormatError(str(path), None, "program not found") from None
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(str(path), None, f"not a UTF-8 text file ({exc.reason})") from None
+
+
+@dataclass
+class CompensationStudyRow:
+    """Before/after on one test program."""
+
+    trajectory: str
+    rmse_before_um: float
+    rmse_after_um: float
+    reduction: float
+    predicted_after_um: float
+    command_change_rmse_mm: float
+    before_um: np.ndarray
+    after_um: np.ndarray
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"trajectory": self.trajectory, "rmse_before_um": self.rmse_before_um,
+                "rmse_after_um": self.rmse_after_um, "reduction": self.reduction,
+                "predicted_after_um": self.predicted_after_um,
+                "command_change_rmse_mm": self.command_change_rmse_mm}
+
+
+def tool_point_error(machine: str, values: dict[str, float], angles_deg: np.ndarray, xyz_mm: np.ndarray,
+                     points_mm: np.ndarray, *, pivots_mm: dict | None = None, tool_mm: Any = None) -> np.ndarray:
+    """Tool point minus intended workpiece point on a machine with errors ``values``, shape=(n, 3) [µm]."""
+    kern = load_kernels(machine)
+    p = _param_vector(kern, values)
+    nominal = np.array([kern.linear_commands(angles_deg[i : i + 1], points_mm[i], pivots_mm, tool_mm)[0]
+                        for i in range(angles_deg.shape[0])])
+    return (xyz_mm - nominal) * 1e3 + raw_offset(kern, angles_deg, points_mm, p, pivots_mm, tool_mm)
+
+
+def compensation_study(machine: str, trajectories: list[Any], *, truth: dict[str, float],
+                       identified: dict[str, float], covariance: np.ndarray | None = None,
+                       ball_mm: Any = (120.0, 0.0, 80.0), tool_mm: Any = None) -> list[CompensationStudyRow]:
+    """Run each test program uncompensated and compensated on a machine with the true errors.
+
+    ``predicted_after_um`` is the RMSE expected from the identification covariance
+    alone: ``sqrt(trace(J Σ Jᵀ)/n)`` over the program's poses.
+    """
+    kern = load_kernels(machine)
+    ball = np.asarray(ball_mm, dtype=float)
+    rows = []
+    for tr in trajectories:
+        a = tr.angles_deg
+        pts = np.tile(ball, (a.shape[0], 1))
+        xyz = kern.linear_commands(a, ball, None, tool_mm)
+        comp = compensate_poses(machine, identified, a, xyz, tool_mm=tool_mm)
+        before = tool_point_error(machine, truth, a, xyz, pts, tool_mm=tool_mm)
+        after = tool_point_error(machine, truth, comp.new_angles_deg, comp.new_xyz_mm, pts, tool_mm=tool_mm)
+        rms_b = float(np.sqrt((before**2).sum(axis=1).mean()))
+        rms_a = float(np.sqrt((after**2).sum(axis=1).mean()))
+        pred = float("nan")
+        if covariance is not None:
+            jac = kern.jacobian(a, None, ball, None, tool_mm)[:, :, : covariance.shape[0]]
+            rot = kern.workpiece_rotation(a)
+            ref = kern.reference_jacobian(ball, None, tool_mm)[:, : covariance.shape[0]]
+            jac = jac + np.einsum("nij,jp->nip", rot, ref)
+            pred = float(np.sqrt(np.einsum("nip,pq,niq->", jac, covariance, jac) / a.shape[0]))
+        change = float(np.sqrt(((comp.new_xyz_mm - xyz) ** 2).sum(axis=1).mean()))
+        rows.append(CompensationStudyRow(tr.description, rms_b, rms_a, 1 - rms_a / rms_b if rms_b else 0.0, pred,
+                                         change, before, after))
+    return rows
+
+
+def plot_compensation(rows: list[CompensationStudyRow], out_dir: str | Path) -> list[str]:
+    """Deviation per point before/after (paper Figures 9 and 10 style); returns PNG paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, r in enumerate(rows):
+        fig, axs = plt.subplots(1, 2, figsize=(10, 3.6))
+        idx = np.arange(r.before_um.shape[0])
+        for k, c in enumerate("xyz"):
+            axs[0].plot(idx, r.before_um[:, k], "-", label=f"{c} before")
+            axs[0].plot(idx, r.after_um[:, k], "--", label=f"{c} after")
+        axs[0].set_xlabel("point")
+        axs[0].set_ylabel("tool point error [µm]")
+        axs[0].legend(fontsize=7, ncol=2)
+        axs[1].plot(idx, np.linalg.norm(r.before_um, axis=1), "o-", label=f"before, RMSE {r.rmse_before_um:.2f} µm")
+        axs[1].plot(idx, np.linalg.norm(r.after_um, axis=1), "s-", label=f"after, RMSE {r.rmse_after_um:.2f} µm")
+        axs[1].set_xlabel("point")
+        axs[1].set_ylabel("|error| [µm]")
+        axs[1].legend(fontsize=8)
+        fig.suptitle(r.trajectory, fontsize=9)
+        fig.tight_layout()
+        paths.append(str(out / f"compensation_{i}.png"))
+        fig.savefig(paths[-1], dpi=90)
+        plt.close(fig)
+    return paths
