@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 from scipy import stats
+from tqdm import tqdm
 
 from .effects import EffectContext, EffectSpec
 from .errors import InputError
@@ -98,7 +99,9 @@ class Finding:
         vals = ", ".join(f"{k}={v:.3g}±{self.std[k]:.2g} {self.units[k]}" for k, v in self.params.items())
         opts = "".join(f" {k}={v:g}" for k, v in self.options.items())
         big = max(self.pige_shift.items(), key=lambda kv: abs(kv[1]), default=None)
-        moved = f"; moves {big[0]} by {big[1]:+.3g}" if big and abs(big[1]) > 0 else ""
+        # E<direction>0<axis>: a linear direction (X, Y, Z) is a position error in µm, else µrad
+        unit = "um" if big and big[0][1:2] in ("X", "Y", "Z") else "urad"
+        moved = f"; moves {big[0]} by {big[1]:+.3g} {unit}" if big and abs(big[1]) > 0 else ""
         return (f"{self.effect}{opts}: {self.evidence}; {vals}; held-out RMS {self.heldout_rms_um_before:.3g} → "
                 f"{self.heldout_rms_um_after:.3g} um (ΔBIC {self.delta_bic:.1f}){moved}")
 
@@ -226,7 +229,7 @@ def _extra(specs: list[EffectSpec], ctx: EffectContext) -> ExtraColumns | None:
 
 def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: float = P_MAX,
              min_heldout_gain: float = MIN_HELDOUT_GAIN, vif_max: float = VIF_MAX,
-             candidates: list[str] | None = None) -> DiagnosisResult:
+             candidates: list[str] | None = None, progress: bool = False) -> DiagnosisResult:
     """Diagnose a measurement (see the module docstring).
 
     Parameters
@@ -234,6 +237,8 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
     m : Measurement
     candidates : list of str, optional
         Restrict to these catalogue ids.
+    progress : bool
+        Show a progress bar (stderr) over the candidates of each greedy round.
 
     Returns
     -------
@@ -260,7 +265,8 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
     while pool:
         best: tuple[float, EffectSpec, _Fit, float, float] | None = None
         tried: dict[str, Rejected] = {}
-        for spec in pool:
+        for spec in tqdm(pool, desc=f"diagnosis round {len(accepted) + 1}", unit="candidate", leave=False,
+                         disable=not progress):
             extra = _extra(accepted + [spec], ctx)
             fit = _fit(m, rows, extra)
             q = len(spec.param_names) + (1 if spec.kind == "thermal_drift" else 0)

@@ -12,7 +12,7 @@ from ..io import read_measurement
 
 def _run(args: argparse.Namespace) -> int:
     m = read_measurement(args.file)
-    result = diagnose(m)
+    result = diagnose(m, progress=not args.json)
     if args.plots:
         residual_plots(m, result, args.plots)
     if args.json:
