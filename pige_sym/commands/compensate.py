@@ -96,9 +96,9 @@ def register_study_compensation(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compensation", help="before/after compensation on a simulated machine",
                        epilog="example:\n  pige study compensation --seed 3 --plots plots/",
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--machine", default=DEFAULT_MACHINE)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--noise", type=float, default=0.25)
-    p.add_argument("--plots", metavar="DIR")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--machine", default=DEFAULT_MACHINE, help="ISO 10791 machine code (default %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the true errors and the noise (default %(default)s)")
+    p.add_argument("--noise", type=float, default=0.25, help="sensor noise sigma [um] (default %(default)s)")
+    p.add_argument("--plots", metavar="DIR", help="write before/after plots (PNG) into DIR")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_study)

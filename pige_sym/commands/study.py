@@ -33,12 +33,12 @@ def _sobol(args: argparse.Namespace) -> int:
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--machine", default=DEFAULT_MACHINE)
+    p.add_argument("--machine", default=DEFAULT_MACHINE, help="ISO 10791 machine code (default %(default)s)")
     p.add_argument("--trajectory", default="cone-frustum", help="cone-frustum, figure-eight, steps or an angle CSV")
     p.add_argument("--incl-axis", choices=["X", "Y"], help="cone inclination axis")
     p.add_argument("--projections", default="x,y,z,xyz", help="comma list of projections (default %(default)s)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default %(default)s)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
