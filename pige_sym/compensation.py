@@ -323,11 +323,13 @@ def tool_point_error(machine: str, values: dict[str, float], angles_deg: np.ndar
 
 def compensation_study(machine: str, trajectories: list[Any], *, truth: dict[str, float],
                        identified: dict[str, float], covariance: np.ndarray | None = None,
-                       ball_mm: Any = (120.0, 0.0, 80.0), tool_mm: Any = None) -> list[CompensationStudyRow]:
+                       ball_mm: Any = (120.0, 0.0, 80.0), tool_mm: Any = None,
+                       pivots_mm: dict | None = None) -> list[CompensationStudyRow]:
     """Run each test program uncompensated and compensated on a machine with the true errors.
 
     ``predicted_after_um`` is the RMSE expected from the identification covariance
-    alone: ``sqrt(trace(J Σ Jᵀ)/n)`` over the program's poses.
+    alone: ``sqrt(trace(J Σ Jᵀ)/n)`` over the program's poses.  ``pivots_mm`` are the
+    nominal pivots of the rotary axes (default: all at the origin).
     """
     kern = load_kernels(machine)
     ball = np.asarray(ball_mm, dtype=float)
@@ -335,17 +337,18 @@ def compensation_study(machine: str, trajectories: list[Any], *, truth: dict[str
     for tr in trajectories:
         a = tr.angles_deg
         pts = np.tile(ball, (a.shape[0], 1))
-        xyz = kern.linear_commands(a, ball, None, tool_mm)
-        comp = compensate_poses(machine, identified, a, xyz, tool_mm=tool_mm)
-        before = tool_point_error(machine, truth, a, xyz, pts, tool_mm=tool_mm)
-        after = tool_point_error(machine, truth, comp.new_angles_deg, comp.new_xyz_mm, pts, tool_mm=tool_mm)
+        xyz = kern.linear_commands(a, ball, pivots_mm, tool_mm)
+        comp = compensate_poses(machine, identified, a, xyz, pivots_mm=pivots_mm, tool_mm=tool_mm)
+        before = tool_point_error(machine, truth, a, xyz, pts, pivots_mm=pivots_mm, tool_mm=tool_mm)
+        after = tool_point_error(machine, truth, comp.new_angles_deg, comp.new_xyz_mm, pts, pivots_mm=pivots_mm,
+                                 tool_mm=tool_mm)
         rms_b = float(np.sqrt((before**2).sum(axis=1).mean()))
         rms_a = float(np.sqrt((after**2).sum(axis=1).mean()))
         pred = float("nan")
         if covariance is not None:
-            jac = kern.jacobian(a, None, ball, None, tool_mm)[:, :, : covariance.shape[0]]
+            jac = kern.jacobian(a, None, ball, pivots_mm, tool_mm)[:, :, : covariance.shape[0]]
             rot = kern.workpiece_rotation(a)
-            ref = kern.reference_jacobian(ball, None, tool_mm)[:, : covariance.shape[0]]
+            ref = kern.reference_jacobian(ball, pivots_mm, tool_mm)[:, : covariance.shape[0]]
             jac = jac + np.einsum("nij,jp->nip", rot, ref)
             pred = float(np.sqrt(np.einsum("nip,pq,niq->", jac, covariance, jac) / a.shape[0]))
         change = float(np.sqrt(((comp.new_xyz_mm - xyz) ** 2).sum(axis=1).mean()))
