@@ -68,7 +68,7 @@ from .compensation import (
 )
 from .diagnosis import DiagnosisResult, diagnose, residual_plots
 from .errors import FileFormatError, InputError
-from .identification import METHODS, IdentificationResult, identify
+from .identification import METHODS, IdentificationError, IdentificationResult, identify
 from .io import Measurement, read_measurement
 from .kernels import load_kernels
 from .ncprogram import parse_program, poses_from_program
@@ -140,7 +140,8 @@ class MeasurementReport:
         One result per method (``gauss-newton``, ``double-differential``).
     primary_method : {"gauss-newton", "double-differential", "diagnosis"}
         The estimate that drives the model overlay and the compensation.
-    diagnosis : DiagnosisResult
+    diagnosis : DiagnosisResult or None
+        None when the diagnosis failed on these data (``diagnosis_error`` says why).
     compensation : list of CompensationStudyRow
         The measured trajectory first, then the NC program's poses when one is given.
     compensation_basis : {"truth", "model"}
@@ -167,11 +168,12 @@ class MeasurementReport:
     machine: str
     identification: dict[str, IdentificationResult]
     primary_method: str
-    diagnosis: DiagnosisResult
+    diagnosis: DiagnosisResult | None
     compensation: list[CompensationStudyRow]
     compensation_basis: str
     not_compensated: list[str]
     truth: Truth | None = None
+    diagnosis_error: str | None = None
     model_um: np.ndarray | None = None
     compensated_program_text: str | None = None
     compensated_program: Path | None = None
@@ -184,7 +186,7 @@ class MeasurementReport:
     @property
     def primary(self) -> IdentificationResult:
         """The result whose estimate is compensated (may hold extension parameters: diagnosis)."""
-        if self.primary_method == "diagnosis":
+        if self.primary_method == "diagnosis" and self.diagnosis is not None:
             return self.diagnosis.final
         return self.identification[self.primary_method]
 
@@ -216,7 +218,8 @@ class MeasurementReport:
             "machine": self.machine,
             "primary_method": self.primary_method,
             "identification": {k: v.to_dict() for k, v in self.identification.items()},
-            "diagnosis": self.diagnosis.to_dict(),
+            "diagnosis": None if self.diagnosis is None else self.diagnosis.to_dict(),
+            "diagnosis_error": self.diagnosis_error,
             "compensation": {"basis": self.compensation_basis, "not_compensated": self.not_compensated,
                              "rows": [r.to_dict() for r in self.compensation],
                              "program": None if self.compensated_program is None else str(self.compensated_program)},
@@ -494,9 +497,20 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
             results = {meth: identify(m, method=meth, projection=projection, with_zero=with_zero) for meth in METHODS}
             bar.update(1)
             bar.set_postfix_str(f"{p.name}: diagnosis")
-            diag = diagnose(m)
+            diag: DiagnosisResult | None = None
+            diag_error = None
+            try:
+                diag = diagnose(m)
+            except IdentificationError as exc:  # the data are fine; one candidate fit is not: report it, go on
+                diag_error = str(exc)
             bar.update(1)
-            rep = _compensation(p, label, m, truth, results, diag, method, bar)
+            primary = method if diag is not None or method != "diagnosis" else "gauss-newton"
+            rep = _compensation(p, label, m, truth, results, diag, primary, bar)
+            if diag_error is not None:
+                rep.diagnosis_error = diag_error
+                rep.notes.append(f"the diagnosis failed on these data ({diag_error})"
+                                 + ("; the Gauss–Newton estimate is compensated instead" if primary != method
+                                    else ""))
             if program_text is not None and program is not None:
                 bar.set_postfix_str(f"{p.name}: program")
                 _program(rep, Path(program), program_text)
@@ -531,7 +545,7 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
 
 
 def _compensation(p: Path, label: str, m: Measurement, truth: Truth | None,
-                  results: dict[str, IdentificationResult], diag: DiagnosisResult, method: str,
+                  results: dict[str, IdentificationResult], diag: DiagnosisResult | None, method: str,
                   bar: Any) -> MeasurementReport:
     """Before/after on the measured trajectory with the primary estimate."""
     bar.set_postfix_str(f"{p.name}: compensation")
@@ -706,6 +720,8 @@ def identification_figure(results: dict[str, IdentificationResult], truth: Truth
     matplotlib.figure.Figure
     """
     plt = _pyplot()
+    from matplotlib.transforms import blended_transform_factory
+
     first = next(iter(results.values()))
     groups = [("position errors", "um"), ("orientation / zero-position errors", "urad")]
     fig, axs = plt.subplots(1, 2, figsize=(11, 3.8))
@@ -723,14 +739,16 @@ def identification_figure(results: dict[str, IdentificationResult], truth: Truth
                 if math.isfinite(v):
                     ax.errorbar(x[j] + off, v, yerr=[[v - ci[q, 0]], [ci[q, 1] - v]], fmt=mk, color=col, ms=5,
                                 capsize=3, label=meth if j == 0 else None)
-                else:
-                    ax.annotate("not\nidentifiable", (x[j] + off, 0), fontsize=6, color="crimson", ha="center",
-                                va="center", rotation=90)
+                else:  # no value: a label at mid-height (axes coordinates), never a number
+                    ax.text(x[j] + off, 0.5, "not identifiable", transform=blended_transform_factory(
+                        ax.transData, ax.transAxes), fontsize=6.5, color="crimson", ha="center", va="center",
+                        rotation=90)
         if truth is not None:
             ax.plot(x, [truth.values.get(n, 0.0) for n in names], "x", color="crimson", ms=8, mew=2, label="truth")
         ax.axhline(0, color="k", lw=0.6)
         ax.set_xticks(x)
         ax.set_xticklabels(names)
+        ax.set_xlim(-0.6, len(names) - 0.4)
         ax.set_ylabel(f"value [{UNIT_TEXT.get(unit, unit)}]")
         ax.set_title(f"{title} (95 % intervals)", fontsize=10)
         ax.grid(alpha=0.3)
@@ -784,10 +802,12 @@ def draw_figures(rep: MeasurementReport, out_dir: Path) -> list[ReportFigure]:
                                                      out_dir / "identification.png"),
                              "Identified PIGEs with 95 % confidence intervals, both methods"
                              + ("; red crosses: truth from the sidecar." if rep.truth is not None else ".")))
-    try:
-        paths = residual_plots(m, rep.diagnosis, out_dir)
-    except InputError:
-        paths = []
+    paths: list[str] = []
+    if rep.diagnosis is not None:
+        try:
+            paths = residual_plots(m, rep.diagnosis, out_dir)
+        except InputError:
+            paths = []
     captions = {"residual_time": "Residual of the PIGE fit against time [µm] (thermal drift shows as a trend).",
                 "residual_rows": "Residual norm per row (red: outliers) and its autocorrelation in time.",
                 "residual_approach": "Tangential residual by direction of approach (backlash shows as a split)."}
@@ -871,6 +891,7 @@ figure{margin:.8em 0}
 figure img{max-width:100%;height:auto;border:1px solid #e2e6ea}
 figcaption{font-size:.85em;color:#4a5563}
 nav a{margin-right:12px}
+.nw{white-space:nowrap}
 code{background:#eef2f7;padding:0 3px;border-radius:3px}
 ul.verdict li{margin:.25em 0}
 footer{font-size:.8em;color:#5c6670;padding-bottom:30px}
@@ -1086,6 +1107,9 @@ def _final_html(res: IdentificationResult) -> str:
 
 def _diagnosis_html(rep: MeasurementReport, base: Path | None) -> str:
     d = rep.diagnosis
+    if d is None:
+        return (f'<p class="note"><span class="bad">The diagnosis failed on these data: {_e(rep.diagnosis_error)}'
+                "</span>. The identification above does not depend on it.</p>")
     parts = [_kv([
         ("baseline PIGE fit", _e(f"residual RMS {_f(d.baseline_rms_um, '.4f')} µm, held-out RMS "
                                  f"{_f(d.baseline_heldout_rms_um, '.4f')} µm, BIC {_f(d.baseline_bic, '.1f')}")),
@@ -1106,7 +1130,8 @@ def _diagnosis_html(rep: MeasurementReport, base: Path | None) -> str:
             params = "<br>".join(f"{_e(k)} = {_f(v, '.4g')} ± {_f(f.std.get(k), '.2g')} {_e(_u(f.units.get(k, '')))}"
                                  for k, v in f.params.items())
             shifts = sorted(f.pige_shift.items(), key=lambda kv: -abs(kv[1]))
-            shift_txt = "<br>".join(f"{_e(k)} {_f(v, '+.3g')}" for k, v in shifts[:4] if abs(v) > 0) or "—"
+            shift_txt = "<br>".join(f'<span class="nw">{_e(k)} {_f(v, "+.3g")} {_e(_u(d.final.units.get(k, "")))}'
+                                    "</span>" for k, v in shifts[:4] if abs(v) > 0) or "—"
             rows.append([f"<b>{_e(f.effect)}</b>{_e(opts)}", params, _f(f.delta_bic, ".1f"),
                          f"{_f(f.f_statistic, '.3g')} / {_f(f.p_value, '.2g')}",
                          f"{_f(f.rms_um_before, '.4f')} → {_f(f.rms_um_after, '.4f')}",
@@ -1146,8 +1171,10 @@ def _compensation_html(rep: MeasurementReport, base: Path | None) -> str:
                      "machine: the column “expected after, from the std” (identification uncertainty alone), plus "
                      f"what the PIGE model does not explain (residual RMS {_f(rep.primary.rms_um, '.3f')} µm).</p>")
     if rep.not_compensated:
+        unknown = (" The model-predicted machine carries 0 for them too: their real errors are unknown and not in "
+                   "these numbers." if rep.compensation_basis == "model" else "")
         parts.append(f'<p class="note"><span class="unid">Not compensated (no value): '
-                     f"{_e(', '.join(rep.not_compensated))}</span> — set to 0.</p>")
+                     f"{_e(', '.join(rep.not_compensated))}</span> — set to 0.{_e(unknown)}</p>")
     head = ["test", "RMSE before [µm]", "RMSE after [µm]", "reduction", "expected after, from the std [µm]",
             "command change RMS [µm]"]
     rows = [[_e(r.trajectory), _f(r.rmse_before_um), _f(r.rmse_after_um), _f(r.reduction * 100, ".1f") + " %",
@@ -1217,12 +1244,19 @@ def _measurement_html(i: int, rep: MeasurementReport, base: Path | None) -> str:
     return "\n".join(parts)
 
 
+def findings_text(rep: MeasurementReport) -> str:
+    """One-line diagnosis outcome."""
+    if rep.diagnosis is None:
+        return f"diagnosis failed ({rep.diagnosis_error})"
+    return ", ".join(f.effect for f in rep.diagnosis.findings) or "no effect beyond the PIGEs"
+
+
 def _overview_html(data: ReportData) -> str:
     head = ["#", "file", "machine", "points", "rank", "residual RMS [µm]", "diagnosis", "RMSE before → after [µm]"]
     rows = []
     for i, rep in enumerate(data.measurements):
         gn = rep.identification["gauss-newton"]
-        findings = ", ".join(f.effect for f in rep.diagnosis.findings) or "no effect beyond the PIGEs"
+        findings = findings_text(rep)
         comp = rep.compensation[0]
         rank = _e(f"{gn.rank}/{len(gn.parameters)}")
         if gn.rank < len(gn.parameters):

@@ -232,3 +232,20 @@ def test_renders_in_headless_chromium(built: tuple[ReportData, Path, str], tmp_p
     assert img.shape[:2] == (2400, 1280)
     ink = (img[:, :, :3].mean(axis=2) < 0.8).mean()
     assert ink > 0.02, ink  # text, tables and plots, not a blank page
+
+
+def test_a_failing_diagnosis_is_reported_not_fatal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from pige_sym import report
+    from pige_sym.identification import IdentificationError
+
+    def boom(*args: object, **kwargs: object) -> None:
+        raise IdentificationError("Gauss–Newton did not converge")
+
+    monkeypatch.setattr(report, "diagnose", boom)
+    csv = _simulate(tmp_path / "run.csv", 10)
+    data = gather_report([csv], method="diagnosis")
+    (rep,) = data.measurements
+    assert rep.diagnosis is None and rep.primary_method == "gauss-newton"
+    text = write_report(data, tmp_path / "out").read_text(encoding="utf-8")
+    assert "The diagnosis failed on these data: Gauss–Newton did not converge" in text
+    assert 'data-section="compensation"' in text and 'data-figure="residual"' not in text

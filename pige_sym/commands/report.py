@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from ..report import PRIMARY_METHODS, gather_report, write_report
+from ..report import PRIMARY_METHODS, findings_text, gather_report, write_report
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -19,7 +19,7 @@ def _run(args: argparse.Namespace) -> int:
         return 0
     for rep in data.measurements:
         gn = rep.identification["gauss-newton"]
-        found = ", ".join(f.effect for f in rep.diagnosis.findings) or "no effect beyond the PIGEs"
+        found = findings_text(rep)
         comp = rep.compensation[0]
         print(f"{rep.path}: rank {gn.rank}/{len(gn.parameters)}, residual RMS {gn.rms_um:.3f} um; {found}; "
               f"RMSE {comp.rmse_before_um:.3f} -> {comp.rmse_after_um:.3f} um"
