@@ -494,9 +494,12 @@ def identify(measurement: Measurement, *, method: str = "gauss-newton", projecti
     sol = _solve(problem.normal, problem.rhs, problem.yy)
     if method == "gauss-newton":
         # Gauss–Newton: x1 = x0 + Δ with Δ from the linearised (scaled) normal equations, from x0 = 0.
-        # The first-order model is linear in the parameters, so Δ at x1 is zero (checked).
+        # The first-order model is linear in the parameters, so Δ at x1 is zero (checked) for every
+        # parameter the data determine; along near-null directions (parameters reported as not
+        # identifiable, infinite VIF) the second step is round-off amplified and is not checked.
         step = _solve(problem.normal, problem.rhs - problem.normal @ sol.values, problem.yy).values
-        if np.abs(step).max(initial=0) > 1e-6 * max(1.0, np.abs(sol.values).max(initial=0)):
+        determined = np.isfinite(sol.vif)
+        if np.abs(step[determined]).max(initial=0) > 1e-6 * max(1.0, np.abs(sol.values[determined]).max(initial=0)):
             raise IdentificationError("Gauss–Newton did not converge")  # pragma: no cover - linear model
         return _result(problem, sol, method=method, projection=proj.name, loss=loss, machine=measurement.machine,
                        measurement=measurement, outliers=outliers)

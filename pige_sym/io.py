@@ -231,9 +231,10 @@ def format_measurement(m: Measurement) -> str:
 
 
 def write_measurement(m: Measurement, path: str | os.PathLike[str]) -> Path:
-    """Write a measurement file (atomically: temp file then rename)."""
+    """Write a measurement file (atomically: temp file then rename); missing parent folders are created."""
     p = Path(path)
     text = format_measurement(m)
+    p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_name(p.name + ".tmp")
     tmp.write_text(text, encoding="utf-8")
     tmp.replace(p)

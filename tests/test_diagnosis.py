@@ -116,3 +116,14 @@ def test_plots_and_json(tmp_path) -> None:
         assert key in f
     json.dumps(out)
     assert np.isfinite(out["baseline"]["bic"])
+
+
+def test_head_machine_candidates_with_near_null_directions_do_not_abort():
+    """Fork head, cone test: some wobble/runout candidates are confounded (near-null directions whose
+    Gauss–Newton re-step is pure round-off); they are rejected as unidentifiable, the diagnosis finishes."""
+    code = "wbXYZCA(C1)t"
+    sim = simulate(code, cone_frustum(code), pige=random_pige(code, 5), noise_um=0.25, seed=5,
+                   tool_mm=(0.0, 0.0, -250.0))
+    result = diagnose(sim.measurement)
+    assert result.findings == []
+    assert any("unidentifiable" in r.reason for r in result.rejected)
