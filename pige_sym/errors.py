@@ -56,3 +56,11 @@ class FileFormatError(PigeError):
         self.problem = problem
         loc = f"{self.path}:{line}" if line is not None else self.path
         super().__init__(f"{loc}: {problem}")
+
+
+class AcquisitionError(PigeError):
+    """Acquisition from a measuring device cannot go on (port, device, resume mismatch).
+
+    Rows written before the error stay in a valid ``pige-rtest 1`` file that
+    ``pige acquire --resume`` continues.
+    """
