@@ -94,7 +94,7 @@ from .kernels import load_kernels
 from .machine_code import parse_machine_code
 from .nest import NestGeometry, default_nest
 from .rtest_program import TestProgram
-from .transport import PortSettings, RawLog, open_port
+from .transport import PortSettings, RawLog, open_port, read_available
 
 TRIGGERS = ("stable", "schedule", "key")
 EXTRA_COLUMNS = ("pose", "seq_first", "seq_last", "r1_um", "r2_um", "r3_um")
@@ -680,7 +680,8 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
     echo : callable (str) -> None
         Receives messages (prompts, resume notes); default: stderr.
     opener : callable () -> port object
-        Opens the port instead of :func:`~pige_sym.transport.open_port` (tests, special links).
+        Opens the port instead of :func:`~pige_sym.transport.open_port` (tests, special links);
+        the port must be non-blocking (pyserial ``timeout=0``).
 
     Returns
     -------
@@ -755,9 +756,6 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
         overall.update(1)
         point.reset(total=opts.window_s)
 
-    engine = _Engine(program, out_p, nest, opts, summary, state, trigger, on_pose)
-    framer = adapter.new_framer()
-    log = RawLog(log_path)
     last_seq: int | None = None
     conn: Any = None
 
@@ -787,18 +785,27 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
         summary.reconnects += 1
         return conn
 
+    try:
+        conn = connect(first=True)
+    except AcquisitionError:
+        overall.close()
+        point.close()
+        raise
+    engine = _Engine(program, out_p, nest, opts, summary, state, trigger, on_pose)
+    framer = adapter.new_framer()
+    log = RawLog(log_path)
     last_data = timer = time.monotonic()
     in_stall = False
     last_status = 0.0
     try:
-        conn = connect(first=True)
         while not engine.done:
             try:
                 adapter.poll(conn)
-                data = conn.read(4096)
+                data = read_available(conn, settings.poll_s)
             except (serial.SerialException, OSError):
                 summary.disconnects += 1
                 reconnect()
+                timer = time.monotonic()
                 continue
             now = time.monotonic()
             if not data:

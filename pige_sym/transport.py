@@ -7,9 +7,11 @@ Every port is opened with :func:`serial.serial_for_url`, so a device path
 ``rfc2217://host:port`` all work.  :class:`PortSettings` holds the line settings
 (baud rate, byte size, parity, stop bits; ignored by the network URL handlers) and
 the *stall timeout*: a port that delivers no byte for ``timeout_s`` seconds is
-considered stalled.  Reads themselves use a short poll interval
-(``min(timeout_s, 0.05)`` s) so that data is handled as it arrives whatever the URL
-handler.
+considered stalled.  Ports are opened non-blocking (pyserial ``timeout=0``) and read
+with :func:`read_available`, which returns the bytes that are there, waiting at most
+a short poll interval (``min(timeout_s, 0.05)`` s) for the first one.  A blocking
+pyserial read would collect bytes inside the call and lose them when the link fails
+before it returns; a non-blocking read hands over every byte it took.
 
 Raw log
 -------
@@ -38,6 +40,7 @@ byte every line is a frame (empty lines are ignored).
 from __future__ import annotations
 
 import os
+import select
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -107,10 +110,30 @@ def open_port(url: str, settings: PortSettings | None = None) -> serial.SerialBa
     try:
         return serial.serial_for_url(
             url, baudrate=s.baudrate, bytesize=BYTESIZES[s.bytesize], parity=PARITIES[s.parity.upper()],
-            stopbits=STOPBITS[str(s.stopbits)], timeout=s.poll_s, write_timeout=max(s.timeout_s, 1.0),
+            stopbits=STOPBITS[str(s.stopbits)], timeout=0, write_timeout=max(s.timeout_s, 1.0),
         )
     except (serial.SerialException, OSError, ValueError) as exc:
         raise AcquisitionError(f"cannot open port {url!r}: {exc}") from None
+
+
+def read_available(port: Any, wait_s: float, max_bytes: int = 65536) -> bytes:
+    """The bytes a non-blocking port has now, waiting up to ``wait_s`` for the first one.
+
+    Raises what the port raises (``serial.SerialException``, ``OSError``) when the link
+    fails; no byte already taken from the port is lost then.
+    """
+    data = port.read(max_bytes)
+    if data:
+        return bytes(data)
+    try:
+        fd = port.fileno()
+    except Exception:  # noqa: BLE001 - URL handlers without a file descriptor (loop://, rfc2217://)
+        fd = None
+    if fd is not None:
+        select.select([fd], [], [], wait_s)
+    else:
+        time.sleep(min(wait_s, 0.01))
+    return bytes(port.read(max_bytes))
 
 
 class RawLog:

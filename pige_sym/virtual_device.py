@@ -91,6 +91,7 @@ TRANSIENT_UM, TRANSIENT_TAU_S, TRANSIENT_HZ = 8.0, 0.15, 3.0
 LAG_UM, VIBRATION_UM, VIBRATION_HZ = 15.0, 3.0, 4.0
 SENSOR_PHASES = np.array([0.0, 2.1, 4.2])
 CONNECT_SETTLE_S = 0.05
+DRAIN_QUIET_S = 0.1
 
 
 def parse_faults(spec: str | None) -> dict[str, int]:
@@ -358,11 +359,18 @@ class PtyLink(_Link):
         except OSError:
             return
         try:
+            # the kernel moves written bytes to the slave's input queue asynchronously, so the queue must be
+            # seen empty for a while (longer than that hand-over, shorter than anything else)
             deadline = time.monotonic() + timeout_s
             buf = array.array("i", [0])
-            while time.monotonic() < deadline:
+            empty_since: float | None = None
+            while (now := time.monotonic()) < deadline:
                 fcntl.ioctl(fd, termios.FIONREAD, buf)
-                if buf[0] == 0:
+                if buf[0] != 0:
+                    empty_since = None
+                elif empty_since is None:
+                    empty_since = now
+                elif now - empty_since >= DRAIN_QUIET_S:
                     break
                 time.sleep(0.005)
         finally:

@@ -1,0 +1,410 @@
+"""Acquisition end to end: the virtual R-test over a real pty / TCP, faults, resume, nest geometry."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pige_sym.acquisition import AcquisitionOptions, acquire, default_raw_log, summary_path
+from pige_sym.cli import main
+from pige_sym.device import GaugeQueryAdapter, Info, RecordError, Sample, encode_info, encode_sample, parse_record
+from pige_sym.errors import AcquisitionError
+from pige_sym.identification import identify
+from pige_sym.io import read_measurement
+from pige_sym.ncprogram import make_rtest_program
+from pige_sym.nest import NestGeometry, parse_nest, tripod
+from pige_sym.rtest_program import load_test_program
+from pige_sym.simulator import random_pige
+from pige_sym.transport import LineFramer, PortSettings, open_port, read_available
+from pige_sym.virtual_device import DeviceConfig, VirtualRTest, start_virtual_device
+
+AC = "wC'A'bXYZ(C1)t"
+REPO = Path(__file__).resolve().parents[1]
+FAST = PortSettings(timeout_s=0.25)
+
+
+# --------------------------------------------------------------------------------------------- nest geometry
+
+
+def test_nest_recovers_known_displacement_for_non_orthogonal_point_probes() -> None:
+    nest = tripod(tilt_deg=50.0, azimuth_deg=17.0, probe="point", ball_diameter_mm=25.4)
+    n = nest.directions
+    assert abs(n[0] @ n[1]) > 0.1  # really not orthogonal
+    d = np.array([[150.0, -80.0, 40.0], [-300.0, 20.0, -120.0], [0.0, 0.0, 0.0], [5.0, 5.0, -5.0]])
+    r = nest.readings(d)
+    np.testing.assert_allclose(nest.displacement(r), d, atol=1e-9)
+    # the sphere-contact correction matters: the linear (flat-probe) model is off by far more than the noise
+    linear = r @ np.linalg.inv(n).T
+    assert np.abs(linear - d).max() > 0.5
+    # forward model against the exact contact condition |s n − d| = ρ for one sensor
+    rho = 12.7e3
+    s = rho + r[0, 0]
+    assert abs(np.linalg.norm(s * n[0] - d[0]) - rho) < 1e-6
+
+
+def test_nest_flat_probes_are_linear_and_json_geometry(tmp_path) -> None:
+    dirs = [[1.0, 0.2, -0.5], [-0.3, 1.0, -0.6], [-0.6, -0.7, -0.4]]
+    spec = tmp_path / "nest.json"
+    spec.write_text(json.dumps({"directions": dirs, "probe": ["flat", "point", "point"], "ball_diameter_mm": 20}))
+    nest = parse_nest(str(spec))
+    d = np.array([40.0, -25.0, 90.0])
+    np.testing.assert_allclose(nest.displacement(nest.readings(d)), d, atol=1e-9)
+    flat = parse_nest("default")
+    assert flat.linear
+    np.testing.assert_allclose(flat.readings(d), flat.directions @ d)
+    np.testing.assert_allclose(flat.directions @ flat.directions.T, np.eye(3), atol=1e-12)  # cube corner
+    with pytest.raises(Exception, match="coplanar"):
+        NestGeometry(np.array([[1.0, 0, 0], [0, 1.0, 0], [1.0, 1.0, 0]]), np.full(3, np.inf))
+    with pytest.raises(Exception, match="key=value"):
+        parse_nest("tilt=45,bogus=1")
+
+
+# --------------------------------------------------------------------------------------------- protocol, framing
+
+
+def test_parse_record_accepts_valid_and_names_every_rejection() -> None:
+    rec = encode_sample(12, 0.6, [312.4051, -87.113, 15.0042])
+    assert rec.startswith(b"$RT,12,0.6000,312.4051,-87.1130,15.0042*") and rec.endswith(b"\r\n")
+    s = parse_record(rec[1:-2])
+    assert isinstance(s, Sample) and s.seq == 12 and s.readings_um == (312.4051, -87.113, 15.0042)
+    info = parse_record(encode_info("END")[1:-2])
+    assert isinstance(info, Info) and info.is_end
+
+    def reason(body: bytes) -> str:
+        with pytest.raises(RecordError) as exc:
+            parse_record(body)
+        return exc.value.reason
+
+    from pige_sym.device import frame_payload
+
+    assert reason(rec[1:-8]) == "format"
+    assert reason(rec[1:-2].replace(b"312.4051", b"312.4061")) == "checksum"
+    assert reason(frame_payload(b"XX,1,2")[1:-2]) == "type"
+    assert reason(frame_payload(b"RT,1,2,3,4")[1:-2]) == "fields"
+    assert reason(frame_payload(b"RT,1,2,nan,4,5")[1:-2]) == "number"
+    assert reason(frame_payload(b"RT,-1,2,3,4,5")[1:-2]) == "number"
+
+
+def test_framer_counts_noise_truncated_and_overlong_across_chunk_boundaries() -> None:
+    good = [encode_sample(k, k / 20, [1.0 * k, 2.0, 3.0]) for k in range(4)]
+    stream = b"xx\n" + good[0] + b"\x00\xffnoise" + good[1] + b"$RT,9,1" + good[2] + b"$" + b"9" * 300 + b"\n" + good[3]
+    whole = LineFramer(b"$", max_len=160)
+    frames = whole.feed(stream)
+    byte_by_byte = LineFramer(b"$", max_len=160)
+    frames2 = [f for i in range(len(stream)) for f in byte_by_byte.feed(stream[i:i + 1])]
+    assert frames == frames2 == [g[1:-2] for g in good]
+    for fr in (whole, byte_by_byte):
+        assert (fr.noise_bytes, fr.noise_runs, fr.truncated, fr.overlong) == (10, 2, 1, 1)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.one_of(st.integers(0, 5), st.binary(min_size=1, max_size=40)), min_size=1, max_size=30),
+       st.integers(1, 64))
+def test_random_bytes_never_yield_a_record_that_was_not_sent(parts, chunk) -> None:
+    sent = {k: encode_sample(k, k * 0.05, [k + 0.5, -k - 0.25, 3.0]) for k in range(6)}
+    stream = b"".join(sent[p] if isinstance(p, int) else p for p in parts)
+    framer = LineFramer(b"$")
+    for i in range(0, len(stream), chunk):
+        for frame in framer.feed(stream[i:i + chunk]):
+            try:
+                rec = parse_record(frame)
+            except RecordError:
+                continue
+            assert isinstance(rec, Sample)
+            assert rec.seq is not None and sent[rec.seq][1:-2] == frame
+
+
+def test_loop_url_round_trip() -> None:
+    port = open_port("loop://", PortSettings(timeout_s=0.2))
+    try:
+        port.write(b"junk" + encode_sample(0, 0.0, [1, 2, 3]) + encode_info("hello"))
+        framer = LineFramer(b"$")
+        frames = []
+        deadline = time.monotonic() + 2
+        while len(frames) < 2 and time.monotonic() < deadline:
+            frames += framer.feed(read_available(port, 0.05))
+        recs = [parse_record(f) for f in frames]
+        assert isinstance(recs[0], Sample) and recs[0].readings_um == (1.0, 2.0, 3.0)
+        assert isinstance(recs[1], Info) and recs[1].text == "hello" and framer.noise_bytes == 4
+    finally:
+        port.close()
+    with pytest.raises(AcquisitionError, match="cannot open port"):
+        open_port("/dev/does-not-exist-pige")
+
+
+# --------------------------------------------------------------------------------------------- in-process stream
+
+
+class _BytesPort:
+    """A port that hands out a fixed byte stream in uneven chunks (no serial stack)."""
+
+    def __init__(self, data: bytes, seed: int = 0) -> None:
+        self.data = data
+        self.pos = 0
+        self.rng = np.random.default_rng(seed)
+
+    def read(self, n: int) -> bytes:
+        k = int(min(n, self.rng.integers(1, 3000)))
+        out = self.data[self.pos:self.pos + k]
+        self.pos += len(out)
+        return out
+
+    def write(self, data: bytes) -> int:
+        return len(data)
+
+    def close(self) -> None:
+        pass
+
+
+def _stream(dev: VirtualRTest) -> bytes:
+    return encode_info("test") + b"".join(dev.record(k) for k in range(dev.n_samples)) + encode_info("END")
+
+
+def _config(program, seed: int = 2, **kw) -> DeviceConfig:
+    return DeviceConfig(program=program, pige=random_pige(AC, seed), seed=seed, **kw)
+
+
+def test_flagged_pose_gets_no_row_and_the_rest_stay_aligned(tmp_path) -> None:
+    program = load_test_program(AC, "cone-frustum", points=6)
+    program.dwell_s[3] = 1.6  # too short to settle and average 20 samples
+    dev = VirtualRTest(_config(program))
+    out = tmp_path / "flag.csv"
+    s = acquire("fake", program, out, opener=lambda: _BytesPort(_stream(dev)))
+    assert s.completed and [f["pose"] for f in s.flagged] == [3]
+    m = read_measurement(out)
+    poses = [int(p) for p in m.extra_columns["pose"]]
+    assert poses == [0, 1, 2, 4, 5, 6]
+    truth = dev.deviation_machine_um[poses]
+    assert np.abs(m.deviation_um - truth).max() < 0.2  # right pose on every row (poses differ by um)
+    assert (m.optional["n_samples"] == 100).all()
+
+
+def test_schedule_and_key_triggers_agree_with_stability(tmp_path) -> None:
+    program = load_test_program(AC, "cone-frustum", points=5)
+    dev = VirtualRTest(_config(program, seed=4))
+    rows = {}
+    for trig in ("stable", "schedule", "key"):
+        out = tmp_path / f"{trig}.csv"
+        s = acquire("fake", program, out, options=AcquisitionOptions(trigger=trig), raw_log=None,
+                    key_source=lambda: True, echo=lambda msg: None, opener=lambda: _BytesPort(_stream(dev)))
+        assert s.completed, s.stop_reason
+        rows[trig] = read_measurement(out).deviation_um
+    truth = dev.deviation_machine_um
+    assert np.abs(rows["stable"] - truth).max() < 0.2  # noise of the mean and of the zero: ~0.035 um
+    assert np.abs(rows["schedule"] - truth).max() < 0.2
+    # "key" pressed at once: pose 0 is averaged from the first sample (still fine), later windows start while the
+    # machine moves, so only the reference row is comparable
+    assert rows["key"].shape == truth.shape
+
+
+def test_resume_refuses_a_different_setup_and_accepts_a_complete_file(tmp_path) -> None:
+    program = load_test_program(AC, "cone-frustum", points=4)
+    dev = VirtualRTest(_config(program))
+    out = tmp_path / "r.csv"
+    acquire("fake", program, out, raw_log=None, opener=lambda: _BytesPort(_stream(dev)))
+    other = load_test_program(AC, "cone-frustum", points=4, ball_mm=(100.0, 0.0, 80.0))
+    with pytest.raises(AcquisitionError, match="ball_mm"):
+        acquire("fake", other, out, resume=True, opener=lambda: _BytesPort(b""))
+    s = acquire("fake", program, out, resume=True, echo=lambda msg: None, opener=lambda: _BytesPort(b""))
+    assert s.completed and s.rows_written == 0
+
+
+def test_nc_program_dwells_and_poses(tmp_path) -> None:
+    traj_prog = load_test_program(AC, "cone-frustum", points=6)
+    text = make_rtest_program(traj_prog.angles_deg, traj_prog.linear_mm(), traj_prog.rotary_axes, dwell_s=8)
+    path = tmp_path / "rtest.mpf"
+    path.write_text(text)
+    nc = load_test_program(AC, str(path))
+    np.testing.assert_allclose(nc.angles_deg, traj_prog.angles_deg, atol=1e-4)
+    assert (nc.dwell_s == 8.0).all() and nc.lines is not None and nc.description.startswith("nc ")
+
+
+def test_gauge_query_adapter_is_one_small_class(tmp_path) -> None:
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+    answered = []
+
+    def gauge() -> None:
+        conn, _ = server.accept()
+        buf = b""
+        with conn:
+            while True:
+                data = conn.recv(100)
+                if not data:
+                    return
+                buf += data
+                while b"?\r" in buf:
+                    buf = buf.replace(b"?\r", b"", 1)
+                    v = 0.3 + 0.001 * len(answered)
+                    conn.sendall(f"{v:+.4f} -0.2500 +0.1000\r\n".encode())
+                    answered.append(v)
+
+    threading.Thread(target=gauge, daemon=True).start()
+    angles = tmp_path / "angles.csv"
+    angles.write_text("A_deg,C_deg\n0,0\n10,20\n20,40\n")
+    program = load_test_program(AC, str(angles))
+    out = tmp_path / "gauge.csv"
+    s = acquire(f"socket://127.0.0.1:{port}", program, out, adapter=GaugeQueryAdapter(period_s=0.01),
+                options=AcquisitionOptions(trigger="key", window_s=0.15, min_samples=3), key_source=lambda: True,
+                echo=lambda msg: None, settings=FAST)
+    server.close()
+    assert s.completed and s.rows_written == 3 and len(answered) >= 9
+    m = read_measurement(out)
+    assert m.n_rows == 3 and float(m.extra_columns["r1_um"][0]) > 300  # 0.3 mm read in mm, stored in um
+
+
+# --------------------------------------------------------------------------------------------- real serial stack
+
+
+def test_acquire_whole_cone_over_pty_and_identify(tmp_path) -> None:
+    truth_path = tmp_path / "dev.truth.json"
+    out = tmp_path / "run.csv"
+    program = load_test_program(AC, "cone-frustum")
+    with start_virtual_device(AC, "cone-frustum", seed=11, time_scale=400, truth=truth_path,
+                              extra_args=["--linger", "1"]) as dev:
+        assert dev.url.startswith("/dev/pts/")
+        s = acquire(dev.url, program, out, settings=FAST)
+    truth = json.loads(truth_path.read_text())
+    assert s.completed and s.rows_written == 31 and s.rejected_total == 0 and s.missing == 0, s.format()
+    assert default_raw_log(out).stat().st_size == s.bytes_read
+    assert json.loads(summary_path(out).read_text())["sessions"][0]["rows_written"] == 31
+    m = read_measurement(out)
+    assert [int(p) for p in m.extra_columns["pose"]] == list(range(31))
+    assert (m.optional["n_samples"] == 100).all() and np.all(np.abs(m.optional["sd_um"] - 0.25) < 0.05)
+    assert m.metadata["source"] == "pige acquire" and np.all(np.diff(m.t_s) > 0)
+    res = identify(m)
+    z = [(res.value(p) - truth["pige"][p]) / res.std[i] for i, p in enumerate(res.parameters)]
+    assert res.rank == 8 and np.all(np.abs(z) < 4), dict(zip(res.parameters, np.round(z, 2), strict=True))
+
+
+def _check_rows_are_clean(out: Path, dev: VirtualRTest, truth: dict) -> None:
+    """Every row averages exactly the device's clean readings of the sequence numbers it names."""
+    bad = set(truth["affected"]["checksum"]) | set(truth["affected"]["drop"]) | set(truth["affected"]["disconnect"])
+    m = read_measurement(out)
+    for i in range(m.n_rows):
+        first, last = int(m.extra_columns["seq_first"][i]), int(m.extra_columns["seq_last"][i])
+        seqs = [k for k in range(first, last + 1) if k not in bad]
+        clean = [parse_record(dev.record(k)[1:-2]) for k in seqs]
+        mean = np.array([c.readings_um for c in clean if isinstance(c, Sample)]).mean(axis=0)
+        assert m.optional["n_samples"][i] == len(seqs)
+        got = [float(m.extra_columns[c][i]) for c in ("r1_um", "r2_um", "r3_um")]
+        np.testing.assert_allclose(got, mean, rtol=0, atol=1e-9)
+
+
+FAULT_RUN = ["--points", "10", "--stall-s", "0.6", "--linger", "1.5"]
+
+
+@pytest.mark.parametrize("kind", ["garbage", "checksum", "drop", "stall", "disconnect"])
+def test_each_injected_fault_is_counted_and_never_reaches_a_row(tmp_path, kind) -> None:
+    seed = 3
+    truth_path = tmp_path / "truth.json"
+    out = tmp_path / "f.csv"
+    program = load_test_program(AC, "cone-frustum", points=10)
+    with start_virtual_device(AC, "cone-frustum", seed=seed, time_scale=200, faults=kind, truth=truth_path,
+                              extra_args=FAULT_RUN) as dev:
+        s = acquire(dev.url, program, out, settings=FAST, options=AcquisitionOptions(reconnect_timeout_s=10))
+    truth = json.loads(truth_path.read_text())
+    inj = truth["injected"]
+    assert inj[kind] == 3
+    assert s.completed and s.rows_written == 11, s.format()
+    assert s.noise_bytes == inj["garbage_bytes"] and s.noise_runs == inj["garbage"]
+    assert s.rejected.get("checksum", 0) == inj["checksum"]
+    assert s.rejected_total == inj["checksum"]
+    assert s.missing == inj["checksum"] + inj["drop"] + inj["lost_in_outage"]
+    assert s.stalls == inj["stall"] and s.disconnects == inj["disconnect"]
+    dev_model = VirtualRTest(_config(program, seed=seed))
+    _check_rows_are_clean(out, dev_model, truth)
+
+
+def test_all_faults_at_once_over_tcp(tmp_path) -> None:
+    seed = 8
+    truth_path = tmp_path / "truth.json"
+    out = tmp_path / "t.csv"
+    program = load_test_program(AC, "cone-frustum", points=10)
+    with start_virtual_device(AC, "cone-frustum", seed=seed, time_scale=200, tcp=0, truth=truth_path,
+                              faults="garbage=4,checksum=4,drop=4,stall=2,disconnect=2", extra_args=FAULT_RUN) as dev:
+        assert dev.url.startswith("socket://127.0.0.1:")
+        s = acquire(dev.url, program, out, settings=FAST, options=AcquisitionOptions(reconnect_timeout_s=10))
+    truth = json.loads(truth_path.read_text())
+    inj = truth["injected"]
+    assert s.completed and s.rows_written == 11, s.format()
+    assert (s.noise_bytes, s.rejected_total, s.stalls, s.disconnects) == (
+        inj["garbage_bytes"], inj["checksum"], inj["stall"], inj["disconnect"])
+    assert s.missing == inj["checksum"] + inj["drop"] + inj["lost_in_outage"]
+    _check_rows_are_clean(out, VirtualRTest(_config(program, seed=seed)), truth)
+
+
+def _acquire_cmd(url: str, out: Path) -> list[str]:
+    return [sys.executable, "-m", "pige_sym", "acquire", "--port", url, "--program", "cone-frustum", "--points", "10",
+            "--out", str(out), "--no-progress", "--timeout", "0.25"]
+
+
+def _wait_rows(path: Path, rows: int, proc: subprocess.Popen, timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if path.exists() and sum(1 for ln in path.read_text().splitlines() if ln[:1].isdigit()) >= rows:
+            return
+        assert proc.poll() is None, "acquisition ended before it could be interrupted"
+        time.sleep(0.02)
+    raise AssertionError("no rows appeared")
+
+
+def test_kill_mid_run_then_resume_gives_the_same_file(tmp_path) -> None:
+    seed = 5
+    program = load_test_program(AC, "cone-frustum", points=10)
+    full = tmp_path / "full.csv"
+    with start_virtual_device(AC, "cone-frustum", seed=seed, time_scale=300, extra_args=FAULT_RUN) as dev:
+        assert acquire(dev.url, program, full, settings=FAST).completed
+    part = tmp_path / "part.csv"
+    with start_virtual_device(AC, "cone-frustum", seed=seed, time_scale=30, extra_args=FAULT_RUN) as dev:
+        proc = subprocess.Popen(_acquire_cmd(dev.url, part), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        _wait_rows(part, 4, proc)
+        proc.kill()  # a crash: no clean-up at all
+        proc.wait()
+    partial = read_measurement(part)
+    assert 4 <= partial.n_rows < 11
+    with open(part, "a") as fh:
+        fh.write("61.3,12.5")  # a row cut in the middle by the crash
+    with start_virtual_device(AC, "cone-frustum", seed=seed, time_scale=300, extra_args=FAULT_RUN) as dev:
+        s = acquire(dev.url, program, part, resume=True, settings=FAST, echo=lambda msg: None)
+    assert s.completed and s.removed_partial_line and s.first_pose == partial.n_rows
+    assert s.poses_replayed == partial.n_rows and s.rows_written == 11 - partial.n_rows
+    assert part.read_bytes() == full.read_bytes()
+
+
+def test_ctrl_c_leaves_a_valid_partial_file_and_summary(tmp_path) -> None:
+    out = tmp_path / "c.csv"
+    with start_virtual_device(AC, "cone-frustum", seed=6, time_scale=30, extra_args=FAULT_RUN) as dev:
+        proc = subprocess.Popen(_acquire_cmd(dev.url, out), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                text=True)
+        _wait_rows(out, 2, proc)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    m = read_measurement(out)
+    assert 2 <= m.n_rows < 11
+    session = json.loads(summary_path(out).read_text())["sessions"][-1]
+    assert session["stop_reason"].startswith("interrupted") and session["rows_written"] == m.n_rows
+    assert "interrupted" in err and "rows written" in err
+
+
+def test_cli_bad_input_is_one_line_and_status_2(capsys) -> None:
+    assert main(["rtest-sim", "--faults", "gremlins"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown fault 'gremlins'" in err[0]
+    assert main(["acquire", "--port", "/dev/does-not-exist-pige", "--out", os.devnull, "--no-progress",
+                 "--no-raw-log"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot open port" in err[0]
