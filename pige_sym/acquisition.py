@@ -750,7 +750,8 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
     overall = tqdm(total=program.n_poses, unit="pose", desc="poses", disable=not progress, position=0,
                    dynamic_ncols=True, file=sys.stderr)
     point = tqdm(total=opts.window_s, unit="s", desc="point", disable=not progress, position=1, leave=False,
-                 dynamic_ncols=True, file=sys.stderr, bar_format="{desc}: {percentage:3.0f}%|{bar}| {postfix}")
+                 dynamic_ncols=True, file=sys.stderr,
+                 bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:g} s{postfix}")
 
     def on_pose(pose: int) -> None:
         overall.update(1)

@@ -209,6 +209,26 @@ def test_schedule_and_key_triggers_agree_with_stability(tmp_path) -> None:
     assert rows["key"].shape == truth.shape
 
 
+@pytest.mark.parametrize("machine, tool, frame", [(AC, None, "table"), ("wbXYZCA(C1)t", (0.0, 0.0, -250.0), "machine")])
+def test_point_probe_nest_and_frames_end_to_end(tmp_path, machine, tool, frame) -> None:
+    from pige_sym.effects import parse_effect
+    from pige_sym.kernels import load_kernels
+
+    kern = load_kernels(machine)
+    program = load_test_program(machine, "cone-frustum", points=6, tool_mm=tool)
+    nest = tripod(tilt_deg=50.0, azimuth_deg=10.0, probe="point", ball_diameter_mm=25.4)
+    cfg = DeviceConfig(program=program, pige=random_pige(machine, 7), seed=7, nest=nest,
+                       effects=[parse_effect("thermal_drift", tuple(kern.ROTARY_AXES))])
+    dev = VirtualRTest(cfg)
+    out = tmp_path / "n.csv"
+    s = acquire("fake", program, out, nest=nest, options=AcquisitionOptions(frame=frame), raw_log=None,
+                opener=lambda: _BytesPort(_stream(dev)))
+    assert s.completed, s.stop_reason
+    m = read_measurement(out)
+    assert m.frame == frame and m.metadata["nest"] == nest.description
+    np.testing.assert_allclose(m.deviation_machine_um(), dev.deviation_machine_um, atol=0.2)
+
+
 def test_resume_refuses_a_different_setup_and_accepts_a_complete_file(tmp_path) -> None:
     program = load_test_program(AC, "cone-frustum", points=4)
     dev = VirtualRTest(_config(program))
