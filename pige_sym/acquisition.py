@@ -70,6 +70,7 @@ same seed) the final file is byte-identical to an uninterrupted run.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -694,7 +695,8 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
     AcquisitionError
         The port cannot be opened at the start, or ``resume`` does not match the file.
     KeyboardInterrupt
-        After writing the summary; rows already written stay.
+        After writing the summary (``pige acquire`` turns SIGTERM into this too); rows already
+        written stay.
     """
     opts = options or AcquisitionOptions()
     settings = settings or PortSettings()
@@ -757,43 +759,15 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
         overall.update(1)
         point.reset(total=opts.window_s)
 
-    last_seq: int | None = None
-    conn: Any = None
-
-    def connect(first: bool) -> Any:
-        deadline = time.monotonic() + opts.reconnect_timeout_s
-        while True:
-            try:
-                c = opener() if opener is not None else open_port(port, settings)
-                adapter.on_connect(c)
-                return c
-            except (AcquisitionError, serial.SerialException, OSError) as exc:
-                if first:
-                    raise AcquisitionError(str(exc)) from None
-                if time.monotonic() >= deadline:
-                    raise _Stop(f"lost the device at pose {engine.pose}: could not reopen {port} for "
-                                f"{opts.reconnect_timeout_s:g} s ({exc}); run again with --resume") from None
-                time.sleep(opts.retry_s)
-
-    def reconnect() -> Any:
-        nonlocal conn
-        try:
-            conn.close()
-        except Exception:  # noqa: BLE001 - the port is already broken
-            pass
-        framer.reset()
-        conn = connect(first=False)
-        summary.reconnects += 1
-        return conn
-
+    link = _Link(port, settings, opts, adapter, opener, summary)
     try:
-        conn = connect(first=True)
+        link.open()
     except AcquisitionError:
         overall.close()
         point.close()
         raise
     engine = _Engine(program, out_p, nest, opts, summary, state, trigger, on_pose)
-    framer = adapter.new_framer()
+    records = _Records(adapter, summary, engine)
     log = RawLog(log_path)
     last_data = timer = time.monotonic()
     in_stall = False
@@ -801,11 +775,11 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
     try:
         while not engine.done:
             try:
-                adapter.poll(conn)
-                data = read_available(conn, settings.poll_s)
+                data = link.read()
             except (serial.SerialException, OSError):
                 summary.disconnects += 1
-                reconnect()
+                records.reset()
+                link.reopen(engine.pose)
                 timer = time.monotonic()
                 continue
             now = time.monotonic()
@@ -817,76 +791,148 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
                         in_stall = True
                     if now - last_data >= opts.reconnect_timeout_s:
                         raise _Stop(f"no data from the device for {now - last_data:.0f} s at pose {engine.pose}")
-                    reconnect()
+                    records.reset()
+                    link.reopen(engine.pose)
                     timer = time.monotonic()
                 continue
             in_stall = False
             last_data = timer = now
-            log.write(data)
+            log.write(data)  # logged (and flushed) before anything is parsed
             summary.bytes_read += len(data)
-            for frame in framer.feed(data):
-                try:
-                    rec = adapter.parse(frame)
-                except RecordError as exc:
-                    summary.rejected[exc.reason] = summary.rejected.get(exc.reason, 0) + 1
-                    continue
-                if isinstance(rec, Info):
-                    summary.info_records += 1
-                    if len(summary.device_info) < 20:
-                        summary.device_info.append(rec.text)
-                    if rec.is_end and not engine.done:
-                        raise _Stop(f"the device reported the end of its program before pose {engine.pose} "
-                                    f"of {program.n_poses} was measured")
-                    continue
-                if rec.seq is not None and last_seq is not None:
-                    if rec.seq == last_seq:
-                        summary.rejected["duplicate"] = summary.rejected.get("duplicate", 0) + 1
-                        continue
-                    if rec.seq < last_seq:
-                        raise _Stop(f"the device restarted (sequence {last_seq} then {rec.seq}) at pose "
-                                    f"{engine.pose}: run again with --resume")
-                    summary.missing += rec.seq - last_seq - 1
-                if rec.seq is not None:
-                    last_seq = rec.seq
-                summary.accepted += 1
-                engine.on_sample(rec)
-                if engine.done:
-                    break
+            records.feed(data)
             if progress and now - last_status > 0.1:
                 last_status = now
                 win = engine.window
-                elapsed = (win[-1].t_s - win[0].t_s) if len(win) > 1 else 0.0
-                point.n = min(elapsed, opts.window_s)
+                point.n = min((win[-1].t_s - win[0].t_s) if len(win) > 1 else 0.0, opts.window_s)
                 point.set_description_str(f"pose {engine.pose}")
                 point.set_postfix_str(f"{trigger.status()}, {len(win)} samples, "
                                       f"{summary.rejected_total} rejected", refresh=True)
         summary.completed = True
     except _Stop as stop:
         summary.stop_reason = str(stop)
-    except KeyboardInterrupt:
-        summary.stop_reason = "interrupted (Ctrl-C)"
-        _finish(summary, framer, log, engine, conn, started, out_p, overall, point)
-        say(summary.format())
+    except (KeyboardInterrupt, AcquisitionError) as exc:
+        interrupted = isinstance(exc, KeyboardInterrupt)
+        summary.stop_reason = "interrupted (Ctrl-C or SIGTERM)" if interrupted else str(exc)
+        _finish(summary, records, log, engine, link, started, out_p, overall, point)
+        if interrupted:
+            say(summary.format())
         raise
-    _finish(summary, framer, log, engine, conn, started, out_p, overall, point)
+    _finish(summary, records, log, engine, link, started, out_p, overall, point)
     return summary
 
 
-def _finish(summary: AcquisitionSummary, framer: Any, log: RawLog, engine: _Engine, conn: Any, started: float,
-            out: Path, *bars: Any) -> None:
+class _Link:
+    """The port of one acquisition: opened, reopened after a failure, read without losing bytes."""
+
+    def __init__(self, port: str, settings: PortSettings, opts: AcquisitionOptions, adapter: DeviceAdapter,
+                 opener: Callable[[], Any] | None, summary: AcquisitionSummary) -> None:
+        self.port = port
+        self.settings = settings
+        self.opts = opts
+        self.adapter = adapter
+        self.opener = opener
+        self.summary = summary
+        self.conn: Any = None
+
+    def _open(self) -> Any:
+        conn = self.opener() if self.opener is not None else open_port(self.port, self.settings)
+        self.adapter.on_connect(conn)
+        return conn
+
+    def open(self) -> None:
+        """First opening: a failure is the user's to fix (AcquisitionError)."""
+        try:
+            self.conn = self._open()
+        except (AcquisitionError, serial.SerialException, OSError) as exc:
+            raise AcquisitionError(str(exc)) from None
+
+    def reopen(self, pose: int) -> None:
+        """Close and reopen every ``retry_s`` until it works or ``reconnect_timeout_s`` has passed."""
+        self.close()
+        deadline = time.monotonic() + self.opts.reconnect_timeout_s
+        while True:
+            try:
+                self.conn = self._open()
+                self.summary.reconnects += 1
+                return
+            except (AcquisitionError, serial.SerialException, OSError) as exc:
+                if time.monotonic() >= deadline:
+                    raise _Stop(f"lost the device at pose {pose}: could not reopen {self.port} for "
+                                f"{self.opts.reconnect_timeout_s:g} s ({exc}); run again with --resume") from None
+                time.sleep(self.opts.retry_s)
+
+    def read(self) -> bytes:
+        self.adapter.poll(self.conn)
+        return read_available(self.conn, self.settings.poll_s)
+
+    def close(self) -> None:
+        if self.conn is not None:
+            with contextlib.suppress(Exception):  # the port may already be broken
+                self.conn.close()
+            self.conn = None
+
+
+class _Records:
+    """Bytes → frames → records → sequence check → engine."""
+
+    def __init__(self, adapter: DeviceAdapter, summary: AcquisitionSummary, engine: _Engine) -> None:
+        self.adapter = adapter
+        self.summary = summary
+        self.engine = engine
+        self.framer = adapter.new_framer()
+        self.last_seq: int | None = None
+
+    def reset(self) -> None:
+        """A new connection: a partial frame is dropped (counted as truncated)."""
+        self.framer.reset()
+
+    def _reject(self, reason: str) -> None:
+        self.summary.rejected[reason] = self.summary.rejected.get(reason, 0) + 1
+
+    def feed(self, data: bytes) -> None:
+        s, engine = self.summary, self.engine
+        for frame in self.framer.feed(data):
+            try:
+                rec = self.adapter.parse(frame)
+            except RecordError as exc:
+                self._reject(exc.reason)
+                continue
+            if isinstance(rec, Info):
+                s.info_records += 1
+                if len(s.device_info) < 20:
+                    s.device_info.append(rec.text)
+                if rec.is_end and not engine.done:
+                    raise _Stop(f"the device reported the end of its program before pose {engine.pose} "
+                                f"of {engine.program.n_poses} was measured")
+                continue
+            if rec.seq is not None and self.last_seq is not None:
+                if rec.seq == self.last_seq:
+                    self._reject("duplicate")
+                    continue
+                if rec.seq < self.last_seq:
+                    raise _Stop(f"the device restarted (sequence {self.last_seq} then {rec.seq}) at pose "
+                                f"{engine.pose}: run again with --resume")
+                s.missing += rec.seq - self.last_seq - 1
+            if rec.seq is not None:
+                self.last_seq = rec.seq
+            s.accepted += 1
+            engine.on_sample(rec)
+            if engine.done:
+                return
+
+
+def _finish(summary: AcquisitionSummary, records: _Records, log: RawLog, engine: _Engine, link: _Link,
+            started: float, out: Path, *bars: Any) -> None:
     for bar in bars:
         bar.close()
-    if conn is not None:
-        try:
-            conn.close()
-        except Exception:  # noqa: BLE001
-            pass
+    link.close()
     engine.close()
     log.close()
-    summary.frames = framer.frames
-    summary.noise_bytes = framer.noise_bytes
-    summary.noise_runs = framer.noise_runs
-    for reason, count in (("truncated", framer.truncated), ("overlong", framer.overlong)):
+    fr = records.framer
+    summary.frames = fr.frames
+    summary.noise_bytes = fr.noise_bytes
+    summary.noise_runs = fr.noise_runs
+    for reason, count in (("truncated", fr.truncated), ("overlong", fr.overlong)):
         if count:
             summary.rejected[reason] = summary.rejected.get(reason, 0) + count
     summary.wall_s = time.monotonic() - started

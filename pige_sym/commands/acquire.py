@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import signal
+from typing import Any
 
 from ..acquisition import TRIGGERS, AcquisitionOptions, acquire, summary_path
 from ..device import ADAPTERS, make_adapter
@@ -14,7 +16,12 @@ from .rtest_sim import trajectory_options
 from .simulate import parse_pivots, parse_vec3
 
 
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt  # SIGTERM ends the run like Ctrl-C: summary written, partial file valid
+
+
 def _run(args: argparse.Namespace) -> int:
+    signal.signal(signal.SIGTERM, _interrupt)
     kern = load_kernels(args.machine)
     program = load_test_program(
         kern.MACHINE_CODE, args.program, ball_mm=parse_vec3(args.ball, "--ball"), pivots_mm=parse_pivots(args.pivot),
