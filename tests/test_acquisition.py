@@ -239,6 +239,17 @@ def test_resume_refuses_a_different_setup_and_accepts_a_complete_file(tmp_path) 
         acquire("fake", other, out, resume=True, opener=lambda: _BytesPort(b""))
     s = acquire("fake", program, out, resume=True, echo=lambda msg: None, opener=lambda: _BytesPort(b""))
     assert s.completed and s.rows_written == 0
+    # a partial file continued from another machine state (other seed: other sensor zero) is refused, untouched
+    full = out.read_bytes()
+    lines = full.decode().splitlines(keepends=True)
+    out.write_text("".join(lines[:-2]))
+    stranger = VirtualRTest(_config(program, seed=9))
+    with pytest.raises(AcquisitionError, match="nest moved"):
+        acquire("fake", program, out, resume=True, echo=lambda msg: None,
+                opener=lambda: _BytesPort(_stream(stranger)))
+    assert out.read_text() == "".join(lines[:-2])
+    s = acquire("fake", program, out, resume=True, echo=lambda msg: None, opener=lambda: _BytesPort(_stream(dev)))
+    assert s.completed and s.rows_written == 2 and out.read_bytes() == full
 
 
 def test_nc_program_dwells_and_poses(tmp_path) -> None:
