@@ -18,23 +18,43 @@ nominal kinematics (``linear_commands`` is affine in the point).  With ``TRAORI`
 program holds workpiece coordinates; the compensated program stays in workpiece
 coordinates: the point is shifted by ``−R_wᵀ·d_raw`` and the angles by Δθ.
 
-Only the PIGEs and zero-position errors are compensated; accepted diagnosis
-extensions are reported but not compensated (yet).
+Accepted diagnosis extensions (``pige diagnose --json``): an angular positioning
+error (``angular_error_<AXIS>``, ``e(θ) = c·cos hθ + s·sin hθ``) or a reversal error
+(``backlash_<AXIS>``, ``e = (b/2)·approach``) means the axis stands at ``θ + e`` when
+θ is commanded, exactly what a zero-position error ``E<axis>0<axis> = e`` means
+(CONVENTIONS §3).  They are compensated as a pose-dependent zero-position error
+added to the parameters of each pose (the direction of approach follows the
+program's sequence of rotary positions).  The other extensions are listed as not
+compensated, with the reason: ``thermal_drift`` depends on when the program runs;
+``wobble``/``radial_runout`` and linear-axis ``squareness`` belong in the
+controller's own error-motion and squareness tables; ``setup_offset`` is not a
+machine error.
 """
 
 from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .effects import EffectSpec
 from .errors import FileFormatError, InputError, PigeError
 from .kernels import load_kernels
 from .ncprogram import NCBlock, parse_program, rewrite_program, to_fanuc
+from .trajectories import approach_directions
+
+COMPENSABLE_KINDS = ("angular_error", "backlash")
+NOT_COMPENSATED_WHY = {
+    "thermal_drift": "time-dependent (depends on when the program runs)",
+    "wobble": "an error motion: enter it in the controller's rotary-axis error tables",
+    "radial_runout": "an error motion: enter it in the controller's rotary-axis error tables",
+    "squareness": "a linear-axis error: enter it in the controller's squareness compensation",
+    "setup_offset": "a set-up error of the test, not of the machine",
+}
 
 
 class CompensationError(PigeError):
@@ -42,8 +62,58 @@ class CompensationError(PigeError):
 
 
 @dataclass
+class AngleExtension:
+    """An accepted extension acting as a pose-dependent zero-position error of a rotary axis.
+
+    Attributes
+    ----------
+    spec : EffectSpec
+        ``angular_error_<AXIS>`` or ``backlash_<AXIS>`` with its options (harmonic).
+    params : dict of str to float
+        Fitted values [µrad] by parameter name (``cos_urad``, ``sin_urad`` or ``b_urad``).
+    """
+
+    spec: EffectSpec
+    params: dict[str, float]
+
+    def zero_error_urad(self, angles_deg: np.ndarray, rotary_axes: tuple[str, ...],
+                        approach: np.ndarray) -> np.ndarray:
+        """Angle error of the axis at each pose, shape=(n,) [µrad].
+
+        Parameters
+        ----------
+        angles_deg : shape=(n, k) [deg]
+        rotary_axes : names of the columns of ``angles_deg``
+        approach : shape=(n, k) of {−1, 0, +1}
+            Direction of approach of each axis (:func:`~pige_sym.trajectories.approach_directions`).
+        """
+        k = rotary_axes.index(self.spec.axis)
+        if self.spec.kind == "angular_error":
+            h = self.spec.harmonic
+            theta = np.radians(angles_deg[:, k])
+            return self.params["cos_urad"] * np.cos(h * theta) + self.params["sin_urad"] * np.sin(h * theta)
+        return 0.5 * self.params["b_urad"] * approach[:, k]
+
+
+@dataclass
 class CompensationParameters:
-    """Parameters read from an identify/diagnose JSON result."""
+    """Parameters read from an identify/diagnose JSON result.
+
+    Attributes
+    ----------
+    machine : str
+    values : dict of str to float
+        PIGEs and zero-position errors [µm, µrad].
+    units : dict of str to str
+    tool_mm : list of float or None
+    pivots_mm : dict of str to list of float
+    source : str
+        Where the values come from (file name).
+    ignored : list of str
+        Names (and reasons) of what is not compensated.
+    extensions : list of AngleExtension
+        Accepted extensions that are compensated (module docstring).
+    """
 
     machine: str
     values: dict[str, float]
@@ -52,6 +122,7 @@ class CompensationParameters:
     pivots_mm: dict[str, list[float]]
     source: str
     ignored: list[str]
+    extensions: list[AngleExtension] = field(default_factory=list)
 
 
 def load_parameters(path: str | os.PathLike[str], machine: str | None = None, *,
@@ -74,10 +145,13 @@ def load_parameters(path: str | os.PathLike[str], machine: str | None = None, *,
     if not code:
         raise InputError(f"{p} names no machine: give --machine")
     kern = load_kernels(code)
-    values, ignored = {}, []
+    values: dict[str, float] = {}
+    ignored: list[str] = []
+    extensions, extension_names = _extensions(data, p, tuple(kern.ROTARY_AXES), ignored)
     for name, v in data["pige"].items():
         if "." in name:
-            ignored.append(name)  # an extension parameter: not compensated
+            if name not in extension_names and not any(name.startswith(i.split(" ")[0] + ".") for i in ignored):
+                ignored.append(f"{name} (no finding describes it)")
             continue
         if name not in kern.PARAMETERS:
             raise FileFormatError(p, None, f"parameter {name!r} does not belong to {kern.MACHINE_CODE}")
@@ -89,7 +163,90 @@ def load_parameters(path: str | os.PathLike[str], machine: str | None = None, *,
             v = 0.0
         values[name] = float(v)
     return CompensationParameters(kern.MACHINE_CODE, values, dict(data.get("units", {})), data.get("tool_mm"),
-                                  dict(data.get("pivots_mm", {})), p, ignored)
+                                  dict(data.get("pivots_mm", {})), p, ignored, extensions)
+
+
+def _extensions(data: dict[str, Any], path: str, rotary_axes: tuple[str, ...],
+                ignored: list[str]) -> tuple[list[AngleExtension], set[str]]:
+    """Compensable accepted findings of a ``pige diagnose --json`` result; the others go to ``ignored``."""
+    findings = data.get("findings", [])
+    if not isinstance(findings, list):
+        raise FileFormatError(path, None, '"findings" must be a list')
+    for f in findings:
+        if not isinstance(f, dict) or not isinstance(f.get("effect"), str) or not isinstance(f.get("params"), dict):
+            raise FileFormatError(path, None, 'each finding needs "effect" and "params"')
+    try:
+        out, skipped = angle_extensions(findings, rotary_axes)
+    except InputError as exc:
+        raise FileFormatError(path, None, str(exc)) from None
+    ignored += skipped
+    return out, {f"{e.spec.id}.{n}" for e in out for n in e.params}
+
+
+def angle_extensions(records: Any, rotary_axes: tuple[str, ...]) -> tuple[list[AngleExtension], list[str]]:
+    """Split effect records into compensable angle extensions and the rest (with the reason).
+
+    Parameters
+    ----------
+    records : iterable of dict
+        Either findings (``{"effect", "options", "params"}``, as ``pige diagnose --json``
+        prints them) or flat simulator records (``{"effect": id, option: value, param:
+        value}``, as in a ``*.truth.json`` sidecar).
+    rotary_axes : tuple of str
+
+    Returns
+    -------
+    extensions : list of AngleExtension
+    not_compensated : list of str
+        ``"<id> (<reason>)"`` for every other effect.
+
+    Raises
+    ------
+    InputError
+        A record names an axis the machine does not have or lacks a parameter.
+    """
+    from .effects import OPTION_KEYS
+
+    out: list[AngleExtension] = []
+    skipped: list[str] = []
+    for rec in records:
+        if "params" in rec:
+            options, values = dict(rec.get("options") or {}), dict(rec["params"])
+        else:
+            options = {k: v for k, v in rec.items() if k in OPTION_KEYS}
+            values = {k: v for k, v in rec.items() if k != "effect" and k not in OPTION_KEYS}
+        spec = EffectSpec(str(rec["effect"]), options)
+        if spec.kind not in COMPENSABLE_KINDS:
+            skipped.append(f"{spec.id} ({NOT_COMPENSATED_WHY.get(spec.kind, 'not compensable')})")
+            continue
+        if spec.axis not in rotary_axes:
+            raise InputError(f"effect {spec.id}: {spec.axis} is not a rotary axis of the machine")
+        params = {}
+        for name in spec.param_names:
+            v = values.get(name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                raise InputError(f"effect {spec.id}: {name} must be a finite number")
+            params[name] = float(v)
+        out.append(AngleExtension(spec, params))
+    return out, skipped
+
+
+def pose_parameters(kern: Any, values: dict[str, float], angles_deg: np.ndarray,
+                    extensions: list[AngleExtension] | tuple[()] = (),
+                    approach: np.ndarray | None = None) -> np.ndarray:
+    """Parameter vector of every pose, shape=(n, P) [µm, µrad]: the values plus the extensions' zero errors.
+
+    ``approach`` (n, k) defaults to the directions of approach of the poses in order.
+    """
+    a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    out = np.tile(_param_vector(kern, values), (a.shape[0], 1))
+    if extensions:
+        appr = approach_directions(a) if approach is None else np.atleast_2d(approach)
+        axes = tuple(kern.ROTARY_AXES)
+        for ext in extensions:
+            ax = ext.spec.axis
+            out[:, kern.PARAMETERS.index(f"E{ax[0]}0{ax}")] += ext.zero_error_urad(a, axes, appr)
+    return out
 
 
 def _param_vector(kern: Any, values: dict[str, float]) -> np.ndarray:
@@ -98,14 +255,18 @@ def _param_vector(kern: Any, values: dict[str, float]) -> np.ndarray:
 
 def raw_offset(kern: Any, angles_deg: np.ndarray, points_mm: np.ndarray, params: np.ndarray,
                pivots: dict | None, tool: Any) -> np.ndarray:
-    """Un-zeroed tool-point minus workpiece-point error per pose, shape=(n, 3) [µm]."""
+    """Un-zeroed tool-point minus workpiece-point error per pose, shape=(n, 3) [µm].
+
+    ``params`` is one vector (P,) or one per pose (n, P).
+    """
     out = np.empty((angles_deg.shape[0], 3))
     rot = kern.workpiece_rotation(angles_deg)
+    per_pose = np.broadcast_to(params, (angles_deg.shape[0], np.shape(params)[-1]))
     for i in range(angles_deg.shape[0]):
         a = angles_deg[i : i + 1]
         jac = kern.jacobian(a, None, points_mm[i], pivots, tool)[0]
         ref = kern.reference_jacobian(points_mm[i], pivots, tool)
-        out[i] = (jac + rot[i] @ ref) @ params
+        out[i] = (jac + rot[i] @ ref) @ per_pose[i]
     return out
 
 
@@ -134,7 +295,9 @@ class CompensatedPoses:
 
 
 def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndarray, xyz_mm: np.ndarray, *,
-                     rtcp: bool = False, pivots_mm: dict | None = None, tool_mm: Any = None) -> CompensatedPoses:
+                     rtcp: bool = False, pivots_mm: dict | None = None, tool_mm: Any = None,
+                     extensions: list[AngleExtension] | tuple[()] = (),
+                     approach: np.ndarray | None = None) -> CompensatedPoses:
     """Compensated commands for programmed poses (module docstring).
 
     Parameters
@@ -142,16 +305,20 @@ def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndar
     angles_deg : (n, k) [deg]
     xyz_mm : (n, 3) [mm]
         Machine positions of the tool point (``rtcp=False``) or workpiece coordinates (``rtcp=True``).
+    extensions : list of AngleExtension
+        Accepted angular-positioning / reversal errors to compensate too.
+    approach : (n, k) of {−1, 0, +1}, optional
+        Directions of approach (default: from the poses in order); used by backlash.
     """
     kern = load_kernels(machine)
-    p = _param_vector(kern, values)
     a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    p = pose_parameters(kern, values, a, extensions, approach)
     xyz = np.atleast_2d(np.asarray(xyz_mm, dtype=float))
     pts = xyz if rtcp else workpiece_points(kern, a, xyz, pivots_mm, tool_mm)
     new_a = a.copy()
     if kern.HAS_DIRECTION_SOLVER:
         v = kern.tool_direction(a)
-        omega = np.einsum("nip,p->ni", kern.orientation_jacobian(a), p) * 1e-6
+        omega = np.einsum("nip,np->ni", kern.orientation_jacobian(a), p) * 1e-6
         target = -np.cross(omega, v)
         h = 1e-4
         for i in range(a.shape[0]):
@@ -187,18 +354,29 @@ def compensate_program(program_text: str, params: CompensationParameters, *, pat
         if missing:
             raise CompensationError(f"{path}:{b.line_no}: position of {', '.join(missing)} unknown at this block; "
                                     "program every axis before the first move")
-        a = np.array([[b.position[ax] for ax in kern.ROTARY_AXES]], dtype=float)
+    sequence = np.array([[b.position[ax] for ax in kern.ROTARY_AXES] for b in motion], dtype=float)
+    approach = approach_directions(sequence) if motion else np.zeros((0, len(kern.ROTARY_AXES)))
+    for i, b in enumerate(motion):
+        a = sequence[i : i + 1]
         xyz = np.array([[b.position[ax] for ax in ("X", "Y", "Z")]], dtype=float)
-        c = compensate_poses(params.machine, params.values, a, xyz, rtcp=b.rtcp, pivots_mm=pivots, tool_mm=tool)
+        c = compensate_poses(params.machine, params.values, a, xyz, rtcp=b.rtcp, pivots_mm=pivots, tool_mm=tool,
+                             extensions=params.extensions, approach=approach[i : i + 1])
         new[b.line_no] = {"X": c.new_xyz_mm[0, 0], "Y": c.new_xyz_mm[0, 1], "Z": c.new_xyz_mm[0, 2]} | {
             ax: c.new_angles_deg[0, i] for i, ax in enumerate(kern.ROTARY_AXES)}
     header = [f"compensated by pige_sym for {params.machine} with {params.source}",
               "parameters: " + ", ".join(f"{k}={v:.4g}" for k, v in params.values.items())]
+    for ext in params.extensions:
+        opts = "".join(f" {k}={v:g}" for k, v in ext.spec.options.items())
+        header.append(f"compensated extension: {ext.spec.id}{opts}: "
+                      + ", ".join(f"{k}={v:.4g}" for k, v in ext.params.items()))
     if params.ignored:
         header.append("not compensated: " + ", ".join(params.ignored))
 
     def positions(b: NCBlock) -> dict[str, float] | None:
         return new.get(b.line_no)
+
+    if not motion and dialect == "siemens":
+        return program_text  # nothing to compensate: the program is returned unchanged
 
     if dialect == "siemens":
         return rewrite_program(program, positions, header_lines=header, decimals=decimals)
@@ -312,10 +490,16 @@ class CompensationStudyRow:
 
 
 def tool_point_error(machine: str, values: dict[str, float], angles_deg: np.ndarray, xyz_mm: np.ndarray,
-                     points_mm: np.ndarray, *, pivots_mm: dict | None = None, tool_mm: Any = None) -> np.ndarray:
-    """Tool point minus intended workpiece point on a machine with errors ``values``, shape=(n, 3) [µm]."""
+                     points_mm: np.ndarray, *, pivots_mm: dict | None = None, tool_mm: Any = None,
+                     extensions: list[AngleExtension] | tuple[()] = (),
+                     approach: np.ndarray | None = None) -> np.ndarray:
+    """Tool point minus intended workpiece point on a machine with errors ``values``, shape=(n, 3) [µm].
+
+    ``extensions`` are angle errors the machine also has (evaluated at the commanded angles;
+    ``approach`` defaults to the directions of approach of the poses in order).
+    """
     kern = load_kernels(machine)
-    p = _param_vector(kern, values)
+    p = pose_parameters(kern, values, angles_deg, extensions, approach)
     nominal = np.array([kern.linear_commands(angles_deg[i : i + 1], points_mm[i], pivots_mm, tool_mm)[0]
                         for i in range(angles_deg.shape[0])])
     return (xyz_mm - nominal) * 1e3 + raw_offset(kern, angles_deg, points_mm, p, pivots_mm, tool_mm)
@@ -324,12 +508,14 @@ def tool_point_error(machine: str, values: dict[str, float], angles_deg: np.ndar
 def compensation_study(machine: str, trajectories: list[Any], *, truth: dict[str, float],
                        identified: dict[str, float], covariance: np.ndarray | None = None,
                        ball_mm: Any = (120.0, 0.0, 80.0), tool_mm: Any = None,
-                       pivots_mm: dict | None = None) -> list[CompensationStudyRow]:
+                       pivots_mm: dict | None = None, truth_extensions: list[AngleExtension] | tuple[()] = (),
+                       extensions: list[AngleExtension] | tuple[()] = ()) -> list[CompensationStudyRow]:
     """Run each test program uncompensated and compensated on a machine with the true errors.
 
     ``predicted_after_um`` is the RMSE expected from the identification covariance
     alone: ``sqrt(trace(J Σ Jᵀ)/n)`` over the program's poses.  ``pivots_mm`` are the
-    nominal pivots of the rotary axes (default: all at the origin).
+    nominal pivots of the rotary axes (default: all at the origin).  ``truth_extensions``
+    are angle errors the simulated machine has too; ``extensions`` those compensated.
     """
     kern = load_kernels(machine)
     ball = np.asarray(ball_mm, dtype=float)
@@ -338,10 +524,13 @@ def compensation_study(machine: str, trajectories: list[Any], *, truth: dict[str
         a = tr.angles_deg
         pts = np.tile(ball, (a.shape[0], 1))
         xyz = kern.linear_commands(a, ball, pivots_mm, tool_mm)
-        comp = compensate_poses(machine, identified, a, xyz, pivots_mm=pivots_mm, tool_mm=tool_mm)
-        before = tool_point_error(machine, truth, a, xyz, pts, pivots_mm=pivots_mm, tool_mm=tool_mm)
+        approach = approach_directions(a)
+        comp = compensate_poses(machine, identified, a, xyz, pivots_mm=pivots_mm, tool_mm=tool_mm,
+                                extensions=extensions, approach=approach)
+        before = tool_point_error(machine, truth, a, xyz, pts, pivots_mm=pivots_mm, tool_mm=tool_mm,
+                                  extensions=truth_extensions, approach=approach)
         after = tool_point_error(machine, truth, comp.new_angles_deg, comp.new_xyz_mm, pts, pivots_mm=pivots_mm,
-                                 tool_mm=tool_mm)
+                                 tool_mm=tool_mm, extensions=truth_extensions, approach=approach)
         rms_b = float(np.sqrt((before**2).sum(axis=1).mean()))
         rms_a = float(np.sqrt((after**2).sum(axis=1).mean()))
         pred = float("nan")

@@ -217,38 +217,44 @@ def to_fanuc(program: NCProgram, positions: Callable[[NCBlock], dict[str, float]
     """ISO/Fanuc-style program: ``N.. G1 X.. Y.. Z.. A.. C..`` with absolute values.
 
     TRAORI → ``G43.4`` (tool centre point control on), TRAFOOF → ``G49``; dwell
-    ``G4 F<s>`` → ``G04 X<s>``; ``;`` comments → ``( … )``; M codes kept.
+    ``G4 F<s>`` → ``G04 X<s>``; ``;`` comments → ``( … )``; blocks are renumbered.
+    Motion blocks are written as ``G0``/``G1`` with every axis at its absolute
+    position; their other words (F, S, M …) follow in their order.  Every other block
+    keeps its words verbatim (nothing is dropped); a block passed through
+    uncompensated says so in its comment.
     """
     out = ["%"] + [f"({h})" for h in header_lines or []] + ["G90"]
     n = 10
     for b in program.blocks:
         code, _, comment = b.text.partition(";")
-        toks = [t.upper() for t in code.split()]
-        if not toks and comment.strip():
-            out.append(f"({comment.strip()})")
+        comment = comment.strip().replace("(", "[").replace(")", "]")
+        toks = [t for t in code.split() if not re.fullmatch(r"N\d+", t, re.IGNORECASE)]
+        if code.strip().startswith("%"):
             continue
-        if not toks or toks[0].startswith("%"):
+        if b.passed_through:
+            comment = (comment + "; " if comment else "") + "passed through, not compensated"
+        if not toks:
+            if comment:
+                out.append(f"({comment})")
             continue
-        words = []
-        if "TRAORI" in toks:
-            words.append("G43.4")
-        if "TRAFOOF" in toks:
-            words.append("G49")
+        upper = [t.upper() for t in toks]
+        words: list[str] = []
         if b.dwell:
-            f = next((t[1:] for t in toks if t.startswith("F")), "0")
+            f = next((t[1:] for t in upper if t.startswith("F")), "0")
             words += ["G04", f"X{f}"]
+            words += [t for t in upper if t not in ("G4", "G04") and not t.startswith("F")]
         elif b.is_motion:
-            g = next((t for t in toks if t in ("G0", "G00", "G1", "G01")), None)
+            g = next((t for t in upper if t in ("G0", "G00", "G1", "G01")), None)
             words.append(g or "G1")
             pos = dict(b.position)
             if positions is not None:
                 pos.update(positions(b) or {})
             words += [f"{ax}{_fmt(v, decimals)}" for ax, v in pos.items() if v is not None]
-            words += [t for t in toks if t.startswith("F")]
-        words += [t for t in toks if re.fullmatch(r"M\d+", t)]
-        if words:
-            out.append(f"N{n} " + " ".join(words) + (f" ({comment.strip()})" if comment.strip() else ""))
-            n += 10
+            words += [t for t in upper if t not in ("G0", "G00", "G1", "G01") and not _WORD.fullmatch(t)]
+        else:
+            words = [{"TRAORI": "G43.4", "TRAFOOF": "G49"}.get(t, t) for t in upper]
+        out.append(f"N{n} " + " ".join(words) + (f" ({comment})" if comment else ""))
+        n += 10
     out.append("%")
     return "\n".join(out) + "\n"
 

@@ -57,8 +57,10 @@ from tqdm import tqdm
 
 from . import __version__
 from .compensation import (
+    AngleExtension,
     CompensationParameters,
     CompensationStudyRow,
+    angle_extensions,
     compensate_poses,
     compensate_program,
     compensation_study,
@@ -74,7 +76,7 @@ from .kernels import load_kernels
 from .ncprogram import parse_program, poses_from_program
 from .simulator import normalise_parameter_name
 from .studies import ProjectionStudy, SobolStudy, projection_study, sobol_study
-from .trajectories import Trajectory
+from .trajectories import Trajectory, approach_directions
 
 STUDIES = ("projection", "sobol")
 PRIMARY_METHODS = (*METHODS, "diagnosis")
@@ -116,11 +118,15 @@ class Truth:
         Parameter name to value [µm or µrad]; parameters absent from the file are 0.
     notes : list of str
         What the sidecar holds that the report does not simulate (effects, outliers).
+    extensions : list of AngleExtension
+        Angle errors of the sidecar's effects (angular positioning, backlash) that the
+        before/after simulates on the true machine.
     """
 
     path: Path
     values: dict[str, float]
     notes: list[str] = field(default_factory=list)
+    extensions: list[AngleExtension] = field(default_factory=list)
 
 
 @dataclass
@@ -148,6 +154,10 @@ class MeasurementReport:
         Whether "before" is simulated with the truth sidecar or with the identified model.
     not_compensated : list of str
         Parameters without a value, compensated as 0.
+    extensions : list of AngleExtension
+        Accepted diagnosis extensions compensated with the PIGEs (primary method ``diagnosis``).
+    extensions_not_compensated : list of str
+        Accepted extensions that are not compensated, with the reason.
     truth : Truth or None
     model_um : ndarray, shape=(n, 3) [µm] or None
         PIGE-model deviation of the primary estimate in the machine frame (None when a
@@ -172,6 +182,8 @@ class MeasurementReport:
     compensation: list[CompensationStudyRow]
     compensation_basis: str
     not_compensated: list[str]
+    extensions: list[AngleExtension] = field(default_factory=list)
+    extensions_not_compensated: list[str] = field(default_factory=list)
     truth: Truth | None = None
     diagnosis_error: str | None = None
     model_um: np.ndarray | None = None
@@ -336,13 +348,20 @@ def read_truth(csv_path: str | os.PathLike[str], machine: str) -> Truth | None:
         values[key] = float(v)
     notes = []
     effects = data.get("effects") or []
-    names = [str(e.get("name", e.get("effect", e))) if isinstance(e, dict) else str(e) for e in effects]
+    records = [e for e in effects if isinstance(e, dict) and isinstance(e.get("effect"), str)]
+    try:
+        extensions, skipped = angle_extensions(records, tuple(kern.ROTARY_AXES))
+    except InputError as exc:
+        raise FileFormatError(str(tp), None, str(exc)) from None
+    names = [s.split(" ")[0] for s in skipped]
+    names += [str(e.get("name", e)) if isinstance(e, dict) else str(e) for e in effects if e not in records]
     if isinstance(data.get("effect"), str) and data["effect"] not in ("", "none"):
         names.append(data["effect"])
     if names:
+        simulated = "true PIGEs" + (" and angle errors" if extensions else "")
         notes.append(f"the truth sidecar also lists effect(s) {', '.join(names)}: the before/after simulates the "
-                     "true PIGEs only")
-    return Truth(tp, values, notes)
+                     f"{simulated} only")
+    return Truth(tp, values, notes, extensions)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -368,7 +387,9 @@ def _measured_trajectory(m: Measurement) -> Trajectory:
 def program_before_after(machine: str, truth: dict[str, float], identified: dict[str, float], angles_deg: np.ndarray,
                          xyz_mm: np.ndarray, rtcp: Sequence[bool], *, description: str,
                          pivots_mm: dict | None = None, tool_mm: Any = None,
-                         covariance: np.ndarray | None = None) -> CompensationStudyRow:
+                         covariance: np.ndarray | None = None,
+                         truth_extensions: list[AngleExtension] | tuple[()] = (),
+                         extensions: list[AngleExtension] | tuple[()] = ()) -> CompensationStudyRow:
     """Before/after tool-point error of an NC program's poses on a machine with errors ``truth``.
 
     Parameters
@@ -397,6 +418,7 @@ def program_before_after(machine: str, truth: dict[str, float], identified: dict
     xyz = np.atleast_2d(np.asarray(xyz_mm, dtype=float))
     flags = np.asarray(rtcp, dtype=bool)
     n = a.shape[0]
+    approach = approach_directions(a)
     pts = np.empty((n, 3))
     cmd_before = np.empty((n, 3))
     cmd_after = np.empty((n, 3))
@@ -406,7 +428,7 @@ def program_before_after(machine: str, truth: dict[str, float], identified: dict
         if sel.size == 0:
             continue
         comp = compensate_poses(machine, identified, a[sel], xyz[sel], rtcp=flag, pivots_mm=pivots_mm,
-                                tool_mm=tool_mm)
+                                tool_mm=tool_mm, extensions=extensions, approach=approach[sel])
         pts[sel] = comp.points_mm
         new_a[sel] = comp.new_angles_deg
         if flag:  # the controller turns workpiece coordinates into machine positions nominally
@@ -417,8 +439,10 @@ def program_before_after(machine: str, truth: dict[str, float], identified: dict
         else:
             cmd_before[sel] = xyz[sel]
             cmd_after[sel] = comp.new_xyz_mm
-    before = tool_point_error(machine, truth, a, cmd_before, pts, pivots_mm=pivots_mm, tool_mm=tool_mm)
-    after = tool_point_error(machine, truth, new_a, cmd_after, pts, pivots_mm=pivots_mm, tool_mm=tool_mm)
+    before = tool_point_error(machine, truth, a, cmd_before, pts, pivots_mm=pivots_mm, tool_mm=tool_mm,
+                              extensions=truth_extensions, approach=approach)
+    after = tool_point_error(machine, truth, new_a, cmd_after, pts, pivots_mm=pivots_mm, tool_mm=tool_mm,
+                             extensions=truth_extensions, approach=approach)
     rms_b = float(np.sqrt((before**2).sum(axis=1).mean()))
     rms_a = float(np.sqrt((after**2).sum(axis=1).mean()))
     pred = float("nan")
@@ -556,11 +580,17 @@ def _compensation(p: Path, label: str, m: Measurement, truth: Truth | None,
         not_compensated=[], truth=truth,
     )
     identified, rep.not_compensated, covariance = rep.estimate()
+    if method == "diagnosis" and diag is not None:
+        rep.extensions, rep.extensions_not_compensated = angle_extensions(
+            [f.to_dict() for f in diag.findings], tuple(kern.ROTARY_AXES))
     machine_values = truth.values if truth is not None else identified
+    # the model-predicted machine carries what was identified, extensions included
+    machine_extensions = truth.extensions if truth is not None else rep.extensions
     pivots = m.pivots_mm or None
     rep.compensation = compensation_study(kern.MACHINE_CODE, [_measured_trajectory(m)], truth=machine_values,
                                           identified=identified, covariance=covariance, ball_mm=m.ball_mm,
-                                          tool_mm=m.tool_mm, pivots_mm=pivots)
+                                          tool_mm=m.tool_mm, pivots_mm=pivots, truth_extensions=machine_extensions,
+                                          extensions=rep.extensions)
     if not rep.not_compensated:
         vec = np.array([identified.get(n, 0.0) for n in kern.PARAMETERS])
         rep.model_um = kern.deviation(m.angles_deg, vec, m.ball_mm, pivots, m.tool_mm)
@@ -581,16 +611,19 @@ def _program(rep: MeasurementReport, program: Path, text: str) -> None:
     res = rep.primary
     identified, _missing, covariance = rep.estimate()
     machine_values = rep.truth.values if rep.truth is not None else identified
+    machine_extensions = rep.truth.extensions if rep.truth is not None else rep.extensions
     pivots = m.pivots_mm or None
     row = program_before_after(rep.machine, machine_values, identified, angles, xyz, rtcp,
                                description=f"NC program {program.name} ({angles.shape[0]} poses)", pivots_mm=pivots,
-                               tool_mm=m.tool_mm, covariance=covariance)
+                               tool_mm=m.tool_mm, covariance=covariance, truth_extensions=machine_extensions,
+                               extensions=rep.extensions)
     rep.compensation.append(row)
     params = CompensationParameters(
         machine=rep.machine, values=identified, units={k: res.units.get(k, "") for k in identified},
         tool_mm=None if m.tool_mm is None else [float(x) for x in m.tool_mm],
         pivots_mm={k: [float(x) for x in v] for k, v in m.pivots_mm.items()},
-        source=f"{rep.path.name} ({rep.primary_method})", ignored=list(rep.not_compensated),
+        source=f"{rep.path.name} ({rep.primary_method})",
+        ignored=list(rep.not_compensated) + list(rep.extensions_not_compensated), extensions=list(rep.extensions),
     )
     rep.compensated_program_text = compensate_program(text, params, path=str(program))
 
@@ -1141,7 +1174,14 @@ def _diagnosis_html(rep: MeasurementReport, base: Path | None) -> str:
         parts.append(_table(head, rows, num_cols=[2, 3, 4, 5, 6]))
         parts.append("<h4>Final estimates with the accepted extensions</h4>")
         parts.append(_final_html(d.final))
-        parts.append("<p><small>Accepted extensions are reported, not compensated.</small></p>")
+        if rep.extensions:
+            ids = ", ".join(e.spec.id for e in rep.extensions)
+            parts.append(f"<p><small>Compensated with the PIGEs: {_e(ids)} (pose-dependent zero errors).</small></p>")
+        for why in rep.extensions_not_compensated:
+            parts.append(f"<p><small>Not compensated: {_e(why)}.</small></p>")
+        if not rep.extensions and not rep.extensions_not_compensated:
+            parts.append("<p><small>Accepted extensions are compensated only when the report's method is "
+                         "<code>diagnosis</code>.</small></p>")
     else:
         parts.append("<p>No finding: the PIGE model explains the data down to the noise.</p>")
     parts.append("<h4>Rejected candidates</h4>")

@@ -35,6 +35,8 @@ def test_demo_finds_the_hidden_effect_and_writes_everything(tmp_path, capsys):
     assert sum(line.startswith("N") for line in compensated) == sum(line.startswith("N") for line in original)
     html = (out / "report" / "report.html").read_text()
     assert "angular_error_C" in html and "data:image/png;base64," in html
+    assert "Compensated with the PIGEs: angular_error_C" in html
+    assert "; compensated extension: angular_error_C harmonic=2" in "\n".join(compensated)
 
 
 def test_demo_says_when_the_hidden_effect_is_missed(tmp_path, capsys):

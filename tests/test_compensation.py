@@ -1,0 +1,320 @@
+"""Compensation: compensated kinematics, NC program rewrite, controller corrections, before/after."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pige_sym.cli import main
+from pige_sym.compensation import (
+    AngleExtension,
+    CompensationError,
+    CompensationParameters,
+    compensate_poses,
+    compensate_program,
+    compensation_study,
+    controller_corrections,
+    load_parameters,
+    tool_point_error,
+)
+from pige_sym.effects import EffectSpec
+from pige_sym.identification import identify
+from pige_sym.kernels import load_kernels
+from pige_sym.ncprogram import NCProgramError, make_rtest_program
+from pige_sym.simulator import random_pige, simulate
+from pige_sym.trajectories import cone_frustum, figure_eight, steps
+
+AC, BC, HEAD, MIXED = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t", "wbXYZCA(C1)t", "wC'bXYZB(C1)t"
+TOOL = {HEAD: (0.0, 0.0, -250.0), MIXED: (0.0, 0.0, -250.0)}
+BALL = (120.0, 30.0, 80.0)
+
+
+def _trajectories(code: str) -> list:
+    incl = "X" if load_kernels(code).ROTARY_AXES[0] == "A" else "Y"
+    return [cone_frustum(code, incl_axis=incl), figure_eight(code)]
+
+
+def _params(code: str, values: dict[str, float], extensions: list[AngleExtension] | None = None,
+            ) -> CompensationParameters:
+    tool = TOOL.get(code)
+    return CompensationParameters(load_kernels(code).MACHINE_CODE, values, {}, None if tool is None else list(tool),
+                                  {}, "test", [], extensions or [])
+
+
+@pytest.mark.parametrize("code", [AC, BC, HEAD, MIXED])
+def test_true_parameters_remove_at_least_95_percent(code):
+    truth = random_pige(code, 3)
+    truth.update({n: 8.0 for n in load_kernels(code).ZERO_PARAMETERS})
+    rows = compensation_study(code, _trajectories(code), truth=truth, identified=truth, ball_mm=BALL,
+                              tool_mm=TOOL.get(code))
+    for r in rows:
+        assert r.rmse_before_um > 5
+        assert r.reduction >= 0.95, (r.trajectory, r.rmse_before_um, r.rmse_after_um)
+
+
+def test_identified_parameters_leave_what_their_standard_errors_predict():
+    """Over seeds, the RMSE left after compensating with estimates from noisy data matches the
+    RMSE predicted from their covariance (ratio of the means within [0.5, 2])."""
+    after, predicted = [], []
+    for seed in range(12):
+        truth = random_pige(AC, seed)
+        cone = cone_frustum(AC, incl_axis="X")
+        res = identify(simulate(AC, cone, pige=truth, noise_um=0.5, seed=seed, ball_mm=BALL).measurement)
+        ident = dict(zip(res.parameters, res.values, strict=True))
+        row = compensation_study(AC, [cone], truth=truth, identified=ident, covariance=res.covariance,
+                                 ball_mm=BALL)[0]
+        after.append(row.rmse_after_um)
+        predicted.append(row.predicted_after_um)
+        assert row.reduction > 0.5
+    ratio = np.mean(after) / np.mean(predicted)
+    assert 0.5 < ratio < 2.0, (np.mean(after), np.mean(predicted))
+
+
+def test_rtcp_program_compensated_in_workpiece_coordinates():
+    truth = random_pige(AC, 5)
+    cone = cone_frustum(AC, incl_axis="X")
+    ball = np.array(BALL)
+    pts = np.tile(ball, (cone.angles_deg.shape[0], 1))
+    comp = compensate_poses(AC, truth, cone.angles_deg, pts, rtcp=True)
+    kern = load_kernels(AC)
+    # the controller's RTCP turns workpiece coordinates into machine positions with the nominal kinematics
+    machine_xyz = np.array([kern.linear_commands(comp.new_angles_deg[i : i + 1], comp.new_xyz_mm[i])[0]
+                            for i in range(pts.shape[0])])
+    err = tool_point_error(AC, truth, comp.new_angles_deg, machine_xyz, pts)
+    before = tool_point_error(AC, truth, cone.angles_deg, kern.linear_commands(cone.angles_deg, ball), pts)
+    assert np.sqrt((err**2).sum(1).mean()) < 0.05 * np.sqrt((before**2).sum(1).mean())
+
+
+def test_orientation_is_corrected_to_first_order():
+    kern = load_kernels(AC)
+    truth = random_pige(AC, 8)
+    cone = cone_frustum(AC, incl_axis="X")
+    a = cone.angles_deg[1:]
+    comp = compensate_poses(AC, truth, a, kern.linear_commands(a, np.array(BALL)))
+    p = np.array([truth.get(n, 0.0) for n in kern.PARAMETERS])
+
+    def actual_direction(angles: np.ndarray) -> np.ndarray:
+        v = kern.tool_direction(angles)
+        omega = np.einsum("nip,p->ni", kern.orientation_jacobian(angles), p) * 1e-6
+        return v + np.cross(omega, v)
+
+    wanted = kern.tool_direction(a)
+    before = np.linalg.norm(actual_direction(a) - wanted, axis=1)
+    after = np.linalg.norm(actual_direction(comp.new_angles_deg) - wanted, axis=1)
+    assert before.max() > 5e-6
+    assert after.max() < 0.02 * before.max()
+
+
+@pytest.mark.parametrize("effect,trajectory", [("angular_error_C:harmonic=2,cos_urad=25,sin_urad=-15", "cone"),
+                                               ("backlash_C:b_urad=40", "steps")])
+def test_angle_extensions_are_compensated(effect, trajectory):
+    from pige_sym.effects import parse_effect
+
+    eff = parse_effect(effect, ("A", "C"))
+    ext = AngleExtension(eff.spec, eff.params)
+    truth = random_pige(AC, 2)
+    traj = steps(AC) if trajectory == "steps" else cone_frustum(AC, incl_axis="X")
+    a = traj.angles_deg
+    ball = np.array(BALL)
+    pts = np.tile(ball, (a.shape[0], 1))
+    xyz = load_kernels(AC).linear_commands(a, ball)
+    approach = traj.approach
+
+    def rmse(angles: np.ndarray, commands: np.ndarray) -> float:
+        e = tool_point_error(AC, truth, angles, commands, pts, extensions=[ext], approach=approach)
+        return float(np.sqrt((e**2).sum(1).mean()))
+
+    plain = compensate_poses(AC, truth, a, xyz)
+    full = compensate_poses(AC, truth, a, xyz, extensions=[ext], approach=approach)
+    before, without, with_ext = rmse(a, xyz), rmse(plain.new_angles_deg, plain.new_xyz_mm), \
+        rmse(full.new_angles_deg, full.new_xyz_mm)
+    assert with_ext < 0.05 * before
+    assert with_ext < 0.2 * without  # the extension is what is left without it
+
+
+def test_study_with_an_angle_error_on_the_true_machine():
+    """The true machine has an angular positioning error of C: compensating the PIGEs alone leaves it,
+    compensating the accepted extension too removes it."""
+    from pige_sym.effects import parse_effect
+
+    eff = parse_effect("angular_error_C:harmonic=2,cos_urad=20,sin_urad=-10", ("A", "C"))
+    ext = [AngleExtension(eff.spec, eff.params)]
+    truth = random_pige(AC, 6)
+    trajs = _trajectories(AC)
+    plain = compensation_study(AC, trajs, truth=truth, identified=truth, truth_extensions=ext, ball_mm=BALL)
+    full = compensation_study(AC, trajs, truth=truth, identified=truth, truth_extensions=ext, extensions=ext,
+                              ball_mm=BALL)
+    for p_row, f_row in zip(plain, full, strict=True):
+        assert p_row.rmse_before_um == pytest.approx(f_row.rmse_before_um)
+        assert f_row.reduction >= 0.95
+        assert f_row.rmse_after_um < 0.2 * p_row.rmse_after_um
+
+
+def test_extension_equals_a_zero_position_error_per_pose():
+    """angular_error_C at a pose acts exactly like EC0C = e(θ) (CONVENTIONS §3): same raw offset."""
+    spec = EffectSpec("angular_error_C", {"harmonic": 3})
+    ext = AngleExtension(spec, {"cos_urad": 7.0, "sin_urad": -4.0})
+    a = np.array([[20.0, 40.0]])
+    e = 7.0 * np.cos(np.radians(120.0)) - 4.0 * np.sin(np.radians(120.0))
+    pts = np.array([BALL])
+    xyz = load_kernels(AC).linear_commands(a, np.array(BALL))
+    via_ext = tool_point_error(AC, {}, a, xyz, pts, extensions=[ext])
+    via_zero = tool_point_error(AC, {"EC0C": e}, a, xyz, pts)
+    np.testing.assert_allclose(via_ext, via_zero, atol=1e-12)
+
+
+@pytest.mark.parametrize("effect", ["angular_error_C:harmonic=2,cos_urad=25,sin_urad=-15",
+                                    "angular_error_A:harmonic=1,cos_urad=-9,sin_urad=12", "backlash_C:b_urad=40",
+                                    "backlash_A:b_urad=-30"])
+def test_extensions_act_like_the_effect_catalogue(effect):
+    """The compensated angle error is the same physics as the simulator's effect: the machine with the
+    extension (per-pose zero errors) shows, zeroed at the reference, exactly the effect's contribution."""
+    from pige_sym.compensation import raw_offset
+    from pige_sym.effects import EffectContext, parse_effect
+
+    kern = load_kernels(AC)
+    eff = parse_effect(effect, ("A", "C"))
+    traj = steps(AC)
+    a, ball = traj.angles_deg, np.array(BALL)
+    pts = np.tile(ball, (a.shape[0], 1))
+    ctx = EffectContext(kern, a, traj.t_s, ball, None, None)
+    expected = eff.spec.contribution(ctx, eff.params)
+    from pige_sym.compensation import pose_parameters
+
+    raw = raw_offset(kern, a, pts, pose_parameters(kern, {}, a, [AngleExtension(eff.spec, eff.params)]), None, None)
+    zeroed = raw - np.einsum("nij,j->ni", kern.workpiece_rotation(a), raw[0])
+    assert np.abs(expected).max() > 1.0
+    np.testing.assert_allclose(zeroed, expected, atol=1e-9)
+
+
+PROGRAM = (
+    "%_N_RTEST_MPF\r\n"
+    "; R-test program (keep me)\r\n"
+    "G90 G17\r\n"
+    "TRAFOOF\r\n"
+    "N10 G1 X120 Y30 Z80 A0 C0 F2000 ; reference\r\n"
+    "N15 G4 F5\r\n"
+    "N20 G1 X34.5626 Y-56.2372 Z128.2295 A=31.4749 C=DC(73.2604)\r\n"
+    "N25 M00\r\n"
+    "N30 G91 C10\r\n"
+    "N35 G90\r\n"
+    "M30\r\n"
+)
+
+
+def test_rewrite_keeps_untouched_lines_byte_for_byte():
+    params = _params(AC, random_pige(AC, 1))
+    out = compensate_program(PROGRAM, params, path="p.mpf")
+    orig_lines = PROGRAM.splitlines(keepends=True)
+    new_lines = out.splitlines(keepends=True)
+    header = [ln for ln in new_lines if ln.startswith("; compensated") or ln.startswith("; parameters")]
+    assert len(header) == 2 and all(ln.endswith("\r\n") for ln in header)
+    body = [ln for ln in new_lines if ln not in header]
+    assert len(body) == len(orig_lines)
+    changed = {i for i, (o, n) in enumerate(zip(orig_lines, body, strict=True)) if o != n}
+    # only the motion blocks away from the reference pose change (N20, and the incremental N30)
+    assert changed == {6, 8}
+    assert "A=" in body[6] and "C=DC(" in body[6] and body[6].endswith("\r\n")
+    assert "C=AC(" in body[8]  # incremental word rewritten in absolute form
+
+
+def test_program_without_motion_is_unchanged():
+    text = "; just comments\nG90 G17\nM30\n"
+    assert compensate_program(text, _params(AC, random_pige(AC, 1))) == text
+
+
+@pytest.mark.parametrize("bad,line,words", [
+    ("G90\nN10 G1 X1 Y2 Z3 A0 C0\nN20 G2 X5 Y5 I1 J1\n", 3, "G2"),
+    ("G90\nN10 G1 X1 Y2 Z3 A0 C0\nCYCLE800(1)\n", 3, "CYCLE800"),
+    ("G91\nN10 G1 X1\n", 2, "incremental"),
+    ("G90\nN10 G1 X1 Y2 Z3 A0 B7 C0\n", 2, "B is not an axis"),
+    ("G90\nN10 G1 X1 Y2 Z3 A0 CX0\n", 2, "malformed"),
+])
+def test_unsupported_programs_are_refused_with_the_line(bad, line, words):
+    with pytest.raises(NCProgramError) as exc:
+        compensate_program(bad, _params(AC, {}), path="bad.mpf")
+    assert f"bad.mpf:{line}:" in str(exc.value) and words in str(exc.value)
+
+
+def test_block_needs_every_axis_before_compensation():
+    with pytest.raises(CompensationError, match=r"p.mpf:2: position of .*unknown"):
+        compensate_program("G90\nN10 G1 X1 Y2 A0 C0\n", _params(AC, {}), path="p.mpf")
+
+
+def test_pass_through_keeps_unsupported_blocks_verbatim():
+    text = "G90\nN10 G1 X120 Y0 Z80 A0 C0\nN20 G2 X5 Y5 I1 J1 ; arc\nN30 G1 A20 C30\n"
+    out = compensate_program(text, _params(AC, random_pige(AC, 1)), pass_through=True)
+    assert "N20 G2 X5 Y5 I1 J1 ; arc\n" in out
+    fanuc = compensate_program(text, _params(AC, random_pige(AC, 1)), pass_through=True, dialect="fanuc")
+    assert "G2 X5 Y5 I1 J1 (arc; passed through, not compensated)" in fanuc
+
+
+def test_fanuc_dialect():
+    out = compensate_program(PROGRAM, _params(AC, random_pige(AC, 1)), dialect="fanuc")
+    lines = out.splitlines()
+    assert lines[0] == "%" and lines[-1] == "%"
+    assert any(ln.startswith("N") and " G49" in ln for ln in lines)
+    assert any("G04 X5" in ln for ln in lines)
+    motion = [ln for ln in lines if " G1 " in ln]
+    assert len(motion) == 3 and all(all(f" {ax}" in ln for ax in "XYZAC") for ln in motion)
+    assert "(R-test program [keep me])" in lines
+
+
+def test_load_parameters_from_identify_and_diagnose_json(tmp_path):
+    data = {"machine": AC, "pige": {"EX0C": 3.0, "EY0C": None}, "units": {}}
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(CompensationError, match="EY0C was not identifiable"):
+        load_parameters(path)
+    params = load_parameters(path, allow_unidentifiable=True)
+    assert params.values["EY0C"] == 0.0 and params.ignored == ["EY0C"]
+    data = {"machine": AC, "pige": {"EX0C": 3.0, "angular_error_C.cos_urad": 5.0, "angular_error_C.sin_urad": 1.0,
+                                    "thermal_drift.vx_um": 1.0, "thermal_drift.vy_um": 0.0,
+                                    "thermal_drift.vz_um": 0.0},
+            "findings": [{"effect": "angular_error_C", "options": {"harmonic": 2},
+                          "params": {"cos_urad": 5.0, "sin_urad": 1.0}},
+                         {"effect": "thermal_drift", "options": {"tau_s": 300},
+                          "params": {"vx_um": 1.0, "vy_um": 0.0, "vz_um": 0.0}}]}
+    path.write_text(json.dumps(data))
+    params = load_parameters(path)
+    assert [e.spec.id for e in params.extensions] == ["angular_error_C"]
+    assert params.extensions[0].spec.harmonic == 2
+    assert params.ignored == ["thermal_drift (time-dependent (depends on when the program runs))"]
+    text = compensate_program("G90\nN10 G1 X120 Y0 Z80 A0 C0\nN20 G1 A20 C30\n", params)
+    assert "; compensated extension: angular_error_C harmonic=2: cos_urad=5, sin_urad=1" in text
+
+
+def test_controller_corrections_follow_the_pige_definitions():
+    values = {"EX0C": 3.0, "EY0C": -2.0, "EA0C": 5.0, "EB0C": 7.0, "EY0A": 1.0, "EZ0A": 4.0, "EB0A": -6.0,
+              "EC0A": 2.0, "EC0C": 50.0}
+    rows = {r["axis"]: r for r in controller_corrections(_params(AC, values))}
+    np.testing.assert_allclose(rows["C"]["pivot_mm"], [3e-3, -2e-3, 0.0])
+    np.testing.assert_allclose(rows["C"]["direction"], [7e-6, -5e-6, 1.0], atol=1e-12)  # (EB0C, −EA0C, 1)
+    np.testing.assert_allclose(rows["A"]["pivot_mm"], [0.0, 1e-3, 4e-3])
+    np.testing.assert_allclose(rows["A"]["direction"], [1.0, 2e-6, 6e-6], atol=1e-12)  # (1, EC0A, −EB0A)
+    assert rows["C"]["zero_offset_deg"] == pytest.approx(np.degrees(50e-6))
+
+
+def test_cli_compensate_end_to_end(tmp_path, capsys):
+    code = AC
+    cone = cone_frustum(code, incl_axis="X")
+    sim = simulate(code, cone, pige=random_pige(code, 4), noise_um=0.1, seed=4, ball_mm=BALL)
+    csv = tmp_path / "run.csv"
+    sim.write(csv)
+    assert main(["identify", str(csv), "--json"]) == 0
+    result = tmp_path / "result.json"
+    result.write_text(capsys.readouterr().out)
+    program = tmp_path / "rtest.mpf"
+    program.write_text(make_rtest_program(cone.angles_deg, sim.measurement.linear_mm, ("A", "C")))
+    out = tmp_path / "comp.mpf"
+    assert main(["compensate", str(program), "--params", str(result), "--out", str(out)]) == 0
+    assert out.read_text().count("\nN") == program.read_text().count("\nN")
+    assert main(["compensate", "--params", str(result), "--controller", "siemens"]) == 0
+    assert "$TC_CARR7[1]=" in capsys.readouterr().out
+    bad = tmp_path / "bad.mpf"
+    bad.write_text("G90\nN10 G1 X1 Y2 Z3 A0 C0\nN20 G3 X1 Y1\n")
+    assert main(["compensate", str(bad), "--params", str(result), "--out", str(tmp_path / "x.mpf")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad.mpf:3:" in err[0]
