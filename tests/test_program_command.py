@@ -1,0 +1,49 @@
+"""``pige program``: the R-test NC program of a trajectory, read back by the NC parser and the acquirer."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pige_sym.cli import main
+from pige_sym.kernels import load_kernels
+from pige_sym.ncprogram import parse_program, poses_from_program
+from pige_sym.rtest_program import load_test_program
+from pige_sym.trajectories import cone_frustum, figure_eight
+
+
+def test_machine_coordinate_program_holds_the_rtcp_commands(tmp_path):
+    code = "wC'B'bXYZ(C1)t"
+    out = tmp_path / "bc.mpf"
+    assert main(["program", "--machine", code, "--trajectory", "cone-frustum", "--ball", "100,20,90",
+                 "--pivot", "B=0,0,-50", "--out", str(out)]) == 0
+    angles, xyz, rtcp, _ = poses_from_program(parse_program(out.read_text(), rotary_axes=("B", "C")))
+    traj = cone_frustum(code, incl_axis="Y")
+    np.testing.assert_allclose(angles, traj.angles_deg, atol=1e-4)  # 4 decimals in the program
+    expected = load_kernels(code).linear_commands(traj.angles_deg, np.array([100.0, 20.0, 90.0]),
+                                                  {"B": np.array([0.0, 0.0, -50.0])})
+    np.testing.assert_allclose(xyz, expected, atol=1e-4)
+    assert not any(rtcp)
+    # the acquirer and the virtual device read the same poses, with the program's dwell
+    program = load_test_program(code, str(out), ball_mm=(100.0, 20.0, 90.0))
+    assert program.n_poses == traj.angles_deg.shape[0]
+    assert np.all(program.dwell_s == 7.0)
+
+
+def test_rtcp_and_fanuc_variants(tmp_path):
+    out = tmp_path / "fig8.mpf"
+    assert main(["program", "--trajectory", "figure-eight", "--rtcp", "--dwell", "6", "--out", str(out)]) == 0
+    angles, xyz, rtcp, _ = poses_from_program(parse_program(out.read_text()))
+    assert all(rtcp)
+    np.testing.assert_allclose(xyz, np.tile([120.0, 0.0, 80.0], (angles.shape[0], 1)))
+    np.testing.assert_allclose(angles, figure_eight("wC'A'bXYZ(C1)t").angles_deg, atol=1e-4)
+    nc = tmp_path / "fig8.nc"
+    assert main(["program", "--trajectory", "figure-eight", "--dialect", "fanuc", "--out", str(nc)]) == 0
+    text = nc.read_text()
+    assert text.startswith("%\n") and text.count("G04 X7") == angles.shape[0]
+
+
+def test_bad_input_is_one_line(tmp_path, capsys):
+    assert main(["program", "--machine", "wXYZ", "--out", str(tmp_path / "x.mpf")]) == 2
+    assert main(["program", "--ball", "1,2", "--out", str(tmp_path / "x.mpf")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all(line.startswith("pige program:") for line in err)
