@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -24,7 +25,7 @@ from .simulate import parse_pivots, parse_vec3
 
 def _run(args: argparse.Namespace) -> int:
     kern = load_kernels(args.machine)
-    options: dict[str, float | int | str] = {}
+    options: dict[str, Any] = {}
     if args.points is not None:
         options["points"] = args.points
     if args.trajectory == "cone-frustum":
