@@ -318,3 +318,23 @@ def test_cli_compensate_end_to_end(tmp_path, capsys):
     assert main(["compensate", str(bad), "--params", str(result), "--out", str(tmp_path / "x.mpf")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad.mpf:3:" in err[0]
+
+
+def test_json_output_of_simulate_and_compensate(tmp_path, capsys):
+    csv = tmp_path / "run.csv"
+    assert main(["simulate", "--out", str(csv), "--seed", "3", "--effect", "backlash_C", "--trajectory", "steps",
+                 "--json"]) == 0
+    sim = json.loads(capsys.readouterr().out)
+    assert sim["rows"] == 70 and sim["truth"]["effects"][0]["effect"] == "backlash_C"
+    assert main(["diagnose", str(csv), "--json"]) == 0
+    diag = tmp_path / "diag.json"
+    diag.write_text(capsys.readouterr().out)
+    program = tmp_path / "steps.mpf"
+    assert main(["program", "--trajectory", "steps", "--out", str(program)]) == 0
+    capsys.readouterr()
+    assert main(["compensate", str(program), "--params", str(diag), "--out", str(tmp_path / "c.mpf"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [e["effect"] for e in out["extensions"]] == ["backlash_C"]
+    assert main(["compensate", "--params", str(diag), "--controller", "table", "--json"]) == 0
+    axes = json.loads(capsys.readouterr().out)["axes"]
+    assert [a["axis"] for a in axes] == ["A", "C"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import signal
 from typing import Any
 
@@ -39,10 +40,13 @@ def _run(args: argparse.Namespace) -> int:
         args.port, program, args.out, options=options, settings=settings, nest=parse_nest(args.nest),
         adapter=make_adapter(args.protocol), resume=args.resume,
         raw_log=args.raw_log if args.raw_log else (None if args.no_raw_log else True),
-        progress=not args.no_progress,
+        progress=not (args.no_progress or args.json),
     )
-    print(summary.format())
-    print(f"summary: {summary_path(args.out)}")
+    if args.json:
+        print(json.dumps({**summary.to_dict(), "summary_file": str(summary_path(args.out))}, indent=1))
+    else:
+        print(summary.format())
+        print(f"summary: {summary_path(args.out)}")
     return 0 if summary.completed else 1
 
 
@@ -102,4 +106,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     a.add_argument("--dwell", type=float, default=DEFAULT_DWELL_S, help="program dwell per pose [s]")
     a.add_argument("--replay-tol", type=float, default=1.0, help="resume: allowed difference of a replayed pose [um]")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object (no progress bars)")
     p.set_defaults(handler=_run)

@@ -9,6 +9,7 @@ from pathlib import Path
 from ..compensation import (
     compensate_program,
     compensation_study,
+    controller_corrections,
     format_controller,
     load_parameters,
     plot_compensation,
@@ -23,10 +24,13 @@ from ..trajectories import cone_frustum, figure_eight
 
 def _run(args: argparse.Namespace) -> int:
     params = load_parameters(args.params, args.machine, allow_unidentifiable=args.allow_unidentifiable)
-    if args.controller:
+    if args.controller and not args.json:
         print(format_controller(params, args.controller))
-        if not args.program:
-            return 0
+    if args.controller and not args.program:
+        if args.json:
+            print(json.dumps({"machine": params.machine, "parameters_from": params.source,
+                              "axes": controller_corrections(params)}, indent=1))
+        return 0
     if not args.program:
         raise InputError("give a PROGRAM to compensate (or --controller to print the corrected kinematics)")
     if not args.out:
@@ -35,7 +39,16 @@ def _run(args: argparse.Namespace) -> int:
                               pass_through=args.pass_through)
     with open(args.out, "w", encoding="utf-8", newline="") as fh:
         fh.write(text)
+    if args.json:
+        print(json.dumps({"program": args.program, "out": args.out, "dialect": args.dialect,
+                          "machine": params.machine, "parameters_from": params.source, "pige": params.values,
+                          "extensions": [{"effect": e.spec.id, "options": e.spec.options, "params": e.params}
+                                         for e in params.extensions],
+                          "not_compensated": params.ignored}, indent=1))
+        return 0
     print(f"wrote {args.out} ({args.dialect}); parameters from {params.source}")
+    for ext in params.extensions:
+        print(f"compensated extension: {ext.spec.id} " + ", ".join(f"{k}={v:.4g}" for k, v in ext.params.items()))
     if params.ignored:
         print("not compensated: " + ", ".join(params.ignored))
     return 0
@@ -63,6 +76,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--pass-through", action="store_true", help="keep unsupported blocks verbatim (uncompensated)")
     p.add_argument("--allow-unidentifiable", action="store_true", help="use 0 for parameters without a value")
     p.add_argument("--controller", choices=["table", "siemens"], help="print the corrected kinematic chain")
+    p.add_argument("--json", action="store_true", help="print what was compensated as one JSON object")
     p.set_defaults(handler=_run)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 
 from ..effects import parse_effect
 from ..errors import InputError
@@ -55,7 +56,11 @@ def _run(args: argparse.Namespace) -> int:
         seed=args.seed, frame=args.frame,
     )
     csv, truth = result.write(args.out)
-    print(f"wrote {csv} ({result.measurement.n_rows} rows) and {truth}")
+    if args.json:
+        print(json.dumps({"csv": str(csv), "truth_file": str(truth), "rows": result.measurement.n_rows,
+                          "truth": result.truth}, indent=1))
+    else:
+        print(f"wrote {csv} ({result.measurement.n_rows} rows) and {truth}")
     return 0
 
 
@@ -88,4 +93,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--incl-axis", choices=["X", "Y", "x", "y"], help="cone inclination axis")
     p.add_argument("--frame", choices=["machine", "table"], default="machine", help="frame of the deviations")
     p.add_argument("--out", required=True, help="output CSV (a .truth.json sidecar is written beside it)")
+    p.add_argument("--json", action="store_true", help="print the files written and the truth as one JSON object")
     p.set_defaults(handler=_run)
