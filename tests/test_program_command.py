@@ -14,8 +14,8 @@ from pige_sym.trajectories import cone_frustum, figure_eight
 def test_machine_coordinate_program_holds_the_rtcp_commands(tmp_path):
     code = "wC'B'bXYZ(C1)t"
     out = tmp_path / "bc.mpf"
-    assert main(["program", "--machine", code, "--trajectory", "cone-frustum", "--ball", "100,20,90",
-                 "--pivot", "B=0,0,-50", "--out", str(out)]) == 0
+    assert main(["program", "--machine", code, "--trajectory", "cone-frustum", "--incl-axis", "Y",
+                 "--ball", "100,20,90", "--pivot", "B=0,0,-50", "--out", str(out)]) == 0
     angles, xyz, rtcp, _ = poses_from_program(parse_program(out.read_text(), rotary_axes=("B", "C")))
     traj = cone_frustum(code, incl_axis="Y")
     np.testing.assert_allclose(angles, traj.angles_deg, atol=1e-4)  # 4 decimals in the program
@@ -40,6 +40,14 @@ def test_rtcp_and_fanuc_variants(tmp_path):
     assert main(["program", "--trajectory", "figure-eight", "--dialect", "fanuc", "--out", str(nc)]) == 0
     text = nc.read_text()
     assert text.startswith("%\n") and text.count("G04 X7") == angles.shape[0]
+
+
+def test_acquire_accepts_the_shape_options(tmp_path, capsys):
+    """--turns/--incl-axis go to the program's trajectory (regression: acquire crashed on --turns)."""
+    status = main(["acquire", "--port", str(tmp_path / "no-such-port"), "--turns", "2", "--incl-axis", "Y",
+                   "--out", str(tmp_path / "x.csv"), "--no-progress"])
+    assert status == 2
+    assert "no-such-port" in capsys.readouterr().err
 
 
 def test_bad_input_is_one_line(tmp_path, capsys):

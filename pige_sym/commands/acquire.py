@@ -9,12 +9,11 @@ from typing import Any
 
 from ..acquisition import TRIGGERS, AcquisitionOptions, acquire, summary_path
 from ..device import ADAPTERS, make_adapter
-from ..kernels import DEFAULT_MACHINE, load_kernels
+from ..kernels import load_kernels
 from ..nest import parse_nest
 from ..rtest_program import DEFAULT_DWELL_S, DEFAULT_MOVE_S, load_test_program
 from ..transport import PARITIES, STOPBITS, PortSettings
-from .rtest_sim import trajectory_options
-from .simulate import parse_pivots, parse_vec3
+from ._setup import add_setup_arguments, setup_geometry, trajectory_options
 
 
 def _interrupt(signum: int, frame: Any) -> None:
@@ -24,11 +23,9 @@ def _interrupt(signum: int, frame: Any) -> None:
 def _run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, _interrupt)
     kern = load_kernels(args.machine)
-    program = load_test_program(
-        kern.MACHINE_CODE, args.program, ball_mm=parse_vec3(args.ball, "--ball"), pivots_mm=parse_pivots(args.pivot),
-        tool_mm=parse_vec3(args.tool, "--tool") if args.tool else None, move_s=args.move, dwell_s=args.dwell,
-        **trajectory_options(args),
-    )
+    ball, pivots, tool = setup_geometry(args)
+    program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=ball, pivots_mm=pivots, tool_mm=tool,
+                                move_s=args.move, dwell_s=args.dwell, **trajectory_options(args))
     settings = PortSettings(baudrate=args.baud, bytesize=args.bytesize, parity=args.parity, stopbits=args.stopbits,
                             timeout_s=args.timeout)
     options = AcquisitionOptions(
@@ -71,18 +68,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--port", required=True, help="device path or URL: /dev/ttyUSB0, socket://host:port, rfc2217://...")
-    p.add_argument("--program", default="cone-frustum",
-                   help="cone-frustum, figure-eight, steps, an angle CSV, or an NC program (G4 F<s> / M00 per pose)")
-    p.add_argument("--machine", default=DEFAULT_MACHINE, help="ISO 10791 machine code (default %(default)s)")
-    p.add_argument("--ball", default="120,0,80", help="ball centre at the reference pose x,y,z [mm]")
-    p.add_argument("--pivot", action="append", metavar="AXIS=x,y,z", help="nominal pivot of a rotary axis [mm]")
-    p.add_argument("--tool", help="ball offset from the last tool-side pivot x,y,z [mm] (head machines)")
+    add_setup_arguments(p, program_flag="--program", program_help="cone-frustum, figure-eight, steps, an angle CSV, "
+                        "or an NC program (G4 F<s> / M00 per pose)")
     p.add_argument("--out", required=True, help="measurement file (pige-rtest 1), written row by row")
     p.add_argument("--resume", action="store_true", help="continue a partial --out file (run the program again)")
     p.add_argument("--raw-log", help="raw byte log (default: <out stem>.raw.log)")
     p.add_argument("--no-raw-log", action="store_true", help="do not keep the raw byte log")
-    p.add_argument("--points", type=int, help="points per turn (cone, figure-eight)")
-    p.add_argument("--turns", type=float, help="turns of the cone")
     p.add_argument("--frame", choices=["machine", "table"], default="machine", help="frame of the deviations")
     p.add_argument("--nest", default="default", help="nest geometry: default, key=value,... or a JSON file")
     p.add_argument("--protocol", choices=sorted(ADAPTERS), default="rtest", help="device protocol")

@@ -13,29 +13,20 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from ..kernels import DEFAULT_MACHINE, load_kernels
+from ..kernels import load_kernels
 from ..ncprogram import make_rtest_program, parse_program, to_fanuc
 from ..rtest_program import DEFAULT_DWELL_S, load_test_program
-from .simulate import parse_pivots, parse_vec3
+from ._setup import add_setup_arguments, setup_geometry, trajectory_options
 
 
 def _run(args: argparse.Namespace) -> int:
     kern = load_kernels(args.machine)
-    options: dict[str, Any] = {}
-    if args.points is not None:
-        options["points"] = args.points
-    if args.trajectory == "cone-frustum":
-        if args.turns is not None:
-            options["turns"] = args.turns
-        options["incl_axis"] = args.incl_axis or ("X" if kern.ROTARY_AXES[0] == "A" else "Y")
-    program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=parse_vec3(args.ball, "--ball"),
-                                pivots_mm=parse_pivots(args.pivot),
-                                tool_mm=parse_vec3(args.tool, "--tool") if args.tool else None,
-                                dwell_s=args.dwell, **options)
+    ball, pivots, tool = setup_geometry(args)
+    program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=ball, pivots_mm=pivots, tool_mm=tool,
+                                dwell_s=args.dwell, **trajectory_options(args))
     if args.rtcp:
         xyz = np.tile(program.ball_mm, (program.n_poses, 1))
     else:
@@ -66,15 +57,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--machine", default=DEFAULT_MACHINE, help="ISO 10791 machine code (default %(default)s)")
-    p.add_argument("--trajectory", default="cone-frustum",
-                   help="cone-frustum, figure-eight, steps, or a CSV of <axis>_deg angles (default %(default)s)")
-    p.add_argument("--ball", default="120,0,80", help="ball centre at the reference pose x,y,z [mm]")
-    p.add_argument("--pivot", action="append", metavar="AXIS=x,y,z", help="nominal pivot of a rotary axis [mm]")
-    p.add_argument("--tool", help="ball offset from the last tool-side pivot x,y,z [mm] (head machines)")
-    p.add_argument("--points", type=int, help="points per turn (cone, figure-eight)")
-    p.add_argument("--turns", type=float, help="turns of the cone")
-    p.add_argument("--incl-axis", choices=["X", "Y"], help="cone inclination axis (default: the tilt axis)")
+    add_setup_arguments(p)
     p.add_argument("--dwell", type=float, default=DEFAULT_DWELL_S,
                    help="dwell per pose [s] (default %(default)s: ~1 s to settle, then a 5 s average)")
     p.add_argument("--feed", type=float, default=2000.0, help="feed of the positioning blocks (default %(default)s)")

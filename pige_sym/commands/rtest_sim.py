@@ -9,22 +9,12 @@ import sys
 from typing import Any
 
 from ..effects import parse_effect
-from ..kernels import DEFAULT_MACHINE, load_kernels
+from ..kernels import load_kernels
 from ..nest import parse_nest
 from ..rtest_program import DEFAULT_DWELL_S, DEFAULT_MOVE_S, load_test_program
 from ..simulator import parse_pige
 from ..virtual_device import FAULT_KINDS, DeviceConfig, parse_faults, run_device
-from .simulate import parse_pivots, parse_vec3
-
-
-def trajectory_options(args: argparse.Namespace) -> dict[str, Any]:
-    """Trajectory options shared by ``rtest-sim`` and ``acquire`` (only those given)."""
-    out: dict[str, Any] = {}
-    if args.points is not None:
-        out["points"] = args.points
-    if args.turns is not None and args.trajectory == "cone-frustum":
-        out["turns"] = args.turns
-    return out
+from ._setup import add_setup_arguments, setup_geometry, trajectory_options
 
 
 def _terminate(signum: int, frame: Any) -> None:
@@ -33,11 +23,9 @@ def _terminate(signum: int, frame: Any) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     kern = load_kernels(args.machine)
-    program = load_test_program(
-        kern.MACHINE_CODE, args.trajectory, ball_mm=parse_vec3(args.ball, "--ball"), pivots_mm=parse_pivots(args.pivot),
-        tool_mm=parse_vec3(args.tool, "--tool") if args.tool else None, move_s=args.move, dwell_s=args.dwell,
-        **trajectory_options(args),
-    )
+    ball, pivots, tool = setup_geometry(args)
+    program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=ball, pivots_mm=pivots, tool_mm=tool,
+                                move_s=args.move, dwell_s=args.dwell, **trajectory_options(args))
     seed = args.seed if args.seed is not None else secrets.randbits(31)
     cfg = DeviceConfig(
         program=program, pige=parse_pige(args.pige, kern.MACHINE_CODE, seed),
@@ -76,12 +64,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--machine", default=DEFAULT_MACHINE, help="ISO 10791 machine code (default %(default)s)")
-    p.add_argument("--trajectory", default="cone-frustum",
-                   help="cone-frustum, figure-eight, steps, an angle CSV or an NC program file")
-    p.add_argument("--ball", default="120,0,80", help="ball centre at the reference pose x,y,z [mm]")
-    p.add_argument("--pivot", action="append", metavar="AXIS=x,y,z", help="nominal pivot of a rotary axis [mm]")
-    p.add_argument("--tool", help="ball offset from the last tool-side pivot x,y,z [mm] (head machines)")
+    add_setup_arguments(p, program_help="cone-frustum, figure-eight, steps, an angle CSV or an NC program file")
     p.add_argument("--pige", default="random", help="'random', NAME=VALUE,... [um|urad], or a JSON file")
     p.add_argument("--effect", action="append", metavar="NAME[:k=v,...]", help="add an unmodelled effect")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: random, written to the truth)")
@@ -89,8 +72,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"inject faults: {', '.join(FAULT_KINDS)} (N of each, default 3)")
     p.add_argument("--truth", help="write the truth (PIGEs, faults injected) to this JSON file")
     p.add_argument("--tcp", type=int, metavar="PORT", help="listen on 127.0.0.1:PORT (0: any) instead of a pty")
-    p.add_argument("--points", type=int, help="points per turn (cone, figure-eight)")
-    p.add_argument("--turns", type=float, help="turns of the cone")
     p.add_argument("--nest", default="default", help="nest geometry: default, key=value,... or a JSON file")
     p.add_argument("--noise", type=float, default=0.25, help="sensor noise per sample [um] (default %(default)s)")
     p.add_argument("--repeatability", type=float, default=0.2,
