@@ -307,13 +307,14 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
         names = fit.result.parameters
         params = {p: fit.result.value(f"{spec.id}.{p}") for p in spec.param_names}
         std = {p: float(fit.result.std[names.index(f"{spec.id}.{p}")]) for p in spec.param_names}
+        units = dict(spec.units)
         if spec.kind == "thermal_drift":
-            params["tau_s"], std["tau_s"] = float(spec.options["tau_s"]), tau_std
+            params["tau_s"], std["tau_s"], units["tau_s"] = float(spec.options["tau_s"]), tau_std, "s"
         explained = 1.0 - fit.rss / current.rss if current.rss > 0 else 0.0
         h = int(spec.options.get("harmonic", 1))
         evidence = _EVIDENCE[spec.kind].format(axis=spec.axis, h=h)
         findings.append(Finding(
-            effect=spec.id, options=dict(spec.options), params=params, std=std, units=spec.units, delta_bic=dbic,
+            effect=spec.id, options=dict(spec.options), params=params, std=std, units=units, delta_bic=dbic,
             f_statistic=f_stat, p_value=p_val, rms_um_before=math.sqrt(current.rss / current.n_obs),
             rms_um_after=math.sqrt(fit.rss / fit.n_obs), heldout_rms_um_before=current.heldout_rms,
             heldout_rms_um_after=fit.heldout_rms, pige_shift=_shift(current.result, fit.result),

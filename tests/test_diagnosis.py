@@ -49,6 +49,8 @@ def test_hidden_effect_is_found_first(code, spec, traj, seed) -> None:
     assert d.findings, "nothing found"
     first = d.findings[0]
     assert first.effect == eff.spec.id, [f.effect for f in d.findings]
+    assert d.verdict().startswith(f"- {first.effect}")  # the one-line verdict renders every finding
+    assert set(first.units) == set(first.params) == set(first.std)
     assert first.heldout_rms_um_after < first.heldout_rms_um_before
     if eff.spec.kind == "outliers":
         assert d.outlier_rows == sim.truth["outlier_rows"]
