@@ -3,8 +3,9 @@
 Stages (each prints what it did; every file lands in ``--out``):
 
 1. kernels of the machine (generated on demand when absent);
-2. the R-test program: a BK3-style cone frustum as a Siemens 840D program in machine
-   coordinates (``rtest_cone.mpf``, one 7 s G4 dwell per pose: about 1 s to settle, then
+2. the R-test program: a BK3-style cone frustum (``--trajectory``: or figure-eight, steps)
+   as a Siemens 840D program in machine coordinates (``rtest_<trajectory>.mpf``, one 7 s
+   G4 dwell per pose: about 1 s to settle, then
    the 5 s averaging window);
 3. a virtual R-test device (``pige rtest-sim``, a separate process) with random
    PIGEs and one *hidden* effect runs that program and streams the device protocol
@@ -12,7 +13,7 @@ Stages (each prints what it did; every file lands in ``--out``):
 4. acquisition over that serial port (``rtest.csv``, raw byte log, summary);
 5. identification by Gauss–Newton and by the double-differential scheme;
 6. diagnosis: the residual analysis must name the hidden effect;
-7. compensation of the test program (``rtest_cone_comp.mpf``) with the PIGEs of the
+7. compensation of the test program (``rtest_<trajectory>_comp.mpf``) with the PIGEs of the
    diagnosis' final fit, and the corrected kinematic chain;
 8. the HTML report (``report/report.html``).
 
@@ -82,10 +83,12 @@ def _run(args: argparse.Namespace) -> int:
 
     _stage(2, "R-test program")
     incl = "X" if kern.ROTARY_AXES[0] == "A" else "Y"
-    program = load_test_program(code, "cone-frustum", ball_mm=ball, incl_axis=incl)
-    nc_path = out / "rtest_cone.mpf"
+    options = {"incl_axis": incl} if args.trajectory == "cone-frustum" else {}
+    program = load_test_program(code, args.trajectory, ball_mm=ball, **options)
+    stem = "rtest_" + args.trajectory.split("-")[0]
+    nc_path = out / f"{stem}.mpf"
     nc_path.write_text(make_rtest_program(program.angles_deg, program.linear_mm(), tuple(kern.ROTARY_AXES),
-                                          dwell_s=7.0, title=f"R-test cone frustum, {code}"), encoding="utf-8")
+                                          dwell_s=7.0, title=f"R-test {program.description}, {code}"), encoding="utf-8")
     program = load_test_program(code, str(nc_path), ball_mm=ball)
     print(f"wrote {nc_path}: {program.n_poses} poses, "
           f"{program.duration_s / 60:.1f} min of machine time")
@@ -141,7 +144,7 @@ def _run(args: argparse.Namespace) -> int:
 
     _stage(7, "compensation of the test program")
     params = load_parameters(diag_json, code)
-    comp_path = out / "rtest_cone_comp.mpf"
+    comp_path = out / f"{stem}_comp.mpf"
     comp_path.write_text(compensate_program(nc_path.read_text(encoding="utf-8"), params, path=str(nc_path)),
                          encoding="utf-8")
     print(f"wrote {comp_path} (parameters from {params.source})")
@@ -168,13 +171,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="run the whole story on the default machine",
         description=("Virtual R-test device with a hidden effect -> acquisition over a pseudo-terminal -> "
                      "identification -> diagnosis -> compensated program -> HTML report."),
-        epilog="examples:\n  pige demo\n  pige demo --out /tmp/demo --effect thermal_drift --seed 3",
+        epilog=("examples:\n  pige demo\n  pige demo --out /tmp/demo --effect thermal_drift --seed 3\n"
+                "  pige demo --trajectory steps --effect backlash_C:b_urad=30"),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--machine", default=DEFAULT_MACHINE, help="machine structure code (default %(default)s)")
     p.add_argument("--out", default="demo-out", help="output directory (default %(default)s)")
     p.add_argument("--effect", default=DEFAULT_EFFECT,
                    help="the effect hidden in the virtual machine, NAME[:k=v,...] (default %(default)s)")
+    p.add_argument("--trajectory", choices=["cone-frustum", "figure-eight", "steps"], default="cone-frustum",
+                   help="test trajectory (default %(default)s; steps reveals backlash)")
     p.add_argument("--seed", type=int, default=7, help="seed of the PIGEs, noise and device (default %(default)s)")
     p.add_argument("--time-scale", type=float, default=100.0,
                    help="device seconds per wall second (default %(default)s)")
