@@ -83,7 +83,7 @@ def _run(args: argparse.Namespace) -> int:
 
     _stage(2, "R-test program")
     incl = "X" if kern.ROTARY_AXES[0] == "A" else "Y"
-    options = {"incl_axis": incl} if args.trajectory == "cone-frustum" else {}
+    options: dict[str, Any] = {"incl_axis": incl} if args.trajectory == "cone-frustum" else {}
     program = load_test_program(code, args.trajectory, ball_mm=ball, **options)
     stem = "rtest_" + args.trajectory.split("-")[0]
     nc_path = out / f"{stem}.mpf"
