@@ -147,10 +147,12 @@ def load_parameters(path: str | os.PathLike[str], machine: str | None = None, *,
     kern = load_kernels(code)
     values: dict[str, float] = {}
     ignored: list[str] = []
-    extensions, extension_names = _extensions(data, p, tuple(kern.ROTARY_AXES), ignored)
+    extensions, skipped = _extensions(data, p, tuple(kern.ROTARY_AXES))
+    ignored += [f"{effect} ({why})" for effect, why in skipped.items()]
+    described = {e.spec.id for e in extensions} | set(skipped)
     for name, v in data["pige"].items():
         if "." in name:
-            if name not in extension_names and not any(name.startswith(i.split(" ")[0] + ".") for i in ignored):
+            if name.split(".", 1)[0] not in described:
                 ignored.append(f"{name} (no finding describes it)")
             continue
         if name not in kern.PARAMETERS:
@@ -166,9 +168,9 @@ def load_parameters(path: str | os.PathLike[str], machine: str | None = None, *,
                                   dict(data.get("pivots_mm", {})), p, ignored, extensions)
 
 
-def _extensions(data: dict[str, Any], path: str, rotary_axes: tuple[str, ...],
-                ignored: list[str]) -> tuple[list[AngleExtension], set[str]]:
-    """Compensable accepted findings of a ``pige diagnose --json`` result; the others go to ``ignored``."""
+def _extensions(data: dict[str, Any], path: str,
+                rotary_axes: tuple[str, ...]) -> tuple[list[AngleExtension], dict[str, str]]:
+    """Compensable accepted findings of a ``pige diagnose --json`` result, and the others with the reason."""
     findings = data.get("findings", [])
     if not isinstance(findings, list):
         raise FileFormatError(path, None, '"findings" must be a list')
@@ -176,14 +178,12 @@ def _extensions(data: dict[str, Any], path: str, rotary_axes: tuple[str, ...],
         if not isinstance(f, dict) or not isinstance(f.get("effect"), str) or not isinstance(f.get("params"), dict):
             raise FileFormatError(path, None, 'each finding needs "effect" and "params"')
     try:
-        out, skipped = angle_extensions(findings, rotary_axes)
+        return angle_extensions(findings, rotary_axes)
     except InputError as exc:
         raise FileFormatError(path, None, str(exc)) from None
-    ignored += skipped
-    return out, {f"{e.spec.id}.{n}" for e in out for n in e.params}
 
 
-def angle_extensions(records: Any, rotary_axes: tuple[str, ...]) -> tuple[list[AngleExtension], list[str]]:
+def angle_extensions(records: Any, rotary_axes: tuple[str, ...]) -> tuple[list[AngleExtension], dict[str, str]]:
     """Split effect records into compensable angle extensions and the rest (with the reason).
 
     Parameters
@@ -197,8 +197,8 @@ def angle_extensions(records: Any, rotary_axes: tuple[str, ...]) -> tuple[list[A
     Returns
     -------
     extensions : list of AngleExtension
-    not_compensated : list of str
-        ``"<id> (<reason>)"`` for every other effect.
+    not_compensated : dict of str to str
+        Every other effect id with the reason it is not compensated.
 
     Raises
     ------
@@ -208,7 +208,7 @@ def angle_extensions(records: Any, rotary_axes: tuple[str, ...]) -> tuple[list[A
     from .effects import OPTION_KEYS
 
     out: list[AngleExtension] = []
-    skipped: list[str] = []
+    skipped: dict[str, str] = {}
     for rec in records:
         if "params" in rec:
             options, values = dict(rec.get("options") or {}), dict(rec["params"])
@@ -217,7 +217,7 @@ def angle_extensions(records: Any, rotary_axes: tuple[str, ...]) -> tuple[list[A
             values = {k: v for k, v in rec.items() if k != "effect" and k not in OPTION_KEYS}
         spec = EffectSpec(str(rec["effect"]), options)
         if spec.kind not in COMPENSABLE_KINDS:
-            skipped.append(f"{spec.id} ({NOT_COMPENSATED_WHY.get(spec.kind, 'not compensable')})")
+            skipped[spec.id] = NOT_COMPENSATED_WHY.get(spec.kind, "not compensable")
             continue
         if spec.axis not in rotary_axes:
             raise InputError(f"effect {spec.id}: {spec.axis} is not a rotary axis of the machine")

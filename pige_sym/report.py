@@ -353,7 +353,7 @@ def read_truth(csv_path: str | os.PathLike[str], machine: str) -> Truth | None:
         extensions, skipped = angle_extensions(records, tuple(kern.ROTARY_AXES))
     except InputError as exc:
         raise FileFormatError(str(tp), None, str(exc)) from None
-    names = [s.split(" ")[0] for s in skipped]
+    names = list(skipped)
     names += [str(e.get("name", e)) if isinstance(e, dict) else str(e) for e in effects if e not in records]
     if isinstance(data.get("effect"), str) and data["effect"] not in ("", "none"):
         names.append(data["effect"])
@@ -581,8 +581,8 @@ def _compensation(p: Path, label: str, m: Measurement, truth: Truth | None,
     )
     identified, rep.not_compensated, covariance = rep.estimate()
     if method == "diagnosis" and diag is not None:
-        rep.extensions, rep.extensions_not_compensated = angle_extensions(
-            [f.to_dict() for f in diag.findings], tuple(kern.ROTARY_AXES))
+        rep.extensions, skipped = angle_extensions([f.to_dict() for f in diag.findings], tuple(kern.ROTARY_AXES))
+        rep.extensions_not_compensated = [f"{effect} ({why})" for effect, why in skipped.items()]
     machine_values = truth.values if truth is not None else identified
     # the model-predicted machine carries what was identified, extensions included
     machine_extensions = truth.extensions if truth is not None else rep.extensions
