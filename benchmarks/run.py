@@ -76,7 +76,7 @@ def machine_info() -> list[str]:
 
 
 def bench_generation(rows: list[Row]) -> None:
-    from pige_sym.emit import write_module
+    from pige_sym.codegen.emit import write_module
 
     with tempfile.TemporaryDirectory() as tmp:
         for code in SHIPPED_MACHINES:
@@ -88,7 +88,7 @@ def naive_lambdify(code: str):  # noqa: ANN201
     """Lambdify the symbolic 3×P Jacobian with cos/sin of the angle symbols substituted back."""
     import sympy as sp
 
-    from pige_sym.symbolic import build_model
+    from pige_sym.codegen.symbolic import build_model
 
     model = build_model(code)
     theta = [sp.Symbol(f"th_{r.axis.name}") for r in model.rotary]

@@ -2,6 +2,6 @@
 
 import sys
 
-from .cli import main
+from pige_sym.cli import main
 
 sys.exit(main())

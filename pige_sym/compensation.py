@@ -41,11 +41,11 @@ from typing import Any
 
 import numpy as np
 
-from .effects import EffectSpec
-from .errors import FileFormatError, InputError, PigeError
-from .kernels import load_kernels
-from .ncprogram import NCBlock, parse_program, rewrite_program, to_fanuc
-from .trajectories import approach_directions
+from pige_sym.effects import EffectSpec
+from pige_sym.errors import FileFormatError, InputError, PigeError
+from pige_sym.kernels import load_kernels
+from pige_sym.nc.program import NCBlock, parse_program, rewrite_program, to_fanuc
+from pige_sym.trajectories import approach_directions
 
 COMPENSABLE_KINDS = ("angular_error", "backlash")
 NOT_COMPENSATED_WHY = {
@@ -205,7 +205,7 @@ def angle_extensions(records: Any, rotary_axes: tuple[str, ...]) -> tuple[list[A
     InputError
         A record names an axis the machine does not have or lacks a parameter.
     """
-    from .effects import OPTION_KEYS
+    from pige_sym.effects import OPTION_KEYS
 
     out: list[AngleExtension] = []
     skipped: dict[str, str] = {}
@@ -447,7 +447,7 @@ def format_controller(params: CompensationParameters, style: str = "table") -> s
 
 
 def kern_axes(machine: str, side: str) -> list[Any]:
-    from .machine_code import parse_machine_code
+    from pige_sym.codegen.machine_code import parse_machine_code
 
     st = parse_machine_code(machine)
     axes = st.workpiece_axes if side == "workpiece" else st.tool_axes

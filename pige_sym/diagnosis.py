@@ -42,11 +42,11 @@ import numpy as np
 from scipy import stats
 from tqdm import tqdm
 
-from .effects import EffectContext, EffectSpec
-from .errors import InputError
-from .identification import ExtraColumns, IdentificationResult, build_problem, identify
-from .io import Measurement
-from .kernels import load_kernels
+from pige_sym.effects import EffectContext, EffectSpec
+from pige_sym.errors import InputError
+from pige_sym.identification import ExtraColumns, IdentificationResult, build_problem, identify
+from pige_sym.io import Measurement
+from pige_sym.kernels import load_kernels
 
 DELTA_BIC_MAX = -10.0
 P_MAX = 1e-4

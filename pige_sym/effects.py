@@ -42,8 +42,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import InputError
-from .trajectories import approach_directions
+from pige_sym.errors import InputError
+from pige_sym.trajectories import approach_directions
 
 _MOTION_COMPONENTS = ("dx", "dy", "dz", "rx", "ry", "rz")
 _XYZ = "xyz"

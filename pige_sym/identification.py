@@ -56,10 +56,10 @@ from typing import Any
 import numpy as np
 from scipy import optimize, stats
 
-from .errors import InputError, PigeError
-from .io import Measurement
-from .kernels import load_kernels
-from .projection import Projection, parse_projection
+from pige_sym.errors import InputError, PigeError
+from pige_sym.io import Measurement
+from pige_sym.kernels import load_kernels
+from pige_sym.projection import Projection, parse_projection
 
 METHODS = ("gauss-newton", "double-differential")
 LOSSES = ("linear", "soft_l1", "huber")

@@ -32,8 +32,9 @@ from typing import IO, Any
 
 import numpy as np
 
-from .errors import FileFormatError, InputError, PigeError
-from .machine_code import MachineStructure, parse_machine_code
+from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
+from pige_sym.errors import FileFormatError, InputError, PigeError
+from pige_sym.files import atomic_write_text
 
 FORMAT_LINE = "# pige-rtest 1"
 DEVIATION_COLUMNS = ("dx_um", "dy_um", "dz_um")
@@ -119,7 +120,7 @@ class Measurement:
         """
         if self.frame == "machine":
             return self.deviation_um
-        from .kernels import load_kernels
+        from pige_sym.kernels import load_kernels
 
         kern: Any = kernels if kernels is not None else load_kernels(self.machine)
         rot = kern.workpiece_rotation(self.angles_deg)
@@ -232,13 +233,7 @@ def format_measurement(m: Measurement) -> str:
 
 def write_measurement(m: Measurement, path: str | os.PathLike[str]) -> Path:
     """Write a measurement file (atomically: temp file then rename); missing parent folders are created."""
-    p = Path(path)
-    text = format_measurement(m)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(p)
-    return p
+    return atomic_write_text(path, format_measurement(m))
 
 
 def validate_measurement(m: Measurement) -> None:

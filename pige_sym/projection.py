@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from pige_sym.errors import InputError
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 

@@ -24,11 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from .effects import EffectContext, EffectInstance
-from .errors import FileFormatError, InputError
-from .io import Measurement, write_measurement
-from .kernels import load_kernels
-from .trajectories import Trajectory
+from pige_sym.effects import EffectContext, EffectInstance
+from pige_sym.errors import FileFormatError, InputError
+from pige_sym.io import Measurement, write_measurement
+from pige_sym.kernels import load_kernels
+from pige_sym.trajectories import Trajectory
 
 ORIENTATION_RANGE_URAD = (1.0, 15.0)
 OFFSET_RANGE_UM = (1.0, 15.0)

@@ -28,11 +28,11 @@ import numpy as np
 from scipy import stats
 from tqdm import tqdm
 
-from .identification import identify
-from .kernels import load_kernels
-from .projection import Projection, direction_sweep, parse_projection
-from .simulator import random_pige, simulate
-from .trajectories import Trajectory
+from pige_sym.identification import identify
+from pige_sym.kernels import load_kernels
+from pige_sym.projection import Projection, direction_sweep, parse_projection
+from pige_sym.simulator import random_pige, simulate
+from pige_sym.trajectories import Trajectory
 
 DEFAULT_PROJECTIONS = ("x", "y", "z", "xyz")
 

@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from .errors import InputError
-from .io import read_angle_file
-from .kernels import load_kernels
+from pige_sym.errors import InputError
+from pige_sym.io import read_angle_file
+from pige_sym.kernels import load_kernels
 
 NAMES = ("cone-frustum", "figure-eight", "steps")
 

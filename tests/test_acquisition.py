@@ -17,18 +17,26 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pige_sym.acquisition import AcquisitionOptions, acquire, default_raw_log, summary_path
-from pige_sym.cli import main
-from pige_sym.device import GaugeQueryAdapter, Info, RecordError, Sample, encode_info, encode_sample, parse_record
+from pige_sym.acquisition.device import (
+    GaugeQueryAdapter,
+    Info,
+    RecordError,
+    Sample,
+    encode_info,
+    encode_sample,
+    parse_record,
+)
+from pige_sym.acquisition.engine import AcquisitionOptions, acquire, default_raw_log, summary_path
+from pige_sym.acquisition.nest import NestGeometry, parse_nest, tripod
+from pige_sym.acquisition.transport import LineFramer, PortSettings, open_port, read_available
+from pige_sym.acquisition.virtual_device import DeviceConfig, VirtualRTest, start_virtual_device
+from pige_sym.cli.main import main
 from pige_sym.errors import AcquisitionError
 from pige_sym.identification import identify
 from pige_sym.io import read_measurement
-from pige_sym.ncprogram import make_rtest_program
-from pige_sym.nest import NestGeometry, parse_nest, tripod
-from pige_sym.rtest_program import load_test_program
+from pige_sym.nc.program import make_rtest_program
+from pige_sym.nc.rtest_program import load_test_program
 from pige_sym.simulator import random_pige
-from pige_sym.transport import LineFramer, PortSettings, open_port, read_available
-from pige_sym.virtual_device import DeviceConfig, VirtualRTest, start_virtual_device
 
 AC = "wC'A'bXYZ(C1)t"
 REPO = Path(__file__).resolve().parents[1]
@@ -87,7 +95,7 @@ def test_parse_record_accepts_valid_and_names_every_rejection() -> None:
             parse_record(body)
         return exc.value.reason
 
-    from pige_sym.device import frame_payload
+    from pige_sym.acquisition.device import frame_payload
 
     assert reason(rec[1:-8]) == "format"
     assert reason(rec[1:-2].replace(b"312.4051", b"312.4061")) == "checksum"

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from pige_sym.cli import main
+from pige_sym.cli.main import main
 from pige_sym.compensation import (
     AngleExtension,
     CompensationError,
@@ -22,7 +22,7 @@ from pige_sym.compensation import (
 from pige_sym.effects import EffectSpec
 from pige_sym.identification import identify
 from pige_sym.kernels import load_kernels
-from pige_sym.ncprogram import NCProgramError, make_rtest_program
+from pige_sym.nc.program import NCProgramError, make_rtest_program
 from pige_sym.simulator import random_pige, simulate
 from pige_sym.trajectories import cone_frustum, figure_eight, steps
 

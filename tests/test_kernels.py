@@ -286,7 +286,7 @@ def test_generated_modules_do_not_import_sympy() -> None:
 
 
 def test_on_demand_generation_for_a_new_machine(tmp_path, monkeypatch) -> None:
-    monkeypatch.setenv("PIGE_GENERATED_DIR", str(tmp_path))
+    monkeypatch.setenv("PIGE_KERNEL_DIR", str(tmp_path))
     from pige_sym import kernels
 
     monkeypatch.setattr(kernels, "_CACHE", {})
@@ -294,7 +294,7 @@ def test_on_demand_generation_for_a_new_machine(tmp_path, monkeypatch) -> None:
     assert (tmp_path / "kin_wCpApYpXpbZ_C1_t.py").exists()
     angles = np.array([[20.0, 30.0]])
     monkeypatch.setattr(kernels, "_CACHE", {})
-    monkeypatch.delenv("PIGE_GENERATED_DIR")
+    monkeypatch.delenv("PIGE_KERNEL_DIR")
     ac = load_kernels("wC'A'bXYZ(C1)t")
     p = np.arange(1.0, 9.0)
     # linear axes on the workpiece side do not change the rotary-axis error model
@@ -306,7 +306,7 @@ def test_on_demand_generation_for_a_new_machine(tmp_path, monkeypatch) -> None:
     [("wbXYZ(C1)t", "no rotary axis"), ("wC'A'bXY(C1)t", "no linear axis along Z"), ("wX'C'bYZ(C1)t", "singular")],
 )
 def test_unsupported_machines_are_refused(code, fragment) -> None:
-    from pige_sym.symbolic import build_model
+    from pige_sym.codegen.symbolic import build_model
 
     with pytest.raises(UnsupportedMachineError, match=fragment):
         build_model(code)
@@ -314,7 +314,7 @@ def test_unsupported_machines_are_refused(code, fragment) -> None:
 
 def test_check_generated_is_clean() -> None:
     env = dict(os.environ)
-    env.pop("PIGE_GENERATED_DIR", None)
+    env.pop("PIGE_KERNEL_DIR", None)
     proc = subprocess.run(
         [sys.executable, "-m", "pige_sym", "gen", "--check", *SHIPPED_MACHINES],
         capture_output=True, text=True, cwd=REPO, env=env, timeout=120,

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pige_sym.codegen.machine_code import parse_machine_code
 from pige_sym.errors import MachineCodeError, PigeError
-from pige_sym.machine_code import parse_machine_code
 
 VALID = {
     "wC'A'bXYZ(C1)t": ("wC'A'bXYZ(C1)t", ["C", "A"], ["X", "Y", "Z"], ("A", "C")),

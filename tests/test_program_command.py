@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pige_sym.cli import main
+from pige_sym.cli.main import main
 from pige_sym.kernels import load_kernels
-from pige_sym.ncprogram import parse_program, poses_from_program
-from pige_sym.rtest_program import load_test_program
+from pige_sym.nc.program import parse_program, poses_from_program
+from pige_sym.nc.rtest_program import load_test_program
 from pige_sym.trajectories import cone_frustum, figure_eight
 
 

@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pige_sym.cli import main
+from pige_sym.cli.main import main
 from pige_sym.compensation import compensation_study
 from pige_sym.kernels import load_kernels
-from pige_sym.ncprogram import make_rtest_program
-from pige_sym.report import ReportData, build_report, gather_report, write_report
+from pige_sym.nc.program import make_rtest_program
+from pige_sym.report.build import ReportData, build_report, gather_report, write_report
 from pige_sym.simulator import random_pige, simulate
 from pige_sym.trajectories import cone_frustum, figure_eight
 
@@ -235,8 +235,8 @@ def test_renders_in_headless_chromium(built: tuple[ReportData, Path, str], tmp_p
 
 
 def test_a_failing_diagnosis_is_reported_not_fatal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from pige_sym import report
     from pige_sym.identification import IdentificationError
+    from pige_sym.report import build as report
 
     def boom(*args: object, **kwargs: object) -> None:
         raise IdentificationError("Gauss–Newton did not converge")

@@ -1,0 +1,71 @@
+"""Options shared by the commands that describe a test set-up (simulate, program, rtest-sim, acquire).
+
+``--machine``, the test program (``--trajectory`` or ``--program``), ``--ball``,
+``--pivot AXIS=x,y,z`` (repeatable), ``--tool``, and the trajectory shape options
+``--points``, ``--turns`` and ``--incl-axis`` (the last two only for the cone frustum).
+Not a subcommand: the leading underscore keeps it out of the registry.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from pige_sym.errors import InputError
+from pige_sym.kernels import DEFAULT_MACHINE
+
+
+def parse_vec3(text: str, what: str) -> list[float]:
+    """Three comma-separated numbers, or a clear InputError naming the option."""
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise InputError(f"{what}: expected x,y,z numbers, got {text!r}") from None
+    if len(vals) != 3:
+        raise InputError(f"{what}: expected 3 numbers x,y,z, got {len(vals)}")
+    return vals
+
+
+def parse_pivots(items: list[str] | None) -> dict[str, list[float]]:
+    """``AXIS=x,y,z`` items of ``--pivot`` as axis -> [x, y, z] [mm]."""
+    out = {}
+    for item in items or []:
+        axis, eq, vec = item.partition("=")
+        if not eq:
+            raise InputError(f"--pivot: expected AXIS=x,y,z, got {item!r}")
+        out[axis.strip()] = parse_vec3(vec, f"--pivot {axis.strip()}")
+    return out
+
+
+def add_setup_arguments(p: argparse.ArgumentParser, *, program_flag: str = "--trajectory",
+                        program_help: str = "cone-frustum, figure-eight, steps, or a CSV of <axis>_deg angles") -> None:
+    """Add the set-up options; the test program lands in ``args.trajectory`` whatever its flag."""
+    p.add_argument("--machine", default=DEFAULT_MACHINE, help="ISO 10791 machine code (default %(default)s)")
+    p.add_argument(program_flag, dest="trajectory", default="cone-frustum",
+                   help=program_help + " (default %(default)s)")
+    p.add_argument("--ball", default="120,0,80",
+                   help="ball centre at the reference pose x,y,z [mm] (default %(default)s)")
+    p.add_argument("--pivot", action="append", metavar="AXIS=x,y,z", help="nominal pivot of a rotary axis [mm]")
+    p.add_argument("--tool", help="ball offset from the last tool-side pivot x,y,z [mm] (head machines)")
+    p.add_argument("--points", type=int, help="points per turn (cone, figure-eight)")
+    p.add_argument("--turns", type=float, help="turns of the cone")
+    p.add_argument("--incl-axis", choices=["X", "Y", "x", "y"], help="cone inclination axis (default X)")
+
+
+def trajectory_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The trajectory shape options that were given (cone-only ones only for the cone)."""
+    out: dict[str, Any] = {}
+    if args.points is not None:
+        out["points"] = args.points
+    if args.trajectory == "cone-frustum":
+        if args.turns is not None:
+            out["turns"] = args.turns
+        if args.incl_axis is not None:
+            out["incl_axis"] = args.incl_axis.upper()
+    return out
+
+
+def setup_geometry(args: argparse.Namespace) -> tuple[list[float], dict[str, list[float]], list[float] | None]:
+    """Ball [mm], nominal pivots by axis [mm] and tool offset [mm] (None when not given)."""
+    return (parse_vec3(args.ball, "--ball"), parse_pivots(args.pivot),
+            parse_vec3(args.tool, "--tool") if args.tool else None)

@@ -1,0 +1,46 @@
+"""``pige diagnose``: find what the PIGE model misses, name it, extend the model, measure the gain."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from pige_sym.diagnosis import diagnose, residual_plots
+from pige_sym.identification import format_result
+from pige_sym.io import read_measurement
+
+
+def _run(args: argparse.Namespace) -> int:
+    m = read_measurement(args.file)
+    result = diagnose(m, progress=not args.json)
+    if args.plots:
+        residual_plots(m, result, args.plots)
+    if args.json:
+        print(json.dumps(result.to_dict(), indent=1))
+        return 0
+    print(f"baseline PIGE fit: residual RMS {result.baseline_rms_um:.3f} um, held-out RMS "
+          f"{result.baseline_heldout_rms_um:.3f} um, BIC {result.baseline_bic:.1f}")
+    print(result.verdict())
+    if result.rejected:
+        print("\nrejected candidates:")
+        for r in result.rejected:
+            print(f"  {r.effect}: {r.reason}")
+    print("\nfinal estimates (with the accepted extensions):")
+    print(format_result(result.final))
+    if result.plots:
+        print("\nplots: " + ", ".join(result.plots))
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "diagnose",
+        help="find and name what the PIGE model misses",
+        description="Residual analysis, candidate extensions, identifiability, BIC/F-test/held-out gain.",
+        epilog="examples:\n  pige diagnose run.csv --plots plots/\n  pige diagnose run.csv --json > diagnosis.json",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("file", help="pige-rtest 1 measurement file")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--plots", metavar="DIR", help="write residual plots (PNG) into DIR")
+    p.set_defaults(handler=_run)

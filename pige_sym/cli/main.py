@@ -1,0 +1,58 @@
+"""The ``pige`` parser and entry point (also ``python -m pige_sym``).
+
+Exit status: 0 success, 1 the command ran but failed (e.g. a check found a
+difference), 2 bad input (one line on stderr, no traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+
+from pige_sym.errors import PigeError
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose usage errors exit with status 2 and one line."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"pige {self.prog.split(' ', 1)[-1]}: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pige`` with every subcommand."""
+    parser = _Parser(
+        prog="pige",
+        description="Identify and compensate the rotary-axis PIGEs of five-axis machines from R-test data.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    from pige_sym import __version__
+
+    parser.add_argument("--version", action="version", version=f"pige {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    from pige_sym.cli.registry import register_all
+
+    register_all(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``pige``; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.handler(args))
+    except PigeError as exc:
+        print(f"pige {args.command}: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # output piped into head & co.
+        sys.stderr.close()
+        return 0
+    except KeyboardInterrupt:
+        print(f"pige {args.command}: interrupted", file=sys.stderr)
+        return 130

@@ -1,0 +1,69 @@
+"""``pige study``: projection study, Sobol sensitivity, compensation before/after."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from pige_sym.kernels import DEFAULT_MACHINE, load_kernels
+from pige_sym.studies import projection_study, sobol_study
+from pige_sym.trajectories import make_trajectory
+
+
+def _trajectory(args: argparse.Namespace):  # noqa: ANN202
+    kern = load_kernels(args.machine)
+    opts = {"incl_axis": args.incl_axis} if args.trajectory == "cone-frustum" and args.incl_axis else {}
+    return kern, make_trajectory(kern.MACHINE_CODE, args.trajectory, **opts)
+
+
+def _projection(args: argparse.Namespace) -> int:
+    kern, traj = _trajectory(args)
+    study = projection_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), sweep=args.sweep,
+                             presets=args.presets, noise_um=args.noise, seed=args.seed, progress=not args.json)
+    print(json.dumps(study.to_dict(), indent=1) if args.json else study.format())
+    return 0
+
+
+def _sobol(args: argparse.Namespace) -> int:
+    kern, traj = _trajectory(args)
+    study = sobol_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), n=args.samples,
+                        default_range=args.range, seed=args.seed)
+    print(json.dumps(study.to_dict(), indent=1) if args.json else study.format())
+    return 0
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--machine", default=DEFAULT_MACHINE, help="ISO 10791 machine code (default %(default)s)")
+    p.add_argument("--trajectory", default="cone-frustum", help="cone-frustum, figure-eight, steps or an angle CSV")
+    p.add_argument("--incl-axis", choices=["X", "Y"], help="cone inclination axis")
+    p.add_argument("--projections", default="x,y,z,xyz", help="comma list of projections (default %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default %(default)s)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    study = subparsers.add_parser("study", help="projection, sobol and compensation studies",
+                                  description="Studies of identifiability, sensitivity and compensation.")
+    sub = study.add_subparsers(dest="study", metavar="STUDY", parser_class=type(study))
+    sub.required = True
+    p = sub.add_parser("projection", help="identifiability per excitation projection (paper Tables 3-6)",
+                       epilog="example:\n  pige study projection --machine \"wC'B'bXYZ(C1)t\" --presets 100",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    _common(p)
+    p.add_argument("--presets", type=int, default=50, help="random presets (default %(default)s)")
+    p.add_argument("--sweep", type=int, default=0, help="also N directions over 180 deg in the XY plane")
+    p.add_argument("--noise", type=float, default=0.25, help="sensor noise [um]")
+    p.set_defaults(handler=_projection)
+    s = sub.add_parser("sobol", help="Sobol sensitivity indices per projection",
+                       epilog="example:\n  pige study sobol --trajectory cone-frustum --samples 4096",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    _common(s)
+    s.add_argument("--samples", type=int, default=2048, help="base sample size (power of 2)")
+    s.add_argument("--range", type=float, default=15.0, help="half range of every PIGE [um|urad]")
+    s.set_defaults(handler=_sobol)
+    try:
+        from pige_sym.cli.compensate import register_study_compensation
+    except ImportError:
+        pass
+    else:
+        register_study_compensation(sub)

@@ -1,0 +1,472 @@
+"""Symbolic R-test error model of any ISO 10791 machine structure (SymPy).
+
+This is the only place (with :mod:`pige_sym.codegen.emit`) that imports SymPy.  It builds,
+for a parsed machine code, the ball-minus-nest deviation of CONVENTIONS §4 to first
+order in the rotary-axis errors, its closed-form Jacobian, and the nominal
+kinematics (rotations, RTCP linear commands, tool direction and its inverse).
+
+Model
+-----
+Every angle enters only through ``c_k = cos θ_k`` and ``s_k = sin θ_k``, so all
+expressions are polynomials in ``(c_k, s_k)``, the geometry and the errors.
+
+* Rotary axis k (nominal direction u, nominal pivot p, ISO 841 sense σ = +1 tool
+  side, −1 workpiece side) moves the body it carries as
+  ``x ↦ q + R(u', σ(θ + e))(x − q)`` with ``q = p + δ``, ``u' = u + ε × u``
+  (CONVENTIONS §3), δ the position errors [µm → mm], ε the orientation errors and
+  e the zero-position error [µrad → rad].  R is Rodrigues' formula; ``|u'| = 1``
+  to second order, and ``cos(θ+e), sin(θ+e)`` are expanded to first order in e.
+* Linear axis with command L moves what it carries by ``+L`` (tool side) or
+  ``−L`` (workpiece side, primed), so the tool moves by +L relative to the work.
+* Workpiece side: a point x fixed in W is at ``F_m(…F_1(x))`` in M (axes from the
+  workpiece outward).  Tool side: a point y fixed in the spindle frame is at
+  ``G_1(…G_n(y))`` (axes from the bed towards the tool).
+* The nest sits at ``ball_mm`` in W.  The ball sits at ``ball_mm`` in the spindle
+  frame when there is no tool-side rotary axis, else at ``pivot_last + tool_mm``
+  (``pivot_last`` of the tool-side rotary axis nearest the tool).
+* RTCP: the linear commands L(θ) solve ``ball − nest = 0`` for the nominal
+  kinematics (the first linear axis along each of X, Y, Z is commanded; any
+  further parallel axis, U V W or a suffixed duplicate, stays at 0).
+* Deviation (machine frame, µm): ``d(θ) = r(θ) − R_w(θ) r(0)`` with
+  ``r = ball − nest`` at the commanded L and R_w the nominal rotation of W into M
+  (zeroing in the nest frame).  ``d = J(θ) · params`` exactly to first order.
+
+The deviation is therefore ``basis(θ) @ G(geometry) @ params`` where ``basis``
+holds the trigonometric monomials and G is a small coefficient tensor; the
+emitter renders exactly that.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from pige_sym.codegen.machine_code import Axis, MachineStructure, parse_machine_code
+from pige_sym.errors import UnsupportedMachineError
+
+# Location errors per rotary-axis letter: (position error names, orientation error names),
+# each listed with the machine-axis index it refers to (CONVENTIONS §3 table order).
+_LOCATION = {
+    "A": (("Y", 1), ("Z", 2), ("B", 1), ("C", 2)),
+    "B": (("X", 0), ("Z", 2), ("A", 0), ("C", 2)),
+    "C": (("X", 0), ("Y", 1), ("A", 0), ("B", 1)),
+}
+_ROTARY_FOR_INDEX = "ABC"
+UM_TO_MM = sp.Rational(1, 1000)
+#: Error-motion components of the body carried by a rotary axis, in the carrier frame:
+#: translations [µm] and small rotations about the nominal pivot [µrad].
+MOTION_COMPONENTS = ("dx", "dy", "dz", "rx", "ry", "rz")
+URAD_TO_RAD = sp.Rational(1, 10**6)
+MM_TO_UM = 1000
+
+
+def location_parameter_names(axis_name: str) -> list[str]:
+    """The four ISO 230-7 location-error names of a rotary axis, in CONVENTIONS order.
+
+    Positions first (µm), then orientations (µrad), e.g. ``EX0C, EY0C, EA0C, EB0C``.
+    """
+    return [f"E{d}0{axis_name}" for d, _ in _LOCATION[axis_name[0]]]
+
+
+def zero_parameter_name(axis_name: str) -> str:
+    """Name of the zero-position error of a rotary axis, e.g. ``EC0C``."""
+    return f"E{axis_name[0]}0{axis_name}"
+
+
+def _cross_matrix(v: sp.Matrix) -> sp.Matrix:
+    return sp.Matrix([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+
+
+def _unit(index: int) -> sp.Matrix:
+    e = sp.zeros(3, 1)
+    e[index] = 1
+    return e
+
+
+def reduce_trig(expr: sp.Expr, pairs: list[tuple[sp.Symbol, sp.Symbol]]) -> sp.Expr:
+    """Reduce a polynomial in ``(c_k, s_k)`` with ``s_k**2 -> 1 - c_k**2``."""
+    expr = sp.expand(expr)
+    for c, s in pairs:
+        if not expr.has(s):
+            continue
+        poly = sp.Poly(expr, s)
+        out = sp.Integer(0)
+        for (deg,), coeff in poly.terms():
+            out += coeff * s ** (deg % 2) * (1 - c**2) ** (deg // 2)
+        expr = sp.expand(out)
+    return expr
+
+
+@dataclass
+class RotaryAxisSymbols:
+    """SymPy symbols belonging to one rotary axis."""
+
+    axis: Axis
+    cos: sp.Symbol
+    sin: sp.Symbol
+    pivot: sp.Matrix
+    location: list[sp.Symbol]
+    zero: sp.Symbol
+    motion: list[sp.Symbol]
+
+
+@dataclass
+class SymbolicModel:
+    """First-order R-test model of one machine, in SymPy form.
+
+    Attributes
+    ----------
+    structure : MachineStructure
+    rotary_axes : tuple of str
+        Rotary-axis names in column order.
+    parameters : tuple of str
+        All error parameters: the location errors of every rotary axis (column
+        order), then the zero-position errors.
+    n_location : int
+        Number of location-error parameters (the first entries of ``parameters``).
+    jacobian : sympy.Matrix, shape (3, P)
+        ∂d/∂params [µm per µm or µrad], polynomial in the cos/sin symbols and geometry.
+    workpiece_rotation, tool_rotation : sympy.Matrix, shape (3, 3)
+        Nominal rotations of W and of the spindle frame into M.
+    linear_commands : sympy.Matrix, shape (3, 1)
+        Commanded X, Y, Z [mm] (RTCP, nominal kinematics), equal to ``ball_mm`` at
+        the reference pose.
+    tool_direction : sympy.Matrix, shape (3, 1)
+        Spindle direction expressed in the workpiece frame W.
+    reference_jacobian : sympy.Matrix, shape (3, P)
+        Jacobian of the un-zeroed ball-minus-nest offset at the reference pose,
+        ``J_raw(0)``; the un-zeroed Jacobian at any pose is
+        ``jacobian + workpiece_rotation @ reference_jacobian``.
+    orientation_jacobian : sympy.Matrix, shape (3, P)
+        Small rotation ω [µrad per µm or µrad] of the spindle frame relative to the
+        workpiece frame, expressed in W: ``R_rel_actual = (I + [ω]×) R_rel_nominal``
+        with ``R_rel = workpiece_rotationᵀ · tool_rotation``.  Not zeroed (nothing
+        measures orientation at the reference pose).
+    motion_jacobian : sympy.Matrix, shape (3, 6k)
+        Un-zeroed ball-minus-nest offset [µm] per unit error motion of the body carried
+        by each rotary axis (column order; per axis ``dx, dy, dz`` [µm] translations and
+        ``rx, ry, rz`` [µrad] small rotations about the nominal pivot, in the carrier's
+        frame, applied after the axis' own motion).  Angle-dependent error motions
+        (angular positioning, tilt/wobble, radial runout, backlash) are these columns
+        times functions of the angles.
+    """
+
+    structure: MachineStructure
+    rotary: list[RotaryAxisSymbols]
+    ball: sp.Matrix
+    tool: sp.Matrix
+    parameters: tuple[str, ...]
+    n_location: int
+    jacobian: sp.Matrix
+    workpiece_rotation: sp.Matrix
+    tool_rotation: sp.Matrix
+    linear_commands: sp.Matrix
+    tool_direction: sp.Matrix
+    reference_jacobian: sp.Matrix
+    orientation_jacobian: sp.Matrix
+    motion_jacobian: sp.Matrix
+    motion_parameters: tuple[str, ...]
+    spindle_direction: int
+    has_tool_rotary: bool
+    units: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def rotary_axes(self) -> tuple[str, ...]:
+        return tuple(r.axis.name for r in self.rotary)
+
+    @property
+    def trig_pairs(self) -> list[tuple[sp.Symbol, sp.Symbol]]:
+        return [(r.cos, r.sin) for r in self.rotary]
+
+    @property
+    def geometry_symbols(self) -> list[sp.Symbol]:
+        syms: list[sp.Symbol] = list(self.ball)
+        for r in self.rotary:
+            syms.extend(r.pivot)
+        syms.extend(self.tool)
+        return syms
+
+
+def build_model(code: str | MachineStructure) -> SymbolicModel:
+    """Build the symbolic first-order model of a machine.
+
+    Parameters
+    ----------
+    code : str or MachineStructure
+        ISO 10791 machine structure code, e.g. ``"wC'A'bXYZ(C1)t"``.
+
+    Raises
+    ------
+    UnsupportedMachineError
+        No rotary axis, no linear axis along one of X/Y/Z, or an RTCP that is
+        singular because a linear axis is carried by a rotary axis.
+    """
+    structure = parse_machine_code(code) if isinstance(code, str) else code
+    rotary_axes = structure.rotary_axes
+    if not rotary_axes:
+        raise UnsupportedMachineError(
+            f"machine {structure.canonical!r} has no rotary axis: there are no rotary-axis PIGEs to model"
+        )
+    rotary: dict[str, RotaryAxisSymbols] = {}
+    for ax in rotary_axes:
+        nm = ax.name
+        rotary[nm] = RotaryAxisSymbols(
+            axis=ax,
+            cos=sp.Symbol(f"c_{nm}", real=True),
+            sin=sp.Symbol(f"s_{nm}", real=True),
+            pivot=sp.Matrix(sp.symbols(f"p{nm}_x p{nm}_y p{nm}_z", real=True)),
+            location=[sp.Symbol(n, real=True) for n in location_parameter_names(nm)],
+            zero=sp.Symbol(zero_parameter_name(nm), real=True),
+            motion=[sp.Symbol(f"{nm}_{c}", real=True) for c in MOTION_COMPONENTS],
+        )
+    ordered = [rotary[a.name] for a in rotary_axes]
+    location_syms = [s for r in ordered for s in r.location]
+    zero_syms = [r.zero for r in ordered]
+    param_syms = location_syms + zero_syms
+    ball = sp.Matrix(sp.symbols("ball_x ball_y ball_z", real=True))
+    tool = sp.Matrix(sp.symbols("tool_x tool_y tool_z", real=True))
+
+    # Commanded linear axes: the first axis along each direction (chain order).
+    commanded: dict[int, Axis] = {}
+    for ax in structure.linear_axes:
+        commanded.setdefault(ax.direction, ax)
+    missing = [d for d in range(3) if d not in commanded]
+    if missing:
+        raise UnsupportedMachineError(
+            f"machine {structure.canonical!r} has no linear axis along {', '.join('XYZ'[d] for d in missing)}: "
+            "RTCP needs one linear axis along each of X, Y and Z"
+        )
+    lin_syms = {d: sp.Symbol(f"L_{'XYZ'[d]}", real=True) for d in range(3)}
+
+    def only(sym: sp.Symbol, active: sp.Symbol | None) -> sp.Expr:
+        """The error symbol itself if it is the active one, else 0 (one derivative at a time)."""
+        return sym if sym == active else sp.Integer(0)
+
+    def rotary_motion(r: RotaryAxisSymbols, x: sp.Matrix, active: sp.Symbol | None) -> tuple[sp.Matrix, sp.Matrix]:
+        """Return (moved point, rotation matrix) for rotary axis r, perturbed by the active error only."""
+        ax = r.axis
+        u = _unit(ax.direction)
+        sigma = ax.sign
+        c, s = r.cos, r.sin
+        perturbed = active is not None and (active in r.location or active == r.zero or active in r.motion)
+        if perturbed:
+            names = _LOCATION[ax.letter]
+            delta = sp.zeros(3, 1)
+            eps = sp.zeros(3, 1)
+            delta[names[0][1]] = only(r.location[0], active) * UM_TO_MM
+            delta[names[1][1]] = only(r.location[1], active) * UM_TO_MM
+            eps[names[2][1]] = only(r.location[2], active) * URAD_TO_RAD
+            eps[names[3][1]] = only(r.location[3], active) * URAD_TO_RAD
+            e = only(r.zero, active) * URAD_TO_RAD
+            u_act = u + eps.cross(u)
+            q = r.pivot + delta
+            cos_phi = c - e * s
+            sin_phi = sigma * (s + e * c)
+        else:
+            u_act, q, cos_phi, sin_phi = u, r.pivot, c, sigma * s
+        k_mat = _cross_matrix(u_act)
+        rot = sp.eye(3) + sin_phi * k_mat + (1 - cos_phi) * k_mat * k_mat
+        moved = q + rot * (x - q)
+        if perturbed:
+            # error motion of the carried body, applied after the axis' own motion
+            d = sp.Matrix([only(m, active) for m in r.motion[:3]]) * UM_TO_MM
+            w = sp.Matrix([only(m, active) for m in r.motion[3:]]) * URAD_TO_RAD
+            moved = moved + d + w.cross(moved - r.pivot)
+            rot = rot + _cross_matrix(w) * rot
+        return moved, rot
+
+    def linear_motion(ax: Axis, x: sp.Matrix) -> sp.Matrix:
+        if commanded[ax.direction] is not ax:
+            return x  # parallel secondary axis held at its reference position
+        return x + ax.sign * lin_syms[ax.direction] * _unit(ax.direction)
+
+    def chain(active: sp.Symbol | None) -> tuple[sp.Matrix, sp.Matrix, sp.Matrix, sp.Matrix]:
+        # workpiece side: nest point, from the workpiece outward
+        x = ball
+        rot_w = sp.eye(3)
+        for ax in structure.workpiece_axes:
+            if ax.kind == "rotary":
+                x, rot = rotary_motion(rotary[ax.name], x, active)
+                rot_w = rot * rot_w
+            else:
+                x = linear_motion(ax, x)
+        # tool side: ball point, from the tool back to the bed
+        tool_rot = [a for a in structure.tool_axes if a.kind == "rotary"]
+        y = (rotary[tool_rot[-1].name].pivot + tool) if tool_rot else ball
+        rot_t = sp.eye(3)
+        for ax in reversed(structure.tool_axes):
+            if ax.kind == "rotary":
+                y, rot = rotary_motion(rotary[ax.name], y, active)
+                rot_t = rot * rot_t
+            else:
+                y = linear_motion(ax, y)
+        return y, x, rot_w, rot_t
+
+    pairs = [(r.cos, r.sin) for r in ordered]
+
+    def red(m: sp.Matrix) -> sp.Matrix:
+        return m.applyfunc(lambda e: reduce_trig(e, pairs))
+
+    ball_nom, nest_nom, rot_w, rot_t = chain(None)
+    rot_w = red(rot_w)
+    rot_t = red(rot_t)
+    r_nom = ball_nom - nest_nom
+    lin_vec = sp.Matrix([lin_syms[d] for d in range(3)])
+    a_mat = red(r_nom.jacobian(lin_vec))
+    r0 = red(r_nom.subs({s: 0 for s in lin_vec}))
+    det = reduce_trig(a_mat.det(), pairs)
+    if det.free_symbols or det == 0:
+        raise UnsupportedMachineError(
+            f"machine {structure.canonical!r}: a linear axis is carried by a rotary axis in a way that makes "
+            f"RTCP singular (det of the linear-axis map = {det}); this structure is not supported"
+        )
+    lin_solution = red(-(a_mat.adjugate() / det) * r0)
+    lin_subs = {lin_vec[d]: lin_solution[d] for d in range(3)}
+
+    # First-order derivatives, one error symbol at a time (the others are 0 in the chain,
+    # so the expressions stay small).
+    rel_nom = rot_w.T * rot_t
+    motion_syms = [m for r in ordered for m in r.motion]
+    jac_cols, ori_cols, motion_cols = [], [], []
+    for sym in param_syms + motion_syms:
+        ball_act, nest_act, rot_w_act, rot_t_act = chain(sym)
+        col = (ball_act - nest_act).diff(sym).subs(sym, 0).subs(lin_subs)
+        if sym in motion_syms:
+            motion_cols.append(col)
+            continue
+        jac_cols.append(col)
+        # orientation of the spindle frame relative to W: R_rel_act = (I + [ω]x) R_rel_nom
+        dm = (rot_w_act.T * rot_t_act).diff(sym).subs(sym, 0) * rel_nom.T
+        ori_cols.append(sp.Matrix([dm[2, 1], dm[0, 2], dm[1, 0]]))
+    jac_raw = sp.Matrix.hstack(*jac_cols) * MM_TO_UM
+    motion_jacobian = red(sp.Matrix.hstack(*motion_cols) * MM_TO_UM)
+    at_reference = {r.cos: 1 for r in ordered} | {r.sin: 0 for r in ordered}
+    jac_ref = jac_raw.subs(at_reference)
+    jacobian = red(jac_raw - rot_w * jac_ref)
+    orientation_jacobian = red(sp.Matrix.hstack(*ori_cols) * 10**6)
+
+    # Commanded X, Y, Z: equal to ball_mm at the reference pose.
+    lin_ref = lin_solution.subs(at_reference)
+    linear_commands = red(lin_solution - lin_ref + ball)
+
+    spindle_dir = 2
+    if structure.spindle is not None and structure.spindle[0] in "ABC":
+        spindle_dir = "ABC".index(structure.spindle[0])
+    tool_direction = red(rot_w.T * rot_t * _unit(spindle_dir))
+
+    units = {s.name: "um" for r in ordered for s in r.location[:2]}
+    units |= {s.name: "urad" for r in ordered for s in r.location[2:]}
+    units |= {s.name: "urad" for s in zero_syms}
+    return SymbolicModel(
+        structure=structure,
+        rotary=ordered,
+        ball=ball,
+        tool=tool,
+        parameters=tuple(s.name for s in param_syms),
+        n_location=len(location_syms),
+        jacobian=jacobian,
+        workpiece_rotation=rot_w,
+        tool_rotation=rot_t,
+        linear_commands=linear_commands,
+        tool_direction=tool_direction,
+        reference_jacobian=red(jac_ref),
+        orientation_jacobian=orientation_jacobian,
+        motion_jacobian=motion_jacobian,
+        motion_parameters=tuple(m.name for m in motion_syms),
+        spindle_direction=spindle_dir,
+        has_tool_rotary=any(a.kind == "rotary" for a in structure.tool_axes),
+        units=units,
+    )
+
+
+@dataclass
+class TrigBasis:
+    """Decomposition ``M(θ, g) = Σ_k basis_k(θ) · C_k(g)`` of a matrix of polynomials.
+
+    Attributes
+    ----------
+    monomials : list of tuple of int
+        Exponents ``(a_1, b_1, a_2, b_2, …)`` of ``c_1^a_1 s_1^b_1 …`` per basis column.
+    coefficients : list of sympy.Matrix
+        One coefficient matrix (same shape as M) per monomial.
+    """
+
+    monomials: list[tuple[int, ...]]
+    coefficients: list[sp.Matrix]
+
+
+def trig_basis(matrix: sp.Matrix, pairs: list[tuple[sp.Symbol, sp.Symbol]]) -> TrigBasis:
+    """Split a matrix of trig polynomials into monomials and coefficient matrices."""
+    gens = [g for pair in pairs for g in pair]
+    table: dict[tuple[int, ...], sp.Matrix] = {}
+    for i, j in itertools.product(range(matrix.rows), range(matrix.cols)):
+        expr = matrix[i, j]
+        if expr == 0:
+            continue
+        poly = sp.Poly(expr, *gens)
+        for monom, coeff in poly.terms():
+            m = table.setdefault(tuple(monom), sp.zeros(matrix.rows, matrix.cols))
+            m[i, j] += coeff
+    monomials = sorted(table, key=lambda m: (sum(m), tuple(-x for x in m)))
+    return TrigBasis(monomials=monomials, coefficients=[table[m] for m in monomials])
+
+
+@dataclass
+class DirectionSolver:
+    """Closed-form inverse of the tool direction for two rotary axes.
+
+    ``tool_direction[primary_component] = a cos θ_p + b sin θ_p + g`` depends on the
+    primary axis only; the other two components are linear in
+    ``(cos θ_s, sin θ_s)`` with coefficients depending on θ_p.
+    """
+
+    primary: int  # index into rotary axes
+    secondary: int
+    primary_component: int
+    a: sp.Expr
+    b: sp.Expr
+    g: sp.Expr
+    other_components: tuple[int, int]
+    # rows: component -> (coef of cos θ_s, coef of sin θ_s, constant), in (c_p, s_p)
+    rows: list[tuple[sp.Expr, sp.Expr, sp.Expr]]
+
+
+def direction_solver(model: SymbolicModel) -> DirectionSolver | None:
+    """Derive the closed-form tool-direction inverse, or None when there is none.
+
+    Only machines with exactly two rotary axes whose tool direction has one
+    component that depends on one axis alone (all ISO orthogonal 5-axis
+    structures) get one.
+    """
+    if len(model.rotary) != 2:
+        return None
+    pairs = model.trig_pairs
+    v = model.tool_direction
+    for comp in range(3):
+        for p_idx in range(2):
+            s_idx = 1 - p_idx
+            cs, ss = pairs[s_idx]
+            cp, sp_ = pairs[p_idx]
+            if v[comp].has(cs) or v[comp].has(ss) or not (v[comp].has(cp) or v[comp].has(sp_)):
+                continue
+            poly = sp.Poly(v[comp], cp, sp_)
+            if poly.total_degree() > 1:
+                continue
+            a = poly.coeff_monomial(cp)
+            b = poly.coeff_monomial(sp_)
+            g = poly.coeff_monomial(1)
+            others = tuple(c for c in range(3) if c != comp)
+            rows = []
+            for oc in others:
+                q = sp.Poly(v[oc], cs, ss)
+                if q.total_degree() > 1:
+                    break
+                rows.append((q.coeff_monomial(cs), q.coeff_monomial(ss), q.coeff_monomial(1)))
+            else:
+                return DirectionSolver(
+                    primary=p_idx, secondary=s_idx, primary_component=comp, a=a, b=b, g=g,
+                    other_components=(others[0], others[1]), rows=rows,
+                )
+    return None

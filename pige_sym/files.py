@@ -1,0 +1,135 @@
+"""Writing files safely, and JSON out: the one helper for each.
+
+Rules every command follows (README "What it refuses and why"):
+
+- an existing output is never replaced without ``force``;
+- an output is never one of the command's inputs (same file, also through links);
+- only regular files are ever replaced: a symlink, FIFO, socket or device node at the output
+  path is refused even with ``force``;
+- the output's folder must exist (or be creatable) and be writable, checked *before* long work
+  by :func:`check_output`;
+- the text is written to a temporary file in the same folder, flushed to disk and renamed over
+  the target, so a reader sees the old file or the new one, never half of one.
+
+JSON: :func:`to_json` turns dataclass dicts with NumPy values into strict JSON (non-finite
+floats become ``null``, never ``NaN``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import stat
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from pige_sym.errors import InputError
+
+PathLike = str | os.PathLike[str]
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_output(path: PathLike, *, force: bool = False, inputs: Iterable[PathLike] = (), what: str = "output") -> Path:
+    """Refuse an output path that would clobber something; returns it as a Path.
+
+    Parameters
+    ----------
+    path : path
+        The file to be written.
+    force : bool
+        Allow replacing an existing *regular* file.
+    inputs : iterable of paths
+        The command's inputs; the output may be none of them.
+    what : str
+        Name of the option in messages (``--out``, ``--raw-log``, …).
+
+    Raises
+    ------
+    InputError
+        With one line that says what to change.
+    """
+    p = Path(path)
+    for source in inputs:
+        src = Path(source)
+        if _same_file(p, src) or p.resolve() == src.resolve():
+            raise InputError(f"{what} {p} is also an input of this command: choose another file")
+    if p.is_symlink():
+        raise InputError(f"{what} {p} is a symbolic link: pige never replaces one; write to the real path")
+    if p.exists():
+        mode = p.stat().st_mode
+        if stat.S_ISDIR(mode):
+            raise InputError(f"{what} {p} is a directory: give a file name")
+        if not stat.S_ISREG(mode):
+            raise InputError(f"{what} {p} is not a regular file (FIFO, socket or device): pige never replaces one")
+        if not force:
+            raise InputError(f"{what} {p} exists: pass --force to replace it, or choose another name")
+    parent = p.parent if str(p.parent) else Path(".")
+    existing = parent
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"{what} {p}: {existing} is not a directory")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise InputError(f"{what} {p}: the folder {existing} is not writable")
+    return p
+
+
+def atomic_write_text(path: PathLike, text: str, *, encoding: str = "utf-8", newline: str | None = None) -> Path:
+    """Write ``text`` to ``path`` through a temporary file and a rename (same folder).
+
+    The caller decides whether replacing is allowed (:func:`check_output`); this function only
+    refuses to replace anything that is not a regular file.  Missing parent folders are created.
+    """
+    p = Path(path)
+    if p.is_symlink() or (p.exists() and not p.is_file()):
+        raise InputError(f"{p} is not a regular file: pige never replaces one")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+    try:
+        with os.fdopen(fd, "w", encoding=encoding, newline=newline) as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp_name, p)
+    except OSError as exc:
+        Path(tmp_name).unlink(missing_ok=True)
+        raise InputError(f"cannot write {p}: {exc.strerror or exc}") from exc
+    except BaseException:
+        Path(tmp_name).unlink(missing_ok=True)
+        raise
+    return p
+
+
+def json_ready(x: Any) -> Any:
+    """Python values for JSON: NumPy scalars/arrays converted, non-finite floats → None, recursively."""
+    import numpy as np
+
+    if isinstance(x, dict):
+        return {str(k): json_ready(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_ready(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return json_ready(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, Path):
+        return str(x)
+    return x
+
+
+def to_json(x: Any, *, indent: int | None = 1) -> str:
+    """Strict JSON text of ``x`` (see :func:`json_ready`); never contains NaN or Infinity."""
+    return json.dumps(json_ready(x), indent=indent, allow_nan=False, ensure_ascii=False)

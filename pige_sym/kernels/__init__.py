@@ -1,0 +1,129 @@
+"""Runtime access to the generated NumPy kernels (no SymPy unless generating).
+
+Where kernel modules live, one per machine, named after the canonical machine code
+(``kin_wCpApbXYZ_C1_t.py`` for ``wC'A'bXYZ(C1)t``):
+
+- ``pige_sym/kernels/shipped/``: the machines of :data:`~pige_sym.constants.SHIPPED_MACHINES`,
+  installed with the package and never written at run time;
+- the user cache directory (``$PIGE_KERNEL_DIR``, else the platform's cache directory,
+  e.g. ``~/.cache/pige_sym/kernels`` on Linux): kernels of every other machine, generated
+  with SymPy on first use and announced on stderr.
+
+:func:`load_kernels` looks in that order and regenerates (into the cache, never into the
+installation) a module whose generator fingerprint differs from the current generator's.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import re
+import sys
+from pathlib import Path
+from typing import cast
+
+from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
+from pige_sym.constants import DEFAULT_MACHINE, SHIPPED_MACHINES
+from pige_sym.errors import KernelError
+from pige_sym.kernels.protocol import KernelModule
+
+__all__ = [
+    "DEFAULT_MACHINE",
+    "SHIPPED_MACHINES",
+    "KernelModule",
+    "cache_dir",
+    "kernel_path",
+    "load_kernels",
+    "shipped_dir",
+]
+
+_CACHE: dict[str, KernelModule] = {}
+_HASH_RE = re.compile(r"^# input hash\s*:\s*([0-9a-f]+)", re.MULTILINE)
+
+
+def shipped_dir() -> Path:
+    """Directory of the kernels shipped with the package."""
+    return Path(__file__).resolve().parent / "shipped"
+
+
+def cache_dir() -> Path:
+    """Directory for kernels generated at run time (``$PIGE_KERNEL_DIR`` or the user cache)."""
+    env = os.environ.get("PIGE_KERNEL_DIR")
+    if env:
+        return Path(env)
+    from platformdirs import user_cache_dir
+
+    return Path(user_cache_dir("pige_sym")) / "kernels"
+
+
+def _file_hash(path: Path) -> str | None:
+    with path.open(encoding="utf-8") as fh:
+        head = fh.read(4000)
+    m = _HASH_RE.search(head)
+    return m.group(1) if m else None
+
+
+def _is_current(path: Path, structure: MachineStructure) -> bool:
+    if not path.is_file():
+        return False
+    from pige_sym.codegen.fingerprint import current_hash
+
+    return _file_hash(path) == current_hash(structure)
+
+
+def kernel_path(code: str | MachineStructure) -> Path:
+    """Path of the current kernel module of a machine: shipped if current, else in the cache.
+
+    The returned file may not exist yet; :func:`load_kernels` generates it there.
+    """
+    structure = parse_machine_code(code) if isinstance(code, str) else code
+    shipped = shipped_dir() / f"{structure.module_name}.py"
+    if _is_current(shipped, structure):
+        return shipped
+    return cache_dir() / f"{structure.module_name}.py"
+
+
+def _generate(structure: MachineStructure, path: Path) -> None:
+    print(
+        f"pige: generating kernels for {structure.canonical} into {path.parent} (first use; `pige gen` does it ahead)",
+        file=sys.stderr,
+    )
+    try:
+        from pige_sym.codegen.emit import write_module
+    except ImportError as exc:  # pragma: no cover - sympy missing
+        raise KernelError(
+            f"kernels for {structure.canonical} are missing and SymPy is not installed to generate them"
+        ) from exc
+    write_module(structure, path.parent)
+
+
+def load_kernels(code: str | MachineStructure) -> KernelModule:
+    """Import the kernel module of a machine, generating it into the cache if needed.
+
+    Parameters
+    ----------
+    code : str or MachineStructure
+        Machine structure code, e.g. ``"wC'A'bXYZ(C1)t"``.
+
+    Returns
+    -------
+    KernelModule
+        The generated module (see :class:`~pige_sym.kernels.protocol.KernelModule`).
+    """
+    structure = parse_machine_code(code) if isinstance(code, str) else code
+    key = structure.canonical
+    if key in _CACHE:
+        return _CACHE[key]
+    path = kernel_path(structure)
+    if not _is_current(path, structure):
+        _generate(structure, path)
+    spec = importlib.util.spec_from_file_location(f"pige_generated.{structure.module_name}", path)
+    if spec is None or spec.loader is None:
+        raise KernelError(f"cannot import generated kernels from {path}")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    kernels = cast(KernelModule, module)
+    if kernels.MACHINE_CODE != key:
+        raise KernelError(f"{path} holds kernels for {kernels.MACHINE_CODE!r}, not {key!r}: run pige gen")
+    _CACHE[key] = kernels
+    return kernels
