@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -362,3 +363,42 @@ def test_motion_jacobian_matches_exact_chain(code, tool) -> None:
             for a in angles
         ])
         np.testing.assert_allclose(jac[:, :, j], fd, rtol=1e-6, atol=1e-6 * np.abs(jac).max())
+
+
+@pytest.mark.parametrize("code", ["wC'A'bXYZ(C1)t", "wbXYZCA(C1)t", "wC'bXYZB(C1)t", "wA'B'bXYZ(C1)t"])
+def test_rendered_kernels_are_lint_clean(code: str, tmp_path: Path) -> None:
+    """No unused locals, undefined names or `(0.001)*` literals in generated code."""
+    import shutil
+
+    from pige_sym.codegen.emit import render_module
+
+    text = render_module(code)
+    assert "(0.001)" not in text
+    assert "_HELPERS" not in text
+    ruff = shutil.which("ruff") or str(Path(sys.executable).with_name("ruff"))
+    if not Path(ruff).exists():
+        pytest.skip("ruff is not installed")
+    path = tmp_path / "kernel.py"
+    path.write_text(text, encoding="utf-8")
+    proc = subprocess.run([ruff, "check", "--isolated", "--select", "F,E9", str(path)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout
+
+
+def test_jacobian_into_a_preallocated_array() -> None:
+    kern = load_kernels("wC'A'bXYZ(C1)t")
+    angles = np.random.default_rng(3).uniform(-90, 90, (50, 2))
+    out = np.full((50, 3, len(kern.PARAMETERS)), np.nan)
+    result = kern.jacobian(angles, None, [120, 0, 80], None, None, out=out)
+    assert result is out
+    np.testing.assert_array_equal(out, kern.jacobian(angles, None, [120, 0, 80]))
+    with pytest.raises(ValueError, match="C-contiguous"):
+        kern.jacobian(angles, None, [120, 0, 80], out=np.empty((49, 3, len(kern.PARAMETERS))))
+
+
+def test_check_generated_ignores_the_sympy_version_line() -> None:
+    from pige_sym.codegen.emit import render_module, same_code
+
+    text = render_module("wC'A'bXYZ(C1)t")
+    other = "\n".join("# sympy version: 0.0" if ln.startswith("# sympy version") else ln for ln in text.splitlines())
+    assert same_code(text, other + "\n")
+    assert not same_code(text, text.replace("np.zeros", "np.ones", 1))

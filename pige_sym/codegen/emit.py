@@ -8,16 +8,27 @@ The module is rendered to a string first (:func:`render_module`), then written
   ``WORKPIECE_ROTARY``, ``TOOL_ROTARY``, ``HAS_DIRECTION_SOLVER``;
 * ``basis(angles_deg) -> (n, K)`` and ``coefficients(ball_mm, pivots_mm, tool_mm)
   -> (K, 3, P)``, so that ``jacobian = basis @ coefficients`` (one BLAS call);
-* ``deviation``, ``jacobian``, ``workpiece_rotation``, ``tool_rotation``,
-  ``linear_commands``, ``tool_direction`` and ``angles_for_direction``.
+* ``deviation``, ``jacobian`` (optionally into a preallocated ``out``),
+  ``workpiece_rotation``, ``tool_rotation``, ``linear_commands``, ``tool_direction``
+  and ``angles_for_direction`` (see :class:`pige_sym.kernels.protocol.KernelModule`).
 
-The header records the machine code, parameter order and units, the SymPy
-version and a hash of the inputs (code + generator sources), so
-``make check-generated`` can detect any drift.
+How a function is rendered: the fixed parts (signatures and docstrings) are templates
+in :data:`_SPECS`; the body is the symbolic expressions printed with plain float
+literals; the locals a body needs are chosen from the candidates of
+:func:`_trig_locals` and :func:`_geometry_locals` (each angle's cos/sin evaluated once,
+lever arms ``d_P_Q = 0.001 * (P - Q)`` [mm → µm per µrad] as named locals) and nothing
+else is defined.  The input checks shared by all modules are real code in
+:mod:`pige_sym.codegen.kernel_helpers`, copied in verbatim.
+
+The header records the machine code, parameter order and units, the SymPy version
+(information only: ``make check-generated`` compares the code, not that line) and the
+generator fingerprint.
 """
 
 from __future__ import annotations
 
+import re
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import sympy as sp
@@ -25,232 +36,84 @@ from sympy.printing.pycode import PythonCodePrinter
 
 from pige_sym.codegen.fingerprint import current_hash
 from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
-from pige_sym.codegen.symbolic import SymbolicModel, build_model, direction_solver, trig_basis
+from pige_sym.codegen.symbolic import DirectionSolver, SymbolicModel, build_model, direction_solver, trig_basis
 from pige_sym.files import atomic_write_text
 
+_HELPERS_FILE = Path(__file__).with_name("kernel_helpers.py")
+_MARKER = "# --- copied into every kernel module ---"
+_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
-class _Printer(PythonCodePrinter):
-    """Prints polynomials with plain float literals for rationals."""
+#: Signature and docstring of every generated function; ``{K}`` and ``{P}`` are filled in.
+_SPECS: dict[str, str] = {
+    "basis": '''def basis(angles_deg):
+    """Trigonometric basis, shape=(n, K={K}) [1]; columns named in BASIS."""''',
+    "coefficients": '''def coefficients(ball_mm, pivots_mm=None, tool_mm=None):
+    """Coefficient tensor G, shape=(K={K}, 3, P={P}) [µm per µm or µrad]: jacobian = basis @ G."""''',
+    "reference_jacobian": '''def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
+    """Un-zeroed offset Jacobian at the reference pose J_raw(0), shape=(3, P={P}) [µm per µm or µrad].
 
-    def _print_Rational(self, expr: sp.Rational) -> str:
-        return repr(float(expr.p) / float(expr.q))
+    The ball-minus-nest offset before zeroing is, at any pose,
+    ``(jacobian + workpiece_rotation @ reference_jacobian) @ params``; effects whose
+    size changes with the pose (angle-dependent errors) need it.
+    """''',
+    "motion_jacobian": '''def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
+    """Un-zeroed offset per unit error motion, shape=(n, 3, 6k) [µm per µm or µrad].
 
-    def _print_Half(self, expr: sp.Rational) -> str:
-        return "0.5"
+    Columns MOTION_PARAMETERS: per rotary axis dx, dy, dz [µm] and rx, ry, rz [µrad],
+    a small rigid motion of the body the axis carries (carrier frame, rotations about
+    the nominal pivot) applied after the axis' own motion.  Zeroing at the reference
+    pose is the caller's business (subtract workpiece_rotation @ value at the reference).
+    """''',
+    "orientation_jacobian": '''def orientation_jacobian(angles_deg):
+    """Tool-orientation error Jacobian, shape=(n, 3, P={P}) [µrad per µm or µrad].
 
-
-def _code(expr: sp.Expr) -> str:
-    return str(_Printer({"standard": "python3"}).doprint(expr))
-
-
-input_hash = current_hash
-
-
-def _symbol_locals(model: SymbolicModel, indent: str) -> list[str]:
-    lines = [f"{indent}ball_x, ball_y, ball_z = _vec3(ball_mm, 'ball_mm')"]
-    lines.append(f"{indent}pivots = _pivots(pivots_mm)")
-    for r in model.rotary:
-        nm = r.axis.name
-        lines.append(f"{indent}p{nm}_x, p{nm}_y, p{nm}_z = pivots[{nm!r}]")
-    lines.append(f"{indent}tool_x, tool_y, tool_z = _tool(tool_mm)")
-    return lines
-
-
-def _trig_locals(model: SymbolicModel, indent: str) -> list[str]:
-    lines = [f"{indent}th = np.radians(_angles(angles_deg))"]
-    for i, r in enumerate(model.rotary):
-        nm = r.axis.name
-        lines.append(f"{indent}c_{nm} = np.cos(th[:, {i}])")
-        lines.append(f"{indent}s_{nm} = np.sin(th[:, {i}])")
-    return lines
-
-
-def _matrix_function(model: SymbolicModel, matrix: sp.Matrix, name: str, doc: str, geometry: bool) -> str:
-    """Render a function returning matrix(θ) evaluated per point, shape (n, rows[, cols])."""
-    args = "angles_deg" + (", ball_mm, pivots_mm=None, tool_mm=None" if geometry else "")
-    out = [f"def {name}({args}):", f'    """{doc}"""']
-    out += _trig_locals(model, "    ")
-    if geometry:
-        out += _symbol_locals(model, "    ")
-    out.append("    n = th.shape[0]")
-    vector = matrix.cols == 1
-    shape = f"(n, {matrix.rows})" if vector else f"(n, {matrix.rows}, {matrix.cols})"
-    out.append(f"    out = np.zeros({shape})")
-    for i in range(matrix.rows):
-        for j in range(matrix.cols):
-            e = matrix[i, j]
-            if e == 0:
-                continue
-            idx = f"[:, {i}]" if vector else f"[:, {i}, {j}]"
-            out.append(f"    out{idx} = {_code(e)}")
-    out.append("    return out")
-    return "\n".join(out)
-
-
-_HELPERS = '''
-def _angles(angles_deg):
-    a = np.asarray(angles_deg, dtype=float)
-    if a.ndim == 1 and len(ROTARY_AXES) == 1:
-        a = a[:, None]
-    if a.ndim == 1 and a.shape[0] == len(ROTARY_AXES):
-        a = a[None, :]
-    if a.ndim != 2 or a.shape[1] != len(ROTARY_AXES):
-        raise ValueError(
-            f"angles_deg must have shape (n, {len(ROTARY_AXES)}) with columns {ROTARY_AXES}, got {a.shape}"
-        )
-    return a
-
-
-def _vec3(v, name):
-    a = np.asarray(v, dtype=float).reshape(-1)
-    if a.shape != (3,):
-        raise ValueError(f"{name} must be 3 numbers [mm], got shape {a.shape}")
-    return a
-
-
-def _pivots(pivots_mm):
-    out = {ax: np.zeros(3) for ax in ROTARY_AXES}
-    for key, value in (pivots_mm or {}).items():
-        if key not in out:
-            raise ValueError(f"pivots_mm: {key!r} is not a rotary axis of {MACHINE_CODE} (axes: {ROTARY_AXES})")
-        out[key] = _vec3(value, f"pivots_mm[{key!r}]")
-    return out
-
-
-def _tool(tool_mm):
-    if tool_mm is None:
-        if TOOL_ROTARY:
-            raise ValueError(f"{MACHINE_CODE} has tool-side rotary axes {TOOL_ROTARY}: give tool_mm")
-        return np.zeros(3)
-    return _vec3(tool_mm, "tool_mm")
-
-
-def _params(params):
-    p = np.asarray(params, dtype=float).reshape(-1)
-    if p.shape[0] == len(LOCATION_PARAMETERS):
-        p = np.concatenate([p, np.zeros(len(ZERO_PARAMETERS))])
-    if p.shape[0] != len(PARAMETERS):
-        raise ValueError(
-            f"params must hold {len(LOCATION_PARAMETERS)} location errors or all {len(PARAMETERS)} "
-            f"parameters in the order {PARAMETERS}, got {p.shape[0]}"
-        )
-    return p
-'''
-
-
-def render_module(code: str | MachineStructure) -> str:
-    """Render the kernel module of a machine as Python source text.
+    ω = orientation_jacobian @ params is the small rotation of the spindle frame
+    relative to the workpiece, expressed in W: R_rel_actual = (I + [ω]x) R_rel_nominal.
+    """''',
+    "workpiece_rotation": '''def workpiece_rotation(angles_deg):
+    """Nominal rotation of the workpiece frame W into M, shape=(n, 3, 3)."""''',
+    "tool_rotation": '''def tool_rotation(angles_deg):
+    """Nominal rotation of the spindle frame into M, shape=(n, 3, 3)."""''',
+    "linear_commands": '''def linear_commands(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
+    """Commanded X, Y, Z (RTCP, nominal kinematics), shape=(n, 3) [mm]; ball_mm at the reference pose."""''',
+    "tool_direction": '''def tool_direction(angles_deg):
+    """Spindle direction in the workpiece frame W, shape=(n, 3) [unit vectors]."""''',
+    "angles_for_direction": '''def angles_for_direction(direction, branch=1, previous_deg=None):
+    """Rotary angles that put a workpiece-frame tool direction on the spindle axis.
 
     Parameters
     ----------
-    code : str or MachineStructure
+    direction : array, shape=(n, 3)
+        Tool direction in the workpiece frame W (normalised here).
+    branch : {{+1, -1}}
+        Which of the two solutions of the primary (tilting) axis to take.
+    previous_deg : array, shape=(k,), optional
+        Angles used where the secondary axis is undetermined (singular pose).
 
     Returns
     -------
-    str
-        Source of a module that imports only NumPy.
-    """
-    structure = parse_machine_code(code) if isinstance(code, str) else code
-    model = build_model(structure)
-    basis = trig_basis(model.jacobian, model.trig_pairs)
-    solver = direction_solver(model)
-    names = model.rotary_axes
-    n_par = len(model.parameters)
+    angles_deg : array, shape=(n, k) [deg], secondary axis unwrapped to be continuous.
+    """''',
+}
 
-    def monomial_name(m: tuple[int, ...]) -> str:
-        parts = []
-        for i, nm in enumerate(names):
-            for fn, deg in (("cos", m[2 * i]), ("sin", m[2 * i + 1])):
-                if deg:
-                    parts.append(f"{fn}({nm})" + (f"^{deg}" if deg > 1 else ""))
-        return "*".join(parts) if parts else "1"
-
-    def monomial_code(m: tuple[int, ...]) -> str:
-        parts = []
-        for i, nm in enumerate(names):
-            for fn, deg in (("c", m[2 * i]), ("s", m[2 * i + 1])):
-                parts += [f"{fn}_{nm}"] * deg
-        return " * ".join(parts) if parts else "1.0"
-
-    units_lines = "\n".join(
-        f"#   {i:2d}  {p:<8s} [{model.units[p]}]" + ("  (zero-position error)" if i >= model.n_location else "")
-        for i, p in enumerate(model.parameters)
-    )
-    wp_rot = tuple(a.name for a in structure.workpiece_axes if a.kind == "rotary")
-    tl_rot = tuple(a.name for a in structure.tool_axes if a.kind == "rotary")
-    header = f'''# Generated by pige_sym from the machine structure code {structure.canonical}
-# DO NOT EDIT — regenerate with: make gen MACHINE="{structure.canonical}"
-# machine code : {structure.canonical}
-# rotary axes  : {", ".join(names)} (column order of angles_deg)
-# parameters (order and units):
-{units_lines}
-# sympy version: {sp.__version__}
-# input hash   : {input_hash(structure)}
-"""R-test kernels for {structure.canonical} (generated; do not edit — make gen).
-
-First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
-its Jacobian and the nominal kinematics.  ``jacobian = basis @ coefficients``:
-the deviation is linear in the error parameters and in {len(basis.monomials)} trigonometric
-basis functions of the rotary angles.
-"""
-
-import numpy as np
-
-MACHINE_CODE = {structure.canonical!r}
-ROTARY_AXES = {names!r}
-WORKPIECE_ROTARY = {wp_rot!r}
-TOOL_ROTARY = {tl_rot!r}
-PARAMETERS = {model.parameters!r}
-LOCATION_PARAMETERS = {model.parameters[: model.n_location]!r}
-ZERO_PARAMETERS = {model.parameters[model.n_location:]!r}
-MOTION_PARAMETERS = {model.motion_parameters!r}
-UNITS = {dict(model.units)!r}
-BASIS = {tuple(monomial_name(m) for m in basis.monomials)!r}
-SPINDLE_DIRECTION = {model.spindle_direction}
-HAS_DIRECTION_SOLVER = {solver is not None}
-GENERATOR_HASH = {input_hash(structure)!r}
-'''
-    parts = [header, _HELPERS]
-
-    # basis
-    lines = [
-        "def basis(angles_deg):",
-        '    """Trigonometric basis, shape=(n, K) [1]; columns named in BASIS."""',
-    ]
-    lines += _trig_locals(model, "    ")
-    lines.append(f"    out = np.empty((th.shape[0], {len(basis.monomials)}))")
-    for k, m in enumerate(basis.monomials):
-        lines.append(f"    out[:, {k}] = {monomial_code(m)}")
-    lines.append("    return out")
-    parts.append("\n".join(lines))
-
-    # coefficients
-    lines = [
-        "def coefficients(ball_mm, pivots_mm=None, tool_mm=None):",
-        '    """Coefficient tensor G, shape=(K, 3, P) [µm per µm or µrad]: jacobian = basis @ G."""',
-    ]
-    lines += _symbol_locals(model, "    ")
-    lines.append(f"    g = np.zeros(({len(basis.monomials)}, 3, {n_par}))")
-    for k, cm in enumerate(basis.coefficients):
-        for i in range(3):
-            for j in range(n_par):
-                if cm[i, j] != 0:
-                    lines.append(f"    g[{k}, {i}, {j}] = {_code(cm[i, j])}")
-    lines.append("    return g")
-    parts.append("\n".join(lines))
-
-    parts.append(
-        '''def jacobian(angles_deg, params=None, ball_mm=None, pivots_mm=None, tool_mm=None):
+_LINEAR_FUNCTIONS = '''def jacobian(angles_deg, params=None, ball_mm=None, pivots_mm=None, tool_mm=None, out=None):
     """Jacobian of the deviation, shape=(n, 3, P) [µm per µm or µrad].
 
     The first-order model is linear in the parameters, so ``params`` is accepted
-    for a uniform signature but does not change the result.
+    for a uniform signature but does not change the result.  ``out``, a C-contiguous
+    float array of shape (n, 3, P), receives the result without a new allocation.
     """
     if ball_mm is None:
         raise ValueError("jacobian needs ball_mm")
     b = basis(angles_deg)
     g = coefficients(ball_mm, pivots_mm, tool_mm)
-    return (b @ g.reshape(g.shape[0], -1)).reshape(b.shape[0], 3, g.shape[2])
+    n = b.shape[0]
+    if out is None:
+        out = np.empty((n, 3, g.shape[2]))
+    elif out.shape != (n, 3, g.shape[2]) or not out.flags.c_contiguous:
+        raise ValueError(f"out must be a C-contiguous array of shape {(n, 3, g.shape[2])}, got {out.shape}")
+    np.matmul(b, g.reshape(g.shape[0], -1), out=out.reshape(n, -1))
+    return out
 
 
 def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
@@ -270,127 +133,229 @@ def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
     p = _params(params)
     g = coefficients(ball_mm, pivots_mm, tool_mm)
     return basis(angles_deg) @ (g @ p)'''
-    )
-    lines = [
-        "def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):",
-        '    """Un-zeroed offset Jacobian at the reference pose J_raw(0), shape=(3, P) [µm per µm or µrad].',
-        "",
-        "    The ball-minus-nest offset before zeroing is, at any pose,",
-        "    ``(jacobian + workpiece_rotation @ reference_jacobian) @ params``; effects whose",
-        "    size changes with the pose (angle-dependent errors) need it.",
-        '    """',
+
+
+class _Printer(PythonCodePrinter):
+    """Prints numbers as plain float literals (no ``(0.001)*``)."""
+
+    def _print_Float(self, expr: sp.Float) -> str:
+        return repr(float(expr))
+
+    def _print_Rational(self, expr: sp.Rational) -> str:
+        return repr(float(expr.p) / float(expr.q))
+
+    def _print_Half(self, expr: sp.Rational) -> str:
+        return "0.5"
+
+
+def _code(expr: sp.Expr) -> str:
+    """Python source of an expression; non-integer rationals become float literals."""
+    floats = {r: sp.Float(r) for r in expr.atoms(sp.Rational) if not r.is_Integer}
+    return str(_Printer({"standard": "python3"}).doprint(expr.xreplace(floats)))
+
+
+# ---------------------------------------------------------------- locals of a body
+
+
+def _tokens(lines: Iterable[str]) -> set[str]:
+    return {t for line in lines for t in _TOKEN.findall(line)}
+
+
+def _select_locals(candidates: Sequence[tuple[str, str]], body: Sequence[str]) -> list[str]:
+    """Assignments among ``candidates`` (name, code) that the body needs, with their dependencies, in order."""
+    names = {name for name, _ in candidates}
+    needed = _tokens(body) & names
+    for name, code in reversed(candidates):
+        if name in needed:
+            needed |= _tokens([code]) & names
+    lines = [f"    {name} = {code}" for name, code in candidates if name in needed]
+    if "cos_th" in needed and "sin_th" in needed:  # one evaluation of the angles' cos and sin
+        lines = [ln for ln in lines if not ln.startswith(("    cos_th =", "    sin_th ="))]
+        lines.insert(0, "    cos_th, sin_th = _cos_sin(angles_deg)")
+    return lines
+
+
+def _trig_locals(model: SymbolicModel) -> list[tuple[str, str]]:
+    out = [("cos_th", "_cos_sin(angles_deg)[0]"), ("sin_th", "_cos_sin(angles_deg)[1]"),
+           ("n", "cos_th.shape[1]")]
+    for i, r in enumerate(model.rotary):
+        out += [(f"c_{r.axis.name}", f"cos_th[{i}]"), (f"s_{r.axis.name}", f"sin_th[{i}]")]
+    return out
+
+
+def _geometry_locals(model: SymbolicModel, levers: Sequence[tuple[str, str]] = ()) -> list[tuple[str, str]]:
+    out = [("ball", "_vec3(ball_mm, 'ball_mm')")]
+    out += [(f"ball_{c}", f"ball[{i}]") for i, c in enumerate("xyz")]
+    out.append(("pivots", "_pivots(pivots_mm)"))
+    for r in model.rotary:
+        nm = r.axis.name
+        out += [(f"p{nm}_{c}", f"pivots[{nm!r}][{i}]") for i, c in enumerate("xyz")]
+    out.append(("tool", "_tool(tool_mm)"))
+    out += [(f"tool_{c}", f"tool[{i}]") for i, c in enumerate("xyz")]
+    return out + list(levers)
+
+
+def _geometry_checks(selected: Sequence[str]) -> list[str]:
+    """Validate geometry arguments that the body does not otherwise read."""
+    names = {ln.split("=", 1)[0].strip() for ln in selected}
+    checks = [
+        ("ball", "    _vec3(ball_mm, 'ball_mm')"),
+        ("pivots", "    _pivots(pivots_mm)"),
+        ("tool", "    _tool(tool_mm)"),
     ]
-    lines += _symbol_locals(model, "    ")
-    lines.append(f"    out = np.zeros((3, {n_par}))")
-    for i in range(3):
-        for j in range(n_par):
-            if model.reference_jacobian[i, j] != 0:
-                lines.append(f"    out[{i}, {j}] = {_code(model.reference_jacobian[i, j])}")
-    lines.append("    return out")
-    parts.append("\n".join(lines))
+    return [code for name, code in checks if name not in names]
+
+
+def _function(spec: str, body: list[str], candidates: Sequence[tuple[str, str]], geometry: bool) -> str:
+    selected = _select_locals(candidates, body)
+    checks = _geometry_checks(selected) if geometry else []
+    return "\n".join([spec, *checks, *selected, *body])
+
+
+class _Levers:
+    """Lever arms ``d_P_Q = 0.001 * (P - Q)``: first-order coefficients of a rotation error [µm/µrad]."""
+
+    def __init__(self, model: SymbolicModel) -> None:
+        self.order = [str(s) for s in model.geometry_symbols]
+        self.used: dict[str, str] = {}
+
+    def code(self, expr: sp.Expr) -> str:
+        """Source of a coefficient, using a lever-arm local where the entry is ±0.001·(P − Q)."""
+        terms = sp.expand(expr).as_coefficients_dict()
+        if len(terms) == 2 and all(isinstance(s, sp.Symbol) and str(s) in self.order for s in terms):
+            (a, ka), (b, kb) = sorted(terms.items(), key=lambda t: self.order.index(str(t[0])))
+            if ka == -kb and abs(ka) == sp.Rational(1, 1000):
+                name = f"d_{a}_{b}"
+                self.used[name] = f"0.001 * ({a} - {b})"
+                return name if ka > 0 else f"-{name}"
+        return _code(expr)
+
+    def locals(self) -> list[tuple[str, str]]:
+        return sorted(self.used.items())
+
+
+# ---------------------------------------------------------------- rendered functions
+
+
+def _monomial_name(names: Sequence[str], m: tuple[int, ...]) -> str:
+    parts = []
+    for i, nm in enumerate(names):
+        for fn, deg in (("cos", m[2 * i]), ("sin", m[2 * i + 1])):
+            if deg:
+                parts.append(f"{fn}({nm})" + (f"^{deg}" if deg > 1 else ""))
+    return "*".join(parts) if parts else "1"
+
+
+def _monomial_factors(names: Sequence[str], m: tuple[int, ...]) -> list[str]:
+    parts: list[str] = []
+    for i, nm in enumerate(names):
+        for fn, deg in (("c", m[2 * i]), ("s", m[2 * i + 1])):
+            parts += [f"{fn}_{nm}"] * deg
+    return parts
+
+
+def _basis_columns(names: Sequence[str], monomials: Sequence[tuple[int, ...]], target: str) -> list[str]:
+    """Fill ``target`` (n, K), Fortran order, column by column with products built in place."""
+    lines = []
+    for k, m in enumerate(monomials):
+        f = _monomial_factors(names, m)
+        col = f"{target}[:, {k}]"
+        if not f:
+            lines.append(f"    {col} = 1.0")
+        elif len(f) == 1:
+            lines.append(f"    {col} = {f[0]}")
+        else:
+            lines.append(f"    np.multiply({f[0]}, {f[1]}, out={col})")
+            lines += [f"    {col} *= {x}" for x in f[2:]]
+    return lines
+
+
+def _render_basis(model: SymbolicModel, monomials: Sequence[tuple[int, ...]]) -> str:
+    body = [f"    out = np.empty((n, {len(monomials)}), order='F')"]
+    body += _basis_columns(model.rotary_axes, monomials, "out")
+    body.append("    return out")
+    spec = _SPECS["basis"].format(K=len(monomials), P=len(model.parameters))
+    return _function(spec, body, _trig_locals(model), geometry=False)
+
+
+def _tensor_lines(target: str, coefficients: Sequence[sp.Matrix], levers: _Levers) -> list[str]:
+    lines = []
+    for k, cm in enumerate(coefficients):
+        for i in range(cm.rows):
+            for j in range(cm.cols):
+                if cm[i, j] != 0:
+                    lines.append(f"    {target}[{k}, {i}, {j}] = {levers.code(cm[i, j])}")
+    return lines
+
+
+def _render_coefficients(model: SymbolicModel, coefficients: Sequence[sp.Matrix]) -> str:
+    levers = _Levers(model)
+    k, p = len(coefficients), len(model.parameters)
+    body = [f"    g = np.zeros(({k}, 3, {p}))", *_tensor_lines("g", coefficients, levers), "    return g"]
+    spec = _SPECS["coefficients"].format(K=k, P=p)
+    return _function(spec, body, _geometry_locals(model, levers.locals()), geometry=True)
+
+
+def _render_reference_jacobian(model: SymbolicModel) -> str:
+    levers = _Levers(model)
+    p = len(model.parameters)
+    body = [f"    out = np.zeros((3, {p}))"]
+    body += [ln.replace("out[0, ", "out[", 1) for ln in _tensor_lines("out", [model.reference_jacobian], levers)]
+    body.append("    return out")
+    return _function(_SPECS["reference_jacobian"].format(P=p), body, _geometry_locals(model, levers.locals()), True)
+
+
+def _render_motion_jacobian(model: SymbolicModel) -> str:
     mot = trig_basis(model.motion_jacobian, model.trig_pairs)
-    n_mot = len(model.motion_parameters)
-    lines = [
-        "def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):",
-        '    """Un-zeroed offset per unit error motion, shape=(n, 3, 6k) [µm per µm or µrad].',
-        "",
-        "    Columns MOTION_PARAMETERS: per rotary axis dx, dy, dz [µm] and rx, ry, rz [µrad],",
-        "    a small rigid motion of the body the axis carries (carrier frame, rotations about",
-        "    the nominal pivot) applied after the axis' own motion.  Zeroing at the reference",
-        "    pose is the caller's business (subtract workpiece_rotation @ value at the reference).",
-        '    """',
-    ]
-    lines += _trig_locals(model, "    ")
-    lines += _symbol_locals(model, "    ")
-    lines.append(f"    b = np.empty((th.shape[0], {len(mot.monomials)}))")
-    for k, m in enumerate(mot.monomials):
-        lines.append(f"    b[:, {k}] = {monomial_code(m)}")
-    lines.append(f"    g = np.zeros(({len(mot.monomials)}, 3, {n_mot}))")
-    for k, cm in enumerate(mot.coefficients):
-        for i in range(3):
-            for j in range(n_mot):
-                if cm[i, j] != 0:
-                    lines.append(f"    g[{k}, {i}, {j}] = {_code(cm[i, j])}")
-    lines.append(f"    return (b @ g.reshape({len(mot.monomials)}, -1)).reshape(th.shape[0], 3, {n_mot})")
-    parts.append("\n".join(lines))
+    levers = _Levers(model)
+    k, m = len(mot.monomials), len(model.motion_parameters)
+    body = [f"    b = np.empty((n, {k}), order='F')", *_basis_columns(model.rotary_axes, mot.monomials, "b")]
+    body += [f"    g = np.zeros(({k}, 3, {m}))", *_tensor_lines("g", mot.coefficients, levers)]
+    body.append(f"    return (b @ g.reshape({k}, -1)).reshape(n, 3, {m})")
+    candidates = _trig_locals(model) + _geometry_locals(model, levers.locals())
+    return _function(_SPECS["motion_jacobian"], body, candidates, geometry=True)
+
+
+def _render_orientation_jacobian(model: SymbolicModel) -> str:
     ori = trig_basis(model.orientation_jacobian, model.trig_pairs)
-    lines = [
-        "def orientation_jacobian(angles_deg):",
-        '    """Tool-orientation error Jacobian, shape=(n, 3, P) [µrad per µm or µrad].',
-        "",
-        "    ω = orientation_jacobian @ params is the small rotation of the spindle frame",
-        "    relative to the workpiece, expressed in W: R_rel_actual = (I + [ω]x) R_rel_nominal.",
-        '    """',
-    ]
-    lines += _trig_locals(model, "    ")
-    lines.append(f"    out = np.zeros((th.shape[0], 3, {n_par}))")
+    p = len(model.parameters)
+    body = [f"    out = np.zeros((n, 3, {p}))"]
     for m, cm in zip(ori.monomials, ori.coefficients, strict=True):
+        term = " * ".join(_monomial_factors(model.rotary_axes, m)) or "1.0"
         for i in range(3):
-            for j in range(n_par):
+            for j in range(p):
                 if cm[i, j] != 0:
-                    term = monomial_code(m)
-                    lines.append(f"    out[:, {i}, {j}] += {_code(cm[i, j])} * {term}")
-    lines.append("    return out")
-    parts.append("\n".join(lines))
-    parts.append(
-        _matrix_function(
-            model, model.workpiece_rotation, "workpiece_rotation",
-            "Nominal rotation of the workpiece frame W into M, shape=(n, 3, 3).", geometry=False,
-        )
-    )
-    parts.append(
-        _matrix_function(
-            model, model.tool_rotation, "tool_rotation",
-            "Nominal rotation of the spindle frame into M, shape=(n, 3, 3).", geometry=False,
-        )
-    )
-    parts.append(
-        _matrix_function(
-            model, model.linear_commands, "linear_commands",
-            "Commanded X, Y, Z (RTCP, nominal kinematics), shape=(n, 3) [mm]; ball_mm at the reference pose.",
-            geometry=True,
-        )
-    )
-    parts.append(
-        _matrix_function(
-            model, model.tool_direction, "tool_direction",
-            "Spindle direction in the workpiece frame W, shape=(n, 3) [unit vectors].", geometry=False,
-        )
-    )
-    parts.append(_render_direction_solver(model, solver))
-    return "\n\n\n".join(p.strip("\n") for p in parts) + "\n"
+                    body.append(f"    out[:, {i}, {j}] += {_code(cm[i, j])} * {term}")
+    body.append("    return out")
+    return _function(_SPECS["orientation_jacobian"].format(P=p), body, _trig_locals(model), geometry=False)
 
 
-def _render_direction_solver(model: SymbolicModel, solver: object) -> str:
-    from pige_sym.codegen.symbolic import DirectionSolver
+def _render_matrix(model: SymbolicModel, matrix: sp.Matrix, name: str, geometry: bool) -> str:
+    """A function returning ``matrix(θ)`` per point, shape (n, rows[, cols])."""
+    vector = matrix.cols == 1
+    shape = f"(n, {matrix.rows})" if vector else f"(n, {matrix.rows}, {matrix.cols})"
+    body = [f"    out = np.zeros({shape})"]
+    for i in range(matrix.rows):
+        for j in range(matrix.cols):
+            if matrix[i, j] != 0:
+                idx = f"[:, {i}]" if vector else f"[:, {i}, {j}]"
+                body.append(f"    out{idx} = {_code(matrix[i, j])}")
+    body.append("    return out")
+    candidates = _trig_locals(model) + (_geometry_locals(model) if geometry else [])
+    return _function(_SPECS[name], body, candidates, geometry)
 
-    head = [
-        "def angles_for_direction(direction, branch=1, previous_deg=None):",
-        '    """Rotary angles that put a workpiece-frame tool direction on the spindle axis.',
-        "",
-        "    Parameters",
-        "    ----------",
-        "    direction : array, shape=(n, 3)",
-        "        Tool direction in the workpiece frame W (normalised here).",
-        "    branch : {+1, -1}",
-        "        Which of the two solutions of the primary (tilting) axis to take.",
-        "    previous_deg : array, shape=(k,), optional",
-        "        Angles used where the secondary axis is undetermined (singular pose).",
-        "",
-        "    Returns",
-        "    -------",
-        "    angles_deg : array, shape=(n, k) [deg], secondary axis unwrapped to be continuous.",
-        '    """',
-    ]
-    if not isinstance(solver, DirectionSolver):
-        head.append(
-            "    raise NotImplementedError(f'{MACHINE_CODE}: no closed-form tool-direction inverse "
+
+def _render_direction_solver(model: SymbolicModel, solver: DirectionSolver | None) -> str:
+    spec = _SPECS["angles_for_direction"].format()
+    if solver is None:
+        return spec + (
+            "\n    raise NotImplementedError(f'{MACHINE_CODE}: no closed-form tool-direction inverse "
             "(needs exactly two rotary axes)')"
         )
-        return "\n".join(head)
     pc, ps = model.trig_pairs[solver.primary]
     sc, ss = model.trig_pairs[solver.secondary]
-    k = len(model.rotary)
+    (a1, b1, g1), (a2, b2, g2) = solver.rows
+    c1, c2 = solver.other_components
     body = [
         "    v = np.asarray(direction, dtype=float).reshape(-1, 3)",
         "    v = v / np.linalg.norm(v, axis=1, keepdims=True)",
@@ -399,13 +364,7 @@ def _render_direction_solver(model: SymbolicModel, solver: object) -> str:
         f"    cosarg = np.clip((v[:, {solver.primary_component}] - g) / r, -1.0, 1.0)",
         "    theta_p = np.arctan2(b, a) + branch * np.arccos(cosarg)",
         "    theta_p = (theta_p + np.pi) % (2 * np.pi) - np.pi",
-        f"    {pc.name} = np.cos(theta_p)",
-        f"    {ps.name} = np.sin(theta_p)",
         "    zeros = np.zeros_like(theta_p)",
-    ]
-    (a1, b1, g1), (a2, b2, g2) = solver.rows
-    c1, c2 = solver.other_components
-    body += [
         f"    a1 = {_code(a1)} + zeros",
         f"    b1 = {_code(b1)} + zeros",
         f"    r1 = v[:, {c1}] - ({_code(g1)} + zeros)",
@@ -424,12 +383,100 @@ def _render_direction_solver(model: SymbolicModel, solver: object) -> str:
         "        if not ok[i]:",
         "            theta_s[i] = prev if i == 0 else theta_s[i - 1]",
         "    theta_s = np.unwrap(theta_s)",
-        f"    out = np.zeros((v.shape[0], {k}))",
+        f"    out = np.zeros((v.shape[0], {len(model.rotary)}))",
         f"    out[:, {solver.primary}] = np.degrees(theta_p)",
         f"    out[:, {solver.secondary}] = np.degrees(theta_s)",
         "    return out",
     ]
-    return "\n".join(head + body)
+    used = _tokens(body)
+    primary = [f"    {sym.name} = np.{fn}(theta_p)" for sym, fn in ((pc, "cos"), (ps, "sin")) if sym.name in used]
+    return "\n".join([spec, *body[:7], *primary, *body[7:]])
+
+
+# ---------------------------------------------------------------- module
+
+
+def _copied_helpers() -> str:
+    return _HELPERS_FILE.read_text(encoding="utf-8").split("\n" + _MARKER + "\n", 1)[1].strip("\n")
+
+
+def _render_header(structure: MachineStructure, model: SymbolicModel, monomials: Sequence[tuple[int, ...]],
+                   has_solver: bool) -> str:
+    names = model.rotary_axes
+    units_lines = "\n".join(
+        f"#   {i:2d}  {p:<8s} [{model.units[p]}]" + ("  (zero-position error)" if i >= model.n_location else "")
+        for i, p in enumerate(model.parameters)
+    )
+    wp_rot = tuple(a.name for a in structure.workpiece_axes if a.kind == "rotary")
+    tl_rot = tuple(a.name for a in structure.tool_axes if a.kind == "rotary")
+    fingerprint = current_hash(structure)
+    return f'''# Generated by pige_sym from the machine structure code {structure.canonical}
+# DO NOT EDIT — regenerate with: pige gen "{structure.canonical}" (shipped kernels: make gen-all)
+# machine code : {structure.canonical}
+# rotary axes  : {", ".join(names)} (column order of angles_deg)
+# parameters (order and units):
+{units_lines}
+# sympy version: {sp.__version__}
+# input hash   : {fingerprint}
+"""R-test kernels for {structure.canonical} (generated; do not edit — pige gen).
+
+First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
+its Jacobian and the nominal kinematics.  ``jacobian = basis @ coefficients``:
+the deviation is linear in the error parameters and in {len(monomials)} trigonometric
+basis functions of the rotary angles.
+"""
+
+from typing import Any
+
+import numpy as np
+
+MACHINE_CODE = {structure.canonical!r}
+ROTARY_AXES = {names!r}
+WORKPIECE_ROTARY = {wp_rot!r}
+TOOL_ROTARY = {tl_rot!r}
+PARAMETERS = {model.parameters!r}
+LOCATION_PARAMETERS = {model.parameters[: model.n_location]!r}
+ZERO_PARAMETERS = {model.parameters[model.n_location:]!r}
+MOTION_PARAMETERS = {model.motion_parameters!r}
+UNITS = {dict(model.units)!r}
+BASIS = {tuple(_monomial_name(names, m) for m in monomials)!r}
+SPINDLE_DIRECTION = {model.spindle_direction}
+HAS_DIRECTION_SOLVER = {has_solver}
+GENERATOR_HASH = {fingerprint!r}'''
+
+
+def render_module(code: str | MachineStructure) -> str:
+    """Render the kernel module of a machine as Python source text.
+
+    Parameters
+    ----------
+    code : str or MachineStructure
+
+    Returns
+    -------
+    str
+        Source of a module that imports only NumPy (and ``typing``).
+    """
+    structure = parse_machine_code(code) if isinstance(code, str) else code
+    model = build_model(structure)
+    basis = trig_basis(model.jacobian, model.trig_pairs)
+    solver = direction_solver(model)
+    parts = [
+        _render_header(structure, model, basis.monomials, solver is not None),
+        _copied_helpers(),
+        _render_basis(model, basis.monomials),
+        _render_coefficients(model, basis.coefficients),
+        _LINEAR_FUNCTIONS,
+        _render_reference_jacobian(model),
+        _render_motion_jacobian(model),
+        _render_orientation_jacobian(model),
+        _render_matrix(model, model.workpiece_rotation, "workpiece_rotation", geometry=False),
+        _render_matrix(model, model.tool_rotation, "tool_rotation", geometry=False),
+        _render_matrix(model, model.linear_commands, "linear_commands", geometry=True),
+        _render_matrix(model, model.tool_direction, "tool_direction", geometry=False),
+        _render_direction_solver(model, solver),
+    ]
+    return "\n\n\n".join(p.strip("\n") for p in parts) + "\n"
 
 
 def same_code(a: str, b: str) -> bool:
@@ -444,5 +491,4 @@ def same_code(a: str, b: str) -> bool:
 def write_module(code: str | MachineStructure, directory: str | Path) -> Path:
     """Render and write the kernel module; returns its path."""
     structure = parse_machine_code(code) if isinstance(code, str) else code
-    text = render_module(structure)
-    return atomic_write_text(Path(directory) / f"{structure.module_name}.py", text)
+    return atomic_write_text(Path(directory) / f"{structure.module_name}.py", render_module(structure))
