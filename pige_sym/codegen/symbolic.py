@@ -189,6 +189,180 @@ class SymbolicModel:
         return syms
 
 
+def _only(sym: sp.Symbol, active: sp.Symbol | None) -> sp.Expr:
+    """The error symbol itself if it is the active one, else 0 (one derivative at a time)."""
+    return sym if sym == active else sp.Integer(0)
+
+
+def _axis_symbols(ax: Axis) -> RotaryAxisSymbols:
+    nm = ax.name
+    return RotaryAxisSymbols(
+        axis=ax,
+        cos=sp.Symbol(f"c_{nm}", real=True),
+        sin=sp.Symbol(f"s_{nm}", real=True),
+        pivot=sp.Matrix(sp.symbols(f"p{nm}_x p{nm}_y p{nm}_z", real=True)),
+        location=[sp.Symbol(n, real=True) for n in location_parameter_names(nm)],
+        zero=sp.Symbol(zero_parameter_name(nm), real=True),
+        motion=[sp.Symbol(f"{nm}_{c}", real=True) for c in MOTION_COMPONENTS],
+    )
+
+
+def _commanded_axes(structure: MachineStructure) -> dict[int, Axis]:
+    """The commanded linear axis per direction: the first along each of X, Y, Z in chain order."""
+    commanded: dict[int, Axis] = {}
+    for ax in structure.linear_axes:
+        commanded.setdefault(ax.direction, ax)
+    missing = [d for d in range(3) if d not in commanded]
+    if missing:
+        raise UnsupportedMachineError(
+            f"machine {structure.canonical!r} has no linear axis along {', '.join('XYZ'[d] for d in missing)}: "
+            "RTCP needs one linear axis along each of X, Y and Z"
+        )
+    return commanded
+
+
+class _Chain:
+    """The kinematic chain of a machine with symbolic axes, perturbable by one error symbol at a time."""
+
+    def __init__(self, structure: MachineStructure) -> None:
+        if not structure.rotary_axes:
+            raise UnsupportedMachineError(
+                f"machine {structure.canonical!r} has no rotary axis: there are no rotary-axis PIGEs to model"
+            )
+        self.structure = structure
+        self.rotary = {ax.name: _axis_symbols(ax) for ax in structure.rotary_axes}
+        self.ordered = [self.rotary[a.name] for a in structure.rotary_axes]
+        self.pairs = [(r.cos, r.sin) for r in self.ordered]
+        self.commanded = _commanded_axes(structure)
+        self.lin_syms = {d: sp.Symbol(f"L_{'XYZ'[d]}", real=True) for d in range(3)}
+        self.lin_vec = sp.Matrix([self.lin_syms[d] for d in range(3)])
+        self.ball = sp.Matrix(sp.symbols("ball_x ball_y ball_z", real=True))
+        self.tool = sp.Matrix(sp.symbols("tool_x tool_y tool_z", real=True))
+
+    def reduce(self, m: sp.Matrix) -> sp.Matrix:
+        """Reduce every entry with cos² + sin² = 1."""
+        return m.applyfunc(lambda e: reduce_trig(e, self.pairs))
+
+    def _perturbation(self, r: RotaryAxisSymbols, active: sp.Symbol) -> tuple[sp.Matrix, sp.Matrix, sp.Expr]:
+        """Offset of the axis line [mm], its tilt [rad] and the zero error [rad] for the active symbol."""
+        names = _LOCATION[r.axis.letter]
+        delta = sp.zeros(3, 1)
+        eps = sp.zeros(3, 1)
+        delta[names[0][1]] = _only(r.location[0], active) * UM_TO_MM
+        delta[names[1][1]] = _only(r.location[1], active) * UM_TO_MM
+        eps[names[2][1]] = _only(r.location[2], active) * URAD_TO_RAD
+        eps[names[3][1]] = _only(r.location[3], active) * URAD_TO_RAD
+        return delta, eps, _only(r.zero, active) * URAD_TO_RAD
+
+    def rotary_motion(
+        self, r: RotaryAxisSymbols, x: sp.Matrix, active: sp.Symbol | None
+    ) -> tuple[sp.Matrix, sp.Matrix]:
+        """(moved point, rotation matrix) of rotary axis ``r``, perturbed by the active error only."""
+        u = _unit(r.axis.direction)
+        sigma = r.axis.sign
+        c, s = r.cos, r.sin
+        perturbed = active is not None and (active in r.location or active == r.zero or active in r.motion)
+        if perturbed:
+            assert active is not None
+            delta, eps, e = self._perturbation(r, active)
+            u_act, q = u + eps.cross(u), r.pivot + delta
+            cos_phi, sin_phi = c - e * s, sigma * (s + e * c)
+        else:
+            u_act, q, cos_phi, sin_phi = u, r.pivot, c, sigma * s
+        k_mat = _cross_matrix(u_act)
+        rot = sp.eye(3) + sin_phi * k_mat + (1 - cos_phi) * k_mat * k_mat
+        moved = q + rot * (x - q)
+        if perturbed:
+            # error motion of the carried body, applied after the axis' own motion
+            d = sp.Matrix([_only(m, active) for m in r.motion[:3]]) * UM_TO_MM
+            w = sp.Matrix([_only(m, active) for m in r.motion[3:]]) * URAD_TO_RAD
+            moved = moved + d + w.cross(moved - r.pivot)
+            rot = rot + _cross_matrix(w) * rot
+        return moved, rot
+
+    def linear_motion(self, ax: Axis, x: sp.Matrix) -> sp.Matrix:
+        if self.commanded[ax.direction] is not ax:
+            return x  # parallel secondary axis held at its reference position
+        return x + ax.sign * self.lin_syms[ax.direction] * _unit(ax.direction)
+
+    def evaluate(self, active: sp.Symbol | None) -> tuple[sp.Matrix, sp.Matrix, sp.Matrix, sp.Matrix]:
+        """(ball point, nest point, workpiece rotation, tool rotation) in the machine frame."""
+        x = self.ball  # workpiece side: nest point, from the workpiece outward
+        rot_w = sp.eye(3)
+        for ax in self.structure.workpiece_axes:
+            if ax.kind == "rotary":
+                x, rot = self.rotary_motion(self.rotary[ax.name], x, active)
+                rot_w = rot * rot_w
+            else:
+                x = self.linear_motion(ax, x)
+        tool_rot = [a for a in self.structure.tool_axes if a.kind == "rotary"]
+        y = (self.rotary[tool_rot[-1].name].pivot + self.tool) if tool_rot else self.ball
+        rot_t = sp.eye(3)  # tool side: ball point, from the tool back to the bed
+        for ax in reversed(self.structure.tool_axes):
+            if ax.kind == "rotary":
+                y, rot = self.rotary_motion(self.rotary[ax.name], y, active)
+                rot_t = rot * rot_t
+            else:
+                y = self.linear_motion(ax, y)
+        return y, x, rot_w, rot_t
+
+
+def _solve_rtcp(chain: _Chain, r_nom: sp.Matrix) -> sp.Matrix:
+    """Linear-axis commands that keep the ball on the nest (nominal RTCP), shape (3, 1) [mm]."""
+    a_mat = chain.reduce(r_nom.jacobian(chain.lin_vec))
+    r0 = chain.reduce(r_nom.subs({s: 0 for s in chain.lin_vec}))
+    det = reduce_trig(a_mat.det(), chain.pairs)
+    if det.free_symbols or det == 0:
+        raise UnsupportedMachineError(
+            f"machine {chain.structure.canonical!r}: a linear axis is carried by a rotary axis in a way that makes "
+            f"RTCP singular (det of the linear-axis map = {det}); this structure is not supported"
+        )
+    return chain.reduce(-(a_mat.adjugate() / det) * r0)
+
+
+@dataclass
+class _Derivatives:
+    """First-order columns: deviation per PIGE, per error motion, and orientation per PIGE (raw, un-zeroed)."""
+
+    jacobian_raw: sp.Matrix
+    motion: sp.Matrix
+    orientation: sp.Matrix
+
+
+def _derivatives(chain: _Chain, params: list[sp.Symbol], motions: list[sp.Symbol], lin_subs: dict,
+                 rel_nom: sp.Matrix) -> _Derivatives:
+    """Differentiate the chain one error symbol at a time (the others are 0, so expressions stay small)."""
+    jac_cols, ori_cols, motion_cols = [], [], []
+    for sym in params + motions:
+        ball_act, nest_act, rot_w_act, rot_t_act = chain.evaluate(sym)
+        col = (ball_act - nest_act).diff(sym).subs(sym, 0).subs(lin_subs)
+        if sym in motions:
+            motion_cols.append(col)
+            continue
+        jac_cols.append(col)
+        # orientation of the spindle frame relative to W: R_rel_act = (I + [ω]x) R_rel_nom
+        dm = (rot_w_act.T * rot_t_act).diff(sym).subs(sym, 0) * rel_nom.T
+        ori_cols.append(sp.Matrix([dm[2, 1], dm[0, 2], dm[1, 0]]))
+    return _Derivatives(
+        jacobian_raw=sp.Matrix.hstack(*jac_cols) * MM_TO_UM,
+        motion=chain.reduce(sp.Matrix.hstack(*motion_cols) * MM_TO_UM),
+        orientation=chain.reduce(sp.Matrix.hstack(*ori_cols) * 10**6),
+    )
+
+
+def _units(ordered: list[RotaryAxisSymbols]) -> dict[str, str]:
+    units = {s.name: "um" for r in ordered for s in r.location[:2]}
+    units |= {s.name: "urad" for r in ordered for s in r.location[2:]}
+    units |= {r.zero.name: "urad" for r in ordered}
+    return units
+
+
+def _spindle_direction(structure: MachineStructure) -> int:
+    if structure.spindle is not None and structure.spindle[0] in "ABC":
+        return "ABC".index(structure.spindle[0])
+    return 2
+
+
 def build_model(code: str | MachineStructure) -> SymbolicModel:
     """Build the symbolic first-order model of a machine.
 
@@ -204,180 +378,40 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
         singular because a linear axis is carried by a rotary axis.
     """
     structure = parse_machine_code(code) if isinstance(code, str) else code
-    rotary_axes = structure.rotary_axes
-    if not rotary_axes:
-        raise UnsupportedMachineError(
-            f"machine {structure.canonical!r} has no rotary axis: there are no rotary-axis PIGEs to model"
-        )
-    rotary: dict[str, RotaryAxisSymbols] = {}
-    for ax in rotary_axes:
-        nm = ax.name
-        rotary[nm] = RotaryAxisSymbols(
-            axis=ax,
-            cos=sp.Symbol(f"c_{nm}", real=True),
-            sin=sp.Symbol(f"s_{nm}", real=True),
-            pivot=sp.Matrix(sp.symbols(f"p{nm}_x p{nm}_y p{nm}_z", real=True)),
-            location=[sp.Symbol(n, real=True) for n in location_parameter_names(nm)],
-            zero=sp.Symbol(zero_parameter_name(nm), real=True),
-            motion=[sp.Symbol(f"{nm}_{c}", real=True) for c in MOTION_COMPONENTS],
-        )
-    ordered = [rotary[a.name] for a in rotary_axes]
-    location_syms = [s for r in ordered for s in r.location]
-    zero_syms = [r.zero for r in ordered]
-    param_syms = location_syms + zero_syms
-    ball = sp.Matrix(sp.symbols("ball_x ball_y ball_z", real=True))
-    tool = sp.Matrix(sp.symbols("tool_x tool_y tool_z", real=True))
-
-    # Commanded linear axes: the first axis along each direction (chain order).
-    commanded: dict[int, Axis] = {}
-    for ax in structure.linear_axes:
-        commanded.setdefault(ax.direction, ax)
-    missing = [d for d in range(3) if d not in commanded]
-    if missing:
-        raise UnsupportedMachineError(
-            f"machine {structure.canonical!r} has no linear axis along {', '.join('XYZ'[d] for d in missing)}: "
-            "RTCP needs one linear axis along each of X, Y and Z"
-        )
-    lin_syms = {d: sp.Symbol(f"L_{'XYZ'[d]}", real=True) for d in range(3)}
-
-    def only(sym: sp.Symbol, active: sp.Symbol | None) -> sp.Expr:
-        """The error symbol itself if it is the active one, else 0 (one derivative at a time)."""
-        return sym if sym == active else sp.Integer(0)
-
-    def rotary_motion(r: RotaryAxisSymbols, x: sp.Matrix, active: sp.Symbol | None) -> tuple[sp.Matrix, sp.Matrix]:
-        """Return (moved point, rotation matrix) for rotary axis r, perturbed by the active error only."""
-        ax = r.axis
-        u = _unit(ax.direction)
-        sigma = ax.sign
-        c, s = r.cos, r.sin
-        perturbed = active is not None and (active in r.location or active == r.zero or active in r.motion)
-        if perturbed:
-            names = _LOCATION[ax.letter]
-            delta = sp.zeros(3, 1)
-            eps = sp.zeros(3, 1)
-            delta[names[0][1]] = only(r.location[0], active) * UM_TO_MM
-            delta[names[1][1]] = only(r.location[1], active) * UM_TO_MM
-            eps[names[2][1]] = only(r.location[2], active) * URAD_TO_RAD
-            eps[names[3][1]] = only(r.location[3], active) * URAD_TO_RAD
-            e = only(r.zero, active) * URAD_TO_RAD
-            u_act = u + eps.cross(u)
-            q = r.pivot + delta
-            cos_phi = c - e * s
-            sin_phi = sigma * (s + e * c)
-        else:
-            u_act, q, cos_phi, sin_phi = u, r.pivot, c, sigma * s
-        k_mat = _cross_matrix(u_act)
-        rot = sp.eye(3) + sin_phi * k_mat + (1 - cos_phi) * k_mat * k_mat
-        moved = q + rot * (x - q)
-        if perturbed:
-            # error motion of the carried body, applied after the axis' own motion
-            d = sp.Matrix([only(m, active) for m in r.motion[:3]]) * UM_TO_MM
-            w = sp.Matrix([only(m, active) for m in r.motion[3:]]) * URAD_TO_RAD
-            moved = moved + d + w.cross(moved - r.pivot)
-            rot = rot + _cross_matrix(w) * rot
-        return moved, rot
-
-    def linear_motion(ax: Axis, x: sp.Matrix) -> sp.Matrix:
-        if commanded[ax.direction] is not ax:
-            return x  # parallel secondary axis held at its reference position
-        return x + ax.sign * lin_syms[ax.direction] * _unit(ax.direction)
-
-    def chain(active: sp.Symbol | None) -> tuple[sp.Matrix, sp.Matrix, sp.Matrix, sp.Matrix]:
-        # workpiece side: nest point, from the workpiece outward
-        x = ball
-        rot_w = sp.eye(3)
-        for ax in structure.workpiece_axes:
-            if ax.kind == "rotary":
-                x, rot = rotary_motion(rotary[ax.name], x, active)
-                rot_w = rot * rot_w
-            else:
-                x = linear_motion(ax, x)
-        # tool side: ball point, from the tool back to the bed
-        tool_rot = [a for a in structure.tool_axes if a.kind == "rotary"]
-        y = (rotary[tool_rot[-1].name].pivot + tool) if tool_rot else ball
-        rot_t = sp.eye(3)
-        for ax in reversed(structure.tool_axes):
-            if ax.kind == "rotary":
-                y, rot = rotary_motion(rotary[ax.name], y, active)
-                rot_t = rot * rot_t
-            else:
-                y = linear_motion(ax, y)
-        return y, x, rot_w, rot_t
-
-    pairs = [(r.cos, r.sin) for r in ordered]
-
-    def red(m: sp.Matrix) -> sp.Matrix:
-        return m.applyfunc(lambda e: reduce_trig(e, pairs))
-
-    ball_nom, nest_nom, rot_w, rot_t = chain(None)
-    rot_w = red(rot_w)
-    rot_t = red(rot_t)
-    r_nom = ball_nom - nest_nom
-    lin_vec = sp.Matrix([lin_syms[d] for d in range(3)])
-    a_mat = red(r_nom.jacobian(lin_vec))
-    r0 = red(r_nom.subs({s: 0 for s in lin_vec}))
-    det = reduce_trig(a_mat.det(), pairs)
-    if det.free_symbols or det == 0:
-        raise UnsupportedMachineError(
-            f"machine {structure.canonical!r}: a linear axis is carried by a rotary axis in a way that makes "
-            f"RTCP singular (det of the linear-axis map = {det}); this structure is not supported"
-        )
-    lin_solution = red(-(a_mat.adjugate() / det) * r0)
-    lin_subs = {lin_vec[d]: lin_solution[d] for d in range(3)}
-
-    # First-order derivatives, one error symbol at a time (the others are 0 in the chain,
-    # so the expressions stay small).
-    rel_nom = rot_w.T * rot_t
+    chain = _Chain(structure)
+    ordered = chain.ordered
+    param_syms = [s for r in ordered for s in r.location] + [r.zero for r in ordered]
     motion_syms = [m for r in ordered for m in r.motion]
-    jac_cols, ori_cols, motion_cols = [], [], []
-    for sym in param_syms + motion_syms:
-        ball_act, nest_act, rot_w_act, rot_t_act = chain(sym)
-        col = (ball_act - nest_act).diff(sym).subs(sym, 0).subs(lin_subs)
-        if sym in motion_syms:
-            motion_cols.append(col)
-            continue
-        jac_cols.append(col)
-        # orientation of the spindle frame relative to W: R_rel_act = (I + [ω]x) R_rel_nom
-        dm = (rot_w_act.T * rot_t_act).diff(sym).subs(sym, 0) * rel_nom.T
-        ori_cols.append(sp.Matrix([dm[2, 1], dm[0, 2], dm[1, 0]]))
-    jac_raw = sp.Matrix.hstack(*jac_cols) * MM_TO_UM
-    motion_jacobian = red(sp.Matrix.hstack(*motion_cols) * MM_TO_UM)
+
+    ball_nom, nest_nom, rot_w, rot_t = chain.evaluate(None)
+    rot_w, rot_t = chain.reduce(rot_w), chain.reduce(rot_t)
+    lin_solution = _solve_rtcp(chain, ball_nom - nest_nom)
+    lin_subs = {chain.lin_vec[d]: lin_solution[d] for d in range(3)}
+    der = _derivatives(chain, param_syms, motion_syms, lin_subs, rot_w.T * rot_t)
+
     at_reference = {r.cos: 1 for r in ordered} | {r.sin: 0 for r in ordered}
-    jac_ref = jac_raw.subs(at_reference)
-    jacobian = red(jac_raw - rot_w * jac_ref)
-    orientation_jacobian = red(sp.Matrix.hstack(*ori_cols) * 10**6)
-
-    # Commanded X, Y, Z: equal to ball_mm at the reference pose.
-    lin_ref = lin_solution.subs(at_reference)
-    linear_commands = red(lin_solution - lin_ref + ball)
-
-    spindle_dir = 2
-    if structure.spindle is not None and structure.spindle[0] in "ABC":
-        spindle_dir = "ABC".index(structure.spindle[0])
-    tool_direction = red(rot_w.T * rot_t * _unit(spindle_dir))
-
-    units = {s.name: "um" for r in ordered for s in r.location[:2]}
-    units |= {s.name: "urad" for r in ordered for s in r.location[2:]}
-    units |= {s.name: "urad" for s in zero_syms}
+    jac_ref = der.jacobian_raw.subs(at_reference)
+    spindle_dir = _spindle_direction(structure)
     return SymbolicModel(
         structure=structure,
         rotary=ordered,
-        ball=ball,
-        tool=tool,
+        ball=chain.ball,
+        tool=chain.tool,
         parameters=tuple(s.name for s in param_syms),
-        n_location=len(location_syms),
-        jacobian=jacobian,
+        n_location=4 * len(ordered),
+        jacobian=chain.reduce(der.jacobian_raw - rot_w * jac_ref),
         workpiece_rotation=rot_w,
         tool_rotation=rot_t,
-        linear_commands=linear_commands,
-        tool_direction=tool_direction,
-        reference_jacobian=red(jac_ref),
-        orientation_jacobian=orientation_jacobian,
-        motion_jacobian=motion_jacobian,
+        # commanded X, Y, Z: equal to ball_mm at the reference pose
+        linear_commands=chain.reduce(lin_solution - lin_solution.subs(at_reference) + chain.ball),
+        tool_direction=chain.reduce(rot_w.T * rot_t * _unit(spindle_dir)),
+        reference_jacobian=chain.reduce(jac_ref),
+        orientation_jacobian=der.orientation,
+        motion_jacobian=der.motion,
         motion_parameters=tuple(m.name for m in motion_syms),
         spindle_direction=spindle_dir,
         has_tool_rotary=any(a.kind == "rotary" for a in structure.tool_axes),
-        units=units,
+        units=_units(ordered),
     )
 
 
