@@ -402,3 +402,13 @@ def test_check_generated_ignores_the_sympy_version_line() -> None:
     other = "\n".join("# sympy version: 0.0" if ln.startswith("# sympy version") else ln for ln in text.splitlines())
     assert same_code(text, other + "\n")
     assert not same_code(text, text.replace("np.zeros", "np.ones", 1))
+
+
+@pytest.mark.parametrize("shape", [(1, 2), (2,), (5, 2)])
+def test_kernels_never_modify_the_callers_angles(shape: tuple[int, ...]) -> None:
+    kern = load_kernels("wC'A'bXYZ(C1)t")
+    angles = np.full(shape, 30.0)
+    for fn in (kern.basis, kern.workpiece_rotation, kern.tool_direction, kern.orientation_jacobian):
+        fn(angles)
+    kern.jacobian(angles, None, [120, 0, 80])
+    assert np.all(angles == 30.0)

@@ -39,7 +39,7 @@ def _angles(angles_deg: Any) -> np.ndarray:
 
 def _cos_sin(angles_deg: Any) -> tuple[np.ndarray, np.ndarray]:
     """Cosine and sine of every rotary angle, each ``(k, n)``: evaluated once per call."""
-    th = np.ascontiguousarray(_angles(angles_deg).T)
+    th = np.array(_angles(angles_deg).T, order="C")  # always a copy: the caller's angles stay untouched
     th *= np.pi / 180.0
     return np.cos(th), np.sin(th)
 

@@ -14,7 +14,7 @@
 #    8  EA0A     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : e1226b2450222914
+# input hash   : 66ed91b9304c9c30
 """R-test kernels for wC'A'bXYZ(C1)t (generated; do not edit — pige gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -39,7 +39,7 @@ UNITS = {'EY0A': 'um', 'EZ0A': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EB0A': 'urad',
 BASIS = ('1', 'cos(A)', 'sin(A)', 'cos(C)', 'sin(C)', 'cos(A)*cos(C)', 'cos(A)*sin(C)', 'sin(A)*cos(C)', 'sin(A)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = 'e1226b2450222914'
+GENERATOR_HASH = '66ed91b9304c9c30'
 
 
 def _angles(angles_deg: Any) -> np.ndarray:
@@ -58,7 +58,7 @@ def _angles(angles_deg: Any) -> np.ndarray:
 
 def _cos_sin(angles_deg: Any) -> tuple[np.ndarray, np.ndarray]:
     """Cosine and sine of every rotary angle, each ``(k, n)``: evaluated once per call."""
-    th = np.ascontiguousarray(_angles(angles_deg).T)
+    th = np.array(_angles(angles_deg).T, order="C")  # always a copy: the caller's angles stay untouched
     th *= np.pi / 180.0
     return np.cos(th), np.sin(th)
 

@@ -14,7 +14,7 @@
 #    8  EB0B     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 96e3a8db8a93a4f2
+# input hash   : f75a4f90b7487331
 """R-test kernels for wC'B'bXYZ(C1)t (generated; do not edit — pige gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -39,7 +39,7 @@ UNITS = {'EX0B': 'um', 'EZ0B': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EA0B': 'urad',
 BASIS = ('1', 'cos(B)', 'sin(B)', 'cos(C)', 'sin(C)', 'cos(B)*cos(C)', 'cos(B)*sin(C)', 'sin(B)*cos(C)', 'sin(B)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '96e3a8db8a93a4f2'
+GENERATOR_HASH = 'f75a4f90b7487331'
 
 
 def _angles(angles_deg: Any) -> np.ndarray:
@@ -58,7 +58,7 @@ def _angles(angles_deg: Any) -> np.ndarray:
 
 def _cos_sin(angles_deg: Any) -> tuple[np.ndarray, np.ndarray]:
     """Cosine and sine of every rotary angle, each ``(k, n)``: evaluated once per call."""
-    th = np.ascontiguousarray(_angles(angles_deg).T)
+    th = np.array(_angles(angles_deg).T, order="C")  # always a copy: the caller's angles stay untouched
     th *= np.pi / 180.0
     return np.cos(th), np.sin(th)
 
