@@ -89,7 +89,8 @@ def test_wheel_ships_subpackages_and_kernels(installed: dict[str, Path]) -> None
 
     names = zipfile.ZipFile(installed["wheel"]).namelist()
     for part in ("pige_sym/cli/main.py", "pige_sym/codegen/emit.py", "pige_sym/acquisition/engine.py",
-                 "pige_sym/nc/program.py", "pige_sym/report/__init__.py", "pige_sym/kernels/shipped/kin_wCpApbXYZ_C1_t.py"):
+                 "pige_sym/nc/program.py", "pige_sym/report/__init__.py",
+                 "pige_sym/kernels/shipped/kin_wCpApbXYZ_C1_t.py"):
         assert part in names, part
 
 
@@ -102,7 +103,8 @@ def test_installed_pige_runs_anywhere_and_writes_nothing_into_the_installation(
     assert version.returncode == 0 and version.stdout.startswith("pige "), version.stderr
     for code, name in (("wC'A'bXYZ(C1)t", "shipped"), (NON_SHIPPED, "generated")):
         work = tmp_path / name
-        sim = _pige(installed, work, "simulate", "--machine", code, "--pige", "random", "--seed", "3", "--out", "run.csv")
+        sim = _pige(installed, work, "simulate", "--machine", code, "--pige", "random", "--seed", "3",
+                    "--out", "run.csv")
         assert sim.returncode == 0, sim.stderr
         ident = _pige(installed, work, "identify", "run.csv", "--json")
         assert ident.returncode == 0, ident.stderr
