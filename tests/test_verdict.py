@@ -196,7 +196,7 @@ def test_cli_bad_input_is_status_2_with_file_and_field(tmp_path: Path, capsys: p
     else:
         tol = _tol(tmp_path, {"format": FMT, "limits": {"EX0C": 8}})
         target = tmp_path / "bad.json"
-        target.write_text('{"machine": "%s", "pige": {"EX0C": NaN}, "std": {}, "units": {}}' % AC)
+        target.write_text('{"machine": "' + AC + '", "pige": {"EX0C": NaN}, "std": {}, "units": {}}')
         field = "NaN"
     assert main(["check", str(target), "--tolerances", str(tol)]) == 2
     err = capsys.readouterr().err
