@@ -43,7 +43,7 @@ from pige_sym.io import read_measurement
 from pige_sym.kernels import DEFAULT_MACHINE, load_kernels
 from pige_sym.nc.program import make_rtest_program
 from pige_sym.nc.rtest_program import load_test_program
-from pige_sym.report.build import gather_report, write_report
+from pige_sym.report import gather_report, write_report
 from pige_sym.simulator import random_pige
 
 DEFAULT_EFFECT = "angular_error_C:harmonic=2,cos_urad=12,sin_urad=-8"

@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from pige_sym.report.build import PRIMARY_METHODS, findings_text, gather_report, write_report
+from pige_sym.report import PRIMARY_METHODS, findings_text, gather_report, write_report
 
 
 def _run(args: argparse.Namespace) -> int:
