@@ -16,12 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from pige_sym.compensation import plot_compensation
+from pige_sym.compensation import CompensationStudyRow
 from pige_sym.diagnosis import residual_plots
 from pige_sym.errors import InputError
 from pige_sym.identification import IdentificationResult
 from pige_sym.io import Measurement
-from pige_sym.report.gather import UNIT_TEXT, MeasurementReport, ReportFigure, Truth
+from pige_sym.report.gather import UNIT_TEXT, HistoryData, MeasurementReport, ReportData, ReportFigure, Truth
 from pige_sym.studies import SobolStudy
 
 
@@ -243,12 +243,144 @@ def draw_figures(rep: MeasurementReport, out_dir: Path) -> list[ReportFigure]:
                                  f"{stem.removeprefix('residual_')} [µm] against its angle (harmonics show at their "
                                  "order).")
         figs.append(ReportFigure("residual", Path(path), cap))
-    basis = ("simulated with the true parameters of the sidecar" if rep.compensation_basis == "truth" else
-             "model-predicted: the machine is assumed to carry exactly the identified errors")
-    for path, row in zip(plot_compensation(rep.compensation, out_dir), rep.compensation, strict=True):
-        figs.append(ReportFigure("compensation", Path(path),
-                                 f"Tool-point error before and after compensation [µm], {row.trajectory} ({basis})."))
-    if rep.sobol is not None:
+    basis = ("simulated on the known truth of the sidecar" if rep.compensation_basis == "truth" else
+             "model-predicted: the machine is assumed to carry exactly the identified errors, so 'after' is only "
+             "what the compensation algorithm itself leaves, not a prediction for the real machine")
+    for i, row in enumerate(rep.compensation):
+        fig = before_after_figure(row, BASIS_LABEL[rep.compensation_basis])
+        figs.append(ReportFigure("compensation", _save(fig, out_dir / f"compensation_{i}.png"),
+                                 f"Tool-point error before (top) and after compensation (bottom, its own scale) [µm], "
+                                 f"{row.trajectory} ({basis})."))
+    if rep.sobol is not None and rep.sobol_same_as is None:
         figs.append(ReportFigure("sobol", _save(sobol_figure(rep.sobol), out_dir / "sobol.png"),
                                  "Total Sobol indices of the mean-square projected deviation, per projection."))
+    return figs
+
+
+BASIS_LABEL = {"truth": "simulated on a known truth", "model": "model-predicted", "measured": "measured"}
+
+
+def before_after_figure(row: CompensationStudyRow, label: str) -> Any:
+    """Error components and norm per point, before (top) and after (bottom), each panel on its own scale.
+
+    Parameters
+    ----------
+    row : CompensationStudyRow
+        ``before_um``, ``after_um`` shape=(n, 3) [µm].
+    label : str
+        Basis of the numbers (measured, simulated on a known truth, model-predicted), in the titles.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    fig, axs = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True)
+    idx = np.arange(row.before_um.shape[0])
+    colors = ("tab:blue", "tab:orange", "tab:green")
+    for ax, err, when, rms in ((axs[0], row.before_um, "before", row.rmse_before_um),
+                               (axs[1], row.after_um, "after", row.rmse_after_um)):
+        for k, c in enumerate("xyz"):
+            ax.plot(idx, err[:, k], "-", lw=0.9, color=colors[k], label=f"{c}")
+        ax.plot(idx, np.linalg.norm(err, axis=1), "k.-", lw=1, ms=3, label="|error|")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_ylabel("[µm]")
+        ax.set_title(f"{when} compensation ({label}): RMSE {rms:.3g} µm", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=4, loc="upper right")
+    axs[1].set_xlabel("point")
+    fig.tight_layout()
+    return fig
+
+
+def compare_figure(result: Any) -> Any:
+    """Measured |d| per pose before (top) and after (bottom, its own scale) with the parts of what is left.
+
+    Parameters
+    ----------
+    result : CompareResult
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    fig, axs = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True)
+    idx = np.arange(result.before_um.shape[0])
+    panels = ((axs[0], result.before_um, result.before_parts, "before", result.rms_before_um),
+              (axs[1], result.after_um, result.after_parts, "after", result.rms_after_um))
+    for ax, norms, dec, when, rms in panels:
+        ax.plot(idx, norms, "ko-", ms=3, lw=1.2, label="|d| measured")
+        for part in (dec.parts if dec is not None else []):
+            if part.values_um is not None:
+                ax.plot(idx, np.linalg.norm(part.values_um, axis=1), "--", lw=0.9, label=f"|{part.name} part|")
+        ax.set_ylabel("[µm]")
+        ax.set_title(f"{when} (measured): RMS {rms:.3g} µm", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=4, loc="upper right")
+    axs[1].set_xlabel("pose")
+    fig.tight_layout()
+    return fig
+
+
+def trend_figure(history: HistoryData) -> Any:
+    """Value ± 2 std of each location PIGE per run, tolerance band shaded, significant changes circled.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from pige_sym.kernels import load_kernels
+
+    plt = _pyplot()
+    runs = history.runs
+    kern = load_kernels(runs[-1].machine_code)
+    names = list(kern.LOCATION_PARAMETERS)
+    cols = 4
+    rows = math.ceil(len(names) / cols)
+    fig, axs = plt.subplots(rows, cols, figsize=(11, 2.4 * rows), sharex=True, squeeze=False)
+    x = np.arange(len(runs))
+    flagged = {(comp.to_run, ch.parameter) for comp in history.comparisons for ch in comp.changes
+               if ch.significant}
+    for ax, name in zip(axs.ravel(), names, strict=False):
+        vals = np.array([r.values[r.parameters.index(name)] if name in r.parameters else np.nan for r in runs])
+        std = np.array([r.std[r.parameters.index(name)] if name in r.parameters else np.nan for r in runs])
+        limit = history.limits.get(name)
+        if limit is not None:
+            ax.axhspan(-limit, limit, color="tab:green", alpha=0.12, lw=0)
+            ax.axhline(limit, color="tab:green", lw=0.8)
+            ax.axhline(-limit, color="tab:green", lw=0.8)
+        ax.errorbar(x, vals, yerr=2 * np.nan_to_num(std), fmt="o-", ms=4, capsize=3, lw=1, color="tab:blue")
+        for i, r in enumerate(runs):
+            if (r.id, name) in flagged:
+                ax.plot(x[i], vals[i], "o", ms=11, mfc="none", mec="crimson", mew=1.8)
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_title(f"{name} [{UNIT_TEXT.get(kern.UNITS[name], kern.UNITS[name])}]", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=7)
+    for ax in axs.ravel()[len(names):]:
+        ax.set_visible(False)
+    for ax in axs[-1]:
+        ax.set_xticks(x)
+        ax.set_xticklabels([r.measured_at[:10] for r in runs], rotation=45, ha="right", fontsize=7)
+    fig.suptitle(f"{history.machine_id}: value ± 2 std per run; green band = tolerance; red ring = significant "
+                 "change from the previous run", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def draw_report_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
+    """The figures of the whole report (measured before/after, history trends) into ``out_dir``."""
+    figs: list[ReportFigure] = []
+    if data.comparison is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        figs.append(ReportFigure("measured-compare", _save(compare_figure(data.comparison),
+                                                           out_dir / "measured_before_after.png"),
+                                 "Measured |d| per pose [µm] before (top) and after (bottom, its own scale), with "
+                                 "the model parts of each (PIGEs, accepted effects, unexplained rest)."))
+    if data.history is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        figs.append(ReportFigure("trend", _save(trend_figure(data.history), out_dir / "history_trend.png"),
+                                 f"History of machine {data.history.machine_id}: each PIGE per run with ± 2 std, "
+                                 "the tolerance band and the significant changes."))
     return figs

@@ -15,7 +15,7 @@ Choices made here
   exactly the identified errors, so "after" only shows what the compensation
   algorithm itself leaves and the report says the before/after is model-predicted.
   Parameters without a value are compensated as 0 and listed.
-- *Primary method.*  ``method`` (default Gauss–Newton) selects the estimate used for
+- *Primary method.*  ``method`` (default ``diagnosis``) selects the estimate used for
   the model overlay and the compensation: ``gauss-newton``, ``double-differential``,
   or ``diagnosis`` (the PIGEs of the diagnosis' final fit, estimated jointly with the
   accepted extensions, which are not compensated).  Both identification methods are
@@ -34,7 +34,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tqdm import tqdm
@@ -61,8 +61,13 @@ from pige_sym.nc.program import parse_program, poses_from_program
 from pige_sym.simulator import normalise_parameter_name
 from pige_sym.studies import ProjectionStudy, SobolStudy, projection_study, sobol_study
 from pige_sym.trajectories import Trajectory, approach_directions
+from pige_sym.verdict import CheckResult, Tolerances, check, estimates_from_result, read_tolerances
+
+if TYPE_CHECKING:
+    from pige_sym.compare import CompareResult
 
 STUDIES = ("projection", "sobol")
+SOBOL_EFFECT_UM = 15.0
 PRIMARY_METHODS = (*METHODS, "diagnosis")
 UNIT_TEXT = {"um": "µm", "urad": "µrad", "s": "s", "count": "count"}
 
@@ -176,8 +181,13 @@ class MeasurementReport:
     projection: ProjectionStudy | None = None
     projection_noise_um: float | None = None
     sobol: SobolStudy | None = None
+    sobol_ranges: dict[str, float] = field(default_factory=dict)
+    sobol_same_as: int | None = None
     figures: list[ReportFigure] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    check: CheckResult | None = None
+    measured_at: str = ""
+    time_source: str = ""
 
     @property
     def primary(self) -> IdentificationResult:
@@ -221,7 +231,9 @@ class MeasurementReport:
                              "program": None if self.compensated_program is None else str(self.compensated_program)},
             "truth": None if self.truth is None else {"file": str(self.truth.path), "pige": self.truth.values},
             "projection": None if self.projection is None else self.projection.to_dict(),
-            "sobol": None if self.sobol is None else self.sobol.to_dict(),
+            "sobol": None if self.sobol is None else {**self.sobol.to_dict(), "half_ranges": self.sobol_ranges},
+            "check": None if self.check is None else self.check.to_dict(),
+            "measured_at": self.measured_at, "time_source": self.time_source,
             "figures": [str(f.path) for f in self.figures],
             "notes": self.notes,
         }
@@ -253,6 +265,9 @@ class ReportData:
     settings: dict[str, str] = field(default_factory=dict)
     created: str = ""
     html_path: Path | None = None
+    comparison: CompareResult | None = None
+    history: HistoryData | None = None
+    figures: list[ReportFigure] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return json_ready({
@@ -260,7 +275,37 @@ class ReportData:
             "created": self.created, "version": __version__, "settings": self.settings,
             "studies": list(self.studies), "program": None if self.program is None else str(self.program),
             "measurements": [m.to_dict() for m in self.measurements],
+            "compare": None if self.comparison is None else self.comparison.to_dict(),
+            "history": None if self.history is None else self.history.to_dict(),
         })
+
+
+@dataclass
+class HistoryData:
+    """A machine's runs from the history database, for the trend plots.
+
+    Attributes
+    ----------
+    machine_id : str
+    database : str
+        URL with the password hidden.
+    runs : list of RunRecord
+        In measurement order.
+    comparisons : list of Comparison
+        Consecutive runs.
+    limits : dict of str to float
+        Tolerance band per parameter [µm, µrad] (from ``--tolerances``, else the last run's check).
+    """
+
+    machine_id: str
+    database: str
+    runs: list[Any]
+    comparisons: list[Any]
+    limits: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"machine_id": self.machine_id, "database": self.database, "runs": [r.to_dict() for r in self.runs],
+                "comparisons": [c.to_dict() for c in self.comparisons], "limits": self.limits}
 
 
 def parse_studies(text: str | Iterable[str] | None) -> tuple[str, ...]:
@@ -429,22 +474,37 @@ def program_before_after(machine: str, truth: dict[str, float], identified: dict
                                 before, after)
 
 
+def _check_options(method: str, presets: int, sobol_samples: int, paths: list[Path], others: bool) -> None:
+    if method not in PRIMARY_METHODS:
+        raise InputError(f"unknown method {method!r}: use {', '.join(PRIMARY_METHODS)}")
+    if presets < 1:
+        raise InputError("--presets must be at least 1")
+    if sobol_samples < 2 or sobol_samples & (sobol_samples - 1):
+        raise InputError(f"--samples must be a power of 2, got {sobol_samples}")
+    if not paths and not others:
+        raise InputError("give at least one measurement file (or --compare BEFORE AFTER, or --history ID)")
+
+
 def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studies: Iterable[str] = (),
-                  program: str | os.PathLike[str] | None = None, method: str = "gauss-newton",
+                  program: str | os.PathLike[str] | None = None, method: str = "diagnosis",
                   projection: str = "xyz", with_zero: bool = False, presets: int = 50, sobol_samples: int = 2048,
-                  seed: int = 0, progress: bool = False) -> ReportData:
+                  seed: int = 0, progress: bool = False, tolerances: str | os.PathLike[str] | None = None,
+                  rule: str = "guard", k: float = 2.0,
+                  compare: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None,
+                  history: str | None = None, db: str | None = None) -> ReportData:
     """Compute everything a report shows (no files written).
 
     Parameters
     ----------
     measurement_paths : sequence of path-like
         ``pige-rtest 1`` files; all are read (and their truth sidecars checked) before
-        any computation, so a bad file fails fast.
+        any computation, so a bad file fails fast.  May be empty with ``compare`` or ``history``.
     studies : iterable of {"projection", "sobol"}
     program : path-like, optional
         An 840D-style NC program compensated with each measurement's estimate.
-    method : {"gauss-newton", "double-differential", "diagnosis"}
-        Primary estimate (module docstring).
+    method : {"diagnosis", "gauss-newton", "double-differential"}
+        Primary estimate (module docstring); default the diagnosis' final fit, the PIGEs used
+        for compensation.
     projection : str
         Excitation projection of the identification tables (the diagnosis uses xyz).
     with_zero : bool
@@ -456,6 +516,12 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     seed : int
     progress : bool
         Show a tqdm progress bar on stderr.
+    tolerances : path-like, optional
+        Tolerance file: each measurement gets a ``pige check`` verdict (``rule``, ``k``).
+    compare : (before, after), optional
+        Two measurements of the same program: the measured before/after section.
+    history, db : str, optional
+        Machine id and database URL: the trend section.
 
     Returns
     -------
@@ -466,75 +532,156 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     PigeError
         Bad input (file format, truth sidecar, program, option); the message names it.
     """
-    if method not in PRIMARY_METHODS:
-        raise InputError(f"unknown method {method!r}: use {', '.join(PRIMARY_METHODS)}")
     study_set = parse_studies(studies)
-    if presets < 1:
-        raise InputError("--presets must be at least 1")
-    if sobol_samples < 2 or sobol_samples & (sobol_samples - 1):
-        raise InputError(f"--samples must be a power of 2, got {sobol_samples}")
     paths = [Path(p) for p in measurement_paths]
-    if not paths:
-        raise InputError("give at least one measurement file")
+    _check_options(method, presets, sobol_samples, paths, compare is not None or history is not None)
     loaded = []
     for p in paths:
         m = read_measurement(p)
         loaded.append((p, m, read_truth(p, m.machine)))
+    tol = read_tolerances(tolerances) if tolerances is not None else None
     program_text = read_program(program) if program is not None else None
-    labels = _labels(paths)
     steps_per_file = 4 + len(study_set) + (program is not None)
-    reports: list[MeasurementReport] = []
+    options = _Options(method, projection, with_zero, study_set, presets, sobol_samples, seed, tol, rule, k,
+                       None if program is None else Path(program), program_text)
     with tqdm(total=steps_per_file * len(paths), desc="report", unit="step", disable=not progress) as bar:
-        for (p, m, truth), label in zip(loaded, labels, strict=True):
-            bar.set_postfix_str(f"{p.name}: identification")
-            results = {meth: identify(m, method=meth, projection=projection, with_zero=with_zero) for meth in METHODS}
-            bar.update(1)
-            bar.set_postfix_str(f"{p.name}: diagnosis")
-            diag: DiagnosisResult | None = None
-            diag_error = None
-            try:
-                diag = diagnose(m)
-            except IdentificationError as exc:  # the data are fine; one candidate fit is not: report it, go on
-                diag_error = str(exc)
-            bar.update(1)
-            primary = method if diag is not None or method != "diagnosis" else "gauss-newton"
-            rep = _compensation(p, label, m, truth, results, diag, primary, bar)
-            if diag_error is not None:
-                rep.diagnosis_error = diag_error
-                rep.notes.append(f"the diagnosis failed on these data ({diag_error})"
-                                 + ("; the Gauss–Newton estimate is compensated instead" if primary != method
-                                    else ""))
-            if program_text is not None and program is not None:
-                bar.set_postfix_str(f"{p.name}: program")
-                _program(rep, Path(program), program_text)
-                bar.update(1)
-            kern = load_kernels(m.machine)
-            traj = _measured_trajectory(m)
-            if m.pivots_mm and study_set:
-                rep.notes.append("the studies place the rotary-axis pivots at the origin (the file gives pivots)")
-            if "projection" in study_set:
-                bar.set_postfix_str(f"{p.name}: projection study")
-                sigma = results["gauss-newton"].sigma_um
-                noise = sigma if math.isfinite(sigma) and sigma > 0 else 0.25
-                rep.projection = projection_study(kern.MACHINE_CODE, traj, presets=presets, noise_um=noise, seed=seed,
-                                                  ball_mm=m.ball_mm, tool_mm=m.tool_mm, progress=False)
-                rep.projection_noise_um = noise
-                bar.update(1)
-            if "sobol" in study_set:
-                bar.set_postfix_str(f"{p.name}: Sobol indices")
-                rep.sobol = sobol_study(kern.MACHINE_CODE, traj, n=sobol_samples, ball_mm=m.ball_mm,
-                                        tool_mm=m.tool_mm, seed=seed)
-                bar.update(1)
-            bar.update(1)  # the figures are drawn by write_report; keep the step count honest
-            reports.append(rep)
+        reports = [_gather_one(p, label, m, truth, options, bar)
+                   for (p, m, truth), label in zip(loaded, _labels(paths), strict=True)]
+    _share_identical_sobol(reports)
     settings = {"primary method": method, "projection": projection, "zero-position errors": str(with_zero),
                 "studies": ", ".join(study_set) or "none"}
     if "projection" in study_set:
         settings["projection-study presets"] = str(presets)
     if "sobol" in study_set:
         settings["Sobol samples"] = str(sobol_samples)
+    if tol is not None:
+        settings["tolerances"] = f"{tol.path} ({rule} rule" + (f", k = {k:g})" if rule == "guard" else ")")
     created = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
-    return ReportData(reports, study_set, None if program is None else Path(program), settings, created)
+    data = ReportData(reports, study_set, options.program, settings, created)
+    if compare is not None:
+        from pige_sym.compare import compare_measurements
+
+        data.comparison = compare_measurements(*compare)
+    if history is not None:
+        data.history = gather_history(history, db, tol)
+    return data
+
+
+@dataclass
+class _Options:
+    method: str
+    projection: str
+    with_zero: bool
+    studies: tuple[str, ...]
+    presets: int
+    sobol_samples: int
+    seed: int
+    tolerances: Tolerances | None
+    rule: str
+    k: float
+    program: Path | None
+    program_text: str | None
+
+
+def _gather_one(p: Path, label: str, m: Measurement, truth: Truth | None, opt: _Options, bar: Any) -> MeasurementReport:
+    """Identification, diagnosis, compensation, program, verdict and studies of one file."""
+    from pige_sym.history.store import measurement_time
+
+    bar.set_postfix_str(f"{p.name}: identification")
+    results = {meth: identify(m, method=meth, projection=opt.projection, with_zero=opt.with_zero) for meth in METHODS}
+    bar.update(1)
+    bar.set_postfix_str(f"{p.name}: diagnosis")
+    diag: DiagnosisResult | None = None
+    diag_error = None
+    try:
+        diag = diagnose(m)
+    except IdentificationError as exc:  # the data are fine; one candidate fit is not: report it, go on
+        diag_error = str(exc)
+    bar.update(1)
+    primary = opt.method if diag is not None or opt.method != "diagnosis" else "gauss-newton"
+    rep = _compensation(p, label, m, truth, results, diag, primary, bar)
+    rep.measured_at, rep.time_source = measurement_time(p, m.metadata, None)
+    if diag_error is not None:
+        rep.diagnosis_error = diag_error
+        rep.notes.append(f"the diagnosis failed on these data ({diag_error})"
+                         + ("; the Gauss–Newton estimate is compensated instead" if primary != opt.method else ""))
+    if opt.tolerances is not None:
+        source = diag if primary == "diagnosis" and diag is not None else rep.primary
+        rep.check = check(estimates_from_result(source, str(p)), opt.tolerances, rule=opt.rule, k=opt.k)
+    if opt.program_text is not None and opt.program is not None:
+        bar.set_postfix_str(f"{p.name}: program")
+        _program(rep, opt.program, opt.program_text)
+        bar.update(1)
+    _studies(rep, opt, bar)
+    bar.update(1)  # the figures are drawn by write_report; keep the step count honest
+    return rep
+
+
+def _same_setup(a: Measurement, b: Measurement) -> bool:
+    return (a.machine == b.machine and a.angles_deg.shape == b.angles_deg.shape
+            and np.array_equal(a.angles_deg, b.angles_deg) and np.array_equal(a.ball_mm, b.ball_mm)
+            and ((a.tool_mm is None and b.tool_mm is None)
+                 or (a.tool_mm is not None and b.tool_mm is not None and np.array_equal(a.tool_mm, b.tool_mm))))
+
+
+def _share_identical_sobol(reports: list[MeasurementReport]) -> None:
+    """The Sobol indices depend on the trajectory, ball and tool only: show them once per set-up."""
+    for i, rep in enumerate(reports):
+        for j in range(i):
+            if rep.sobol is not None and reports[j].sobol is not None and reports[j].sobol_same_as is None \
+                    and _same_setup(rep.measurement, reports[j].measurement):
+                rep.sobol_same_as = j + 1
+                break
+
+
+def sobol_half_ranges(m: Measurement, effect_um: float = SOBOL_EFFECT_UM) -> dict[str, float]:
+    """Half-range per location PIGE [its unit] whose RMS effect on the ball over the trajectory is ``effect_um``.
+
+    The parameters are scaled like the identification's columns, so position (µm) and orientation
+    (µrad) errors compete on equal terms in the Sobol study.
+    """
+    kern = load_kernels(m.machine)
+    names = list(kern.LOCATION_PARAMETERS)
+    jac = kern.jacobian(m.angles_deg, None, m.ball_mm, None, m.tool_mm)[1:, :, : len(names)]
+    scale = np.sqrt((jac**2).sum(axis=1).mean(axis=0))
+    return {n: (effect_um / float(c) if c > 0 else effect_um) for n, c in zip(names, scale, strict=True)}
+
+
+def _studies(rep: MeasurementReport, opt: _Options, bar: Any) -> None:
+    m, p = rep.measurement, rep.path
+    kern = load_kernels(m.machine)
+    traj = _measured_trajectory(m)
+    if m.pivots_mm and opt.studies:
+        rep.notes.append("the studies place the rotary-axis pivots at the origin (the file gives pivots)")
+    if "projection" in opt.studies:
+        bar.set_postfix_str(f"{p.name}: projection study")
+        sigma = rep.identification["gauss-newton"].sigma_um
+        noise = sigma if math.isfinite(sigma) and sigma > 0 else 0.25
+        rep.projection = projection_study(kern.MACHINE_CODE, traj, presets=opt.presets, noise_um=noise,
+                                          seed=opt.seed, ball_mm=m.ball_mm, tool_mm=m.tool_mm, progress=False)
+        rep.projection_noise_um = noise
+        bar.update(1)
+    if "sobol" in opt.studies:
+        bar.set_postfix_str(f"{p.name}: Sobol indices")
+        rep.sobol_ranges = sobol_half_ranges(m)
+        rep.sobol = sobol_study(kern.MACHINE_CODE, traj, n=opt.sobol_samples, ball_mm=m.ball_mm,
+                                tool_mm=m.tool_mm, seed=opt.seed, ranges=rep.sobol_ranges)
+        bar.update(1)
+
+
+def gather_history(machine_id: str, db: str | None, tol: Tolerances | None) -> HistoryData:
+    """Runs and consecutive comparisons of a machine; tolerance band from ``tol`` or the last stored check."""
+    from pige_sym.history import compare_runs, connect, list_runs
+
+    engine = connect(db)
+    runs = list_runs(engine, machine_id)
+    comps = [compare_runs(a, b, from_run=a.id, to_run=b.id) for a, b in zip(runs, runs[1:], strict=False)]
+    if tol is not None:
+        limits = tol.resolve(runs[-1].machine_code)
+    else:
+        last = next((r.check for r in reversed(runs) if r.check), None)
+        limits = {str(i["name"]): float(i["limit"]) for i in (last or {}).get("items", [])}
+    return HistoryData(machine_id, engine.url.render_as_string(hide_password=True), runs, comps, limits)
 
 
 def _compensation(p: Path, label: str, m: Measurement, truth: Truth | None,

@@ -12,6 +12,7 @@ import math
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -20,8 +21,9 @@ from pige_sym.errors import InputError
 from pige_sym.files import atomic_write_text
 from pige_sym.identification import IdentificationResult
 from pige_sym.kernels import load_kernels
-from pige_sym.report.figures import draw_figures
+from pige_sym.report.figures import draw_figures, draw_report_figures
 from pige_sym.report.gather import (
+    SOBOL_EFFECT_UM,
     UNIT_TEXT,
     MeasurementReport,
     ReportData,
@@ -29,6 +31,7 @@ from pige_sym.report.gather import (
     findings_text,
     gather_report,
 )
+from pige_sym.report.lead import improvement, main_finding, pige_rows
 
 
 def write_report(data: ReportData, out_dir: str | os.PathLike[str]) -> Path:
@@ -46,24 +49,20 @@ def write_report(data: ReportData, out_dir: str | os.PathLike[str]) -> Path:
             with open(target, "w", encoding="utf-8", newline="") as fh:
                 fh.write(text)
             rep.compensated_program = target
+    data.figures = draw_report_figures(data, out / "_report")
     html_path = out / "report.html"
     atomic_write_text(html_path, render_html(data, base=out))
     data.html_path = html_path
     return html_path
 
 
-def build_report(measurement_paths: Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[str], *,
-                 studies: Iterable[str] = (), program: str | os.PathLike[str] | None = None,
-                 method: str = "gauss-newton", projection: str = "xyz", with_zero: bool = False,
-                 presets: int = 50, sobol_samples: int = 2048, seed: int = 0, progress: bool = False) -> Path:
+def build_report(measurement_paths: Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[str],
+                 **options: Any) -> Path:
     """Build the report of measurement files into ``out_dir``; returns the path of ``report.html``.
 
-    Parameters are those of :func:`gather_report`; PNGs are kept in ``out_dir/<label>/``.
+    ``options`` are those of :func:`gather_report`; PNGs are kept in ``out_dir/<label>/``.
     """
-    data = gather_report(measurement_paths, studies=studies, program=program, method=method, projection=projection,
-                         with_zero=with_zero, presets=presets, sobol_samples=sobol_samples, seed=seed,
-                         progress=progress)
-    return write_report(data, out_dir)
+    return write_report(gather_report(measurement_paths, **options), out_dir)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -72,9 +71,34 @@ def build_report(measurement_paths: Sequence[str | os.PathLike[str]], out_dir: s
 CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-serif;margin:0;color:#1d232a;
 background:#f6f7f9;line-height:1.4}
-header,main,footer{max-width:1150px;margin:0 auto;padding:0 18px}
-header{padding-top:18px}
-h1{font-size:1.6em;margin:.2em 0}
+header,main,footer{max-width:1150px;margin:0 auto;padding:0 18px;box-sizing:border-box}
+table{max-width:100%}
+td,th{overflow-wrap:anywhere}
+code{overflow-wrap:anywhere}
+.meta{margin:.2em 0;color:#4a5563;font-size:.85em}
+.answer{display:flex;flex-wrap:wrap;gap:6px 18px;background:#fff;border:2px solid #2b6cb0;border-radius:6px;
+padding:8px 14px;margin:8px 0}
+.answer .facts{flex:1 1 420px;min-width:0}
+.answer .used{flex:1 1 340px;min-width:0}
+.answer table{margin:.2em 0;width:100%}
+.answer th{width:9em}
+.cap{margin:.2em 0;font-size:.85em;color:#2b4a6f;font-weight:600}
+.badge{display:inline-block;padding:1px 10px;border-radius:4px;font-weight:700;letter-spacing:.04em;color:#fff}
+.badge.pass{background:#1b7f3a}
+.badge.fail{background:#b00020}
+.badge.undecided{background:#b26a00}
+.badge.none{background:#6b7480}
+.st.pass{color:#1b7f3a;font-weight:600}
+.st.fail{color:#b00020;font-weight:600}
+.st.undecided{color:#b26a00;font-weight:600}
+.basis{display:inline-block;padding:0 6px;border-radius:3px;font-size:.8em;font-weight:700;background:#eef2f7}
+.basis.measured{background:#d7f0de}
+.basis.model{background:#fde7c8}
+ul.rejected li{margin:.15em 0}
+ul.rejected details{display:inline}
+details summary{cursor:pointer;color:#2b6cb0}
+header{padding-top:10px}
+h1{font-size:1.35em;margin:.1em 0}
 h2{font-size:1.3em;border-bottom:2px solid #2b6cb0;padding-bottom:3px;margin-top:1.6em}
 h3{font-size:1.08em;margin:1.2em 0 .4em;color:#2b4a6f}
 section.measurement{background:#fff;border:1px solid #d9dee5;border-radius:6px;padding:6px 18px 18px;margin:18px 0}
@@ -201,46 +225,54 @@ def _status(res: IdentificationResult, j: int) -> tuple[str, bool]:
     return '<span class="ok">identified</span>', False
 
 
-def _identification_html(rep: MeasurementReport) -> str:
+def _gn_rows(rep: MeasurementReport) -> tuple[list[str], list[list[str]], list[str]]:
     gn = rep.identification["gauss-newton"]
-    dd = rep.identification["double-differential"]
     truth = rep.truth
     ci = gn.ci95()
-    ci_dd = dd.ci95()
-    fixed_at = {p: s.index for s in dd.stages for p in s.fixed}
-    head = ["parameter", "unit", "Gauss–Newton value", "std", "95 % interval", "VIF", "status (GN)",
-            "double-diff. value", "std", "95 % interval", "fixed at stage", "status (DD)"]
+    head = ["parameter", "unit", "value", "std", "95 % interval", "VIF", "status"]
     if truth is not None:
-        head += ["truth", "error (GN)", "|error| / std"]
+        head += ["truth", "error", "|error| / std"]
     rows, classes = [], []
     for j, name in enumerate(gn.parameters):
-        u = _u(gn.units.get(name, ""))
-        st_gn, bad_gn = _status(gn, j)
-        jd = dd.parameters.index(name)
-        st_dd, bad_dd = _status(dd, jd)
+        st, bad = _status(gn, j)
         vif = gn.vif[j] if gn.vif is not None else float("nan")
-        if bad_gn:
-            cells_gn = ["not identifiable", "—", "—", _f(vif, ".3g")]
-        else:
-            cells_gn = [_f(gn.values[j]), _f(gn.std[j]), f"[{_f(ci[j, 0])}, {_f(ci[j, 1])}]", _f(vif, ".3g")]
-        if bad_dd:
-            cells_dd = ["no value", "—", "—", _e(fixed_at.get(name, "—"))]
-        else:
-            cells_dd = [_f(dd.values[jd]), _f(dd.std[jd]), f"[{_f(ci_dd[jd, 0])}, {_f(ci_dd[jd, 1])}]",
-                        _e(fixed_at.get(name, "—"))]
-        row = [f"<b>{_e(name)}</b>", _e(u), *cells_gn, st_gn, *cells_dd, st_dd]
+        cells = (["not identifiable", "—", "—"] if bad else
+                 [_f(gn.values[j]), _f(gn.std[j]), f"[{_f(ci[j, 0])}, {_f(ci[j, 1])}]"])
+        row = [f"<b>{_e(name)}</b>", _e(_u(gn.units.get(name, ""))), *cells, _f(vif, ".3g"), st]
         if truth is not None:
             t = truth.values.get(name, 0.0)
-            if bad_gn:
+            if bad:
                 row += [_f(t), "—", "—"]
             else:
                 err = gn.values[j] - t
                 ratio = abs(err) / gn.std[j] if gn.std[j] > 0 else float("inf")
                 row += [_f(t), _f(err, "+.3f"), _f(ratio, ".2f")]
         rows.append(row)
-        classes.append("unid" if (bad_gn or bad_dd) else "")
-    num_cols = [2, 3, 4, 5, 7, 8, 9, 10] + ([12, 13, 14] if truth is not None else [])
-    parts = [_table(head, rows, row_classes=classes, num_cols=num_cols)]
+        classes.append("unid" if bad else "")
+    return head, rows, classes
+
+
+def _dd_table(dd: IdentificationResult) -> str:
+    ci = dd.ci95()
+    fixed_at = {p: s.index for s in dd.stages for p in s.fixed}
+    rows, classes = [], []
+    for j, name in enumerate(dd.parameters):
+        st, bad = _status(dd, j)
+        cells = (["no value", "—", "—"] if bad else
+                 [_f(dd.values[j]), _f(dd.std[j]), f"[{_f(ci[j, 0])}, {_f(ci[j, 1])}]"])
+        rows.append([f"<b>{_e(name)}</b>", _e(_u(dd.units.get(name, ""))), *cells, _e(fixed_at.get(name, "—")), st])
+        classes.append("unid" if bad else "")
+    return _table(["parameter", "unit", "value", "std", "95 % interval", "fixed at stage", "status"], rows,
+                  row_classes=classes, num_cols=[2, 3, 4])
+
+
+def _identification_html(rep: MeasurementReport) -> str:
+    gn = rep.identification["gauss-newton"]
+    dd = rep.identification["double-differential"]
+    head, rows, classes = _gn_rows(rep)
+    num_cols = [2, 3, 4, 5] + ([7, 8, 9] if rep.truth is not None else [])
+    parts = ["<h4>Gauss–Newton (all PIGEs at once)</h4>", _table(head, rows, row_classes=classes, num_cols=num_cols),
+             "<h4>Double-differential scheme</h4>", _dd_table(dd)]
     n_bad = int((~gn.identifiable).sum())
     if n_bad:
         parts.append(f'<p class="note"><span class="unid">{n_bad} parameter(s) are not identifiable from these data'
@@ -354,9 +386,7 @@ def _diagnosis_html(rep: MeasurementReport, base: Path | None) -> str:
         parts.append("<p>No finding: the PIGE model explains the data down to the noise.</p>")
     parts.append("<h4>Rejected candidates</h4>")
     if d.rejected:
-        rows = [[_e(r.effect), _e(" ".join(f"{k}={v:g}" for k, v in r.options.items()) or "—"), _e(r.reason),
-                 _f(r.delta_bic, ".1f"), _f(r.p_value, ".2g")] for r in d.rejected]
-        parts.append(_table(["candidate", "options", "why not accepted", "ΔBIC", "p"], rows, num_cols=[3, 4]))
+        parts.append('<ul class="rejected">' + "".join(_rejected_item(r) for r in d.rejected) + "</ul>")
     else:
         parts.append("<p>None.</p>")
     parts.append("<h4>Residual plots</h4>")
@@ -369,30 +399,48 @@ def _compensation_html(rep: MeasurementReport, base: Path | None) -> str:
     parts = []
     if rep.compensation_basis == "truth":
         assert rep.truth is not None
-        parts.append(f"<p>Before/after <b>simulated</b> on a machine with the true parameters of "
-                     f"<code>{_e(rep.truth.path.name)}</code>, compensated with the {_e(rep.primary_method)} "
+        parts.append(f"<p>Before/after <b>simulated on a known truth</b>: the machine carries the true parameters of "
+                     f"<code>{_e(rep.truth.path.name)}</code> and is compensated with the {_e(rep.primary_method)} "
                      "estimate.</p>")
     else:
         parts.append(f'<p class="note">No truth sidecar: the before/after is <b>model-predicted</b>. The machine is '
-                     f"assumed to carry exactly the identified errors ({_e(rep.primary_method)}), so “after” shows "
-                     "only what the compensation itself leaves (second-order terms). What to expect on the real "
-                     "machine: the column “expected after, from the std” (identification uncertainty alone), plus "
-                     f"what the PIGE model does not explain (residual RMS {_f(rep.primary.rms_um, '.3f')} µm).</p>")
+                     f"assumed to carry exactly the identified errors ({_e(rep.primary_method)}), so what the "
+                     "compensation leaves on that model machine says nothing about the real one and is shown only "
+                     "as a check of the algorithm. Expected on the real machine: the identification uncertainty "
+                     "propagated to the tool point, combined with what the model leaves unexplained; a measurement "
+                     "after compensation (<code>pige compare</code>) proves it.</p>")
     if rep.not_compensated:
         unknown = (" The model-predicted machine carries 0 for them too: their real errors are unknown and not in "
                    "these numbers." if rep.compensation_basis == "model" else "")
         parts.append(f'<p class="note"><span class="unid">Not compensated (no value): '
                      f"{_e(', '.join(rep.not_compensated))}</span> — set to 0.{_e(unknown)}</p>")
-    head = ["test", "RMSE before [µm]", "RMSE after [µm]", "reduction", "expected after, from the std [µm]",
-            "command change RMS [µm]"]
-    rows = [[_e(r.trajectory), _f(r.rmse_before_um), _f(r.rmse_after_um), _f(r.reduction * 100, ".1f") + " %",
-             _f(r.predicted_after_um, ".3f", "n/a"), _f(r.command_change_rmse_mm * 1e3, ".2f")]
-            for r in rep.compensation]
-    parts.append(_table(head, rows, num_cols=[1, 2, 3, 4, 5]))
+    parts.append(_compensation_table(rep))
     if rep.compensated_program is not None:
         parts.append(f"<p>Compensated NC program written to <code>{_e(rep.compensated_program)}</code>.</p>")
     parts.append(_figs(rep, "compensation", base))
     return "\n".join(parts)
+
+
+def _compensation_table(rep: MeasurementReport) -> str:
+    from pige_sym.report.lead import unexplained_rms_um
+
+    if rep.compensation_basis == "truth":
+        head = ["test", "RMSE before [µm]", "RMSE after [µm]", "reduction", "expected after, from the std [µm]",
+                "command change RMS [µm]"]
+        rows = [[_e(r.trajectory), _f(r.rmse_before_um), _f(r.rmse_after_um), _f(r.reduction * 100, ".1f") + " %",
+                 _f(r.predicted_after_um, ".3f", "n/a"), _f(r.command_change_rmse_mm * 1e3, ".2f")]
+                for r in rep.compensation]
+        return _table(head, rows, num_cols=[1, 2, 3, 4, 5])
+    resid = unexplained_rms_um(rep)
+    head = ["test", "RMSE of the identified errors [µm]", "expected after [µm]", "of which: uncertainty [µm]",
+            "unexplained residual [µm]", "left by the algorithm on the model [µm]", "command change RMS [µm]"]
+    rows = []
+    for r in rep.compensation:
+        u = r.predicted_after_um
+        expected = math.sqrt((u if math.isfinite(u) else 0.0) ** 2 + (resid if math.isfinite(resid) else 0.0) ** 2)
+        rows.append([_e(r.trajectory), _f(r.rmse_before_um), _f(expected, ".2f"), _f(u, ".3f", "n/a"),
+                     _f(resid, ".3f"), _f(r.rmse_after_um, ".2g"), _f(r.command_change_rmse_mm * 1e3, ".2f")])
+    return _table(head, rows, num_cols=[1, 2, 3, 4, 5, 6])
 
 
 def _projection_html(rep: MeasurementReport) -> str:
@@ -417,13 +465,201 @@ def _projection_html(rep: MeasurementReport) -> str:
 def _sobol_html(rep: MeasurementReport, base: Path | None) -> str:
     st = rep.sobol
     assert st is not None
+    if rep.sobol_same_as is not None:
+        return (f'<p>Same trajectory, ball and tool as <a href="#m{rep.sobol_same_as}">measurement '
+                f"{rep.sobol_same_as}</a>: the Sobol indices depend on nothing else and are shown there.</p>")
     head = ["parameter"] + [f"{p} {k}" for p in st.projections for k in ("S1", "ST")]
     rows = [[_e(name)] + [_f(v, ".3f") for i in range(len(st.projections))
                           for v in (st.first_order[i, j], st.total_order[i, j])]
             for j, name in enumerate(st.parameters)]
     return (f"<p>First-order (S1) and total (ST) indices of the mean-square projected deviation over the measured "
-            f"trajectory, every PIGE uniform on ±15 µm / µrad, {st.n_samples} base samples.</p>"
+            f"trajectory, {st.n_samples} base samples. The parameters are scaled like the identification's "
+            f"columns: each PIGE is uniform on ±h, h chosen so that its RMS effect on the ball is "
+            f"{SOBOL_EFFECT_UM:g} µm ({_e(_ranges_text(rep))}), so position and orientation errors compete on "
+            "equal terms.</p>"
             + _table(head, rows, num_cols=range(1, 1 + 2 * len(st.projections))) + _figs(rep, "sobol", base))
+
+
+def _ranges_text(rep: MeasurementReport) -> str:
+    units = load_kernels(rep.machine).UNITS
+    return ", ".join(f"{k} ±{v:.3g} {_u(units.get(k, ''))}" for k, v in rep.sobol_ranges.items())
+
+
+_REJECTION_SENTENCES = (
+    ("unidentifiable", "{name} cannot be told apart from the PIGEs with this test."),
+    ("best candidate", "{name} was the best remaining candidate, but its gain is within the noise."),
+    ("not significant", "{name} does not improve the fit beyond the noise."),
+)
+
+
+def _rejected_item(r: Any) -> str:
+    """One plain sentence per rejected candidate; the statistics folded in a <details>."""
+    opts = ", ".join(f"{k} {v:g}" for k, v in r.options.items())
+    name = f"{r.effect}" + (f" ({opts})" if opts else "")
+    sentence = next((t.format(name=name) for key, t in _REJECTION_SENTENCES if r.reason.startswith(key)
+                     or key in r.reason[:40]), f"{name}: {r.reason}.")
+    numbers = f"{r.reason}; ΔBIC {_f(r.delta_bic, '.1f')}, p {_f(r.p_value, '.2g')}"
+    return f"<li>{_e(sentence)} <details><summary>why</summary><small>{_e(numbers)}</small></details></li>"
+
+
+_BADGE = {"pass": "PASS", "fail": "FAIL", "undecided": "UNDECIDED"}
+
+
+def _verdict_html(rep: MeasurementReport) -> str:
+    chk = rep.check
+    if chk is None:
+        return ('<span data-verdict="none" class="badge none">not judged</span> <small>no tolerances given '
+                "(pige report --tolerances TOL.json)</small>")
+    rule = f"|v| ± {chk.k:g}u vs limit (ISO 14253-1)" if chk.rule == "guard" else "simple acceptance"
+    odd = [f"{i.name} {i.status}" for i in chk.items if i.status != "pass"]
+    tail = f": {', '.join(odd)}" if odd else f": all {len(chk.items)} items pass"
+    return (f'<span data-verdict="{_e(chk.verdict)}" class="badge {_e(chk.verdict)}">{_BADGE[chk.verdict]}</span> '
+            f"<small>{_e(rule)}{_e(tail)}</small>")
+
+
+def _pige_used_html(rep: MeasurementReport) -> str:
+    rows, classes = [], []
+    for r in pige_rows(rep):
+        val = "not identifiable" if r.value is None else f"{_f(r.value)} ± {_f(r.std, '.2g')}"
+        row = [f"<b>{_e(r.name)}</b>", val, _e(r.unit)]
+        if rep.check is not None:
+            row += [_f(r.limit, "g"), f'<span class="st {_e(r.status or "")}">{_e(r.status or "no limit")}</span>']
+        rows.append(row)
+        classes.append("unid" if r.value is None else "")
+    head = ["PIGE", "value ± std", "unit"] + (["limit", "status"] if rep.check is not None else [])
+    return _table(head, rows, row_classes=classes, num_cols=[1, 3])
+
+
+def _estimate_label(rep: MeasurementReport) -> str:
+    if rep.primary_method == "diagnosis":
+        found = rep.diagnosis is not None and any(f.effect != "outliers" for f in rep.diagnosis.findings)
+        return ("diagnosis' final fit: PIGEs estimated jointly with the accepted effects" if found
+                else "diagnosis' final fit (no effect accepted: the PIGE-only model)")
+    return f"{rep.primary_method} fit"
+
+
+def _answer_one(i: int, rep: MeasurementReport, data: ReportData) -> str:
+    imp = improvement(rep, data)
+    facts = [
+        ("machine", f"<code>{_e(rep.machine)}</code>" + (f" — id <b>{_e(data.history.machine_id)}</b>"
+                                                          if data.history is not None else "")),
+        ("measured", _e(f"{rep.measured_at} ({rep.time_source})") + f" — <code>{_e(rep.path.name)}</code>"),
+        ("verdict", _verdict_html(rep)),
+        ("main finding", _e(main_finding(rep))),
+        (f"improvement ({imp.label})", f'<span class="basis {_e(imp.basis)}">{_e(imp.label)}</span> {_e(imp.text)}'),
+    ]
+    return (f'<div class="answer" id="answer-m{i + 1}"><div class="facts">{_kv(facts)}</div>'
+            f'<div class="used"><p class="cap">PIGEs used for compensation ({_e(_estimate_label(rep))})</p>'
+            f"{_pige_used_html(rep)}</div></div>")
+
+
+def _answer_history(data: ReportData) -> str:
+    h = data.history
+    assert h is not None
+    last = h.runs[-1]
+    verdict = (f'<span data-verdict="{_e(last.verdict)}" class="badge {_e(last.verdict)}">'
+               f"{_BADGE.get(last.verdict, last.verdict)}</span> <small>stored with run {last.id}</small>"
+               if last.verdict else '<span data-verdict="none" class="badge none">not judged</span>')
+    moved = [f"{c.parameter} {_f(c.change, '+.3g')} ± {_f(c.std, '.2g')} {_u(c.unit)} (run {c.from_run} → {c.to_run})"
+             for comp in h.comparisons for c in comp.changes if c.significant]
+    facts = [("machine", f"id <b>{_e(h.machine_id)}</b> — <code>{_e(last.machine_code)}</code>"),
+             ("runs", _e(f"{len(h.runs)}, last measured {last.measured_at}")),
+             ("verdict of the last run", verdict),
+             ("what changed", _e("; ".join(moved) if moved else "no significant change between consecutive runs "
+                                 "(family-wise false-alarm rate 1 % per comparison)"))]
+    return f'<div class="answer"><div class="facts">{_kv(facts)}</div></div>'
+
+
+def _answer_compare(data: ReportData) -> str:
+    c = data.comparison
+    assert c is not None
+    facts = [("machine", f"<code>{_e(c.machine)}</code>"),
+             ("verdict", '<span data-verdict="none" class="badge none">not judged</span> <small>give the '
+                         "measurement files and --tolerances for a verdict</small>"),
+             ("improvement (measured)", f'<span class="basis measured">measured</span> '
+                                        f"{_e(f'RMS |d| {c.rms_before_um:.3g} → {c.rms_after_um:.3g} µm ')}"
+                                        f"{_e(f'({c.improvement:.0%} less)')}")]
+    return f'<div class="answer"><div class="facts">{_kv(facts)}</div></div>'
+
+
+def _answer_html(data: ReportData) -> str:
+    parts = [_answer_one(i, rep, data) for i, rep in enumerate(data.measurements)]
+    if not data.measurements and data.history is not None:
+        parts.append(_answer_history(data))
+    elif not data.measurements and data.comparison is not None:
+        parts.append(_answer_compare(data))
+    return "\n".join(parts)
+
+
+def _check_html(rep: MeasurementReport) -> str:
+    chk = rep.check
+    assert chk is not None
+    rows = [[f"<b>{_e(i.name)}</b>", _f(i.value), _f(i.std), _f(i.limit, "g"), _e(_u(i.unit)),
+             f'<span class="st {_e(i.status)}">{_e(i.status)}</span>', _e(i.reason)] for i in chk.items]
+    parts = [f"<p>Tolerances <code>{_e(chk.tolerances)}</code>; {_e(chk.method)} estimate; rule "
+             + (f"<b>guard</b>: pass when |v| + {chk.k:g}u ≤ limit, fail when |v| − {chk.k:g}u &gt; limit, "
+                "undecided otherwise (ISO 14253-1)" if chk.rule == "guard" else
+                "<b>simple acceptance</b>: the uncertainty is not used")
+             + ". A parameter without a value is undecided.</p>",
+             _table(["parameter", "value", "std", "limit", "unit", "status", "why"], rows, num_cols=[1, 2, 3])]
+    for name, why in chk.not_assessed.items():
+        parts.append(f"<p><small>{_e(name)}: not assessed — {_e(why)}.</small></p>")
+    return "\n".join(parts)
+
+
+def _compare_html(data: ReportData, base: Path | None) -> str:
+    c = data.comparison
+    assert c is not None
+    parts = [f"<p>Two <b>measurements</b> of the same program on <code>{_e(c.machine)}</code>: "
+             f"<code>{_e(c.before)}</code> (before) and <code>{_e(c.after)}</code> (after); commanded angles agree "
+             f"within {_f(c.max_angle_difference_deg, '.4f')}°. No model enters these numbers.</p>",
+             _table(["", "RMS |d| [µm]", "max |d| [µm]"],
+                    [["before", _f(c.rms_before_um), _f(c.max_before_um)],
+                     ["after", _f(c.rms_after_um), _f(c.max_after_um)],
+                     ["improvement", _f(c.improvement * 100, ".1f") + " %", "—"]], num_cols=[1, 2])]
+    for when, dec in (("before", c.before_parts), ("after", c.after_parts)):
+        if dec is None:
+            continue
+        rows = [[_e(p.name), _f(p.rms_um), _f(p.max_um)] for p in dec.parts]
+        expl = "—" if dec.explained is None else f"{dec.explained:.0%}"
+        parts.append(f"<h4>What the {when} deviation is made of</h4>"
+                     + _table(["part", "RMS [µm]", "max [µm]"], rows, num_cols=[1, 2])
+                     + f"<p><small>The model explains {_e(expl)} of the mean square; noise σ "
+                       f"{_f(dec.sigma_um)} µm per component. {_e(' '.join(dec.notes))}</small></p>")
+    parts.append("".join(_img(f, base) for f in data.figures if f.key == "measured-compare"))
+    poses = [[_e(i), *(_f(a, ".2f") for a in ang), _f(b), _f(x)]
+             for i, (ang, b, x) in enumerate(zip(c.angles_deg, c.before_um, c.after_um, strict=True))]
+    parts.append("<details><summary>|d| per pose</summary>"
+                 + _table(["pose", *(f"{a} [deg]" for a in c.rotary_axes), "before [µm]", "after [µm]"], poses,
+                          num_cols=range(0, 3 + len(c.rotary_axes))) + "</details>")
+    return "\n".join(parts)
+
+
+def _history_html(data: ReportData, base: Path | None) -> str:
+    h = data.history
+    assert h is not None
+    runs = [[_e(r.id), _e(r.measured_at), f"<code>{_e(Path(r.file_name).name)}</code>", _e(r.method),
+             _e(", ".join(str(f.get("effect")) for f in r.effects) or "none"), _e(r.verdict or "—"), _f(r.rms_um)]
+            for r in h.runs]
+    parts = [f"<p>Machine <b>{_e(h.machine_id)}</b> in <code>{_e(h.database)}</code>.</p>",
+             _table(["run", "measured (UTC)", "file", "estimate", "effects", "verdict", "residual RMS [µm]"], runs,
+                    num_cols=[0, 6]),
+             "".join(_img(f, base) for f in data.figures if f.key == "trend")]
+    for comp in h.comparisons:
+        sig = [c for c in comp.changes if c.significant]
+        head = (f"run {comp.from_run} → {comp.to_run}: " + ("<b>changed</b>" if comp.significant else
+                                                           "no significant change")
+                + f" (joint p = {_f(comp.p_value, '.3g')})")
+        rows = [[_e(c.parameter), _f(c.change, "+.3f"), _f(c.std), _e(_u(c.unit)), _f(c.z, "+.2f"),
+                 "yes" if c.significant else ("not tested" if c.significant is None else "no")]
+                for c in comp.changes]
+        parts.append(f"<h4>{head}</h4>" + ("<p>" + _e(", ".join(c.parameter for c in sig)) + "</p>" if sig else "")
+                     + "<details><summary>every parameter</summary>"
+                     + _table(["parameter", "change", "std", "unit", "z", "significant"], rows, num_cols=[1, 2, 4])
+                     + "</details>")
+    if h.comparisons:
+        parts.append(f"<p><small>Test: {_e(h.comparisons[0].test)}, α = {_e(h.comparisons[0].alpha)}.</small></p>")
+    return "\n".join(parts)
 
 
 def _measurement_html(i: int, rep: MeasurementReport, base: Path | None) -> str:
@@ -432,6 +668,9 @@ def _measurement_html(i: int, rep: MeasurementReport, base: Path | None) -> str:
              f"<h2>{i + 1}. {_e(rep.path.name)} — <code>{_e(rep.machine)}</code></h2>"]
     for note in rep.notes:
         parts.append(f'<p class="note">{_e(note)}</p>')
+    if rep.check is not None:
+        parts += [f'<section data-section="conformance" id="{sid}-conformance"><h3>Conformance</h3>',
+                  _check_html(rep), "</section>"]
     parts += [f'<section data-section="summary" id="{sid}-summary"><h3>Machine and test</h3>',
               _summary_html(rep), "</section>",
               f'<section data-section="deviations" id="{sid}-deviations"><h3>Measured deviations</h3>',
@@ -479,7 +718,9 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
     base : Path, optional
         Figure paths are shown relative to it.
     """
-    nav = " ".join(f'<a href="#m{i + 1}">{_e(r.path.name)}</a>' for i, r in enumerate(data.measurements))
+    nav = " ".join([f'<a href="#m{i + 1}">{_e(r.path.name)}</a>' for i, r in enumerate(data.measurements)]
+                   + (['<a href="#compare">measured before/after</a>'] if data.comparison is not None else [])
+                   + (['<a href="#history">history</a>'] if data.history is not None else []))
     settings = "; ".join(f"{k}: {v}" for k, v in data.settings.items())
     parts = [
         "<!DOCTYPE html>",
@@ -488,11 +729,21 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
         "<title>pige_sym calibration report</title>",
         f"<style>{CSS}</style></head><body>",
         "<header><h1>Five-axis calibration report (R-test)</h1>",
-        f"<p>pige_sym {_e(__version__)} — {_e(data.created)} — {_e(settings)}"
+        f'<p class="meta">pige_sym {_e(__version__)} — {_e(data.created)}</p></header><main>',
+        '<section data-section="answer" id="answer">', _answer_html(data), "</section>",
+        f'<p class="meta">{_e(settings)}'
         + (f" — NC program <code>{_e(data.program)}</code>" if data.program is not None else "") + "</p>",
-        f"<nav>{nav}</nav></header><main>",
-        '<section data-section="overview" id="overview"><h2>Overview</h2>', _overview_html(data), "</section>",
+        f"<nav>{nav}</nav>",
     ]
+    if data.measurements:
+        parts += ['<section data-section="overview" id="overview"><h2>Overview</h2>', _overview_html(data),
+                  "</section>"]
+    if data.comparison is not None:
+        parts += ['<section data-section="measured-compare" id="compare"><h2>Measured before/after</h2>',
+                  _compare_html(data, base), "</section>"]
+    if data.history is not None:
+        parts += ['<section data-section="history" id="history"><h2>Machine history</h2>',
+                  _history_html(data, base), "</section>"]
     parts += [_measurement_html(i, rep, base) for i, rep in enumerate(data.measurements)]
     parts += [
         "</main><footer><p>PIGEs: position-independent geometric errors of the rotary axes (ISO 230-7), position "
