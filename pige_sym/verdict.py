@@ -352,6 +352,10 @@ def check(est: Estimates, tol: Tolerances, *, rule: str = "guard", k: float = DE
     CheckResult
         Items in the order of the limits (location PIGEs first).
     """
+    if rule not in RULES:
+        raise InputError(f"unknown decision rule {rule!r}: use {', '.join(RULES)}")
+    if not (math.isfinite(k) and k >= 0):
+        raise InputError(f"--k must be a finite number >= 0, got {k}")
     limits = tol.resolve(est.machine)
     items: list[CheckItem] = []
     skipped: dict[str, str] = {}

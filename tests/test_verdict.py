@@ -202,3 +202,10 @@ def test_cli_bad_input_is_status_2_with_file_and_field(tmp_path: Path, capsys: p
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("pige check: ") and field in err, err
     assert (str(target) if problem == "result-nan" else str(tol)) in err
+
+
+@pytest.mark.parametrize("k", ["-1", "nan"])
+def test_bad_coverage_factor_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str], k: str) -> None:
+    tol = _tol(tmp_path, {"format": FMT, "defaults": {"um": 10}})
+    assert main(["check", str(_run(tmp_path, 6)), "--tolerances", str(tol), "--k", k]) == 2
+    assert "--k" in capsys.readouterr().err
