@@ -247,3 +247,19 @@ def test_false_alarm_rate_of_pure_noise_pairs_is_at_most_one_percent() -> None:
         b = identify(simulate(AC, TRAJ, pige={**PIGE, "EX0C": PIGE["EX0C"] + 1.0}, noise_um=0.25,
                               seed=5001 + 2 * i).measurement)
         assert [c.parameter for c in compare_runs(a, b).changes if c.significant] == ["EX0C"]
+
+
+def test_runs_fitted_with_different_effects_are_noted() -> None:
+    from types import SimpleNamespace
+
+    a = identify(simulate(AC, TRAJ, pige=PIGE, noise_um=0.25, seed=51).measurement)
+    b = identify(simulate(AC, TRAJ, pige=PIGE, noise_um=0.25, seed=52).measurement)
+
+    def run(res: object, effects: list[dict[str, object]]) -> SimpleNamespace:
+        return SimpleNamespace(**{k: getattr(res, k) for k in ("parameters", "values", "covariance", "dof", "units")},
+                               effects=effects)
+
+    same = compare_runs(run(a, [{"effect": "angular_error_C"}]), run(b, [{"effect": "angular_error_C"}]))
+    other = compare_runs(run(a, []), run(b, [{"effect": "angular_error_C"}, {"effect": "outliers"}]))
+    assert same.notes == [] and compare_runs(a, b).notes == []
+    assert len(other.notes) == 1 and "none vs angular_error_C" in other.notes[0]

@@ -209,3 +209,22 @@ def test_bad_coverage_factor_is_refused(tmp_path: Path, capsys: pytest.CaptureFi
     tol = _tol(tmp_path, {"format": FMT, "defaults": {"um": 10}})
     assert main(["check", str(_run(tmp_path, 6)), "--tolerances", str(tol), "--k", k]) == 2
     assert "--k" in capsys.readouterr().err
+
+
+def test_effect_limits_from_a_saved_diagnosis(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from pige_sym.effects import parse_effect
+
+    eff = [parse_effect("angular_error_C:harmonic=2,cos_urad=12,sin_urad=-8", ("A", "C"))]
+    sim = simulate(AC, cone_frustum(AC, points=30), pige=random_pige(AC, 2), effects=eff, noise_um=0.25, seed=2)
+    csv, _ = sim.write(tmp_path / "run.csv")
+    assert main(["diagnose", str(csv), "--json"]) == 0
+    saved = tmp_path / "diagnosis.json"
+    saved.write_text(capsys.readouterr().out)
+    tol = _tol(tmp_path, {"format": FMT, "limits": {"angular_error_C.cos_urad": 5, "angular_error_C.sin_urad": 50,
+                                                    "backlash_C.b_urad": 5}})
+    for target in (saved, csv):  # the saved JSON and the measurement itself agree
+        assert main(["check", str(target), "--tolerances", str(tol), "--json"]) == 1
+        out = json.loads(capsys.readouterr().out)
+        status = {i["name"]: i["status"] for i in out["items"]}
+        assert status == {"angular_error_C.cos_urad": "fail", "angular_error_C.sin_urad": "pass"}
+        assert list(out["not_assessed"]) == ["backlash_C.b_urad"] and out["method"] == "diagnosis"

@@ -54,6 +54,8 @@ def _show_text(runs: list[Any], comparisons: list[Any]) -> None:
         head = "DIFFERENT" if c.significant else "no significant change"
         print(f"\nrun {c.from_run} -> {c.to_run}: {head} (joint p = {_num(c.p_value, '.3g')}, T² = "
               f"{_num(c.statistic, '.1f')}, rank {c.rank}, α = {c.alpha:g})")
+        for note in c.notes:
+            print(f"  note: {note}")
         for ch in c.changes:
             mark = "SIGNIFICANT" if ch.significant else ("not tested" if ch.significant is None else "")
             print(f"  {ch.parameter:28s} {_num(ch.change, '+.3f'):>9s} ± {_num(ch.std):>6s} {ch.unit:5s} "

@@ -73,6 +73,7 @@ class Comparison:
     p_value: float | None
     significant: bool
     changes: list[Change] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         from pige_sym.files import json_ready
@@ -94,6 +95,14 @@ def _joint(d: np.ndarray, cov: np.ndarray) -> tuple[float, int]:
     keep = w > 1e-10 * max(float(w.max()), 1e-300)
     proj = v[:, keep].T @ (d / s)
     return float((proj**2 / w[keep]).sum()), int(keep.sum())
+
+
+def _effect_ids(run: Any) -> list[str] | None:
+    """Accepted effect ids of a stored run (None for a bare estimate)."""
+    effects = getattr(run, "effects", None)
+    if effects is None:
+        return None
+    return sorted(str(f.get("effect")) for f in effects if f.get("effect") != "outliers")
 
 
 def compare_runs(a: Estimate, b: Estimate, *, alpha: float = ALPHA, from_run: int | None = None,
@@ -125,6 +134,10 @@ def compare_runs(a: Estimate, b: Estimate, *, alpha: float = ALPHA, from_run: in
         p_joint = float(stats.f.sf(stat / max(rank, 1), max(rank, 1), max(min(nu), 1)))
     joint = p_joint is not None and p_joint <= alpha
     out = Comparison(from_run, to_run, TEST, alpha, len(tested), rank, stat, nu, p_joint, joint)
+    effects_a, effects_b = _effect_ids(a), _effect_ids(b)
+    if effects_a is not None and effects_b is not None and effects_a != effects_b:
+        out.notes.append(f"the runs were fitted with different effects ({', '.join(effects_a) or 'none'} vs "
+                         f"{', '.join(effects_b) or 'none'}): a PIGE change may partly reflect the model")
     m = max(len(tested), 1)
     for p in names:
         unit = a.units.get(p) or b.units.get(p, "")

@@ -653,7 +653,9 @@ def _history_html(data: ReportData, base: Path | None) -> str:
         rows = [[_e(c.parameter), _f(c.change, "+.3f"), _f(c.std), _e(_u(c.unit)), _f(c.z, "+.2f"),
                  "yes" if c.significant else ("not tested" if c.significant is None else "no")]
                 for c in comp.changes]
-        parts.append(f"<h4>{head}</h4>" + ("<p>" + _e(", ".join(c.parameter for c in sig)) + "</p>" if sig else "")
+        notes = "".join(f'<p class="note">{_e(n)}</p>' for n in comp.notes)
+        parts.append(f"<h4>{head}</h4>" + notes
+                     + ("<p>" + _e(", ".join(c.parameter for c in sig)) + "</p>" if sig else "")
                      + "<details><summary>every parameter</summary>"
                      + _table(["parameter", "change", "std", "unit", "z", "significant"], rows, num_cols=[1, 2, 4])
                      + "</details>")
