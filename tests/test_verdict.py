@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import REPO
@@ -228,3 +228,29 @@ def test_effect_limits_from_a_saved_diagnosis(tmp_path: Path, capsys: pytest.Cap
         status = {i["name"]: i["status"] for i in out["items"]}
         assert status == {"angular_error_C.cos_urad": "fail", "angular_error_C.sin_urad": "pass"}
         assert list(out["not_assessed"]) == ["backlash_C.b_urad"] and out["method"] == "diagnosis"
+
+
+_values = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-5, 50), st.text(max_size=3),
+                    st.booleans(), st.none())
+
+
+@settings(deadline=None)  # the first example loads the kernels
+@given(limits=st.dictionaries(st.sampled_from(["EX0C", "EY0A", "EB0C", "EXOC"]), _values, max_size=4),
+       defaults=st.dictionaries(st.sampled_from(["um", "urad", "mm"]), _values, max_size=2))
+def test_tolerance_parser_accepts_exactly_positive_finite_numbers(limits: dict[str, object],
+                                                                   defaults: dict[str, object]) -> None:
+    def good(v: object) -> bool:
+        return (not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and v > 0)
+
+    data = {"format": FMT, "limits": limits, "defaults": defaults}
+    valid = all(good(v) for v in limits.values()) and all(good(v) and u != "mm" for u, v in defaults.items()) \
+        and bool(limits or defaults)
+    try:
+        tol = tolerances_from_dict(data, "t.json")
+    except FileFormatError as exc:
+        assert not valid and str(exc).startswith("t.json: ")
+    else:
+        assert valid
+        assert tol.limits == {k: float(v) for k, v in limits.items()}  # type: ignore[arg-type]
+        resolved = tol.resolve(AC)
+        assert all(math.isfinite(x) and x > 0 for x in resolved.values())
