@@ -304,6 +304,8 @@ def test_model_predicted_never_claims_its_own_leftover(tmp_path: Path) -> None:
     expected = float(np.hypot(row.predicted_after_um, unexplained_rms_um(rep)))
     assert imp.after_um == pytest.approx(expected) and imp.after_um > 5 * row.rmse_after_um
     assert "100 %" not in text and f"{row.reduction * 100:.1f} %" not in text
+    overview = re.search(r'data-section="overview".*?</section>', text, re.DOTALL)
+    assert overview and f"→ ≈ {imp.after_um:.3g}" in overview.group(0) and "model-predicted" in overview.group(0)
     assert 'data-verdict="none"' in _answer(text)  # no tolerances: not judged, never a made-up pass
 
 

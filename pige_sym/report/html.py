@@ -694,19 +694,20 @@ def _measurement_html(i: int, rep: MeasurementReport, base: Path | None) -> str:
 
 
 def _overview_html(data: ReportData) -> str:
-    head = ["#", "file", "machine", "points", "rank", "residual RMS [µm]", "diagnosis", "RMSE before → after [µm]"]
+    head = ["#", "file", "machine", "points", "rank", "residual RMS [µm]", "diagnosis", "RMSE before → after [µm]",
+            "basis"]
     rows = []
     for i, rep in enumerate(data.measurements):
         gn = rep.identification["gauss-newton"]
         findings = findings_text(rep)
-        comp = rep.compensation[0]
+        imp = improvement(rep, data)
+        arrow = "→ ≈" if imp.basis == "model" else "→"
         rank = _e(f"{gn.rank}/{len(gn.parameters)}")
         if gn.rank < len(gn.parameters):
             rank = f'<span class="unid">{rank}</span>'
         rows.append([f'<a href="#m{i + 1}">{i + 1}</a>', f"<code>{_e(rep.path.name)}</code>",
                      f"<code>{_e(rep.machine)}</code>", _e(rep.measurement.n_rows), rank, _f(gn.rms_um, ".4f"),
-                     _e(findings), f"{_f(comp.rmse_before_um)} → {_f(comp.rmse_after_um)}"
-                     + (" (model)" if rep.compensation_basis == "model" else "")])
+                     _e(findings), f"{_f(imp.before_um)} {arrow} {_f(imp.after_um, '.3g')}", _e(imp.label)])
     return _table(head, rows, num_cols=[3, 5])
 
 
@@ -733,8 +734,9 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
         "<header><h1>Five-axis calibration report (R-test)</h1>",
         f'<p class="meta">pige_sym {_e(__version__)} — {_e(data.created)}</p></header><main>',
         '<section data-section="answer" id="answer">', _answer_html(data), "</section>",
-        f'<p class="meta">{_e(settings)}'
-        + (f" — NC program <code>{_e(data.program)}</code>" if data.program is not None else "") + "</p>",
+        (f'<p class="meta">{_e(settings)}'
+         + (f" — NC program <code>{_e(data.program)}</code>" if data.program is not None else "") + "</p>"
+         if data.measurements else ""),
         f"<nav>{nav}</nav>",
     ]
     if data.measurements:
