@@ -244,7 +244,7 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str], machine_id: str, *,
     chk = check(estimates_from_result(result, str(p)), tol, rule=rule, k=k) if tol is not None else None
     now = datetime.now(timezone.utc).isoformat(timespec="seconds")
     values = {
-        "machine_id": machine_id, "file_sha256": sha, "file_name": str(p), "measured_at": measured,
+        "machine_id": machine_id, "file_sha256": sha, "file_name": str(p.resolve()), "measured_at": measured,
         "time_source": source, "added_at": now, "machine_code": code, "method": method,
         "parameters": _dumps(final.parameters), "units": _dumps(final.units), "values_json": _dumps(final.values),
         "std_json": _dumps(final.std), "covariance_json": _dumps(final.covariance), "dof": int(final.dof),
