@@ -73,8 +73,8 @@ body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-se
 background:#f6f7f9;line-height:1.4}
 header,main,footer{max-width:1150px;margin:0 auto;padding:0 18px;box-sizing:border-box}
 table{max-width:100%}
-td,th{overflow-wrap:anywhere}
-code{overflow-wrap:anywhere}
+td,th{overflow-wrap:break-word}
+code{overflow-wrap:break-word}
 .meta{margin:.2em 0;color:#4a5563;font-size:.85em}
 .answer{display:flex;flex-wrap:wrap;gap:6px 18px;background:#fff;border:2px solid #2b6cb0;border-radius:6px;
 padding:8px 14px;margin:8px 0}

@@ -6,9 +6,9 @@ What the first screen says, per measurement (rendered by :mod:`~pige_sym.report.
 - the PIGEs actually used for compensation: the primary estimate (by default the diagnosis'
   final fit, i.e. the PIGEs estimated jointly with the accepted effects);
 - the main finding in one sentence: the effects found beyond the PIGEs (or that there are
-  none) and the largest PIGE, judged by its effect at the ball (value × the RMS sensitivity of
-  the ball to it over the trajectory, the identification's column scale) or, with tolerances,
-  by its share of the limit;
+  none) and the PIGE that matters most: with tolerances the one closest to its limit, else the
+  one with the largest effect at the ball (value × the RMS sensitivity of the ball to it over
+  the trajectory, the identification's column scale);
 - the improvement, labelled with its basis: *measured* (``--compare``), *simulated on a known
   truth* (truth sidecar) or *model-predicted*.  A model-predicted "after" is never shown as the
   compensation's own near-zero leftover: the expected result is the identification
@@ -93,8 +93,9 @@ def main_finding(rep: MeasurementReport) -> str:
     else:
         scale = {k: 1.0 / v for k, v in sobol_half_ranges(rep.measurement, 1.0).items()}
         worst = max(rows, key=lambda r: abs(r.value or 0.0) * scale.get(r.name, 1.0))
-        tail = f", about {abs(worst.value or 0.0) * scale.get(worst.name, 1.0):.2g} µm at the ball"
-    return (f"{clause}; the largest PIGE is {worst.name} = {worst.value:.3g} ± {worst.std or float('nan'):.2g} "
+        tail = f", about {abs(worst.value or 0.0) * scale.get(worst.name, 1.0):.2g} µm RMS at the ball"
+    what = "closest to its limit" if any(r.limit for r in rows) else "with the largest effect"
+    return (f"{clause}; the PIGE {what} is {worst.name} = {worst.value:.3g} ± {worst.std or float('nan'):.2g} "
             f"{worst.unit}{tail}.")
 
 
