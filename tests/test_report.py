@@ -43,7 +43,7 @@ def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[ReportData, Path, s
     """One report of two files (one with a truth sidecar, one without, with a hostile name and metadata),
     with both studies and an NC program."""
     root = tmp_path_factory.mktemp("report")
-    first = _simulate(root / "ac_cone.csv", 5)
+    first = _simulate(root / ("ac_cone_" + "a_long_file_name_without_any_space_" * 4 + ".csv"), 5)  # wraps at 1000 px
     second = _simulate(root / f"{WEIRD}.csv", 6, truth=False, source=HOSTILE)
     kern = load_kernels(AC)
     tr = figure_eight(AC)

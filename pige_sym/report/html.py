@@ -75,6 +75,7 @@ header,main,footer{max-width:1150px;margin:0 auto;padding:0 18px;box-sizing:bord
 table{max-width:100%}
 td,th{overflow-wrap:break-word}
 code{overflow-wrap:break-word}
+.kv td,.kv td code,code.path,nav a,h1,h2,h3,h4,figcaption,span.file{overflow-wrap:anywhere}
 .meta{margin:.2em 0;color:#4a5563;font-size:.85em}
 .answer{display:flex;flex-wrap:wrap;gap:6px 18px;background:#fff;border:2px solid #2b6cb0;border-radius:6px;
 padding:8px 14px;margin:8px 0}
@@ -161,7 +162,7 @@ def _table(head: Sequence[str], rows: Iterable[Sequence[str]], *, row_classes: S
 
 def _kv(items: Iterable[tuple[str, str]]) -> str:
     """Two-column key/value table; keys escaped, values already HTML."""
-    return "<table>" + "".join(f"<tr><th>{_e(k)}</th><td>{v}</td></tr>" for k, v in items) + "</table>"
+    return '<table class="kv">' + "".join(f"<tr><th>{_e(k)}</th><td>{v}</td></tr>" for k, v in items) + "</table>"
 
 
 def _img(fig: ReportFigure, base: Path | None) -> str:
@@ -638,7 +639,7 @@ def _compare_html(data: ReportData, base: Path | None) -> str:
 def _history_html(data: ReportData, base: Path | None) -> str:
     h = data.history
     assert h is not None
-    runs = [[_e(r.id), _e(r.measured_at), f"<code>{_e(Path(r.file_name).name)}</code>", _e(r.method),
+    runs = [[_e(r.id), _e(r.measured_at), f'<code class="path">{_e(Path(r.file_name).name)}</code>', _e(r.method),
              _e(", ".join(str(f.get("effect")) for f in r.effects) or "none"), _e(r.verdict or "—"), _f(r.rms_um)]
             for r in h.runs]
     parts = [f"<p>Machine <b>{_e(h.machine_id)}</b> in <code>{_e(h.database)}</code>.</p>",
@@ -705,7 +706,7 @@ def _overview_html(data: ReportData) -> str:
         rank = _e(f"{gn.rank}/{len(gn.parameters)}")
         if gn.rank < len(gn.parameters):
             rank = f'<span class="unid">{rank}</span>'
-        rows.append([f'<a href="#m{i + 1}">{i + 1}</a>', f"<code>{_e(rep.path.name)}</code>",
+        rows.append([f'<a href="#m{i + 1}">{i + 1}</a>', f'<code class="path">{_e(rep.path.name)}</code>',
                      f"<code>{_e(rep.machine)}</code>", _e(rep.measurement.n_rows), rank, _f(gn.rms_um, ".4f"),
                      _e(findings), f"{_f(imp.before_um)} {arrow} {_f(imp.after_um, '.3g')}", _e(imp.label)])
     return _table(head, rows, num_cols=[3, 5])
