@@ -376,3 +376,10 @@ def test_fits_1000_px_and_the_verdict_is_on_the_first_screen(built: tuple[Report
     assert check["width"] == 1000 and check["height"] >= 600, check  # a 1000 px wide, laptop-high viewport
     assert check["scroll"] <= 1000 and check["wide"] == 0, check  # no horizontal overflow
     assert 0 < check["verdict"] <= check["height"], check  # the verdict is on the first screen
+
+
+def test_cli_methods_match_the_report() -> None:
+    from pige_sym.cli.report import METHODS
+    from pige_sym.report import PRIMARY_METHODS
+
+    assert sorted(METHODS) == sorted(PRIMARY_METHODS)
