@@ -12,11 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import REPO
 from pige_sym.cli.main import main
 from pige_sym.compensation import compensation_study
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.program import make_rtest_program
-from pige_sym.report.build import ReportData, build_report, gather_report, write_report
+from pige_sym.report import ReportData, build_report, gather_report, write_report
 from pige_sym.simulator import random_pige, simulate
 from pige_sym.trajectories import cone_frustum, figure_eight
 
@@ -24,6 +25,7 @@ AC = "wC'A'bXYZ(C1)t"
 WEIRD = 'odd <b>&"name'
 HOSTILE = "<img src=x onerror=alert(1)> & <script>alert(2)</script>"
 PNG = b"\x89PNG\r\n\x1a\n"
+TOLERANCES = REPO / "examples" / "tolerances.json"
 
 
 def _simulate(path: Path, seed: int, *, truth: bool = True, source: str | None = None) -> Path:
@@ -41,15 +43,19 @@ def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[ReportData, Path, s
     """One report of two files (one with a truth sidecar, one without, with a hostile name and metadata),
     with both studies and an NC program."""
     root = tmp_path_factory.mktemp("report")
-    first = _simulate(root / "ac_cone.csv", 5)
+    first = _simulate(root / ("ac_cone_" + "a_long_file_name_without_any_space_" * 4 + ".csv"), 5)  # wraps at 1000 px
     second = _simulate(root / f"{WEIRD}.csv", 6, truth=False, source=HOSTILE)
     kern = load_kernels(AC)
     tr = figure_eight(AC)
     program = root / "fig8.mpf"
     program.write_text(make_rtest_program(tr.angles_deg, kern.linear_commands(tr.angles_deg, [120.0, 0.0, 80.0]),
                                           kern.ROTARY_AXES, title="figure eight"))
+    db = f"sqlite:///{root / 'history.sqlite'}"
+    for seed in (31, 32, 33):
+        assert main(["history", "add", str(_simulate(root / f"h{seed}.csv", seed)), "--machine-id", "M-1",
+                     "--db", db, "--date", f"2026-0{seed - 30}-01", "--tolerances", str(TOLERANCES)]) == 0
     data = gather_report([first, second], studies=("projection", "sobol"), program=program, presets=6,
-                         sobol_samples=256)
+                         sobol_samples=256, tolerances=TOLERANCES, compare=(first, second), history="M-1", db=db)
     path = write_report(data, root / "out")
     return data, path, path.read_text(encoding="utf-8")
 
@@ -61,7 +67,8 @@ def test_report_is_self_contained(built: tuple[ReportData, Path, str]) -> None:
     assert "<script" not in text.lower() and "<link" not in text.lower() and "@import" not in text
     srcs = re.findall(r'<img src="([^"]*)"', text)
     pngs = sorted(path.parent.rglob("*.png"))
-    assert len(srcs) == len(pngs) == sum(len(m.figures) for m in data.measurements) > 10
+    assert len(srcs) == len(pngs) == sum(len(m.figures) for m in data.measurements) + len(data.figures) > 10
+    assert len(set(srcs)) == len(srcs)  # no figure twice
     for src in srcs:
         assert src.startswith("data:image/png;base64,")
         assert base64.b64decode(src.split(",", 1)[1], validate=True).startswith(PNG)
@@ -70,11 +77,13 @@ def test_report_is_self_contained(built: tuple[ReportData, Path, str]) -> None:
 def test_every_section_is_there(built: tuple[ReportData, Path, str]) -> None:
     _, _, text = built
     sections = re.findall(r'data-section="([^"]+)"', text)
-    assert sections[0] == "overview"
-    expected = ["summary", "deviations", "identification", "diagnosis", "compensation", "projection-study", "sobol"]
-    assert sections[1:] == expected * 2
+    assert sections[:4] == ["answer", "overview", "measured-compare", "history"]
+    expected = ["conformance", "summary", "deviations", "identification", "diagnosis", "compensation",
+                "projection-study", "sobol"]
+    assert sections[4:] == expected * 2
     figures = re.findall(r'data-figure="([^"]+)"', text)
-    for key in ("deviation", "polar", "identification", "residual", "compensation", "sobol"):
+    for key in ("deviation", "polar", "identification", "residual", "compensation", "sobol", "measured-compare",
+                "trend"):
         assert key in figures
     for words in ("Stages of the double-differential scheme", "Unidentifiable combinations", "Rejected candidates",
                   "observability indices", "condition number", "Verdict", "held-out RMS"):
@@ -123,17 +132,18 @@ def test_program_before_after_matches_the_compensation_study(built: tuple[Report
 
 def test_unidentifiable_parameters_are_flagged(tmp_path: Path) -> None:
     csv = _simulate(tmp_path / "run.csv", 7)
-    out = build_report([csv], tmp_path / "out", projection="x")
+    out = build_report([csv], tmp_path / "out", projection="x", method="gauss-newton")
     text = out.read_text(encoding="utf-8")
     assert "NOT IDENTIFIABLE" in text and "Not compensated (no value)" in text
     flagged = 0
     for attrs, row in re.findall(r"<tr([^>]*)>(.*?)</tr>", text, re.DOTALL):
         cells = re.findall(r"<td[^>]*>(.*?)</td>", row, re.DOTALL)
-        if len(cells) > 6 and cells[0].startswith("<b>E"):  # the identification table
+        if len(cells) > 6 and cells[0].startswith("<b>E"):  # the identification tables
             if "NOT IDENTIFIABLE" in cells[6]:
                 flagged += 1
                 assert 'class="unid"' in attrs
-                assert cells[2] == "not identifiable" and cells[3] == "—" and cells[4] == "—"
+                # Gauss–Newton table: "not identifiable"; double-differential table: "no value"
+                assert cells[2] in ("not identifiable", "no value") and cells[3] == "—" and cells[4] == "—"
             else:
                 assert re.fullmatch(r"-?\d+\.\d+", cells[2]), cells[2]
     assert flagged >= 2
@@ -218,10 +228,10 @@ def test_renders_in_headless_chromium(built: tuple[ReportData, Path, str], tmp_p
     found = re.search(r'<pre id="pige-check">([^<]*)</pre>', run.stdout)
     assert found, run.stderr[-2000:]
     check = dict(kv.split("=", 1) for kv in found.group(1).split())
-    assert int(check["images"]) == sum(len(m.figures) for m in data.measurements)
+    assert int(check["images"]) == sum(len(m.figures) for m in data.measurements) + len(data.figures)
     assert check["broken"] == "0"
     sections = check["sections"].split(",")
-    assert "overview:1" in sections and sections.count("identification:1") == 2 and sections.count("sobol:1") == 2
+    assert "answer:1" in sections and sections.count("identification:1") == 2 and sections.count("sobol:1") == 2
 
     shot = tmp_path / "shot.png"
     _chromium(tmp_path, f"--screenshot={shot}", "--window-size=1280,2400", path.as_uri())
@@ -236,7 +246,7 @@ def test_renders_in_headless_chromium(built: tuple[ReportData, Path, str], tmp_p
 
 def test_a_failing_diagnosis_is_reported_not_fatal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from pige_sym.identification import IdentificationError
-    from pige_sym.report import build as report
+    from pige_sym.report import gather as report
 
     def boom(*args: object, **kwargs: object) -> None:
         raise IdentificationError("Gauss–Newton did not converge")
@@ -249,3 +259,127 @@ def test_a_failing_diagnosis_is_reported_not_fatal(tmp_path: Path, monkeypatch: 
     text = write_report(data, tmp_path / "out").read_text(encoding="utf-8")
     assert "The diagnosis failed on these data: Gauss–Newton did not converge" in text
     assert 'data-section="compensation"' in text and 'data-figure="residual"' not in text
+
+
+def _answer(text: str) -> str:
+    found = re.search(r'<section data-section="answer" id="answer">(.*?)</section>', text, re.DOTALL)
+    assert found
+    return found.group(1)
+
+
+def test_the_answer_leads(built: tuple[ReportData, Path, str]) -> None:
+    data, _, text = built
+    answer = _answer(text)
+    assert text.index('data-section="answer"') < text.index('data-section="overview"')
+    blocks = answer.split('<div class="answer"')[1:]
+    assert len(blocks) == 2
+    for rep, block in zip(data.measurements, blocks, strict=True):
+        assert rep.check is not None and f'data-verdict="{rep.check.verdict}"' in block
+        for label in ("machine", "measured", "verdict", "main finding", "improvement"):
+            assert f"<th>{label}" in block
+        # the PIGEs shown are those compensated: the primary (diagnosis final) estimate
+        assert rep.primary_method == "diagnosis" and rep.diagnosis is not None
+        final = rep.diagnosis.final
+        shown = dict(re.findall(r"<td><b>(E\w+)</b></td><td[^>]*>(-?\d+\.\d+) ±", block))
+        assert len(shown) == 8
+        for name, value in shown.items():
+            assert float(value) == pytest.approx(final.value(name), abs=6e-4)
+    # a measured before/after is labelled measured, with the measured numbers
+    comp = data.comparison
+    assert comp is not None and 'class="basis measured"' in answer
+    assert f"{comp.rms_before_um:.3g} → {comp.rms_after_um:.3g} µm" in answer
+
+
+def test_model_predicted_never_claims_its_own_leftover(tmp_path: Path) -> None:
+    from pige_sym.report.lead import improvement, unexplained_rms_um
+
+    csv = _simulate(tmp_path / "run.csv", 12, truth=False)
+    data = gather_report([csv])
+    text = write_report(data, tmp_path / "out").read_text(encoding="utf-8")
+    (rep,) = data.measurements
+    row = rep.compensation[0]
+    assert row.rmse_after_um < 0.05 * row.rmse_before_um  # the algorithm on its own model: nearly nothing left
+    imp = improvement(rep, data)
+    assert imp.basis == "model" and 'class="basis model"' in _answer(text)
+    expected = float(np.hypot(row.predicted_after_um, unexplained_rms_um(rep)))
+    assert imp.after_um == pytest.approx(expected) and imp.after_um > 5 * row.rmse_after_um
+    assert "100 %" not in text and f"{row.reduction * 100:.1f} %" not in text
+    overview = re.search(r'data-section="overview".*?</section>', text, re.DOTALL)
+    assert overview and f"→ ≈ {imp.after_um:.3g}" in overview.group(0) and "model-predicted" in overview.group(0)
+    assert 'data-verdict="none"' in _answer(text)  # no tolerances: not judged, never a made-up pass
+
+
+def test_rejected_candidates_are_one_sentence_each(built: tuple[ReportData, Path, str]) -> None:
+    data, _, text = built
+    d = data.measurements[0].diagnosis
+    assert d is not None and d.rejected
+    lists = re.findall(r'<ul class="rejected">(.*?)</ul>', text, re.DOTALL)
+    items = re.findall(r"<li>(.*?)</li>", lists[0], re.DOTALL)
+    assert len(items) == len(d.rejected)
+    for item in items:
+        sentence, _, folded = item.partition("<details>")
+        assert sentence.strip().endswith(".") and "ΔBIC" not in sentence and "ΔBIC" in folded
+
+
+def test_sobol_parameters_are_scaled(built: tuple[ReportData, Path, str]) -> None:
+    data, _, _ = built
+    rep = data.measurements[0]
+    kern = load_kernels(AC)
+    m = rep.measurement
+    jac = kern.jacobian(m.angles_deg, None, m.ball_mm, None, None)[1:, :, :8]
+    assert rep.sobol is not None and list(rep.sobol_ranges) == list(kern.LOCATION_PARAMETERS)
+    for j, name in enumerate(kern.LOCATION_PARAMETERS):
+        effect = rep.sobol_ranges[name] * np.sqrt((jac[:, :, j] ** 2).sum(axis=1).mean())
+        assert effect == pytest.approx(15.0)
+    units = {kern.UNITS[n] for n in kern.LOCATION_PARAMETERS}
+    assert units == {"um", "urad"}  # both kinds, on one effect scale
+
+
+def test_history_only_report(built: tuple[ReportData, Path, str], tmp_path: Path,
+                             capsys: pytest.CaptureFixture[str]) -> None:
+    _, path, _ = built
+    db = f"sqlite:///{path.parent.parent / 'history.sqlite'}"
+    assert main(["report", "--history", "M-1", "--db", db, "--out", str(tmp_path / "h")]) == 0
+    text = (tmp_path / "h" / "report.html").read_text(encoding="utf-8")
+    answer = _answer(text)
+    assert "M-1" in answer and "what changed" in answer and "data-verdict=" in answer
+    assert 'data-figure="trend"' in text and 'data-section="overview"' not in text
+    assert "3 runs" in capsys.readouterr().out
+    assert main(["report", "--out", str(tmp_path / "none")]) == 2
+
+
+CHECK_LAYOUT = """<script>
+window.addEventListener('load', function () {
+  var w = document.documentElement.clientWidth;
+  var wide = Array.from(document.querySelectorAll('body *')).filter(function (e) {
+    return e.getBoundingClientRect().right > w + 1; }).map(function (e) { return e.tagName; });
+  var v = document.querySelector('[data-verdict]');
+  var d = document.createElement('pre');
+  d.id = 'pige-layout';
+  d.textContent = 'width=' + w + ' scroll=' + document.documentElement.scrollWidth + ' wide=' + wide.length +
+    ' verdict=' + (v ? Math.round(v.getBoundingClientRect().bottom) : -1) + ' height=' + window.innerHeight;
+  document.body.appendChild(d);
+});
+</script>"""
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt-get install chromium)")
+def test_fits_1000_px_and_the_verdict_is_on_the_first_screen(built: tuple[ReportData, Path, str],
+                                                              tmp_path: Path) -> None:
+    _, _, text = built
+    probe = tmp_path / "layout.html"
+    probe.write_text(text.replace("</body>", CHECK_LAYOUT + "</body>"), encoding="utf-8")
+    run = _chromium(tmp_path, "--window-size=1000,800", "--dump-dom", probe.as_uri())
+    found = re.search(r'<pre id="pige-layout">([^<]*)</pre>', run.stdout)
+    assert found, run.stderr[-2000:]
+    check = {k: int(v) for k, v in (kv.split("=", 1) for kv in found.group(1).split())}
+    assert check["width"] == 1000 and check["height"] >= 600, check  # a 1000 px wide, laptop-high viewport
+    assert check["scroll"] <= 1000 and check["wide"] == 0, check  # no horizontal overflow
+    assert 0 < check["verdict"] <= check["height"], check  # the verdict is on the first screen
+
+
+def test_cli_methods_match_the_report() -> None:
+    from pige_sym.cli.report import METHODS
+    from pige_sym.report import PRIMARY_METHODS
+
+    assert sorted(METHODS) == sorted(PRIMARY_METHODS)

@@ -27,24 +27,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from pige_sym.acquisition.engine import acquire
-from pige_sym.acquisition.virtual_device import start_virtual_device
-from pige_sym.compensation import compensate_program, format_controller, load_parameters
-from pige_sym.diagnosis import diagnose
-from pige_sym.identification import format_result, identify
-from pige_sym.io import read_measurement
-from pige_sym.kernels import DEFAULT_MACHINE, load_kernels
-from pige_sym.nc.program import make_rtest_program
-from pige_sym.nc.rtest_program import load_test_program
-from pige_sym.report.build import gather_report, write_report
-from pige_sym.simulator import random_pige
+from pige_sym.constants import DEFAULT_MACHINE
 
 DEFAULT_EFFECT = "angular_error_C:harmonic=2,cos_urad=12,sin_urad=-8"
 
@@ -56,6 +45,8 @@ def _stage(n: int, text: str) -> None:
 def _truth_sidecar(device_truth: dict[str, Any], machine: str, pige: dict[str, float], effect: str,
                    ball: list[float]) -> dict[str, Any]:
     """The device truth in the simulator's sidecar layout (what ``pige report`` reads), device fields kept."""
+    from pige_sym.kernels import load_kernels
+
     kern = load_kernels(machine)
     return {
         **device_truth,
@@ -68,6 +59,18 @@ def _truth_sidecar(device_truth: dict[str, Any], machine: str, pige: dict[str, f
 
 
 def _run(args: argparse.Namespace) -> int:
+    from pige_sym.acquisition.engine import acquire
+    from pige_sym.acquisition.virtual_device import start_virtual_device
+    from pige_sym.compensation import compensate_program, format_controller, load_parameters
+    from pige_sym.diagnosis import diagnose
+    from pige_sym.identification import format_result, identify
+    from pige_sym.io import read_measurement
+    from pige_sym.kernels import load_kernels
+    from pige_sym.nc.program import make_rtest_program
+    from pige_sym.nc.rtest_program import load_test_program
+    from pige_sym.report import gather_report, write_report
+    from pige_sym.simulator import random_pige
+
     started = time.perf_counter()
     progress = not args.quiet and sys.stderr.isatty()
     out = Path(args.out)
@@ -162,7 +165,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _num(x: float | None) -> str:
-    return "—" if x is None or not np.isfinite(x) else f"{x:.3f}"
+    return "—" if x is None or not math.isfinite(x) else f"{x:.3f}"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -6,13 +6,18 @@ import argparse
 import json
 import sys
 
-from pige_sym.report.build import PRIMARY_METHODS, findings_text, gather_report, write_report
+#: estimates a report can compensate with (pige_sym.report.PRIMARY_METHODS, kept here so --help stays light)
+METHODS = ("diagnosis", "gauss-newton", "double-differential")
 
 
 def _run(args: argparse.Namespace) -> int:
+    from pige_sym.report import findings_text, gather_report, write_report
+
     data = gather_report(args.files, studies=args.study or "", program=args.program, method=args.method,
                          projection=args.projection, with_zero=args.with_zero, presets=args.presets,
-                         sobol_samples=args.samples, seed=args.seed, progress=not args.json and sys.stderr.isatty())
+                         sobol_samples=args.samples, seed=args.seed, progress=not args.json and sys.stderr.isatty(),
+                         tolerances=args.tolerances, rule=args.rule, k=args.k,
+                         compare=tuple(args.compare) if args.compare else None, history=args.history, db=args.db)
     path = write_report(data, args.out)
     if args.json:
         print(json.dumps(data.to_dict(), indent=1))
@@ -21,9 +26,19 @@ def _run(args: argparse.Namespace) -> int:
         gn = rep.identification["gauss-newton"]
         found = findings_text(rep)
         comp = rep.compensation[0]
-        print(f"{rep.path}: rank {gn.rank}/{len(gn.parameters)}, residual RMS {gn.rms_um:.3f} um; {found}; "
-              f"RMSE {comp.rmse_before_um:.3f} -> {comp.rmse_after_um:.3f} um"
-              f"{' (model-predicted)' if rep.compensation_basis == 'model' else ''}")
+        verdict = f"verdict {rep.check.verdict}; " if rep.check is not None else ""
+        if rep.compensation_basis == "model":
+            before_after = f"RMSE {comp.rmse_before_um:.3f} um (model-predicted; measure after compensating)"
+        else:
+            before_after = f"RMSE {comp.rmse_before_um:.3f} -> {comp.rmse_after_um:.3f} um (simulated on the truth)"
+        print(f"{rep.path}: {verdict}rank {gn.rank}/{len(gn.parameters)}, residual RMS {gn.rms_um:.3f} um; "
+              f"{found}; {before_after}")
+    if data.comparison is not None:
+        c = data.comparison
+        print(f"measured before/after: RMS {c.rms_before_um:.3f} -> {c.rms_after_um:.3f} um ({c.improvement:.1%} less)")
+    if data.history is not None:
+        n_sig = sum(ch.significant is True for comp in data.history.comparisons for ch in comp.changes)
+        print(f"history of {data.history.machine_id}: {len(data.history.runs)} runs, {n_sig} significant change(s)")
     print(f"wrote {path}")
     return 0
 
@@ -37,22 +52,33 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "DIR/report.html: one self-contained page (plots embedded as PNG, no external resources); the PNGs\n"
             "are kept in DIR/<file stem>/. A <stem>.truth.json beside a file (from pige simulate) is used as the\n"
             "machine of the before/after and compared with the estimates; without it the before/after is\n"
-            "model-predicted."
+            "model-predicted. The page leads with the answer: machine, date, verdict (--tolerances), the PIGEs\n"
+            "used for compensation, the main finding and the improvement (measured with --compare)."
         ),
         epilog=(
             "examples:\n"
             "  pige report run.csv --out report/\n"
             "  pige report ac.csv bc.csv --out report/ --study projection,sobol\n"
             "  pige report run.csv --out report/ --program rtest.mpf --method double-differential\n"
-            "  pige report run.csv --out report/ --json > summary.json"
+            "  pige report run.csv --out report/ --json > summary.json\n"
+            "  pige report after.csv --out report/ --tolerances tol.json --compare before.csv after.csv\n"
+            "  pige report --history DMU50-2 --tolerances tol.json --out report/"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("files", nargs="+", metavar="FILE", help="pige-rtest 1 measurement file(s)")
+    p.add_argument("files", nargs="*", metavar="FILE",
+                   help="pige-rtest 1 measurement file(s) (optional with --compare or --history)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (created)")
     p.add_argument("--study", metavar="LIST", help="also run studies on the measured trajectory: projection,sobol")
     p.add_argument("--program", metavar="NC-FILE", help="also compensate this 840D-style program (before/after)")
-    p.add_argument("--method", choices=PRIMARY_METHODS, default="gauss-newton",
+    p.add_argument("--tolerances", metavar="TOL.json", help="judge every measurement (pige check) and lead with it")
+    p.add_argument("--rule", choices=("guard", "simple"), default="guard", help="decision rule (default %(default)s)")
+    p.add_argument("--k", type=float, default=2.0, help="coverage factor of the guard band (default %(default)s)")
+    p.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"),
+                   help="two measurements of the same program: the measured before/after section")
+    p.add_argument("--history", metavar="ID", help="machine id: trend plots of its runs (pige history)")
+    p.add_argument("--db", metavar="URL", help="history database (default: as pige history)")
+    p.add_argument("--method", choices=METHODS, default="diagnosis",
                    help="estimate used for the model overlay and the compensation; diagnosis = the PIGEs fitted "
                         "jointly with the accepted extensions (default %(default)s)")
     p.add_argument("--projection", default="xyz", help="projection of the identification tables (default xyz)")

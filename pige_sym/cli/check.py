@@ -1,0 +1,86 @@
+"""``pige check``: is the machine in tolerance?  ISO 14253-1 verdict per PIGE with its uncertainty.
+
+Exit status: 0 only when every judged item passes; 1 when any fails or is undecided; 2 bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+ESTIMATES = ("diagnosis", "gauss-newton", "double-differential")
+
+
+def _is_json(path: str) -> bool:
+    """True when the file's first non-blank character opens a JSON object (a saved result)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096).lstrip()
+    except OSError:
+        return False
+    return head.startswith(b"{")
+
+
+def load_estimates(path: str, method: str) -> Any:
+    """Estimates of a measurement file (identified/diagnosed now) or of a saved identify/diagnose JSON."""
+    from pige_sym.verdict import estimates_from_json, estimates_from_result, strict_json
+
+    if _is_json(path):
+        return estimates_from_json(strict_json(path), path)
+    from pige_sym.io import read_measurement
+
+    m = read_measurement(path)
+    if method == "diagnosis":
+        from pige_sym.diagnosis import diagnose
+
+        return estimates_from_result(diagnose(m), path)
+    from pige_sym.identification import identify
+
+    return estimates_from_result(identify(m, method=method), path)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from pige_sym.files import to_json
+    from pige_sym.verdict import check, read_tolerances
+
+    tol = read_tolerances(args.tolerances)
+    est = load_estimates(args.file, args.method)
+    result = check(est, tol, rule=args.rule, k=args.k)
+    print(to_json(result.to_dict()) if args.json else result.format())
+    return result.exit_status
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "check",
+        help="verdict pass/fail/undecided of the PIGEs against tolerances (ISO 14253-1)",
+        description=(
+            "Judge every parameter that has a limit: pass when |value| + k*u <= limit, fail when\n"
+            "|value| - k*u > limit, undecided otherwise (guard rule, ISO 14253-1); a parameter that is not\n"
+            "identifiable is undecided. FILE is a measurement (identified and diagnosed now) or the JSON of\n"
+            "`pige identify --json` / `pige diagnose --json`. Exit status 0 only when every item passes,\n"
+            "1 otherwise, 2 bad input.\n\n"
+            "tolerance file (JSON):\n"
+            '  {"format": "pige-tolerances 1", "machine": "...", "description": "...",\n'
+            '   "defaults": {"um": 10, "urad": 20}, "limits": {"EX0C": 8, "angular_error_C.cos_urad": 25}}\n'
+            "  limits bound |value| in the parameter's unit (um, urad); defaults apply to every location PIGE\n"
+            "  of that unit. Example: examples/tolerances.json in the source tree."
+        ),
+        epilog=(
+            "examples:\n"
+            "  pige check run.csv --tolerances tolerances.json\n"
+            "  pige check diagnosis.json --tolerances tolerances.json --json\n"
+            "  pige check run.csv --tolerances tolerances.json --rule simple"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("file", metavar="FILE", help="pige-rtest 1 measurement, or identify/diagnose JSON")
+    p.add_argument("--tolerances", required=True, metavar="TOL.json", help="tolerance file (format above)")
+    p.add_argument("--rule", choices=("guard", "simple"), default="guard",
+                   help="decision rule (default %(default)s: with the expanded uncertainty k*u)")
+    p.add_argument("--k", type=float, default=2.0, help="coverage factor of the guard band (default %(default)s)")
+    p.add_argument("--method", choices=ESTIMATES, default="diagnosis",
+                   help="estimate of a measurement file (default %(default)s: the PIGEs fitted with the accepted "
+                        "effects, i.e. those used for compensation)")
+    p.add_argument("--json", action="store_true", help="print one JSON object {verdict, items, ...}")
+    p.set_defaults(handler=_run)

@@ -1,0 +1,122 @@
+"""``pige history``: a machine's calibration runs in a database, and what changed between them.
+
+``pige history add FILE --machine-id ID`` identifies and diagnoses the file and stores the run;
+``pige history show ID`` lists the runs and, between consecutive runs, each parameter's change
+with its significance (joint Wald test + Bonferroni follow-up, family-wise false alarm ≤ 1 %).
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+DB_HELP = ("history database: a file path, sqlite:///PATH or postgresql://user@host:port/dbname "
+           "(default: $PIGE_HISTORY_DB, else history.sqlite in the user data directory)")
+
+
+def _add(args: argparse.Namespace) -> int:
+    from pige_sym.files import to_json
+    from pige_sym.history import add_run, connect
+
+    engine = connect(args.db)
+    run = add_run(engine, args.file, args.machine_id, method=args.method, tolerances=args.tolerances,
+                  rule=args.rule, k=args.k, date=args.date)
+    if args.json:
+        print(to_json(run.to_dict()))
+        return 0
+    verdict = f", verdict {run.verdict}" if run.verdict is not None else ""
+    effects = ", ".join(str(f.get("effect")) for f in run.effects) or "none"
+    print(f"added run {run.id} of machine {run.machine_id} ({run.machine_code}): {run.file_name}, measured "
+          f"{run.measured_at} ({run.time_source}), {run.method} estimate, effects: {effects}{verdict}")
+    return 0
+
+
+def history_comparisons(runs: list[Any], alpha: float) -> list[Any]:
+    """Comparisons of consecutive runs."""
+    from pige_sym.history import compare_runs
+
+    return [compare_runs(a, b, alpha=alpha, from_run=a.id, to_run=b.id) for a, b in zip(runs, runs[1:], strict=False)]
+
+
+def _num(x: float | None, fmt: str = ".3f") -> str:
+    import math
+
+    return "—" if x is None or not math.isfinite(x) else format(x, fmt)
+
+
+def _show_text(runs: list[Any], comparisons: list[Any]) -> None:
+    print(f"machine {runs[0].machine_id} ({runs[0].machine_code}): {len(runs)} run(s)")
+    print(f"{'run':>4s}  {'measured (UTC)':25s} {'method':10s} {'verdict':10s} {'RMS um':>7s}  file")
+    for r in runs:
+        print(f"{r.id:4d}  {r.measured_at:25s} {r.method:10s} {r.verdict or '—':10s} {_num(r.rms_um):>7s}  "
+              f"{r.file_name}")
+    for c in comparisons:
+        head = "DIFFERENT" if c.significant else "no significant change"
+        print(f"\nrun {c.from_run} -> {c.to_run}: {head} (joint p = {_num(c.p_value, '.3g')}, T² = "
+              f"{_num(c.statistic, '.1f')}, rank {c.rank}, α = {c.alpha:g})")
+        for note in c.notes:
+            print(f"  note: {note}")
+        for ch in c.changes:
+            mark = "SIGNIFICANT" if ch.significant else ("not tested" if ch.significant is None else "")
+            print(f"  {ch.parameter:28s} {_num(ch.change, '+.3f'):>9s} ± {_num(ch.std):>6s} {ch.unit:5s} "
+                  f"z {_num(ch.z, '+.2f'):>7s}  {mark} {'' if ch.significant else ch.reason}".rstrip())
+    if comparisons:
+        print(f"\ntest: {comparisons[0].test}")
+
+
+def _show(args: argparse.Namespace) -> int:
+    from pige_sym.files import to_json
+    from pige_sym.history import connect, list_runs
+
+    if not 0 < args.alpha < 1:
+        from pige_sym.errors import InputError
+
+        raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
+    runs = list_runs(connect(args.db), args.machine_id)
+    comparisons = history_comparisons(runs, args.alpha)
+    if args.json:
+        print(to_json({"machine_id": args.machine_id, "runs": [r.to_dict() for r in runs],
+                       "comparisons": [{k: v for k, v in c.to_dict().items() if k != "changes"} for c in comparisons],
+                       "changes": [ch for c in comparisons for ch in c.to_dict()["changes"]]}))
+    else:
+        _show_text(runs, comparisons)
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "history",
+        help="store calibration runs per machine and show what changed (with significance)",
+        description=__doc__,
+        epilog=(
+            "examples:\n"
+            "  pige history add run.csv --machine-id DMU50-2\n"
+            "  pige history add run.csv --machine-id DMU50-2 --tolerances tolerances.json --date 2026-11-23T14:05\n"
+            "  pige history show DMU50-2\n"
+            "  pige history show DMU50-2 --json --db postgresql://pige@dbhost/calibration"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sub = p.add_subparsers(dest="history_command", metavar="ACTION", parser_class=type(p))
+    sub.required = True
+    add = sub.add_parser("add", help="identify/diagnose a measurement file and store the run")
+    add.add_argument("file", metavar="FILE", help="pige-rtest 1 measurement file")
+    add.add_argument("--machine-id", required=True, metavar="ID", help="the shop's name of the machine")
+    add.add_argument("--db", metavar="URL", help=DB_HELP)
+    add.add_argument("--method", choices=("diagnosis", "gauss-newton", "double-differential"), default="diagnosis",
+                     help="estimate stored (default %(default)s: PIGEs fitted with the accepted effects)")
+    add.add_argument("--tolerances", metavar="TOL.json", help="also store the pige check verdict")
+    add.add_argument("--rule", choices=("guard", "simple"), default="guard", help="decision rule of the verdict")
+    add.add_argument("--k", type=float, default=2.0, help="coverage factor of the verdict (default %(default)s)")
+    add.add_argument("--date", metavar="ISO", help="when it was measured (default: the file's date metadata, "
+                                                   "else its modification time)")
+    add.add_argument("--json", action="store_true", help="print the stored run as JSON")
+    add.set_defaults(handler=_add)
+    show = sub.add_parser("show", help="list a machine's runs and the changes between consecutive runs")
+    show.add_argument("machine_id", metavar="ID", help="machine id")
+    show.add_argument("--db", metavar="URL", help=DB_HELP)
+    show.add_argument("--alpha", type=float, default=0.01,
+                      help="family-wise false-alarm rate per comparison of two runs (default %(default)s)")
+    show.add_argument("--json", action="store_true",
+                      help='print {"runs": [...], "comparisons": [...], "changes": [...]}')
+    show.set_defaults(handler=_show)

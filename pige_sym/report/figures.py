@@ -1,0 +1,386 @@
+"""Figures of the HTML report (matplotlib, Agg backend), one PNG per figure.
+
+*Deviation plots (ISO 10791-6 / R-test style).*  Per measurement: the deviation components dx,
+dy, dz [µm] in the machine frame against the point index, above the commanded rotary angles
+[deg] against the same index; and, when one rotary axis turns through at least 180° (cone
+frustum, stepped sweeps), a polar plot of each component against that axis' angle, drawn about
+a nominal circle (radius offset, radial scale in µm).  The PIGE model of the primary estimate
+is overlaid when every parameter was determined.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pige_sym.compensation import CompensationStudyRow
+from pige_sym.diagnosis import residual_plots
+from pige_sym.errors import InputError
+from pige_sym.identification import IdentificationResult
+from pige_sym.io import Measurement
+from pige_sym.report.gather import UNIT_TEXT, HistoryData, MeasurementReport, ReportData, ReportFigure, Truth
+from pige_sym.studies import SobolStudy
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig: Any, path: Path) -> Path:
+    fig.savefig(path, dpi=90)
+    _pyplot().close(fig)
+    return path
+
+
+def deviation_figure(m: Measurement, model_um: np.ndarray | None) -> Any:
+    """Deviation components against the point index above the commanded angles.
+
+    Parameters
+    ----------
+    m : Measurement
+    model_um : ndarray, shape=(n, 3) [µm] or None
+        PIGE-model deviation (machine frame) to overlay.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    dev = m.deviation_machine_um()
+    idx = np.arange(m.n_rows)
+    fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(9, 5.6), sharex=True, gridspec_kw={"height_ratios": [3, 2]})
+    colors = ("tab:blue", "tab:orange", "tab:green")
+    for k, c in enumerate("xyz"):
+        ax0.plot(idx, dev[:, k], "o-", ms=3.5, lw=1, color=colors[k], label=f"d{c} measured")
+        if model_um is not None:
+            ax0.plot(idx, model_um[:, k], "--", lw=1, color=colors[k], alpha=0.8, label=f"d{c} PIGE model")
+    ax0.axhline(0, color="k", lw=0.6)
+    ax0.set_ylabel("deviation ball − nest [µm]")
+    ax0.set_title("R-test deviation, machine frame" + (" (converted from the table frame)" if m.frame == "table"
+                                                       else ""), fontsize=10)
+    ax0.legend(fontsize=7, ncol=3 if model_um is None else 2, loc="best")
+    ax0.grid(alpha=0.3)
+    for k, a in enumerate(m.rotary_axes):
+        ax1.plot(idx, m.angles_deg[:, k], ".-", lw=1, label=f"{a}")
+    ax1.set_xlabel("measurement point (0 = reference pose)")
+    ax1.set_ylabel("commanded angle [deg]")
+    ax1.legend(fontsize=8)
+    ax1.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def polar_axis(m: Measurement) -> int | None:
+    """Index of the rotary axis that turns through at least 180° (the largest span), or None."""
+    spans = np.ptp(m.angles_deg, axis=0)
+    k = int(np.argmax(spans))
+    return k if spans[k] >= 180.0 else None
+
+
+def polar_figure(m: Measurement, model_um: np.ndarray | None, axis_index: int) -> Any:
+    """Deviation components magnified about a nominal circle against one rotary angle.
+
+    The radius is ``R0 + d`` [µm] with ``R0`` a round offset larger than the largest
+    deviation; the dashed circle is zero deviation and the radial ticks read in µm of
+    deviation.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    dev = m.deviation_machine_um()
+    theta = np.radians(m.angles_deg[:, axis_index])
+    peak = float(np.abs(dev).max())
+    if model_um is not None:
+        peak = max(peak, float(np.abs(model_um).max()))
+    step = _nice_step(peak if peak > 0 else 1.0)
+    r0 = 2 * step * math.ceil(peak / step if peak > 0 else 1.0)
+    fig, axs = plt.subplots(1, 3, figsize=(11, 4), subplot_kw={"projection": "polar"})
+    circle = np.linspace(0, 2 * np.pi, 361)
+    ticks = np.arange(-r0 / 2, r0 / 2 + step / 2, step)
+    ticks = ticks[(ticks >= -r0 + 1e-12)]
+    colors = ("tab:blue", "tab:orange", "tab:green")
+    for k, (ax, c) in enumerate(zip(axs, "xyz", strict=True)):
+        ax.plot(circle, np.full_like(circle, r0), "k--", lw=0.8)
+        ax.plot(theta, r0 + dev[:, k], "o-", ms=3, lw=1, color=colors[k], label="measured")
+        if model_um is not None:
+            ax.plot(theta, r0 + model_um[:, k], "-", lw=0.8, color="0.3", alpha=0.8, label="PIGE model")
+        ax.set_rlim(0, r0 + r0 / 2 + step / 2)
+        ax.set_rticks(r0 + ticks)
+        ax.set_yticklabels([f"{t:+g}" for t in ticks], fontsize=7)
+        ax.set_title(f"d{c} [µm] vs {m.rotary_axes[axis_index]} [deg]", fontsize=10)
+        ax.tick_params(axis="x", labelsize=7)
+        if k == 0:
+            ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(-0.25, -0.15))
+    fig.suptitle(f"deviation about the nominal circle (dashed = 0 µm, ring step {step:g} µm)", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def _nice_step(x: float) -> float:
+    """A 1-2-5 step near x/2."""
+    target = x / 2
+    exp = math.floor(math.log10(target))
+    for mult in (1, 2, 5, 10):
+        if mult * 10**exp >= target:
+            return float(mult * 10**exp)
+    return float(10 ** (exp + 1))  # pragma: no cover
+
+
+def identification_figure(results: dict[str, IdentificationResult], truth: Truth | None) -> Any:
+    """Estimates with 95 % intervals per parameter and method; truth as crosses; no bar where undetermined.
+
+    Two panels: position errors [µm], orientation and zero-position errors [µrad].
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    from matplotlib.transforms import blended_transform_factory
+
+    first = next(iter(results.values()))
+    groups = [("position errors", "um"), ("orientation / zero-position errors", "urad")]
+    fig, axs = plt.subplots(1, 2, figsize=(11, 3.8))
+    markers = {"gauss-newton": ("o", "tab:blue"), "double-differential": ("s", "tab:purple")}
+    for ax, (title, unit) in zip(axs, groups, strict=True):
+        names = [n for n in first.parameters if first.units.get(n) == unit and "." not in n]
+        x = np.arange(len(names))
+        for i, (meth, res) in enumerate(results.items()):
+            ci = res.ci95()
+            mk, col = markers.get(meth, ("^", "tab:gray"))
+            off = (i - (len(results) - 1) / 2) * 0.22
+            for j, name in enumerate(names):
+                q = res.parameters.index(name)
+                v = res.values[q]
+                if math.isfinite(v):
+                    ax.errorbar(x[j] + off, v, yerr=[[v - ci[q, 0]], [ci[q, 1] - v]], fmt=mk, color=col, ms=5,
+                                capsize=3, label=meth if j == 0 else None)
+                else:  # no value: a label at mid-height (axes coordinates), never a number
+                    ax.text(x[j] + off, 0.5, "not identifiable", transform=blended_transform_factory(
+                        ax.transData, ax.transAxes), fontsize=6.5, color="crimson", ha="center", va="center",
+                        rotation=90)
+        if truth is not None:
+            ax.plot(x, [truth.values.get(n, 0.0) for n in names], "x", color="crimson", ms=8, mew=2, label="truth")
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xticks(x)
+        ax.set_xticklabels(names)
+        ax.set_xlim(-0.6, len(names) - 0.4)
+        ax.set_ylabel(f"value [{UNIT_TEXT.get(unit, unit)}]")
+        ax.set_title(f"{title} (95 % intervals)", fontsize=10)
+        ax.grid(alpha=0.3)
+        handles, labels = ax.get_legend_handles_labels()
+        if handles:
+            ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def sobol_figure(study: SobolStudy) -> Any:
+    """Total Sobol indices per parameter, one bar group per projection.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(9, 3.6))
+    n_proj = len(study.projections)
+    x = np.arange(len(study.parameters))
+    width = 0.8 / max(n_proj, 1)
+    for i, proj in enumerate(study.projections):
+        ax.bar(x + (i - (n_proj - 1) / 2) * width, study.total_order[i], width, label=f"{proj} (total)")
+    ax.set_xticks(x)
+    ax.set_xticklabels(study.parameters)
+    ax.set_ylabel("total Sobol index [-]")
+    ax.set_title("sensitivity of the mean-square projected deviation to each PIGE", fontsize=10)
+    ax.legend(fontsize=7, ncol=n_proj)
+    ax.grid(alpha=0.3, axis="y")
+    fig.tight_layout()
+    return fig
+
+
+def draw_figures(rep: MeasurementReport, out_dir: Path) -> list[ReportFigure]:
+    """Write every PNG of one measurement into ``out_dir`` (created); returns them in page order."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    m = rep.measurement
+    figs: list[ReportFigure] = []
+    overlay = "; dashed: PIGE model of the " + rep.primary_method + " estimate" if rep.model_um is not None else (
+        "; no model overlay: a parameter is undetermined")
+    figs.append(ReportFigure("deviation", _save(deviation_figure(m, rep.model_um), out_dir / "deviation.png"),
+                             f"Deviation ball − nest per measurement point [µm], machine frame, with the commanded "
+                             f"rotary angles [deg]{overlay}."))
+    k = polar_axis(m)
+    if k is not None:
+        figs.append(ReportFigure("polar", _save(polar_figure(m, rep.model_um, k), out_dir / "deviation_polar.png"),
+                                 f"Deviation components against the {m.rotary_axes[k]} angle, magnified about a "
+                                 f"nominal circle (dashed line = zero deviation; radial labels in µm)."))
+    figs.append(ReportFigure("identification", _save(identification_figure(rep.identification, rep.truth),
+                                                     out_dir / "identification.png"),
+                             "Identified PIGEs with 95 % confidence intervals, both methods"
+                             + ("; red crosses: truth from the sidecar." if rep.truth is not None else ".")))
+    paths: list[str] = []
+    if rep.diagnosis is not None:
+        try:
+            paths = residual_plots(m, rep.diagnosis, out_dir)
+        except InputError:
+            paths = []
+    captions = {"residual_time": "Residual of the PIGE fit against time [µm] (thermal drift shows as a trend).",
+                "residual_rows": "Residual norm per row (red: outliers) and its autocorrelation in time.",
+                "residual_approach": "Tangential residual by direction of approach (backlash shows as a split)."}
+    for path in paths:
+        stem = Path(path).stem
+        cap = captions.get(stem, f"Residual of the PIGE fit in the radial / tangential / axial frame of axis "
+                                 f"{stem.removeprefix('residual_')} [µm] against its angle (harmonics show at their "
+                                 "order).")
+        figs.append(ReportFigure("residual", Path(path), cap))
+    basis = ("simulated on the known truth of the sidecar" if rep.compensation_basis == "truth" else
+             "model-predicted: the machine is assumed to carry exactly the identified errors, so 'after' is only "
+             "what the compensation algorithm itself leaves, not a prediction for the real machine")
+    for i, row in enumerate(rep.compensation):
+        fig = before_after_figure(row, BASIS_LABEL[rep.compensation_basis])
+        figs.append(ReportFigure("compensation", _save(fig, out_dir / f"compensation_{i}.png"),
+                                 f"Tool-point error before (top) and after compensation (bottom, its own scale) [µm], "
+                                 f"{row.trajectory} ({basis})."))
+    if rep.sobol is not None and rep.sobol_same_as is None:
+        figs.append(ReportFigure("sobol", _save(sobol_figure(rep.sobol), out_dir / "sobol.png"),
+                                 "Total Sobol indices of the mean-square projected deviation, per projection."))
+    return figs
+
+
+BASIS_LABEL = {"truth": "simulated on a known truth", "model": "model-predicted", "measured": "measured"}
+
+
+def before_after_figure(row: CompensationStudyRow, label: str) -> Any:
+    """Error components and norm per point, before (top) and after (bottom), each panel on its own scale.
+
+    Parameters
+    ----------
+    row : CompensationStudyRow
+        ``before_um``, ``after_um`` shape=(n, 3) [µm].
+    label : str
+        Basis of the numbers (measured, simulated on a known truth, model-predicted), in the titles.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    fig, axs = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True)
+    idx = np.arange(row.before_um.shape[0])
+    colors = ("tab:blue", "tab:orange", "tab:green")
+    for ax, err, when, rms in ((axs[0], row.before_um, "before", row.rmse_before_um),
+                               (axs[1], row.after_um, "after", row.rmse_after_um)):
+        for k, c in enumerate("xyz"):
+            ax.plot(idx, err[:, k], "-", lw=0.9, color=colors[k], label=f"{c}")
+        ax.plot(idx, np.linalg.norm(err, axis=1), "k.-", lw=1, ms=3, label="|error|")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_ylabel("[µm]")
+        ax.set_title(f"{when} compensation ({label}): RMSE {rms:.3g} µm", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=4, loc="upper right")
+    axs[1].set_xlabel("point")
+    fig.tight_layout()
+    return fig
+
+
+def compare_figure(result: Any) -> Any:
+    """Measured |d| per pose before (top) and after (bottom, its own scale) with the parts of what is left.
+
+    Parameters
+    ----------
+    result : CompareResult
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    fig, axs = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True)
+    idx = np.arange(result.before_um.shape[0])
+    panels = ((axs[0], result.before_um, result.before_parts, "before", result.rms_before_um),
+              (axs[1], result.after_um, result.after_parts, "after", result.rms_after_um))
+    for ax, norms, dec, when, rms in panels:
+        ax.plot(idx, norms, "ko-", ms=3, lw=1.2, label="|d| measured")
+        for part in (dec.parts if dec is not None else []):
+            if part.values_um is not None:
+                ax.plot(idx, np.linalg.norm(part.values_um, axis=1), "--", lw=0.9, label=f"|{part.name} part|")
+        ax.set_ylabel("[µm]")
+        ax.set_title(f"{when} (measured): RMS {rms:.3g} µm", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=4, loc="upper right")
+    axs[1].set_xlabel("pose")
+    fig.tight_layout()
+    return fig
+
+
+def trend_figure(history: HistoryData) -> Any:
+    """Value ± 2 std of each location PIGE per run, tolerance band shaded, significant changes circled.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from pige_sym.kernels import load_kernels
+
+    plt = _pyplot()
+    runs = history.runs
+    kern = load_kernels(runs[-1].machine_code)
+    names = list(kern.LOCATION_PARAMETERS)
+    cols = 4
+    rows = math.ceil(len(names) / cols)
+    fig, axs = plt.subplots(rows, cols, figsize=(11, 2.4 * rows), sharex=True, squeeze=False)
+    x = np.arange(len(runs))
+    flagged = {(comp.to_run, ch.parameter) for comp in history.comparisons for ch in comp.changes
+               if ch.significant}
+    for ax, name in zip(axs.ravel(), names, strict=False):
+        vals = np.array([r.values[r.parameters.index(name)] if name in r.parameters else np.nan for r in runs])
+        std = np.array([r.std[r.parameters.index(name)] if name in r.parameters else np.nan for r in runs])
+        limit = history.limits.get(name)
+        if limit is not None:
+            ax.axhspan(-limit, limit, color="tab:green", alpha=0.12, lw=0)
+            ax.axhline(limit, color="tab:green", lw=0.8)
+            ax.axhline(-limit, color="tab:green", lw=0.8)
+        ax.errorbar(x, vals, yerr=2 * np.nan_to_num(std), fmt="o-", ms=4, capsize=3, lw=1, color="tab:blue")
+        for i, r in enumerate(runs):
+            if (r.id, name) in flagged:
+                ax.plot(x[i], vals[i], "o", ms=11, mfc="none", mec="crimson", mew=1.8)
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_title(f"{name} [{UNIT_TEXT.get(kern.UNITS[name], kern.UNITS[name])}]", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=7)
+    for ax in axs.ravel()[len(names):]:
+        ax.set_visible(False)
+    for ax in axs[-1]:
+        ax.set_xticks(x)
+        ax.set_xticklabels([r.measured_at[:10] for r in runs], rotation=45, ha="right", fontsize=7)
+    fig.suptitle(f"{history.machine_id}: value ± 2 std per run; green band = tolerance; red ring = significant "
+                 "change from the previous run", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def draw_report_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
+    """The figures of the whole report (measured before/after, history trends) into ``out_dir``."""
+    figs: list[ReportFigure] = []
+    if data.comparison is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        figs.append(ReportFigure("measured-compare", _save(compare_figure(data.comparison),
+                                                           out_dir / "measured_before_after.png"),
+                                 "Measured |d| per pose [µm] before (top) and after (bottom, its own scale), with "
+                                 "the model parts of each (PIGEs, accepted effects, unexplained rest)."))
+    if data.history is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        figs.append(ReportFigure("trend", _save(trend_figure(data.history), out_dir / "history_trend.png"),
+                                 f"History of machine {data.history.machine_id}: each PIGE per run with ± 2 std, "
+                                 "the tolerance band and the significant changes."))
+    return figs

@@ -1,0 +1,265 @@
+"""pige history: runs in SQLite and a real PostgreSQL, changes with an honest significance, false alarms <= 1 %."""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+import shutil
+import socket
+import subprocess
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sqlalchemy as sa
+from scipy import stats
+
+from pige_sym.cli.main import main
+from pige_sym.errors import InputError
+from pige_sym.history import compare_runs, connect, list_runs
+from pige_sym.history import tables as T
+from pige_sym.history.migrations import MIGRATIONS
+from pige_sym.identification import identify
+from pige_sym.simulator import random_pige, simulate
+from pige_sym.trajectories import cone_frustum
+
+AC = "wC'A'bXYZ(C1)t"
+TRAJ = cone_frustum(AC, points=30)
+PIGE = random_pige(AC, 1)
+
+
+def _write_run(path: Path, seed: int, shift_um: float = 0.0, date: str | None = None) -> Path:
+    pige = dict(PIGE)
+    pige["EX0C"] += shift_um
+    sim = simulate(AC, TRAJ, pige=pige, noise_um=0.25, seed=seed)
+    if date is not None:
+        sim.measurement.metadata["date"] = date
+    csv, _ = sim.write(path)
+    return csv
+
+
+# --------------------------------------------------------------------------------------------- PostgreSQL
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _pg_bin() -> Path | None:
+    found = sorted(glob.glob("/usr/lib/postgresql/*/bin/initdb"))
+    if found:
+        return Path(found[-1]).parent
+    exe = shutil.which("initdb")
+    return Path(exe).parent if exe else None
+
+
+@pytest.fixture(scope="module")
+def postgres_url() -> Iterator[str]:
+    """A throw-away PostgreSQL server on 127.0.0.1 in a temporary directory (skips when none can start)."""
+    pytest.importorskip("psycopg", reason="psycopg is not installed (pip install 'pige_sym[postgres]')")
+    bindir = _pg_bin()
+    if bindir is None:
+        pytest.skip("PostgreSQL server binaries not found (apt-get install postgresql)")
+    root = Path(tempfile.mkdtemp(prefix="pige-pg-"))
+    prefix: list[str] = []
+    if os.geteuid() == 0:  # the server refuses to run as root: run it as the postgres user
+        runuser = shutil.which("runuser")
+        try:
+            import pwd
+
+            pw = pwd.getpwnam("postgres")
+        except KeyError:
+            pytest.skip("running as root and there is no postgres user to run the server")
+        if runuser is None:
+            pytest.skip("running as root without runuser")
+        os.chown(root, pw.pw_uid, pw.pw_gid)
+        prefix = [runuser, "-u", "postgres", "--"]
+    data, port = root / "data", _free_port()
+    log = root / "server.log"
+
+    def run(*cmd: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([*prefix, *cmd], capture_output=True, text=True, timeout=120, check=False)
+
+    init = run(str(bindir / "initdb"), "-D", str(data), "-U", "pige", "-A", "trust", "--no-sync", "-E", "UTF8")
+    if init.returncode != 0:
+        shutil.rmtree(root, ignore_errors=True)
+        pytest.skip(f"initdb failed: {init.stderr.strip()[-300:]}")
+    start = run(str(bindir / "pg_ctl"), "-D", str(data), "-l", str(log), "-w", "-t", "60", "-o",
+                f"-c listen_addresses=127.0.0.1 -p {port} -k {root} -c fsync=off", "start")
+    if start.returncode != 0:
+        text = log.read_text() if log.exists() else start.stderr
+        shutil.rmtree(root, ignore_errors=True)
+        pytest.skip(f"PostgreSQL did not start: {text.strip()[-300:]}")
+    try:
+        yield f"postgresql://pige@127.0.0.1:{port}/postgres"
+    finally:
+        run(str(bindir / "pg_ctl"), "-D", str(data), "-m", "immediate", "-w", "stop")
+        shutil.rmtree(root, ignore_errors=True)
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'history.sqlite'}"
+    url = request.getfixturevalue("postgres_url")
+    engine = connect(url)  # a clean schema per test
+    with engine.begin() as conn:
+        for table in ("runs", "machines", "schema_version"):
+            conn.execute(sa.text(f"DROP TABLE IF EXISTS {table} CASCADE"))
+    engine.dispose()
+    return url
+
+
+# --------------------------------------------------------------------------------------------- tests
+
+
+def test_three_runs_one_real_change(db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    files = [_write_run(tmp_path / "a.csv", 11, date="2026-01-05T08:00"),
+             _write_run(tmp_path / "b.csv", 12, date="2026-03-05T08:00"),
+             _write_run(tmp_path / "c.csv", 13, shift_um=8.0, date="2026-06-05T08:00")]
+    for f in reversed(files):  # added out of order: listed by measurement time
+        assert main(["history", "add", str(f), "--machine-id", "DMU-1", "--db", db_url]) == 0
+    capsys.readouterr()
+    assert main(["history", "show", "DMU-1", "--db", db_url, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [Path(r["file"]).name for r in out["runs"]] == ["a.csv", "b.csv", "c.csv"]
+    first, second = out["runs"][0]["id"], out["runs"][1]["id"]
+    cov = np.array(out["runs"][0]["covariance"]["matrix"])
+    assert cov.shape == (8, 8) and np.allclose(cov, cov.T)
+    changes = out["changes"]
+    assert len(changes) == 16 and {"parameter", "from_run", "to_run", "change", "std", "significant"} <= set(changes[0])
+    noise_only = [c for c in changes if c["from_run"] == first]
+    assert not any(c["significant"] for c in noise_only)
+    moved = [c for c in changes if c["from_run"] == second]
+    assert [c["parameter"] for c in moved if c["significant"]] == ["EX0C"]
+    ex0c = next(c for c in moved if c["parameter"] == "EX0C")
+    assert abs(ex0c["change"] - 8.0) < 4 * ex0c["std"]
+    assert [c["significant"] for c in out["comparisons"]] == [False, True]
+    assert "Bonferroni" in out["comparisons"][0]["test"]
+    assert main(["history", "show", "DMU-1", "--db", db_url]) == 0
+    text = capsys.readouterr().out
+    assert "SIGNIFICANT" in text and text.count("SIGNIFICANT") == 1
+
+
+def test_the_same_file_is_refused(db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    csv = _write_run(tmp_path / "run.csv", 21)
+    assert main(["history", "add", str(csv), "--machine-id", "M", "--db", db_url]) == 0
+    copy = tmp_path / "renamed.csv"
+    shutil.copy(csv, copy)
+    for again in (csv, copy):
+        capsys.readouterr()
+        assert main(["history", "add", str(again), "--machine-id", "M2", "--db", db_url]) == 2
+        err = capsys.readouterr().err
+        assert "already in the history" in err and err.count("\n") == 1
+    assert len(list_runs(connect(db_url), "M")) == 1
+
+
+def test_verdict_is_stored_and_machine_structure_checked(db_url: str, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    from conftest import REPO
+
+    csv = _write_run(tmp_path / "run.csv", 22)
+    assert main(["history", "add", str(csv), "--machine-id", "M", "--db", db_url, "--json",
+                 "--tolerances", str(REPO / "examples" / "tolerances.json")]) == 0
+    run = json.loads(capsys.readouterr().out)
+    assert run["verdict"] in ("pass", "fail", "undecided") and run["check"]["verdict"] == run["verdict"]
+    other = simulate("wC'B'bXYZ(C1)t", cone_frustum("wC'B'bXYZ(C1)t", points=20), seed=3)
+    b_csv, _ = other.write(tmp_path / "b.csv")
+    assert main(["history", "add", str(b_csv), "--machine-id", "M", "--db", db_url]) == 2
+    assert "use the right --machine-id" in capsys.readouterr().err
+
+
+def test_unknown_machine_lists_the_known(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    url = f"sqlite:///{tmp_path / 'h.sqlite'}"
+    assert main(["history", "add", str(_write_run(tmp_path / "r.csv", 23)), "--machine-id", "M", "--db", url]) == 0
+    assert main(["history", "show", "nope", "--db", url]) == 2
+    assert "known: M" in capsys.readouterr().err
+
+
+def test_migrations_build_the_tables_and_refuse_a_newer_schema(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'h.sqlite'}"
+    engine = connect(url)
+    connect(url)  # idempotent
+    insp = sa.inspect(engine)
+    for table in T.metadata.sorted_tables:
+        assert {c["name"] for c in insp.get_columns(table.name)} == {c.name for c in table.columns}
+    with engine.begin() as conn:
+        versions = list(conn.execute(sa.select(T.schema_version.c.version)).scalars())
+        assert versions == [m.version for m in MIGRATIONS]
+        conn.execute(sa.insert(T.schema_version).values(version=999, description="future", applied_at="x"))
+    with pytest.raises(InputError, match="newer"):
+        connect(url)
+
+
+def test_default_database_follows_the_environment(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from pige_sym.history import default_url
+
+    monkeypatch.setenv("PIGE_HISTORY_DB", str(tmp_path / "env.sqlite"))
+    assert default_url() == str(tmp_path / "env.sqlite")
+    monkeypatch.delenv("PIGE_HISTORY_DB")
+    assert default_url().startswith("sqlite:///") and default_url().endswith("history.sqlite")
+
+
+def test_joint_statistic_matches_an_independent_computation() -> None:
+    a = identify(simulate(AC, TRAJ, pige=PIGE, noise_um=0.25, seed=31).measurement)
+    b = identify(simulate(AC, TRAJ, pige={**PIGE, "EY0A": PIGE["EY0A"] + 0.6}, noise_um=0.25, seed=32).measurement)
+    comp = compare_runs(a, b)
+    d = b.values - a.values
+    cov = a.covariance + b.covariance
+    t2 = float(d @ np.linalg.solve(cov, d))
+    assert comp.statistic == pytest.approx(t2, rel=1e-6) and comp.rank == 8
+    assert comp.p_value == pytest.approx(stats.f.sf(t2 / 8, 8, min(a.dof, b.dof)), rel=1e-6)
+    ey = next(c for c in comp.changes if c.parameter == "EY0A")
+    assert ey.std == pytest.approx(np.sqrt(cov[0, 0])) and ey.z == pytest.approx(d[0] / np.sqrt(cov[0, 0]))
+
+
+def test_undetermined_parameters_are_not_tested() -> None:
+    m1 = simulate(AC, TRAJ, pige=PIGE, noise_um=0.25, seed=41).measurement
+    m2 = simulate(AC, TRAJ, pige=PIGE, noise_um=0.25, seed=42).measurement
+    a, b = identify(m1, projection="x"), identify(m2)
+    comp = compare_runs(a, b)
+    missing = {p for p, v in zip(a.parameters, a.values, strict=True) if not np.isfinite(v)}
+    assert missing
+    for c in comp.changes:
+        assert (c.significant is None) == (c.parameter in missing)
+    assert comp.n_tested == 8 - len(missing)
+
+
+def test_false_alarm_rate_of_pure_noise_pairs_is_at_most_one_percent() -> None:
+    n = 400
+    alarms = joint = 0
+    for i in range(n):
+        a = identify(simulate(AC, TRAJ, pige=PIGE, noise_um=0.25, seed=1000 + 2 * i).measurement)
+        b = identify(simulate(AC, TRAJ, pige=PIGE, noise_um=0.25, seed=1001 + 2 * i).measurement)
+        comp = compare_runs(a, b)
+        joint += comp.significant
+        alarms += any(c.significant for c in comp.changes)
+    # binomial(400, 0.01): mean 4, P(X >= 9) < 2 %; a level of 5 % would give ~20
+    assert joint <= 8 and alarms <= joint, (joint, alarms)
+    # and the test has power: 1 µm on EX0C (σ of the change ≈ 0.07 µm) is always found
+    for i in range(20):
+        a = identify(simulate(AC, TRAJ, pige=PIGE, noise_um=0.25, seed=5000 + 2 * i).measurement)
+        b = identify(simulate(AC, TRAJ, pige={**PIGE, "EX0C": PIGE["EX0C"] + 1.0}, noise_um=0.25,
+                              seed=5001 + 2 * i).measurement)
+        assert [c.parameter for c in compare_runs(a, b).changes if c.significant] == ["EX0C"]
+
+
+def test_runs_fitted_with_different_effects_are_noted() -> None:
+    from types import SimpleNamespace
+
+    a = identify(simulate(AC, TRAJ, pige=PIGE, noise_um=0.25, seed=51).measurement)
+    b = identify(simulate(AC, TRAJ, pige=PIGE, noise_um=0.25, seed=52).measurement)
+
+    def run(res: object, effects: list[dict[str, object]]) -> SimpleNamespace:
+        return SimpleNamespace(**{k: getattr(res, k) for k in ("parameters", "values", "covariance", "dof", "units")},
+                               effects=effects)
+
+    same = compare_runs(run(a, [{"effect": "angular_error_C"}]), run(b, [{"effect": "angular_error_C"}]))
+    other = compare_runs(run(a, []), run(b, [{"effect": "angular_error_C"}, {"effect": "outliers"}]))
+    assert same.notes == [] and compare_runs(a, b).notes == []
+    assert len(other.notes) == 1 and "none vs angular_error_C" in other.notes[0]
