@@ -10,7 +10,9 @@ deviation σ per observed component.  The normal matrix is
 measured) and the predicted covariance is ``σ²·N⁺``, with the rank, near-null and
 identifiability rules of :mod:`pige_sym.identification` (unit-norm column scaling,
 ``RANK_RTOL``, ``NULL_RTOL``, ``NULL_WEIGHT``): a parameter with weight in a near-null
-direction is *undetermined* and gets no standard error.  These are exactly the standard
+direction is *undetermined* and gets no standard error; so is one whose column is below
+``UNOBSERVED_RTOL`` (1e-9) times the largest column (round-off, e.g. the A-axis errors when
+A never moves).  These are exactly the standard
 errors ``pige identify`` reports for data with noise σ (tests check it).
 
 Criteria (smaller is better), over the determined parameters j
@@ -50,6 +52,7 @@ from pige_sym.projection import Projection, parse_projection
 
 CRITERIA = ("worst", "A", "D")
 SMOOTH_MAX_POWER = 16.0
+UNOBSERVED_RTOL = 1e-9  # a column this much smaller than the largest is round-off: the parameter is not observed
 SINGULAR = 1e6  # criterion value of a design that cannot determine the estimable parameters
 _DIFF_STEP_DEG = 1e-3
 
@@ -220,7 +223,7 @@ def predict_from_normal(normal: np.ndarray, names: Sequence[str], units: dict[st
     rank = int(keep.sum())
     inv_w = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
     cov = ((v * inv_w) @ v.T) * np.outer(scale, scale) * noise_um**2
-    determined = diag > 0
+    determined = diag > UNOBSERVED_RTOL * diag.max(initial=0.0)
     near_null = svals <= NULL_RTOL * smax
     if near_null.any():
         determined &= np.abs(v[:, near_null]).max(axis=1) <= NULL_WEIGHT

@@ -133,6 +133,8 @@ class Plan:
     limits : Limits or None
     baseline_within_limits : bool or None
     planning_s : float or None
+    duration_s : float [s]
+        End of the last dwell under the test-program schedule.
     """
 
     machine: str
@@ -150,14 +152,11 @@ class Plan:
     limits: Limits | None = None
     baseline_within_limits: bool | None = None
     planning_s: float | None = None
+    duration_s: float = 0.0
 
     @property
     def points(self) -> int:
         return int(self.angles_deg.shape[0] - 1)
-
-    @property
-    def duration_s(self) -> float:
-        return float(self.t_s[-1]) if self.t_s.size else 0.0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (undetermined parameters: ``None``, never a number)."""
@@ -430,6 +429,7 @@ def plan_test(req: PlanRequest) -> Plan:
                          ball_searched=bool(req.ball_region), ball_given=req.setup.ball_mm)
         if not plan.prediction.undetermined and all(plan.reveal[e].revealable for e in req.reveal):
             plan.planning_s = time.perf_counter() - t0
+            plan.duration_s = float(ctx.t_s[-1] + req.dwell_s)
             return plan
     missing = ", ".join(req.reveal) or "the PIGEs"
     raise InputError(f"no test with {req.points} poses within these limits determines {missing}: "
@@ -464,7 +464,7 @@ def _describe(setup: Setup, angles: np.ndarray, t_s: np.ndarray, family: str, de
 
 
 def grade_test(setup: Setup, angles_deg: np.ndarray, t_s: np.ndarray, *, description: str = "graded test",
-               criterion: str = "worst", limits: Limits | None = None) -> Plan:
+               criterion: str = "worst", limits: Limits | None = None, duration_s: float | None = None) -> Plan:
     """The predicted figures of an existing test (same as a plan's, family ``graded``)."""
     if criterion not in CRITERIA:
         raise InputError(f"unknown criterion {criterion!r}: use {', '.join(CRITERIA)}")
@@ -472,6 +472,7 @@ def grade_test(setup: Setup, angles_deg: np.ndarray, t_s: np.ndarray, *, descrip
     if angles.shape[0] < 2 or np.abs(angles[0]).max() > 1e-9:
         raise InputError("a test starts at the reference pose (all rotary axes 0) and has at least one more pose")
     plan = _describe(setup, angles, np.asarray(t_s, dtype=float), "graded", description, criterion, (), limits)
+    plan.duration_s = float(t_s[-1]) if duration_s is None else float(duration_s)
     return plan
 
 
