@@ -159,23 +159,23 @@ def test_prediction_holds_over_50_simulated_runs_every_machine(code) -> None:
 def test_rotary_and_linear_limits_are_respected() -> None:
     kern = load_kernels(AC)
     limits = parse_limits(["A=-40:100", "C=-90:270", "Z=-60:200"], kern)
-    plan = _plan(AC, 20, limits=limits)
+    plan = _plan(AC, 12, limits=limits)
     a = plan.angles_deg
     assert a[:, 0].min() >= -40 and a[:, 0].max() <= 100 and a[:, 1].min() >= -90 and a[:, 1].max() <= 270
     assert linear_violation(kern, a, plan.setup, limits).max() <= 1e-6
     z = kern.linear_commands(a, plan.setup.ball_mm)[:, 2]
     assert z.min() >= -60 - 1e-6
-    unconstrained = _plan(AC, 20, limits=parse_limits(["A=-40:100", "C=-90:270"], kern))
+    unconstrained = _plan(AC, 12, limits=parse_limits(["A=-40:100", "C=-90:270"], kern))
     assert kern.linear_commands(unconstrained.angles_deg, BALL)[:, 2].min() < -60  # the Z limit was binding
 
 
 def test_ball_region_is_searched_and_respected() -> None:
-    req = PlanRequest(_setup(AC, ball=(100.0, 0.0, 60.0)), 20, _limits(AC), {0: (60.0, 160.0), 2: (40.0, 120.0)})
+    req = PlanRequest(_setup(AC, ball=(100.0, 0.0, 60.0)), 12, _limits(AC), {0: (60.0, 160.0), 2: (40.0, 120.0)})
     plan = plan_test(req)
     x, y, z = plan.setup.ball_mm
     assert 60 <= x <= 160 and y == 0 and 40 <= z <= 120
     assert plan.default_setup_baseline is not None
-    fixed = plan_test(PlanRequest(_setup(AC, ball=(100.0, 0.0, 60.0)), 20, _limits(AC)))
+    fixed = plan_test(PlanRequest(_setup(AC, ball=(100.0, 0.0, 60.0)), 12, _limits(AC)))
     assert plan.prediction.worst <= fixed.prediction.worst * 1.02
 
 

@@ -65,7 +65,7 @@ from pige_sym.planning.reveal import RevealStatus, effect_columns, effect_spec, 
 from pige_sym.trajectories import cone_frustum
 
 ROUND_DEG = 4
-PENALTY = 10.0
+PENALTY = 0.1
 RICH_POSES = 400
 
 
@@ -373,12 +373,33 @@ def _search_free(ctx: _Context, starts: list[np.ndarray]) -> list[_Candidate]:
     out = []
     for x0 in x0s:
         res = optimize.minimize(lambda x: _free_objective(ctx, x, n_core, k), x0, jac=True, method="L-BFGS-B",
-                                bounds=list(zip(lo, hi, strict=True)), options={"maxiter": 300})
-        core = order_path(res.x[:n_core * k].reshape(n_core, k))
+                                bounds=list(zip(lo, hi, strict=True)), options={"maxiter": 150, "maxfun": 300})
+        ball = _ball(ctx, res.x[n_core * k:])
+        core = order_path(_repair_linear(ctx, res.x[:n_core * k].reshape(n_core, k), ball))
         angles = _finish(ctx, core)
         if angles is not None:
-            ball = _ball(ctx, res.x[n_core * k:])
             out.append(_Candidate("free", f"free poses ({n_core} chosen)", angles, ball, _score(ctx, angles, ball)))
+    return out
+
+
+def _repair_linear(ctx: _Context, core: np.ndarray, ball: np.ndarray) -> np.ndarray:
+    """Move poses that still leave a linear limit toward the reference pose until they fit (bisection).
+
+    The reference pose is within the limits (checked when parsing them), so a fitting point exists
+    on the segment; the penalty leaves only small violations, so the poses move little.
+    """
+    if not ctx.req.limits.linear:
+        return core
+    setup = ctx.req.setup.with_ball(ball)
+    out = core.copy()
+    bad = np.flatnonzero(linear_violation(ctx.kern, out, setup, ctx.req.limits) > 0)
+    for i in bad:
+        lo, hi = 0.0, 1.0  # fraction of the pose kept: lo fits, hi does not
+        for _ in range(30):
+            mid = 0.5 * (lo + hi)
+            ok = linear_violation(ctx.kern, core[i:i + 1] * mid, setup, ctx.req.limits)[0] <= 0
+            lo, hi = (mid, hi) if ok else (lo, mid)
+        out[i] = core[i] * lo
     return out
 
 
