@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from scipy import optimize
 
-from pige_sym.acquisition.transport import PortSettings
 from pige_sym.acquisition.virtual_device import start_virtual_device
 from pige_sym.cli.main import main
 from pige_sym.diagnosis import diagnose

@@ -38,13 +38,17 @@ def _points(args: argparse.Namespace, move_s: float, dwell_s: float) -> int:
 
 
 def _setup(args: argparse.Namespace) -> Any:
+    import numpy as np
+
     from pige_sym.cli._setup import parse_pivots, parse_vec3
     from pige_sym.planning import Setup
     from pige_sym.projection import parse_projection
 
     tool = parse_vec3(args.tool, "--tool") if args.tool else None
-    return Setup(args.machine, parse_vec3(args.ball, "--ball"), tool, parse_pivots(args.pivot) or None,
-                 noise_um=args.noise, projection=parse_projection(args.projection), with_zero=args.with_zero)
+    pivots = {a: np.asarray(v, dtype=float) for a, v in parse_pivots(args.pivot).items()}
+    return Setup(args.machine, np.asarray(parse_vec3(args.ball, "--ball"), dtype=float),
+                 None if tool is None else np.asarray(tool, dtype=float), pivots or None, noise_um=args.noise,
+                 projection=parse_projection(args.projection), with_zero=args.with_zero)
 
 
 def _grade(args: argparse.Namespace, setup: Any, limits: Any) -> Any:
@@ -93,13 +97,13 @@ def _format(plan: Any, out: str | None) -> str:
         b = bstd.get(name)
         lines.append(f"{name:<12}{'undetermined' if s is None else f'{s:.4f}':>15}"
                      f"{'—' if b is None else f'{b:.4f}':>15}   {units.get(name, '')}")
-    gain = f"   ({base.worst / pred.worst:.1f}x better than the default cone {base.worst:.4g})" if base else ""
+    gain = f"   (default cone {base.worst:.4g}: {base.worst / pred.worst:.1f}x larger)" if base else ""
     lines += ["", f"worst predicted std {pred.worst:.4g}{gain}", f"condition {pred.condition:.3g}   duration "
               f"{plan.duration_s:g} s" + (f"   planned in {plan.planning_s:.2f} s" if plan.planning_s else "")]
     if pred.undetermined:
         lines.append(f"undetermined (no value will be given): {', '.join(pred.undetermined)}")
     if plan.limits is not None and plan.limits.assumed:
-        lines.append(f"assumed limits (give --limits): " + ", ".join(
+        lines.append("assumed limits (give --limits): " + ", ".join(
             f"{a} {plan.limits.rotary[a][0]:g}:{plan.limits.rotary[a][1]:g}" for a in plan.limits.assumed))
     if plan.baseline_within_limits is False:
         lines.append("note: the default cone itself leaves these limits")
@@ -121,8 +125,9 @@ def _run(args: argparse.Namespace) -> int:
     setup = _setup(args)
     limits = parse_limits(args.limits, setup.kernels)
     if args.grade:
-        if args.out:
-            raise InputError("--grade reports on an existing test and writes nothing: leave out --out")
+        if args.out or args.reveal or args.ball_region:
+            raise InputError("--grade reports on an existing test and writes nothing: leave out --out, --reveal "
+                             "and --ball-region (they are for planning)")
         plan = _grade(args, setup, limits)
     else:
         plan = _plan(args, setup, limits)

@@ -208,11 +208,23 @@ class Prediction:
         return {n: (float(s) if d else None) for n, s, d in zip(self.names, self.std, self.determined, strict=True)}
 
 
+def _drop_unobserved(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Zero the rows/columns of parameters whose column norm is round-off; returns (normal, column norms)."""
+    diag = np.sqrt(np.clip(np.diag(normal), 0, None))
+    unobserved = diag <= UNOBSERVED_RTOL * diag.max(initial=0.0)
+    if unobserved.any():
+        normal = normal.copy()
+        normal[unobserved, :] = 0.0
+        normal[:, unobserved] = 0.0
+        diag = np.where(unobserved, 0.0, diag)
+    return normal, diag
+
+
 def predict_from_normal(normal: np.ndarray, names: Sequence[str], units: dict[str, str], noise_um: float,
                         n_obs: int) -> Prediction:
     """Prediction from a normal matrix with the identification's rank and null rules."""
     p = normal.shape[0]
-    diag = np.sqrt(np.clip(np.diag(normal), 0, None))
+    normal, diag = _drop_unobserved(normal)
     scale = 1.0 / np.where(diag > 0, diag, 1.0)
     w, v = np.linalg.eigh(normal * np.outer(scale, scale))
     w = np.clip(w, 0, None)[::-1]
@@ -223,7 +235,7 @@ def predict_from_normal(normal: np.ndarray, names: Sequence[str], units: dict[st
     rank = int(keep.sum())
     inv_w = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
     cov = ((v * inv_w) @ v.T) * np.outer(scale, scale) * noise_um**2
-    determined = diag > UNOBSERVED_RTOL * diag.max(initial=0.0)
+    determined = diag > 0
     near_null = svals <= NULL_RTOL * smax
     if near_null.any():
         determined &= np.abs(v[:, near_null]).max(axis=1) <= NULL_WEIGHT
@@ -272,8 +284,7 @@ class Estimable:
     @classmethod
     def from_rich_design(cls, normal: np.ndarray) -> Estimable:
         """Estimable subspace of a design that visits the whole admissible region."""
-        p = normal.shape[0]
-        diag = np.sqrt(np.clip(np.diag(normal), 0, None))
+        normal, diag = _drop_unobserved(normal)
         scale = 1.0 / np.where(diag > 0, diag, 1.0)
         w, v = np.linalg.eigh(normal * np.outer(scale, scale))
         smax = math.sqrt(max(w.max(initial=0.0), 0.0)) or 1.0

@@ -4,13 +4,14 @@ Search
 ------
 Every family of :mod:`pige_sym.planning.families` is optimised per discrete variant with
 ``scipy.optimize.differential_evolution`` (seeded, so a plan is reproducible) over its
-continuous parameters and, with ``--ball-region``, the ball position.  Free poses are
+continuous parameters and, with ``--ball-region``, the ball position, on the PIGE model
+(the poses already carry the structure the forced effects need).  Free poses are
 optimised with ``scipy.optimize.minimize`` (L-BFGS-B, analytic gradient of the smooth
 criterion, linear-axis limits as a quadratic penalty), started from the best family's
 poses and from seeded random poses.  A candidate that leaves a limit, or on which a
 forced effect (``--reveal``) cannot be determined jointly with the PIGEs, is dropped; the
-remaining candidate with the lowest exact criterion on the joint model (PIGEs plus the
-forced effects' parameters) wins.  Angles are rounded to 1e-4° before the final
+remaining candidate with the lowest criterion on the joint model (PIGEs plus the forced
+effects' parameters, so e.g. a forced wobble is planned for) wins.  Angles are rounded to 1e-4° before the final
 prediction, so the figures describe the file that is written.
 
 Baseline
@@ -266,12 +267,19 @@ def _finish(ctx: _Context, core: np.ndarray) -> np.ndarray | None:
     return angles
 
 
-def _score(ctx: _Context, angles: np.ndarray, ball: np.ndarray) -> float:
-    """Smooth criterion of a full angle table on the joint model (large when infeasible)."""
+def _score(ctx: _Context, angles: np.ndarray, ball: np.ndarray, *, joint: bool = False) -> float:
+    """Smooth criterion of a full angle table (large when infeasible).
+
+    The searches use the PIGE model (the structure of the forced effects is already in the
+    poses); ``joint`` adds the forced effects' parameters, for ranking the final candidates.
+    """
     setup = ctx.req.setup.with_ball(ball)
     viol = linear_violation(ctx.kern, angles, setup, ctx.req.limits).max(initial=0.0)
     if viol > 1e-6:
         return SINGULAR + viol
+    if not joint:
+        rows = design_rows(setup, angles[1:], projected_coefficients(setup))
+        return criterion_and_dn(normal_matrix(rows), ctx.est, ctx.req.criterion, setup.noise_um)[0]
     rows, extra, names = _joint(ctx, setup, angles)
     est = ctx.est if extra is None else _joint_estimable(ctx, extra.shape[2])
     value, _ = criterion_and_dn(normal_matrix(rows, extra), est, ctx.req.criterion, setup.noise_um)
@@ -297,13 +305,13 @@ def _search_family(ctx: _Context, fam: Family) -> list[_Candidate]:
     for vi, variant in enumerate(fam.variants):
         nb = len(fam.bounds)
 
-        def build(x: np.ndarray, variant: dict[str, Any] = variant) -> np.ndarray | None:
+        def build(x: np.ndarray, variant: dict[str, Any] = variant, nb: int = nb) -> np.ndarray | None:
             try:
                 return _finish(ctx, fam.make(x[:nb], variant, n_core))
             except (InputError, ValueError, FloatingPointError):
                 return None
 
-        def objective(x: np.ndarray, build: Any = build) -> float:
+        def objective(x: np.ndarray, build: Any = build, nb: int = nb) -> float:
             angles = build(x)
             return 2 * SINGULAR if angles is None else _score(ctx, angles, _ball(ctx, x[nb:]))
 
@@ -442,6 +450,9 @@ def plan_test(req: PlanRequest) -> Plan:
     n_core = structure.core_count(req.points)
     starts = [core for c in cands[:2] if (core := _core_of(c.angles, structure)).shape[0] == n_core]
     cands += _search_free(ctx, starts)
+    if forced:
+        for c in cands:
+            c.score = _score(ctx, c.angles, c.ball, joint=True)
     cands.sort(key=lambda c: c.score)
     for cand in cands:
         angles = np.round(cand.angles, ROUND_DEG)
