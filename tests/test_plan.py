@@ -66,6 +66,21 @@ def test_prediction_is_what_identify_reports_for_the_same_noise(code) -> None:
     assert pred.condition == pytest.approx(res.condition, rel=1e-6) and pred.rank == res.rank == 8
 
 
+@pytest.mark.parametrize("projection, with_zero", [("y", False), ("xyz", True), ("0.6,0.8,0", True)])
+def test_prediction_follows_projection_and_zero_position_errors(projection, with_zero) -> None:
+    from pige_sym.projection import parse_projection
+
+    tr = cone_frustum(BC, points=24, incl_axis="Y")
+    sim = simulate(BC, tr, pige=random_pige(BC, 2), ball_mm=BALL, noise_um=NOISE, seed=5)
+    res = identify(sim.measurement, projection=projection, with_zero=with_zero)
+    setup = Setup(BC, BALL, noise_um=NOISE, projection=parse_projection(projection), with_zero=with_zero)
+    pred = predict(setup, tr.angles_deg)
+    assert pred.names == res.parameters
+    ok = np.isfinite(res.values)
+    assert list(np.array(pred.names)[~ok]) == pred.undetermined
+    np.testing.assert_allclose(pred.std[ok], res.std[ok] * NOISE / res.sigma_um, rtol=1e-6)
+
+
 def test_undetermined_parameters_are_named_never_given_a_number(tmp_path, capsys) -> None:
     """Steps at tilt 0 only: the A axis never moves, so its PIGEs cannot be determined (identify agrees)."""
     tr = steps(AC, tilts=(0.0,))
@@ -142,6 +157,15 @@ def test_prediction_holds_over_50_simulated_runs_ac() -> None:
     plan = _plan(AC, 24)
     ratio = _empirical_ratio(AC, plan, 50)
     assert np.all((ratio >= 0.65) & (ratio <= 1.5)), dict(zip(plan.prediction.names, np.round(ratio, 3), strict=True))
+
+
+@pytest.mark.slow
+def test_single_rotary_axis_machine_gets_a_stepped_or_free_plan(tmp_path, monkeypatch) -> None:
+    """A machine with one rotary axis (kernels generated on first use): no cone, no baseline, still a plan."""
+    code = "wC'bXYZ(C1)t"
+    plan = plan_test(PlanRequest(Setup(code, BALL), 12, parse_limits(None, load_kernels(code))))
+    assert plan.baseline is None and plan.family in ("steps", "free") and not plan.prediction.undetermined
+    assert not plan.reveal["squareness_YZ"].revealable and "no Z travel" in plan.reveal["squareness_YZ"].reason
 
 
 @pytest.mark.slow

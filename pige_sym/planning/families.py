@@ -6,6 +6,10 @@ Limits (``--limits AXIS=lo:hi``)
     is endless; the tilt axis (the rotary axis not parallel to the spindle) defaults to
     ±90° and is reported as *assumed*.  The reference pose must lie within the limits.
     A rotary column may be shifted by a multiple of 360° as a whole to fit (same poses).
+    Limits are checked at the poses.  Between poses the rotary axes move monotonically,
+    and in machine coordinates (``pige program`` without ``--rtcp``) the linear axes move
+    on straight lines, so a test whose poses fit stays inside; with ``--rtcp`` (TRAORI)
+    the controller's linear path between poses is not checked.
 
 Families (poses after the reference pose; n of them)
     ``cone-frustum``  :func:`pige_sym.trajectories.cone_frustum`; half angle and
@@ -280,13 +284,15 @@ def _steps(rot_bounds: tuple[float, float], tilt_bounds: tuple[float, float], ro
            n: int) -> Family:
     def make(x: np.ndarray, v: dict[str, Any], count: int) -> np.ndarray:
         lo, hi = sorted((float(x[0]), float(x[1])))
-        return stepped_sweeps(np.asarray(x[2:2 + v["levels"]]), lo, hi, count, roles)
+        tilts = np.zeros(1) if roles is None else np.asarray(x[2:2 + v["levels"]])
+        return stepped_sweeps(tilts, lo, hi, count, roles)
 
     level_options = (1,) if roles is None else tuple(L for L in (1, 2, 3) if n >= 3 * L)
     bounds = [rot_bounds, rot_bounds] + ([tilt_bounds] * 3 if roles is not None else [])
     return Family("steps", bounds, [{"levels": L} for L in level_options or (1,)], make,
-                  lambda x, v: (f"steps rotary {min(x[0], x[1]):.2f}..{max(x[0], x[1]):.2f} at tilts "
-                                + "/".join(f"{t:.2f}" for t in x[2:2 + v["levels"]])))
+                  lambda x, v: (f"steps rotary {min(x[0], x[1]):.2f}..{max(x[0], x[1]):.2f}"
+                                + ("" if roles is None else " at tilts "
+                                   + "/".join(f"{t:.2f}" for t in x[2:2 + v["levels"]]))))
 
 
 def families(kern: Any, limits: Limits, n: int) -> list[Family]:

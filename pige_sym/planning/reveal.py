@@ -18,7 +18,7 @@ What each effect needs (and the reason given when it is not revealable):
   reference poses), otherwise a drift looks like pose-dependent errors;
 - ``angular_error``/``wobble``/``radial_runout_<AXIS>``: the axis moved over enough of a
   turn for the harmonic to differ from the PIGEs' own first-harmonic signature;
-- ``squareness_<PAIR>``: linear travel along the second axis of the pair;
+- ``squareness_<PAIR>``: linear travel along the axis it tilts (Y for XY, Z for YZ and ZX);
 - ``setup_offset``: tool and table orientations differing between poses;
 - ``outliers``: redundancy (leverage rule above).
 """
@@ -104,9 +104,13 @@ def effect_columns(setup: Setup, spec: EffectSpec, angles_deg: np.ndarray, t_s: 
     return np.einsum("mi,niq->nmq", setup.projection.directions, spec.columns(ctx))
 
 
+SQUARENESS_TRAVEL = {"XY": 1, "YZ": 2, "ZX": 2}  # the travel each squareness acts on (effects.py: dx = γ·ΔY …)
+
+
 def _needs(spec: EffectSpec) -> str:
     pair = spec.id.split("_")[-1]
-    return NEEDS[spec.kind].format(axis=spec.axis, h=spec.harmonic, second=pair[-1] if len(pair) == 2 else "")
+    second = "XYZ"[SQUARENESS_TRAVEL[pair]] if spec.kind == "squareness" else ""
+    return NEEDS[spec.kind].format(axis=spec.axis, h=spec.harmonic, second=second)
 
 
 def _structural_reason(spec: EffectSpec, kern: Any, setup: Setup, angles: np.ndarray, t_s: np.ndarray) -> str | None:
@@ -125,6 +129,11 @@ def _structural_reason(spec: EffectSpec, kern: Any, setup: Setup, angles: np.nda
     if spec.kind in ("angular_error", "wobble", "radial_runout"):
         if np.ptp(angles[:, axes.index(spec.axis)]) < 1e-9:
             return f"{spec.axis} does not move"
+    if spec.kind == "squareness":
+        j = SQUARENESS_TRAVEL[spec.id.split("_")[-1]]
+        lin = np.asarray(kern.linear_commands(angles, setup.ball_mm, setup.pivots_mm or None, setup.tool_mm))
+        if np.ptp(lin[:, j]) < 1e-6:
+            return f"no {'XYZ'[j]} travel: the RTCP moves never move {'XYZ'[j]}"
     return None
 
 

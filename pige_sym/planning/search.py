@@ -68,6 +68,8 @@ from pige_sym.trajectories import cone_frustum
 ROUND_DEG = 4
 PENALTY = 0.1
 RICH_POSES = 400
+FREE_WARM_STARTS = 1  # best family candidates that start a free-pose search
+FREE_RANDOM_STARTS = 1  # seeded random starts of the free-pose search
 
 
 @dataclass
@@ -377,7 +379,7 @@ def _search_free(ctx: _Context, starts: list[np.ndarray]) -> list[_Candidate]:
     ball0 = [ctx.req.setup.ball_mm[i] for i in sorted(ctx.req.ball_region)]
     x0s = [np.clip(np.concatenate([s.ravel(), ball0]), lo, hi) for s in starts if s.shape == (n_core, k)]
     x0s += [np.clip(np.concatenate([rng.uniform(lo[:n_core * k], hi[:n_core * k]), ball0]), lo, hi)
-            for _ in range(2)]
+            for _ in range(FREE_RANDOM_STARTS)]
     out = []
     for x0 in x0s:
         res = optimize.minimize(lambda x: _free_objective(ctx, x, n_core, k), x0, jac=True, method="L-BFGS-B",
@@ -448,7 +450,7 @@ def plan_test(req: PlanRequest) -> Plan:
         cands += _search_family(ctx, fam)
     cands.sort(key=lambda c: c.score)
     n_core = structure.core_count(req.points)
-    starts = [core for c in cands[:2] if (core := _core_of(c.angles, structure)).shape[0] == n_core]
+    starts = [core for c in cands[:FREE_WARM_STARTS] if (core := _core_of(c.angles, structure)).shape[0] == n_core]
     cands += _search_free(ctx, starts)
     if forced:
         for c in cands:
