@@ -201,7 +201,7 @@ class Plan:
             lines.insert(2, f"# tool_mm: {','.join(f'{x:g}' for x in self.setup.tool_mm)}")
         lines.append(",".join(["t_s"] + [f"{a}_deg" for a in self.rotary_axes]))
         for t, row in zip(self.t_s, self.angles_deg, strict=True):
-            lines.append(",".join([f"{t:g}"] + [f"{x:.{ROUND_DEG}f}" for x in row]))
+            lines.append(",".join([f"{t:.10g}"] + [f"{x:.{ROUND_DEG}f}" for x in row]))
         return "\n".join(lines) + "\n"
 
 
