@@ -62,7 +62,7 @@ from pige_sym.planning.prediction import (
     predict,
     projected_coefficients,
 )
-from pige_sym.planning.reveal import RevealStatus, effect_columns, effect_spec, reveal_report
+from pige_sym.planning.reveal import RevealStatus, effect_columns, effect_spec, reveal_report, reveal_status
 from pige_sym.trajectories import cone_frustum
 
 ROUND_DEG = 4
@@ -413,17 +413,37 @@ def _repair_linear(ctx: _Context, core: np.ndarray, ball: np.ndarray) -> np.ndar
     return out
 
 
-def _structural_estimable(req: PlanRequest) -> Estimable:
-    """Estimable subspace from many random poses within the limits (what no test can do better)."""
+def _rich_poses(req: PlanRequest) -> tuple[Setup, np.ndarray]:
+    """Many random poses within the limits (reference row first) and the set-up at the ball region's centre."""
     kern = req.setup.kernels
     rng = np.random.default_rng(req.seed + 1000)
-    axes = tuple(kern.ROTARY_AXES)
     ball = req.setup.ball_mm.copy()
     for i, (lo, hi) in req.ball_region.items():
         ball[i] = 0.5 * (lo + hi)
-    setup = req.setup.with_ball(ball)
-    poses = np.column_stack([rng.uniform(*req.limits.search_bounds(a), RICH_POSES) for a in axes])
-    return Estimable.from_rich_design(normal_matrix(design_rows(setup, poses)))
+    poses = np.column_stack([rng.uniform(*req.limits.search_bounds(a), RICH_POSES) for a in kern.ROTARY_AXES])
+    return req.setup.with_ball(ball), np.vstack([np.zeros(poses.shape[1]), poses])
+
+
+def _structural_estimable(req: PlanRequest) -> Estimable:
+    """Estimable subspace from many random poses within the limits (what no test can do better)."""
+    setup, angles = _rich_poses(req)
+    return Estimable.from_rich_design(normal_matrix(design_rows(setup, angles[1:])))
+
+
+def _check_forced_possible(req: PlanRequest, forced: list[str]) -> None:
+    """Refuse at once an effect that even many random poses cannot tell apart from the PIGEs.
+
+    Backlash and thermal drift are left to the search: they need order and repeats, not poses.
+    """
+    setup, angles = _rich_poses(req)
+    t_s = schedule_times(angles.shape[0], req.move_s, req.dwell_s)
+    for effect in forced:
+        if effect == "thermal_drift" or effect.startswith("backlash_"):
+            continue
+        status = reveal_status(setup, effect, angles, t_s)
+        if not status.revealable:
+            raise InputError(f"--reveal {effect}: no test within these limits can tell it from the PIGEs "
+                             f"(not even {RICH_POSES} random poses): {status.reason}")
 
 
 # ------------------------------------------------------------------------------------------ public
@@ -443,6 +463,7 @@ def plan_test(req: PlanRequest) -> Plan:
     axes = tuple(kern.ROTARY_AXES)
     structure = Structure.for_reveal(req.reveal, axes, req.points)
     forced = [e for e in req.reveal if e != "outliers"]
+    _check_forced_possible(req, forced)
     ctx = _Context(req, structure, _structural_estimable(req), forced,
                    schedule_times(req.points + 1, req.move_s, req.dwell_s))
     cands: list[_Candidate] = []
