@@ -8,6 +8,8 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import optimize
 
 from pige_sym.acquisition.virtual_device import start_virtual_device
@@ -21,7 +23,7 @@ from pige_sym.kernels import load_kernels
 from pige_sym.planning import PlanRequest, Setup, grade_test, parse_limits, plan_test, predict
 from pige_sym.planning.families import linear_violation
 from pige_sym.planning.prediction import Estimable, criterion_gradient, projected_coefficients
-from pige_sym.planning.search import schedule_times, within_limits
+from pige_sym.planning.search import schedule_times, search_ball_region, within_limits
 from pige_sym.simulator import random_pige, simulate
 from pige_sym.trajectories import Trajectory, cone_frustum, steps
 
@@ -305,6 +307,33 @@ def test_bad_input_is_one_line_and_status_2(tmp_path, capsys, argv, message) -> 
     assert main(["plan", *argv, "--out", str(tmp_path / "p.csv")]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-720, 0, allow_nan=False), st.floats(0, 720, allow_nan=False),
+       st.floats(-2000, 2000, allow_nan=False), st.floats(0.001, 500, allow_nan=False))
+def test_limits_round_trip(lo, hi, zlo, zspan) -> None:
+    if lo == hi:
+        return
+    limits = parse_limits([f"A={lo!r}:{hi!r},Z={zlo!r}:{zlo + zspan!r}"], load_kernels(AC))
+    assert limits.rotary["A"] == (lo, hi) and limits.linear["Z"] == (zlo, zlo + zspan)
+    assert limits.rotary["C"] == (-np.inf, np.inf) and limits.assumed == []
+    wlo, whi = limits.search_bounds("A")
+    assert lo <= wlo <= 0 <= whi <= hi and whi - wlo <= 360
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(alphabet="ACXYZxyzQ=:,.-+0123456789e nai", max_size=24))
+def test_limit_and_ball_region_parsers_refuse_cleanly(text) -> None:
+    """Any text either parses into finite ranges or raises InputError (never another exception)."""
+    for parse in (lambda t: parse_limits([t], load_kernels(AC)), search_ball_region):
+        try:
+            out = parse(text)
+        except InputError:
+            continue
+        ranges = list(out.values()) if isinstance(out, dict) else [*out.rotary.values(), *out.linear.values()]
+        for lo, hi in ranges:
+            assert lo <= hi
 
 
 def test_time_budget_sets_the_points(tmp_path, capsys) -> None:

@@ -72,13 +72,12 @@ class Limits:
                 "assumed": list(self.assumed)}
 
     def search_bounds(self, axis: str) -> tuple[float, float]:
-        """A window of at most 360° inside the axis' limits where free poses are searched."""
+        """A window of at most 360° inside the axis' limits, containing 0, where poses are searched."""
         lo, hi = self.rotary[axis]
-        if math.isfinite(lo):
-            return lo, min(hi, lo + 360.0)
-        if math.isfinite(hi):
-            return hi - 360.0, hi
-        return -180.0, 180.0
+        if not (math.isfinite(lo) or math.isfinite(hi)):
+            return -180.0, 180.0
+        start = min(max(lo, hi - 360.0, -360.0), 0.0)
+        return max(lo, start), min(hi, start + 360.0)
 
 
 def _range(text: str, what: str) -> tuple[float, float]:
