@@ -3,6 +3,7 @@ over simulated runs, limits, reveal rules, the angle file through program / rtes
 
 from __future__ import annotations
 
+import functools
 import json
 import time
 
@@ -46,6 +47,14 @@ def _limits(code: str, extra: list[str] | None = None):
 
 def _plan(code: str, points: int = 30, **kw):
     return plan_test(PlanRequest(_setup(code), points, kw.pop("limits", None) or _limits(code), **kw))
+
+
+@functools.lru_cache(maxsize=None)
+def _default_plan(code: str):
+    """The plan of the measures (30 poses, tilt -90..90), made once per machine and timed."""
+    t0 = time.perf_counter()
+    plan = _plan(code)
+    return plan, time.perf_counter() - t0
 
 
 def _traj(code: str, angles: np.ndarray) -> Trajectory:
@@ -128,9 +137,7 @@ def test_criterion_gradient_matches_finite_differences(criterion) -> None:
 
 @pytest.mark.parametrize("code", [AC, BC, HEAD, MIXED])
 def test_planned_worst_std_is_at_most_half_the_default_cone_and_fast(code) -> None:
-    t0 = time.perf_counter()
-    plan = _plan(code)
-    elapsed = time.perf_counter() - t0
+    plan, elapsed = _default_plan(code)
     assert plan.baseline is not None and plan.baseline_within_limits is True
     cone = cone_frustum(code, points=30).angles_deg
     assert plan.baseline.worst == pytest.approx(predict(_setup(code), cone).worst, rel=1e-12)
@@ -156,7 +163,7 @@ def _empirical_ratio(code: str, plan, runs: int) -> np.ndarray:
 
 
 def test_prediction_holds_over_50_simulated_runs_ac() -> None:
-    plan = _plan(AC, 24)
+    plan = _default_plan(AC)[0]
     ratio = _empirical_ratio(AC, plan, 50)
     assert np.all((ratio >= 0.65) & (ratio <= 1.5)), dict(zip(plan.prediction.names, np.round(ratio, 3), strict=True))
 
@@ -173,7 +180,7 @@ def test_single_rotary_axis_machine_gets_a_stepped_or_free_plan(tmp_path, monkey
 @pytest.mark.slow
 @pytest.mark.parametrize("code", [AC, BC, HEAD, MIXED])
 def test_prediction_holds_over_50_simulated_runs_every_machine(code) -> None:
-    plan = _plan(code)
+    plan = _default_plan(code)[0]
     ratio = _empirical_ratio(code, plan, 50)
     assert np.all((ratio >= 0.65) & (ratio <= 1.5)), dict(zip(plan.prediction.names, np.round(ratio, 3), strict=True))
 
@@ -354,7 +361,7 @@ def test_grade_refuses_an_out_file(tmp_path, capsys) -> None:
 def test_report_section_has_every_pige_and_an_embedded_figure(tmp_path) -> None:
     from pige_sym.report.plan_section import plan_section
 
-    plan = _plan(HEAD, 12)
+    plan = _default_plan(HEAD)[0]
     html, png = plan_section(plan, tmp_path)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert 'data-section="plan"' in html and "data:image/png;base64," in html
