@@ -482,7 +482,8 @@ def plan_test(req: PlanRequest) -> Plan:
         plan = _describe(req.setup.with_ball(np.round(cand.ball, 3)), angles, ctx.t_s, cand.family,
                          cand.description, req.criterion, req.reveal, req.limits,
                          ball_searched=bool(req.ball_region), ball_given=req.setup.ball_mm)
-        if not plan.prediction.undetermined and all(plan.reveal[e].revealable for e in req.reveal):
+        if (not plan.prediction.undetermined and all(plan.reveal[e].revealable for e in req.reveal)
+                and within_limits(angles, plan.setup, req.limits)):
             plan.planning_s = time.perf_counter() - t0
             plan.duration_s = float(ctx.t_s[-1] + req.dwell_s)
             return plan
@@ -492,13 +493,17 @@ def plan_test(req: PlanRequest) -> Plan:
 
 
 def within_limits(angles: np.ndarray, setup: Setup, limits: Limits) -> bool:
-    """True when every pose respects the rotary limits (as given, no shift) and the linear ones."""
+    """True when every pose respects the rotary limits (as given, no shift) and the linear ones.
+
+    Tolerances: the file's angle resolution (``10^-ROUND_DEG`` deg) and 1 µm on X/Y/Z.
+    """
     axes = tuple(setup.kernels.ROTARY_AXES)
+    tol = 10.0 ** -ROUND_DEG
     for k, a in enumerate(axes):
         lo, hi = limits.rotary[a]
-        if angles[:, k].min() < lo - 1e-9 or angles[:, k].max() > hi + 1e-9:
+        if angles[:, k].min() < lo - tol or angles[:, k].max() > hi + tol:
             return False
-    return bool(linear_violation(setup.kernels, angles, setup, limits).max(initial=0.0) <= 1e-6)
+    return bool(linear_violation(setup.kernels, angles, setup, limits).max(initial=0.0) <= 1e-3)
 
 
 def _describe(setup: Setup, angles: np.ndarray, t_s: np.ndarray, family: str, description: str, criterion: str,
