@@ -49,7 +49,7 @@ def _plan(code: str, points: int = 30, **kw):
     return plan_test(PlanRequest(_setup(code), points, kw.pop("limits", None) or _limits(code), **kw))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _default_plan(code: str):
     """The plan of the measures (30 poses, tilt -90..90), made once per machine and timed."""
     t0 = time.perf_counter()
