@@ -1,0 +1,180 @@
+"""``pige plan``: plan the R-test before running it, or grade an existing test program.
+
+Planning searches trajectory families and (with ``--ball-region``) the ball position for
+the test that determines the PIGEs best within the axis limits, writes it as an angle file
+(first row the reference pose) that ``pige program``, ``pige rtest-sim`` and ``pige
+acquire`` take, and prints the predicted standard error of every PIGE next to the default
+cone's with the same points, noise and ball, plus which catalogue effects the test can
+reveal.  ``--grade`` reports the same figures for a given trajectory or NC program.
+See :mod:`pige_sym.planning`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+from pige_sym.errors import InputError
+from pige_sym.kernels import DEFAULT_MACHINE
+
+
+def _points(args: argparse.Namespace, move_s: float, dwell_s: float) -> int:
+    """Points from ``--points`` and/or the time budget ``--time`` (schedule: move + dwell per pose)."""
+    per = move_s + dwell_s
+    if args.time is not None:
+        if not (math.isfinite(args.time) and args.time > 0):
+            raise InputError("--time must be a positive number of seconds")
+        fit = int((args.time - dwell_s) // per)
+        if args.points is None:
+            if fit < 3:
+                raise InputError(f"--time {args.time:g} s holds {max(fit, 0)} poses ({per:g} s each): give at least "
+                                 f"{3 * per + dwell_s:g} s")
+            return fit
+        if args.points > fit:
+            raise InputError(f"--points {args.points} takes {args.points * per + dwell_s:g} s with {move_s:g} s move "
+                             f"and {dwell_s:g} s dwell per pose, more than --time {args.time:g} s (at most {fit})")
+    return 30 if args.points is None else int(args.points)
+
+
+def _setup(args: argparse.Namespace) -> Any:
+    import numpy as np
+
+    from pige_sym.cli._setup import parse_pivots, parse_vec3
+    from pige_sym.planning import Setup
+    from pige_sym.projection import parse_projection
+
+    tool = parse_vec3(args.tool, "--tool") if args.tool else None
+    pivots = {a: np.asarray(v, dtype=float) for a, v in parse_pivots(args.pivot).items()}
+    return Setup(args.machine, np.asarray(parse_vec3(args.ball, "--ball"), dtype=float),
+                 None if tool is None else np.asarray(tool, dtype=float), pivots or None, noise_um=args.noise,
+                 projection=parse_projection(args.projection), with_zero=args.with_zero)
+
+
+def _grade(args: argparse.Namespace, setup: Any, limits: Any) -> Any:
+    from pige_sym.nc.rtest_program import load_test_program
+    from pige_sym.planning import grade_test
+    from pige_sym.trajectories import NAMES
+
+    options = {"points": args.points} if args.points is not None and args.grade in NAMES else {}
+    prog = load_test_program(setup.machine, args.grade, ball_mm=setup.ball_mm, pivots_mm=setup.pivots_mm,
+                             tool_mm=setup.tool_mm, move_s=args.move, dwell_s=args.dwell, **options)
+    return grade_test(setup, prog.angles_deg, prog.arrive_s, description=prog.description, criterion=args.criterion,
+                      limits=limits, duration_s=prog.duration_s)
+
+
+def _plan(args: argparse.Namespace, setup: Any, limits: Any) -> Any:
+    from pige_sym.files import atomic_write_text, check_output
+    from pige_sym.io import read_angle_file
+    from pige_sym.planning import PlanRequest, parse_reveal, plan_test, search_ball_region
+
+    if not args.out:
+        raise InputError("give --out PLAN.csv for the planned test (or --grade FILE to grade an existing one)")
+    out = check_output(args.out, force=args.force, what="--out")
+    region = search_ball_region(args.ball_region)
+    for i, (lo, hi) in region.items():
+        setup.ball_mm[i] = min(max(setup.ball_mm[i], lo), hi)
+    req = PlanRequest(setup, _points(args, args.move, args.dwell), limits, region, args.criterion,
+                      parse_reveal(args.reveal, tuple(setup.kernels.ROTARY_AXES)), args.move, args.dwell, args.seed)
+    plan = plan_test(req)
+    text = plan.angle_file_text()
+    atomic_write_text(out, text)
+    axes, angles, _ = read_angle_file(out)  # read the output back: it must be the planned poses
+    if axes != plan.rotary_axes or angles.shape != plan.angles_deg.shape or abs(angles - plan.angles_deg).max() > 0:
+        raise InputError(f"{out}: the file read back differs from the plan (please report this)")
+    return plan
+
+
+def _format(plan: Any, out: str | None) -> str:
+    pred, base = plan.prediction, plan.baseline
+    units = pred.units
+    lines = [f"machine {plan.machine}   {plan.points} poses + reference   noise {plan.setup.noise_um:g} um   "
+             f"criterion {plan.criterion}   ball {', '.join(f'{x:g}' for x in plan.setup.ball_mm)} mm",
+             f"{plan.family}: {plan.description}", "",
+             f"{'parameter':<12}{'predicted std':>15}{'default cone':>15}   unit"]
+    bstd = base.std_dict() if base is not None else {}
+    for name, s in pred.std_dict().items():
+        b = bstd.get(name)
+        lines.append(f"{name:<12}{'undetermined' if s is None else f'{s:.4f}':>15}"
+                     f"{'—' if b is None else f'{b:.4f}':>15}   {units.get(name, '')}")
+    gain = f"   (default cone {base.worst:.4g}: {base.worst / pred.worst:.1f}x larger)" if base else ""
+    lines += ["", f"worst predicted std {pred.worst:.4g}{gain}", f"condition {pred.condition:.3g}   duration "
+              f"{plan.duration_s:g} s" + (f"   planned in {plan.planning_s:.2f} s" if plan.planning_s else "")]
+    if pred.undetermined:
+        lines.append(f"undetermined (no value will be given): {', '.join(pred.undetermined)}")
+    if plan.limits is not None and plan.limits.assumed:
+        lines.append("assumed limits (give --limits): " + ", ".join(
+            f"{a} {plan.limits.rotary[a][0]:g}:{plan.limits.rotary[a][1]:g}" for a in plan.limits.assumed))
+    if plan.baseline_within_limits is False:
+        lines.append("note: the default cone itself leaves these limits")
+    lines += ["", "effects this test can reveal:"]
+    for eff, st in plan.reveal.items():
+        lines.append(f"  {'yes' if st.revealable else 'no ':<4}{eff:<20}{'(forced) ' if st.forced else ''}{st.reason}")
+    if out:
+        ball = ",".join(f"{x:g}" for x in plan.setup.ball_mm)
+        tool = f" --tool {','.join(f'{x:g}' for x in plan.setup.tool_mm)}" if plan.setup.tool_mm is not None else ""
+        lines += ["", f"wrote {out}; next: pige program --machine \"{plan.machine}\" --trajectory {out} "
+                  f"--ball {ball}{tool} --out plan.mpf"]
+    return "\n".join(lines)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from pige_sym.files import to_json
+    from pige_sym.planning import parse_limits
+
+    setup = _setup(args)
+    limits = parse_limits(args.limits, setup.kernels)
+    if args.grade:
+        if args.out or args.reveal or args.ball_region:
+            raise InputError("--grade reports on an existing test and writes nothing: leave out --out, --reveal "
+                             "and --ball-region (they are for planning)")
+        plan = _grade(args, setup, limits)
+    else:
+        plan = _plan(args, setup, limits)
+    if args.json:
+        print(to_json({**plan.to_dict(), "out": args.out}))
+    else:
+        print(_format(plan, args.out))
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from pige_sym.nc.rtest_program import DEFAULT_DWELL_S, DEFAULT_MOVE_S
+
+    p = subparsers.add_parser(
+        "plan", help="plan the R-test (trajectory, ball) for the best predicted precision, or grade one",
+        description=__doc__.split("\n\n", 1)[1] if __doc__ else None,
+        epilog=(
+            "examples:\n"
+            "  pige plan --machine \"wC'A'bXYZ(C1)t\" --points 30 --limits A=-110:30 --out plan.csv\n"
+            "  pige plan --machine \"wbXYZCA(C1)t\" --tool 0,0,-250 --points 24 --reveal backlash_C,thermal_drift "
+            "--out plan.csv --json\n"
+            "  pige plan --ball-region x=80:150,z=50:120 --criterion D --out plan.csv\n"
+            "  pige plan --grade rtest.mpf --noise 0.3"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--machine", default=DEFAULT_MACHINE, help="ISO 10791 machine code (default %(default)s)")
+    p.add_argument("--points", type=int, help="poses after the reference pose (default 30, or what --time holds)")
+    p.add_argument("--noise", type=float, default=0.25, help="sensor noise per component [um] (default %(default)s)")
+    p.add_argument("--limits", action="append", metavar="AXIS=lo:hi",
+                   help="axis range: rotary [deg] or X/Y/Z [mm] (repeatable; tilt axis default -90:90)")
+    p.add_argument("--ball", default="120,0,80", help="ball centre x,y,z [mm] (start of --ball-region search)")
+    p.add_argument("--ball-region", metavar="x=lo:hi,...", help="search the ball position in this box [mm]")
+    p.add_argument("--tool", help="ball offset from the last tool-side pivot x,y,z [mm] (head machines)")
+    p.add_argument("--pivot", action="append", metavar="AXIS=x,y,z", help="nominal pivot of a rotary axis [mm]")
+    p.add_argument("--time", type=float, metavar="S", help="time budget of the test [s] (move + dwell per pose)")
+    p.add_argument("--reveal", metavar="EFFECT,...", help="effects the test must be able to reveal (catalogue ids)")
+    p.add_argument("--criterion", choices=["worst", "A", "D"], default="worst",
+                   help="worst: largest std; A: total variance; D: determinant (default %(default)s)")
+    p.add_argument("--projection", default="xyz", help="excitation projection used to identify (default xyz)")
+    p.add_argument("--with-zero", action="store_true", help="also plan for the zero-position errors")
+    p.add_argument("--move", type=float, default=DEFAULT_MOVE_S, help="move time per pose [s]")
+    p.add_argument("--dwell", type=float, default=DEFAULT_DWELL_S, help="dwell per pose [s]")
+    p.add_argument("--seed", type=int, default=0, help="seed of the search (default %(default)s: reproducible)")
+    p.add_argument("--grade", metavar="TRAJECTORY",
+                   help="grade this test instead: cone-frustum, figure-eight, steps, an angle CSV or an NC program")
+    p.add_argument("--out", help="angle file of the planned test")
+    p.add_argument("--force", action="store_true", help="replace an existing --out file")
+    p.add_argument("--json", action="store_true", help="print the figures as one JSON object")
+    p.set_defaults(handler=_run)
