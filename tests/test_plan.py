@@ -194,9 +194,10 @@ def test_rotary_and_linear_limits_are_respected() -> None:
     plan = _plan(AC, 12, limits=limits)
     a = plan.angles_deg
     assert a[:, 0].min() >= -40 and a[:, 0].max() <= 100 and a[:, 1].min() >= -90 and a[:, 1].max() <= 270
-    assert linear_violation(kern, a, plan.setup, limits).max() <= 1e-6
+    # tolerance as documented in planning.search.within_limits: the 1e-4 deg rounding of the file, 1 µm on X/Y/Z
+    assert linear_violation(kern, a, plan.setup, limits).max() <= 1e-3
     z = kern.linear_commands(a, plan.setup.ball_mm)[:, 2]
-    assert z.min() >= -60 - 1e-6
+    assert z.min() >= -60 - 1e-3
     unconstrained = _plan(AC, 6, limits=parse_limits(["A=-40:100", "C=-90:270"], kern))
     assert kern.linear_commands(unconstrained.angles_deg, BALL)[:, 2].min() < -60  # the Z limit was binding
 
