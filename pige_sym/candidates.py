@@ -307,7 +307,8 @@ def _removed_sentence(cand: Candidate, vec: np.ndarray, absorbed: np.ndarray, gc
     prefix = ""
     if half is not None:
         kind = "tilt" if cand.spec.kind == "wobble" else "offset"
-        prefix = f"co-rotating half (a {kind} that turns with axis {cand.spec.axis}) = location error: "
+        prefix = (f"co-rotating half (a {kind} that turns with axis {cand.spec.axis}, i.e. fixed in its body: "
+                  f"a location or setup error): ")
     if trace <= 1e-16 * max(float(np.trace(gcc)), 1e-300):
         return f"{prefix}{combo} leaves no trace in the zeroed data"
     what = combination(absorbed, model_names, model_units)
