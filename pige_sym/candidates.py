@@ -41,7 +41,7 @@ import numpy as np
 from pige_sym.effects import EffectContext, EffectSpec
 
 HARMONICS = (1, 2, 3, 4)
-TAU_GRID_FRACTIONS = tuple(float(x) for x in np.geomspace(0.03, 5.0, 14))
+TAU_GRID_FRACTIONS = tuple(float(x) for x in np.geomspace(0.03, 5.0, 10))
 NULL_LAMBDA = 1e-7  # 1/VIF below which a direction counts as undetermined (std inflated > ~3000x)
 ZERO_COLUMN = 1e-10  # relative column norm below which a candidate column leaves no trace
 
@@ -166,8 +166,11 @@ def all_specs(layout: Layout) -> list[tuple[EffectSpec, tuple[int, ...]]]:
 
 
 def evaluate_rows(layout: Layout, blocks: list[tuple[EffectSpec, tuple[int, ...]]], kern: Any, m: Any,
-                  approach: np.ndarray, rows: np.ndarray) -> np.ndarray:
+                  approach: np.ndarray, rows: np.ndarray, compact: bool = False) -> np.ndarray:
     """Super-design rows, shape=(r, 3, C) [µm per parameter unit].
+
+    With ``compact`` only the PIGE columns and the given blocks, in that order, are
+    returned, shape=(r, 3, P + Σq) (see :func:`compact_columns`).
 
     Parameters
     ----------
@@ -180,16 +183,32 @@ def evaluate_rows(layout: Layout, blocks: list[tuple[EffectSpec, tuple[int, ...]
     """
     idx = np.concatenate([[0], np.asarray(rows, dtype=int)])
     angles = m.angles_deg[idx]
-    out = np.zeros((len(rows), 3, layout.n_columns))
     pivots = m.pivots_mm or None
     jac = kern.jacobian(angles, None, m.ball_mm, pivots, m.tool_mm)
     loc = [kern.PARAMETERS.index(p) for p in layout.pige]
-    out[:, :, : len(loc)] = jac[1:, :, loc]
-    if blocks:
-        ctx = EffectContext(kern, angles, m.t_s[idx], m.ball_mm, pivots, m.tool_mm, approach=approach[idx])
-        for spec, cols in blocks:
-            out[:, :, cols[0]: cols[-1] + 1] = spec.columns(ctx)[1:]
-    return out
+    width = len(compact_columns(layout, blocks)) if compact else layout.n_columns
+    if not blocks:
+        out = np.zeros((len(rows), 3, width))
+        out[:, :, : len(loc)] = jac[1:, :, loc]
+        return out
+    raw = np.zeros((len(idx), 3, width))
+    ctx = EffectContext(kern, angles, m.t_s[idx], m.ball_mm, pivots, m.tool_mm, approach=approach[idx])
+    at = len(loc)
+    for spec, cols in blocks:
+        start = at if compact else cols[0]
+        raw[:, :, start: start + len(cols)] = spec.raw_columns(ctx)[0]
+        at += len(cols)
+    # zero all effect columns at once: raw − R_w · raw(reference row); the columns that need no
+    # zeroing (squareness: travel from the reference; drift: t = 0) are zero at the reference anyway
+    p = len(loc)
+    raw[:, :, p:] -= ctx.rot_w @ raw[0][:, p:]
+    raw[:, :, :p] = jac[:, :, loc]
+    return raw[1:]
+
+
+def compact_columns(layout: Layout, blocks: list[tuple[EffectSpec, tuple[int, ...]]]) -> list[int]:
+    """Super-design indices of the columns of a compact evaluation (PIGEs, then the blocks in order)."""
+    return list(range(len(layout.pige))) + [c for _, cols in blocks for c in cols]
 
 
 @dataclass

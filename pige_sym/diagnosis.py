@@ -74,7 +74,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from tqdm import tqdm
 
-from pige_sym.candidates import Candidate, Layout, build_layout, combination, evaluate_rows
+from pige_sym.candidates import Candidate, Layout, build_layout, combination, compact_columns, evaluate_rows
 from pige_sym.diagnosis_results import _EVIDENCE, DiagnosisResult, Finding, Rejected
 from pige_sym.effects import EffectContext, EffectSpec
 from pige_sym.errors import InputError
@@ -84,7 +84,6 @@ from pige_sym.kernels import load_kernels
 from pige_sym.normal_sums import NormalSums, accumulate, fit, fold_of_rows
 from pige_sym.outliers import Cluster, flag_rows, row_residuals, split_clusters
 from pige_sym.selection import Model, Selector, compare, select
-from pige_sym.trajectories import approach_directions
 
 __all__ = ["DiagnosisResult", "Finding", "Rejected", "axis_frames", "diagnose", "residual_plots"]
 
@@ -101,15 +100,41 @@ class _Setup:
     layout: Layout
     folds: np.ndarray
 
-    def design(self, cands: list[Candidate] | None = None) -> Callable[[np.ndarray], np.ndarray]:
-        """``rows -> (r, 3, C)`` super-design rows filling the given candidates (default all)."""
+    def _blocks(self, cands: list[Candidate] | None) -> list[tuple[EffectSpec, tuple[int, ...]]]:
         chosen = self.layout.candidates if cands is None else cands
         blocks = {c.cols: c.spec for c in chosen if c.mix is None}
         if any(c.mix is not None for c in chosen):  # interpolated drift: fill the whole τ grid
             blocks |= {cols: EffectSpec("thermal_drift", {"tau_s": float(t)})
                        for cols, t in zip(self.layout.drift_cols, self.layout.tau_grid_s, strict=True)}
-        items = [(spec, cols) for cols, spec in blocks.items()]
+        return [(spec, cols) for cols, spec in blocks.items()]
+
+    def design(self, cands: list[Candidate] | None = None) -> Callable[[np.ndarray], np.ndarray]:
+        """``rows -> (r, 3, C)`` super-design rows filling the given candidates (default all)."""
+        items = self._blocks(cands)
         return lambda rows: evaluate_rows(self.layout, items, self.kern, self.m, self.approach, rows)
+
+    def residuals(self, model: Model, rows: np.ndarray) -> np.ndarray:
+        """Residuals of a fitted model on ``rows``, shape=(r, 3) [µm], from a compact design."""
+        items = self._blocks(model.cands)
+        used = compact_columns(self.layout, items)
+        beta = (model.w @ model.fit.values)[used]
+
+        def design(r: np.ndarray) -> np.ndarray:
+            return evaluate_rows(self.layout, items, self.kern, self.m, self.approach, r, compact=True)
+
+        return row_residuals(design, np.eye(len(used)), beta, self.m.deviation_um, rows)
+
+
+def _approach(angles_deg: np.ndarray) -> np.ndarray:
+    """Sign of the last non-zero move of each axis, shape=(n, k) (``approach_directions``, vectorised)."""
+    step = np.sign(np.diff(angles_deg, axis=0)).astype(int)
+    n = angles_deg.shape[0]
+    out = np.zeros(angles_deg.shape, dtype=int)
+    pos = np.where(step != 0, np.arange(1, n)[:, None], 0)
+    last = np.maximum.accumulate(pos, axis=0)  # row (1-based in step) of the last move, 0 = none yet
+    filled = np.take_along_axis(np.vstack([np.zeros((1, step.shape[1]), dtype=int), step]), last, axis=0)
+    out[1:] = filled
+    return out
 
 
 def _setup(m: Measurement, candidates: list[str] | None) -> _Setup:
@@ -118,7 +143,7 @@ def _setup(m: Measurement, candidates: list[str] | None) -> _Setup:
         m = Measurement(**{**m.__dict__, "deviation_um": m.deviation_machine_um(kern), "frame": "machine"})
     if m.n_rows < 3:
         raise InputError(f"{m.path or 'measurement'}: {m.n_rows} rows cannot be diagnosed: measure more points")
-    approach = approach_directions(m.angles_deg)
+    approach = _approach(m.angles_deg)
     layout = build_layout(kern, m.angles_deg, m.t_s, approach, candidates)
     return _Setup(kern, m, approach, layout, fold_of_rows(m.n_rows))
 
@@ -130,9 +155,11 @@ def _move_rows(sums: NormalSums, setup: _Setup, rows: list[int], sign: float) ->
         sums.add_rows(setup.design()(r), setup.m.deviation_um[r], setup.folds[r], sign)
 
 
-def _screen(setup: _Setup, model: Model, rows: np.ndarray) -> tuple[list[int], list[Cluster]]:
-    """Isolated flagged rows and clusters of ``model``'s residuals on ``rows``."""
-    resid = row_residuals(setup.design(model.cands), model.w, model.fit.values, setup.m.deviation_um, rows)
+def _screen(setup: _Setup, model: Model, rows: np.ndarray, resid: np.ndarray | None = None
+            ) -> tuple[list[int], list[Cluster]]:
+    """Isolated flagged rows and clusters of ``model``'s residuals (r, 3) [µm] on ``rows`` (computed if not given)."""
+    if resid is None:
+        resid = setup.residuals(model, rows)
     flagged = flag_rows(resid, rows)
     return split_clusters(flagged, setup.m.angles_deg, tuple(setup.kern.ROTARY_AXES), setup.m.n_rows)
 
@@ -367,7 +394,8 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
     all_rows = np.arange(1, setup.m.n_rows)
     sums = accumulate(setup.design(), dev, all_rows, setup.folds, lay.n_columns)
     base_model = Selector(sums, lay).model([])
-    suspects, _ = _screen(setup, base_model, all_rows)
+    base_resid = _residuals(setup, base_model)
+    suspects, _ = _screen(setup, base_model, all_rows, base_resid[1:])
     _move_rows(sums, setup, suspects, -1.0)
     selector = Selector(sums, lay)
     with tqdm(desc="diagnosis", unit="fit", disable=not progress, leave=False) as bar:
@@ -385,7 +413,6 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
     rejected = _rejections(reasons, lay, final)
     if out_finding is None:
         rejected.append(out_note)
-    base_resid = _residuals(setup, base_model)
     final_resid = _residuals(setup, final)
     final_result = _identification(setup, final, final_resid)
     final_result.outlier_rows = outlier_rows
@@ -404,7 +431,7 @@ def _residuals(setup: _Setup, model: Model) -> np.ndarray:
     """Residuals of a model on every row, reference row (zero) included, shape=(n, 3) [µm]."""
     rows = np.arange(1, setup.m.n_rows)
     out = np.zeros((setup.m.n_rows, 3))
-    out[1:] = row_residuals(setup.design(model.cands), model.w, model.fit.values, setup.m.deviation_um, rows)
+    out[1:] = setup.residuals(model, rows)
     return out
 
 

@@ -183,6 +183,14 @@ class EffectSpec:
 
     def columns(self, ctx: EffectContext) -> np.ndarray:
         """Zeroed deviation per unit parameter, shape=(n, 3, m) [µm per parameter unit]."""
+        raw, needs_zeroing = self.raw_columns(ctx)
+        return ctx.zeroed(raw) if needs_zeroing else raw
+
+    def raw_columns(self, ctx: EffectContext) -> tuple[np.ndarray, bool]:
+        """Deviation per unit parameter before zeroing, shape=(n, 3, m), and whether it needs zeroing.
+
+        Callers evaluating many effects zero them all at once (``raw − R_w·raw[0]``).
+        """
         kind = self.kind
         n = ctx.n
         if kind == "thermal_drift":
@@ -193,9 +201,9 @@ class EffectSpec:
             cols = np.zeros((n, 3, 3))
             for i in range(3):
                 cols[:, i, i] = f
-            return ctx.zeroed(cols)
+            return cols, True
         if kind == "setup_offset":
-            return ctx.zeroed(ctx.rot_t - ctx.rot_w)
+            return ctx.rot_t - ctx.rot_w, True
         if kind == "squareness":
             pair = self.id.split("_")[1]
             travel = ctx.travel_mm * 1e-3  # µm per µrad
@@ -208,7 +216,7 @@ class EffectSpec:
                 cols[:, 0, 0] = travel[:, 2]
             else:
                 raise InputError(f"unknown squareness pair in {self.id!r}: use XY, YZ or ZX")
-            return cols
+            return cols, False
         axis = self.axis
         k = ctx.axis_index(axis)
         theta = np.radians(ctx.angles_deg[:, k])
@@ -218,12 +226,12 @@ class EffectSpec:
             h = self.harmonic
             rot_u = sign * ctx.motion_column(axis, "r" + u)
             raw = np.stack([rot_u * np.cos(h * theta)[:, None], rot_u * np.sin(h * theta)[:, None]], axis=2)
-            return ctx.zeroed(raw)
+            return raw, True
         if kind == "backlash":
             rot_u = sign * ctx.motion_column(axis, "r" + u)
             assert ctx.approach is not None
             raw = (rot_u * (0.5 * ctx.approach[:, k])[:, None])[:, :, None]
-            return ctx.zeroed(raw)
+            return raw, True
         if kind in ("wobble", "radial_runout"):
             h = self.harmonic
             pre = "r" if kind == "wobble" else "d"
@@ -231,7 +239,7 @@ class EffectSpec:
             ca, cb = ctx.motion_column(axis, pre + a), ctx.motion_column(axis, pre + b)
             c, s = np.cos(h * theta)[:, None], np.sin(h * theta)[:, None]
             raw = np.stack([ca * c, ca * s, cb * c, cb * s], axis=2)
-            return ctx.zeroed(raw)
+            return raw, True
         raise InputError(f"effect {self.id!r} has no fitted columns")
 
     def contribution(self, ctx: EffectContext, params: dict[str, float]) -> np.ndarray:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 N_FOLDS = 5
-CHUNK_ROWS = 4000
+CHUNK_ROWS = 10000
 RANK_RTOL = 1e-7
 NULL_RTOL = 1e-4
 NULL_WEIGHT = 0.05
@@ -57,7 +57,7 @@ class NormalSums:
         """Add (sign=+1) or remove (−1) rows: x (r, 3, C), y (r, 3), folds (r,)."""
         for f in np.unique(folds):
             sel = folds == f
-            a = x[sel].reshape(-1, x.shape[2])
+            a = np.ascontiguousarray(x[sel].reshape(-1, x.shape[2]))
             b = y[sel].reshape(-1)
             self.gram[f] += sign * (a.T @ a)
             self.rhs[f] += sign * (a.T @ b)
