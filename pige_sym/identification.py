@@ -585,6 +585,8 @@ def format_result(result: IdentificationResult) -> str:
             continue
         lines.append(f"{name:<12}{result.values[j]:>11.3f}{result.std[j]:>10.3f}   "
                      f"[{ci[j, 0]:8.3f}, {ci[j, 1]:8.3f}]      {u}")
+    if result.unobserved:
+        lines += ["", f"unobserved (no trace in these data): {', '.join(result.unobserved)}"]
     if result.unidentifiable:
         lines += ["", "not identifiable from these data:"] + [f"  {c}" for c in result.unidentifiable]
     if result.outlier_rows:

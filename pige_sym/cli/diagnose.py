@@ -21,6 +21,8 @@ def _run(args: argparse.Namespace) -> int:
     print(f"baseline PIGE fit: residual RMS {result.baseline_rms_um:.3f} um, held-out RMS "
           f"{result.baseline_heldout_rms_um:.3f} um, BIC {result.baseline_bic:.1f}")
     print(result.verdict())
+    for c in result.clusters:
+        print(f"note: {c}")
     if result.rejected:
         print("\nrejected candidates:")
         for r in result.rejected:
