@@ -160,6 +160,19 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
     return Layout(pige, units, cands, col, taus, drift_cols)
 
 
+def add_pose_clusters(layout: Layout, options: list[dict[str, float]]) -> list[Candidate]:
+    """Append a ``pose_cluster`` candidate per pose (3 new columns each); returns the new candidates."""
+    new = []
+    for opt in options:
+        spec = EffectSpec("pose_cluster", dict(opt))
+        cols = tuple(range(layout.n_columns, layout.n_columns + 3))
+        layout.n_columns += 3
+        key = "pose_cluster " + " ".join(f"{k}={v:g}" for k, v in opt.items())
+        new.append(Candidate(spec, key, cols))
+    layout.candidates += new
+    return new
+
+
 def all_specs(layout: Layout) -> list[tuple[EffectSpec, tuple[int, ...]]]:
     """Every candidate's effect block of the super design, in column order."""
     return [(c.spec, c.cols) for c in layout.candidates]
@@ -325,8 +338,8 @@ def _removed_sentence(cand: Candidate, vec: np.ndarray, absorbed: np.ndarray, gc
     trace = float(vec @ gcc @ vec)
     prefix = ""
     if half is not None:
-        kind = "tilt" if cand.spec.kind == "wobble" else "offset"
-        prefix = (f"co-rotating half (a {kind} that turns with axis {cand.spec.axis}, i.e. fixed in its body: "
+        kind = "a tilt" if cand.spec.kind == "wobble" else "an offset"
+        prefix = (f"co-rotating half ({kind} that turns with axis {cand.spec.axis}, i.e. fixed in its body: "
                   f"a location or setup error): ")
     if trace <= 1e-16 * max(float(np.trace(gcc)), 1e-300):
         return f"{prefix}{combo} leaves no trace in the zeroed data"

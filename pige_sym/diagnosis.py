@@ -22,8 +22,12 @@ Procedure
    (exact linear combinations of the accumulated sums); its standard error comes from
    the Gauss–Newton covariance with the ∂/∂ln τ column.
 6. **Outliers**, against the extended model on all rows: isolated flagged rows are
-   dropped if the BIC supports it (3 parameters per row); clusters are reported as
-   structured signal, not outliers.
+   dropped if the BIC supports it (3 parameters per row).  Flagged rows that line up with
+   a pose variable (one rotary angle, or consecutive rows) are structure, not outliers:
+   those of the PIGE fit become candidates ``pose_cluster`` (an offset [µm], machine
+   frame, of every row at that pose; the sums are extended over those rows only) that
+   compete in step 4 like the others; those left against the extended model are listed
+   under ``clusters``.
 
 Findings are listed by their ΔBIC in the final model (strongest first): ΔBIC, F and
 held-out RMS compare the final model with the same model without that effect.
@@ -74,14 +78,22 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from tqdm import tqdm
 
-from pige_sym.candidates import Candidate, Layout, build_layout, combination, compact_columns, evaluate_rows
-from pige_sym.diagnosis_results import _EVIDENCE, DiagnosisResult, Finding, Rejected
+from pige_sym.candidates import (
+    Candidate,
+    Layout,
+    add_pose_clusters,
+    build_layout,
+    combination,
+    compact_columns,
+    evaluate_rows,
+)
+from pige_sym.diagnosis_results import EVIDENCE, DiagnosisResult, Finding, Rejected
 from pige_sym.effects import EffectContext, EffectSpec
 from pige_sym.errors import InputError
 from pige_sym.identification import IdentificationResult, _observability
 from pige_sym.io import Measurement
 from pige_sym.kernels import load_kernels
-from pige_sym.normal_sums import NormalSums, accumulate, fit, fold_of_rows
+from pige_sym.normal_sums import NormalSums, accumulate, extend, fit, fold_of_rows
 from pige_sym.outliers import Cluster, flag_rows, row_residuals, split_clusters
 from pige_sym.selection import Model, Selector, compare, select
 
@@ -90,6 +102,7 @@ __all__ = ["DiagnosisResult", "Finding", "Rejected", "axis_frames", "diagnose", 
 DELTA_BIC_MAX = -10.0
 P_MAX = 1e-4
 MIN_HELDOUT_GAIN = 0.02
+MAX_CLUSTERS = 5
 
 
 @dataclass
@@ -161,7 +174,7 @@ def _screen(setup: _Setup, model: Model, rows: np.ndarray, resid: np.ndarray | N
     if resid is None:
         resid = setup.residuals(model, rows)
     flagged = flag_rows(resid, rows)
-    return split_clusters(flagged, setup.m.angles_deg, tuple(setup.kern.ROTARY_AXES), setup.m.n_rows)
+    return split_clusters(flagged, setup.m.angles_deg, tuple(setup.kern.ROTARY_AXES), setup.m.n_rows, setup.m.t_s)
 
 
 def _tau_weights(layout: Layout, log_tau: float) -> tuple[list[int], np.ndarray, np.ndarray]:
@@ -297,7 +310,7 @@ def _finding(selector: Selector, final: Model, i: int, tau_std: float) -> Findin
         params["tau_s"], stds["tau_s"], units["tau_s"] = float(c.spec.options["tau_s"]), tau_std, "s"
     shift = {n: float(final.fit.values[j] - small.fit.values[j]) for j, n in enumerate(selector.layout.pige)}
     explained = 1.0 - f.rss / small.fit.rss if small.fit.rss > 0 else 0.0
-    evidence = _EVIDENCE[c.spec.kind].format(axis=c.spec.axis, h=int(c.spec.options.get("harmonic", 1)))
+    evidence = EVIDENCE[c.spec.kind].format(axis=c.spec.axis, h=int(c.spec.options.get("harmonic", 1)))
     absorbed = [{n: float(red.absorbed[j, k]) for j, n in enumerate(selector.layout.pige)
                  if abs(red.absorbed[j, k]) > 1e-12} for k in range(red.null.shape[1])]
     return Finding(
@@ -343,6 +356,17 @@ def _outlier_step(setup: _Setup, selector: Selector, final: Model, all_rows: np.
         explained=float("nan"),
     )
     return cleaned, after, finding, Rejected("outliers", {}, "accepted"), clusters
+
+
+def _add_clusters(setup: _Setup, sums: NormalSums, clusters: list[Cluster]) -> NormalSums:
+    """Make the largest pose clusters of the PIGE fit candidates (``pose_cluster``) and extend the sums."""
+    chosen = sorted(clusters, key=lambda c: -len(c.rows))[:MAX_CLUSTERS]
+    if not chosen:
+        return sums
+    new = add_pose_clusters(setup.layout, [c.options for c in chosen])
+    rows = np.array(sorted(set().union(*(c.pose_rows for c in chosen))), dtype=int)
+    x = setup.design()(rows)
+    return extend(sums, 3 * len(new), x, setup.m.deviation_um[rows], setup.folds[rows])
 
 
 def _rejections(reasons: dict[str, str], layout: Layout, final: Model) -> list[Rejected]:
@@ -395,7 +419,9 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
     sums = accumulate(setup.design(), dev, all_rows, setup.folds, lay.n_columns)
     base_model = Selector(sums, lay).model([])
     base_resid = _residuals(setup, base_model)
-    suspects, _ = _screen(setup, base_model, all_rows, base_resid[1:])
+    suspects, clusters0 = _screen(setup, base_model, all_rows, base_resid[1:])
+    if candidates is None or "pose_cluster" in candidates:
+        sums = _add_clusters(setup, sums, clusters0)
     _move_rows(sums, setup, suspects, -1.0)
     selector = Selector(sums, lay)
     with tqdm(desc="diagnosis", unit="fit", disable=not progress, leave=False) as bar:

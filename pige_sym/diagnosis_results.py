@@ -17,7 +17,7 @@ import numpy as np
 
 from pige_sym.identification import IdentificationResult
 
-_EVIDENCE = {
+EVIDENCE = {
     "thermal_drift": "a smooth trend of the residual with time (warm-up), not with the angles",
     "angular_error": "a tangential residual about {axis} at harmonic {h} of the {axis} angle",
     "wobble": "a residual from a tilt of the {axis} axis that repeats {h}x per revolution",
@@ -25,6 +25,7 @@ _EVIDENCE = {
     "backlash": "a residual that changes sign with the direction of approach of {axis}",
     "squareness": "a residual proportional to the commanded linear travel",
     "setup_offset": "a residual that turns with the table",
+    "pose_cluster": "rows at one pose deviate together: an effect of that pose outside the catalogue, not outliers",
 }
 
 

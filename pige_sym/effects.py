@@ -23,6 +23,8 @@ id                         physics                                              
 ``squareness_ZX``          Z travel tilted toward X: ``dx = γ·ΔZ``                         gamma_urad
 ``setup_offset``           ball/nest set up Δ away from the nominal ``ball_mm``:           dx_um, dy_um, dz_um
                            ``d = (R_t − R_w)·Δ``
+``pose_cluster``           diagnosis only: an offset of every row at one pose (one angle   dx_um, dy_um, dz_um;
+                           value, or a run of rows) — structure outside the catalogue      axis+deg or t_from/to_s
 ``outliers``               gross reading errors on a few rows (simulation only; the       size_um, count
                            diagnosis handles them with a robust fit)
 =========================  ===========================================================  =========================
@@ -164,13 +166,13 @@ class EffectSpec:
             return ("b_urad",)
         if kind == "squareness":
             return ("gamma_urad",)
-        if kind == "setup_offset":
+        if kind in ("setup_offset", "pose_cluster"):
             return ("dx_um", "dy_um", "dz_um")
         raise InputError(f"effect {self.id!r} has no fitted columns")
 
     @property
     def units(self) -> dict[str, str]:
-        u = "um" if self.kind in ("thermal_drift", "radial_runout", "setup_offset") else "urad"
+        u = "um" if self.kind in ("thermal_drift", "radial_runout", "setup_offset", "pose_cluster") else "urad"
         return {p: u for p in self.param_names}
 
     def _perp(self) -> tuple[str, str]:
@@ -204,6 +206,8 @@ class EffectSpec:
             return cols, True
         if kind == "setup_offset":
             return ctx.rot_t - ctx.rot_w, True
+        if kind == "pose_cluster":
+            return self._pose_indicator(ctx), False
         if kind == "squareness":
             pair = self.id.split("_")[1]
             travel = ctx.travel_mm * 1e-3  # µm per µrad
@@ -241,6 +245,24 @@ class EffectSpec:
             raw = np.stack([ca * c, ca * s, cb * c, cb * s], axis=2)
             return raw, True
         raise InputError(f"effect {self.id!r} has no fitted columns")
+
+    def _pose_indicator(self, ctx: EffectContext) -> np.ndarray:
+        """Offset columns (identity) on the rows of one pose, zero elsewhere and on the reference row.
+
+        Options: ``axis`` (index into the rotary axes) and ``deg`` (the shared angle), or
+        ``t_from_s`` and ``t_to_s`` (a run of consecutive rows, inclusive).
+        """
+        opt = self.options
+        if "axis" in opt:
+            on = np.isclose(ctx.angles_deg[:, int(opt["axis"])], float(opt["deg"]), rtol=0.0, atol=1e-6)
+        else:
+            t = np.asarray(ctx.t_s, dtype=float)
+            on = (t >= float(opt["t_from_s"])) & (t <= float(opt["t_to_s"]))
+        on[0] = False
+        cols = np.zeros((ctx.n, 3, 3))
+        for i in range(3):
+            cols[:, i, i] = on
+        return cols
 
     def contribution(self, ctx: EffectContext, params: dict[str, float]) -> np.ndarray:
         """Deviation added by the effect, shape=(n, 3) [µm]."""

@@ -65,6 +65,31 @@ class NormalSums:
             self.n_obs[f] += int(sign) * b.size
 
 
+def extend(sums: NormalSums, n_new: int, x: np.ndarray, y: np.ndarray, folds: np.ndarray) -> NormalSums:
+    """Append ``n_new`` columns that are zero outside the given rows.
+
+    Parameters
+    ----------
+    x : ndarray, shape=(r, 3, C + n_new)
+        Full design rows (old and new columns) of every row where a new column is non-zero.
+    y : ndarray, shape=(r, 3)
+    folds : ndarray, shape=(r,)
+    """
+    f_n, c = sums.gram.shape[0], sums.gram.shape[1]
+    out = NormalSums(np.zeros((f_n, c + n_new, c + n_new)), np.zeros((f_n, c + n_new)), sums.yy.copy(),
+                     sums.n_obs.copy())
+    out.gram[:, :c, :c], out.rhs[:, :c] = sums.gram, sums.rhs
+    for f in np.unique(folds):
+        sel = folds == f
+        a = x[sel].reshape(-1, x.shape[2])
+        b = y[sel].reshape(-1)
+        delta = a.T @ a
+        delta[:c, :c] = 0.0  # already counted
+        out.gram[f] += delta
+        out.rhs[f, c:] += a[:, c:].T @ b
+    return out
+
+
 def fold_of_rows(n_rows: int, n_folds: int = N_FOLDS, seed: int = 0) -> np.ndarray:
     """Fold index of every row, shape=(n,) (row 0, the reference, gets −1)."""
     folds = np.random.default_rng(seed).integers(0, n_folds, size=n_rows)

@@ -7,7 +7,8 @@ noise level ``σ = 1.4826 · median |r|`` over all residual components.
 Flagged rows that line up with a pose variable are *structure*, not outliers: at least
 ``CLUSTER_MIN`` flagged rows sharing one value of a rotary angle (and making up at least
 half of the rows at that value), or a run of at least ``CLUSTER_MIN`` consecutive rows.
-Such a cluster is reported as signal for a candidate effect and kept in the data; only
+Such a cluster is signal: it stays in the data and becomes a candidate effect (an offset
+of every row at that pose, :func:`pige_sym.diagnosis` tests it like any other); only
 the remaining isolated rows are outlier candidates.  When more than ``MAX_FRACTION`` of
 the rows are flagged, the misfit is systematic and no row is treated as an outlier.
 """
@@ -33,12 +34,19 @@ class Cluster:
     Attributes
     ----------
     rows : list of int
+        The flagged rows.
     where : str
         The shared pose variable, e.g. ``A = -60 deg`` or ``consecutive rows 12-18``.
+    pose_rows : list of int
+        Every row with that pose variable (all rows at that angle, or the run).
+    options : dict of str to float
+        The pose as options of a ``pose_cluster`` effect (``axis``, ``deg`` or ``t_from_s``, ``t_to_s``).
     """
 
     rows: list[int]
     where: str
+    pose_rows: list[int]
+    options: dict[str, float]
 
 
 def row_residuals(design: Callable[[np.ndarray], np.ndarray], w: np.ndarray, x: np.ndarray, data: np.ndarray,
@@ -64,8 +72,8 @@ def flag_rows(resid: np.ndarray, rows: np.ndarray, threshold: float = THRESHOLD)
     return [int(r) for r in rows[norms > limit]]
 
 
-def split_clusters(flagged: list[int], angles_deg: np.ndarray, axes: tuple[str, ...],
-                   n_rows: int) -> tuple[list[int], list[Cluster]]:
+def split_clusters(flagged: list[int], angles_deg: np.ndarray, axes: tuple[str, ...], n_rows: int,
+                   t_s: np.ndarray) -> tuple[list[int], list[Cluster]]:
     """Split flagged rows into isolated ones and clusters aligned with a pose variable.
 
     Parameters
@@ -76,6 +84,7 @@ def split_clusters(flagged: list[int], angles_deg: np.ndarray, axes: tuple[str, 
         Rotary axis names (column order).
     n_rows : int
         Rows in the measurement (the reference included).
+    t_s : ndarray, shape=(n,) [s]
     """
     rows = np.array(sorted(flagged), dtype=int)
     in_cluster: set[int] = set()
@@ -86,14 +95,18 @@ def split_clusters(flagged: list[int], angles_deg: np.ndarray, axes: tuple[str, 
             same = rows[vals[rows] == v]
             total = int((vals[1:] == v).sum())
             if same.size >= CLUSTER_MIN and same.size >= 0.5 * total and total < n_rows - 1:
-                clusters.append(Cluster([int(r) for r in same], f"{ax} = {v:g} deg"))
+                at = np.flatnonzero(vals == v)
+                clusters.append(Cluster([int(r) for r in same], f"{ax} = {v:g} deg", [int(r) for r in at if r > 0],
+                                        {"axis": float(k), "deg": float(v)}))
                 in_cluster.update(int(r) for r in same)
     start = 0
     for i in range(1, rows.size + 1):
         if i == rows.size or rows[i] != rows[i - 1] + 1:
             run = rows[start:i]
             if run.size >= CLUSTER_MIN and not set(run.tolist()) <= in_cluster:
-                clusters.append(Cluster([int(r) for r in run], f"consecutive rows {run[0]}-{run[-1]}"))
+                members = [int(r) for r in run]
+                clusters.append(Cluster(members, f"consecutive rows {run[0]}-{run[-1]}", members,
+                                        {"t_from_s": float(t_s[run[0]]), "t_to_s": float(t_s[run[-1]])}))
                 in_cluster.update(int(r) for r in run)
             start = i
     isolated = [int(r) for r in rows if int(r) not in in_cluster]

@@ -88,13 +88,17 @@ class Comparison:
 
 def compare(small: Model, big: Model) -> Comparison:
     """ΔBIC, F-test and held-out gain of ``big`` over the nested ``small``."""
-    a, b = small.fit, big.fit
+    return compare_fits(small.fit, big.fit, small.extra, big.extra)
+
+
+def compare_fits(a: LinearFit, b: LinearFit, extra_a: int = 0, extra_b: int = 0) -> Comparison:
+    """ΔBIC, F-test and held-out gain of fit ``b`` over the nested fit ``a`` (extra: non-linear parameters)."""
     q = max(b.rank - a.rank, 1)
     dof = max(b.n_obs - b.rank, 1)
     f_stat = ((a.rss - b.rss) / q) / (b.rss / dof) if b.rss > 0 else float("inf")
     p_val = float(stats.f.sf(f_stat, q, dof)) if math.isfinite(f_stat) else 0.0
     gain = 1.0 - b.heldout_rms / a.heldout_rms if a.heldout_rms > 0 else 0.0
-    return Comparison(big.bic - small.bic, f_stat, p_val, gain)
+    return Comparison(b.bic(extra_b) - a.bic(extra_a), f_stat, p_val, gain)
 
 
 @dataclass

@@ -42,7 +42,7 @@ def test_partly_confounded_candidate_is_reduced_not_rejected() -> None:
 
 
 def test_cluster_at_one_tilt_is_signal_not_outliers() -> None:
-    """All rows at one tilt deviate together: not outliers (kept, reported as structure)."""
+    """All rows at one tilt deviate together: never outliers (on steps data the tilt harmonics can fit it)."""
     tr = steps(AC)
     sim = simulate(AC, tr, pige=random_pige(AC, 4), noise_um=0.25, seed=4)
     m = sim.measurement
@@ -51,6 +51,22 @@ def test_cluster_at_one_tilt_is_signal_not_outliers() -> None:
     d = diagnose(m)
     assert not set(d.outlier_rows) & set(at.tolist())
     assert all(f.effect != "outliers" for f in d.findings)
+
+
+def test_run_of_rows_becomes_a_pose_cluster_candidate() -> None:
+    """Six consecutive rows offset together: found as a pose_cluster effect with its offset, not as
+    outliers and not as a stack of harmonics."""
+    offset = np.array([3.0, -2.0, 1.5])
+    for seed in (4, 5):
+        sim = simulate(AC, cone_frustum(AC, points=60), pige=random_pige(AC, seed), noise_um=0.25, seed=seed)
+        m = sim.measurement
+        m.deviation_um[20:26] += offset
+        d = diagnose(m)
+        assert [f.effect for f in d.findings] == ["pose_cluster"] and d.outlier_rows == []
+        f = d.findings[0]
+        assert f.options == {"t_from_s": m.t_s[20], "t_to_s": m.t_s[25]}
+        for name, v in zip(("dx_um", "dy_um", "dz_um"), offset, strict=True):
+            assert abs(f.params[name] - v) < 4 * f.std[name]
 
 
 def test_isolated_outliers_are_found_against_the_extended_model() -> None:
