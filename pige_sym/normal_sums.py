@@ -54,10 +54,18 @@ class NormalSums:
         return int(self.n_obs.sum())
 
     def add_rows(self, x: np.ndarray, y: np.ndarray, folds: np.ndarray, sign: float = 1.0) -> None:
-        """Add (sign=+1) or remove (−1) rows: x (r, 3, C), y (r, 3), folds (r,)."""
-        for f in np.unique(folds):
-            sel = folds == f
-            a = np.ascontiguousarray(x[sel].reshape(-1, x.shape[2]))
+        """Add (sign=+1) or remove (−1) rows: x (r, 3, C), y (r, 3), folds (r,).
+
+        Rows sorted by fold are sliced without copies (``accumulate`` evaluates them so).
+        """
+        bounds = np.flatnonzero(np.diff(folds)) + 1
+        sorted_folds = bool(np.all(np.diff(folds) >= 0))
+        groups = np.split(np.arange(folds.size), bounds) if sorted_folds else \
+            [np.flatnonzero(folds == f) for f in np.unique(folds)]
+        for idx in groups:
+            f = int(folds[idx[0]])
+            sel = slice(int(idx[0]), int(idx[-1]) + 1) if sorted_folds else idx
+            a = x[sel].reshape(-1, x.shape[2])
             b = y[sel].reshape(-1)
             self.gram[f] += sign * (a.T @ a)
             self.rhs[f] += sign * (a.T @ b)
@@ -113,6 +121,7 @@ def accumulate(design: Callable[[np.ndarray], np.ndarray], data: np.ndarray, row
                       np.zeros(n_folds), np.zeros(n_folds, dtype=int))
     for start in range(0, rows.size, chunk):
         r = rows[start: start + chunk]
+        r = r[np.argsort(folds[r], kind="stable")]  # each fold's rows contiguous: no copies
         sums.add_rows(design(r), data[r], folds[r])
     return sums
 
