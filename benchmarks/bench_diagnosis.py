@@ -4,9 +4,14 @@ The measurement is simulated in memory (a dense cone-frustum with a squareness a
 thermal drift hidden in it; reading the file is not part of the measurement).  For each
 size: the wall time of ``diagnose``, the process' peak resident memory so far (``ru_maxrss``), the
 effects named, and the effects named on the same file decimated to 3000 rows.  The
-floor is one pass that only evaluates the PIGE Jacobian of every row
-(``kern.jacobian``, chunked): the diagnosis must do at least that.  Targets (issue 14):
-10^5 rows ≤ 5 s, 10^6 rows ≤ 60 s, same findings as the decimated file.
+floor is one pass that evaluates the super design (the PIGE and every candidate column)
+of every row, chunked, without accumulating anything: any method that tests every
+candidate on every row must do at least that.  Targets (issue 14): 10^5 rows ≤ 5 s,
+10^6 rows ≤ 60 s, same findings as the decimated file.
+
+BLAS threads: on a small shared machine OpenBLAS's worker threads can spin against other
+processes and slow the Gram products by 10× or more; ``OPENBLAS_NUM_THREADS=1`` gives
+stable numbers (the table header says which setting was in effect).
 
 Run: ``python benchmarks/bench_diagnosis.py [--quick]``; prints a markdown section.
 """
@@ -14,6 +19,7 @@ Run: ``python benchmarks/bench_diagnosis.py [--quick]``; prints a markdown secti
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import sys
 import time
@@ -27,7 +33,6 @@ sys.path.insert(0, str(ROOT))
 from pige_sym.diagnosis import diagnose  # noqa: E402
 from pige_sym.effects import parse_effect  # noqa: E402
 from pige_sym.io import Measurement  # noqa: E402
-from pige_sym.kernels import load_kernels  # noqa: E402
 from pige_sym.simulator import random_pige, simulate  # noqa: E402
 from pige_sym.trajectories import Trajectory, cone_frustum, dwell_times  # noqa: E402
 
@@ -52,10 +57,15 @@ def decimate(m: Measurement, rows: int) -> Measurement:
 
 
 def floor_pass(m: Measurement) -> float:
-    kern = load_kernels(AC)
+    """Seconds to evaluate the super design of every row once (module docstring)."""
+    from pige_sym.diagnosis import _setup
+    from pige_sym.normal_sums import CHUNK_ROWS
+
+    setup = _setup(m, None)
+    design = setup.design()
     t0 = time.perf_counter()
-    for s in range(0, m.n_rows, 4000):
-        kern.jacobian(m.angles_deg[s: s + 4000], None, m.ball_mm)
+    for s in range(1, m.n_rows, CHUNK_ROWS):
+        design(np.arange(s, min(s + CHUNK_ROWS, m.n_rows)))
     return time.perf_counter() - t0
 
 
@@ -65,8 +75,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     sizes = [10_000, 100_000] if args.quick else [10_000, 100_000, 1_000_000]
     targets = {100_000: 5.0, 1_000_000: 60.0}
-    lines = ["## Diagnosis at scale", "",
-             "| rows | diagnose [s] | floor: Jacobian pass [s] | ratio | peak RSS MB | target | findings | "
+    threads = os.environ.get("OPENBLAS_NUM_THREADS", "default")
+    lines = ["## Diagnosis at scale", "", f"OpenBLAS threads: {threads}.", "",
+             "| rows | diagnose [s] | floor: one design pass [s] | ratio | peak RSS MB | target | findings | "
              "decimated (3000 rows) | same |",
              "|---:|---:|---:|---:|---:|:---|:---|:---|:---|"]
     for n in sizes:
@@ -81,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
         target = targets.get(n)
         verdict = "-" if target is None else f"≤ {target:g} s: {'met' if dt <= target else 'MISSED'}"
         same = "yes" if set(found) == set(dec) else "NO"
-        lines.append(f"| {n:,} | {dt:.2f} | {floor:.2f} | {dt / floor:.0f}x | {peak:.0f} | {verdict} | "
+        lines.append(f"| {n:,} | {dt:.2f} | {floor:.2f} | {dt / floor:.1f}x | {peak:.0f} | {verdict} | "
                      f"{', '.join(found) or '-'} | {', '.join(dec) or '-'} | {same} |")
     lines += ["", "Peak RSS is the whole process so far, including the simulated measurement itself (n × 3 "
               "deviations, angles, linear commands).  Findings are compared as sets (their order follows ΔBIC, "

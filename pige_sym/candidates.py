@@ -81,6 +81,7 @@ class Candidate:
 
     @property
     def label(self) -> str:
+        """Id with options, e.g. ``wobble_C harmonic=2``."""
         opts = "".join(f" {k}={v:g}" for k, v in self.spec.options.items())
         return f"{self.spec.id}{opts}"
 

@@ -43,14 +43,17 @@ class NormalSums:
 
     @property
     def total_gram(self) -> np.ndarray:
+        """``XᵀX`` over all folds, shape=(C, C)."""
         return np.asarray(self.gram.sum(axis=0))
 
     @property
     def total_rhs(self) -> np.ndarray:
+        """``Xᵀy`` over all folds, shape=(C,)."""
         return np.asarray(self.rhs.sum(axis=0))
 
     @property
     def n(self) -> int:
+        """Number of observations."""
         return int(self.n_obs.sum())
 
     def add_rows(self, x: np.ndarray, y: np.ndarray, folds: np.ndarray, sign: float = 1.0) -> None:
@@ -161,11 +164,13 @@ class LinearFit:
 
     @property
     def sigma2(self) -> float:
+        """Residual variance ``RSS/(N − rank)`` [µm²]."""
         dof = self.n_obs - self.rank
         return self.rss / dof if dof > 0 else float("nan")
 
     @property
     def std(self) -> np.ndarray:
+        """Standard errors of the coefficients, shape=(K,)."""
         return np.sqrt(np.clip(np.diag(self.cov_unit) * self.sigma2, 0, None))
 
     def bic(self, extra_params: int = 0) -> float:

@@ -62,14 +62,17 @@ class Model:
 
     @property
     def extra(self) -> int:
+        """Non-linear parameters of the model (τ), counted in the BIC."""
         return sum(c.extra_params for c in self.cands)
 
     @property
     def bic(self) -> float:
+        """BIC of the fit, non-linear parameters included."""
         return self.fit.bic(self.extra)
 
     @property
     def keys(self) -> list[str]:
+        """Selection keys of the candidates in the model."""
         return [c.key for c in self.cands]
 
 
@@ -83,6 +86,7 @@ class Comparison:
     heldout_gain: float
 
     def supported(self, delta_bic_max: float, p_max: float, min_gain: float) -> bool:
+        """True when all three tests pass (module docstring)."""
         return self.delta_bic <= delta_bic_max and self.p_value <= p_max and self.heldout_gain >= min_gain
 
 
@@ -167,6 +171,7 @@ class Selector:
         return current
 
     def without(self, current: Model, i: int) -> Model:
+        """``current`` without its i-th candidate."""
         return self.model(current.cands[:i] + current.cands[i + 1:])
 
     def backward(self, current: Model, delta_bic_max: float, p_max: float, min_gain: float) -> Model:
