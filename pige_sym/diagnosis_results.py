@@ -10,6 +10,7 @@ finding estimates and the part the PIGEs absorb (:meth:`Finding.identifiable_par
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -86,7 +87,8 @@ class Finding:
         return dict(zip(names, kept.tolist(), strict=True)), shift
 
     def to_dict(self) -> dict[str, Any]:
-        return {"vif": self.vif, "removed": self.removed,
+        vif = {k: (v if math.isfinite(v) else None) for k, v in self.vif.items()}
+        return {"vif": vif, "removed": self.removed, "null_directions": self.null, "absorbed": self.absorbed,
             "effect": self.effect, "options": self.options, "params": self.params, "std": self.std,
             "units": self.units, "delta_bic": self.delta_bic, "f_statistic": self.f_statistic,
             "p_value": self.p_value, "rms_um_before": self.rms_um_before, "rms_um_after": self.rms_um_after,
@@ -103,6 +105,9 @@ class Finding:
         unit = "um" if big and big[0][1:2] in ("X", "Y", "Z") else "urad"
         moved = f"; moves {big[0]} by {big[1]:+.3g} {unit}" if big and abs(big[1]) > 0 else ""
         reduced = f"; identifiable part only, removed: {'; '.join(self.removed)}" if self.removed else ""
+        worst = max(self.vif.values(), default=1.0)
+        if worst > 10:
+            reduced += f"; VIF up to {worst:.3g} (its standard errors are inflated up to {math.sqrt(worst):.3g}x)"
         return (f"{self.effect}{opts}: {self.evidence}; {vals}; held-out RMS {self.heldout_rms_um_before:.3g} → "
                 f"{self.heldout_rms_um_after:.3g} um (ΔBIC {self.delta_bic:.1f}){moved}{reduced}")
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -35,6 +36,8 @@ def test_partly_confounded_candidate_is_reduced_not_rejected() -> None:
     for p in params:
         assert abs(f.params[p] - kept[p]) < 4 * f.std[p]
     assert "identifiable part only, removed" in f.sentence()
+    out = json.loads(json.dumps(d.to_dict(), allow_nan=False))  # strict JSON
+    assert out["findings"][0]["removed"] == f.removed and len(out["findings"][0]["null_directions"]) == 2
     final = d.final
     for j, p in enumerate(final.parameters):
         if "." not in p:
