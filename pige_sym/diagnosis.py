@@ -103,6 +103,7 @@ DELTA_BIC_MAX = -10.0
 P_MAX = 1e-4
 MIN_HELDOUT_GAIN = 0.02
 MAX_CLUSTERS = 5
+AMBIGUOUS_BIC = 6.0  # below this BIC gap, another harmonic is reported as an alternative ("positive" evidence)
 
 
 @dataclass
@@ -290,6 +291,23 @@ def _identification(setup: _Setup, model: Model, resid: np.ndarray) -> Identific
     )
 
 
+def _alternatives(selector: Selector, final: Model, i: int) -> list[str]:
+    """Other harmonics of the i-th effect that the data barely tell apart from it (ΔBIC < AMBIGUOUS_BIC)."""
+    c = final.cands[i]
+    if c.spec.kind not in ("angular_error", "wobble", "radial_runout"):
+        return []
+    others = {x.key for j, x in enumerate(final.cands) if j != i}
+    out = []
+    for alt in selector.layout.candidates:
+        if alt.spec.id != c.spec.id or alt.key == c.key or alt.key in others:
+            continue
+        trial = selector.model(final.cands[:i] + final.cands[i + 1:] + [alt])
+        gap = trial.bic - final.bic
+        if trial.reductions[-1].basis.shape[1] and gap < AMBIGUOUS_BIC:
+            out.append(f"harmonic {alt.spec.harmonic} fits almost as well (ΔBIC {gap:+.1f})")
+    return out
+
+
 def _finding(selector: Selector, final: Model, i: int, tau_std: float) -> Finding:
     """The evidence of the i-th effect of the final model against the final model without it."""
     c, red, blk = final.cands[i], final.reductions[i], final.blocks[i]
@@ -321,6 +339,7 @@ def _finding(selector: Selector, final: Model, i: int, tau_std: float) -> Findin
         evidence=f"{evidence} (explains {explained:.0%} of the residual)", explained=explained,
         vif=dict(zip(names, vif.tolist(), strict=True)), removed=list(red.removed),
         basis=red.basis.tolist(), null=red.null.T.tolist(), absorbed=absorbed,
+        alternatives=_alternatives(selector, final, i),
     )
 
 

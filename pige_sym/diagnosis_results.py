@@ -55,6 +55,7 @@ class Finding:
     basis: list[list[float]] = field(default_factory=list)
     null: list[list[float]] = field(default_factory=list)
     absorbed: list[dict[str, float]] = field(default_factory=list)
+    alternatives: list[str] = field(default_factory=list)
 
     def identifiable_part(self, params: dict[str, float]) -> tuple[dict[str, float], dict[str, float]]:
         """Split catalogue values into the part this finding estimates and the part the PIGEs absorb.
@@ -89,6 +90,7 @@ class Finding:
     def to_dict(self) -> dict[str, Any]:
         vif = {k: (v if math.isfinite(v) else None) for k, v in self.vif.items()}
         return {"vif": vif, "removed": self.removed, "null_directions": self.null, "absorbed": self.absorbed,
+                "alternatives": self.alternatives,
             "effect": self.effect, "options": self.options, "params": self.params, "std": self.std,
             "units": self.units, "delta_bic": self.delta_bic, "f_statistic": self.f_statistic,
             "p_value": self.p_value, "rms_um_before": self.rms_um_before, "rms_um_after": self.rms_um_after,
@@ -105,6 +107,8 @@ class Finding:
         unit = "um" if big and big[0][1:2] in ("X", "Y", "Z") else "urad"
         moved = f"; moves {big[0]} by {big[1]:+.3g} {unit}" if big and abs(big[1]) > 0 else ""
         reduced = f"; identifiable part only, removed: {'; '.join(self.removed)}" if self.removed else ""
+        if self.alternatives:
+            reduced += f"; ambiguous: {'; '.join(self.alternatives)}"
         worst = max(self.vif.values(), default=1.0)
         if worst > 10:
             reduced += f"; VIF up to {worst:.3g} (its standard errors are inflated up to {math.sqrt(worst):.3g}x)"

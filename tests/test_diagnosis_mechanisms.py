@@ -114,3 +114,19 @@ def test_decimated_file_gives_the_same_findings() -> None:
                            "deviation_um": m.deviation_um[keep], "linear_mm": m.linear_mm[keep]})
     dec = diagnose(small)
     assert [f.effect for f in dense.findings] == [f.effect for f in dec.findings] == ["squareness_XY"]
+
+
+def test_harmonics_the_data_cannot_separate_are_reported_as_alternatives() -> None:
+    """Table+head, wobble of the B head over 0..-90 deg: harmonics 1 and 2 are nearly collinear; when the
+    wrong one wins, the true one must be listed as an alternative (never silently)."""
+    from test_diagnosis_grid import BALL, TABLE_HEAD, TOOL, effect, trajectory
+
+    for seed in (1, 7):
+        e = effect("wobble_B", np.random.default_rng(seed), 2)
+        sim = simulate(TABLE_HEAD, trajectory(TABLE_HEAD, "tilt"), pige=random_pige(TABLE_HEAD, seed), effects=[e],
+                       noise_um=0.25, seed=seed, ball_mm=BALL, tool_mm=TOOL)
+        f = diagnose(sim.measurement).findings[0]
+        assert f.effect == "wobble_B"
+        if f.options["harmonic"] != 2:
+            assert any(a.startswith("harmonic 2 ") for a in f.alternatives), f.alternatives
+            assert "ambiguous: harmonic 2" in f.sentence()
