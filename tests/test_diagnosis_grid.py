@@ -2,11 +2,12 @@
 
 Sizes are drawn per seed in realistic ranges (10–40 µrad, 1–5 µm, drift 2–7 µm).  A case
 passes when the hidden effect(s) are named first, every parameter lies within 4 standard
-errors of the part of the truth the data can determine (``Finding.identifiable_part``),
-(or, when the effect is wholly confounded with the PIGEs on that machine and trajectory,
-nothing is found and the confounding PIGEs are named), and every PIGE within 4 standard errors of the truth plus what a removed (confounded)
-part of the effect shifts into it.  A representative subset runs by default; the whole
-grid is marked ``slow`` (``pytest -m slow tests/test_diagnosis_grid.py``).
+errors of the part of the truth the data can determine (``Finding.identifiable_part``) and
+every PIGE within 4 standard errors of the truth plus what a removed (confounded) part of
+the effect shifts into it; or, when the effect is wholly confounded with the PIGEs on that
+machine and trajectory, nothing is found and the confounding PIGEs are named.  A
+representative subset runs by default; the whole grid is marked ``slow``
+(``pytest -m slow tests/test_diagnosis_grid.py``).
 """
 
 from __future__ import annotations
