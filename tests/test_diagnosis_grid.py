@@ -77,6 +77,7 @@ def cases() -> list[tuple[str, str, str, int | None, bool, str]]:
         out.append((code, f"backlash_{tilt}", "", None, False, "steps"))
         out += [(code, f"squareness_{p}", "", None, False, "cone") for p in ("XY", "YZ", "ZX")]
         out.append((code, "thermal_drift", "", None, False, "cone"))
+        out.append((code, "setup_offset", "", None, False, "cone"))
         out.append((code, f"angular_error_{rot}", f"backlash_{rot}", 2, False, "steps"))
         out.append((code, f"radial_runout_{rot}", "thermal_drift", 2, False, "steps"))
     return out
