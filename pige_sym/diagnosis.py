@@ -103,7 +103,7 @@ DELTA_BIC_MAX = -10.0
 P_MAX = 1e-4
 MIN_HELDOUT_GAIN = 0.02
 MAX_CLUSTERS = 5
-AMBIGUOUS_BIC = 6.0  # below this BIC gap, another harmonic is reported as an alternative ("positive" evidence)
+AMBIGUOUS_BIC = 6.0  # below this BIC gap, another candidate is reported as an alternative (not "strong" evidence)
 
 
 @dataclass
@@ -292,20 +292,20 @@ def _identification(setup: _Setup, model: Model, resid: np.ndarray) -> Identific
 
 
 def _alternatives(selector: Selector, final: Model, i: int) -> list[str]:
-    """Other harmonics of the i-th effect that the data barely tell apart from it (ΔBIC < AMBIGUOUS_BIC)."""
+    """Candidates that replace the i-th effect almost as well (BIC gap < AMBIGUOUS_BIC): the data barely tell
+    them apart (e.g. neighbouring harmonics over a short tilt range)."""
     c = final.cands[i]
-    if c.spec.kind not in ("angular_error", "wobble", "radial_runout"):
-        return []
     others = {x.key for j, x in enumerate(final.cands) if j != i}
-    out = []
+    best: dict[str, float] = {}
     for alt in selector.layout.candidates:
-        if alt.spec.id != c.spec.id or alt.key == c.key or alt.key in others:
+        if alt.key == c.key or alt.key in others:
             continue
         trial = selector.model(final.cands[:i] + final.cands[i + 1:] + [alt])
         gap = trial.bic - final.bic
-        if trial.reductions[-1].basis.shape[1] and gap < AMBIGUOUS_BIC:
-            out.append(f"harmonic {alt.spec.harmonic} fits almost as well (ΔBIC {gap:+.1f})")
-    return out
+        name = alt.key if alt.spec.kind != "thermal_drift" else "thermal_drift"
+        if trial.reductions[-1].basis.shape[1] and gap < AMBIGUOUS_BIC and gap < best.get(name, math.inf):
+            best[name] = gap
+    return [f"{name} fits almost as well (ΔBIC {gap:+.1f})" for name, gap in sorted(best.items(), key=lambda x: x[1])]
 
 
 def _finding(selector: Selector, final: Model, i: int, tau_std: float) -> Finding:

@@ -13,7 +13,9 @@ cutoff: harmonics 1–4 compete on BIC and held-out error, and the VIF and infla
 standard errors are reported.
 
 1. **Forward**: add the supported candidate with the lowest ΔBIC (at most one per key:
-   the harmonics of an effect are separate keys, the τ grid of the drift one key).
+   the harmonics of an effect are separate keys, the τ grid of the drift one key); an
+   tie (ΔBIC within ``TIE_BIC``) goes to the candidate with fewer catalogue parameters.  Candidates that
+   replace a finding almost as well (BIC gap < 6) are reported with it as alternatives.
 2. **Swap**: replace an accepted candidate by a pooled one while that lowers the BIC
    by more than ``SWAP_MARGIN``, so an early proxy cannot block the true effect.
 3. **Backward**: every accepted candidate must still be supported against the final
@@ -33,6 +35,7 @@ from pige_sym.candidates import Candidate, Layout, Reduction, reduce_candidate
 from pige_sym.normal_sums import LinearFit, NormalSums, fit
 
 SWAP_MARGIN = 2.0
+TIE_BIC = 0.5
 MAX_EFFECTS = 6
 
 
@@ -151,6 +154,13 @@ class Selector:
             if progress is not None:
                 progress(1)
         scored.sort(key=lambda t: t[2].delta_bic)
+        # ties (the same fitted subspace, e.g. backlash and a harmonic of a tilt axis seen at three
+        # angles) go to the effect with fewer catalogue parameters
+        tied = [t for t in scored if scored and t[2].delta_bic <= scored[0][2].delta_bic + TIE_BIC]
+        if tied:
+            simplest = min(tied, key=lambda t: len(t[0].cols))
+            scored.remove(simplest)
+            scored.insert(0, simplest)
         return scored, confounded
 
     def swap(self, current: Model, pool: list[Candidate]) -> Model:
