@@ -17,7 +17,9 @@ Procedure
 4. **Selection** (:mod:`pige_sym.selection`): forward steps on ΔBIC with the F-test and
    the 5-fold held-out RMS, swaps (an early proxy cannot block the true effect) and
    backward elimination (every accepted effect must still earn its place).  No VIF
-   cutoff: the VIF and inflated standard errors are reported.
+   cutoff: the VIF and inflated standard errors are reported.  Near-ties go to the
+   candidate with fewer parameters, and every candidate that replaces a finding almost
+   as well (BIC gap < 6) is reported with it as an alternative.
 5. **Thermal τ** is refined by interpolating the drift columns between grid points
    (exact linear combinations of the accumulated sums); its standard error comes from
    the Gauss–Newton covariance with the ∂/∂ln τ column.
