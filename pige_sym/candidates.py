@@ -34,6 +34,7 @@ the counter-rotating half stays and is fitted.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -233,8 +234,6 @@ class Reduction:
     ----------
     basis : ndarray, shape=(q, q')
         Kept directions in the catalogue's parameter units (``c = basis @ θ``).
-    removed : list of str
-        One sentence per removed direction, naming what absorbs it.
     null : ndarray, shape=(q, q − q')
         Removed directions (catalogue units, max |.| = 1).
     absorbed : ndarray, shape=(K, q − q')
@@ -244,14 +243,19 @@ class Reduction:
     """
 
     basis: np.ndarray
-    removed: list[str]
     null: np.ndarray
     absorbed: np.ndarray
     vif: np.ndarray
+    _describe: Any = field(default=None, repr=False, compare=False)
+
+    @cached_property
+    def removed(self) -> list[str]:
+        """One sentence per removed direction, naming what absorbs it (built on first use)."""
+        return [] if self._describe is None else list(self._describe())
 
 
 def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, model_names: list[str],
-                     model_units: dict[str, str]) -> Reduction:
+                     model_units: dict[str, str], model_pinv: np.ndarray | None = None) -> Reduction:
     """Split a candidate into its identifiable part and named null directions (module docstring).
 
     Parameters
@@ -264,12 +268,15 @@ def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, mod
     model_names : list of str
         Names of the K model columns.
     model_units : dict
+    model_pinv : ndarray, shape=(K, K), optional
+        ``(WᵀGW)⁺`` when already known (it is the same for every candidate against one model).
     """
     emb = cand.embedding(gram.shape[0])
     gcc = emb.T @ gram @ emb
     gmc = model_w.T @ gram @ emb
-    gmm = model_w.T @ gram @ model_w
-    coef = np.linalg.pinv(gmm, rcond=1e-12, hermitian=True) @ gmc  # (K, q) model fit of each candidate column
+    if model_pinv is None:
+        model_pinv = np.linalg.pinv(model_w.T @ gram @ model_w, rcond=1e-12, hermitian=True)
+    coef = model_pinv @ gmc  # (K, q) model fit of each candidate column
     schur = gcc - gmc.T @ coef
     d = np.sqrt(np.clip(np.diag(gcc), 0, None))
     dmax = float(d.max()) if d.size else 0.0
@@ -285,15 +292,18 @@ def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, mod
     if null.shape[1] > 1:  # within the null space, separate directions without trace from absorbed ones
         lam0, rot = np.linalg.eigh(null.T @ gcc @ null)
         null = null @ rot
-    half = _rotating_half(cand, null) if null.shape[1] else None
-    removed = []
     absorbed = coef @ null if null.size else np.zeros((model_w.shape[1], 0))
     for j in range(null.shape[1]):
         scale = np.abs(null[:, j]).max()
         null[:, j] /= scale
         absorbed[:, j] /= scale
-        removed.append(_removed_sentence(cand, null[:, j], absorbed[:, j], gcc, model_names, model_units, half))
-    return Reduction(basis, removed, null, absorbed, 1.0 / np.clip(lam[keep], 1e-300, None))
+
+    def describe() -> list[str]:
+        half = _rotating_half(cand, null) if null.shape[1] else None
+        return [_removed_sentence(cand, null[:, j], absorbed[:, j], gcc, model_names, model_units, half)
+                for j in range(null.shape[1])]
+
+    return Reduction(basis, null, absorbed, 1.0 / np.clip(lam[keep], 1e-300, None), describe)
 
 
 def combination(vec: np.ndarray, names: list[str] | tuple[str, ...], units: dict[str, str] | None = None) -> str:

@@ -350,7 +350,7 @@ def _outlier_step(setup: _Setup, selector: Selector, final: Model, all_rows: np.
     """Judge isolated rows against the extended model on all rows (module docstring, step 6)."""
     sums = selector.sums
     _move_rows(sums, setup, suspects, +1.0)  # all rows back
-    everything = Selector(sums, setup.layout)
+    everything = Selector(sums, setup.layout) if suspects else selector  # unchanged sums: keep the cache
     full = everything.model(final.cands)
     isolated, clusters = _screen(setup, full, all_rows)
     if not isolated:

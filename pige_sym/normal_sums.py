@@ -201,6 +201,20 @@ def _solve(g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, n
     return x, pinv_s * np.outer(s, s), int(keep.sum()), vif, np.sqrt(w), nulls
 
 
+def _solve_folds(g: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Minimum-norm solutions of a stack of normal equations g (F, K, K), r (F, K) at once, shape=(F, K)."""
+    d = np.sqrt(np.clip(np.einsum("fkk->fk", g), 0, None))
+    dmax = d.max(axis=1, keepdims=True)
+    s = np.where(d > 1e-12 * np.maximum(dmax, 1e-300), 1.0 / np.where(d > 0, d, 1.0), 0.0)
+    gs = g * s[:, :, None] * s[:, None, :]
+    w, v = np.linalg.eigh((gs + np.swapaxes(gs, 1, 2)) / 2)
+    wmax = np.maximum(w.max(axis=1, keepdims=True), 1e-300)
+    keep = w > RANK_RTOL**2 * wmax
+    inv = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
+    proj = np.einsum("fkj,fk->fj", v, s * r)  # Vᵀ(s·r)
+    return np.asarray(s * np.einsum("fkj,fj->fk", v, inv * proj))
+
+
 def fit(sums: NormalSums, w: np.ndarray, heldout: bool = True) -> LinearFit:
     """Least-squares fit of the model ``X·W`` (W: C × K) with its k-fold held-out RMS."""
     gf = w.T @ sums.gram @ w
@@ -211,9 +225,7 @@ def fit(sums: NormalSums, w: np.ndarray, heldout: bool = True) -> LinearFit:
     rss = max(yy - 2 * float(x @ r) + float(x @ g @ x), 0.0)
     held = float("nan")
     if heldout:
-        err = 0.0
-        for f in range(gf.shape[0]):
-            xf = _solve(g - gf[f], r - rf[f])[0]
-            err += max(float(sums.yy[f] - 2 * xf @ rf[f] + xf @ gf[f] @ xf), 0.0)
-        held = math.sqrt(err / max(sums.n, 1))
+        xf = _solve_folds(g[None] - gf, r[None] - rf)  # fit without fold f, for every f
+        err = sums.yy - 2 * np.einsum("fk,fk->f", xf, rf) + np.einsum("fk,fkl,fl->f", xf, gf, xf)
+        held = math.sqrt(float(np.clip(err, 0, None).sum()) / max(sums.n, 1))
     return LinearFit(x, cov, rss, rank, sums.n, held, vif, svals, nulls)

@@ -62,6 +62,13 @@ class Model:
     names: list[str]
     blocks: list[slice]
     fit: LinearFit
+    _pinv: np.ndarray | None = field(default=None, repr=False)
+
+    def pinv(self, sums: NormalSums) -> np.ndarray:
+        """``(WᵀGW)⁺`` of the model (cached), shape=(K, K)."""
+        if self._pinv is None:
+            self._pinv = np.linalg.pinv(self.w.T @ sums.total_gram @ self.w, rcond=1e-12, hermitian=True)
+        return self._pinv
 
     @property
     def extra(self) -> int:
@@ -121,20 +128,21 @@ class Selector:
         key = tuple(c.label for c in cands)
         if key in self.cache:
             return self.cache[key]
-        gram = self.sums.total_gram
-        p = len(self.layout.pige)
-        w = np.eye(self.layout.n_columns)[:, :p]
-        names = list(self.layout.pige)
-        units = dict(self.layout.units)
-        reductions, blocks = [], []
-        for c in cands:
-            red = reduce_candidate(gram, w, c, names, units)
+        if not cands:
+            p = len(self.layout.pige)
+            w = np.eye(self.layout.n_columns)[:, :p]
+            model = Model([], [], w, list(self.layout.pige), [], fit(self.sums, w))
+        else:
+            base = self.model(cands[:-1])  # prefixes are cached: one reduction per new model
+            c = cands[-1]
+            units = dict(self.layout.units)
+            red = reduce_candidate(self.sums.total_gram, base.w, c, base.names, units, base.pinv(self.sums))
             emb = c.embedding(self.layout.n_columns) @ red.basis
-            blocks.append(slice(w.shape[1], w.shape[1] + emb.shape[1]))
-            names += [f"{c.label}#{j}" for j in range(emb.shape[1])]
-            w = np.concatenate([w, emb], axis=1)
-            reductions.append(red)
-        model = Model(list(cands), reductions, w, names, blocks, fit(self.sums, w))
+            k = base.w.shape[1]
+            w = np.concatenate([base.w, emb], axis=1)
+            model = Model(list(cands), base.reductions + [red], w, base.names + [f"{c.label}#{j}" for j in
+                                                                                   range(emb.shape[1])],
+                          base.blocks + [slice(k, k + emb.shape[1])], fit(self.sums, w))
         self.cache[key] = model
         return model
 
