@@ -292,6 +292,10 @@ def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, mod
     if null.shape[1] > 1:  # within the null space, separate directions without trace from absorbed ones
         lam0, rot = np.linalg.eigh(null.T @ gcc @ null)
         null = null @ rot
+    half = _rotating_half(cand, null) if null.shape[1] == 2 else None
+    if half is not None:  # name the rotating half in its canonical directions
+        sign = 1.0 if half == "+" else -1.0
+        null = np.array([[1.0, 0, 0, sign], [0, 1.0, -sign, 0]]).T
     absorbed = coef @ null if null.size else np.zeros((model_w.shape[1], 0))
     for j in range(null.shape[1]):
         scale = np.abs(null[:, j]).max()
@@ -299,7 +303,6 @@ def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, mod
         absorbed[:, j] /= scale
 
     def describe() -> list[str]:
-        half = _rotating_half(cand, null) if null.shape[1] else None
         return [_removed_sentence(cand, null[:, j], absorbed[:, j], gcc, model_names, model_units, half)
                 for j in range(null.shape[1])]
 
