@@ -2,28 +2,65 @@
 
 Procedure
 ---------
-1. **Outliers.**  A robust (soft-L1) PIGE fit flags rows whose residual norm is far
-   beyond the robust noise level; if dropping them is supported by BIC, the finding
-   ``outliers`` is recorded and those rows are left out of everything that follows.
-2. **Candidates.**  Every effect of :mod:`pige_sym.effects` applicable to the machine
-   and the data is a candidate model extension, built through the kinematic chain:
-   angular positioning error of each rotary axis (harmonics 1–4), tilt (wobble) and
-   radial error motions (harmonics 1–3), backlash (only when the data approach
-   positions from both sides), thermal drift (time constant scanned on a grid,
-   counted as one more parameter), linear-axis squareness, setup offset.
-3. **Identifiability first.**  A candidate is fitted jointly with the PIGEs (and the
-   extensions already accepted).  If the joint design is rank-deficient, or a
-   candidate parameter's variance inflation factor exceeds ``vif_max`` (it is
-   confounded), the candidate is reported as *unidentifiable*, naming the
-   confounded combination — never as found.
-4. **Evidence.**  For each identifiable candidate: ΔBIC = BIC(extended) − BIC(current)
-   with ``BIC = N ln(RSS/N) + k ln N``; the nested F-test; and the held-out RMS by
-   leave-one-row-out cross-validation (exact for linear least squares:
-   ``e₍ᵢ₎ = (I − H_ii)⁻¹ eᵢ`` with H_ii the row's block of the hat matrix).
-5. **Greedy acceptance.**  The candidate with the lowest ΔBIC is accepted if
-   ΔBIC ≤ ``delta_bic_max`` (−10: very strong evidence), the F-test p-value is below
-   ``p_max`` (1e-4, conservative for ~30 candidates) and the held-out RMS drops by at
-   least ``min_heldout_gain`` (2 %).  Repeat until no candidate passes.
+1. **Normal equations.**  The *super design* (the PIGEs and every candidate effect,
+   :mod:`pige_sym.candidates`) is accumulated row chunk by row chunk into per-fold
+   normal equations (:mod:`pige_sym.normal_sums`); no dense design of the whole file
+   is ever built, so 10⁶ rows cost seconds and a few MB.
+2. **Gross errors.**  Rows of the PIGE fit far beyond the robust noise level that are
+   *isolated* (:mod:`pige_sym.outliers`) are kept out of the search; rows that line up
+   with a pose variable are structure and stay in.
+3. **Candidates, reduced.**  Every candidate is reduced to the part the data determine
+   jointly with the PIGEs and the effects already in the model; what is removed is
+   named (e.g. "the co-rotating half … = location error of the axis") and the rest is
+   fitted and reported in the catalogue's parameters.  A candidate with nothing left
+   is *unidentifiable*, never found.
+4. **Selection** (:mod:`pige_sym.selection`): forward steps on ΔBIC with the F-test and
+   the 5-fold held-out RMS, swaps (an early proxy cannot block the true effect) and
+   backward elimination (every accepted effect must still earn its place).  No VIF
+   cutoff: the VIF and inflated standard errors are reported.  Near-ties go to the
+   candidate with fewer parameters, and every candidate that replaces a finding almost
+   as well (BIC gap < 6) is reported with it as an alternative.
+5. **Thermal τ** is refined by interpolating the drift columns between grid points
+   (exact linear combinations of the accumulated sums); its standard error comes from
+   the Gauss–Newton covariance with the ∂/∂ln τ column.
+6. **Outliers**, against the extended model on all rows: isolated flagged rows are
+   dropped if the BIC supports it (3 parameters per row).  Flagged rows that line up with
+   a pose variable (one rotary angle, or consecutive rows) are structure, not outliers:
+   those of the PIGE fit become candidates ``pose_cluster`` (an offset [µm], machine
+   frame, of every row at that pose; the sums are extended over those rows only) that
+   compete in step 4 like the others; those left against the extended model are listed
+   under ``clusters``.
+
+Findings are listed by their ΔBIC in the final model (strongest first): ΔBIC, F and
+held-out RMS compare the final model with the same model without that effect.
+
+Conventions of the effects (frames, senses, harmonics)
+------------------------------------------------------
+All columns are the zeroed ball-minus-nest deviation in the machine frame
+(CONVENTIONS §4: ``raw(row) − R_w(row)·raw(reference)``).  θ is the commanded angle of
+the axis (right-handed about its positive direction, degrees in files, radians here);
+harmonic h enters as ``cos hθ``, ``sin hθ``.
+
+- ``angular_error_<AX>`` (h = 1..4): the axis stands at ``θ + c·cos hθ + s·sin hθ``
+  [µrad]; a positive value turns the carried body further in the positive sense.
+- ``wobble_<AX>`` (h = 1..4): tilt error motion of the carried body about the two
+  carrier-frame axes normal to the axis (``r<a>``, ``r<b>`` [µrad], right-handed), each
+  ``cos hθ``/``sin hθ``.  For h = 1 the half that turns with the axis (a tilt fixed in
+  the rotating body) is a location error of the axis and is removed (named); the
+  counter-rotating half is fitted.
+- ``radial_runout_<AX>`` (h = 1..4): translation error motion of the carried body
+  normal to the axis (``d<a>``, ``d<b>`` [µm], carrier frame); h = 1 as for wobble.
+- ``backlash_<AX>``: the axis stands at ``θ + (b/2)·approach`` (approach = sign of the
+  last move of that axis) [µrad].
+- ``squareness_XY``/``YZ``/``ZX``: ``dx = γ·ΔY``, ``dy = γ·ΔZ``, ``dx = γ·ΔZ`` with the
+  commanded linear travel from the reference pose [µrad = µm/m].
+- ``setup_offset``: ball/nest set up Δ [µm] away from nominal, ``d = (R_t − R_w)·Δ``;
+  on table machines this is entirely location errors (unidentifiable, named).
+- ``thermal_drift``: tool-to-table offset ``v·(1 − exp(−t/τ))`` [µm], machine frame.
+
+Tool-side (head) axes use the same definitions in their own carrier frame, through
+the generated kernels' error-motion Jacobian, so head and table+head machines are
+diagnosed like table machines.
 
 Residual signatures (for the plots and the evidence text): residuals against time,
 against each rotary angle in the radial / tangential / axial components of that
@@ -34,378 +71,414 @@ approach, per row, and their autocorrelation in time.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
+from scipy.optimize import minimize_scalar
 from tqdm import tqdm
 
+from pige_sym.candidates import (
+    Candidate,
+    Layout,
+    add_pose_clusters,
+    build_layout,
+    combination,
+    compact_columns,
+    evaluate_rows,
+)
+from pige_sym.diagnosis_results import EVIDENCE, DiagnosisResult, Finding, Rejected
 from pige_sym.effects import EffectContext, EffectSpec
 from pige_sym.errors import InputError
-from pige_sym.identification import ExtraColumns, IdentificationResult, build_problem, identify
+from pige_sym.identification import IdentificationResult, _observability
 from pige_sym.io import Measurement
 from pige_sym.kernels import load_kernels
+from pige_sym.normal_sums import NormalSums, accumulate, extend, fit, fold_of_rows
+from pige_sym.outliers import Cluster, flag_rows, row_residuals, split_clusters
+from pige_sym.selection import Model, Selector, compare, select
+
+__all__ = ["DiagnosisResult", "Finding", "Rejected", "axis_frames", "diagnose", "residual_plots"]
 
 DELTA_BIC_MAX = -10.0
 P_MAX = 1e-4
 MIN_HELDOUT_GAIN = 0.02
-VIF_MAX = 30.0
-TAU_FRACTIONS = (0.05, 0.1, 0.2, 0.35, 0.5, 1.0, 2.0, 5.0)
-
-_EVIDENCE = {
-    "thermal_drift": "a smooth trend of the residual with time (warm-up), not with the angles",
-    "angular_error": "a tangential residual about {axis} at harmonic {h} of the {axis} angle",
-    "wobble": "a residual from a tilt of the {axis} axis that repeats {h}x per revolution",
-    "radial_runout": "a radial residual of the {axis} axis that repeats {h}x per revolution",
-    "backlash": "a residual that changes sign with the direction of approach of {axis}",
-    "squareness": "a residual proportional to the commanded linear travel",
-    "setup_offset": "a residual that turns with the table",
-}
+MAX_CLUSTERS = 5
+AMBIGUOUS_BIC = 6.0  # below this BIC gap, another candidate is reported as an alternative (not "strong" evidence)
 
 
 @dataclass
-class Finding:
-    """An accepted model extension with its evidence."""
+class _Setup:
+    kern: Any
+    m: Measurement  # machine frame
+    approach: np.ndarray
+    layout: Layout
+    folds: np.ndarray
 
-    effect: str
-    options: dict[str, float]
-    params: dict[str, float]
-    std: dict[str, float]
-    units: dict[str, str]
-    delta_bic: float
-    f_statistic: float
-    p_value: float
-    rms_um_before: float
-    rms_um_after: float
-    heldout_rms_um_before: float
-    heldout_rms_um_after: float
-    pige_shift: dict[str, float]
-    evidence: str
-    explained: float
+    def _blocks(self, cands: list[Candidate] | None) -> list[tuple[EffectSpec, tuple[int, ...]]]:
+        chosen = self.layout.candidates if cands is None else cands
+        blocks = {c.cols: c.spec for c in chosen if c.mix is None}
+        if any(c.mix is not None for c in chosen):  # interpolated drift: fill the whole τ grid
+            blocks |= {cols: EffectSpec("thermal_drift", {"tau_s": float(t)})
+                       for cols, t in zip(self.layout.drift_cols, self.layout.tau_grid_s, strict=True)}
+        return [(spec, cols) for cols, spec in blocks.items()]
 
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "effect": self.effect, "options": self.options, "params": self.params, "std": self.std,
-            "units": self.units, "delta_bic": self.delta_bic, "f_statistic": self.f_statistic,
-            "p_value": self.p_value, "rms_um_before": self.rms_um_before, "rms_um_after": self.rms_um_after,
-            "heldout_rms_um_before": self.heldout_rms_um_before, "heldout_rms_um_after": self.heldout_rms_um_after,
-            "pige_shift": self.pige_shift, "evidence": self.evidence, "explained_fraction": self.explained,
-        }
+    def design(self, cands: list[Candidate] | None = None) -> Callable[[np.ndarray], np.ndarray]:
+        """``rows -> (r, 3, C)`` super-design rows filling the given candidates (default all)."""
+        items = self._blocks(cands)
+        return lambda rows: evaluate_rows(self.layout, items, self.kern, self.m, self.approach, rows)
 
-    def sentence(self) -> str:
-        """One-line verdict."""
-        vals = ", ".join(f"{k}={v:.3g}±{self.std[k]:.2g} {self.units[k]}" for k, v in self.params.items())
-        opts = "".join(f" {k}={v:g}" for k, v in self.options.items())
-        big = max(self.pige_shift.items(), key=lambda kv: abs(kv[1]), default=None)
-        # E<direction>0<axis>: a linear direction (X, Y, Z) is a position error in µm, else µrad
-        unit = "um" if big and big[0][1:2] in ("X", "Y", "Z") else "urad"
-        moved = f"; moves {big[0]} by {big[1]:+.3g} {unit}" if big and abs(big[1]) > 0 else ""
-        return (f"{self.effect}{opts}: {self.evidence}; {vals}; held-out RMS {self.heldout_rms_um_before:.3g} → "
-                f"{self.heldout_rms_um_after:.3g} um (ΔBIC {self.delta_bic:.1f}){moved}")
+    def residuals(self, model: Model, rows: np.ndarray) -> np.ndarray:
+        """Residuals of a fitted model on ``rows``, shape=(r, 3) [µm], from a compact design."""
+        items = self._blocks(model.cands)
+        used = compact_columns(self.layout, items)
+        beta = (model.w @ model.fit.values)[used]
+
+        def design(r: np.ndarray) -> np.ndarray:
+            return evaluate_rows(self.layout, items, self.kern, self.m, self.approach, r, compact=True)
+
+        return row_residuals(design, np.eye(len(used)), beta, self.m.deviation_um, rows)
 
 
-@dataclass
-class Rejected:
-    """A candidate that was tried and not accepted, and why."""
-
-    effect: str
-    options: dict[str, float]
-    reason: str
-    delta_bic: float | None = None
-    p_value: float | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"effect": self.effect, "options": self.options, "reason": self.reason,
-                "delta_bic": self.delta_bic, "p_value": self.p_value}
-
-
-@dataclass
-class DiagnosisResult:
-    """Outcome of a diagnosis."""
-
-    machine: str
-    baseline_rms_um: float
-    baseline_bic: float
-    baseline_heldout_rms_um: float
-    findings: list[Finding]
-    rejected: list[Rejected]
-    final: IdentificationResult
-    baseline: IdentificationResult
-    outlier_rows: list[int]
-    plots: list[str] = field(default_factory=list)
-
-    def to_dict(self) -> dict[str, Any]:
-        final = self.final.to_dict()
-        return {
-            "machine": self.machine,
-            "baseline": {"rms_um": self.baseline_rms_um, "bic": self.baseline_bic,
-                         "heldout_rms_um": self.baseline_heldout_rms_um},
-            "findings": [f.to_dict() for f in self.findings],
-            "rejected": [r.to_dict() for r in self.rejected],
-            "pige": final["pige"], "std": final["std"], "units": final["units"],
-            "unidentifiable": final["unidentifiable"], "rank": final["rank"], "condition": final["condition"],
-            "rms_um": final["rms_um"], "outlier_rows": self.outlier_rows, "method": "diagnosis",
-            "ball_mm": final["ball_mm"], "pivots_mm": final["pivots_mm"], "tool_mm": final["tool_mm"],
-            "plots": self.plots,
-        }
-
-    def verdict(self) -> str:
-        if not self.findings:
-            return (f"No effect beyond the PIGEs is supported by the data (residual RMS {self.baseline_rms_um:.3g} um, "
-                    f"{len(self.rejected)} candidates tried).")
-        return "\n".join(f"- {f.sentence()}" for f in self.findings)
-
-
-@dataclass
-class _Fit:
-    result: IdentificationResult
-    rss: float
-    n_obs: int
-    k: int
-    heldout_rms: float
-    residual_rows: np.ndarray
-
-
-def _bic(rss: float, n: int, k: int) -> float:
-    return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
-
-
-def _fit(m: Measurement, rows: np.ndarray, extra: ExtraColumns | None) -> _Fit:
-    res = identify(m, extra=extra, rows=rows)
-    prob = build_problem(m, "xyz", extra=extra, rows=rows, explicit=True)
-    assert prob.design is not None and prob.data is not None
-    a = prob.design[rows]  # (r, 3, P)
-    vals = np.nan_to_num(np.where(np.isfinite(res.values), res.values, 0.0))
-    e = prob.data[rows] - a @ vals
-    rss = float((e**2).sum())
-    # leave-one-row-out residuals: e_(i) = (I - H_ii)^-1 e_i
-    flat = a.reshape(-1, a.shape[2])
-    pinv = np.linalg.pinv(flat.T @ flat)
-    loo = np.empty_like(e)
-    for i in range(a.shape[0]):
-        h = a[i] @ pinv @ a[i].T
-        try:
-            loo[i] = np.linalg.solve(np.eye(3) - h, e[i])
-        except np.linalg.LinAlgError:
-            loo[i] = np.inf
-    heldout = math.sqrt(float((loo**2).mean()))
-    return _Fit(res, rss, prob.n_obs, res.rank, heldout, e)
-
-
-def _candidates(m: Measurement, kern: Any) -> list[EffectSpec]:
-    out: list[EffectSpec] = []
-    duration = float(m.t_s[-1] - m.t_s[0])
-    if duration > 0:
-        out += [EffectSpec("thermal_drift", {"tau_s": f * duration}) for f in TAU_FRACTIONS]
-    appr = EffectContext(kern, m.angles_deg, m.t_s, m.ball_mm).approach
-    assert appr is not None
-    for k, ax in enumerate(kern.ROTARY_AXES):
-        if np.ptp(m.angles_deg[:, k]) < 1e-9:
-            continue
-        out += [EffectSpec(f"angular_error_{ax}", {"harmonic": h}) for h in (1, 2, 3, 4)]
-        out += [EffectSpec(f"wobble_{ax}", {"harmonic": h}) for h in (1, 2, 3)]
-        out += [EffectSpec(f"radial_runout_{ax}", {"harmonic": h}) for h in (1, 2, 3)]
-        if (appr[:, k] > 0).any() and (appr[:, k] < 0).any():
-            out.append(EffectSpec(f"backlash_{ax}"))
-    out += [EffectSpec(f"squareness_{p}") for p in ("XY", "YZ", "ZX")]
-    out.append(EffectSpec("setup_offset"))
+def _approach(angles_deg: np.ndarray) -> np.ndarray:
+    """Sign of the last non-zero move of each axis, shape=(n, k) (``approach_directions``, vectorised)."""
+    step = np.sign(np.diff(angles_deg, axis=0)).astype(int)
+    n = angles_deg.shape[0]
+    out = np.zeros(angles_deg.shape, dtype=int)
+    pos = np.where(step != 0, np.arange(1, n)[:, None], 0)
+    last = np.maximum.accumulate(pos, axis=0)  # row (1-based in step) of the last move, 0 = none yet
+    filled = np.take_along_axis(np.vstack([np.zeros((1, step.shape[1]), dtype=int), step]), last, axis=0)
+    out[1:] = filled
     return out
 
 
-def _extra(specs: list[EffectSpec], ctx: EffectContext) -> ExtraColumns | None:
-    if not specs:
+def _setup(m: Measurement, candidates: list[str] | None) -> _Setup:
+    kern = load_kernels(m.machine)
+    if m.frame == "table":
+        m = Measurement(**{**m.__dict__, "deviation_um": m.deviation_machine_um(kern), "frame": "machine"})
+    if m.n_rows < 3:
+        raise InputError(f"{m.path or 'measurement'}: {m.n_rows} rows cannot be diagnosed: measure more points")
+    approach = _approach(m.angles_deg)
+    layout = build_layout(kern, m.angles_deg, m.t_s, approach, candidates)
+    return _Setup(kern, m, approach, layout, fold_of_rows(m.n_rows))
+
+
+def _move_rows(sums: NormalSums, setup: _Setup, rows: list[int], sign: float) -> None:
+    """Add (+1) or remove (−1) rows from the normal equations."""
+    if rows:
+        r = np.array(sorted(rows), dtype=int)
+        sums.add_rows(setup.design()(r), setup.m.deviation_um[r], setup.folds[r], sign)
+
+
+def _screen(setup: _Setup, model: Model, rows: np.ndarray, resid: np.ndarray | None = None
+            ) -> tuple[list[int], list[Cluster]]:
+    """Isolated flagged rows and clusters of ``model``'s residuals (r, 3) [µm] on ``rows`` (computed if not given)."""
+    if resid is None:
+        resid = setup.residuals(model, rows)
+    flagged = flag_rows(resid, rows)
+    return split_clusters(flagged, setup.m.angles_deg, tuple(setup.kern.ROTARY_AXES), setup.m.n_rows, setup.m.t_s)
+
+
+def _tau_weights(layout: Layout, log_tau: float) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """Quadratic Lagrange weights (and their d/d ln τ) of the 3 τ-grid points around ``log_tau``."""
+    s = np.log(layout.tau_grid_s)
+    g = int(np.clip(np.searchsorted(s, log_tau) - 1, 0, len(s) - 3))
+    idx = [g, g + 1, g + 2]
+    pts = s[idx]
+    w, dw = np.zeros(3), np.zeros(3)
+    for i in range(3):
+        o = [pts[j] for j in range(3) if j != i]
+        den = (pts[i] - o[0]) * (pts[i] - o[1])
+        w[i] = (log_tau - o[0]) * (log_tau - o[1]) / den
+        dw[i] = (2 * log_tau - o[0] - o[1]) / den
+    return idx, w, dw
+
+
+def _drift_at(layout: Layout, log_tau: float, derivative: bool = False) -> np.ndarray:
+    idx, w, dw = _tau_weights(layout, log_tau)
+    mix = np.zeros((layout.n_columns, 3))
+    for i, g in enumerate(idx):
+        for j, col in enumerate(layout.drift_cols[g]):
+            mix[col, j] += dw[i] if derivative else w[i]
+    return mix
+
+
+def _refine_tau(selector: Selector, model: Model) -> tuple[Model, float]:
+    """Replace a grid drift by the interpolated τ of least RSS; returns the model and the std of τ [s]."""
+    layout = selector.layout
+    i = next((k for k, c in enumerate(model.cands) if c.spec.kind == "thermal_drift"), None)
+    if i is None or len(layout.tau_grid_s) < 3:
+        return model, float("nan")
+    old = model.cands[i]
+    s = np.log(layout.tau_grid_s)
+
+    def cand(log_tau: float) -> Candidate:
+        spec = EffectSpec("thermal_drift", {"tau_s": float(np.exp(log_tau))})
+        return Candidate(spec, old.key, old.cols, 1, _drift_at(layout, log_tau))
+
+    def with_tau(log_tau: float) -> Model:
+        return selector.model(model.cands[:i] + [cand(log_tau)] + model.cands[i + 1:])
+
+    g = int(np.argmin(np.abs(s - math.log(float(old.spec.options["tau_s"])))))
+    lo, hi = s[max(g - 1, 0)], s[min(g + 1, len(s) - 1)]
+    opt = minimize_scalar(lambda x: with_tau(x).fit.rss, bounds=(lo, hi), method="bounded", options={"xatol": 1e-4})
+    best = with_tau(float(opt.x))
+    if best.fit.rss > model.fit.rss:
+        best, opt.x = model, math.log(float(old.spec.options["tau_s"]))
+    # Gauss–Newton covariance with the ∂/∂ln τ column: v · ∂(drift columns)/∂ln τ
+    block = best.blocks[i]
+    red = best.reductions[i]
+    v = red.basis @ best.fit.values[block]
+    dcol = _drift_at(layout, float(opt.x), derivative=True) @ v
+    aug = fit(selector.sums, np.concatenate([best.w, dcol[:, None]], axis=1), heldout=False)
+    tau = float(np.exp(opt.x))
+    std_tau = tau * float(aug.std[-1]) if np.isfinite(aug.vif[-1]) else float("nan")
+    best.fit.cov_unit = aug.cov_unit[:-1, :-1] * (aug.sigma2 / best.fit.sigma2 if best.fit.sigma2 > 0 else 1.0)
+    return best, std_tau
+
+
+def _param_names(model: Model) -> list[str]:
+    """Reported names of the extension parameters, ``<id>.<param>`` (``<id>@h<h>.<param>`` if an id repeats)."""
+    ids = [c.spec.id for c in model.cands]
+    out = []
+    for c in model.cands:
+        pre = c.spec.id if ids.count(c.spec.id) == 1 else f"{c.spec.id}@h{c.spec.harmonic}"
+        out += [f"{pre}.{p}" for p in c.spec.param_names]
+    return out
+
+
+def _catalogue_transform(model: Model, n_pige: int) -> np.ndarray:
+    """Matrix from model coefficients to PIGEs + catalogue parameters, shape=(P + Σq, K)."""
+    q = sum(len(c.spec.param_names) for c in model.cands)
+    t = np.zeros((n_pige + q, model.w.shape[1]))
+    t[:n_pige, :n_pige] = np.eye(n_pige)
+    row = n_pige
+    for red, blk in zip(model.reductions, model.blocks, strict=True):
+        t[row: row + red.basis.shape[0], blk] = red.basis
+        row += red.basis.shape[0]
+    return t
+
+
+def _identification(setup: _Setup, model: Model, resid: np.ndarray) -> IdentificationResult:
+    """The model's estimate as an IdentificationResult (PIGEs, then catalogue parameters)."""
+    lay, f = setup.layout, model.fit
+    p = len(lay.pige)
+    t = _catalogue_transform(model, p)
+    names = list(lay.pige) + _param_names(model)
+    units = dict(lay.units)
+    ext = iter(names[p:])
+    for c in model.cands:
+        for q in c.spec.param_names:
+            units[next(ext)] = c.spec.units[q]
+    ident = np.concatenate([np.isfinite(f.vif[:p]), np.ones(t.shape[0] - p, dtype=bool)])
+    sigma2 = f.sigma2
+    values = np.where(ident, t @ f.values, np.nan)
+    cov = t @ f.cov_unit @ t.T * sigma2
+    std = np.where(ident, np.sqrt(np.clip(np.diag(cov), 0, None)), np.nan)
+    combos = [f"{combination(f.null_vectors[:, j], model.names, units)} is not identifiable"
+              for j in range(f.null_vectors.shape[1])]
+    m = setup.m
+    k = model.w.shape[1]
+    cond = float(f.svals[0] / f.svals[f.rank - 1]) if f.rank == k and f.rank > 0 else float("inf")
+    return IdentificationResult(
+        machine=setup.kern.MACHINE_CODE, method="diagnosis", projection="xyz", loss="linear", parameters=names,
+        units={n: units.get(n, "") for n in names}, values=values, std=std, covariance=cov, identifiable=ident,
+        rms_um=math.sqrt(f.rss / max(f.n_obs, 1)), sigma_um=math.sqrt(sigma2) if math.isfinite(sigma2) else math.nan,
+        dof=max(f.n_obs - f.rank, 0), n_rows=m.n_rows, n_obs=f.n_obs, rank=f.rank, condition=cond,
+        singular_values=f.svals, observability=_observability(f.svals, f.n_obs), unidentifiable=combos,
+        outlier_rows=[], residuals_um=resid, ball_mm=[float(x) for x in m.ball_mm],
+        pivots_mm={a: [float(x) for x in v] for a, v in m.pivots_mm.items()},
+        tool_mm=None if m.tool_mm is None else [float(x) for x in m.tool_mm], vif=None,
+    )
+
+
+def _alternatives(selector: Selector, final: Model, i: int) -> list[str]:
+    """Candidates that replace the i-th effect almost as well (BIC gap < AMBIGUOUS_BIC): the data barely tell
+    them apart (e.g. neighbouring harmonics over a short tilt range)."""
+    c = final.cands[i]
+    others = {x.key for j, x in enumerate(final.cands) if j != i}
+    best: dict[str, float] = {}
+    for alt in selector.layout.candidates:
+        if alt.key == c.key or alt.key in others:
+            continue
+        trial = selector.model(final.cands[:i] + final.cands[i + 1:] + [alt])
+        gap = trial.bic - final.bic
+        name = alt.key if alt.spec.kind != "thermal_drift" else "thermal_drift"
+        if trial.reductions[-1].basis.shape[1] and gap < AMBIGUOUS_BIC and gap < best.get(name, math.inf):
+            best[name] = gap
+    return [f"{name} fits almost as well (ΔBIC {gap:+.1f})" for name, gap in sorted(best.items(), key=lambda x: x[1])]
+
+
+def _finding(selector: Selector, final: Model, i: int, tau_std: float) -> Finding:
+    """The evidence of the i-th effect of the final model against the final model without it."""
+    c, red, blk = final.cands[i], final.reductions[i], final.blocks[i]
+    small = selector.without(final, i)
+    cmp = compare(small, final)
+    f = final.fit
+    names = list(c.spec.param_names)
+    vals = red.basis @ f.values[blk]
+    cov = red.basis @ f.cov_unit[blk, blk] @ red.basis.T * f.sigma2
+    std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    emb = c.embedding(selector.layout.n_columns)
+    alone = np.diag(emb.T @ selector.sums.total_gram @ emb)
+    vif = np.where(alone > 0, np.diag(cov) / f.sigma2 * alone, np.inf)
+    params = dict(zip(names, vals.tolist(), strict=True))
+    stds = dict(zip(names, std.tolist(), strict=True))
+    units = dict(c.spec.units)
+    if c.spec.kind == "thermal_drift":
+        params["tau_s"], stds["tau_s"], units["tau_s"] = float(c.spec.options["tau_s"]), tau_std, "s"
+    shift = {n: float(final.fit.values[j] - small.fit.values[j]) for j, n in enumerate(selector.layout.pige)}
+    explained = 1.0 - f.rss / small.fit.rss if small.fit.rss > 0 else 0.0
+    evidence = EVIDENCE[c.spec.kind].format(axis=c.spec.axis, h=int(c.spec.options.get("harmonic", 1)))
+    absorbed = [{n: float(red.absorbed[j, k]) for j, n in enumerate(selector.layout.pige)
+                 if abs(red.absorbed[j, k]) > 1e-12} for k in range(red.null.shape[1])]
+    return Finding(
+        effect=c.spec.id, options=dict(c.spec.options), params=params, std=stds, units=units,
+        delta_bic=cmp.delta_bic, f_statistic=cmp.f_statistic, p_value=cmp.p_value,
+        rms_um_before=math.sqrt(small.fit.rss / small.fit.n_obs), rms_um_after=math.sqrt(f.rss / f.n_obs),
+        heldout_rms_um_before=small.fit.heldout_rms, heldout_rms_um_after=f.heldout_rms, pige_shift=shift,
+        evidence=f"{evidence} (explains {explained:.0%} of the residual)", explained=explained,
+        vif=dict(zip(names, vif.tolist(), strict=True)), removed=list(red.removed),
+        basis=red.basis.tolist(), null=red.null.T.tolist(), absorbed=absorbed,
+        alternatives=_alternatives(selector, final, i),
+    )
+
+
+def _outlier_step(setup: _Setup, selector: Selector, final: Model, all_rows: np.ndarray, suspects: list[int],
+                  delta_bic_max: float) -> tuple[Selector, Model, Finding | None, Rejected, list[Cluster]]:
+    """Judge isolated rows against the extended model on all rows (module docstring, step 6)."""
+    sums = selector.sums
+    _move_rows(sums, setup, suspects, +1.0)  # all rows back
+    everything = Selector(sums, setup.layout) if suspects else selector  # unchanged sums: keep the cache
+    full = everything.model(final.cands)
+    isolated, clusters = _screen(setup, full, all_rows)
+    if not isolated:
+        why = "no isolated row lies beyond the robust noise level of the extended model"
+        return everything, full, None, Rejected("outliers", {}, why), clusters
+    kept_sums = NormalSums(sums.gram.copy(), sums.rhs.copy(), sums.yy.copy(), sums.n_obs.copy())
+    _move_rows(kept_sums, setup, isolated, -1.0)
+    cleaned = Selector(kept_sums, setup.layout)
+    after = cleaned.model(final.cands)
+    n = full.fit.n_obs
+    bic_after = n * math.log(max(after.fit.rss, 1e-300) / n) + (after.fit.rank + after.extra + 3 * len(isolated)) * \
+        math.log(n)
+    dbic = bic_after - full.bic
+    if dbic > delta_bic_max:
+        why = f"rows {isolated} stand out but dropping them is not supported (ΔBIC {dbic:.1f})"
+        return everything, full, None, Rejected("outliers", {}, why, dbic), clusters
+    finding = Finding(
+        effect="outliers", options={}, params={"rows": float(len(isolated))}, std={"rows": 0.0},
+        units={"rows": "count"}, delta_bic=dbic, f_statistic=float("nan"), p_value=float("nan"),
+        rms_um_before=math.sqrt(full.fit.rss / full.fit.n_obs), rms_um_after=math.sqrt(after.fit.rss / after.fit.n_obs),
+        heldout_rms_um_before=full.fit.heldout_rms, heldout_rms_um_after=after.fit.heldout_rms,
+        pige_shift={p: float(after.fit.values[j] - full.fit.values[j]) for j, p in enumerate(setup.layout.pige)},
+        evidence=f"isolated rows {isolated} lie far beyond the robust noise level of the extended model",
+        explained=float("nan"),
+    )
+    return cleaned, after, finding, Rejected("outliers", {}, "accepted"), clusters
+
+
+def _add_clusters(setup: _Setup, sums: NormalSums, clusters: list[Cluster]) -> NormalSums:
+    """Make the largest pose clusters of the PIGE fit candidates (``pose_cluster``) and extend the sums."""
+    chosen = sorted(clusters, key=lambda c: -len(c.rows))[:MAX_CLUSTERS]
+    if not chosen:
+        return sums
+    new = add_pose_clusters(setup.layout, [c.options for c in chosen])
+    rows = np.array(sorted(set().union(*(c.pose_rows for c in chosen))), dtype=int)
+    x = setup.design()(rows)
+    return extend(sums, 3 * len(new), x, setup.m.deviation_um[rows], setup.folds[rows])
+
+
+def _rejections(reasons: dict[str, str], layout: Layout, final: Model) -> list[Rejected]:
+    """One entry per effect id not in the final model: its best-scoring variant's reason."""
+    by_label = {c.label: c for c in layout.candidates}
+    in_model = {c.spec.id for c in final.cands}
+    out: dict[str, Rejected] = {}
+    for label, why in reasons.items():
+        c = by_label.get(label)
+        if c is None or c.spec.id in in_model:
+            continue
+        prev = out.get(c.spec.id)
+        dbic = _dbic_of(why)
+        if prev is None or (dbic is not None and (prev.delta_bic is None or dbic < prev.delta_bic)):
+            out[c.spec.id] = Rejected(c.spec.id, dict(c.spec.options), why, dbic)
+    return list(out.values())
+
+
+def _dbic_of(reason: str) -> float | None:
+    if "ΔBIC " not in reason:
         return None
-    names, units, cols = [], {}, []
-    for s in specs:
-        c = s.columns(ctx)
-        for p in s.param_names:
-            names.append(f"{s.id}.{p}")
-            units[f"{s.id}.{p}"] = s.units[p]
-        cols.append(c)
-    return ExtraColumns(names, units, np.concatenate(cols, axis=2))
+    try:
+        return float(reason.split("ΔBIC ")[1].split(",")[0].split(")")[0])
+    except ValueError:
+        return None
 
 
 def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: float = P_MAX,
-             min_heldout_gain: float = MIN_HELDOUT_GAIN, vif_max: float = VIF_MAX,
-             candidates: list[str] | None = None, progress: bool = False) -> DiagnosisResult:
+             min_heldout_gain: float = MIN_HELDOUT_GAIN, candidates: list[str] | None = None,
+             progress: bool = False) -> DiagnosisResult:
     """Diagnose a measurement (see the module docstring).
 
     Parameters
     ----------
     m : Measurement
+    delta_bic_max, p_max, min_heldout_gain : float
+        Evidence an extension needs (:mod:`pige_sym.selection`).
     candidates : list of str, optional
         Restrict to these catalogue ids.
     progress : bool
-        Show a progress bar (stderr) over the candidates of each greedy round.
+        Show a progress bar (stderr) over the candidate evaluations.
 
     Returns
     -------
     DiagnosisResult
     """
-    kern = load_kernels(m.machine)
-    if m.frame == "table":
-        m = Measurement(**{**m.__dict__, "deviation_um": m.deviation_machine_um(kern), "frame": "machine"})
-    ctx = EffectContext(kern, m.angles_deg, m.t_s, m.ball_mm, m.pivots_mm or None, m.tool_mm)
-    rows = np.arange(1, m.n_rows)
-    base = _fit(m, rows, None)
-    findings: list[Finding] = []
-    rejected: list[Rejected] = []
-
-    # rows a robust fit flags are kept out of the search; whether they are outliers is
-    # decided at the end, against the extended model (a missing effect can look like outliers)
-    suspects = list(identify(m, loss="soft_l1").outlier_rows)
-    all_rows = rows
-    rows = np.setdiff1d(all_rows, suspects)
-    current = _fit(m, rows, None)
-    baseline_fit = current
-    accepted: list[EffectSpec] = []
-    pool = [c for c in _candidates(m, kern) if candidates is None or c.id in candidates]
-    while pool:
-        best: tuple[float, EffectSpec, _Fit, float, float] | None = None
-        tried: dict[str, Rejected] = {}
-        for spec in tqdm(pool, desc=f"diagnosis round {len(accepted) + 1}", unit="candidate", leave=False,
-                         disable=not progress):
-            extra = _extra(accepted + [spec], ctx)
-            fit = _fit(m, rows, extra)
-            q = len(spec.param_names) + (1 if spec.kind == "thermal_drift" else 0)
-            names = fit.result.parameters
-            cand_idx = [names.index(f"{spec.id}.{p}") for p in spec.param_names]
-            vif = fit.result.vif if fit.result.vif is not None else np.full(len(names), np.inf)
-            confounded = [names[j] for j in cand_idx if not np.isfinite(vif[j]) or vif[j] > vif_max]
-            key = spec.id
-            if fit.result.rank < len(names) or confounded:
-                combos = "; ".join(fit.result.unidentifiable) or f"VIF > {vif_max:g} for {', '.join(confounded)}"
-                tried.setdefault(key, Rejected(key, dict(spec.options), f"unidentifiable with the PIGEs: {combos}"))
-                continue
-            dbic = _bic(fit.rss, current.n_obs, current.k + q) - _bic(current.rss, current.n_obs, current.k)
-            dof = max(fit.n_obs - current.k - q, 1)
-            f_stat = ((current.rss - fit.rss) / q) / (fit.rss / dof) if fit.rss > 0 else float("inf")
-            p_val = float(stats.f.sf(f_stat, q, dof))
-            prev = tried.get(key)
-            if prev is None or prev.delta_bic is None or dbic < prev.delta_bic:
-                tried[key] = Rejected(key, dict(spec.options), "", dbic, p_val)
-            if best is None or dbic < best[0]:
-                best = (dbic, spec, fit, f_stat, p_val)
-        if best is None:
-            rejected += list(tried.values())
-            break
-        dbic, spec, fit, f_stat, p_val = best
-        gain = 1.0 - fit.heldout_rms / current.heldout_rms if current.heldout_rms > 0 else 0.0
-        if dbic > delta_bic_max or p_val > p_max or gain < min_heldout_gain:
-            for r in tried.values():
-                if not r.reason:
-                    r.reason = (f"not significant (ΔBIC {r.delta_bic:.1f}, p {r.p_value:.2g})"
-                                if r.effect != spec.id else
-                                f"best candidate but not significant (ΔBIC {dbic:.1f}, p {p_val:.2g}, "
-                                f"held-out gain {gain:.1%})")
-            rejected += list(tried.values())
-            break
-        if spec.kind == "thermal_drift":
-            spec, fit, tau_std = _refine_tau(m, rows, accepted, spec, ctx, fit)
-        names = fit.result.parameters
-        params = {p: fit.result.value(f"{spec.id}.{p}") for p in spec.param_names}
-        std = {p: float(fit.result.std[names.index(f"{spec.id}.{p}")]) for p in spec.param_names}
-        units = dict(spec.units)
-        if spec.kind == "thermal_drift":
-            params["tau_s"], std["tau_s"], units["tau_s"] = float(spec.options["tau_s"]), tau_std, "s"
-        explained = 1.0 - fit.rss / current.rss if current.rss > 0 else 0.0
-        h = int(spec.options.get("harmonic", 1))
-        evidence = _EVIDENCE[spec.kind].format(axis=spec.axis, h=h)
-        findings.append(Finding(
-            effect=spec.id, options=dict(spec.options), params=params, std=std, units=units, delta_bic=dbic,
-            f_statistic=f_stat, p_value=p_val, rms_um_before=math.sqrt(current.rss / current.n_obs),
-            rms_um_after=math.sqrt(fit.rss / fit.n_obs), heldout_rms_um_before=current.heldout_rms,
-            heldout_rms_um_after=fit.heldout_rms, pige_shift=_shift(current.result, fit.result),
-            evidence=f"{evidence} (explains {explained:.0%} of the residual)", explained=explained,
-        ))
-        accepted.append(spec)
-        current = fit
-        pool = [c for c in pool if c.id != spec.id]
-    # outliers, against the extended model, on all rows
-    extra = _extra(accepted, ctx)
-    final_all = _fit(m, all_rows, extra)
-    outliers = list(identify(m, loss="soft_l1", extra=extra).outlier_rows)
-    current = final_all
-    if outliers:
-        kept = np.setdiff1d(all_rows, outliers)
-        after = _fit(m, kept, extra)
-        # each dropped row counts as 3 free parameters in the BIC on the full data
-        dbic = _bic(after.rss, final_all.n_obs, after.k + 3 * len(outliers)) - _bic(
-            final_all.rss, final_all.n_obs, final_all.k)
-        if dbic <= delta_bic_max:
-            findings.append(Finding(
-                effect="outliers", options={}, params={"rows": float(len(outliers))}, std={"rows": 0.0},
-                units={"rows": "count"}, delta_bic=dbic, f_statistic=float("nan"), p_value=float("nan"),
-                rms_um_before=math.sqrt(final_all.rss / final_all.n_obs),
-                rms_um_after=math.sqrt(after.rss / after.n_obs), heldout_rms_um_before=final_all.heldout_rms,
-                heldout_rms_um_after=after.heldout_rms, pige_shift=_shift(final_all.result, after.result),
-                evidence=f"rows {outliers} lie far beyond the robust noise level of the fit", explained=float("nan"),
-            ))
-            current = after
-        else:
-            rejected.append(Rejected("outliers", {}, f"rows {outliers} flagged by the robust fit but dropping them "
-                                     f"is not supported (ΔBIC {dbic:.1f})", dbic))
-            outliers = []
-    else:
-        rejected.append(Rejected("outliers", {}, "the robust fit flags no row"))
-    if not suspects:
-        baseline_fit = base
+    setup = _setup(m, candidates)
+    lay, dev = setup.layout, setup.m.deviation_um
+    all_rows = np.arange(1, setup.m.n_rows)
+    sums = accumulate(setup.design(), dev, all_rows, setup.folds, lay.n_columns)
+    base_model = Selector(sums, lay).model([])
+    base_resid = _residuals(setup, base_model)
+    suspects, clusters0 = _screen(setup, base_model, all_rows, base_resid[1:])
+    if candidates is None or "pose_cluster" in candidates:
+        sums = _add_clusters(setup, sums, clusters0)
+    _move_rows(sums, setup, suspects, -1.0)
+    selector = Selector(sums, lay)
+    with tqdm(desc="diagnosis", unit="fit", disable=not progress, leave=False) as bar:
+        final, reasons = select(selector, lay.candidates, delta_bic_max=delta_bic_max, p_max=p_max,
+                                min_gain=min_heldout_gain, progress=bar.update)
+    selector, final, out_finding, out_note, clusters = _outlier_step(setup, selector, final, all_rows, suspects,
+                                                                     delta_bic_max)
+    final, tau_std = _refine_tau(selector, final)
+    findings = sorted((_finding(selector, final, i, tau_std) for i in range(len(final.cands))),
+                      key=lambda f: f.delta_bic)
+    outlier_rows: list[int] = []
+    if out_finding is not None:
+        findings.append(out_finding)
+        outlier_rows = [int(x) for x in out_finding.evidence.split("[")[1].split("]")[0].split(",")]
+    rejected = _rejections(reasons, lay, final)
+    if out_finding is None:
+        rejected.append(out_note)
+    final_resid = _residuals(setup, final)
+    final_result = _identification(setup, final, final_resid)
+    final_result.outlier_rows = outlier_rows
+    baseline = _identification(setup, base_model, base_resid)
+    bf = base_model.fit
     return DiagnosisResult(
-        machine=kern.MACHINE_CODE, baseline_rms_um=math.sqrt(baseline_fit.rss / baseline_fit.n_obs),
-        baseline_bic=_bic(baseline_fit.rss, baseline_fit.n_obs, baseline_fit.k),
-        baseline_heldout_rms_um=baseline_fit.heldout_rms, findings=findings,
-        rejected=_dedupe(rejected), final=current.result, baseline=base.result, outlier_rows=sorted(outliers),
+        machine=setup.kern.MACHINE_CODE, baseline_rms_um=math.sqrt(bf.rss / bf.n_obs), baseline_bic=base_model.bic,
+        baseline_heldout_rms_um=bf.heldout_rms, findings=findings, rejected=rejected, final=final_result,
+        baseline=baseline, outlier_rows=outlier_rows,
+        clusters=[f"rows {c.rows} ({c.where}) deviate together: structured signal kept as data, not outliers"
+                  for c in clusters],
     )
 
 
-def _refine_tau(m: Measurement, rows: np.ndarray, accepted: list[EffectSpec], spec: EffectSpec,
-                ctx: EffectContext, fit: _Fit) -> tuple[EffectSpec, _Fit, float]:
-    """Refine the thermal time constant (1-D search on log τ) and propagate its uncertainty.
-
-    Returns the refined spec, a fit whose standard errors include the τ direction
-    (Gauss–Newton covariance with the ∂/∂τ column), and the standard error of τ [s].
-    """
-    from scipy.optimize import minimize_scalar
-
-    tau0 = float(spec.options["tau_s"])
-
-    def rss(log_tau: float) -> float:
-        s2 = EffectSpec(spec.id, {"tau_s": float(np.exp(log_tau))})
-        return _fit(m, rows, _extra(accepted + [s2], ctx)).rss
-
-    opt = minimize_scalar(rss, bounds=(np.log(tau0) - 1.2, np.log(tau0) + 1.2), method="bounded",
-                          options={"xatol": 1e-3})
-    tau = float(np.exp(opt.x))
-    best = EffectSpec(spec.id, {"tau_s": tau})
-    extra = _extra(accepted + [best], ctx)
-    assert extra is not None
-    fit = _fit(m, rows, extra)
-    v = np.array([fit.result.value(f"{spec.id}.{p}") for p in best.param_names])
-    h = 1e-4 * tau
-    dcols = EffectSpec(spec.id, {"tau_s": tau + h}).columns(ctx) - EffectSpec(spec.id, {"tau_s": tau - h}).columns(ctx)
-    tau_col = (dcols / (2 * h)) @ v
-    aug = ExtraColumns(extra.names + [f"{spec.id}.tau_s"], extra.units | {f"{spec.id}.tau_s": "s"},
-                       np.concatenate([extra.columns, tau_col[:, :, None]], axis=2))
-    with_tau = identify(m, extra=aug, rows=rows)
-    fit.result.std = np.concatenate([with_tau.std[:-1]])
-    tau_std = float(with_tau.std[-1])
-    return best, fit, tau_std
-
-
-def _dedupe(rejected: list[Rejected]) -> list[Rejected]:
-    seen: dict[str, Rejected] = {}
-    for r in rejected:
-        seen[r.effect] = r
-    return list(seen.values())
-
-
-def _shift(before: IdentificationResult, after: IdentificationResult) -> dict[str, float]:
-    out = {}
-    for j, p in enumerate(before.parameters):
-        if p in after.parameters and "." not in p:
-            out[p] = float(after.value(p) - before.values[j])
+def _residuals(setup: _Setup, model: Model) -> np.ndarray:
+    """Residuals of a model on every row, reference row (zero) included, shape=(n, 3) [µm]."""
+    rows = np.arange(1, setup.m.n_rows)
+    out = np.zeros((setup.m.n_rows, 3))
+    out[1:] = setup.residuals(model, rows)
     return out
 
 

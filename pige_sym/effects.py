@@ -23,6 +23,8 @@ id                         physics                                              
 ``squareness_ZX``          Z travel tilted toward X: ``dx = γ·ΔZ``                         gamma_urad
 ``setup_offset``           ball/nest set up Δ away from the nominal ``ball_mm``:           dx_um, dy_um, dz_um
                            ``d = (R_t − R_w)·Δ``
+``pose_cluster``           diagnosis only: an offset of every row at one pose (one angle   dx_um, dy_um, dz_um;
+                           value, or a run of rows) — structure outside the catalogue      axis+deg or t_from/to_s
 ``outliers``               gross reading errors on a few rows (simulation only; the       size_um, count
                            diagnosis handles them with a robust fit)
 =========================  ===========================================================  =========================
@@ -164,13 +166,13 @@ class EffectSpec:
             return ("b_urad",)
         if kind == "squareness":
             return ("gamma_urad",)
-        if kind == "setup_offset":
+        if kind in ("setup_offset", "pose_cluster"):
             return ("dx_um", "dy_um", "dz_um")
         raise InputError(f"effect {self.id!r} has no fitted columns")
 
     @property
     def units(self) -> dict[str, str]:
-        u = "um" if self.kind in ("thermal_drift", "radial_runout", "setup_offset") else "urad"
+        u = "um" if self.kind in ("thermal_drift", "radial_runout", "setup_offset", "pose_cluster") else "urad"
         return {p: u for p in self.param_names}
 
     def _perp(self) -> tuple[str, str]:
@@ -183,6 +185,14 @@ class EffectSpec:
 
     def columns(self, ctx: EffectContext) -> np.ndarray:
         """Zeroed deviation per unit parameter, shape=(n, 3, m) [µm per parameter unit]."""
+        raw, needs_zeroing = self.raw_columns(ctx)
+        return ctx.zeroed(raw) if needs_zeroing else raw
+
+    def raw_columns(self, ctx: EffectContext) -> tuple[np.ndarray, bool]:
+        """Deviation per unit parameter before zeroing, shape=(n, 3, m), and whether it needs zeroing.
+
+        Callers evaluating many effects zero them all at once (``raw − R_w·raw[0]``).
+        """
         kind = self.kind
         n = ctx.n
         if kind == "thermal_drift":
@@ -193,9 +203,11 @@ class EffectSpec:
             cols = np.zeros((n, 3, 3))
             for i in range(3):
                 cols[:, i, i] = f
-            return ctx.zeroed(cols)
+            return cols, True
         if kind == "setup_offset":
-            return ctx.zeroed(ctx.rot_t - ctx.rot_w)
+            return ctx.rot_t - ctx.rot_w, True
+        if kind == "pose_cluster":
+            return self._pose_indicator(ctx), False
         if kind == "squareness":
             pair = self.id.split("_")[1]
             travel = ctx.travel_mm * 1e-3  # µm per µrad
@@ -208,7 +220,7 @@ class EffectSpec:
                 cols[:, 0, 0] = travel[:, 2]
             else:
                 raise InputError(f"unknown squareness pair in {self.id!r}: use XY, YZ or ZX")
-            return cols
+            return cols, False
         axis = self.axis
         k = ctx.axis_index(axis)
         theta = np.radians(ctx.angles_deg[:, k])
@@ -218,12 +230,12 @@ class EffectSpec:
             h = self.harmonic
             rot_u = sign * ctx.motion_column(axis, "r" + u)
             raw = np.stack([rot_u * np.cos(h * theta)[:, None], rot_u * np.sin(h * theta)[:, None]], axis=2)
-            return ctx.zeroed(raw)
+            return raw, True
         if kind == "backlash":
             rot_u = sign * ctx.motion_column(axis, "r" + u)
             assert ctx.approach is not None
             raw = (rot_u * (0.5 * ctx.approach[:, k])[:, None])[:, :, None]
-            return ctx.zeroed(raw)
+            return raw, True
         if kind in ("wobble", "radial_runout"):
             h = self.harmonic
             pre = "r" if kind == "wobble" else "d"
@@ -231,8 +243,26 @@ class EffectSpec:
             ca, cb = ctx.motion_column(axis, pre + a), ctx.motion_column(axis, pre + b)
             c, s = np.cos(h * theta)[:, None], np.sin(h * theta)[:, None]
             raw = np.stack([ca * c, ca * s, cb * c, cb * s], axis=2)
-            return ctx.zeroed(raw)
+            return raw, True
         raise InputError(f"effect {self.id!r} has no fitted columns")
+
+    def _pose_indicator(self, ctx: EffectContext) -> np.ndarray:
+        """Offset columns (identity) on the rows of one pose, zero elsewhere and on the reference row.
+
+        Options: ``axis`` (index into the rotary axes) and ``deg`` (the shared angle), or
+        ``t_from_s`` and ``t_to_s`` (a run of consecutive rows, inclusive).
+        """
+        opt = self.options
+        if "axis" in opt:
+            on = np.isclose(ctx.angles_deg[:, int(opt["axis"])], float(opt["deg"]), rtol=0.0, atol=1e-6)
+        else:
+            t = np.asarray(ctx.t_s, dtype=float)
+            on = (t >= float(opt["t_from_s"])) & (t <= float(opt["t_to_s"]))
+        on[0] = False
+        cols = np.zeros((ctx.n, 3, 3))
+        for i in range(3):
+            cols[:, i, i] = on
+        return cols
 
     def contribution(self, ctx: EffectContext, params: dict[str, float]) -> np.ndarray:
         """Deviation added by the effect, shape=(n, 3) [µm]."""

@@ -65,7 +65,8 @@ METHODS = ("gauss-newton", "double-differential")
 LOSSES = ("linear", "soft_l1", "huber")
 RANK_RTOL = 1e-7
 NULL_RTOL = 1e-4
-NULL_WEIGHT = 0.05
+NULL_WEIGHT = 1e-3
+ZERO_COLUMN_RTOL = 1e-9
 
 
 class IdentificationError(PigeError):
@@ -153,6 +154,7 @@ class IdentificationResult:
     pivots_mm: dict[str, list[float]] = field(default_factory=dict)
     tool_mm: list[float] | None = None
     vif: np.ndarray | None = None
+    unobserved: list[str] = field(default_factory=list)
 
     def value(self, name: str) -> float:
         return float(self.values[self.parameters.index(name)])
@@ -184,6 +186,7 @@ class IdentificationResult:
             "n_obs": self.n_obs,
             "observability": {k: _json_float(v) for k, v in self.observability.items()},
             "unidentifiable": self.unidentifiable,
+            "unobserved": self.unobserved,
             "outlier_rows": self.outlier_rows,
             "ball_mm": self.ball_mm,
             "pivots_mm": self.pivots_mm,
@@ -320,13 +323,20 @@ class _Solution:
     svals: np.ndarray  # scaled singular values
     null_vectors: np.ndarray  # (P, r) in parameter units, normalised to max |.| = 1
     vif: np.ndarray
+    unobserved: list[int] = field(default_factory=list)  # zero or near-zero columns
 
 
 def _solve(normal: np.ndarray, rhs: np.ndarray, yy: float) -> _Solution:
     p = normal.shape[0]
     diag = np.sqrt(np.clip(np.diag(normal), 0, None))
-    scale = 1.0 / np.where(diag > 0, diag, 1.0)  # a zero column (parameter not observed) keeps scale 1
+    # a zero or near-zero column (parameter not observed) is removed, never scaled up: scaling a
+    # ~1e-18 column to unit norm would turn round-off into a "value" of 1e17
+    dead = diag <= ZERO_COLUMN_RTOL * max(float(diag.max(initial=0.0)), 1e-300)
+    scale = 1.0 / np.where(dead, 1.0, diag)
     ns = normal * np.outer(scale, scale)
+    ns[dead, :] = 0.0
+    ns[:, dead] = 0.0
+    rhs = np.where(dead, 0.0, rhs)
     w, v = np.linalg.eigh(ns)
     w = np.clip(w, 0, None)[::-1]
     v = v[:, ::-1]
@@ -349,7 +359,9 @@ def _solve(normal: np.ndarray, rhs: np.ndarray, yy: float) -> _Solution:
     if near_null.any():
         weights = np.abs(v[:, near_null]).max(axis=1)
         vif[weights > NULL_WEIGHT] = np.inf
-    return _Solution(values, cov_unit, rss, rank, svals, nulls, vif)
+    vif[dead] = np.inf
+    values[dead] = 0.0
+    return _Solution(values, cov_unit, rss, rank, svals, nulls, vif, [int(j) for j in np.flatnonzero(dead)])
 
 
 def _combination_text(vec: np.ndarray, names: Sequence[str], units: dict[str, str]) -> str:
@@ -414,7 +426,7 @@ def _result(problem: Problem, sol: _Solution, *, method: str, projection: str, l
         residuals_um=resid, stages=stages or [], ball_mm=[float(x) for x in measurement.ball_mm],
         pivots_mm={k: [float(x) for x in v] for k, v in measurement.pivots_mm.items()},
         tool_mm=None if measurement.tool_mm is None else [float(x) for x in measurement.tool_mm],
-        vif=sol.vif,
+        vif=sol.vif, unobserved=[names[j] for j in sol.unobserved],
     )
 
 
@@ -528,8 +540,8 @@ def _double_differential(problem: Problem, joint: _Solution, projection: str, lo
         sigma2 = rss / dof
         std_c = np.sqrt(np.clip(np.diag(sol.cov_unit) * sigma2, 0, None))
         accept = np.isfinite(sol.vif) & (sol.vif <= vif_max)
-        if stage_no > 1 and not accept.any():
-            # a later differential may accept the best-determined remaining parameters one at a time
+        if not accept.any():
+            # a differential may accept the best-determined remaining parameters one at a time
             finite = np.isfinite(sol.vif)
             if finite.any():
                 accept = np.zeros_like(finite)
@@ -573,6 +585,8 @@ def format_result(result: IdentificationResult) -> str:
             continue
         lines.append(f"{name:<12}{result.values[j]:>11.3f}{result.std[j]:>10.3f}   "
                      f"[{ci[j, 0]:8.3f}, {ci[j, 1]:8.3f}]      {u}")
+    if result.unobserved:
+        lines += ["", f"unobserved (no trace in these data): {', '.join(result.unobserved)}"]
     if result.unidentifiable:
         lines += ["", "not identifiable from these data:"] + [f"  {c}" for c in result.unidentifiable]
     if result.outlier_rows:

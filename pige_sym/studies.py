@@ -168,10 +168,9 @@ def projection_study(machine: str, trajectory: Trajectory, *, projections: list[
                 ok += good
                 bar.update(1)
             assert first is not None
-            col_norm = np.linalg.norm(
-                proj.apply_model(kern.jacobian(trajectory.angles_deg, None, ball_mm, None, tool_mm)[:, :, :8]),
-                axis=(0, 1))
-            unobserved = [p for p, c in zip(names, col_norm, strict=True) if c < 1e-9 * col_norm.max()]
+            # the same definitions as `pige identify`: zero columns are unobserved, the rest of the
+            # undetermined directions are the identification's own combinations
+            unobserved = [p for p in first.unobserved if p in names]
             combos = [c for c in first.unidentifiable if not any(c == f"{u} [{kern.UNITS[u]}] is not identifiable"
                                                                  for u in unobserved)]
             stages = [s.to_dict() | {"preset": {p: sims[0].truth["pige"][p] for p in s.solved}} for s in first.stages]

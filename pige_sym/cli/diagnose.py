@@ -3,24 +3,26 @@
 from __future__ import annotations
 
 import argparse
-import json
-
-from pige_sym.diagnosis import diagnose, residual_plots
-from pige_sym.identification import format_result
-from pige_sym.io import read_measurement
 
 
 def _run(args: argparse.Namespace) -> int:
+    from pige_sym.diagnosis import diagnose, residual_plots
+    from pige_sym.files import to_json
+    from pige_sym.identification import format_result
+    from pige_sym.io import read_measurement
+
     m = read_measurement(args.file)
     result = diagnose(m, progress=not args.json)
     if args.plots:
         residual_plots(m, result, args.plots)
     if args.json:
-        print(json.dumps(result.to_dict(), indent=1))
+        print(to_json(result.to_dict()))
         return 0
     print(f"baseline PIGE fit: residual RMS {result.baseline_rms_um:.3f} um, held-out RMS "
           f"{result.baseline_heldout_rms_um:.3f} um, BIC {result.baseline_bic:.1f}")
     print(result.verdict())
+    for c in result.clusters:
+        print(f"note: {c}")
     if result.rejected:
         print("\nrejected candidates:")
         for r in result.rejected:

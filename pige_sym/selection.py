@@ -1,0 +1,238 @@
+"""Model selection for the diagnosis: forward steps, swaps and backward elimination.
+
+A *model* is the PIGEs plus an ordered list of candidates, each reduced to its
+identifiable part jointly with everything before it (:func:`pige_sym.candidates.reduce_candidate`).
+Every model is fitted on the accumulated normal equations (:mod:`pige_sym.normal_sums`)
+and scored by ``BIC = N ln(RSS/N) + k ln N`` (k = rank + non-linear parameters such as
+τ) and by its k-fold held-out RMS.
+
+An extension is *supported* when, against the model without it,
+``ΔBIC ≤ delta_bic_max`` (−10: very strong evidence), the nested F-test p-value is
+below ``p_max`` and the held-out RMS drops by at least ``min_heldout_gain``.  No VIF
+cutoff: harmonics 1–4 compete on BIC and held-out error, and the VIF and inflated
+standard errors are reported.
+
+1. **Forward**: add the supported candidate with the lowest ΔBIC (at most one per key:
+   the harmonics of an effect are separate keys, the τ grid of the drift one key); an
+   tie (ΔBIC within ``TIE_BIC``) goes to the candidate with fewer catalogue parameters.  Candidates that
+   replace a finding almost as well (BIC gap < 6) are reported with it as alternatives.
+2. **Swap**: replace an accepted candidate by a pooled one while that lowers the BIC
+   by more than ``SWAP_MARGIN``, so an early proxy cannot block the true effect.
+3. **Backward**: every accepted candidate must still be supported against the final
+   model without it; the weakest one that is not is dropped, and steps 2–3 repeat.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from pige_sym.candidates import Candidate, Layout, Reduction, reduce_candidate
+from pige_sym.normal_sums import LinearFit, NormalSums, fit
+
+SWAP_MARGIN = 2.0
+TIE_BIC = 0.5
+MAX_EFFECTS = 6
+
+
+@dataclass
+class Model:
+    """PIGEs plus reduced candidates, fitted.
+
+    Attributes
+    ----------
+    cands : list of Candidate
+    reductions : list of Reduction
+    w : ndarray, shape=(C, K)
+        Model columns as combinations of super-design columns.
+    names : list of str
+        Names of the K model columns.
+    blocks : list of slice
+        Model columns of each candidate.
+    fit : LinearFit
+    """
+
+    cands: list[Candidate]
+    reductions: list[Reduction]
+    w: np.ndarray
+    names: list[str]
+    blocks: list[slice]
+    fit: LinearFit
+    _pinv: np.ndarray | None = field(default=None, repr=False)
+
+    def pinv(self, sums: NormalSums) -> np.ndarray:
+        """``(WᵀGW)⁺`` of the model (cached), shape=(K, K)."""
+        if self._pinv is None:
+            self._pinv = np.linalg.pinv(self.w.T @ sums.total_gram @ self.w, rcond=1e-12, hermitian=True)
+        return self._pinv
+
+    @property
+    def extra(self) -> int:
+        """Non-linear parameters of the model (τ), counted in the BIC."""
+        return sum(c.extra_params for c in self.cands)
+
+    @property
+    def bic(self) -> float:
+        """BIC of the fit, non-linear parameters included."""
+        return self.fit.bic(self.extra)
+
+    @property
+    def keys(self) -> list[str]:
+        """Selection keys of the candidates in the model."""
+        return [c.key for c in self.cands]
+
+
+@dataclass
+class Comparison:
+    """Evidence for a model against a nested one."""
+
+    delta_bic: float
+    f_statistic: float
+    p_value: float
+    heldout_gain: float
+
+    def supported(self, delta_bic_max: float, p_max: float, min_gain: float) -> bool:
+        """True when all three tests pass (module docstring)."""
+        return self.delta_bic <= delta_bic_max and self.p_value <= p_max and self.heldout_gain >= min_gain
+
+
+def compare(small: Model, big: Model) -> Comparison:
+    """ΔBIC, F-test and held-out gain of ``big`` over the nested ``small``."""
+    return compare_fits(small.fit, big.fit, small.extra, big.extra)
+
+
+def compare_fits(a: LinearFit, b: LinearFit, extra_a: int = 0, extra_b: int = 0) -> Comparison:
+    """ΔBIC, F-test and held-out gain of fit ``b`` over the nested fit ``a`` (extra: non-linear parameters)."""
+    q = max(b.rank - a.rank, 1)
+    dof = max(b.n_obs - b.rank, 1)
+    f_stat = ((a.rss - b.rss) / q) / (b.rss / dof) if b.rss > 0 else float("inf")
+    p_val = float(stats.f.sf(f_stat, q, dof)) if math.isfinite(f_stat) else 0.0
+    gain = 1.0 - b.heldout_rms / a.heldout_rms if a.heldout_rms > 0 else 0.0
+    return Comparison(b.bic(extra_b) - a.bic(extra_a), f_stat, p_val, gain)
+
+
+@dataclass
+class Selector:
+    """Builds, caches and compares models on one set of normal equations."""
+
+    sums: NormalSums
+    layout: Layout
+    cache: dict[tuple[str, ...], Model] = field(default_factory=dict)
+
+    def model(self, cands: list[Candidate]) -> Model:
+        """The fitted model of the PIGEs plus ``cands`` (each reduced against those before it)."""
+        key = tuple(c.label for c in cands)
+        if key in self.cache:
+            return self.cache[key]
+        if not cands:
+            p = len(self.layout.pige)
+            w = np.eye(self.layout.n_columns)[:, :p]
+            model = Model([], [], w, list(self.layout.pige), [], fit(self.sums, w))
+        else:
+            base = self.model(cands[:-1])  # prefixes are cached: one reduction per new model
+            c = cands[-1]
+            units = dict(self.layout.units)
+            red = reduce_candidate(self.sums.total_gram, base.w, c, base.names, units, base.pinv(self.sums))
+            emb = c.embedding(self.layout.n_columns) @ red.basis
+            k = base.w.shape[1]
+            w = np.concatenate([base.w, emb], axis=1)
+            model = Model(list(cands), base.reductions + [red], w, base.names + [f"{c.label}#{j}" for j in
+                                                                                   range(emb.shape[1])],
+                          base.blocks + [slice(k, k + emb.shape[1])], fit(self.sums, w))
+        self.cache[key] = model
+        return model
+
+    def forward(self, current: Model, pool: list[Candidate], progress: Callable[[int], None] | None = None
+                ) -> tuple[list[tuple[Candidate, Model, Comparison]], list[tuple[Candidate, Reduction]]]:
+        """Every pooled candidate added to ``current``: the scored ones (best first) and the fully confounded ones."""
+        scored, confounded = [], []
+        for c in pool:
+            if c.key in current.keys:
+                continue
+            big = self.model(current.cands + [c])
+            red = big.reductions[-1]
+            if red.basis.shape[1] == 0:
+                confounded.append((c, red))
+            else:
+                scored.append((c, big, compare(current, big)))
+            if progress is not None:
+                progress(1)
+        scored.sort(key=lambda t: t[2].delta_bic)
+        # ties (the same fitted subspace, e.g. backlash and a harmonic of a tilt axis seen at three
+        # angles) go to the effect with fewer catalogue parameters
+        tied = [t for t in scored if scored and t[2].delta_bic <= scored[0][2].delta_bic + TIE_BIC]
+        if tied:
+            simplest = min(tied, key=lambda t: len(t[0].cols))
+            scored.remove(simplest)
+            scored.insert(0, simplest)
+        return scored, confounded
+
+    def swap(self, current: Model, pool: list[Candidate]) -> Model:
+        """Replace accepted candidates by pooled ones while the BIC drops by more than ``SWAP_MARGIN``."""
+        for _ in range(4 * len(pool) + 1):
+            best = current
+            for i, old in enumerate(current.cands):
+                others = {c.key for j, c in enumerate(current.cands) if j != i}
+                for c in pool:
+                    if c.key in others or c.label == old.label:
+                        continue
+                    trial = self.model(current.cands[:i] + current.cands[i + 1:] + [c])
+                    if trial.reductions[-1].basis.shape[1] and trial.bic < best.bic - SWAP_MARGIN:
+                        best = trial
+            if best is current:
+                return current
+            current = best
+        return current
+
+    def without(self, current: Model, i: int) -> Model:
+        """``current`` without its i-th candidate."""
+        return self.model(current.cands[:i] + current.cands[i + 1:])
+
+    def backward(self, current: Model, delta_bic_max: float, p_max: float, min_gain: float) -> Model:
+        """Drop the weakest accepted candidate that the final model no longer supports, repeatedly."""
+        while current.cands:
+            worst, worst_dbic = None, -math.inf
+            for i in range(len(current.cands)):
+                cmp = compare(self.without(current, i), current)
+                if not cmp.supported(delta_bic_max, p_max, min_gain) and cmp.delta_bic > worst_dbic:
+                    worst, worst_dbic = i, cmp.delta_bic
+            if worst is None:
+                return current
+            current = self.without(current, worst)
+        return current
+
+
+def select(selector: Selector, pool: list[Candidate], *, delta_bic_max: float, p_max: float, min_gain: float,
+           progress: Callable[[int], None] | None = None) -> tuple[Model, dict[str, str]]:
+    """Forward + swap + backward selection (module docstring).
+
+    Returns
+    -------
+    Model
+        The final model.
+    dict of str to str
+        Why each candidate that is not in the final model was left out, by candidate label.
+    """
+    current = selector.model([])
+    reasons: dict[str, str] = {}
+    for _ in range(MAX_EFFECTS):
+        scored, confounded = selector.forward(current, pool, progress)
+        for c, red in confounded:
+            reasons[c.label] = "unidentifiable with the PIGEs: " + "; ".join(red.removed)
+        for c, _, cmp in scored:
+            reasons[c.label] = (f"not supported (ΔBIC {cmp.delta_bic:.1f}, p {cmp.p_value:.2g}, "
+                                f"held-out gain {cmp.heldout_gain:.1%})")
+        if not scored or not scored[0][2].supported(delta_bic_max, p_max, min_gain):
+            break
+        current = scored[0][1]
+        current = selector.swap(current, pool)
+        current = selector.backward(current, delta_bic_max, p_max, min_gain)
+    current = selector.swap(current, pool)
+    current = selector.backward(current, delta_bic_max, p_max, min_gain)
+    for c in current.cands:
+        reasons.pop(c.label, None)
+    return current, reasons
