@@ -490,6 +490,8 @@ _REJECTION_SENTENCES = (
     ("unidentifiable", "{name} cannot be told apart from the PIGEs with this test."),
     ("best candidate", "{name} was the best remaining candidate, but its gain is within the noise."),
     ("not significant", "{name} does not improve the fit beyond the noise."),
+    ("not supported", "{name} does not improve the fit enough to be worth its parameters."),
+    ("rows ", "{name}: the rows that stand out are better kept than dropped."),
 )
 
 
@@ -498,7 +500,7 @@ def _rejected_item(r: Any) -> str:
     opts = ", ".join(f"{k} {v:g}" for k, v in r.options.items())
     name = f"{r.effect}" + (f" ({opts})" if opts else "")
     sentence = next((t.format(name=name) for key, t in _REJECTION_SENTENCES if r.reason.startswith(key)
-                     or key in r.reason[:40]), f"{name}: {r.reason}.")
+                     or key in r.reason[:40]), f"{name} was not accepted.")
     numbers = f"{r.reason}; ΔBIC {_f(r.delta_bic, '.1f')}, p {_f(r.p_value, '.2g')}"
     return f"<li>{_e(sentence)} <details><summary>why</summary><small>{_e(numbers)}</small></details></li>"
 
