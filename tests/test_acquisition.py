@@ -439,11 +439,135 @@ def test_ctrl_c_leaves_a_valid_partial_file_and_summary(tmp_path) -> None:
     assert "interrupted" in err and "rows written" in err
 
 
-def test_cli_bad_input_is_one_line_and_status_2(capsys) -> None:
+def test_cli_bad_input_is_one_line_and_status_2(capsys, tmp_path) -> None:
     assert main(["rtest-sim", "--faults", "gremlins"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown fault 'gremlins'" in err[0]
     assert main(["acquire", "--port", "/dev/does-not-exist-pige", "--out", os.devnull, "--no-progress",
                  "--no-raw-log"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a regular file" in err[0]
+    assert main(["acquire", "--port", "/dev/does-not-exist-pige", "--out", str(tmp_path / "x.csv"), "--no-progress",
+                 "--no-raw-log"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot open port" in err[0]
+
+
+# --------------------------------------------------------------------------------------------- rows tied to poses
+
+
+def _rows(out: Path) -> dict[int, np.ndarray]:
+    m = read_measurement(out)
+    return {int(p): m.deviation_um[i] for i, p in enumerate(m.extra_columns["pose"])}
+
+
+def _acquire_stream(out: Path, program, data: bytes, **kw):
+    return acquire("fake", program, out, raw_log=None, opener=lambda: _BytesPort(data), **kw)
+
+
+_CLEAN_SEQ_LAST: dict[int, int] = {}
+
+
+@pytest.fixture(scope="module")
+def clean_run(tmp_path_factory):
+    """The 9-pose cone of seed 2 acquired from a clean stream: the oracle every faulty run is compared with."""
+    program = load_test_program(AC, "cone-frustum", points=8)
+    out = tmp_path_factory.mktemp("clean") / "clean.csv"
+    s = _acquire_stream(out, program, VirtualRTest(_config(program)).stream())
+    assert s.completed and s.rows_written == 9 and not s.flagged
+    m = read_measurement(out)
+    _CLEAN_SEQ_LAST.update({int(p): int(q) for p, q in zip(m.extra_columns["pose"], m.extra_columns["seq_last"],
+                                                           strict=True)})
+    return program, _rows(out)
+
+
+def _assert_same_rows(out: Path, clean: dict[int, np.ndarray], tol_um: float = 0.03) -> None:
+    rows = _rows(out)
+    assert sorted(rows) == sorted(clean)
+    for pose, row in rows.items():
+        assert np.abs(row - clean[pose]).max() < tol_um, (pose, row, clean[pose])
+
+
+@pytest.mark.parametrize("faults", ["spike=1", "spike=30", "drop=12,duplicate=12",
+                                    "spike=12,drop=6,duplicate=6,garbage=6,checksum=6"])
+def test_spikes_drops_and_duplicates_leave_every_row_as_in_the_clean_run(tmp_path, clean_run, faults) -> None:
+    from pige_sym.acquisition.virtual_device import parse_faults
+
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program, faults=parse_faults(faults)))
+    assert list(dev.plan.values()).count("spike") == parse_faults(faults).get("spike", 0)
+    out = tmp_path / "f.csv"
+    s = _acquire_stream(out, program, dev.stream())
+    assert s.completed and not s.flagged, s.format()
+    assert s.rejected.get("duplicate", 0) == parse_faults(faults).get("duplicate", 0)
+    _assert_same_rows(out, clean)
+    np.testing.assert_allclose(read_measurement(out).deviation_um, dev.deviation_machine_um, atol=0.2)
+
+
+def clean_run_seq_last(pose: int) -> int:
+    """Last sequence number averaged for ``pose`` in the clean run (set by the fixture)."""
+    return _CLEAN_SEQ_LAST[pose]
+
+
+def _dwell_samples(dev: VirtualRTest, pose: int) -> np.ndarray:
+    return np.nonzero(dev.pose_of_sample == pose)[0]
+
+
+@pytest.mark.parametrize("burst", [1, 2, 3, 6])
+def test_a_spike_burst_while_waiting_for_motion_never_shifts_a_pose(tmp_path, clean_run, burst) -> None:
+    """The original defect: a glitch after a window looked like motion, the pose settled again at the same
+    level and every later row held the previous pose's samples.  Short bursts are spikes (ignored), longer ones
+    settle too early for the program's timing (dropped as spurious)."""
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program))
+    k0 = clean_run_seq_last(3) + 2  # after pose 3's window, before the move
+    assert dev.pose_of_sample[k0 + 15] == 3
+    dev.readings_um[k0:k0 + burst, 1] += 50.0
+    out = tmp_path / "b.csv"
+    s = _acquire_stream(out, program, dev.stream())
+    assert s.completed and not s.flagged, s.format()
+    assert s.spurious_settles == (1 if burst > 2 else 0)
+    _assert_same_rows(out, clean)
+
+
+def test_a_spike_inside_a_window_is_left_out_of_the_average(tmp_path, clean_run) -> None:
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program))
+    k = int(_dwell_samples(dev, 5)[80])
+    dev.readings_um[k] += [0.0, 0.0, 50.0]
+    out = tmp_path / "w.csv"
+    s = _acquire_stream(out, program, dev.stream())
+    assert s.completed and s.spikes == 1
+    m = read_measurement(out)
+    assert m.optional["n_samples"][5] == 99  # one reading fewer; the row still matches the clean run closely
+    _assert_same_rows(out, clean)
+
+
+def test_a_pose_passed_without_motion_is_flagged_and_the_next_keeps_its_angles(tmp_path, clean_run) -> None:
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program))
+    still = np.arange(_dwell_samples(dev, 3)[-1] + 1, _dwell_samples(dev, 4)[-1] + 1)
+    level = dev.readings_um[_dwell_samples(dev, 3)[-40:]].mean(axis=0)
+    dev.readings_um[still] = level + np.random.default_rng(1).normal(scale=0.25, size=(still.size, 3))
+    out = tmp_path / "u.csv"
+    s = _acquire_stream(out, program, dev.stream())
+    assert s.completed and [f["pose"] for f in s.flagged] == [4] and "unseen" in s.flagged[0]["reason"]
+    rows = _rows(out)
+    assert sorted(rows) == [0, 1, 2, 3, 5, 6, 7, 8]
+    for pose in rows:
+        assert np.abs(rows[pose] - clean[pose]).max() < 0.03
+
+
+def test_a_settle_at_a_time_no_pose_has_is_flagged_not_written(tmp_path, clean_run) -> None:
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program))
+    dwell = _dwell_samples(dev, 5)
+    shaky = dwell[:90]  # 4.5 s of vibration: the pose settles 4.5 s late, beyond the timing tolerance (3.6 s)
+    dev.readings_um[shaky] += 10.0 * np.sin(2 * np.pi * 2.0 * dev.t_s[shaky])[:, None]
+    out = tmp_path / "d.csv"
+    s = _acquire_stream(out, program, dev.stream())
+    assert s.completed and [f["pose"] for f in s.flagged] == [5] and "doubtful" in s.flagged[0]["reason"]
+    rows = _rows(out)
+    assert 5 not in rows and sorted(rows) == [0, 1, 2, 3, 4, 6, 7, 8]
+    for pose in rows:
+        assert np.abs(rows[pose] - clean[pose]).max() < 0.03

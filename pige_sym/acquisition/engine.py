@@ -75,11 +75,13 @@ import json
 import math
 import os
 import queue
+import shutil
 import sys
+import tempfile
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -93,8 +95,8 @@ from pige_sym.acquisition.nest import NestGeometry, default_nest
 from pige_sym.acquisition.transport import PortSettings, RawLog, open_port, read_available
 from pige_sym.codegen.machine_code import parse_machine_code
 from pige_sym.errors import AcquisitionError, FileFormatError, InputError
-from pige_sym.files import atomic_write_text, to_json
-from pige_sym.io import Measurement, MeasurementWriter, read_measurement
+from pige_sym.files import atomic_write_text, check_output, to_json
+from pige_sym.io import FORMAT_LINE, Measurement, MeasurementWriter, read_measurement
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.rtest_program import TestProgram
 
@@ -129,6 +131,19 @@ class AcquisitionOptions:
         Frame of the written deviations.
     replay_tol_um : float [µm]
         Largest difference between a replayed pose and its row (resume).
+    spike_samples : int
+        Longest run of out-of-band readings treated as a spike (left out) rather than motion.
+    timing_check : bool
+        Cross-check each settle with the program's schedule (``stable``); off for operator-paced programs.
+    timing_tol : float
+        Allowed timing difference, as a fraction of the shortest pose cycle (move + dwell).
+    max_reconnects : int
+        Reconnections in a row without a valid record before the run stops.
+    max_window_samples : int
+        Most samples kept for one window or settle test (memory bound); a full window ends.
+    max_bytes : int or None [bytes]
+        Most bytes read (and logged) in one session; None: sized for the run
+        (:func:`default_max_bytes`).
     """
 
     trigger: str = "stable"
@@ -142,6 +157,12 @@ class AcquisitionOptions:
     retry_s: float = 0.1
     frame: str = "machine"
     replay_tol_um: float = 1.0
+    spike_samples: int = 2
+    timing_check: bool = True
+    timing_tol: float = 0.3
+    max_reconnects: int = 20
+    max_window_samples: int = 100_000
+    max_bytes: int | None = None
 
     def __post_init__(self) -> None:
         if self.trigger not in TRIGGERS:
@@ -156,6 +177,18 @@ class AcquisitionOptions:
             raise InputError("delay_s must be >= 0")
         if self.min_samples < 2:
             raise InputError(f"min_samples must be >= 2, got {self.min_samples}")
+        if not 0 <= self.spike_samples <= 10:
+            raise InputError(f"spike_samples must be 0 to 10, got {self.spike_samples}")
+        if not 0 < self.timing_tol < 0.5:
+            raise InputError(f"timing_tol must be in (0, 0.5) of a pose cycle, got {self.timing_tol!r}")
+        if self.max_reconnects < 1 or self.max_window_samples < self.min_samples:
+            raise InputError("max_reconnects must be >= 1 and max_window_samples >= min_samples")
+        if self.max_bytes is not None and self.max_bytes < 4096:
+            raise InputError(f"max raw log must be >= 4096 bytes, got {self.max_bytes}")
+        for name in ("window_s", "settle_s", "tolerance_um", "max_gap_s", "reconnect_timeout_s", "retry_s",
+                     "replay_tol_um", "delay_s"):
+            if not math.isfinite(getattr(self, name)):
+                raise InputError(f"{name} must be finite, got {getattr(self, name)!r}")
 
 
 @dataclass
@@ -188,6 +221,8 @@ class AcquisitionSummary:
     stalls: int = 0
     disconnects: int = 0
     reconnects: int = 0
+    spikes: int = 0
+    spurious_settles: int = 0
     resumed: bool = False
     removed_partial_line: bool = False
     completed: bool = False
@@ -221,6 +256,8 @@ class AcquisitionSummary:
                      f"{self.noise_runs} runs; device-time gaps > max gap: {self.gaps}")
         lines.append(f"link: {self.timeouts} timeouts in {self.stalls} stalls, {self.disconnects} disconnects, "
                      f"{self.reconnects} reconnects")
+        if self.spikes or self.spurious_settles:
+            lines.append(f"spikes left out: {self.spikes} readings; spurious settles dropped: {self.spurious_settles}")
         if self.raw_log:
             lines.append(f"raw log: {self.raw_log}")
         for f in self.flagged:
@@ -254,16 +291,27 @@ class _Trigger:
     """Decides, sample by sample, whether a sample belongs to the current pose's window.
 
     ``step`` returns ``"skip"`` (not averaged), ``"take"`` (averaged) or ``"done"`` (the
-    window is over; the sample is then offered to the next pose).
+    window is over; the sample is then offered to the next pose).  After ``"done"``,
+    ``assigned`` is the pose the window belongs to (greater than the current pose when
+    poses were passed unseen) and ``doubtful`` a reason not to write it, or None.
     """
 
     reason = "complete"
 
+    def __init__(self) -> None:
+        self.assigned = 0
+        self.doubtful: str | None = None
+
     def begin(self, pose: int, level: np.ndarray | None) -> None:
         self.reason = "complete"
+        self.assigned = pose
+        self.doubtful = None
 
     def step(self, s: Sample, r: np.ndarray, gap: bool) -> str:
         raise NotImplementedError
+
+    def confirm(self, pose: int) -> None:  # noqa: B027 - optional hook
+        """The window of ``pose`` was written: it anchors the timing of the next ones."""
 
     @property
     def level(self) -> np.ndarray | None:
@@ -273,20 +321,63 @@ class _Trigger:
         return ""
 
 
+def _runs(flags: np.ndarray) -> list[int]:
+    """Lengths of the runs of True in a 1-D boolean array."""
+    out: list[int] = []
+    n = 0
+    for f in flags:
+        if f:
+            n += 1
+        elif n:
+            out.append(n)
+            n = 0
+    if n:
+        out.append(n)
+    return out
+
+
 class _StableTrigger(_Trigger):
-    def __init__(self, opts: AcquisitionOptions) -> None:
+    """Settle detection that ignores isolated spikes, cross-checked with the program's timing.
+
+    A *spike* is a run of at most ``spike_samples`` consecutive readings outside the band
+    (``tolerance_um`` from the level); a longer run is motion.  Spikes are left out of
+    the averages (counted in ``spikes``).  A settle is checked against the program: its
+    time after the last written pose (the *anchor*) must match the schedule of the
+    current pose within ``timing_tol`` of the shortest pose cycle.  Too early: a
+    spurious settle (the machine has not reached the pose), dropped and waited again
+    for motion.  Matching a later pose: the poses in between were passed unseen (flagged).
+    Matching no pose: the window is *doubtful* (flagged, not written).
+    """
+
+    def __init__(self, opts: AcquisitionOptions, program: TestProgram) -> None:
+        super().__init__()
         self.o = opts
+        self.arrive = program.arrive_s
+        self.cycle_s = float(program.move_s + program.dwell_s.min())
+        self.end_s = float(program.duration_s)
         self.phase = "settle"
-        self.buf: deque[tuple[float, np.ndarray]] = deque()
+        self.buf: deque[tuple[float, np.ndarray]] = deque(maxlen=opts.max_window_samples)
         self._level: np.ndarray | None = None
         self.t_first: float | None = None
+        self.run = 0
+        self.pose = 0
+        self.settle_t = 0.0
+        self.anchor: tuple[int, float] | None = None
+        self.spikes = 0
+        self.spurious = 0
 
     def begin(self, pose: int, level: np.ndarray | None) -> None:
         super().begin(pose, level)
+        self.pose = pose
         self.phase = "motion" if (pose > 0 and level is not None) else "settle"
         self._level = level
         self.buf.clear()
         self.t_first = None
+        self.run = 0
+
+    def confirm(self, pose: int) -> None:
+        if pose > 0:
+            self.anchor = (pose, self.settle_t)
 
     @property
     def level(self) -> np.ndarray | None:
@@ -295,36 +386,110 @@ class _StableTrigger(_Trigger):
     def status(self) -> str:
         return {"motion": "waiting for motion", "settle": "settling", "window": "averaging"}[self.phase]
 
-    def step(self, s: Sample, r: np.ndarray, gap: bool) -> str:
-        tol = self.o.tolerance_um
-        if self.phase == "motion":
-            assert self._level is not None
-            if np.abs(r - self._level).max() > tol:
-                self.phase = "settle"
-                self.buf.clear()
-                self.buf.append((s.t_s, r))
-            return "skip"
-        if self.phase == "settle":
-            if gap:
-                self.buf.clear()
-            self.buf.append((s.t_s, r))
-            while self.buf and s.t_s - self.buf[0][0] > self.o.settle_s + 1e-9:
-                self.buf.popleft()
-            if s.t_s - self.buf[0][0] >= self.o.settle_s - 1e-9 and len(self.buf) >= 3:
-                arr = np.array([b[1] for b in self.buf])
-                if (arr.max(axis=0) - arr.min(axis=0)).max() <= tol:
-                    self._level = arr.mean(axis=0)
-                    self.phase = "window"
-                    self.t_first = None
-            return "skip"
-        # window
+    def _outside(self, r: np.ndarray) -> bool:
         assert self._level is not None
+        return bool(np.abs(r - self._level).max() > self.o.tolerance_um)
+
+    def step(self, s: Sample, r: np.ndarray, gap: bool) -> str:
+        self._check_program_end(s.t_s)
+        if self.phase == "motion":
+            return self._step_motion(s, r)
+        if self.phase == "settle":
+            return self._step_settle(s, r, gap)
+        return self._step_window(s, r, gap)
+
+    def _check_program_end(self, t: float) -> None:
+        """Stop when the device time runs past the program's end (e.g. a device looping one pose)."""
+        if self.anchor is None or not self.o.timing_check:
+            return
+        a, t_a = self.anchor
+        limit = float(self.arrive[-1] - self.arrive[a]) + 2 * self.cycle_s + self.o.window_s
+        if t - t_a > limit:
+            raise _Stop(f"at pose {self.pose} the device time is {t - t_a:.0f} s past pose {a}, beyond the end of the "
+                        "program: the machine stopped or the device repeats itself; restart and use --resume")
+
+    def _step_motion(self, s: Sample, r: np.ndarray) -> str:
+        if not self._outside(r):
+            self.run = 0
+            return "skip"
+        self.run += 1
+        if self.run > self.o.spike_samples:  # a run longer than a spike: the machine moves
+            self.phase = "settle"
+            self.buf.clear()
+            self.buf.append((s.t_s, r))
+        return "skip"
+
+    def _step_settle(self, s: Sample, r: np.ndarray, gap: bool) -> str:
+        if gap:
+            self.buf.clear()
+        self.buf.append((s.t_s, r))
+        while self.buf and s.t_s - self.buf[0][0] > self.o.settle_s + 1e-9:
+            self.buf.popleft()
+        if s.t_s - self.buf[0][0] < self.o.settle_s - 1e-9 or len(self.buf) < 3:
+            return "skip"
+        level = self._settled_level(np.array([b[1] for b in self.buf]))
+        if level is None:
+            return "skip"
+        previous = self._level
+        self._level = level
+        self.settle_t = s.t_s
+        if self._timing_verdict(s.t_s) == "early":
+            self.spurious += 1
+            self._level = previous
+            self.phase = "motion" if previous is not None else "settle"
+            self.buf.clear()
+            self.run = 0
+            return "skip"
+        self.phase = "window"
+        self.t_first = None
+        self.run = 0
+        return "skip"
+
+    def _settled_level(self, arr: np.ndarray) -> np.ndarray | None:
+        """Mean of the settled readings, or None: every reading within ``tolerance_um`` peak to peak
+        apart from at most one spike (a run of at most ``spike_samples`` readings far from the median).
+        """
+        tol = self.o.tolerance_um
+        out = (np.abs(arr - np.median(arr, axis=0)) > tol).any(axis=1)
+        runs = _runs(out)
+        if len(runs) > 1 or (runs and runs[0] > self.o.spike_samples):
+            return None
+        inl = arr[~out]
+        if inl.shape[0] < 3 or (inl.max(axis=0) - inl.min(axis=0)).max() > tol:
+            return None
+        return np.asarray(inl.mean(axis=0))
+
+    def _timing_verdict(self, t: float) -> str:
+        """``"early"``, or ``"ok"`` after setting ``assigned``/``doubtful`` (class docstring)."""
+        if not self.o.timing_check or self.pose == 0 or self.anchor is None:
+            return "ok"
+        a, t_a = self.anchor
+        elapsed = t - t_a
+        tol = self.o.timing_tol * self.cycle_s
+        expected = self.arrive[self.pose:] - self.arrive[a]
+        if elapsed < expected[0] - tol:
+            return "early"
+        k = int(np.argmin(np.abs(expected - elapsed)))
+        if abs(expected[k] - elapsed) <= tol:
+            self.assigned = self.pose + k
+        else:
+            self.doubtful = (f"settled {elapsed:.1f} s after pose {a}, the program places pose {self.pose} at "
+                             f"{expected[0]:.1f} s (and no pose within {tol:.1f} s)")
+        return "ok"
+
+    def _step_window(self, s: Sample, r: np.ndarray, gap: bool) -> str:
         if gap and self.t_first is not None:
             self.reason = "data gap"
             return "done"
-        if np.abs(r - self._level).max() > tol:
-            self.reason = "machine left the pose"
-            return "done"
+        if self._outside(r):
+            self.run += 1
+            if self.run > self.o.spike_samples:
+                self.reason = "machine left the pose"
+                return "done"
+            return "skip"  # perhaps a spike: left out; decided by the next readings
+        if self.run:
+            self.spikes += self.run
+            self.run = 0
         if self.t_first is None:
             self.t_first = s.t_s
         if s.t_s - self.t_first >= self.o.window_s - 1e-9:
@@ -334,6 +499,7 @@ class _StableTrigger(_Trigger):
 
 class _ScheduleTrigger(_Trigger):
     def __init__(self, opts: AcquisitionOptions, program: TestProgram) -> None:
+        super().__init__()
         self.o = opts
         self.arrive = program.arrive_s
         self.t0: float | None = None
@@ -361,6 +527,7 @@ class _ScheduleTrigger(_Trigger):
 class _KeyTrigger(_Trigger):
     def __init__(self, opts: AcquisitionOptions, key_source: Callable[[], bool],
                  prompt: Callable[[int], None] | None) -> None:
+        super().__init__()
         self.o = opts
         self.key_source = key_source
         self.prompt = prompt
@@ -579,70 +746,96 @@ class _Engine:
             verdict = self.trigger.step(s, r, gap)
             if verdict == "take":
                 self.window.append(s)
-                return
-            if verdict == "skip":
+                if len(self.window) < self.o.max_window_samples:
+                    return
+                self.trigger.reason = f"window full ({self.o.max_window_samples} samples)"
+            elif verdict == "skip":
                 return
             self._finish_pose(self.trigger.reason)
             gap = False
             if not self.done:
                 self.trigger.begin(self.pose, self.trigger.level)
+            if verdict == "take":
+                return
+
+    def _flag(self, pose: int, n: int, reason: str) -> None:
+        """No row for ``pose`` (nothing is invented); the summary lists it."""
+        if pose >= self.start_pose:
+            self.summary.flagged.append({"pose": pose, "n_samples": n, "reason": reason})
+        self.pose = pose + 1
+        self.on_pose(pose)
 
     def _finish_pose(self, reason: str) -> None:
-        pose, samples = self.pose, self.window
+        samples = self.window
         self.window = []
         n = len(samples)
-        replay = pose < self.start_pose
+        for unseen in range(self.pose, min(self.trigger.assigned, self.program.n_poses)):
+            self._flag(unseen, 0, "passed unseen: no motion seen before it; the program timing places the next "
+                       "window later")
+        pose = self.pose
+        if self.trigger.doubtful is not None:
+            self._flag(pose, n, f"doubtful pose assignment: {self.trigger.doubtful}")
+            return
         if n < self.o.min_samples:
             if pose == 0:
                 raise _Stop(f"reference pose: only {n} valid samples ({reason}); the nest cannot be zeroed. Check the "
                             f"dwell (it must exceed settling + {self.o.window_s:g} s) and the link")
-            if not replay:
-                self.summary.flagged.append({"pose": pose, "n_samples": n, "reason": reason})
-            self.pose += 1
-            self.on_pose(pose)
+            self._flag(pose, n, reason)
             return
         raw = readings_array(samples)
         mean_raw = raw.mean(axis=0)
         t_mean = float(np.mean([x.t_s for x in samples]))
         if pose == 0:
-            self.t0 = t_mean
-            if self.resume is not None:
-                if np.abs(mean_raw - self.resume.zero).max() > self.o.replay_tol_um:
-                    raise AcquisitionError(
-                        f"resume: the reference readings {np.round(mean_raw, 3).tolist()} um differ from the file's "
-                        f"zero {np.round(self.resume.zero, 3).tolist()} um by more than {self.o.replay_tol_um:g} um: "
-                        "the nest moved or was re-zeroed; start a new file")
-                self.zero = self.resume.zero
-            else:
-                self.zero = mean_raw
-                self.writer = MeasurementWriter(self.out, _template(self.program, self.nest, self.o, mean_raw))
-        assert self.zero is not None and self.t0 is not None
+            self._zero(mean_raw, t_mean)
+        assert self.zero is not None
         rot = self.rot[pose] if self.o.frame == "machine" else None
         mean, sd = point_statistics(raw, self.zero, self.nest, rot)
         if pose == 0:
             mean = np.zeros(3)
-        if replay:
-            self.summary.poses_replayed += 1
-            row = self.resume.rows.get(pose) if self.resume else None
-            if row is not None and np.abs(mean - row).max() > self.o.replay_tol_um:
-                raise AcquisitionError(
-                    f"resume: pose {pose} measured again differs from its row by {np.abs(mean - row).max():.3g} um "
-                    f"(> {self.o.replay_tol_um:g} um): the machine must run the program again from its start with the "
-                    "same set-up")
+        if pose < self.start_pose:
+            self._check_replay(pose, mean)
         else:
-            t_row = 0.0 if pose == 0 else t_mean - self.t0
-            t_row = max(t_row, self.last_row_t) if pose > 0 else t_row
-            seqs = [x.seq for x in samples]
-            extra = {"pose": str(pose), "seq_first": "" if seqs[0] is None else str(seqs[0]),
-                     "seq_last": "" if seqs[-1] is None else str(seqs[-1]),
-                     "r1_um": _fmt(mean_raw[0]), "r2_um": _fmt(mean_raw[1]), "r3_um": _fmt(mean_raw[2])}
-            assert self.writer is not None
-            self.writer.write_row(t_row, self.program.angles_deg[pose], mean, self.linear[pose],
-                                  {"n_samples": float(n), "sd_um": sd}, extra)
-            self.last_row_t = t_row
-            self.summary.rows_written += 1
+            self._write_row(pose, samples, mean, sd, mean_raw, t_mean)
+        self.trigger.confirm(pose)
         self.pose += 1
         self.on_pose(pose)
+
+    def _zero(self, mean_raw: np.ndarray, t_mean: float) -> None:
+        """The reference window zeroes the nest (or must match the zero of the file being resumed)."""
+        self.t0 = t_mean
+        if self.resume is None:
+            self.zero = mean_raw
+            self.writer = MeasurementWriter(self.out, _template(self.program, self.nest, self.o, mean_raw))
+            return
+        if np.abs(mean_raw - self.resume.zero).max() > self.o.replay_tol_um:
+            raise AcquisitionError(
+                f"resume: the reference readings {np.round(mean_raw, 3).tolist()} um differ from the file's "
+                f"zero {np.round(self.resume.zero, 3).tolist()} um by more than {self.o.replay_tol_um:g} um: "
+                "the nest moved or was re-zeroed; start a new file")
+        self.zero = self.resume.zero
+
+    def _check_replay(self, pose: int, mean: np.ndarray) -> None:
+        """A pose already in the resumed file, measured again: it must agree with its row."""
+        self.summary.poses_replayed += 1
+        row = self.resume.rows.get(pose) if self.resume else None
+        if row is not None and np.abs(mean - row).max() > self.o.replay_tol_um:
+            raise AcquisitionError(
+                f"resume: pose {pose} measured again differs from its row by {np.abs(mean - row).max():.3g} um "
+                f"(> {self.o.replay_tol_um:g} um): the machine must run the program again from its start with the "
+                "same set-up")
+
+    def _write_row(self, pose: int, samples: list[Sample], mean: np.ndarray, sd: float, mean_raw: np.ndarray,
+                   t_mean: float) -> None:
+        assert self.t0 is not None and self.writer is not None
+        t_row = 0.0 if pose == 0 else max(t_mean - self.t0, self.last_row_t)
+        seqs = [x.seq for x in samples]
+        extra = {"pose": str(pose), "seq_first": "" if seqs[0] is None else str(seqs[0]),
+                 "seq_last": "" if seqs[-1] is None else str(seqs[-1]),
+                 "r1_um": _fmt(mean_raw[0]), "r2_um": _fmt(mean_raw[1]), "r3_um": _fmt(mean_raw[2])}
+        self.writer.write_row(t_row, self.program.angles_deg[pose], mean, self.linear[pose],
+                              {"n_samples": float(len(samples)), "sd_um": sd}, extra)
+        self.last_row_t = t_row
+        self.summary.rows_written += 1
 
 
 # --------------------------------------------------------------------------------------------- the loop
@@ -651,9 +844,10 @@ class _Engine:
 def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
             options: AcquisitionOptions | None = None, settings: PortSettings | None = None,
             nest: NestGeometry | None = None, adapter: DeviceAdapter | None = None, resume: bool = False,
-            raw_log: str | os.PathLike[str] | None | bool = True, progress: bool = False,
+            force: bool = False, raw_log: str | os.PathLike[str] | None | bool = True, progress: bool = False,
             key_source: Callable[[], bool] | None = None, echo: Callable[[str], None] | None = None,
-            opener: Callable[[], Any] | None = None) -> AcquisitionSummary:
+            opener: Callable[[], Any] | None = None,
+            inputs: Iterable[str | os.PathLike[str]] = ()) -> AcquisitionSummary:
     """Acquire every pose of a test program from a device and write a ``pige-rtest 1`` file.
 
     Parameters
@@ -673,6 +867,9 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
         Default: the ``rtest`` streaming protocol.
     resume : bool
         Continue a partial ``out`` (module docstring).
+    force : bool
+        Replace an existing ``out`` (and its raw log and summary) with a new run.  Without
+        ``resume`` or ``force`` an existing ``out`` is refused.
     raw_log : path-like, True or None/False
         Raw byte log; True means ``<stem>.raw.log`` beside ``out``; None/False disables it.
     progress : bool
@@ -684,6 +881,8 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
     opener : callable () -> port object
         Opens the port instead of :func:`~pige_sym.acquisition.transport.open_port` (tests, special links);
         the port must be non-blocking (pyserial ``timeout=0``).
+    inputs : iterable of path-like
+        Files the run reads (program, nest): no output may be one of them.
 
     Returns
     -------
@@ -693,6 +892,8 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
 
     Raises
     ------
+    InputError
+        An output would clobber a file or cannot be written (checked before the port is opened).
     AcquisitionError
         The port cannot be opened at the start, or ``resume`` does not match the file.
     KeyboardInterrupt
@@ -705,121 +906,276 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
     adapter = adapter or RTestProtocolAdapter()
     say = echo or (lambda msg: print(msg, file=sys.stderr))
     out_p = Path(out)
-    log_path: Path | None
-    if raw_log is True:
-        log_path = default_raw_log(out_p)
-    elif raw_log in (None, False):
-        log_path = None
-    else:
-        log_path = Path(raw_log)  # type: ignore[arg-type]
+    log_path = _raw_log_path(out_p, raw_log)
+    check_acquisition_files(out_p, log_path, resume=resume, force=force, inputs=inputs)
     summary = AcquisitionSummary(port=port, out=str(out_p), raw_log=None if log_path is None else str(log_path),
                                  program=program.description, n_poses=program.n_poses)
     started = time.monotonic()
-
-    state: _ResumeState | None = None
-    if resume and out_p.exists():
-        summary.resumed = True
-        summary.removed_partial_line = _remove_partial_line(out_p)
-        if summary.removed_partial_line:
-            say(f"resume: removed an incomplete last line from {out_p}")
-        state = _read_resume(out_p, program, nest, opts)
-        if state is not None:
-            summary.first_pose = state.start_pose
-            if state.start_pose >= program.n_poses:
-                summary.completed = True
-                summary.stop_reason = None
-                say(f"resume: {out_p} already holds every pose of the program")
-                _write_summary(summary, out_p)
-                return summary
-            say(f"resume: {out_p} holds poses up to {state.start_pose - 1}; the program is measured again from "
-                f"its start and rows are appended from pose {state.start_pose}")
-    elif resume:
-        say(f"resume: {out_p} does not exist yet, starting a new file")
-
-    axes = program.rotary_axes
-
-    def prompt(pose: int) -> None:
-        ang = ", ".join(f"{a}={v:g}" for a, v in zip(axes, program.angles_deg[pose], strict=True))
-        say(f"pose {pose}/{program.n_poses - 1} ({ang} deg): press Enter when the machine is in position")
-
-    trigger: _Trigger
-    if opts.trigger == "stable":
-        trigger = _StableTrigger(opts)
-    elif opts.trigger == "schedule":
-        trigger = _ScheduleTrigger(opts, program)
-    else:
-        trigger = _KeyTrigger(opts, key_source or StdinKeys(), prompt)
-
-    overall = tqdm(total=program.n_poses, unit="pose", desc="poses", disable=not progress, position=0,
-                   dynamic_ncols=True, file=sys.stderr)
-    point = tqdm(total=opts.window_s, unit="s", desc="point", disable=not progress, position=1, leave=False,
-                 dynamic_ncols=True, file=sys.stderr,
-                 bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:g} s{postfix}")
-
-    def on_pose(pose: int) -> None:
-        overall.update(1)
-        point.reset(total=opts.window_s)
-
+    state = _prepare_resume(out_p, program, nest, opts, summary, say) if resume else None
+    if summary.completed:
+        _write_summary(summary, out_p)
+        return summary
+    trigger = _make_trigger(opts, program, key_source, say)
+    bars = _ProgressBars(program.n_poses, opts.window_s, progress)
     link = _Link(port, settings, opts, adapter, opener, summary)
     try:
         link.open()
     except AcquisitionError:
-        overall.close()
-        point.close()
+        bars.close()
         raise
-    engine = _Engine(program, out_p, nest, opts, summary, state, trigger, on_pose)
+    engine = _Engine(program, out_p, nest, opts, summary, state, trigger, bars.on_pose)
     records = _Records(adapter, summary, engine)
-    log = RawLog(log_path)
-    last_data = timer = time.monotonic()
-    in_stall = False
-    last_status = 0.0
+    log = RawLog(log_path, append=resume)
+    session = _Session(link, records, engine, log, summary, settings, opts,
+                       opts.max_bytes or default_max_bytes(program), bars, progress)
     try:
-        while not engine.done:
-            try:
-                data = link.read()
-            except (serial.SerialException, OSError):
-                summary.disconnects += 1
-                records.reset()
-                link.reopen(engine.pose)
-                timer = time.monotonic()
-                continue
-            now = time.monotonic()
-            if not data:
-                if now - timer >= settings.timeout_s:
-                    summary.timeouts += 1
-                    if not in_stall:
-                        summary.stalls += 1
-                        in_stall = True
-                    if now - last_data >= opts.reconnect_timeout_s:
-                        raise _Stop(f"no data from the device for {now - last_data:.0f} s at pose {engine.pose}")
-                    records.reset()
-                    link.reopen(engine.pose)
-                    timer = time.monotonic()
-                continue
-            in_stall = False
-            last_data = timer = now
-            log.write(data)  # logged (and flushed) before anything is parsed
-            summary.bytes_read += len(data)
-            records.feed(data)
-            if progress and now - last_status > 0.1:
-                last_status = now
-                win = engine.window
-                point.n = min((win[-1].t_s - win[0].t_s) if len(win) > 1 else 0.0, opts.window_s)
-                point.set_description_str(f"pose {engine.pose}")
-                point.set_postfix_str(f"{trigger.status()}, {len(win)} samples, "
-                                      f"{summary.rejected_total} rejected", refresh=True)
+        session.run()
         summary.completed = True
     except _Stop as stop:
         summary.stop_reason = str(stop)
     except (KeyboardInterrupt, AcquisitionError) as exc:
         interrupted = isinstance(exc, KeyboardInterrupt)
         summary.stop_reason = "interrupted (Ctrl-C or SIGTERM)" if interrupted else str(exc)
-        _finish(summary, records, log, engine, link, started, out_p, overall, point)
+        _finish(session, started, out_p)
         if interrupted:
             say(summary.format())
         raise
-    _finish(summary, records, log, engine, link, started, out_p, overall, point)
+    _finish(session, started, out_p)
     return summary
+
+
+def default_max_bytes(program: TestProgram) -> int:
+    """Default byte budget of one session: 16 MiB plus 128 kB per second of program [bytes].
+
+    A fast nest (1 kHz, 64-byte records) sends 64 kB/s, so the budget holds a run twice over;
+    a runaway stream is stopped after a few seconds instead of filling the disk.
+    """
+    return int(16 * 2**20 + 128_000 * program.duration_s)
+
+
+def _raw_log_path(out: Path, raw_log: str | os.PathLike[str] | None | bool) -> Path | None:
+    if raw_log is True:
+        return default_raw_log(out)
+    if raw_log is None or raw_log is False:
+        return None
+    return Path(raw_log)
+
+
+def check_acquisition_files(out: Path, raw_log: Path | None, *, resume: bool, force: bool,
+                            inputs: Iterable[str | os.PathLike[str]] = ()) -> None:
+    """Refuse outputs that would clobber a file, collide with each other, or cannot be written.
+
+    ``out`` exists: needs ``resume`` (continue it) or ``force`` (replace it).  The raw log and the
+    summary beside ``out`` follow ``out``.  No output may be an input or another output; the folder
+    must take a new file (a probe file is created and removed), so a read-only or full disk is
+    refused before the reference pose is measured.
+
+    Raises
+    ------
+    InputError
+        One line naming the option and what to change.
+    """
+    ins = [Path(x) for x in inputs]
+    outputs = [("--out", out), ("summary", summary_path(out))] + ([("--raw-log", raw_log)] if raw_log else [])
+    for i, (what, path) in enumerate(outputs):
+        for other_what, other in outputs[:i]:
+            if path.resolve() == other.resolve():
+                raise InputError(f"{what} {path} is the same file as {other_what}: choose another name")
+    if resume and out.exists():
+        check_output(out, force=True, inputs=ins, what="--out")
+    else:
+        check_output(out, force=force, inputs=ins, what="--out")
+        if out.exists() and force:
+            _require_measurement_or_empty(out)
+    for what, path in outputs[1:]:
+        check_output(path, force=force or resume, inputs=ins, what=what)
+    _probe_folder(out)
+
+
+def _require_measurement_or_empty(path: Path) -> None:
+    """``--force`` replaces an earlier acquisition only, never an unrelated file."""
+    with open(path, "rb") as fh:
+        head = fh.read(64)
+    if head and not head.startswith(FORMAT_LINE.encode()):
+        raise InputError(f"--out {path} exists and is not a pige-rtest file: pige acquire does not replace it "
+                         "even with --force; choose another name")
+
+
+def _probe_folder(out: Path) -> None:
+    folder = out.parent if str(out.parent) else Path(".")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".probe", dir=folder)
+        try:
+            os.write(fd, b"\n" * 4096)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+            os.unlink(name)
+    except OSError as exc:
+        raise InputError(f"--out {out}: cannot write in {folder}: {exc.strerror or exc}") from None
+    if shutil.disk_usage(folder).free < 2**20:
+        raise InputError(f"--out {out}: less than 1 MiB free in {folder}: free some space first")
+
+
+def _prepare_resume(out: Path, program: TestProgram, nest: NestGeometry, opts: AcquisitionOptions,
+                    summary: AcquisitionSummary, say: Callable[[str], None]) -> _ResumeState | None:
+    """Resume state of ``out`` (None: start a new file); ``summary.completed`` when nothing is left."""
+    if not out.exists():
+        say(f"resume: {out} does not exist yet, starting a new file")
+        return None
+    summary.resumed = True
+    summary.removed_partial_line = _remove_partial_line(out)
+    if summary.removed_partial_line:
+        say(f"resume: removed an incomplete last line from {out}")
+    state = _read_resume(out, program, nest, opts)
+    if state is None:
+        return None
+    summary.first_pose = state.start_pose
+    if state.start_pose >= program.n_poses:
+        summary.completed = True
+        say(f"resume: {out} already holds every pose of the program")
+        return state
+    say(f"resume: {out} holds poses up to {state.start_pose - 1}; the program is measured again from "
+        f"its start and rows are appended from pose {state.start_pose}")
+    return state
+
+
+def _make_trigger(opts: AcquisitionOptions, program: TestProgram, key_source: Callable[[], bool] | None,
+                  say: Callable[[str], None]) -> _Trigger:
+    if opts.trigger == "stable":
+        return _StableTrigger(opts, program)
+    if opts.trigger == "schedule":
+        return _ScheduleTrigger(opts, program)
+    axes = program.rotary_axes
+
+    def prompt(pose: int) -> None:
+        ang = ", ".join(f"{a}={v:g}" for a, v in zip(axes, program.angles_deg[pose], strict=True))
+        say(f"pose {pose}/{program.n_poses - 1} ({ang} deg): press Enter when the machine is in position")
+
+    return _KeyTrigger(opts, key_source or StdinKeys(), prompt)
+
+
+class _ProgressBars:
+    """Overall and per-point tqdm bars on stderr (disabled unless ``progress``)."""
+
+    def __init__(self, n_poses: int, window_s: float, progress: bool) -> None:
+        self.window_s = window_s
+        self.overall = tqdm(total=n_poses, unit="pose", desc="poses", disable=not progress, position=0,
+                            dynamic_ncols=True, file=sys.stderr)
+        self.point = tqdm(total=window_s, unit="s", desc="point", disable=not progress, position=1, leave=False,
+                          dynamic_ncols=True, file=sys.stderr,
+                          bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:g} s{postfix}")
+
+    def on_pose(self, pose: int) -> None:
+        self.overall.update(1)
+        self.point.reset(total=self.window_s)
+
+    def show(self, engine: _Engine, summary: AcquisitionSummary) -> None:
+        win = engine.window
+        self.point.n = min((win[-1].t_s - win[0].t_s) if len(win) > 1 else 0.0, self.window_s)
+        self.point.set_description_str(f"pose {engine.pose}")
+        self.point.set_postfix_str(f"{engine.trigger.status()}, {len(win)} samples, "
+                                   f"{summary.rejected_total} rejected", refresh=True)
+
+    def close(self) -> None:
+        self.overall.close()
+        self.point.close()
+
+
+class _Session:
+    """The read loop of one acquisition, with every resource bounded.
+
+    Bounds: bytes read per session (``max_bytes``, logged up to the limit), time without a
+    valid record (``reconnect_timeout_s``: a silent port, noise, an endless line or a port
+    that accepts and closes), reconnections in a row without a valid record
+    (``max_reconnects``), samples per window (``max_window_samples``) and frame length (the
+    framer's ``max_len``).  Each ends the run through :class:`_Stop` with a reason.
+    """
+
+    def __init__(self, link: _Link, records: _Records, engine: _Engine, log: RawLog, summary: AcquisitionSummary,
+                 settings: PortSettings, opts: AcquisitionOptions, max_bytes: int, bars: _ProgressBars,
+                 progress: bool) -> None:
+        self.link, self.records, self.engine, self.log = link, records, engine, log
+        self.summary, self.settings, self.o = summary, settings, opts
+        self.max_bytes = max_bytes
+        self.bars = bars
+        self.progress = progress
+        now = time.monotonic()
+        self.timer = self.last_valid = now
+        self.last_reconnect = -math.inf
+        self.reconnects_in_a_row = 0
+        self.accepted_seen = 0
+        self.in_stall = False
+        self.last_status = 0.0
+
+    def run(self) -> None:
+        while not self.engine.done:
+            self._check_valid_records()
+            try:
+                data = self.link.read()
+            except (serial.SerialException, OSError):
+                self.summary.disconnects += 1
+                self._reconnect()
+                continue
+            if not data:
+                self._on_silence()
+                continue
+            self.in_stall = False
+            self.timer = time.monotonic()
+            self._log(data)
+            self.records.feed(data)
+            if self.progress and self.timer - self.last_status > 0.1:
+                self.last_status = self.timer
+                self.bars.show(self.engine, self.summary)
+
+    def _check_valid_records(self) -> None:
+        now = time.monotonic()
+        if self.summary.accepted != self.accepted_seen:
+            self.accepted_seen = self.summary.accepted
+            self.last_valid = now
+            self.reconnects_in_a_row = 0
+        elif now - self.last_valid >= self.o.reconnect_timeout_s:
+            s = self.summary
+            raise _Stop(f"no valid record from the device for {now - self.last_valid:.0f} s at pose "
+                        f"{self.engine.pose} ({s.bytes_read} bytes read, {s.rejected_total} records rejected, "
+                        f"{self.records.framer.noise_bytes} noise bytes, {s.reconnects} reconnects): check the port, "
+                        "its settings and the device, then run again with --resume")
+
+    def _on_silence(self) -> None:
+        now = time.monotonic()
+        if now - self.timer < self.settings.timeout_s:
+            return
+        self.summary.timeouts += 1
+        if not self.in_stall:
+            self.summary.stalls += 1
+            self.in_stall = True
+        self._reconnect()
+
+    def _reconnect(self) -> None:
+        self.reconnects_in_a_row += 1
+        if self.reconnects_in_a_row > self.o.max_reconnects:
+            raise _Stop(f"reconnected {self.o.max_reconnects} times in a row without a valid record at pose "
+                        f"{self.engine.pose}: the port accepts and drops the link; check the device, then run "
+                        "again with --resume")
+        pause = self.last_reconnect + self.o.retry_s - time.monotonic()
+        if pause > 0:
+            time.sleep(pause)  # a port that fails at once is not hammered
+        self.records.reset()
+        self.link.reopen(self.engine.pose)
+        self.last_reconnect = self.timer = time.monotonic()
+
+    def _log(self, data: bytes) -> None:
+        """Log (and flush) the bytes before anything is parsed; stop at the byte budget."""
+        room = self.max_bytes - self.summary.bytes_read
+        if len(data) > room:
+            self.log.write(data[:max(room, 0)])
+            self.summary.bytes_read += max(room, 0)
+            raise _Stop(f"read {self.max_bytes} bytes at pose {self.engine.pose}, the byte budget of this run "
+                        "(--max-raw-log): the device sends far more than the program needs; check its rate, "
+                        "or raise --max-raw-log")
+        self.log.write(data)
+        self.summary.bytes_read += len(data)
 
 
 class _Link:
@@ -922,13 +1278,12 @@ class _Records:
                 return
 
 
-def _finish(summary: AcquisitionSummary, records: _Records, log: RawLog, engine: _Engine, link: _Link,
-            started: float, out: Path, *bars: Any) -> None:
-    for bar in bars:
-        bar.close()
-    link.close()
-    engine.close()
-    log.close()
+def _finish(session: _Session, started: float, out: Path) -> None:
+    summary, records = session.summary, session.records
+    session.bars.close()
+    session.link.close()
+    session.engine.close()
+    session.log.close()
     fr = records.framer
     summary.frames = fr.frames
     summary.noise_bytes = fr.noise_bytes
@@ -936,8 +1291,11 @@ def _finish(summary: AcquisitionSummary, records: _Records, log: RawLog, engine:
     for reason, count in (("truncated", fr.truncated), ("overlong", fr.overlong)):
         if count:
             summary.rejected[reason] = summary.rejected.get(reason, 0) + count
+    trig = session.engine.trigger
+    if isinstance(trig, _StableTrigger):
+        summary.spikes, summary.spurious_settles = trig.spikes, trig.spurious
     summary.wall_s = time.monotonic() - started
-    if engine.writer is not None or out.exists():
+    if session.engine.writer is not None or out.exists():
         _write_summary(summary, out)
 
 
