@@ -571,3 +571,103 @@ def test_a_settle_at_a_time_no_pose_has_is_flagged_not_written(tmp_path, clean_r
     assert 5 not in rows and sorted(rows) == [0, 1, 2, 3, 4, 6, 7, 8]
     for pose in rows:
         assert np.abs(rows[pose] - clean[pose]).max() < 0.03
+
+
+# --------------------------------------------------------------------------------------------- bounded resources
+
+
+class _Server:
+    """A loopback TCP server running ``behave(conn)`` for every client until stopped (bad devices)."""
+
+    def __init__(self, behave) -> None:
+        self.sock = socket.create_server(("127.0.0.1", 0))
+        self.sock.settimeout(0.1)
+        self.url = f"socket://127.0.0.1:{self.sock.getsockname()[1]}"
+        self.stop = threading.Event()
+        self.accepted = 0
+        self.behave = behave
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self) -> None:
+        while not self.stop.is_set():
+            try:
+                conn, _ = self.sock.accept()
+            except TimeoutError:
+                continue
+            self.accepted += 1
+            with conn:
+                try:
+                    self.behave(conn, self.stop)
+                except OSError:
+                    pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop.set()
+        self.thread.join(5)
+        self.sock.close()
+
+
+def _endless_line(conn, stop) -> None:
+    conn.sendall(b"$RT,0,0.0000,1")
+    while not stop.wait(0.005):  # ~1 MB/s: the time bound ends the run before the byte budget does
+        conn.sendall(b"7" * 4096)
+
+
+def _random_bytes(conn, stop) -> None:
+    rng = np.random.default_rng(0)
+    while not stop.wait(0.005):
+        conn.sendall(rng.integers(0, 256, 4096, dtype=np.uint8).tobytes())
+
+
+def _accept_and_close(conn, stop) -> None:
+    return
+
+
+def _flood(conn, stop) -> None:
+    """Valid records, as fast as the link takes them, one constant reading: nothing ever moves."""
+    k = 0
+    while not stop.is_set():
+        conn.sendall(b"".join(encode_sample(k + j, (k + j) / 20, [300.0, 310.0, 320.0]) for j in range(2000)))
+        k += 2000
+
+
+TIME_BOUND = AcquisitionOptions(reconnect_timeout_s=1.5)
+RECONNECT_BOUND = AcquisitionOptions(reconnect_timeout_s=60, max_reconnects=5)
+BYTE_BOUND = AcquisitionOptions(max_bytes=2_000_000)
+
+
+@pytest.mark.parametrize("behave, opts, why", [
+    (_endless_line, TIME_BOUND, "no valid record"), (_random_bytes, TIME_BOUND, "no valid record"),
+    (_accept_and_close, RECONNECT_BOUND, "reconnected 5 times"), (_accept_and_close, TIME_BOUND, "no valid record"),
+    (_flood, BYTE_BOUND, "byte budget")])
+def test_bad_devices_end_the_run_quickly_with_a_summary(tmp_path, behave, opts, why) -> None:
+    program = load_test_program(AC, "cone-frustum", points=4)
+    out = tmp_path / "bad.csv"
+    started = time.monotonic()
+    with _Server(behave) as server:
+        s = acquire(server.url, program, out, settings=FAST, options=opts)
+    assert time.monotonic() - started < 20
+    assert not s.completed and why in s.stop_reason, s.stop_reason
+    assert s.bytes_read <= (2_000_000 if behave is _flood else 10**9)
+    log = default_raw_log(out)
+    assert log.stat().st_size == s.bytes_read  # every byte read is logged, and no more than the budget
+    if behave is _flood:
+        assert s.rows_written == 1  # the reference pose, then nothing moved
+        session = json.loads(summary_path(out).read_text())["sessions"][-1]
+        assert session["stop_reason"] == s.stop_reason
+    else:
+        assert not out.exists() and not summary_path(out).exists()  # nothing measured: no file claims otherwise
+
+
+def test_cli_reconnect_timeout_exits_1_with_a_summary(tmp_path, capsys) -> None:
+    out = tmp_path / "silent.csv"
+    with _Server(lambda conn, stop: stop.wait(30)) as server:
+        status = main(["acquire", "--port", server.url, "--program", "cone-frustum", "--points", "4", "--out",
+                       str(out), "--no-progress", "--timeout", "0.25", "--reconnect-timeout", "1"])
+    captured = capsys.readouterr()
+    assert status == 1 and "acquisition stopped: no valid record" in captured.out
+    assert "link: " in captured.out and "rows written" in captured.out
