@@ -14,7 +14,7 @@
 #    8  EB0B     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : ed7d16bfa9083ef4
+# input hash   : c8aaa1589a658020
 """R-test kernels for wC'bXYZB(C1)t (generated; do not edit — make gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -37,7 +37,7 @@ UNITS = {'EX0B': 'um', 'EZ0B': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EA0B': 'urad',
 BASIS = ('1', 'cos(B)', 'sin(B)', 'cos(C)', 'sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = 'ed7d16bfa9083ef4'
+GENERATOR_HASH = 'c8aaa1589a658020'
 
 
 def _angles(angles_deg):
