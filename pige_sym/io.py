@@ -511,6 +511,11 @@ class _Body:
         ncols = len(self.h.names)
         if self.h.extras or self.blank_at is not None or chunk.translate(None, _NUMERIC_BYTES):
             return None
+        if b"\r" in chunk:
+            chunk = chunk.replace(b"\r\n", b"\n")
+        if any(x in chunk for x in (b" ", b"\t", b"\r", b",,", b",\n", b"\n,")) or chunk[:1] == b"," or \
+                chunk[-1:] == b",":
+            return None  # blanks or empty fields: the strict path decides (and names the line)
         buf = np.frombuffer(chunk, np.uint8)
         ends = np.flatnonzero(buf == 10)
         if not chunk.endswith(b"\n"):
@@ -538,6 +543,8 @@ class _Body:
         for raw in raws:
             ln = self.line
             self.line += 1
+            if len(raw) > MAX_LINE_BYTES:
+                raise FileFormatError(p, ln, f"line longer than {MAX_LINE_BYTES} bytes")
             try:
                 line = raw.decode("utf-8").rstrip("\r")
             except UnicodeDecodeError as exc:
