@@ -37,6 +37,15 @@ TALLY: dict[str, Counter[str]] = {}
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _write_tally():
+    """After the module: the fuzz outcome counts go to the file named by PIGE_TALLY (README numbers)."""
+    yield
+    target = os.environ.get("PIGE_TALLY")
+    if target:
+        Path(target).write_text(json.dumps({k: dict(v) for k, v in TALLY.items()}, indent=1))
+
+
 def _tally(target: str, outcome: str) -> None:
     TALLY.setdefault(target, Counter())[outcome] += 1
 
@@ -271,7 +280,8 @@ json_values = st.recursive(
 
 
 @FUZZ
-@given(st.dictionaries(st.sampled_from([*LOCATION, "EA0A", "EX0Q", "cone.x", "", "é"]), json_values, max_size=10),
+@given(st.dictionaries(st.sampled_from([*LOCATION, "EA0A", "EX0Q", "cone.x", "", "é"]),
+                       st.one_of(st.floats(-100, 100), json_values), max_size=10),
        st.dictionaries(st.sampled_from(["machine", "units", "tool_mm", "pivots_mm", "findings", "rank", "other"]),
                        json_values, max_size=3), st.booleans())
 def test_fuzzed_params_files_give_finite_values_or_a_named_refusal(tmp_path_factory, pige, extra, allow) -> None:
@@ -388,9 +398,10 @@ def test_a_console_that_cannot_print_mu_or_arrows_does_not_crash(tmp_path) -> No
     assert out.exists() and b"wrote" in proc.stdout
 
 
-def test_zz_tally(tmp_path) -> None:
-    """Writes the fuzz outcome counts when PIGE_TALLY names a file (README numbers); checks they exist."""
-    assert TALLY or os.environ.get("PYTEST_XDIST_WORKER") or True
-    target = os.environ.get("PIGE_TALLY")
-    if target:
-        Path(target).write_text(json.dumps({k: dict(v) for k, v in TALLY.items()}, indent=1))
+def test_cli_vectors_are_ascii_decimals_within_physical_limits(tmp_path, capsys) -> None:
+    for ball, fragment in (("1e308,0,0", "not physical"), ("1_0,0,0", "'1_0' is not a number"),
+                           ("\u0661,0,0", "is not a number"), ("nan,0,0", "is not a number"), ("1,2", "3 numbers")):
+        assert main(["simulate", "--ball", ball, "--out", str(tmp_path / "x.csv")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("pige simulate: --ball: ") and fragment in err[0], err
+    assert not (tmp_path / "x.csv").exists()

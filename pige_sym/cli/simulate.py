@@ -17,10 +17,6 @@ from pige_sym.trajectories import make_trajectory
 
 
 def _run(args: argparse.Namespace) -> int:
-    inputs = [x for x in (args.trajectory, args.pige) if os.path.isfile(x)]
-    out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
-    truth_path = check_output(out.with_name(out.stem + ".truth.json"), force=args.force, inputs=inputs,
-                              what="truth sidecar")
     kern = load_kernels(args.machine)
     traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
     ball, pivots, tool = setup_geometry(args)
@@ -30,6 +26,10 @@ def _run(args: argparse.Namespace) -> int:
             raise InputError(f"--pivot {axis}: not a rotary axis of {kern.MACHINE_CODE} ({axes})")
     pige = parse_pige(args.pige, kern.MACHINE_CODE, args.seed)
     effects = [parse_effect(e, tuple(kern.ROTARY_AXES)) for e in args.effect or []]
+    inputs = [x for x in (args.trajectory, args.pige) if os.path.isfile(x)]
+    out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
+    truth_path = check_output(out.with_name(out.stem + ".truth.json"), force=args.force, inputs=inputs,
+                              what="truth sidecar")
     result = simulate(
         kern.MACHINE_CODE, traj, pige=pige, ball_mm=ball, pivots_mm=pivots, tool_mm=tool, effects=effects,
         noise_um=args.noise, seed=args.seed, frame=args.frame,
