@@ -330,7 +330,7 @@ def test_acquire_whole_cone_over_pty_and_identify(tmp_path) -> None:
 
 def _check_rows_are_clean(out: Path, dev: VirtualRTest, truth: dict) -> None:
     """Every row averages exactly the device's clean readings of the sequence numbers it names."""
-    bad = set(truth["affected"]["checksum"]) | set(truth["affected"]["drop"]) | set(truth["affected"]["disconnect"])
+    bad = set().union(*(truth["affected"].get(k, []) for k in ("checksum", "drop", "disconnect", "spike")))
     m = read_measurement(out)
     for i in range(m.n_rows):
         first, last = int(m.extra_columns["seq_first"][i]), int(m.extra_columns["seq_last"][i])
@@ -345,7 +345,7 @@ def _check_rows_are_clean(out: Path, dev: VirtualRTest, truth: dict) -> None:
 FAULT_RUN = ["--points", "10", "--stall-s", "0.6", "--linger", "1.5"]
 
 
-@pytest.mark.parametrize("kind", ["garbage", "checksum", "drop", "stall", "disconnect"])
+@pytest.mark.parametrize("kind", ["garbage", "checksum", "drop", "spike", "duplicate", "stall", "disconnect"])
 def test_each_injected_fault_is_counted_and_never_reaches_a_row(tmp_path, kind) -> None:
     seed = 3
     truth_path = tmp_path / "truth.json"
@@ -360,7 +360,8 @@ def test_each_injected_fault_is_counted_and_never_reaches_a_row(tmp_path, kind) 
     assert s.completed and s.rows_written == 11, s.format()
     assert s.noise_bytes == inj["garbage_bytes"] and s.noise_runs == inj["garbage"]
     assert s.rejected.get("checksum", 0) == inj["checksum"]
-    assert s.rejected_total == inj["checksum"]
+    assert s.rejected.get("duplicate", 0) == inj["duplicate"]
+    assert s.rejected_total == inj["checksum"] + inj["duplicate"]
     assert s.missing == inj["checksum"] + inj["drop"] + inj["lost_in_outage"]
     assert s.stalls == inj["stall"] and s.disconnects == inj["disconnect"]
     dev_model = VirtualRTest(_config(program, seed=seed))
