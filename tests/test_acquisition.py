@@ -26,8 +26,9 @@ from pige_sym.acquisition.device import (
     encode_sample,
     parse_record,
 )
-from pige_sym.acquisition.engine import AcquisitionOptions, acquire, default_raw_log, summary_path
+from pige_sym.acquisition.engine import AcquisitionOptions, acquire
 from pige_sym.acquisition.nest import NestGeometry, parse_nest, tripod
+from pige_sym.acquisition.outputs import default_raw_log, summary_path
 from pige_sym.acquisition.transport import LineFramer, PortSettings, open_port, read_available
 from pige_sym.acquisition.virtual_device import DeviceConfig, VirtualRTest, start_virtual_device
 from pige_sym.cli.main import main

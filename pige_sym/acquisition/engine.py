@@ -71,16 +71,10 @@ same seed) the final file is byte-identical to an uninterrupted run.
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import os
-import queue
-import shutil
 import sys
-import tempfile
-import threading
 import time
-from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -92,11 +86,17 @@ from tqdm import tqdm
 
 from pige_sym.acquisition.device import DeviceAdapter, Info, RecordError, RTestProtocolAdapter, Sample, readings_array
 from pige_sym.acquisition.nest import NestGeometry, default_nest
+from pige_sym.acquisition.outputs import (
+    _raw_log_path,
+    _remove_partial_line,
+    _write_summary,
+    check_acquisition_files,
+)
 from pige_sym.acquisition.transport import PortSettings, RawLog, open_port, read_available
+from pige_sym.acquisition.triggers import StdinKeys, _KeyTrigger, _ScheduleTrigger, _StableTrigger, _Stop, _Trigger
 from pige_sym.codegen.machine_code import parse_machine_code
 from pige_sym.errors import AcquisitionError, FileFormatError, InputError
-from pige_sym.files import atomic_write_text, check_output, to_json
-from pige_sym.io import FORMAT_LINE, Measurement, MeasurementWriter, read_measurement
+from pige_sym.io import Measurement, MeasurementWriter, read_measurement
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.rtest_program import TestProgram
 
@@ -265,297 +265,6 @@ class AcquisitionSummary:
         return "\n".join(lines)
 
 
-class StdinKeys:
-    """Key source for ``trigger="key"``: True once per line typed on stdin (Enter)."""
-
-    def __init__(self) -> None:
-        self._q: queue.Queue[str] = queue.Queue()
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        for line in sys.stdin:
-            self._q.put(line)
-
-    def __call__(self) -> bool:
-        try:
-            self._q.get_nowait()
-        except queue.Empty:
-            return False
-        return True
-
-
-# --------------------------------------------------------------------------------------------- triggers
-
-
-class _Trigger:
-    """Decides, sample by sample, whether a sample belongs to the current pose's window.
-
-    ``step`` returns ``"skip"`` (not averaged), ``"take"`` (averaged) or ``"done"`` (the
-    window is over; the sample is then offered to the next pose).  After ``"done"``,
-    ``assigned`` is the pose the window belongs to (greater than the current pose when
-    poses were passed unseen) and ``doubtful`` a reason not to write it, or None.
-    """
-
-    reason = "complete"
-
-    def __init__(self) -> None:
-        self.assigned = 0
-        self.doubtful: str | None = None
-
-    def begin(self, pose: int, level: np.ndarray | None) -> None:
-        self.reason = "complete"
-        self.assigned = pose
-        self.doubtful = None
-
-    def step(self, s: Sample, r: np.ndarray, gap: bool) -> str:
-        raise NotImplementedError
-
-    def confirm(self, pose: int) -> None:  # noqa: B027 - optional hook
-        """The window of ``pose`` was written: it anchors the timing of the next ones."""
-
-    @property
-    def level(self) -> np.ndarray | None:
-        return None
-
-    def status(self) -> str:
-        return ""
-
-
-def _runs(flags: np.ndarray) -> list[int]:
-    """Lengths of the runs of True in a 1-D boolean array."""
-    out: list[int] = []
-    n = 0
-    for f in flags:
-        if f:
-            n += 1
-        elif n:
-            out.append(n)
-            n = 0
-    if n:
-        out.append(n)
-    return out
-
-
-class _StableTrigger(_Trigger):
-    """Settle detection that ignores isolated spikes, cross-checked with the program's timing.
-
-    A *spike* is a run of at most ``spike_samples`` consecutive readings outside the band
-    (``tolerance_um`` from the level); a longer run is motion.  Spikes are left out of
-    the averages (counted in ``spikes``).  A settle is checked against the program: its
-    time after the last written pose (the *anchor*) must match the schedule of the
-    current pose within ``timing_tol`` of the shortest pose cycle.  Too early: a
-    spurious settle (the machine has not reached the pose), dropped and waited again
-    for motion.  Matching a later pose: the poses in between were passed unseen (flagged).
-    Matching no pose: the window is *doubtful* (flagged, not written).
-    """
-
-    def __init__(self, opts: AcquisitionOptions, program: TestProgram) -> None:
-        super().__init__()
-        self.o = opts
-        self.arrive = program.arrive_s
-        self.cycle_s = float(program.move_s + program.dwell_s.min())
-        self.end_s = float(program.duration_s)
-        self.phase = "settle"
-        self.buf: deque[tuple[float, np.ndarray]] = deque(maxlen=opts.max_window_samples)
-        self._level: np.ndarray | None = None
-        self.t_first: float | None = None
-        self.run = 0
-        self.pose = 0
-        self.settle_t = 0.0
-        self.anchor: tuple[int, float] | None = None
-        self.spikes = 0
-        self.spurious = 0
-
-    def begin(self, pose: int, level: np.ndarray | None) -> None:
-        super().begin(pose, level)
-        self.pose = pose
-        self.phase = "motion" if (pose > 0 and level is not None) else "settle"
-        self._level = level
-        self.buf.clear()
-        self.t_first = None
-        self.run = 0
-
-    def confirm(self, pose: int) -> None:
-        if pose > 0:
-            self.anchor = (pose, self.settle_t)
-
-    @property
-    def level(self) -> np.ndarray | None:
-        return self._level
-
-    def status(self) -> str:
-        return {"motion": "waiting for motion", "settle": "settling", "window": "averaging"}[self.phase]
-
-    def _outside(self, r: np.ndarray) -> bool:
-        assert self._level is not None
-        return bool(np.abs(r - self._level).max() > self.o.tolerance_um)
-
-    def step(self, s: Sample, r: np.ndarray, gap: bool) -> str:
-        self._check_program_end(s.t_s)
-        if self.phase == "motion":
-            return self._step_motion(s, r)
-        if self.phase == "settle":
-            return self._step_settle(s, r, gap)
-        return self._step_window(s, r, gap)
-
-    def _check_program_end(self, t: float) -> None:
-        """Stop when the device time runs past the program's end (e.g. a device looping one pose)."""
-        if self.anchor is None or not self.o.timing_check:
-            return
-        a, t_a = self.anchor
-        limit = float(self.arrive[-1] - self.arrive[a]) + 2 * self.cycle_s + self.o.window_s
-        if t - t_a > limit:
-            raise _Stop(f"at pose {self.pose} the device time is {t - t_a:.0f} s past pose {a}, beyond the end of the "
-                        "program: the machine stopped or the device repeats itself; restart and use --resume")
-
-    def _step_motion(self, s: Sample, r: np.ndarray) -> str:
-        if not self._outside(r):
-            self.run = 0
-            return "skip"
-        self.run += 1
-        if self.run > self.o.spike_samples:  # a run longer than a spike: the machine moves
-            self.phase = "settle"
-            self.buf.clear()
-            self.buf.append((s.t_s, r))
-        return "skip"
-
-    def _step_settle(self, s: Sample, r: np.ndarray, gap: bool) -> str:
-        if gap:
-            self.buf.clear()
-        self.buf.append((s.t_s, r))
-        while self.buf and s.t_s - self.buf[0][0] > self.o.settle_s + 1e-9:
-            self.buf.popleft()
-        if s.t_s - self.buf[0][0] < self.o.settle_s - 1e-9 or len(self.buf) < 3:
-            return "skip"
-        level = self._settled_level(np.array([b[1] for b in self.buf]))
-        if level is None:
-            return "skip"
-        previous = self._level
-        self._level = level
-        self.settle_t = s.t_s
-        if self._timing_verdict(s.t_s) == "early":
-            self.spurious += 1
-            self._level = previous
-            self.phase = "motion" if previous is not None else "settle"
-            self.buf.clear()
-            self.run = 0
-            return "skip"
-        self.phase = "window"
-        self.t_first = None
-        self.run = 0
-        return "skip"
-
-    def _settled_level(self, arr: np.ndarray) -> np.ndarray | None:
-        """Mean of the settled readings, or None: every reading within ``tolerance_um`` peak to peak
-        apart from at most one spike (a run of at most ``spike_samples`` readings far from the median).
-        """
-        tol = self.o.tolerance_um
-        out = (np.abs(arr - np.median(arr, axis=0)) > tol).any(axis=1)
-        runs = _runs(out)
-        if len(runs) > 1 or (runs and runs[0] > self.o.spike_samples):
-            return None
-        inl = arr[~out]
-        if inl.shape[0] < 3 or (inl.max(axis=0) - inl.min(axis=0)).max() > tol:
-            return None
-        return np.asarray(inl.mean(axis=0))
-
-    def _timing_verdict(self, t: float) -> str:
-        """``"early"``, or ``"ok"`` after setting ``assigned``/``doubtful`` (class docstring)."""
-        if not self.o.timing_check or self.pose == 0 or self.anchor is None:
-            return "ok"
-        a, t_a = self.anchor
-        elapsed = t - t_a
-        tol = self.o.timing_tol * self.cycle_s
-        expected = self.arrive[self.pose:] - self.arrive[a]
-        if elapsed < expected[0] - tol:
-            return "early"
-        k = int(np.argmin(np.abs(expected - elapsed)))
-        if abs(expected[k] - elapsed) <= tol:
-            self.assigned = self.pose + k
-        else:
-            self.doubtful = (f"settled {elapsed:.1f} s after pose {a}, the program places pose {self.pose} at "
-                             f"{expected[0]:.1f} s (and no pose within {tol:.1f} s)")
-        return "ok"
-
-    def _step_window(self, s: Sample, r: np.ndarray, gap: bool) -> str:
-        if gap and self.t_first is not None:
-            self.reason = "data gap"
-            return "done"
-        if self._outside(r):
-            self.run += 1
-            if self.run > self.o.spike_samples:
-                self.reason = "machine left the pose"
-                return "done"
-            return "skip"  # perhaps a spike: left out; decided by the next readings
-        if self.run:
-            self.spikes += self.run
-            self.run = 0
-        if self.t_first is None:
-            self.t_first = s.t_s
-        if s.t_s - self.t_first >= self.o.window_s - 1e-9:
-            return "done"
-        return "take"
-
-
-class _ScheduleTrigger(_Trigger):
-    def __init__(self, opts: AcquisitionOptions, program: TestProgram) -> None:
-        super().__init__()
-        self.o = opts
-        self.arrive = program.arrive_s
-        self.t0: float | None = None
-        self.lo = self.hi = 0.0
-
-    def begin(self, pose: int, level: np.ndarray | None) -> None:
-        super().begin(pose, level)
-        self.lo = float(self.arrive[pose]) + self.o.delay_s
-        self.hi = self.lo + self.o.window_s
-
-    def status(self) -> str:
-        return f"scheduled at {self.lo:.1f} s"
-
-    def step(self, s: Sample, r: np.ndarray, gap: bool) -> str:
-        if self.t0 is None:
-            self.t0 = s.t_s
-        tp = s.t_s - self.t0
-        if tp < self.lo - 1e-9:
-            return "skip"
-        if tp < self.hi - 1e-9:
-            return "take"
-        return "done"
-
-
-class _KeyTrigger(_Trigger):
-    def __init__(self, opts: AcquisitionOptions, key_source: Callable[[], bool],
-                 prompt: Callable[[int], None] | None) -> None:
-        super().__init__()
-        self.o = opts
-        self.key_source = key_source
-        self.prompt = prompt
-        self.armed = False
-        self.t_first: float | None = None
-
-    def begin(self, pose: int, level: np.ndarray | None) -> None:
-        super().begin(pose, level)
-        self.armed = False
-        self.t_first = None
-        if self.prompt is not None:
-            self.prompt(pose)
-
-    def status(self) -> str:
-        return "averaging" if self.armed else "press Enter when in position"
-
-    def step(self, s: Sample, r: np.ndarray, gap: bool) -> str:
-        if not self.armed:
-            if not self.key_source():
-                return "skip"
-            self.armed = True
-        if self.t_first is None:
-            self.t_first = s.t_s
-        if s.t_s - self.t_first >= self.o.window_s - 1e-9:
-            return "done"
-        return "take"
-
-
 # --------------------------------------------------------------------------------------------- points
 
 
@@ -590,18 +299,6 @@ def _fmt(x: float) -> str:
     return repr(float(x))
 
 
-def summary_path(out: str | os.PathLike[str]) -> Path:
-    """Sidecar JSON of an acquisition: ``<stem>.acq.json`` beside the measurement file."""
-    p = Path(out)
-    return p.with_name(p.stem + ".acq.json")
-
-
-def default_raw_log(out: str | os.PathLike[str]) -> Path:
-    """Default raw byte log: ``<stem>.raw.log`` beside the measurement file."""
-    p = Path(out)
-    return p.with_name(p.stem + ".raw.log")
-
-
 def _template(program: TestProgram, nest: NestGeometry, opts: AcquisitionOptions, zero: np.ndarray) -> Measurement:
     k = len(program.rotary_axes)
     meta: dict[str, str] = {"machine": "", "ball_mm": "", "frame": opts.frame}
@@ -630,17 +327,6 @@ class _ResumeState:
     zero: np.ndarray
     rows: dict[int, np.ndarray]
     last_t: float
-
-
-def _remove_partial_line(path: Path) -> bool:
-    """Cut an unterminated last line (a row cut by a crash); True if something was removed."""
-    data = path.read_bytes()
-    if not data or data.endswith(b"\n"):
-        return False
-    cut = data.rfind(b"\n") + 1
-    with open(path, "r+b") as fh:
-        fh.truncate(cut)
-    return True
 
 
 def _read_resume(path: Path, program: TestProgram, nest: NestGeometry, opts: AcquisitionOptions) -> _ResumeState | None:
@@ -682,10 +368,6 @@ def _read_resume(path: Path, program: TestProgram, nest: NestGeometry, opts: Acq
         raise AcquisitionError(f"{path}: pose {poses[-1]} is beyond the program's {program.n_poses} poses")
     rows = {p: m.deviation_um[i] for i, p in enumerate(poses)}
     return _ResumeState(poses[-1] + 1, zero, rows, float(m.t_s[-1]))
-
-
-class _Stop(Exception):
-    """Ends the acquisition loop cleanly (reason in the message)."""
 
 
 class _Engine:
@@ -951,71 +633,6 @@ def default_max_bytes(program: TestProgram) -> int:
     a runaway stream is stopped after a few seconds instead of filling the disk.
     """
     return int(16 * 2**20 + 128_000 * program.duration_s)
-
-
-def _raw_log_path(out: Path, raw_log: str | os.PathLike[str] | None | bool) -> Path | None:
-    if raw_log is True:
-        return default_raw_log(out)
-    if raw_log is None or raw_log is False:
-        return None
-    return Path(raw_log)
-
-
-def check_acquisition_files(out: Path, raw_log: Path | None, *, resume: bool, force: bool,
-                            inputs: Iterable[str | os.PathLike[str]] = ()) -> None:
-    """Refuse outputs that would clobber a file, collide with each other, or cannot be written.
-
-    ``out`` exists: needs ``resume`` (continue it) or ``force`` (replace it).  The raw log and the
-    summary beside ``out`` follow ``out``.  No output may be an input or another output; the folder
-    must take a new file (a probe file is created and removed), so a read-only or full disk is
-    refused before the reference pose is measured.
-
-    Raises
-    ------
-    InputError
-        One line naming the option and what to change.
-    """
-    ins = [Path(x) for x in inputs]
-    outputs = [("--out", out), ("summary", summary_path(out))] + ([("--raw-log", raw_log)] if raw_log else [])
-    for i, (what, path) in enumerate(outputs):
-        for other_what, other in outputs[:i]:
-            if path.resolve() == other.resolve():
-                raise InputError(f"{what} {path} is the same file as {other_what}: choose another name")
-    if resume and out.exists():
-        check_output(out, force=True, inputs=ins, what="--out")
-    else:
-        check_output(out, force=force, inputs=ins, what="--out")
-        if out.exists() and force:
-            _require_measurement_or_empty(out)
-    for what, path in outputs[1:]:
-        check_output(path, force=force or resume, inputs=ins, what=what)
-    _probe_folder(out)
-
-
-def _require_measurement_or_empty(path: Path) -> None:
-    """``--force`` replaces an earlier acquisition only, never an unrelated file."""
-    with open(path, "rb") as fh:
-        head = fh.read(64)
-    if head and not head.startswith(FORMAT_LINE.encode()):
-        raise InputError(f"--out {path} exists and is not a pige-rtest file: pige acquire does not replace it "
-                         "even with --force; choose another name")
-
-
-def _probe_folder(out: Path) -> None:
-    folder = out.parent if str(out.parent) else Path(".")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".probe", dir=folder)
-        try:
-            os.write(fd, b"\n" * 4096)
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-            os.unlink(name)
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot write in {folder}: {exc.strerror or exc}") from None
-    if shutil.disk_usage(folder).free < 2**20:
-        raise InputError(f"--out {out}: less than 1 MiB free in {folder}: free some space first")
 
 
 def _prepare_resume(out: Path, program: TestProgram, nest: NestGeometry, opts: AcquisitionOptions,
@@ -1297,17 +914,3 @@ def _finish(session: _Session, started: float, out: Path) -> None:
     summary.wall_s = time.monotonic() - started
     if session.engine.writer is not None or out.exists():
         _write_summary(summary, out)
-
-
-def _write_summary(summary: AcquisitionSummary, out: Path) -> None:
-    """Append this session to ``<stem>.acq.json`` (a list of sessions)."""
-    path = summary_path(out)
-    sessions: list[Any] = []
-    if summary.resumed and path.exists():
-        try:
-            old = json.loads(path.read_text(encoding="utf-8"))
-            sessions = list(old.get("sessions", [])) if isinstance(old, dict) else []
-        except (json.JSONDecodeError, OSError):
-            sessions = []
-    sessions.append(summary.to_dict())
-    atomic_write_text(path, to_json({"sessions": sessions}) + "\n")

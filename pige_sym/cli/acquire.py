@@ -10,8 +10,9 @@ import signal
 from typing import Any
 
 from pige_sym.acquisition.device import ADAPTERS, make_adapter
-from pige_sym.acquisition.engine import TRIGGERS, AcquisitionOptions, acquire, summary_path
+from pige_sym.acquisition.engine import TRIGGERS, AcquisitionOptions, acquire
 from pige_sym.acquisition.nest import parse_nest
+from pige_sym.acquisition.outputs import summary_path
 from pige_sym.acquisition.transport import PARITIES, STOPBITS, PortSettings
 from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
 from pige_sym.errors import InputError
