@@ -427,7 +427,7 @@ def test_kill_mid_run_then_resume_gives_the_same_file(tmp_path) -> None:
 
 def test_ctrl_c_leaves_a_valid_partial_file_and_summary(tmp_path) -> None:
     out = tmp_path / "c.csv"
-    with start_virtual_device(AC, "cone-frustum", seed=6, time_scale=30, extra_args=FAULT_RUN) as dev:
+    with start_virtual_device(AC, "cone-frustum", seed=6, time_scale=15, extra_args=FAULT_RUN) as dev:
         proc = subprocess.Popen(_acquire_cmd(dev.url, out), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                 text=True)
         _wait_rows(out, 2, proc)
@@ -667,9 +667,15 @@ def test_bad_devices_end_the_run_quickly_with_a_summary(tmp_path, behave, opts, 
 
 def test_cli_reconnect_timeout_exits_1_with_a_summary(tmp_path, capsys) -> None:
     out = tmp_path / "silent.csv"
-    with _Server(lambda conn, stop: stop.wait(30)) as server:
-        status = main(["acquire", "--port", server.url, "--program", "cone-frustum", "--points", "4", "--out",
-                       str(out), "--no-progress", "--timeout", "0.25", "--reconnect-timeout", "1"])
+    cmd = ["acquire", "--program", "cone-frustum", "--points", "4", "--out", str(out), "--no-progress",
+           "--timeout", "0.25", "--reconnect-timeout", "1"]
+    with _Server(lambda conn, stop: stop.wait(0.1) or conn.sendall(b"hello") or stop.wait(30)) as server:
+        status = main([*cmd, "--port", server.url])
     captured = capsys.readouterr()
     assert status == 1 and "acquisition stopped: no valid record" in captured.out
     assert "link: " in captured.out and "rows written" in captured.out
+    log = default_raw_log(out)
+    assert log.read_bytes() == b"hello" and not out.exists()
+    with _Server(lambda conn, stop: stop.wait(0.1) or conn.sendall(b" again") or stop.wait(30)) as server:
+        assert main([*cmd, "--port", server.url]) == 1  # a second attempt appends to the raw log
+    assert log.read_bytes() == b"hello again"

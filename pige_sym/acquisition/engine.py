@@ -551,7 +551,8 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
         Continue a partial ``out`` (module docstring).
     force : bool
         Replace an existing ``out`` (and its raw log and summary) with a new run.  Without
-        ``resume`` or ``force`` an existing ``out`` is refused.
+        ``resume`` or ``force`` an existing ``out`` is refused; an existing raw log alone is
+        appended to.
     raw_log : path-like, True or None/False
         Raw byte log; True means ``<stem>.raw.log`` beside ``out``; None/False disables it.
     progress : bool
@@ -607,7 +608,7 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
         raise
     engine = _Engine(program, out_p, nest, opts, summary, state, trigger, bars.on_pose)
     records = _Records(adapter, summary, engine)
-    log = RawLog(log_path, append=resume)
+    log = RawLog(log_path, append=not force)
     session = _Session(link, records, engine, log, summary, settings, opts,
                        opts.max_bytes or default_max_bytes(program), bars, progress)
     try:

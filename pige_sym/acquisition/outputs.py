@@ -1,6 +1,7 @@
 """The files of an acquisition: ``--out``, its raw log and its summary, checked before any work.
 
-``<stem>.raw.log`` and ``<stem>.acq.json`` sit beside the measurement file.  The checks
+``<stem>.raw.log`` and ``<stem>.acq.json`` sit beside the measurement file.  An existing raw
+log is appended to (earlier attempts stay in it) unless ``--force`` replaces the run.  The checks
 (:func:`check_acquisition_files`) follow :mod:`pige_sym.files`: no output replaced without
 ``--resume``/``--force``, none equal to an input or to another output, only regular files,
 and a folder that takes a new file (probed) before the reference pose is measured.
@@ -82,7 +83,8 @@ def check_acquisition_files(out: Path, raw_log: Path | None, *, resume: bool, fo
         if out.exists() and force:
             _require_measurement_or_empty(out)
     for what, path in outputs[1:]:
-        check_output(path, force=force or resume, inputs=ins, what=what)
+        # an existing raw log is appended to (it loses nothing) unless --force starts it afresh
+        check_output(path, force=force or resume or what == "--raw-log", inputs=ins, what=what)
     _probe_folder(out)
 
 
