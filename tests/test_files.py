@@ -133,3 +133,18 @@ def test_simulate_needs_force_and_never_writes_over_its_input(tmp_path, capsys) 
     assert "also an input" in _err_line(capsys)
     truth = tmp_path / "angles.truth.json"
     assert not truth.exists()
+
+
+def test_gen_regenerates_kernels_but_never_replaces_a_foreign_file(tmp_path, capsys) -> None:
+    from pige_sym.cli.gen import GENERATED_MARK, _refuse_foreign
+    from pige_sym.codegen.machine_code import parse_machine_code
+
+    code = "wC'A'bXYZ(C1)t"
+    kernel = tmp_path / f"{parse_machine_code(code).module_name}.py"
+    kernel.write_text(GENERATED_MARK + " " + code + "\n")
+    _refuse_foreign(kernel, force=False)  # a generated kernel is regenerated freely
+    kernel.write_text("my own module\n")
+    assert main(["gen", code, "--out", str(tmp_path)]) == 2  # refused before any SymPy work
+    assert "exists: pass --force" in _err_line(capsys) and kernel.read_text() == "my own module\n"
+    assert main(["gen", code, "--out", str(kernel)]) == 2
+    assert "is not a directory" in _err_line(capsys)
