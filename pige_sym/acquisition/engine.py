@@ -14,11 +14,20 @@ Triggers (``--trigger``): when the window of a pose starts
 ``stable`` (default)
     Pose 0 (the reference) starts when the readings settle: over the last
     ``settle_s`` of device time every sensor stays within a peak-to-peak band of
-    ``tolerance_um``.  Every later pose needs motion first (a reading more than
-    ``tolerance_um`` away from the previous pose's level), then settling.  The
-    window holds the samples after settling, up to ``window_s`` of device time; it
-    ends early if a reading leaves the settled level by more than ``tolerance_um``
-    (the machine moved on) or after a data gap longer than ``max_gap_s``.
+    ``tolerance_um``, apart from at most one *spike* (a run of at most
+    ``spike_samples`` readings far from the median).  Every later pose needs motion
+    first (more than ``spike_samples`` readings in a row farther than
+    ``tolerance_um`` from the previous pose's level: a spike is not motion), then
+    settling.  The window holds the samples after settling, up to ``window_s`` of
+    device time; spikes are left out of it (``spikes`` in the summary); it ends early
+    when the readings leave the settled level for longer than a spike (the machine
+    moved on) or after a data gap longer than ``max_gap_s``.
+
+    Each settle is cross-checked with the program's timing, from the settle of the
+    last written pose (``timing_tol`` × the shortest pose cycle; ``timing_check``):
+    too early is a spurious settle (dropped: ``spurious_settles``), matching a later
+    pose flags the poses passed unseen, matching none flags the pose as doubtful.
+    No row is ever written under a pose the timing does not support.
 ``schedule``
     Pose i is averaged over device times ``[T0 + arrive_i + delay_s,
     T0 + arrive_i + delay_s + window_s)`` where ``arrive_i`` is the program schedule
@@ -55,6 +64,13 @@ current pose.  A gap in device time longer than one pose cycle (move + dwell) in
 ``stable`` mode, a device restart, an end-of-program record before the last pose,
 or a port that stays away stops the run cleanly: the summary says why
 (``completed`` False) and the file holds every row measured so far.
+
+Bounds (a bad device ends the run, it never runs away): no valid record for
+``reconnect_timeout_s`` (silence, noise, an endless line, a port that accepts and
+closes), ``max_reconnects`` reconnections in a row without a valid record, more than
+``max_bytes`` read in the session (default :func:`default_max_bytes`; what was read
+up to the limit is logged), ``max_window_samples`` per window, frames of at most the
+framer's ``max_len``, and device time running past the end of the program.
 
 Resume
 ------
