@@ -11,6 +11,9 @@ peak resident memory (``ru_maxrss``) belongs to that step alone:
 * **baseline**: an empty Python process importing NumPy and pige_sym (the memory every
   step starts from).
 
+Peak memory is ``VmHWM`` of the step's own process (``ru_maxrss`` would include the
+parent's size at fork).
+
 ``main()`` prints a markdown section; ``python benchmarks/bench_io.py [rows]``.
 The target from the diagnosis issue: 10^6 rows in <= 2 s and <= 400 MB.
 """
@@ -29,10 +32,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pige_sym.io import Measurement, write_measurement  # noqa: E402
+from pige_sym.io import Measurement, header_text  # noqa: E402
 
 STEP = r"""
-import json, resource, sys, time
+import json, sys, time
 import numpy as np
 from pige_sym.io import read_measurement
 path, what = sys.argv[1], sys.argv[2]
@@ -48,20 +51,23 @@ elif what == "read":
 else:
     n = 0
 dt = time.perf_counter() - t0
-print(json.dumps({"s": dt, "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "n": n}))
+hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM:")][0].split()[1]  # this process only
+print(json.dumps({"s": dt, "rss_mb": int(hwm) / 1024, "n": n}))
 """
 
 
 def _write_file(path: Path, rows: int) -> None:
+    """A valid file of ``rows`` rows: the writer's header, then the body with ``%.17g`` (round-trips)."""
     rng = np.random.default_rng(0)
-    angles = np.column_stack([rng.uniform(-30, 30, rows), rng.uniform(0, 360, rows)])
-    angles[0] = 0.0
-    dev = rng.normal(scale=10.0, size=(rows, 3))
-    dev[0] = 0.0
-    m = Measurement(machine="wC'A'bXYZ(C1)t", ball_mm=np.array([120.0, 0.0, 80.0]), t_s=np.arange(rows) * 0.01,
-                    angles_deg=angles, deviation_um=dev, rotary_axes=("A", "C"),
-                    linear_mm=rng.uniform(-200, 200, size=(rows, 3)))
-    write_measurement(m, path)
+    data = np.column_stack([np.arange(rows) * 0.01, rng.uniform(-30, 30, rows), rng.uniform(0, 360, rows),
+                            rng.normal(scale=10.0, size=(rows, 3)), rng.uniform(-200, 200, size=(rows, 3))])
+    data[0, 1:6] = 0.0
+    head = Measurement(machine="wC'A'bXYZ(C1)t", ball_mm=np.array([120.0, 0.0, 80.0]), t_s=data[:1, 0],
+                       angles_deg=data[:1, 1:3], deviation_um=data[:1, 3:6], rotary_axes=("A", "C"),
+                       linear_mm=data[:1, 6:9])
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(header_text(head))
+        np.savetxt(fh, data, fmt="%.17g", delimiter=",")
 
 
 def _step(path: Path, what: str) -> dict[str, float]:

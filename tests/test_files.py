@@ -148,3 +148,17 @@ def test_gen_regenerates_kernels_but_never_replaces_a_foreign_file(tmp_path, cap
     assert "exists: pass --force" in _err_line(capsys) and kernel.read_text() == "my own module\n"
     assert main(["gen", code, "--out", str(kernel)]) == 2
     assert "is not a directory" in _err_line(capsys)
+
+
+def test_diagnose_refuses_to_replace_plots_before_the_long_work(tmp_path, capsys) -> None:
+    csv = tmp_path / "s.csv"
+    assert main(["simulate", "--out", str(csv), "--seed", "1", "--points", "8"]) == 0
+    plots = tmp_path / "plots"
+    plots.mkdir()
+    (plots / "residual_rows.png").write_bytes(b"my picture")
+    capsys.readouterr()
+    assert main(["diagnose", str(csv), "--plots", str(plots)]) == 2
+    assert "residual_rows.png exists: pass --force" in _err_line(capsys)
+    assert (plots / "residual_rows.png").read_bytes() == b"my picture"
+    assert main(["diagnose", str(csv), "--plots", str(csv)]) == 2
+    assert "is not a directory" in _err_line(capsys)
