@@ -679,3 +679,23 @@ def test_cli_reconnect_timeout_exits_1_with_a_summary(tmp_path, capsys) -> None:
     with _Server(lambda conn, stop: stop.wait(0.1) or conn.sendall(b" again") or stop.wait(30)) as server:
         assert main([*cmd, "--port", server.url]) == 1  # a second attempt appends to the raw log
     assert log.read_bytes() == b"hello again"
+
+
+def test_schedule_trigger_leaves_spikes_out_and_flags_a_window_that_is_not_still(tmp_path) -> None:
+    program = load_test_program(AC, "cone-frustum", points=5)
+    opts = AcquisitionOptions(trigger="schedule")
+    clean = VirtualRTest(_config(program, seed=4))
+    s0 = _acquire_stream(tmp_path / "c.csv", program, clean.stream(), options=opts)
+    assert s0.completed and not s0.flagged and s0.spikes == 0
+    dev = VirtualRTest(_config(program, seed=4))
+    k = int(_dwell_samples(dev, 2)[60])
+    dev.readings_um[k, 0] += 50.0  # a spike inside pose 2's scheduled window
+    shaky = _dwell_samples(dev, 4)
+    dev.readings_um[shaky] += 6.0 * np.sin(2 * np.pi * 1.5 * dev.t_s[shaky])[:, None]  # pose 4 never still
+    s = _acquire_stream(tmp_path / "f.csv", program, dev.stream(), options=opts)
+    assert s.completed and s.spikes == 1 and [f["pose"] for f in s.flagged] == [4], s.format()
+    assert "not still" in s.flagged[0]["reason"]
+    rows, ref = _rows(tmp_path / "f.csv"), _rows(tmp_path / "c.csv")
+    assert sorted(rows) == [0, 1, 2, 3, 5]
+    for pose, row in rows.items():
+        assert np.abs(row - ref[pose]).max() < 0.03

@@ -32,6 +32,8 @@ Triggers (``--trigger``): when the window of a pose starts
     Pose i is averaged over device times ``[T0 + arrive_i + delay_s,
     T0 + arrive_i + delay_s + window_s)`` where ``arrive_i`` is the program schedule
     (:mod:`pige_sym.nc.rtest_program`) and ``T0`` the time of the first sample.
+    Readings farther than ``tolerance_um`` from the window's median are spikes (left
+    out); more than a tenth of them flags the pose (the machine was not still).
 ``key``
     The window starts at the first sample after the operator presses Enter (or
     after ``key_source()`` returns True) and lasts ``window_s``.
@@ -480,6 +482,11 @@ class _Engine:
                             f"dwell (it must exceed settling + {self.o.window_s:g} s) and the link")
             self._flag(pose, n, reason)
             return
+        if isinstance(self.trigger, _ScheduleTrigger):
+            samples, why = self._scheduled_window(samples)
+            if why:
+                self._flag(pose, len(samples), why)
+                return
         raw = readings_array(samples)
         mean_raw = raw.mean(axis=0)
         t_mean = float(np.mean([x.t_s for x in samples]))
@@ -497,6 +504,21 @@ class _Engine:
         self.trigger.confirm(pose)
         self.pose += 1
         self.on_pose(pose)
+
+    def _scheduled_window(self, samples: list[Sample]) -> tuple[list[Sample], str | None]:
+        """A window placed by the schedule: spikes (readings beyond ``tolerance_um`` from the window's median)
+        are left out; a window where more than a tenth of the readings are off is not a pose (flagged)."""
+        raw = readings_array(samples)
+        off = (np.abs(raw - np.median(raw, axis=0)) > self.o.tolerance_um).any(axis=1)
+        n_off = int(off.sum())
+        if n_off > 0.1 * len(samples):
+            return samples, (f"doubtful pose: {n_off} of {len(samples)} readings farther than "
+                             f"{self.o.tolerance_um:g} um from the window's median (the machine was not still)")
+        self.summary.spikes += n_off
+        kept = [x for x, bad in zip(samples, off, strict=True) if not bad]
+        if len(kept) < self.o.min_samples:
+            return kept, f"only {len(kept)} valid samples after leaving out {n_off} spikes"
+        return kept, None
 
     def _zero(self, mean_raw: np.ndarray, t_mean: float) -> None:
         """The reference window zeroes the nest (or must match the zero of the file being resumed)."""
@@ -927,7 +949,8 @@ def _finish(session: _Session, started: float, out: Path) -> None:
             summary.rejected[reason] = summary.rejected.get(reason, 0) + count
     trig = session.engine.trigger
     if isinstance(trig, _StableTrigger):
-        summary.spikes, summary.spurious_settles = trig.spikes, trig.spurious
+        summary.spikes += trig.spikes
+        summary.spurious_settles = trig.spurious
     summary.wall_s = time.monotonic() - started
     if session.engine.writer is not None or out.exists():
         _write_summary(summary, out)
