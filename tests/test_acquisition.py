@@ -699,3 +699,19 @@ def test_schedule_trigger_leaves_spikes_out_and_flags_a_window_that_is_not_still
     assert sorted(rows) == [0, 1, 2, 3, 5]
     for pose, row in rows.items():
         assert np.abs(row - ref[pose]).max() < 0.03
+
+
+def test_records_sent_again_out_of_order_are_duplicates_not_a_restart(tmp_path, clean_run) -> None:
+    """A gateway that replays the last records of its buffer after a hiccup must not stop the run."""
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program))
+    k = int(_dwell_samples(dev, 4)[50])
+    records = [dev.record(i) for i in range(dev.n_samples)]
+    replay = b"".join(records[k - 5:k])  # five records already sent, sent again after record k
+    from pige_sym.acquisition.device import encode_info
+
+    data = encode_info("x") + b"".join(records[:k + 1]) + replay + b"".join(records[k + 1:]) + encode_info("END")
+    out = tmp_path / "r.csv"
+    s = _acquire_stream(out, program, data)
+    assert s.completed and s.rejected.get("duplicate") == 5 and not s.flagged, s.format()
+    _assert_same_rows(out, clean, tol_um=1e-9)

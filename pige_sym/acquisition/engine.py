@@ -5,9 +5,11 @@ Data path
 ``port bytes → raw log (appended, flushed) → framer → adapter (records) → sequence
 check → pose trigger → window average → row``.  Every byte read is logged before it
 is parsed.  Malformed records are counted per reason and skipped, never repaired
-(:mod:`pige_sym.acquisition.device`).  Sequence numbers must increase: a repeated number is a
-``duplicate`` (rejected), a jump forward adds to ``missing``, a jump back means the
-device restarted and stops the run (the pose count would no longer be known).
+(:mod:`pige_sym.acquisition.device`).  Sequence numbers must increase: a number seen
+among the last :data:`RECENT_SEQS` samples is a ``duplicate`` (rejected, also when it
+comes out of order), a jump forward adds to ``missing``, a jump back to a number not
+seen means the device restarted and stops the run (the pose count would no longer be
+known).
 
 Triggers (``--trigger``): when the window of a pose starts
 ------------------------------------------------------------
@@ -93,6 +95,7 @@ import math
 import os
 import sys
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -119,6 +122,8 @@ from pige_sym.kernels import load_kernels
 from pige_sym.nc.rtest_program import TestProgram
 
 TRIGGERS = ("stable", "schedule", "key")
+#: A sequence number seen among the last this many samples and received again is a duplicate, not a restart.
+RECENT_SEQS = 4096
 EXTRA_COLUMNS = ("pose", "seq_first", "seq_last", "r1_um", "r2_um", "r3_um")
 
 
@@ -894,10 +899,18 @@ class _Records:
         self.engine = engine
         self.framer = adapter.new_framer()
         self.last_seq: int | None = None
+        self.recent: set[int] = set()  # sequence numbers of the last RECENT_SEQS accepted samples
+        self._recent_order: deque[int] = deque()
 
     def reset(self) -> None:
         """A new connection: a partial frame is dropped (counted as truncated)."""
         self.framer.reset()
+
+    def _remember(self, seq: int) -> None:
+        self.recent.add(seq)
+        self._recent_order.append(seq)
+        if len(self._recent_order) > RECENT_SEQS:
+            self.recent.discard(self._recent_order.popleft())
 
     def _reject(self, reason: str) -> None:
         self.summary.rejected[reason] = self.summary.rejected.get(reason, 0) + 1
@@ -919,8 +932,8 @@ class _Records:
                                 f"of {engine.program.n_poses} was measured")
                 continue
             if rec.seq is not None and self.last_seq is not None:
-                if rec.seq == self.last_seq:
-                    self._reject("duplicate")
+                if rec.seq == self.last_seq or (rec.seq < self.last_seq and rec.seq in self.recent):
+                    self._reject("duplicate")  # sent again (also out of order, e.g. a gateway replaying its buffer)
                     continue
                 if rec.seq < self.last_seq:
                     raise _Stop(f"the device restarted (sequence {self.last_seq} then {rec.seq}) at pose "
@@ -928,6 +941,7 @@ class _Records:
                 s.missing += rec.seq - self.last_seq - 1
             if rec.seq is not None:
                 self.last_seq = rec.seq
+                self._remember(rec.seq)
             s.accepted += 1
             engine.on_sample(rec)
             if engine.done:
