@@ -405,3 +405,19 @@ def test_cli_vectors_are_ascii_decimals_within_physical_limits(tmp_path, capsys)
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("pige simulate: --ball: ") and fragment in err[0], err
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_simulate_pige_file_goes_through_the_schema(tmp_path, capsys) -> None:
+    good = _write_json(tmp_path, {"machine": AC, "pige": {"EX0C": 5.0, "EA0C": -3.0}}, "good.json")
+    out = tmp_path / "s.csv"
+    assert main(["simulate", "--pige", str(good), "--out", str(out), "--points", "6", "--noise", "0"]) == 0
+    truth = json.loads(out.with_name("s.truth.json").read_text())["pige"]
+    assert truth["EX0C"] == 5.0 and truth["EA0C"] == -3.0 and truth["EY0A"] == 0.0
+    capsys.readouterr()
+    for doc, fragment in (({"machine": AC, "pige": {"EX0C": "nan"}}, "pige.EX0C: expected a number"),
+                          ({"machine": "wC'B'bXYZ(C1)t", "pige": {}}, "is for machine"),
+                          ({"machine": AC, "pige": {"EX0C": 1e300}}, "not physical")):
+        bad = _write_json(tmp_path, doc, "bad.json")
+        assert main(["simulate", "--pige", str(bad), "--out", str(tmp_path / "b.csv")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and fragment in err[0], err

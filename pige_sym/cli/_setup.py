@@ -75,3 +75,23 @@ def setup_geometry(args: argparse.Namespace) -> tuple[list[float], dict[str, lis
     """Ball [mm], nominal pivots by axis [mm] and tool offset [mm] (None when not given)."""
     return (parse_vec3(args.ball, "--ball"), parse_pivots(args.pivot),
             parse_vec3(args.tool, "--tool") if args.tool else None)
+
+
+def pige_values(spec: str, machine: str, seed: int | None) -> dict[str, float]:
+    """``--pige``: ``random``, ``NAME=VALUE,...`` or a parameter file [µm, µrad].
+
+    A file goes through :func:`pige_sym.schema.read_params_file` (strict JSON, finite physical
+    numbers, the machine must agree); PIGEs it does not give are 0, as with ``NAME=VALUE``.
+    """
+    import os
+
+    from pige_sym.schema import read_params_file
+    from pige_sym.simulator import parse_pige
+
+    if not os.path.isfile(spec):
+        return parse_pige(spec, machine, seed)
+    params = read_params_file(spec, machine=machine, allow_missing=True)
+    if params.effect_values:
+        raise InputError(f"--pige {spec}: effect parameters ({', '.join(params.effect_values)}) are not PIGEs; "
+                         "give effects with --effect")
+    return dict(params.pige)

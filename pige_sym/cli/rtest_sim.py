@@ -11,12 +11,11 @@ from typing import Any
 
 from pige_sym.acquisition.nest import parse_nest
 from pige_sym.acquisition.virtual_device import FAULT_KINDS, DeviceConfig, parse_faults, run_device
-from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
+from pige_sym.cli._setup import add_setup_arguments, pige_values, setup_geometry, trajectory_options
 from pige_sym.effects import parse_effect
 from pige_sym.files import check_output
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.rtest_program import DEFAULT_DWELL_S, DEFAULT_MOVE_S, load_test_program
-from pige_sym.simulator import parse_pige
 
 
 def _terminate(signum: int, frame: Any) -> None:
@@ -33,7 +32,7 @@ def _run(args: argparse.Namespace) -> int:
                                 move_s=args.move, dwell_s=args.dwell, **trajectory_options(args))
     seed = args.seed if args.seed is not None else secrets.randbits(31)
     cfg = DeviceConfig(
-        program=program, pige=parse_pige(args.pige, kern.MACHINE_CODE, seed),
+        program=program, pige=pige_values(args.pige, kern.MACHINE_CODE, seed),
         effects=[parse_effect(e, tuple(kern.ROTARY_AXES)) for e in args.effect or []], seed=seed,
         noise_um=args.noise, repeatability_um=args.repeatability, rate_hz=args.rate, time_scale=args.time_scale,
         nest=parse_nest(args.nest), faults=parse_faults(args.faults), stall_s=args.stall_s, outage_s=args.outage_s,

@@ -6,13 +6,13 @@ import argparse
 import json
 import os
 
-from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
+from pige_sym.cli._setup import add_setup_arguments, pige_values, setup_geometry, trajectory_options
 from pige_sym.effects import parse_effect
 from pige_sym.errors import InputError
 from pige_sym.files import atomic_write_text, check_output, to_json
 from pige_sym.io import write_measurement
 from pige_sym.kernels import load_kernels
-from pige_sym.simulator import parse_pige, simulate
+from pige_sym.simulator import simulate
 from pige_sym.trajectories import make_trajectory
 
 
@@ -24,7 +24,7 @@ def _run(args: argparse.Namespace) -> int:
         if axis not in kern.ROTARY_AXES:
             axes = ", ".join(kern.ROTARY_AXES)
             raise InputError(f"--pivot {axis}: not a rotary axis of {kern.MACHINE_CODE} ({axes})")
-    pige = parse_pige(args.pige, kern.MACHINE_CODE, args.seed)
+    pige = pige_values(args.pige, kern.MACHINE_CODE, args.seed)
     effects = [parse_effect(e, tuple(kern.ROTARY_AXES)) for e in args.effect or []]
     inputs = [x for x in (args.trajectory, args.pige) if os.path.isfile(x)]
     out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
