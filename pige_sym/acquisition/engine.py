@@ -651,7 +651,7 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
         raise
     engine = _Engine(program, out_p, nest, opts, summary, state, trigger, bars.on_pose)
     records = _Records(adapter, summary, engine)
-    log = RawLog(log_path, append=not force)
+    log = RawLog(log_path, append=resume or not force)
     session = _Session(link, records, engine, log, summary, settings, opts,
                        opts.max_bytes or default_max_bytes(program), bars, progress)
     try:
