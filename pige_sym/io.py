@@ -281,6 +281,11 @@ def validate_measurement(m: Measurement) -> None:
         raise InputError(f"linear_mm has shape {m.linear_mm.shape}, expected ({n}, 3)")
     if m.frame not in FRAMES:
         raise InputError(f"frame must be 'machine' or 'table', got {m.frame!r}")
+    arrays = {"t_s": m.t_s, "angles_deg": m.angles_deg, "deviation_um": m.deviation_um, "ball_mm": m.ball_mm,
+              **({} if m.linear_mm is None else {"linear_mm": m.linear_mm}), **m.optional}
+    for name, arr in arrays.items():
+        if not np.isfinite(np.asarray(arr, dtype=float)).all():
+            raise InputError(f"{name} holds NaN or infinite values: pige never writes them")
 
 
 class MeasurementWriter:
@@ -330,6 +335,9 @@ class MeasurementWriter:
                 vals.append(_fmt((optional or {})[c]))
         for c in self.template.extra_columns:
             vals.append((extra or {}).get(c, ""))
+        bad = [v for v in vals[: len(vals) - len(self.template.extra_columns)] if not math.isfinite(float(v))]
+        if bad:
+            raise InputError(f"{self.path}: a row with {bad[0]} values is not written (pige never writes NaN or inf)")
         self._fh.write(",".join(vals) + "\n")
         self._sync()
 

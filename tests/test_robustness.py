@@ -421,3 +421,27 @@ def test_simulate_pige_file_goes_through_the_schema(tmp_path, capsys) -> None:
         assert main(["simulate", "--pige", str(bad), "--out", str(tmp_path / "b.csv")]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and fragment in err[0], err
+
+
+def test_non_finite_options_are_refused_and_nothing_writes_nan(tmp_path, capsys) -> None:
+    from pige_sym.errors import InputError
+    from pige_sym.io import MeasurementWriter
+
+    for argv, fragment in ((["simulate", "--noise", "nan"], "--noise: nan"),
+                           (["acquire", "--port", "x", "--move", "inf"], "--move: inf"),
+                           (["acquire", "--port", "x", "--window", "nan"], "window_s must be > 0"),
+                           (["rtest-sim", "--noise", "nan"], "noise_um must be a finite number")):
+        assert main([*argv, "--out" if argv[0] != "rtest-sim" else "--seed",
+                     str(tmp_path / "o.csv") if argv[0] != "rtest-sim" else "1"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and fragment in err[0], err
+    good = tmp_path / "g.csv"
+    good.write_text(GOOD)
+    template = read_measurement(good)
+    with pytest.raises(InputError, match="never writes"):
+        write_measurement(Measurement(machine=AC, ball_mm=np.zeros(3), t_s=np.array([0.0, np.nan]),
+                                      angles_deg=np.zeros((2, 2)), deviation_um=np.zeros((2, 3)),
+                                      rotary_axes=("A", "C")), tmp_path / "w.csv")
+    with MeasurementWriter(tmp_path / "r.csv", template) as w, pytest.raises(InputError, match="never writes"):
+        w.write_row(1.0, [0.0, 0.0], [float("nan"), 0.0, 0.0], [0.0, 0.0, 0.0], {"n_samples": 1.0}, {"note": "x"})
+    assert "nan" not in (tmp_path / "r.csv").read_text()

@@ -158,6 +158,9 @@ class DeviceConfig:
     linger_s: float = 2.0
 
     def __post_init__(self) -> None:
+        for name in ("rate_hz", "time_scale", "noise_um", "repeatability_um", "stall_s", "outage_s", "linger_s"):
+            if not math.isfinite(getattr(self, name)):
+                raise InputError(f"{name} must be a finite number, got {getattr(self, name)!r}")
         if not self.rate_hz > 0 or not self.time_scale > 0:
             raise InputError("rate and time scale must be > 0")
         if self.noise_um < 0 or self.repeatability_um < 0:

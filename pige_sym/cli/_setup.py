@@ -95,3 +95,16 @@ def pige_values(spec: str, machine: str, seed: int | None) -> dict[str, float]:
         raise InputError(f"--pige {spec}: effect parameters ({', '.join(params.effect_values)}) are not PIGEs; "
                          "give effects with --effect")
     return dict(params.pige)
+
+
+def finite_option(value: float, name: str, *, minimum: float | None = None, positive: bool = False) -> float:
+    """A numeric option that must be finite (and >= ``minimum`` / > 0); InputError naming it otherwise."""
+    import math
+
+    if not math.isfinite(value):
+        raise InputError(f"{name}: {value!r} is not a finite number")
+    if positive and not value > 0:
+        raise InputError(f"{name} must be > 0, got {value:g}")
+    if minimum is not None and value < minimum:
+        raise InputError(f"{name} must be >= {minimum:g}, got {value:g}")
+    return value

@@ -14,7 +14,7 @@ from pige_sym.acquisition.engine import TRIGGERS, AcquisitionOptions, acquire
 from pige_sym.acquisition.nest import parse_nest
 from pige_sym.acquisition.outputs import summary_path
 from pige_sym.acquisition.transport import PARITIES, STOPBITS, PortSettings
-from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
+from pige_sym.cli._setup import add_setup_arguments, finite_option, setup_geometry, trajectory_options
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.rtest_program import DEFAULT_DWELL_S, DEFAULT_MOVE_S, load_test_program
@@ -40,7 +40,8 @@ def _run(args: argparse.Namespace) -> int:
     kern = load_kernels(args.machine)
     ball, pivots, tool = setup_geometry(args)
     program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=ball, pivots_mm=pivots, tool_mm=tool,
-                                move_s=args.move, dwell_s=args.dwell, **trajectory_options(args))
+                                move_s=finite_option(args.move, "--move", minimum=0.0),
+                                dwell_s=finite_option(args.dwell, "--dwell", positive=True), **trajectory_options(args))
     settings = PortSettings(baudrate=args.baud, bytesize=args.bytesize, parity=args.parity, stopbits=args.stopbits,
                             timeout_s=args.timeout)
     options = AcquisitionOptions(

@@ -11,7 +11,13 @@ from typing import Any
 
 from pige_sym.acquisition.nest import parse_nest
 from pige_sym.acquisition.virtual_device import FAULT_KINDS, DeviceConfig, parse_faults, run_device
-from pige_sym.cli._setup import add_setup_arguments, pige_values, setup_geometry, trajectory_options
+from pige_sym.cli._setup import (
+    add_setup_arguments,
+    finite_option,
+    pige_values,
+    setup_geometry,
+    trajectory_options,
+)
 from pige_sym.effects import parse_effect
 from pige_sym.files import check_output
 from pige_sym.kernels import load_kernels
@@ -29,7 +35,8 @@ def _run(args: argparse.Namespace) -> int:
     kern = load_kernels(args.machine)
     ball, pivots, tool = setup_geometry(args)
     program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=ball, pivots_mm=pivots, tool_mm=tool,
-                                move_s=args.move, dwell_s=args.dwell, **trajectory_options(args))
+                                move_s=finite_option(args.move, "--move", minimum=0.0),
+                                dwell_s=finite_option(args.dwell, "--dwell", positive=True), **trajectory_options(args))
     seed = args.seed if args.seed is not None else secrets.randbits(31)
     cfg = DeviceConfig(
         program=program, pige=pige_values(args.pige, kern.MACHINE_CODE, seed),

@@ -6,7 +6,13 @@ import argparse
 import json
 import os
 
-from pige_sym.cli._setup import add_setup_arguments, pige_values, setup_geometry, trajectory_options
+from pige_sym.cli._setup import (
+    add_setup_arguments,
+    finite_option,
+    pige_values,
+    setup_geometry,
+    trajectory_options,
+)
 from pige_sym.effects import parse_effect
 from pige_sym.errors import InputError
 from pige_sym.files import atomic_write_text, check_output, to_json
@@ -17,6 +23,7 @@ from pige_sym.trajectories import make_trajectory
 
 
 def _run(args: argparse.Namespace) -> int:
+    finite_option(args.noise, "--noise", minimum=0.0)
     kern = load_kernels(args.machine)
     traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
     ball, pivots, tool = setup_geometry(args)
