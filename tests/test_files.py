@@ -3,6 +3,7 @@ checked before any long work (acquire: before the port is even opened)."""
 
 from __future__ import annotations
 
+import json
 import os
 import stat
 
@@ -162,3 +163,15 @@ def test_diagnose_refuses_to_replace_plots_before_the_long_work(tmp_path, capsys
     assert (plots / "residual_rows.png").read_bytes() == b"my picture"
     assert main(["diagnose", str(csv), "--plots", str(csv)]) == 2
     assert "is not a directory" in _err_line(capsys)
+
+
+def test_an_unreadable_acquisition_summary_is_kept_aside_not_dropped(tmp_path) -> None:
+    from pige_sym.acquisition.engine import AcquisitionSummary
+    from pige_sym.acquisition.outputs import _write_summary, summary_path
+
+    out = tmp_path / "run.csv"
+    side = summary_path(out)
+    side.write_text("{not json")
+    _write_summary(AcquisitionSummary(port="p", out=str(out), raw_log=None, program="x", n_poses=3, resumed=True), out)
+    assert (tmp_path / "run.acq.json.unreadable").read_text() == "{not json"
+    assert len(json.loads(side.read_text())["sessions"]) == 1

@@ -9,7 +9,6 @@ and a folder that takes a new file (probed) before the reference pose is measure
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import tempfile
@@ -115,14 +114,27 @@ def _probe_folder(out: Path) -> None:
 
 
 def _write_summary(summary: AcquisitionSummary, out: Path) -> None:
-    """Append this session to ``<stem>.acq.json`` (a list of sessions)."""
+    """Append this session to ``<stem>.acq.json`` (a list of sessions).
+
+    An earlier summary that cannot be read is kept under ``<stem>.acq.json.unreadable[-N]``, never dropped.
+    """
+    from pige_sym.errors import PigeError
+    from pige_sym.schema import load_json
+
     path = summary_path(out)
     sessions: list[Any] = []
     if summary.resumed and path.exists():
         try:
-            old = json.loads(path.read_text(encoding="utf-8"))
-            sessions = list(old.get("sessions", [])) if isinstance(old, dict) else []
-        except (json.JSONDecodeError, OSError):
-            sessions = []
+            old = load_json(path, "acquisition summary")
+            if not isinstance(old, dict) or not isinstance(old.get("sessions"), list):
+                raise ValueError("no sessions list")
+            sessions = list(old["sessions"])
+        except (PigeError, ValueError):
+            keep = path.with_name(path.name + ".unreadable")
+            n = 1
+            while keep.exists():
+                n += 1
+                keep = path.with_name(f"{path.name}.unreadable-{n}")
+            os.replace(path, keep)
     sessions.append(summary.to_dict())
     atomic_write_text(path, to_json({"sessions": sessions}) + "\n")
