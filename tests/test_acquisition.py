@@ -346,7 +346,7 @@ def _check_rows_are_clean(out: Path, dev: VirtualRTest, truth: dict) -> None:
 FAULT_RUN = ["--points", "10", "--stall-s", "0.6", "--linger", "1.5"]
 
 
-@pytest.mark.parametrize("kind", ["garbage", "checksum", "drop", "spike", "duplicate", "stall", "disconnect"])
+@pytest.mark.parametrize("kind", ["garbage", "checksum", "drop", "spike", "stall", "disconnect"])
 def test_each_injected_fault_is_counted_and_never_reaches_a_row(tmp_path, kind) -> None:
     seed = 3
     truth_path = tmp_path / "truth.json"
@@ -637,7 +637,7 @@ def _flood(conn, stop) -> None:
         k += 2000
 
 
-TIME_BOUND = AcquisitionOptions(reconnect_timeout_s=1.5)
+TIME_BOUND = AcquisitionOptions(reconnect_timeout_s=1.0)
 RECONNECT_BOUND = AcquisitionOptions(reconnect_timeout_s=60, max_reconnects=5)
 BYTE_BOUND = AcquisitionOptions(max_bytes=2_000_000)
 

@@ -34,7 +34,7 @@ from pige_sym.schema import MAX_PIGE, read_params_file
 AC = "wC'A'bXYZ(C1)t"
 LOCATION = ("EY0A", "EZ0A", "EB0A", "EC0A", "EX0C", "EY0C", "EA0C", "EB0C")
 TALLY: dict[str, Counter[str]] = {}
-FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+FUZZ = settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 
 @pytest.fixture(scope="module", autouse=True)
