@@ -24,9 +24,9 @@ import stat
 import tempfile
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
-from pige_sym.errors import InputError
+from pige_sym.errors import FileFormatError, InputError
 
 PathLike = str | os.PathLike[str]
 
@@ -107,6 +107,34 @@ def atomic_write_text(path: PathLike, text: str, *, encoding: str = "utf-8", new
         Path(tmp_name).unlink(missing_ok=True)
         raise
     return p
+
+
+def open_regular_file(path: PathLike) -> IO[bytes]:
+    """Open a regular file for binary reading; a FIFO, socket, device or folder is refused.
+
+    The file is opened without blocking (a FIFO would otherwise wait for a writer), checked
+    with ``fstat`` on the open descriptor (no race with a rename), then switched to blocking.
+
+    Raises
+    ------
+    FileFormatError
+        Naming the file and the problem.
+    """
+    p = str(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except FileNotFoundError:
+        raise FileFormatError(p, None, "file not found") from None
+    except OSError as exc:
+        raise FileFormatError(p, None, f"cannot read: {exc.strerror or exc}") from None
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        what = "a directory" if stat.S_ISDIR(mode) else "not a regular file (FIFO, socket or device)"
+        raise FileFormatError(p, None, f"{what}: pige reads regular files only")
+    if hasattr(os, "set_blocking"):
+        os.set_blocking(fd, True)
+    return os.fdopen(fd, "rb")
 
 
 def json_ready(x: Any) -> Any:

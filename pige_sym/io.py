@@ -16,6 +16,14 @@ Optional: ``frame`` (``machine`` or ``table``), ``tool_mm``, ``pivot_<axis>_mm``
 ``trajectory``, ``units``, ``source``; any other key is kept.  The first data row is
 the reference pose (all angles 0, deviation 0); ``t_s`` never decreases.
 
+Numbers are ASCII decimals (``[+-]digits[.digits][e[+-]digits]``): ``1_000``,
+Arabic-Indic or full-width digits, ``nan`` and ``inf`` are not numbers.  Values must
+be physical (:data:`LIMITS`: e.g. a deviation within ±1e5 µm, a ball position within
+±1e5 mm).  A row that repeats an earlier row exactly (a duplicated record) is refused.
+Only regular files are read (not FIFOs or devices).  The data body is read in chunks
+of :data:`CHUNK_BYTES` and parsed with NumPy after the header is validated, so large
+files stream; a line longer than :data:`MAX_LINE_BYTES` is refused.
+
 Every refusal is a :class:`~pige_sym.errors.FileFormatError` naming the file, the
 1-based line and the problem.  Numbers are written with ``repr`` so that a
 write → read round trip is lossless.
@@ -25,6 +33,8 @@ from __future__ import annotations
 
 import math
 import os
+import re
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,7 +44,7 @@ import numpy as np
 
 from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
 from pige_sym.errors import FileFormatError, InputError, PigeError
-from pige_sym.files import atomic_write_text
+from pige_sym.files import atomic_write_text, open_regular_file
 
 FORMAT_LINE = "# pige-rtest 1"
 DEVIATION_COLUMNS = ("dx_um", "dy_um", "dz_um")
@@ -42,6 +52,13 @@ LINEAR_COLUMNS = ("X_mm", "Y_mm", "Z_mm")
 OPTIONAL_COLUMNS = ("temp_C", "n_samples", "sd_um")
 FRAMES = ("machine", "table")
 REFERENCE_TOLERANCE = 1e-9
+CHUNK_BYTES = 8 * 2**20
+MAX_LINE_BYTES = 2**20
+#: Largest magnitude accepted per column or metadata kind (non-physical values are refused), in its unit.
+LIMITS: dict[str, float] = {"t_s": 1e9, "deg": 1e5, "um": 1e5, "mm": 1e5, "temp_C": 1e3, "n_samples": 1e9,
+                            "sd_um": 1e5}
+_NUMBER = re.compile(r"[ \t]*[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?[ \t]*")
+_NUMERIC_BYTES = b"0123456789.+-eE, \t\r\n"
 
 
 @dataclass
@@ -156,14 +173,29 @@ def _parse_vec3(text: str, path: str, line: int, key: str) -> np.ndarray:
         raise FileFormatError(path, line, f"{key}: expected 3 comma-separated numbers, got {text!r}")
     out = []
     for p in parts:
-        try:
-            v = float(p)
-        except ValueError:
-            raise FileFormatError(path, line, f"{key}: {p!r} is not a number") from None
-        if not math.isfinite(v):
-            raise FileFormatError(path, line, f"{key}: {p!r} is not a finite number")
+        v = parse_number(p)
+        if v is None:
+            raise FileFormatError(path, line, f"{key}: {p!r} is not a number (ASCII decimal, e.g. 120.5 or -1e-3)")
+        if abs(v) > LIMITS["mm"]:
+            raise FileFormatError(path, line, f"{key}: {p} mm is not physical (|value| <= {LIMITS['mm']:g} mm)")
         out.append(v)
     return np.array(out)
+
+
+def parse_number(text: str) -> float | None:
+    """A strict ASCII decimal as float, None if ``text`` is not one (``1_000``, ``٣``, ``nan``, ``inf``)."""
+    if not _NUMBER.fullmatch(text):
+        return None
+    v = float(text)
+    return v if math.isfinite(v) else None
+
+
+def column_limit(name: str) -> tuple[float, str]:
+    """Largest magnitude [unit] accepted in a known column, and the unit."""
+    if name in LIMITS:
+        return LIMITS[name], name.rsplit("_", 1)[-1]
+    unit = name.rsplit("_", 1)[-1]
+    return LIMITS.get(unit, math.inf), unit
 
 
 def metadata_for(m: Measurement) -> dict[str, str]:
@@ -249,6 +281,11 @@ def validate_measurement(m: Measurement) -> None:
         raise InputError(f"linear_mm has shape {m.linear_mm.shape}, expected ({n}, 3)")
     if m.frame not in FRAMES:
         raise InputError(f"frame must be 'machine' or 'table', got {m.frame!r}")
+    arrays = {"t_s": m.t_s, "angles_deg": m.angles_deg, "deviation_um": m.deviation_um, "ball_mm": m.ball_mm,
+              **({} if m.linear_mm is None else {"linear_mm": m.linear_mm}), **m.optional}
+    for name, arr in arrays.items():
+        if not np.isfinite(np.asarray(arr, dtype=float)).all():
+            raise InputError(f"{name} holds NaN or infinite values: pige never writes them")
 
 
 class MeasurementWriter:
@@ -298,6 +335,9 @@ class MeasurementWriter:
                 vals.append(_fmt((optional or {})[c]))
         for c in self.template.extra_columns:
             vals.append((extra or {}).get(c, ""))
+        bad = [v for v in vals[: len(vals) - len(self.template.extra_columns)] if not math.isfinite(float(v))]
+        if bad:
+            raise InputError(f"{self.path}: a row with {bad[0]} values is not written (pige never writes NaN or inf)")
         self._fh.write(",".join(vals) + "\n")
         self._sync()
 
@@ -311,70 +351,98 @@ class MeasurementWriter:
         self.close()
 
 
+def _bad_number(column: str, text: str) -> str:
+    t = text.strip()
+    if t.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+        kind = "NaN" if "nan" in t.lower() else "infinite value"
+        return f"column {column}: {kind} {t!r} is not allowed"
+    return f"column {column}: {t!r} is not a number (ASCII decimal, e.g. 12.5 or -3e-2)"
+
+
 def _check_numeric_block(
     path: str, first_line: int, rows: list[list[str]], names: list[str], numeric: list[int]
 ) -> np.ndarray:
-    """Parse the numeric columns; on failure scan to report the exact line and column."""
-    try:
-        arr = np.array([[r[j] for j in numeric] for r in rows], dtype=float)
-        if np.isfinite(arr).all():
-            return arr
-    except ValueError:
-        pass
+    """Parse the numeric columns strictly (:func:`parse_number`); name the line and column of a bad value."""
+    out = np.empty((len(rows), len(numeric)))
     for i, r in enumerate(rows):
-        for j in numeric:
-            text = r[j].strip()
-            try:
-                v = float(text)
-            except ValueError:
-                raise FileFormatError(path, first_line + i, f"column {names[j]}: {text!r} is not a number") from None
-            if math.isnan(v):
-                raise FileFormatError(path, first_line + i, f"column {names[j]}: NaN is not allowed")
-            if math.isinf(v):
-                raise FileFormatError(path, first_line + i, f"column {names[j]}: infinite value {text!r}")
-    raise FileFormatError(path, first_line, "could not parse the numeric block")  # pragma: no cover
+        for q, j in enumerate(numeric):
+            v = parse_number(r[j])
+            if v is None:
+                raise FileFormatError(path, first_line + i, _bad_number(names[j], r[j]))
+            out[i, q] = v
+    return out
 
 
-def read_measurement(path: str | os.PathLike[str]) -> Measurement:
-    """Read and validate a ``pige-rtest 1`` file.
+@dataclass
+class _Header:
+    """What the lines before the data say (validated)."""
 
-    Raises
-    ------
-    FileFormatError
-        Naming the file, the 1-based line and the problem.
-    """
-    p = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FileFormatError(p, None, "file not found") from None
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(p, None, f"not a UTF-8 text file ({exc.reason})") from None
-    lines = text.splitlines()
-    if not lines or lines[0].strip() != FORMAT_LINE:
-        got = lines[0].strip() if lines else "an empty file"
-        raise FileFormatError(p, 1, f"first line must be {FORMAT_LINE!r}, got {got!r}")
+    meta: dict[str, str]
+    meta_line: dict[str, int]
+    names: list[str]
+    header_line: int
+    structure: MachineStructure
+    rotary: tuple[str, ...]
+    numeric: list[int]
+    extras: list[int]
+
+
+class _Lines:
+    """Numbered, length-bounded, UTF-8 lines of the header part of a file."""
+
+    def __init__(self, fh: IO[bytes], path: str) -> None:
+        self.fh = fh
+        self.path = path
+        self.number = 0
+
+    def next(self) -> str | None:
+        raw = self.fh.readline(MAX_LINE_BYTES + 1)
+        if not raw:
+            return None
+        self.number += 1
+        if len(raw) > MAX_LINE_BYTES:
+            raise FileFormatError(self.path, self.number, f"line longer than {MAX_LINE_BYTES} bytes")
+        try:
+            return raw.decode("utf-8").rstrip("\r\n")
+        except UnicodeDecodeError as exc:
+            raise FileFormatError(self.path, self.number, f"not UTF-8 text ({exc.reason})") from None
+
+
+def _read_metadata(lines: _Lines, p: str) -> tuple[dict[str, str], dict[str, int], str | None]:
+    """Format line and ``# key: value`` lines; returns them and the first line after them."""
+    first = lines.next()
+    if first is None or first.strip() != FORMAT_LINE:
+        got = first.strip() if first is not None else "an empty file"
+        raise FileFormatError(p, 1, f"first line must be {FORMAT_LINE!r}, got {got[:80]!r}")
     meta: dict[str, str] = {}
     meta_line: dict[str, int] = {}
-    i = 1
-    while i < len(lines) and lines[i].startswith("#"):
-        body = lines[i][1:].strip()
+    line = lines.next()
+    while line is not None and line.startswith("#"):
+        body = line[1:].strip()
         if body:
             if ":" not in body:
-                raise FileFormatError(p, i + 1, f"metadata line must be '# key: value', got {lines[i]!r}")
+                raise FileFormatError(p, lines.number, f"metadata line must be '# key: value', got {line[:80]!r}")
             key, value = body.split(":", 1)
             key = key.strip()
-            if not key or not all(ch.isalnum() or ch == "_" for ch in key):
-                raise FileFormatError(p, i + 1, f"bad metadata key {key!r}")
+            if not key or not all(ch.isascii() and (ch.isalnum() or ch == "_") for ch in key):
+                raise FileFormatError(p, lines.number, f"bad metadata key {key[:40]!r}")
             if key in meta:
-                raise FileFormatError(p, i + 1, f"metadata key {key!r} repeated (first on line {meta_line[key]})")
+                raise FileFormatError(p, lines.number,
+                                      f"metadata key {key!r} repeated (first on line {meta_line[key]})")
             meta[key] = value.strip()
-            meta_line[key] = i + 1
-        i += 1
+            meta_line[key] = lines.number
+        line = lines.next()
+    while line is not None and not line.strip():
+        line = lines.next()
+    return meta, meta_line, line
+
+
+def _read_header(fh: IO[bytes], p: str) -> _Header:
+    lines = _Lines(fh, p)
+    meta, meta_line, header = _read_metadata(lines, p)
     for key in ("machine", "ball_mm"):
         if key not in meta:
-            where = i + 1 if i < len(lines) else len(lines)
-            raise FileFormatError(p, where, f"missing required metadata '# {key}: ...'")
+            raise FileFormatError(p, lines.number, f"missing required metadata '# {key}: ...'")
     try:
         structure = parse_machine_code(meta["machine"])
     except PigeError as exc:
@@ -382,29 +450,17 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
     rotary = tuple(a.name for a in structure.rotary_axes)
     if not rotary:
         raise FileFormatError(p, meta_line["machine"], f"machine {meta['machine']!r} has no rotary axis")
-    ball = _parse_vec3(meta["ball_mm"], p, meta_line["ball_mm"], "ball_mm")
-    frame = meta.get("frame", "machine")
-    if frame not in FRAMES:
-        raise FileFormatError(p, meta_line.get("frame"), f"frame must be 'machine' or 'table', got {frame!r}")
-    tool = _parse_vec3(meta["tool_mm"], p, meta_line["tool_mm"], "tool_mm") if "tool_mm" in meta else None
-    pivots: dict[str, np.ndarray] = {}
-    for key, value in meta.items():
-        if key.startswith("pivot_") and key.endswith("_mm"):
-            ax = key[len("pivot_") : -len("_mm")]
-            if ax not in rotary:
-                raise FileFormatError(
-                    p, meta_line[key], f"{key}: machine {structure.canonical} has no rotary axis {ax!r} "
-                    f"(axes: {', '.join(rotary)})"
-                )
-            pivots[ax] = _parse_vec3(value, p, meta_line[key], key)
+    if header is None:
+        raise FileFormatError(p, lines.number, "no column header line after the metadata")
+    names = [c.strip() for c in header.split(",")]
+    numeric = _check_columns(p, lines.number, names, structure, rotary)
+    extras = [j for j in range(len(names)) if j not in numeric]
+    return _Header(meta, meta_line, names, lines.number, structure, rotary, numeric, extras)
 
-    # header
-    while i < len(lines) and not lines[i].strip():
-        i += 1
-    if i >= len(lines):
-        raise FileFormatError(p, len(lines), "no column header line after the metadata")
-    header_line = i + 1
-    names = [c.strip() for c in lines[i].split(",")]
+
+def _check_columns(p: str, header_line: int, names: list[str], structure: MachineStructure,
+                   rotary: tuple[str, ...]) -> list[int]:
+    """Validate the column header; returns the indices of the numeric (known) columns."""
     dupes = sorted({c for c in names if names.count(c) > 1})
     if dupes:
         raise FileFormatError(p, header_line, f"duplicated column(s): {', '.join(dupes)}")
@@ -426,47 +482,199 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
     if lin_present and len(lin_present) != 3:
         raise FileFormatError(p, header_line, f"give all of X_mm, Y_mm, Z_mm or none (found {', '.join(lin_present)})")
     known = set(required) | set(LINEAR_COLUMNS) | set(OPTIONAL_COLUMNS)
-    numeric = [j for j, c in enumerate(names) if c in known]
+    return [j for j, c in enumerate(names) if c in known]
 
-    rows: list[list[str]] = []
-    first_data = i + 2
-    for j in range(i + 1, len(lines)):
-        line = lines[j]
-        if not line.strip():
-            if any(x.strip() for x in lines[j:]):
-                raise FileFormatError(p, j + 1, "blank line inside the data")
-            break
-        if line.startswith("#"):
-            raise FileFormatError(p, j + 1, "metadata line after the column header")
-        fields = line.split(",")
-        if len(fields) != len(names):
-            raise FileFormatError(p, j + 1, f"expected {len(names)} fields, got {len(fields)}")
-        rows.append(fields)
-    if not rows:
-        raise FileFormatError(p, header_line, "no data rows")
-    arr = _check_numeric_block(p, first_data, rows, names, numeric)
-    col = {names[j]: arr[:, q] for q, j in enumerate(numeric)}
-    t = col["t_s"]
-    angles = np.column_stack([col[c] for c in angle_cols])
-    dev = np.column_stack([col[c] for c in DEVIATION_COLUMNS])
+
+class _Body:
+    """The data rows, read chunk by chunk: a NumPy fast path for all-numeric chunks, a strict
+    line-by-line path that names the first bad line (and keeps text columns)."""
+
+    def __init__(self, path: str, header: _Header) -> None:
+        self.path = path
+        self.h = header
+        self.first_line = header.header_line + 1
+        self.line = self.first_line  # number of the next line
+        self.blank_at: int | None = None
+        self.blocks: list[np.ndarray] = []
+        self.extras: dict[str, list[str]] = {header.names[j]: [] for j in header.extras}
+
+    def read(self, fh: IO[bytes]) -> None:
+        while chunk := fh.read(CHUNK_BYTES):
+            if not chunk.endswith(b"\n"):
+                tail = fh.readline(MAX_LINE_BYTES + 1)
+                if len(tail) > MAX_LINE_BYTES or (b"\n" not in chunk and len(chunk) > MAX_LINE_BYTES):
+                    raise FileFormatError(self.path, self.line + chunk.count(b"\n"),
+                                          f"line longer than {MAX_LINE_BYTES} bytes")
+                chunk += tail
+            n_lines = chunk.count(b"\n") + (0 if chunk.endswith(b"\n") else 1)
+            block = self._fast(chunk, n_lines)
+            if block is None:
+                block = self._strict(chunk)
+            else:
+                self.line += n_lines
+            self.blocks.append(block)
+
+    def _fast(self, chunk: bytes, n_lines: int) -> np.ndarray | None:
+        """All-numeric chunk with the right number of fields on every line, or None (strict path)."""
+        ncols = len(self.h.names)
+        if self.h.extras or self.blank_at is not None or chunk.translate(None, _NUMERIC_BYTES):
+            return None
+        if b"\r" in chunk:
+            chunk = chunk.replace(b"\r\n", b"\n")
+        if any(x in chunk for x in (b" ", b"\t", b"\r", b",,", b",\n", b"\n,")) or chunk[:1] == b"," or \
+                chunk[-1:] == b",":
+            return None  # blanks or empty fields: the strict path decides (and names the line)
+        buf = np.frombuffer(chunk, np.uint8)
+        ends = np.flatnonzero(buf == 10)
+        if not chunk.endswith(b"\n"):
+            ends = np.append(ends, len(chunk))
+        commas = np.flatnonzero(buf == 44)
+        if (np.diff(np.searchsorted(commas, ends), prepend=0) != ncols - 1).any():
+            return None
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            try:
+                values = np.fromstring(chunk.replace(b"\n", b","), sep=",")
+            except (ValueError, DeprecationWarning):
+                return None
+        if values.size != n_lines * ncols:
+            return None
+        return values.reshape(n_lines, ncols)
+
+    def _strict(self, chunk: bytes) -> np.ndarray:
+        p, names, numeric = self.path, self.h.names, self.h.numeric
+        raws = chunk.split(b"\n")
+        if chunk.endswith(b"\n"):
+            raws.pop()
+        rows = np.empty((len(raws), len(numeric)))
+        n = 0
+        for raw in raws:
+            ln = self.line
+            self.line += 1
+            if len(raw) > MAX_LINE_BYTES:
+                raise FileFormatError(p, ln, f"line longer than {MAX_LINE_BYTES} bytes")
+            try:
+                line = raw.decode("utf-8").rstrip("\r")
+            except UnicodeDecodeError as exc:
+                raise FileFormatError(p, ln, f"not UTF-8 text ({exc.reason})") from None
+            if not line.strip():
+                self.blank_at = self.blank_at or ln
+                continue
+            if self.blank_at is not None:
+                raise FileFormatError(p, self.blank_at, "blank line inside the data")
+            if line.startswith("#"):
+                raise FileFormatError(p, ln, "metadata line after the column header")
+            fields = line.split(",")
+            if len(fields) != len(names):
+                raise FileFormatError(p, ln, f"expected {len(names)} fields, got {len(fields)}")
+            rows[n] = _check_numeric_block(p, ln, [fields], names, numeric)[0]
+            for j in self.h.extras:
+                self.extras[names[j]].append(fields[j])
+            n += 1
+        return rows[:n]
+
+    def array(self) -> np.ndarray:
+        if not self.blocks or sum(b.shape[0] for b in self.blocks) == 0:
+            raise FileFormatError(self.path, self.h.header_line, "no data rows")
+        return np.concatenate(self.blocks) if len(self.blocks) > 1 else self.blocks[0]
+
+
+def _check_values(p: str, first_line: int, col: dict[str, np.ndarray], extras: dict[str, list[str]],
+                  angle_cols: list[str]) -> None:
+    """Physical magnitudes, the reference row, time order and duplicated rows (first offence, located)."""
+    for name, values in col.items():
+        limit, unit = column_limit(name)
+        bad = np.abs(values) > limit
+        if name in ("n_samples", "sd_um"):
+            bad |= values < 0
+        if bad.any():
+            i = int(np.argmax(bad))
+            sign = ", >= 0" if name in ("n_samples", "sd_um") else ""
+            raise FileFormatError(p, first_line + i, f"column {name}: {values[i]:g} is not physical "
+                                  f"(allowed: |value| <= {limit:g} {unit}{sign})")
     ref_bad = [(c, col[c][0]) for c in (*angle_cols, *DEVIATION_COLUMNS) if abs(col[c][0]) > REFERENCE_TOLERANCE]
     if ref_bad:
         what = ", ".join(f"{c}={v:g}" for c, v in ref_bad)
-        raise FileFormatError(
-            p, first_data, f"first data row must be the reference pose (angles 0, deviation 0): {what}"
-        )
+        raise FileFormatError(p, first_line,
+                              f"first data row must be the reference pose (angles 0, deviation 0): {what}")
+    t = col["t_s"]
     back = np.nonzero(np.diff(t) < 0)[0]
     if back.size:
         r = int(back[0]) + 1
-        raise FileFormatError(p, first_data + r, f"t_s goes backwards ({t[r - 1]:g} then {t[r]:g})")
+        raise FileFormatError(p, first_line + r, f"t_s goes backwards ({t[r - 1]:g} then {t[r]:g})")
+    dup = _first_duplicate(col, extras)
+    if dup is not None:
+        raise FileFormatError(p, first_line + dup[1], f"this row repeats line {first_line + dup[0]} exactly "
+                              "(a duplicated record): remove one of them")
+
+
+def _first_duplicate(col: dict[str, np.ndarray], extras: dict[str, list[str]]) -> tuple[int, int] | None:
+    """Indices (first, repeat) of the first row equal to an earlier one in every field, or None.
+
+    ``t_s`` never decreases, so equal rows share a time and sit in one run of equal times.
+    """
+    same = np.flatnonzero(np.diff(col["t_s"]) == 0)
+    if not same.size:
+        return None
+    cand = np.unique(np.concatenate([same, same + 1]))
+    block = np.column_stack([v[cand] for v in col.values()])
+    seen: dict[tuple[bytes, tuple[str, ...]], int] = {}
+    for k, i in enumerate(cand):
+        key = (block[k].tobytes(), tuple(v[i] for v in extras.values()))
+        if key in seen:
+            return seen[key], int(i)
+        seen[key] = int(i)
+    return None
+
+
+def read_measurement(path: str | os.PathLike[str]) -> Measurement:
+    """Read and validate a ``pige-rtest 1`` file (module docstring: grammar and refusals).
+
+    Raises
+    ------
+    FileFormatError
+        Naming the file, the 1-based line and the problem.
+    """
+    p = str(path)
+    with open_regular_file(path) as fh:
+        h = _read_header(fh, p)
+        body = _Body(p, h)
+        body.read(fh)
+    meta, meta_line = h.meta, h.meta_line
+    ball = _parse_vec3(meta["ball_mm"], p, meta_line["ball_mm"], "ball_mm")
+    frame = meta.get("frame", "machine")
+    if frame not in FRAMES:
+        raise FileFormatError(p, meta_line.get("frame"), f"frame must be 'machine' or 'table', got {frame!r}")
+    tool = _parse_vec3(meta["tool_mm"], p, meta_line["tool_mm"], "tool_mm") if "tool_mm" in meta else None
+    pivots = _read_pivots(p, h)
+    arr = body.array()
+    names = h.names
+    col = {names[j]: arr[:, q] for q, j in enumerate(h.numeric)}
+    angle_cols = [f"{a}_deg" for a in h.rotary]
+    _check_values(p, body.first_line, col, body.extras, angle_cols)
     return Measurement(
-        machine=meta["machine"], ball_mm=ball, t_s=t, angles_deg=angles, deviation_um=dev, rotary_axes=rotary,
+        machine=meta["machine"], ball_mm=ball, t_s=col["t_s"].copy(),
+        angles_deg=np.column_stack([col[c] for c in angle_cols]),
+        deviation_um=np.column_stack([col[c] for c in DEVIATION_COLUMNS]), rotary_axes=h.rotary,
         frame=frame, tool_mm=tool, pivots_mm=pivots, trajectory=meta.get("trajectory"),
-        linear_mm=np.column_stack([col[c] for c in LINEAR_COLUMNS]) if lin_present else None,
-        optional={c: col[c] for c in OPTIONAL_COLUMNS if c in col},
-        extra_columns={names[j]: [r[j] for r in rows] for j in range(len(names)) if j not in numeric},
-        metadata=meta, path=p,
+        linear_mm=np.column_stack([col[c] for c in LINEAR_COLUMNS]) if "X_mm" in col else None,
+        optional={c: col[c].copy() for c in OPTIONAL_COLUMNS if c in col},
+        extra_columns=body.extras, metadata=meta, path=p,
     )
+
+
+def _read_pivots(p: str, h: _Header) -> dict[str, np.ndarray]:
+    pivots: dict[str, np.ndarray] = {}
+    for key, value in h.meta.items():
+        if key.startswith("pivot_") and key.endswith("_mm"):
+            ax = key[len("pivot_") : -len("_mm")]
+            if ax not in h.rotary:
+                raise FileFormatError(
+                    p, h.meta_line[key], f"{key}: machine {h.structure.canonical} has no rotary axis {ax!r} "
+                    f"(axes: {', '.join(h.rotary)})"
+                )
+            pivots[ax] = _parse_vec3(value, p, h.meta_line[key], key)
+    return pivots
 
 
 def read_angle_file(path: str | os.PathLike[str]) -> tuple[tuple[str, ...], np.ndarray, np.ndarray | None]:

@@ -26,8 +26,9 @@ from pige_sym.acquisition.device import (
     encode_sample,
     parse_record,
 )
-from pige_sym.acquisition.engine import AcquisitionOptions, acquire, default_raw_log, summary_path
+from pige_sym.acquisition.engine import AcquisitionOptions, acquire
 from pige_sym.acquisition.nest import NestGeometry, parse_nest, tripod
+from pige_sym.acquisition.outputs import default_raw_log, summary_path
 from pige_sym.acquisition.transport import LineFramer, PortSettings, open_port, read_available
 from pige_sym.acquisition.virtual_device import DeviceConfig, VirtualRTest, start_virtual_device
 from pige_sym.cli.main import main
@@ -330,7 +331,7 @@ def test_acquire_whole_cone_over_pty_and_identify(tmp_path) -> None:
 
 def _check_rows_are_clean(out: Path, dev: VirtualRTest, truth: dict) -> None:
     """Every row averages exactly the device's clean readings of the sequence numbers it names."""
-    bad = set(truth["affected"]["checksum"]) | set(truth["affected"]["drop"]) | set(truth["affected"]["disconnect"])
+    bad = set().union(*(truth["affected"].get(k, []) for k in ("checksum", "drop", "disconnect", "spike")))
     m = read_measurement(out)
     for i in range(m.n_rows):
         first, last = int(m.extra_columns["seq_first"][i]), int(m.extra_columns["seq_last"][i])
@@ -345,7 +346,7 @@ def _check_rows_are_clean(out: Path, dev: VirtualRTest, truth: dict) -> None:
 FAULT_RUN = ["--points", "10", "--stall-s", "0.6", "--linger", "1.5"]
 
 
-@pytest.mark.parametrize("kind", ["garbage", "checksum", "drop", "stall", "disconnect"])
+@pytest.mark.parametrize("kind", ["garbage", "checksum", "drop", "spike", "stall", "disconnect"])
 def test_each_injected_fault_is_counted_and_never_reaches_a_row(tmp_path, kind) -> None:
     seed = 3
     truth_path = tmp_path / "truth.json"
@@ -360,7 +361,8 @@ def test_each_injected_fault_is_counted_and_never_reaches_a_row(tmp_path, kind) 
     assert s.completed and s.rows_written == 11, s.format()
     assert s.noise_bytes == inj["garbage_bytes"] and s.noise_runs == inj["garbage"]
     assert s.rejected.get("checksum", 0) == inj["checksum"]
-    assert s.rejected_total == inj["checksum"]
+    assert s.rejected.get("duplicate", 0) == inj["duplicate"]
+    assert s.rejected_total == inj["checksum"] + inj["duplicate"]
     assert s.missing == inj["checksum"] + inj["drop"] + inj["lost_in_outage"]
     assert s.stalls == inj["stall"] and s.disconnects == inj["disconnect"]
     dev_model = VirtualRTest(_config(program, seed=seed))
@@ -425,7 +427,7 @@ def test_kill_mid_run_then_resume_gives_the_same_file(tmp_path) -> None:
 
 def test_ctrl_c_leaves_a_valid_partial_file_and_summary(tmp_path) -> None:
     out = tmp_path / "c.csv"
-    with start_virtual_device(AC, "cone-frustum", seed=6, time_scale=30, extra_args=FAULT_RUN) as dev:
+    with start_virtual_device(AC, "cone-frustum", seed=6, time_scale=15, extra_args=FAULT_RUN) as dev:
         proc = subprocess.Popen(_acquire_cmd(dev.url, out), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                 text=True)
         _wait_rows(out, 2, proc)
@@ -439,11 +441,277 @@ def test_ctrl_c_leaves_a_valid_partial_file_and_summary(tmp_path) -> None:
     assert "interrupted" in err and "rows written" in err
 
 
-def test_cli_bad_input_is_one_line_and_status_2(capsys) -> None:
+def test_cli_bad_input_is_one_line_and_status_2(capsys, tmp_path) -> None:
     assert main(["rtest-sim", "--faults", "gremlins"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown fault 'gremlins'" in err[0]
     assert main(["acquire", "--port", "/dev/does-not-exist-pige", "--out", os.devnull, "--no-progress",
                  "--no-raw-log"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a regular file" in err[0]
+    assert main(["acquire", "--port", "/dev/does-not-exist-pige", "--out", str(tmp_path / "x.csv"), "--no-progress",
+                 "--no-raw-log"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot open port" in err[0]
+
+
+# --------------------------------------------------------------------------------------------- rows tied to poses
+
+
+def _rows(out: Path) -> dict[int, np.ndarray]:
+    m = read_measurement(out)
+    return {int(p): m.deviation_um[i] for i, p in enumerate(m.extra_columns["pose"])}
+
+
+def _acquire_stream(out: Path, program, data: bytes, **kw):
+    return acquire("fake", program, out, raw_log=None, opener=lambda: _BytesPort(data), **kw)
+
+
+_CLEAN_SEQ_LAST: dict[int, int] = {}
+
+
+@pytest.fixture(scope="module")
+def clean_run(tmp_path_factory):
+    """The 9-pose cone of seed 2 acquired from a clean stream: the oracle every faulty run is compared with."""
+    program = load_test_program(AC, "cone-frustum", points=8)
+    out = tmp_path_factory.mktemp("clean") / "clean.csv"
+    s = _acquire_stream(out, program, VirtualRTest(_config(program)).stream())
+    assert s.completed and s.rows_written == 9 and not s.flagged
+    m = read_measurement(out)
+    _CLEAN_SEQ_LAST.update({int(p): int(q) for p, q in zip(m.extra_columns["pose"], m.extra_columns["seq_last"],
+                                                           strict=True)})
+    return program, _rows(out)
+
+
+def _assert_same_rows(out: Path, clean: dict[int, np.ndarray], tol_um: float = 0.03) -> None:
+    rows = _rows(out)
+    assert sorted(rows) == sorted(clean)
+    for pose, row in rows.items():
+        assert np.abs(row - clean[pose]).max() < tol_um, (pose, row, clean[pose])
+
+
+@pytest.mark.parametrize("faults", ["spike=1", "spike=30", "drop=12,duplicate=12",
+                                    "spike=12,drop=6,duplicate=6,garbage=6,checksum=6"])
+def test_spikes_drops_and_duplicates_leave_every_row_as_in_the_clean_run(tmp_path, clean_run, faults) -> None:
+    from pige_sym.acquisition.virtual_device import parse_faults
+
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program, faults=parse_faults(faults)))
+    assert list(dev.plan.values()).count("spike") == parse_faults(faults).get("spike", 0)
+    out = tmp_path / "f.csv"
+    s = _acquire_stream(out, program, dev.stream())
+    assert s.completed and not s.flagged, s.format()
+    assert s.rejected.get("duplicate", 0) == parse_faults(faults).get("duplicate", 0)
+    _assert_same_rows(out, clean)
+    np.testing.assert_allclose(read_measurement(out).deviation_um, dev.deviation_machine_um, atol=0.2)
+
+
+def clean_run_seq_last(pose: int) -> int:
+    """Last sequence number averaged for ``pose`` in the clean run (set by the fixture)."""
+    return _CLEAN_SEQ_LAST[pose]
+
+
+def _dwell_samples(dev: VirtualRTest, pose: int) -> np.ndarray:
+    return np.nonzero(dev.pose_of_sample == pose)[0]
+
+
+@pytest.mark.parametrize("burst", [1, 2, 3, 6])
+def test_a_spike_burst_while_waiting_for_motion_never_shifts_a_pose(tmp_path, clean_run, burst) -> None:
+    """The original defect: a glitch after a window looked like motion, the pose settled again at the same
+    level and every later row held the previous pose's samples.  Short bursts are spikes (ignored), longer ones
+    settle too early for the program's timing (dropped as spurious)."""
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program))
+    k0 = clean_run_seq_last(3) + 2  # after pose 3's window, before the move
+    assert dev.pose_of_sample[k0 + 15] == 3
+    dev.readings_um[k0:k0 + burst, 1] += 50.0
+    out = tmp_path / "b.csv"
+    s = _acquire_stream(out, program, dev.stream())
+    assert s.completed and not s.flagged, s.format()
+    assert s.spurious_settles == (1 if burst > 2 else 0)
+    _assert_same_rows(out, clean)
+
+
+def test_a_spike_inside_a_window_is_left_out_of_the_average(tmp_path, clean_run) -> None:
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program))
+    k = int(_dwell_samples(dev, 5)[80])
+    dev.readings_um[k] += [0.0, 0.0, 50.0]
+    out = tmp_path / "w.csv"
+    s = _acquire_stream(out, program, dev.stream())
+    assert s.completed and s.spikes == 1
+    m = read_measurement(out)
+    assert m.optional["n_samples"][5] == 99  # one reading fewer; the row still matches the clean run closely
+    _assert_same_rows(out, clean)
+
+
+def test_a_pose_passed_without_motion_is_flagged_and_the_next_keeps_its_angles(tmp_path, clean_run) -> None:
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program))
+    still = np.arange(_dwell_samples(dev, 3)[-1] + 1, _dwell_samples(dev, 4)[-1] + 1)
+    level = dev.readings_um[_dwell_samples(dev, 3)[-40:]].mean(axis=0)
+    dev.readings_um[still] = level + np.random.default_rng(1).normal(scale=0.25, size=(still.size, 3))
+    out = tmp_path / "u.csv"
+    s = _acquire_stream(out, program, dev.stream())
+    assert s.completed and [f["pose"] for f in s.flagged] == [4] and "unseen" in s.flagged[0]["reason"]
+    rows = _rows(out)
+    assert sorted(rows) == [0, 1, 2, 3, 5, 6, 7, 8]
+    for pose in rows:
+        assert np.abs(rows[pose] - clean[pose]).max() < 0.03
+
+
+def test_a_settle_at_a_time_no_pose_has_is_flagged_not_written(tmp_path, clean_run) -> None:
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program))
+    dwell = _dwell_samples(dev, 5)
+    shaky = dwell[:90]  # 4.5 s of vibration: the pose settles 4.5 s late, beyond the timing tolerance (3.6 s)
+    dev.readings_um[shaky] += 10.0 * np.sin(2 * np.pi * 2.0 * dev.t_s[shaky])[:, None]
+    out = tmp_path / "d.csv"
+    s = _acquire_stream(out, program, dev.stream())
+    assert s.completed and [f["pose"] for f in s.flagged] == [5] and "doubtful" in s.flagged[0]["reason"]
+    rows = _rows(out)
+    assert 5 not in rows and sorted(rows) == [0, 1, 2, 3, 4, 6, 7, 8]
+    for pose in rows:
+        assert np.abs(rows[pose] - clean[pose]).max() < 0.03
+
+
+# --------------------------------------------------------------------------------------------- bounded resources
+
+
+class _Server:
+    """A loopback TCP server running ``behave(conn)`` for every client until stopped (bad devices)."""
+
+    def __init__(self, behave) -> None:
+        self.sock = socket.create_server(("127.0.0.1", 0))
+        self.sock.settimeout(0.1)
+        self.url = f"socket://127.0.0.1:{self.sock.getsockname()[1]}"
+        self.stop = threading.Event()
+        self.accepted = 0
+        self.behave = behave
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self) -> None:
+        while not self.stop.is_set():
+            try:
+                conn, _ = self.sock.accept()
+            except TimeoutError:
+                continue
+            self.accepted += 1
+            with conn:
+                try:
+                    self.behave(conn, self.stop)
+                except OSError:
+                    pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop.set()
+        self.thread.join(5)
+        self.sock.close()
+
+
+def _endless_line(conn, stop) -> None:
+    conn.sendall(b"$RT,0,0.0000,1")
+    while not stop.wait(0.005):  # ~1 MB/s: the time bound ends the run before the byte budget does
+        conn.sendall(b"7" * 4096)
+
+
+def _random_bytes(conn, stop) -> None:
+    rng = np.random.default_rng(0)
+    while not stop.wait(0.005):
+        conn.sendall(rng.integers(0, 256, 4096, dtype=np.uint8).tobytes())
+
+
+def _accept_and_close(conn, stop) -> None:
+    return
+
+
+def _flood(conn, stop) -> None:
+    """Valid records, as fast as the link takes them, one constant reading: nothing ever moves."""
+    k = 0
+    while not stop.is_set():
+        conn.sendall(b"".join(encode_sample(k + j, (k + j) / 20, [300.0, 310.0, 320.0]) for j in range(2000)))
+        k += 2000
+
+
+TIME_BOUND = AcquisitionOptions(reconnect_timeout_s=1.0)
+RECONNECT_BOUND = AcquisitionOptions(reconnect_timeout_s=60, max_reconnects=5)
+BYTE_BOUND = AcquisitionOptions(max_bytes=2_000_000)
+
+
+@pytest.mark.parametrize("behave, opts, why", [
+    (_endless_line, TIME_BOUND, "no valid record"), (_random_bytes, TIME_BOUND, "no valid record"),
+    (_accept_and_close, RECONNECT_BOUND, "reconnected 5 times"), (_accept_and_close, TIME_BOUND, "no valid record"),
+    (_flood, BYTE_BOUND, "byte budget")])
+def test_bad_devices_end_the_run_quickly_with_a_summary(tmp_path, behave, opts, why) -> None:
+    program = load_test_program(AC, "cone-frustum", points=4)
+    out = tmp_path / "bad.csv"
+    started = time.monotonic()
+    with _Server(behave) as server:
+        s = acquire(server.url, program, out, settings=FAST, options=opts)
+    assert time.monotonic() - started < 20
+    assert not s.completed and why in s.stop_reason, s.stop_reason
+    assert s.bytes_read <= (2_000_000 if behave is _flood else 10**9)
+    log = default_raw_log(out)
+    assert log.stat().st_size == s.bytes_read  # every byte read is logged, and no more than the budget
+    if behave is _flood:
+        assert s.rows_written == 1  # the reference pose, then nothing moved
+        session = json.loads(summary_path(out).read_text())["sessions"][-1]
+        assert session["stop_reason"] == s.stop_reason
+    else:
+        assert not out.exists() and not summary_path(out).exists()  # nothing measured: no file claims otherwise
+
+
+def test_cli_reconnect_timeout_exits_1_with_a_summary(tmp_path, capsys) -> None:
+    out = tmp_path / "silent.csv"
+    cmd = ["acquire", "--program", "cone-frustum", "--points", "4", "--out", str(out), "--no-progress",
+           "--timeout", "0.25", "--reconnect-timeout", "1"]
+    with _Server(lambda conn, stop: stop.wait(0.1) or conn.sendall(b"hello") or stop.wait(30)) as server:
+        status = main([*cmd, "--port", server.url])
+    captured = capsys.readouterr()
+    assert status == 1 and "acquisition stopped: no valid record" in captured.out
+    assert "link: " in captured.out and "rows written" in captured.out
+    log = default_raw_log(out)
+    assert log.read_bytes() == b"hello" and not out.exists()
+    with _Server(lambda conn, stop: stop.wait(0.1) or conn.sendall(b" again") or stop.wait(30)) as server:
+        assert main([*cmd, "--port", server.url]) == 1  # a second attempt appends to the raw log
+    assert log.read_bytes() == b"hello again"
+
+
+def test_schedule_trigger_leaves_spikes_out_and_flags_a_window_that_is_not_still(tmp_path) -> None:
+    program = load_test_program(AC, "cone-frustum", points=5)
+    opts = AcquisitionOptions(trigger="schedule")
+    clean = VirtualRTest(_config(program, seed=4))
+    s0 = _acquire_stream(tmp_path / "c.csv", program, clean.stream(), options=opts)
+    assert s0.completed and not s0.flagged and s0.spikes == 0
+    dev = VirtualRTest(_config(program, seed=4))
+    k = int(_dwell_samples(dev, 2)[60])
+    dev.readings_um[k, 0] += 50.0  # a spike inside pose 2's scheduled window
+    shaky = _dwell_samples(dev, 4)
+    dev.readings_um[shaky] += 6.0 * np.sin(2 * np.pi * 1.5 * dev.t_s[shaky])[:, None]  # pose 4 never still
+    s = _acquire_stream(tmp_path / "f.csv", program, dev.stream(), options=opts)
+    assert s.completed and s.spikes == 1 and [f["pose"] for f in s.flagged] == [4], s.format()
+    assert "not still" in s.flagged[0]["reason"]
+    rows, ref = _rows(tmp_path / "f.csv"), _rows(tmp_path / "c.csv")
+    assert sorted(rows) == [0, 1, 2, 3, 5]
+    for pose, row in rows.items():
+        assert np.abs(row - ref[pose]).max() < 0.03
+
+
+def test_records_sent_again_out_of_order_are_duplicates_not_a_restart(tmp_path, clean_run) -> None:
+    """A gateway that replays the last records of its buffer after a hiccup must not stop the run."""
+    program, clean = clean_run
+    dev = VirtualRTest(_config(program))
+    k = int(_dwell_samples(dev, 4)[50])
+    records = [dev.record(i) for i in range(dev.n_samples)]
+    replay = b"".join(records[k - 5:k])  # five records already sent, sent again after record k
+    from pige_sym.acquisition.device import encode_info
+
+    data = encode_info("x") + b"".join(records[:k + 1]) + replay + b"".join(records[k + 1:]) + encode_info("END")
+    out = tmp_path / "r.csv"
+    s = _acquire_stream(out, program, data)
+    assert s.completed and s.rejected.get("duplicate") == 5 and not s.flagged, s.format()
+    _assert_same_rows(out, clean, tol_um=1e-9)

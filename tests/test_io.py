@@ -111,7 +111,7 @@ def test_missing_file(tmp_path) -> None:
 @settings(max_examples=60, deadline=None)
 @given(
     st.lists(
-        st.tuples(*[st.floats(allow_nan=False, allow_infinity=False, width=64, min_value=-1e6, max_value=1e6)] * 5),
+        st.tuples(*[st.floats(allow_nan=False, allow_infinity=False, width=64, min_value=-1e5, max_value=1e5)] * 5),
         min_size=1, max_size=20,
     ),
     st.lists(st.floats(min_value=-1e3, max_value=1e3, allow_nan=False), min_size=3, max_size=3),

@@ -82,7 +82,7 @@ def test_invalid_codes_refused_with_position(code: str, position: int, fragment:
 
 
 @settings(max_examples=400, deadline=None)
-@given(st.text(alphabet="wbtXYZUVWABC'’()0123 qx\u2032", max_size=16))
+@given(st.text(alphabet="wbtXYZUVWABC'’()0123 qx\u2032\u00b2\u0661\uff11\u00bd", max_size=16))
 def test_random_strings_never_crash_with_anything_but_pige_error(code: str) -> None:
     try:
         m = parse_machine_code(code)
@@ -104,7 +104,7 @@ def test_generated_valid_codes_round_trip(names: list[str], split: int, spindle:
     sep = " " if spaces else ""
     wp = sep.join(n + "'" for n in names[:split])
     tl = sep.join(names[split:])
-    code = sep.join(["w", wp, "b", tl, "(C1)" if spindle else "", "t"])
+    code = sep.join(["w", wp, "b", tl, "(C9)" if spindle else "", "t"])
     m = parse_machine_code(code)
     assert [a.name for a in m.workpiece_axes] == names[:split]
     assert [a.name for a in m.tool_axes] == names[split:]
@@ -119,3 +119,24 @@ def test_cli_bad_code_exits_2_with_one_line() -> None:
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
     assert "position 2" in lines[0] and "Traceback" not in proc.stderr
+
+
+def test_suffixes_are_ascii_numbers_and_names_compare_as_numbers() -> None:
+    assert parse_machine_code("wC01'A'bXYZ(C2)t").canonical == "wC1'A'bXYZ(C2)t"
+    with pytest.raises(MachineCodeError, match="appears twice"):
+        parse_machine_code("wC1'C01'bXYZt")  # the same axis written twice
+    for bad, pos in (("wC\u00b2'bXYZt", 2), ("wC\u0661'bXYZt", 2), ("wC1\uff12'bXYZt", 3), ("wbXYZ(C\u00b9)t", 7)):
+        with pytest.raises(MachineCodeError, match="ASCII digits") as info:
+            parse_machine_code(bad)
+        assert info.value.position == pos
+
+
+def test_spindle_may_not_take_a_positioning_axis_name_and_long_codes_are_refused() -> None:
+    for code in ("wC1'A'bXYZ(C1)t", "wC'A'bXYZ(C)t", "wbXYZCA(C0)tx"[:-1].replace("C0", "C"), "wC01'bXYZ(C1)t"):
+        with pytest.raises(MachineCodeError, match="name of a positioning axis"):
+            parse_machine_code(code)
+    assert parse_machine_code("wC'A'bXYZ(C1)t").spindle == "C1"
+    with pytest.raises(MachineCodeError, match="at most 64 characters"):
+        parse_machine_code("w" + "C'" * 1000 + "bt")
+    with pytest.raises(MachineCodeError, match="at most 3 digits"):
+        parse_machine_code("wC1234'bXYZt")

@@ -5,24 +5,37 @@ Data path
 ``port bytes → raw log (appended, flushed) → framer → adapter (records) → sequence
 check → pose trigger → window average → row``.  Every byte read is logged before it
 is parsed.  Malformed records are counted per reason and skipped, never repaired
-(:mod:`pige_sym.acquisition.device`).  Sequence numbers must increase: a repeated number is a
-``duplicate`` (rejected), a jump forward adds to ``missing``, a jump back means the
-device restarted and stops the run (the pose count would no longer be known).
+(:mod:`pige_sym.acquisition.device`).  Sequence numbers must increase: a number seen
+among the last :data:`RECENT_SEQS` samples is a ``duplicate`` (rejected, also when it
+comes out of order), a jump forward adds to ``missing``, a jump back to a number not
+seen means the device restarted and stops the run (the pose count would no longer be
+known).
 
 Triggers (``--trigger``): when the window of a pose starts
 ------------------------------------------------------------
 ``stable`` (default)
     Pose 0 (the reference) starts when the readings settle: over the last
     ``settle_s`` of device time every sensor stays within a peak-to-peak band of
-    ``tolerance_um``.  Every later pose needs motion first (a reading more than
-    ``tolerance_um`` away from the previous pose's level), then settling.  The
-    window holds the samples after settling, up to ``window_s`` of device time; it
-    ends early if a reading leaves the settled level by more than ``tolerance_um``
-    (the machine moved on) or after a data gap longer than ``max_gap_s``.
+    ``tolerance_um``, apart from at most one *spike* (a run of at most
+    ``spike_samples`` readings far from the median).  Every later pose needs motion
+    first (more than ``spike_samples`` readings in a row farther than
+    ``tolerance_um`` from the previous pose's level: a spike is not motion), then
+    settling.  The window holds the samples after settling, up to ``window_s`` of
+    device time; spikes are left out of it (``spikes`` in the summary); it ends early
+    when the readings leave the settled level for longer than a spike (the machine
+    moved on) or after a data gap longer than ``max_gap_s``.
+
+    Each settle is cross-checked with the program's timing, from the settle of the
+    last written pose (``timing_tol`` × the shortest pose cycle; ``timing_check``):
+    too early is a spurious settle (dropped: ``spurious_settles``), matching a later
+    pose flags the poses passed unseen, matching none flags the pose as doubtful.
+    No row is ever written under a pose the timing does not support.
 ``schedule``
     Pose i is averaged over device times ``[T0 + arrive_i + delay_s,
     T0 + arrive_i + delay_s + window_s)`` where ``arrive_i`` is the program schedule
     (:mod:`pige_sym.nc.rtest_program`) and ``T0`` the time of the first sample.
+    Readings farther than ``tolerance_um`` from the window's median are spikes (left
+    out); more than a tenth of them flags the pose (the machine was not still).
 ``key``
     The window starts at the first sample after the operator presses Enter (or
     after ``key_source()`` returns True) and lasts ``window_s``.
@@ -56,6 +69,13 @@ current pose.  A gap in device time longer than one pose cycle (move + dwell) in
 or a port that stays away stops the run cleanly: the summary says why
 (``completed`` False) and the file holds every row measured so far.
 
+Bounds (a bad device ends the run, it never runs away): no valid record for
+``reconnect_timeout_s`` (silence, noise, an endless line, a port that accepts and
+closes), ``max_reconnects`` reconnections in a row without a valid record, more than
+``max_bytes`` read in the session (default :func:`default_max_bytes`; what was read
+up to the limit is logged), ``max_window_samples`` per window, frames of at most the
+framer's ``max_len``, and device time running past the end of the program.
+
 Resume
 ------
 ``resume=True`` continues a partial file: an incomplete last line (crash during a
@@ -71,15 +91,12 @@ same seed) the final file is byte-identical to an uninterrupted run.
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import os
-import queue
 import sys
-import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -90,15 +107,23 @@ from tqdm import tqdm
 
 from pige_sym.acquisition.device import DeviceAdapter, Info, RecordError, RTestProtocolAdapter, Sample, readings_array
 from pige_sym.acquisition.nest import NestGeometry, default_nest
+from pige_sym.acquisition.outputs import (
+    _raw_log_path,
+    _remove_partial_line,
+    _write_summary,
+    check_acquisition_files,
+)
 from pige_sym.acquisition.transport import PortSettings, RawLog, open_port, read_available
+from pige_sym.acquisition.triggers import StdinKeys, _KeyTrigger, _ScheduleTrigger, _StableTrigger, _Stop, _Trigger
 from pige_sym.codegen.machine_code import parse_machine_code
 from pige_sym.errors import AcquisitionError, FileFormatError, InputError
-from pige_sym.files import atomic_write_text, to_json
 from pige_sym.io import Measurement, MeasurementWriter, read_measurement
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.rtest_program import TestProgram
 
 TRIGGERS = ("stable", "schedule", "key")
+#: A sequence number seen among the last this many samples and received again is a duplicate, not a restart.
+RECENT_SEQS = 4096
 EXTRA_COLUMNS = ("pose", "seq_first", "seq_last", "r1_um", "r2_um", "r3_um")
 
 
@@ -129,6 +154,19 @@ class AcquisitionOptions:
         Frame of the written deviations.
     replay_tol_um : float [µm]
         Largest difference between a replayed pose and its row (resume).
+    spike_samples : int
+        Longest run of out-of-band readings treated as a spike (left out) rather than motion.
+    timing_check : bool
+        Cross-check each settle with the program's schedule (``stable``); off for operator-paced programs.
+    timing_tol : float
+        Allowed timing difference, as a fraction of the shortest pose cycle (move + dwell).
+    max_reconnects : int
+        Reconnections in a row without a valid record before the run stops.
+    max_window_samples : int
+        Most samples kept for one window or settle test (memory bound); a full window ends.
+    max_bytes : int or None [bytes]
+        Most bytes read (and logged) in one session; None: sized for the run
+        (:func:`default_max_bytes`).
     """
 
     trigger: str = "stable"
@@ -142,6 +180,12 @@ class AcquisitionOptions:
     retry_s: float = 0.1
     frame: str = "machine"
     replay_tol_um: float = 1.0
+    spike_samples: int = 2
+    timing_check: bool = True
+    timing_tol: float = 0.3
+    max_reconnects: int = 20
+    max_window_samples: int = 100_000
+    max_bytes: int | None = None
 
     def __post_init__(self) -> None:
         if self.trigger not in TRIGGERS:
@@ -156,6 +200,18 @@ class AcquisitionOptions:
             raise InputError("delay_s must be >= 0")
         if self.min_samples < 2:
             raise InputError(f"min_samples must be >= 2, got {self.min_samples}")
+        if not 0 <= self.spike_samples <= 10:
+            raise InputError(f"spike_samples must be 0 to 10, got {self.spike_samples}")
+        if not 0 < self.timing_tol < 0.5:
+            raise InputError(f"timing_tol must be in (0, 0.5) of a pose cycle, got {self.timing_tol!r}")
+        if self.max_reconnects < 1 or self.max_window_samples < self.min_samples:
+            raise InputError("max_reconnects must be >= 1 and max_window_samples >= min_samples")
+        if self.max_bytes is not None and self.max_bytes < 4096:
+            raise InputError(f"max raw log must be >= 4096 bytes, got {self.max_bytes}")
+        for name in ("window_s", "settle_s", "tolerance_um", "max_gap_s", "reconnect_timeout_s", "retry_s",
+                     "replay_tol_um", "delay_s"):
+            if not math.isfinite(getattr(self, name)):
+                raise InputError(f"{name} must be finite, got {getattr(self, name)!r}")
 
 
 @dataclass
@@ -188,6 +244,8 @@ class AcquisitionSummary:
     stalls: int = 0
     disconnects: int = 0
     reconnects: int = 0
+    spikes: int = 0
+    spurious_settles: int = 0
     resumed: bool = False
     removed_partial_line: bool = False
     completed: bool = False
@@ -221,172 +279,13 @@ class AcquisitionSummary:
                      f"{self.noise_runs} runs; device-time gaps > max gap: {self.gaps}")
         lines.append(f"link: {self.timeouts} timeouts in {self.stalls} stalls, {self.disconnects} disconnects, "
                      f"{self.reconnects} reconnects")
+        if self.spikes or self.spurious_settles:
+            lines.append(f"spikes left out: {self.spikes} readings; spurious settles dropped: {self.spurious_settles}")
         if self.raw_log:
             lines.append(f"raw log: {self.raw_log}")
         for f in self.flagged:
             lines.append(f"flagged pose {f['pose']}: {f['n_samples']} valid samples ({f['reason']})")
         return "\n".join(lines)
-
-
-class StdinKeys:
-    """Key source for ``trigger="key"``: True once per line typed on stdin (Enter)."""
-
-    def __init__(self) -> None:
-        self._q: queue.Queue[str] = queue.Queue()
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        for line in sys.stdin:
-            self._q.put(line)
-
-    def __call__(self) -> bool:
-        try:
-            self._q.get_nowait()
-        except queue.Empty:
-            return False
-        return True
-
-
-# --------------------------------------------------------------------------------------------- triggers
-
-
-class _Trigger:
-    """Decides, sample by sample, whether a sample belongs to the current pose's window.
-
-    ``step`` returns ``"skip"`` (not averaged), ``"take"`` (averaged) or ``"done"`` (the
-    window is over; the sample is then offered to the next pose).
-    """
-
-    reason = "complete"
-
-    def begin(self, pose: int, level: np.ndarray | None) -> None:
-        self.reason = "complete"
-
-    def step(self, s: Sample, r: np.ndarray, gap: bool) -> str:
-        raise NotImplementedError
-
-    @property
-    def level(self) -> np.ndarray | None:
-        return None
-
-    def status(self) -> str:
-        return ""
-
-
-class _StableTrigger(_Trigger):
-    def __init__(self, opts: AcquisitionOptions) -> None:
-        self.o = opts
-        self.phase = "settle"
-        self.buf: deque[tuple[float, np.ndarray]] = deque()
-        self._level: np.ndarray | None = None
-        self.t_first: float | None = None
-
-    def begin(self, pose: int, level: np.ndarray | None) -> None:
-        super().begin(pose, level)
-        self.phase = "motion" if (pose > 0 and level is not None) else "settle"
-        self._level = level
-        self.buf.clear()
-        self.t_first = None
-
-    @property
-    def level(self) -> np.ndarray | None:
-        return self._level
-
-    def status(self) -> str:
-        return {"motion": "waiting for motion", "settle": "settling", "window": "averaging"}[self.phase]
-
-    def step(self, s: Sample, r: np.ndarray, gap: bool) -> str:
-        tol = self.o.tolerance_um
-        if self.phase == "motion":
-            assert self._level is not None
-            if np.abs(r - self._level).max() > tol:
-                self.phase = "settle"
-                self.buf.clear()
-                self.buf.append((s.t_s, r))
-            return "skip"
-        if self.phase == "settle":
-            if gap:
-                self.buf.clear()
-            self.buf.append((s.t_s, r))
-            while self.buf and s.t_s - self.buf[0][0] > self.o.settle_s + 1e-9:
-                self.buf.popleft()
-            if s.t_s - self.buf[0][0] >= self.o.settle_s - 1e-9 and len(self.buf) >= 3:
-                arr = np.array([b[1] for b in self.buf])
-                if (arr.max(axis=0) - arr.min(axis=0)).max() <= tol:
-                    self._level = arr.mean(axis=0)
-                    self.phase = "window"
-                    self.t_first = None
-            return "skip"
-        # window
-        assert self._level is not None
-        if gap and self.t_first is not None:
-            self.reason = "data gap"
-            return "done"
-        if np.abs(r - self._level).max() > tol:
-            self.reason = "machine left the pose"
-            return "done"
-        if self.t_first is None:
-            self.t_first = s.t_s
-        if s.t_s - self.t_first >= self.o.window_s - 1e-9:
-            return "done"
-        return "take"
-
-
-class _ScheduleTrigger(_Trigger):
-    def __init__(self, opts: AcquisitionOptions, program: TestProgram) -> None:
-        self.o = opts
-        self.arrive = program.arrive_s
-        self.t0: float | None = None
-        self.lo = self.hi = 0.0
-
-    def begin(self, pose: int, level: np.ndarray | None) -> None:
-        super().begin(pose, level)
-        self.lo = float(self.arrive[pose]) + self.o.delay_s
-        self.hi = self.lo + self.o.window_s
-
-    def status(self) -> str:
-        return f"scheduled at {self.lo:.1f} s"
-
-    def step(self, s: Sample, r: np.ndarray, gap: bool) -> str:
-        if self.t0 is None:
-            self.t0 = s.t_s
-        tp = s.t_s - self.t0
-        if tp < self.lo - 1e-9:
-            return "skip"
-        if tp < self.hi - 1e-9:
-            return "take"
-        return "done"
-
-
-class _KeyTrigger(_Trigger):
-    def __init__(self, opts: AcquisitionOptions, key_source: Callable[[], bool],
-                 prompt: Callable[[int], None] | None) -> None:
-        self.o = opts
-        self.key_source = key_source
-        self.prompt = prompt
-        self.armed = False
-        self.t_first: float | None = None
-
-    def begin(self, pose: int, level: np.ndarray | None) -> None:
-        super().begin(pose, level)
-        self.armed = False
-        self.t_first = None
-        if self.prompt is not None:
-            self.prompt(pose)
-
-    def status(self) -> str:
-        return "averaging" if self.armed else "press Enter when in position"
-
-    def step(self, s: Sample, r: np.ndarray, gap: bool) -> str:
-        if not self.armed:
-            if not self.key_source():
-                return "skip"
-            self.armed = True
-        if self.t_first is None:
-            self.t_first = s.t_s
-        if s.t_s - self.t_first >= self.o.window_s - 1e-9:
-            return "done"
-        return "take"
 
 
 # --------------------------------------------------------------------------------------------- points
@@ -423,18 +322,6 @@ def _fmt(x: float) -> str:
     return repr(float(x))
 
 
-def summary_path(out: str | os.PathLike[str]) -> Path:
-    """Sidecar JSON of an acquisition: ``<stem>.acq.json`` beside the measurement file."""
-    p = Path(out)
-    return p.with_name(p.stem + ".acq.json")
-
-
-def default_raw_log(out: str | os.PathLike[str]) -> Path:
-    """Default raw byte log: ``<stem>.raw.log`` beside the measurement file."""
-    p = Path(out)
-    return p.with_name(p.stem + ".raw.log")
-
-
 def _template(program: TestProgram, nest: NestGeometry, opts: AcquisitionOptions, zero: np.ndarray) -> Measurement:
     k = len(program.rotary_axes)
     meta: dict[str, str] = {"machine": "", "ball_mm": "", "frame": opts.frame}
@@ -463,17 +350,6 @@ class _ResumeState:
     zero: np.ndarray
     rows: dict[int, np.ndarray]
     last_t: float
-
-
-def _remove_partial_line(path: Path) -> bool:
-    """Cut an unterminated last line (a row cut by a crash); True if something was removed."""
-    data = path.read_bytes()
-    if not data or data.endswith(b"\n"):
-        return False
-    cut = data.rfind(b"\n") + 1
-    with open(path, "r+b") as fh:
-        fh.truncate(cut)
-    return True
 
 
 def _read_resume(path: Path, program: TestProgram, nest: NestGeometry, opts: AcquisitionOptions) -> _ResumeState | None:
@@ -515,10 +391,6 @@ def _read_resume(path: Path, program: TestProgram, nest: NestGeometry, opts: Acq
         raise AcquisitionError(f"{path}: pose {poses[-1]} is beyond the program's {program.n_poses} poses")
     rows = {p: m.deviation_um[i] for i, p in enumerate(poses)}
     return _ResumeState(poses[-1] + 1, zero, rows, float(m.t_s[-1]))
-
-
-class _Stop(Exception):
-    """Ends the acquisition loop cleanly (reason in the message)."""
 
 
 class _Engine:
@@ -579,70 +451,116 @@ class _Engine:
             verdict = self.trigger.step(s, r, gap)
             if verdict == "take":
                 self.window.append(s)
-                return
-            if verdict == "skip":
+                if len(self.window) < self.o.max_window_samples:
+                    return
+                self.trigger.reason = f"window full ({self.o.max_window_samples} samples)"
+            elif verdict == "skip":
                 return
             self._finish_pose(self.trigger.reason)
             gap = False
             if not self.done:
                 self.trigger.begin(self.pose, self.trigger.level)
+            if verdict == "take":
+                return
+
+    def _flag(self, pose: int, n: int, reason: str) -> None:
+        """No row for ``pose`` (nothing is invented); the summary lists it."""
+        if pose >= self.start_pose:
+            self.summary.flagged.append({"pose": pose, "n_samples": n, "reason": reason})
+        self.pose = pose + 1
+        self.on_pose(pose)
 
     def _finish_pose(self, reason: str) -> None:
-        pose, samples = self.pose, self.window
+        samples = self.window
         self.window = []
         n = len(samples)
-        replay = pose < self.start_pose
+        for unseen in range(self.pose, min(self.trigger.assigned, self.program.n_poses)):
+            self._flag(unseen, 0, "passed unseen: no motion seen before it; the program timing places the next "
+                       "window later")
+        pose = self.pose
+        if self.trigger.doubtful is not None:
+            self._flag(pose, n, f"doubtful pose assignment: {self.trigger.doubtful}")
+            return
         if n < self.o.min_samples:
             if pose == 0:
                 raise _Stop(f"reference pose: only {n} valid samples ({reason}); the nest cannot be zeroed. Check the "
                             f"dwell (it must exceed settling + {self.o.window_s:g} s) and the link")
-            if not replay:
-                self.summary.flagged.append({"pose": pose, "n_samples": n, "reason": reason})
-            self.pose += 1
-            self.on_pose(pose)
+            self._flag(pose, n, reason)
             return
+        if isinstance(self.trigger, _ScheduleTrigger):
+            samples, why = self._scheduled_window(samples)
+            if why:
+                self._flag(pose, len(samples), why)
+                return
         raw = readings_array(samples)
         mean_raw = raw.mean(axis=0)
         t_mean = float(np.mean([x.t_s for x in samples]))
         if pose == 0:
-            self.t0 = t_mean
-            if self.resume is not None:
-                if np.abs(mean_raw - self.resume.zero).max() > self.o.replay_tol_um:
-                    raise AcquisitionError(
-                        f"resume: the reference readings {np.round(mean_raw, 3).tolist()} um differ from the file's "
-                        f"zero {np.round(self.resume.zero, 3).tolist()} um by more than {self.o.replay_tol_um:g} um: "
-                        "the nest moved or was re-zeroed; start a new file")
-                self.zero = self.resume.zero
-            else:
-                self.zero = mean_raw
-                self.writer = MeasurementWriter(self.out, _template(self.program, self.nest, self.o, mean_raw))
-        assert self.zero is not None and self.t0 is not None
+            self._zero(mean_raw, t_mean)
+        assert self.zero is not None
         rot = self.rot[pose] if self.o.frame == "machine" else None
         mean, sd = point_statistics(raw, self.zero, self.nest, rot)
         if pose == 0:
             mean = np.zeros(3)
-        if replay:
-            self.summary.poses_replayed += 1
-            row = self.resume.rows.get(pose) if self.resume else None
-            if row is not None and np.abs(mean - row).max() > self.o.replay_tol_um:
-                raise AcquisitionError(
-                    f"resume: pose {pose} measured again differs from its row by {np.abs(mean - row).max():.3g} um "
-                    f"(> {self.o.replay_tol_um:g} um): the machine must run the program again from its start with the "
-                    "same set-up")
+        if pose < self.start_pose:
+            self._check_replay(pose, mean)
         else:
-            t_row = 0.0 if pose == 0 else t_mean - self.t0
-            t_row = max(t_row, self.last_row_t) if pose > 0 else t_row
-            seqs = [x.seq for x in samples]
-            extra = {"pose": str(pose), "seq_first": "" if seqs[0] is None else str(seqs[0]),
-                     "seq_last": "" if seqs[-1] is None else str(seqs[-1]),
-                     "r1_um": _fmt(mean_raw[0]), "r2_um": _fmt(mean_raw[1]), "r3_um": _fmt(mean_raw[2])}
-            assert self.writer is not None
-            self.writer.write_row(t_row, self.program.angles_deg[pose], mean, self.linear[pose],
-                                  {"n_samples": float(n), "sd_um": sd}, extra)
-            self.last_row_t = t_row
-            self.summary.rows_written += 1
+            self._write_row(pose, samples, mean, sd, mean_raw, t_mean)
+        self.trigger.confirm(pose)
         self.pose += 1
         self.on_pose(pose)
+
+    def _scheduled_window(self, samples: list[Sample]) -> tuple[list[Sample], str | None]:
+        """A window placed by the schedule: spikes (readings beyond ``tolerance_um`` from the window's median)
+        are left out; a window where more than a tenth of the readings are off is not a pose (flagged)."""
+        raw = readings_array(samples)
+        off = (np.abs(raw - np.median(raw, axis=0)) > self.o.tolerance_um).any(axis=1)
+        n_off = int(off.sum())
+        if n_off > 0.1 * len(samples):
+            return samples, (f"doubtful pose: {n_off} of {len(samples)} readings farther than "
+                             f"{self.o.tolerance_um:g} um from the window's median (the machine was not still)")
+        self.summary.spikes += n_off
+        kept = [x for x, bad in zip(samples, off, strict=True) if not bad]
+        if len(kept) < self.o.min_samples:
+            return kept, f"only {len(kept)} valid samples after leaving out {n_off} spikes"
+        return kept, None
+
+    def _zero(self, mean_raw: np.ndarray, t_mean: float) -> None:
+        """The reference window zeroes the nest (or must match the zero of the file being resumed)."""
+        self.t0 = t_mean
+        if self.resume is None:
+            self.zero = mean_raw
+            self.writer = MeasurementWriter(self.out, _template(self.program, self.nest, self.o, mean_raw))
+            return
+        if np.abs(mean_raw - self.resume.zero).max() > self.o.replay_tol_um:
+            raise AcquisitionError(
+                f"resume: the reference readings {np.round(mean_raw, 3).tolist()} um differ from the file's "
+                f"zero {np.round(self.resume.zero, 3).tolist()} um by more than {self.o.replay_tol_um:g} um: "
+                "the nest moved or was re-zeroed; start a new file")
+        self.zero = self.resume.zero
+
+    def _check_replay(self, pose: int, mean: np.ndarray) -> None:
+        """A pose already in the resumed file, measured again: it must agree with its row."""
+        self.summary.poses_replayed += 1
+        row = self.resume.rows.get(pose) if self.resume else None
+        if row is not None and np.abs(mean - row).max() > self.o.replay_tol_um:
+            raise AcquisitionError(
+                f"resume: pose {pose} measured again differs from its row by {np.abs(mean - row).max():.3g} um "
+                f"(> {self.o.replay_tol_um:g} um): the machine must run the program again from its start with the "
+                "same set-up")
+
+    def _write_row(self, pose: int, samples: list[Sample], mean: np.ndarray, sd: float, mean_raw: np.ndarray,
+                   t_mean: float) -> None:
+        assert self.t0 is not None and self.writer is not None
+        t_row = 0.0 if pose == 0 else max(t_mean - self.t0, self.last_row_t)
+        seqs = [x.seq for x in samples]
+        extra = {"pose": str(pose), "seq_first": "" if seqs[0] is None else str(seqs[0]),
+                 "seq_last": "" if seqs[-1] is None else str(seqs[-1]),
+                 "r1_um": _fmt(mean_raw[0]), "r2_um": _fmt(mean_raw[1]), "r3_um": _fmt(mean_raw[2])}
+        self.writer.write_row(t_row, self.program.angles_deg[pose], mean, self.linear[pose],
+                              {"n_samples": float(len(samples)), "sd_um": sd}, extra)
+        self.last_row_t = t_row
+        self.summary.rows_written += 1
 
 
 # --------------------------------------------------------------------------------------------- the loop
@@ -651,9 +569,10 @@ class _Engine:
 def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
             options: AcquisitionOptions | None = None, settings: PortSettings | None = None,
             nest: NestGeometry | None = None, adapter: DeviceAdapter | None = None, resume: bool = False,
-            raw_log: str | os.PathLike[str] | None | bool = True, progress: bool = False,
+            force: bool = False, raw_log: str | os.PathLike[str] | None | bool = True, progress: bool = False,
             key_source: Callable[[], bool] | None = None, echo: Callable[[str], None] | None = None,
-            opener: Callable[[], Any] | None = None) -> AcquisitionSummary:
+            opener: Callable[[], Any] | None = None,
+            inputs: Iterable[str | os.PathLike[str]] = ()) -> AcquisitionSummary:
     """Acquire every pose of a test program from a device and write a ``pige-rtest 1`` file.
 
     Parameters
@@ -673,6 +592,10 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
         Default: the ``rtest`` streaming protocol.
     resume : bool
         Continue a partial ``out`` (module docstring).
+    force : bool
+        Replace an existing ``out`` (and its raw log and summary) with a new run.  Without
+        ``resume`` or ``force`` an existing ``out`` is refused; an existing raw log alone is
+        appended to.
     raw_log : path-like, True or None/False
         Raw byte log; True means ``<stem>.raw.log`` beside ``out``; None/False disables it.
     progress : bool
@@ -684,6 +607,8 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
     opener : callable () -> port object
         Opens the port instead of :func:`~pige_sym.acquisition.transport.open_port` (tests, special links);
         the port must be non-blocking (pyserial ``timeout=0``).
+    inputs : iterable of path-like
+        Files the run reads (program, nest): no output may be one of them.
 
     Returns
     -------
@@ -693,6 +618,8 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
 
     Raises
     ------
+    InputError
+        An output would clobber a file or cannot be written (checked before the port is opened).
     AcquisitionError
         The port cannot be opened at the start, or ``resume`` does not match the file.
     KeyboardInterrupt
@@ -705,121 +632,211 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
     adapter = adapter or RTestProtocolAdapter()
     say = echo or (lambda msg: print(msg, file=sys.stderr))
     out_p = Path(out)
-    log_path: Path | None
-    if raw_log is True:
-        log_path = default_raw_log(out_p)
-    elif raw_log in (None, False):
-        log_path = None
-    else:
-        log_path = Path(raw_log)  # type: ignore[arg-type]
+    log_path = _raw_log_path(out_p, raw_log)
+    check_acquisition_files(out_p, log_path, resume=resume, force=force, inputs=inputs)
     summary = AcquisitionSummary(port=port, out=str(out_p), raw_log=None if log_path is None else str(log_path),
                                  program=program.description, n_poses=program.n_poses)
     started = time.monotonic()
-
-    state: _ResumeState | None = None
-    if resume and out_p.exists():
-        summary.resumed = True
-        summary.removed_partial_line = _remove_partial_line(out_p)
-        if summary.removed_partial_line:
-            say(f"resume: removed an incomplete last line from {out_p}")
-        state = _read_resume(out_p, program, nest, opts)
-        if state is not None:
-            summary.first_pose = state.start_pose
-            if state.start_pose >= program.n_poses:
-                summary.completed = True
-                summary.stop_reason = None
-                say(f"resume: {out_p} already holds every pose of the program")
-                _write_summary(summary, out_p)
-                return summary
-            say(f"resume: {out_p} holds poses up to {state.start_pose - 1}; the program is measured again from "
-                f"its start and rows are appended from pose {state.start_pose}")
-    elif resume:
-        say(f"resume: {out_p} does not exist yet, starting a new file")
-
-    axes = program.rotary_axes
-
-    def prompt(pose: int) -> None:
-        ang = ", ".join(f"{a}={v:g}" for a, v in zip(axes, program.angles_deg[pose], strict=True))
-        say(f"pose {pose}/{program.n_poses - 1} ({ang} deg): press Enter when the machine is in position")
-
-    trigger: _Trigger
-    if opts.trigger == "stable":
-        trigger = _StableTrigger(opts)
-    elif opts.trigger == "schedule":
-        trigger = _ScheduleTrigger(opts, program)
-    else:
-        trigger = _KeyTrigger(opts, key_source or StdinKeys(), prompt)
-
-    overall = tqdm(total=program.n_poses, unit="pose", desc="poses", disable=not progress, position=0,
-                   dynamic_ncols=True, file=sys.stderr)
-    point = tqdm(total=opts.window_s, unit="s", desc="point", disable=not progress, position=1, leave=False,
-                 dynamic_ncols=True, file=sys.stderr,
-                 bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:g} s{postfix}")
-
-    def on_pose(pose: int) -> None:
-        overall.update(1)
-        point.reset(total=opts.window_s)
-
+    state = _prepare_resume(out_p, program, nest, opts, summary, say) if resume else None
+    if summary.completed:
+        _write_summary(summary, out_p)
+        return summary
+    trigger = _make_trigger(opts, program, key_source, say)
+    bars = _ProgressBars(program.n_poses, opts.window_s, progress)
     link = _Link(port, settings, opts, adapter, opener, summary)
     try:
         link.open()
     except AcquisitionError:
-        overall.close()
-        point.close()
+        bars.close()
         raise
-    engine = _Engine(program, out_p, nest, opts, summary, state, trigger, on_pose)
+    engine = _Engine(program, out_p, nest, opts, summary, state, trigger, bars.on_pose)
     records = _Records(adapter, summary, engine)
-    log = RawLog(log_path)
-    last_data = timer = time.monotonic()
-    in_stall = False
-    last_status = 0.0
+    log = RawLog(log_path, append=resume or not force)
+    session = _Session(link, records, engine, log, summary, settings, opts,
+                       opts.max_bytes or default_max_bytes(program), bars, progress)
     try:
-        while not engine.done:
-            try:
-                data = link.read()
-            except (serial.SerialException, OSError):
-                summary.disconnects += 1
-                records.reset()
-                link.reopen(engine.pose)
-                timer = time.monotonic()
-                continue
-            now = time.monotonic()
-            if not data:
-                if now - timer >= settings.timeout_s:
-                    summary.timeouts += 1
-                    if not in_stall:
-                        summary.stalls += 1
-                        in_stall = True
-                    if now - last_data >= opts.reconnect_timeout_s:
-                        raise _Stop(f"no data from the device for {now - last_data:.0f} s at pose {engine.pose}")
-                    records.reset()
-                    link.reopen(engine.pose)
-                    timer = time.monotonic()
-                continue
-            in_stall = False
-            last_data = timer = now
-            log.write(data)  # logged (and flushed) before anything is parsed
-            summary.bytes_read += len(data)
-            records.feed(data)
-            if progress and now - last_status > 0.1:
-                last_status = now
-                win = engine.window
-                point.n = min((win[-1].t_s - win[0].t_s) if len(win) > 1 else 0.0, opts.window_s)
-                point.set_description_str(f"pose {engine.pose}")
-                point.set_postfix_str(f"{trigger.status()}, {len(win)} samples, "
-                                      f"{summary.rejected_total} rejected", refresh=True)
+        session.run()
         summary.completed = True
     except _Stop as stop:
         summary.stop_reason = str(stop)
     except (KeyboardInterrupt, AcquisitionError) as exc:
         interrupted = isinstance(exc, KeyboardInterrupt)
         summary.stop_reason = "interrupted (Ctrl-C or SIGTERM)" if interrupted else str(exc)
-        _finish(summary, records, log, engine, link, started, out_p, overall, point)
+        _finish(session, started, out_p)
         if interrupted:
             say(summary.format())
         raise
-    _finish(summary, records, log, engine, link, started, out_p, overall, point)
+    _finish(session, started, out_p)
     return summary
+
+
+def default_max_bytes(program: TestProgram) -> int:
+    """Default byte budget of one session: 16 MiB plus 128 kB per second of program [bytes].
+
+    A fast nest (1 kHz, 64-byte records) sends 64 kB/s, so the budget holds a run twice over;
+    a runaway stream is stopped after a few seconds instead of filling the disk.
+    """
+    return int(16 * 2**20 + 128_000 * program.duration_s)
+
+
+def _prepare_resume(out: Path, program: TestProgram, nest: NestGeometry, opts: AcquisitionOptions,
+                    summary: AcquisitionSummary, say: Callable[[str], None]) -> _ResumeState | None:
+    """Resume state of ``out`` (None: start a new file); ``summary.completed`` when nothing is left."""
+    if not out.exists():
+        say(f"resume: {out} does not exist yet, starting a new file")
+        return None
+    summary.resumed = True
+    summary.removed_partial_line = _remove_partial_line(out)
+    if summary.removed_partial_line:
+        say(f"resume: removed an incomplete last line from {out}")
+    state = _read_resume(out, program, nest, opts)
+    if state is None:
+        return None
+    summary.first_pose = state.start_pose
+    if state.start_pose >= program.n_poses:
+        summary.completed = True
+        say(f"resume: {out} already holds every pose of the program")
+        return state
+    say(f"resume: {out} holds poses up to {state.start_pose - 1}; the program is measured again from "
+        f"its start and rows are appended from pose {state.start_pose}")
+    return state
+
+
+def _make_trigger(opts: AcquisitionOptions, program: TestProgram, key_source: Callable[[], bool] | None,
+                  say: Callable[[str], None]) -> _Trigger:
+    if opts.trigger == "stable":
+        return _StableTrigger(opts, program)
+    if opts.trigger == "schedule":
+        return _ScheduleTrigger(opts, program)
+    axes = program.rotary_axes
+
+    def prompt(pose: int) -> None:
+        ang = ", ".join(f"{a}={v:g}" for a, v in zip(axes, program.angles_deg[pose], strict=True))
+        say(f"pose {pose}/{program.n_poses - 1} ({ang} deg): press Enter when the machine is in position")
+
+    return _KeyTrigger(opts, key_source or StdinKeys(), prompt)
+
+
+class _ProgressBars:
+    """Overall and per-point tqdm bars on stderr (disabled unless ``progress``)."""
+
+    def __init__(self, n_poses: int, window_s: float, progress: bool) -> None:
+        self.window_s = window_s
+        self.overall = tqdm(total=n_poses, unit="pose", desc="poses", disable=not progress, position=0,
+                            dynamic_ncols=True, file=sys.stderr)
+        self.point = tqdm(total=window_s, unit="s", desc="point", disable=not progress, position=1, leave=False,
+                          dynamic_ncols=True, file=sys.stderr,
+                          bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:g} s{postfix}")
+
+    def on_pose(self, pose: int) -> None:
+        self.overall.update(1)
+        self.point.reset(total=self.window_s)
+
+    def show(self, engine: _Engine, summary: AcquisitionSummary) -> None:
+        win = engine.window
+        self.point.n = min((win[-1].t_s - win[0].t_s) if len(win) > 1 else 0.0, self.window_s)
+        self.point.set_description_str(f"pose {engine.pose}")
+        self.point.set_postfix_str(f"{engine.trigger.status()}, {len(win)} samples, "
+                                   f"{summary.rejected_total} rejected", refresh=True)
+
+    def close(self) -> None:
+        self.overall.close()
+        self.point.close()
+
+
+class _Session:
+    """The read loop of one acquisition, with every resource bounded.
+
+    Bounds: bytes read per session (``max_bytes``, logged up to the limit), time without a
+    valid record (``reconnect_timeout_s``: a silent port, noise, an endless line or a port
+    that accepts and closes), reconnections in a row without a valid record
+    (``max_reconnects``), samples per window (``max_window_samples``) and frame length (the
+    framer's ``max_len``).  Each ends the run through :class:`_Stop` with a reason.
+    """
+
+    def __init__(self, link: _Link, records: _Records, engine: _Engine, log: RawLog, summary: AcquisitionSummary,
+                 settings: PortSettings, opts: AcquisitionOptions, max_bytes: int, bars: _ProgressBars,
+                 progress: bool) -> None:
+        self.link, self.records, self.engine, self.log = link, records, engine, log
+        self.summary, self.settings, self.o = summary, settings, opts
+        self.max_bytes = max_bytes
+        self.bars = bars
+        self.progress = progress
+        now = time.monotonic()
+        self.timer = self.last_valid = now
+        self.last_reconnect = -math.inf
+        self.reconnects_in_a_row = 0
+        self.accepted_seen = 0
+        self.in_stall = False
+        self.last_status = 0.0
+
+    def run(self) -> None:
+        while not self.engine.done:
+            self._check_valid_records()
+            try:
+                data = self.link.read()
+            except (serial.SerialException, OSError):
+                self.summary.disconnects += 1
+                self._reconnect()
+                continue
+            if not data:
+                self._on_silence()
+                continue
+            self.in_stall = False
+            self.timer = time.monotonic()
+            self._log(data)
+            self.records.feed(data)
+            if self.progress and self.timer - self.last_status > 0.1:
+                self.last_status = self.timer
+                self.bars.show(self.engine, self.summary)
+
+    def _check_valid_records(self) -> None:
+        now = time.monotonic()
+        if self.summary.accepted != self.accepted_seen:
+            self.accepted_seen = self.summary.accepted
+            self.last_valid = now
+            self.reconnects_in_a_row = 0
+        elif now - self.last_valid >= self.o.reconnect_timeout_s:
+            s = self.summary
+            raise _Stop(f"no valid record from the device for {now - self.last_valid:.0f} s at pose "
+                        f"{self.engine.pose} ({s.bytes_read} bytes read, {s.rejected_total} records rejected, "
+                        f"{self.records.framer.noise_bytes} noise bytes, {s.reconnects} reconnects): check the port, "
+                        "its settings and the device, then run again with --resume")
+
+    def _on_silence(self) -> None:
+        now = time.monotonic()
+        if now - self.timer < self.settings.timeout_s:
+            return
+        self.summary.timeouts += 1
+        if not self.in_stall:
+            self.summary.stalls += 1
+            self.in_stall = True
+        self._reconnect()
+
+    def _reconnect(self) -> None:
+        self.reconnects_in_a_row += 1
+        if self.reconnects_in_a_row > self.o.max_reconnects:
+            raise _Stop(f"reconnected {self.o.max_reconnects} times in a row without a valid record at pose "
+                        f"{self.engine.pose}: the port accepts and drops the link; check the device, then run "
+                        "again with --resume")
+        pause = self.last_reconnect + self.o.retry_s - time.monotonic()
+        if pause > 0:
+            time.sleep(pause)  # a port that fails at once is not hammered
+        self.records.reset()
+        self.link.reopen(self.engine.pose)
+        self.last_reconnect = self.timer = time.monotonic()
+
+    def _log(self, data: bytes) -> None:
+        """Log (and flush) the bytes before anything is parsed; stop at the byte budget."""
+        room = self.max_bytes - self.summary.bytes_read
+        if len(data) > room:
+            self.log.write(data[:max(room, 0)])
+            self.summary.bytes_read += max(room, 0)
+            raise _Stop(f"read {self.max_bytes} bytes at pose {self.engine.pose}, the byte budget of this run "
+                        "(--max-raw-log): the device sends far more than the program needs; check its rate, "
+                        "or raise --max-raw-log")
+        self.log.write(data)
+        self.summary.bytes_read += len(data)
 
 
 class _Link:
@@ -882,10 +899,18 @@ class _Records:
         self.engine = engine
         self.framer = adapter.new_framer()
         self.last_seq: int | None = None
+        self.recent: set[int] = set()  # sequence numbers of the last RECENT_SEQS accepted samples
+        self._recent_order: deque[int] = deque()
 
     def reset(self) -> None:
         """A new connection: a partial frame is dropped (counted as truncated)."""
         self.framer.reset()
+
+    def _remember(self, seq: int) -> None:
+        self.recent.add(seq)
+        self._recent_order.append(seq)
+        if len(self._recent_order) > RECENT_SEQS:
+            self.recent.discard(self._recent_order.popleft())
 
     def _reject(self, reason: str) -> None:
         self.summary.rejected[reason] = self.summary.rejected.get(reason, 0) + 1
@@ -907,8 +932,8 @@ class _Records:
                                 f"of {engine.program.n_poses} was measured")
                 continue
             if rec.seq is not None and self.last_seq is not None:
-                if rec.seq == self.last_seq:
-                    self._reject("duplicate")
+                if rec.seq == self.last_seq or (rec.seq < self.last_seq and rec.seq in self.recent):
+                    self._reject("duplicate")  # sent again (also out of order, e.g. a gateway replaying its buffer)
                     continue
                 if rec.seq < self.last_seq:
                     raise _Stop(f"the device restarted (sequence {self.last_seq} then {rec.seq}) at pose "
@@ -916,19 +941,19 @@ class _Records:
                 s.missing += rec.seq - self.last_seq - 1
             if rec.seq is not None:
                 self.last_seq = rec.seq
+                self._remember(rec.seq)
             s.accepted += 1
             engine.on_sample(rec)
             if engine.done:
                 return
 
 
-def _finish(summary: AcquisitionSummary, records: _Records, log: RawLog, engine: _Engine, link: _Link,
-            started: float, out: Path, *bars: Any) -> None:
-    for bar in bars:
-        bar.close()
-    link.close()
-    engine.close()
-    log.close()
+def _finish(session: _Session, started: float, out: Path) -> None:
+    summary, records = session.summary, session.records
+    session.bars.close()
+    session.link.close()
+    session.engine.close()
+    session.log.close()
     fr = records.framer
     summary.frames = fr.frames
     summary.noise_bytes = fr.noise_bytes
@@ -936,20 +961,10 @@ def _finish(summary: AcquisitionSummary, records: _Records, log: RawLog, engine:
     for reason, count in (("truncated", fr.truncated), ("overlong", fr.overlong)):
         if count:
             summary.rejected[reason] = summary.rejected.get(reason, 0) + count
+    trig = session.engine.trigger
+    if isinstance(trig, _StableTrigger):
+        summary.spikes += trig.spikes
+        summary.spurious_settles = trig.spurious
     summary.wall_s = time.monotonic() - started
-    if engine.writer is not None or out.exists():
+    if session.engine.writer is not None or out.exists():
         _write_summary(summary, out)
-
-
-def _write_summary(summary: AcquisitionSummary, out: Path) -> None:
-    """Append this session to ``<stem>.acq.json`` (a list of sessions)."""
-    path = summary_path(out)
-    sessions: list[Any] = []
-    if summary.resumed and path.exists():
-        try:
-            old = json.loads(path.read_text(encoding="utf-8"))
-            sessions = list(old.get("sessions", [])) if isinstance(old, dict) else []
-        except (json.JSONDecodeError, OSError):
-            sessions = []
-    sessions.append(summary.to_dict())
-    atomic_write_text(path, to_json({"sessions": sessions}) + "\n")

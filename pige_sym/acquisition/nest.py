@@ -50,19 +50,28 @@ a JSON file
 
 from __future__ import annotations
 
-import json
 import math
 import os
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from pige_sym.errors import FileFormatError, InputError
+from pige_sym.schema import read_json_file
 
 CUBE_CORNER_TILT_DEG = math.degrees(math.atan(1 / math.sqrt(2)))  # 35.264°
 PROBES = ("flat", "point")
+
+
+@dataclass(frozen=True)
+class NestDocument:
+    """Schema of a nest JSON file (:mod:`pige_sym.schema`)."""
+
+    directions: list[list[float]] = field(metadata={"length": 3, "max_abs": 1e6})
+    probe: str | list[str] = field(default="flat", metadata={"length": 3})
+    ball_diameter_mm: float = field(default=25.4, metadata={"max_abs": 1e3})
+    tip_radius_mm: float = field(default=0.0, metadata={"max_abs": 1e3})
 
 
 @dataclass(frozen=True)
@@ -190,22 +199,15 @@ def parse_nest(spec: str | None) -> NestGeometry:
     if spec is None or spec.strip() in ("", "default"):
         return default_nest()
     if os.path.exists(spec):
-        try:
-            data = json.loads(Path(spec).read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise FileFormatError(spec, exc.lineno, f"not valid JSON: {exc.msg}") from None
-        if not isinstance(data, dict) or "directions" not in data:
-            raise FileFormatError(spec, None, 'expected a JSON object with "directions" (three 3-vectors)')
-        probe = data.get("probe", "flat")
-        probes = probe if isinstance(probe, list) else [probe] * 3
-        if len(probes) != 3 or any(p not in PROBES for p in probes):
+        doc = read_json_file(spec, NestDocument, "nest file")
+        probes = list(doc.probe) if isinstance(doc.probe, list) else [doc.probe] * 3
+        if any(p not in PROBES for p in probes):
             raise FileFormatError(spec, None, "probe must be 'flat', 'point' or a list of three of them")
-        radius = float(data.get("ball_diameter_mm", 25.4)) / 2 + float(data.get("tip_radius_mm", 0.0))
+        if not doc.ball_diameter_mm > 0 or doc.tip_radius_mm < 0:
+            raise FileFormatError(spec, None, "ball_diameter_mm must be > 0 and tip_radius_mm >= 0")
+        radius = doc.ball_diameter_mm / 2 + doc.tip_radius_mm
         rho = np.array([radius if p == "point" else math.inf for p in probes])
-        try:
-            return NestGeometry(np.array(data["directions"], dtype=float), rho, f"file {spec}")
-        except (ValueError, TypeError):
-            raise FileFormatError(spec, None, "directions must be three lists of three numbers") from None
+        return NestGeometry(np.array(doc.directions, dtype=float), rho, f"file {spec}")
     opts: dict[str, Any] = {}
     names = {"tilt": "tilt_deg", "azimuth": "azimuth_deg", "probe": "probe", "ball_diameter": "ball_diameter_mm",
              "tip_radius": "tip_radius_mm"}

@@ -145,14 +145,17 @@ class RawLog:
         None disables logging.
     sync_s : float [s]
         Longest time between two ``fsync`` calls (every write is flushed at once).
+    append : bool
+        Continue an existing log (resume); otherwise an existing log is replaced (the caller
+        has checked that it may be, :func:`pige_sym.files.check_output`).
     """
 
-    def __init__(self, path: str | os.PathLike[str] | None, *, sync_s: float = 1.0) -> None:
+    def __init__(self, path: str | os.PathLike[str] | None, *, sync_s: float = 1.0, append: bool = True) -> None:
         self.path = Path(path) if path is not None else None
         self.sync_s = sync_s
         self.bytes = 0
         self._last_sync = time.monotonic()
-        self._fh: IO[bytes] | None = open(self.path, "ab") if self.path is not None else None  # noqa: SIM115
+        self._fh: IO[bytes] | None = open(self.path, "ab" if append else "wb") if self.path is not None else None  # noqa: SIM115
 
     def write(self, data: bytes) -> None:
         """Append ``data`` and flush it (fsync when ``sync_s`` has passed)."""

@@ -44,6 +44,9 @@ than the outage to each other):
 ``garbage``     a burst of 8–48 random bytes (any byte but ``$``) between two records
 ``checksum``    one digit of a reading changed, the CRC left as it was
 ``drop``        one record not sent (its sequence number is skipped)
+``spike``       one record with ``SPIKE_UM`` (50 µm) added to one sensor, its CRC valid (a glitch the
+                framer cannot see; the acquisition must not let it move a window or a pose)
+``duplicate``   one record sent twice in a row (same sequence number)
 ``stall``       nothing sent for ``stall_s`` wall seconds (no sample lost)
 ``disconnect``  the link is dropped after the client has read everything (pty: closed
                 and re-created under the same ``/dev/pts/N``; TCP: connection closed,
@@ -86,7 +89,10 @@ from pige_sym.kernels import DEFAULT_MACHINE, load_kernels
 from pige_sym.nc.rtest_program import TestProgram
 from pige_sym.simulator import simulate
 
-FAULT_KINDS = ("garbage", "checksum", "drop", "stall", "disconnect")
+FAULT_KINDS = ("garbage", "checksum", "drop", "spike", "duplicate", "stall", "disconnect")
+#: faults that change the byte stream only (no timing, no link action): :meth:`VirtualRTest.wire`
+STREAM_FAULTS = ("garbage", "checksum", "drop", "spike", "duplicate")
+SPIKE_UM = 50.0
 DEFAULT_FAULT_COUNT = 3
 TRANSIENT_UM, TRANSIENT_TAU_S, TRANSIENT_HZ = 8.0, 0.15, 3.0
 LAG_UM, VIBRATION_UM, VIBRATION_HZ = 15.0, 3.0, 4.0
@@ -152,6 +158,9 @@ class DeviceConfig:
     linger_s: float = 2.0
 
     def __post_init__(self) -> None:
+        for name in ("rate_hz", "time_scale", "noise_um", "repeatability_um", "stall_s", "outage_s", "linger_s"):
+            if not math.isfinite(getattr(self, name)):
+                raise InputError(f"{name} must be a finite number, got {getattr(self, name)!r}")
         if not self.rate_hz > 0 or not self.time_scale > 0:
             raise InputError("rate and time scale must be > 0")
         if self.noise_um < 0 or self.repeatability_um < 0:
@@ -242,6 +251,7 @@ class VirtualRTest:
         self.plan: dict[int, str] = {}
         self.garbage: dict[int, bytes] = {}
         self.corruption: dict[int, tuple[float, int]] = {}
+        self.spike_sensor: dict[int, int] = {}
         for kind in FAULT_KINDS:
             for _ in range(cfg.faults.get(kind, 0)):
                 for _try in range(10000):
@@ -257,10 +267,41 @@ class VirtualRTest:
                     self.garbage[k] = bytes((v + (v >= 0x24)).astype(np.uint8).tolist())
                 elif kind == "checksum":
                     self.corruption[k] = (float(rng.random()), int(rng.integers(1, 10)))
+                elif kind == "spike":
+                    self.spike_sensor[k] = int(rng.integers(0, 3))
 
     def record(self, k: int) -> bytes:
         """Wire record of sample k."""
         return encode_sample(k, self.t_s[k], self.readings_um[k])
+
+    def spiked_record(self, k: int) -> bytes:
+        """Record k with ``SPIKE_UM`` added to one sensor and a valid CRC."""
+        r = self.readings_um[k].copy()
+        r[self.spike_sensor.get(k, 0)] += SPIKE_UM
+        return encode_sample(k, self.t_s[k], r)
+
+    def wire(self, k: int) -> tuple[bytes, str | None]:
+        """Bytes sent for sample k with its stream fault applied (:data:`STREAM_FAULTS`), and that fault.
+
+        ``stall`` and ``disconnect`` act on the link (:func:`run_device`); here they send the plain record.
+        """
+        fault = self.plan.get(k)
+        if fault == "drop":
+            return b"", fault
+        if fault == "garbage":
+            return self.garbage[k] + self.record(k), fault
+        if fault == "checksum":
+            return self.corrupted_record(k), fault
+        if fault == "spike":
+            return self.spiked_record(k), fault
+        if fault == "duplicate":
+            return self.record(k) * 2, fault
+        return self.record(k), None
+
+    def stream(self, banner: str = "virtual") -> bytes:
+        """The whole program as one byte stream with the stream faults applied (in-process tests)."""
+        body = b"".join(self.wire(k)[0] for k in range(self.n_samples))
+        return encode_info(banner) + body + encode_info("END")
 
     def corrupted_record(self, k: int) -> bytes:
         """Record k with one reading digit changed and the original CRC."""
@@ -498,115 +539,134 @@ def run_device(cfg: DeviceConfig, *, tcp_port: int | None = None, truth_path: st
     connect_timeout_s : float [s]
         Longest wait for the first client.
     """
-    dev = VirtualRTest(cfg)
-    prog = cfg.program
-    injected = {"garbage": 0, "garbage_bytes": 0, "checksum": 0, "drop": 0, "stall": 0, "disconnect": 0,
-                "lost_in_outage": 0}
-    affected: dict[str, list[int]] = {"checksum": [], "drop": [], "disconnect": []}
-    truth: dict[str, Any] = dict(dev.sim_truth)
-    truth.update({
-        "device": {
-            "program": prog.description, "poses": prog.n_poses, "samples": dev.n_samples, "rate_hz": cfg.rate_hz,
-            "time_scale": cfg.time_scale, "move_s": prog.move_s, "dwell_s": prog.dwell_s.tolist(),
-            "noise_um": cfg.noise_um, "repeatability_um": cfg.repeatability_um, "nest": cfg.nest.description,
-            "offsets_um": dev.offsets_um.tolist(), "faults_requested": dict(cfg.faults), "stall_s": cfg.stall_s,
-            "outage_s": cfg.outage_s, "outage_samples": dev.outage_samples,
-        },
-        "deviation_with_repeatability_um": dev.deviation_machine_um.tolist(),
-        "injected": injected, "affected": affected, "sent": 0, "unsent": 0, "interrupted_sends": 0,
-        "finished": False, "port": None,
-    })
-
-    def save() -> None:
-        if truth_path is None:
-            return
-        atomic_write_text(truth_path, to_json(truth) + "\n")
-
+    run = _DeviceRun(cfg, truth_path)
     link: _Link = TcpLink(tcp_port) if tcp_port is not None else PtyLink()
-    truth["port"] = link.url
-    save()
+    run.truth["port"] = link.url
+    run.save()
     announce(link.url)
-    speed = cfg.rate_hz * cfg.time_scale
     try:
         if not link.wait_client(connect_timeout_s):
-            truth["stop_reason"] = f"no client within {connect_timeout_s:g} s"
-            return truth
-        link.send(encode_info(f"pige-rtest-device 1;sensors=3;rate_hz={cfg.rate_hz:g};program={prog.description}"))
-        k, n = 0, dev.n_samples
+            run.truth["stop_reason"] = f"no client within {connect_timeout_s:g} s"
+            return run.truth
+        link.send(encode_info(f"pige-rtest-device 1;sensors=3;rate_hz={cfg.rate_hz:g};"
+                              f"program={cfg.program.description}"))
+        run.stream_program(link)
+        run.send_end(link)
+        run.truth["finished"] = True
+        return run.truth
+    finally:
+        link.close()
+        run.save()
+
+
+class _DeviceRun:
+    """One run of the virtual device: the paced stream, the link faults and the truth record."""
+
+    def __init__(self, cfg: DeviceConfig, truth_path: str | os.PathLike[str] | None) -> None:
+        self.cfg = cfg
+        self.truth_path = truth_path
+        self.dev = dev = VirtualRTest(cfg)
+        prog = cfg.program
+        self.injected = {"garbage": 0, "garbage_bytes": 0, "checksum": 0, "drop": 0, "spike": 0, "duplicate": 0,
+                         "stall": 0, "disconnect": 0, "lost_in_outage": 0}
+        self.affected: dict[str, list[int]] = {"checksum": [], "drop": [], "spike": [], "duplicate": [],
+                                               "disconnect": []}
+        self.truth: dict[str, Any] = dict(dev.sim_truth)
+        self.truth.update({
+            "device": {
+                "program": prog.description, "poses": prog.n_poses, "samples": dev.n_samples,
+                "rate_hz": cfg.rate_hz, "time_scale": cfg.time_scale, "move_s": prog.move_s,
+                "dwell_s": prog.dwell_s.tolist(), "noise_um": cfg.noise_um,
+                "repeatability_um": cfg.repeatability_um, "nest": cfg.nest.description,
+                "offsets_um": dev.offsets_um.tolist(), "faults_requested": dict(cfg.faults),
+                "stall_s": cfg.stall_s, "outage_s": cfg.outage_s, "outage_samples": dev.outage_samples,
+            },
+            "deviation_with_repeatability_um": dev.deviation_machine_um.tolist(),
+            "injected": self.injected, "affected": self.affected, "sent": 0, "unsent": 0, "interrupted_sends": 0,
+            "finished": False, "port": None,
+        })
+        self.k = 0
+        self.streaming = True
+
+    def save(self) -> None:
+        if self.truth_path is not None:
+            atomic_write_text(self.truth_path, to_json(self.truth) + "\n")
+
+    def stream_program(self, link: _Link) -> None:
+        """Send every sample at its pace, pausing while no client listens, applying the faults."""
+        speed = self.cfg.rate_hz * self.cfg.time_scale
+        n = self.dev.n_samples
         origin_wall, origin_k = time.monotonic(), 0
-        streaming = True
-        while k < n:
+        while self.k < n:
             due = min(n, origin_k + int((time.monotonic() - origin_wall) * speed) + 1)
-            if k >= due:
+            if self.k >= due:
                 time.sleep(min(0.005, 1.0 / speed))
                 continue
             if not link.connected():
-                if streaming:
-                    streaming = link.wait_client(cfg.linger_s)
-                else:
-                    streaming = link.wait_client(0.0)
-                if streaming:
-                    origin_wall, origin_k = time.monotonic(), k
+                self.streaming = link.wait_client(self.cfg.linger_s if self.streaming else 0.0)
+                if self.streaming:
+                    origin_wall, origin_k = time.monotonic(), self.k
                     continue
-                truth["unsent"] += due - k  # nobody listening: the machine goes on
-                k = due
+                self.truth["unsent"] += due - self.k  # nobody listening: the machine goes on
+                self.k = due
                 continue
-            batch = bytearray()
-            special: str | None = None
-            end = min(due, k + 400)
-            while k < end:
-                fault = dev.plan.get(k)
-                if fault in ("stall", "disconnect"):
-                    special = fault
-                    break
-                if fault == "drop":
-                    injected["drop"] += 1
-                    affected["drop"].append(k)
-                    k += 1
-                    continue
-                if fault == "garbage":
-                    batch += dev.garbage[k]
-                    injected["garbage"] += 1
-                    injected["garbage_bytes"] += len(dev.garbage[k])
-                if fault == "checksum":
-                    batch += dev.corrupted_record(k)
-                    injected["checksum"] += 1
-                    affected["checksum"].append(k)
-                else:
-                    batch += dev.record(k)
-                truth["sent"] += 1
-                k += 1
-            if batch and not link.send(bytes(batch)):
-                truth["interrupted_sends"] += 1
+            batch, special = self._batch(due)
+            if batch and not link.send(batch):
+                self.truth["interrupted_sends"] += 1
                 continue
             if special is not None:
-                del dev.plan[k]
-                if special == "stall":
-                    injected["stall"] += 1
-                    save()
-                    time.sleep(cfg.stall_s)
-                else:
-                    link.drain()
-                    link.drop_client()
-                    lost = list(range(k, min(n, k + dev.outage_samples)))
-                    affected["disconnect"].extend(lost)
-                    injected["disconnect"] += 1
-                    injected["lost_in_outage"] += len(lost)
-                    k += len(lost)
-                    save()
-                    streaming = link.wait_client(max(cfg.linger_s, 10.0))
-                origin_wall, origin_k = time.monotonic(), k
+                self._link_fault(link, special)
+                origin_wall, origin_k = time.monotonic(), self.k
+
+    def _batch(self, due: int) -> tuple[bytes, str | None]:
+        """Wire bytes of the samples up to ``due`` (at most 400), stopping before a link fault."""
+        dev = self.dev
+        batch = bytearray()
+        end = min(due, self.k + 400)
+        while self.k < end:
+            k = self.k
+            data, fault = dev.wire(k)
+            if dev.plan.get(k) in ("stall", "disconnect"):
+                return bytes(batch), dev.plan[k]
+            if fault is not None:
+                self.injected[fault] += 1
+                if fault in self.affected:
+                    self.affected[fault].append(k)
+                if fault == "garbage":
+                    self.injected["garbage_bytes"] += len(dev.garbage[k])
+            if fault != "drop":
+                self.truth["sent"] += 1
+            batch += data
+            self.k += 1
+        return bytes(batch), None
+
+    def _link_fault(self, link: _Link, special: str) -> None:
+        """A stall (nothing sent for ``stall_s``) or a disconnect (``outage_s`` of samples lost)."""
+        dev, cfg = self.dev, self.cfg
+        del dev.plan[self.k]
+        if special == "stall":
+            self.injected["stall"] += 1
+            self.save()
+            time.sleep(cfg.stall_s)
+            return
+        link.drain()
+        link.drop_client()
+        lost = list(range(self.k, min(dev.n_samples, self.k + dev.outage_samples)))
+        self.affected["disconnect"].extend(lost)
+        self.injected["disconnect"] += 1
+        self.injected["lost_in_outage"] += len(lost)
+        self.k += len(lost)
+        self.save()
+        self.streaming = link.wait_client(max(cfg.linger_s, 10.0))
+
+    def send_end(self, link: _Link) -> None:
+        """``$RI,END``, then wait until the client has read everything and left (at most ``linger_s``)."""
         if link.connected():
             link.send(encode_info("END"))
             link.drain()
-            deadline = time.monotonic() + cfg.linger_s
+            deadline = time.monotonic() + self.cfg.linger_s
             while link.connected() and time.monotonic() < deadline:
                 time.sleep(0.01)
-        truth["finished"] = True
-        return truth
-    finally:
-        link.close()
-        save()
 
 
 # --------------------------------------------------------------------------------------------- as a process

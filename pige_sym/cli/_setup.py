@@ -16,14 +16,20 @@ from pige_sym.kernels import DEFAULT_MACHINE
 
 
 def parse_vec3(text: str, what: str) -> list[float]:
-    """Three comma-separated numbers, or a clear InputError naming the option."""
-    try:
-        vals = [float(x) for x in text.split(",")]
-    except ValueError:
-        raise InputError(f"{what}: expected x,y,z numbers, got {text!r}") from None
-    if len(vals) != 3:
-        raise InputError(f"{what}: expected 3 numbers x,y,z, got {len(vals)}")
-    return vals
+    """Three comma-separated ASCII decimals within ±1e5 mm, or a clear InputError naming the option."""
+    from pige_sym.io import LIMITS, parse_number
+
+    parts = text.split(",")
+    if len(parts) != 3:
+        raise InputError(f"{what}: expected 3 numbers x,y,z, got {len(parts)}")
+    vals = [parse_number(x) for x in parts]
+    bad = [x for x, v in zip(parts, vals, strict=True) if v is None]
+    if bad:
+        raise InputError(f"{what}: {bad[0].strip()!r} is not a number (ASCII decimal); expected x,y,z in mm")
+    out = [float(v) for v in vals if v is not None]
+    if max(abs(v) for v in out) > LIMITS["mm"]:
+        raise InputError(f"{what}: {text} is not physical (|x|, |y|, |z| <= {LIMITS['mm']:g} mm)")
+    return out
 
 
 def parse_pivots(items: list[str] | None) -> dict[str, list[float]]:
@@ -69,3 +75,36 @@ def setup_geometry(args: argparse.Namespace) -> tuple[list[float], dict[str, lis
     """Ball [mm], nominal pivots by axis [mm] and tool offset [mm] (None when not given)."""
     return (parse_vec3(args.ball, "--ball"), parse_pivots(args.pivot),
             parse_vec3(args.tool, "--tool") if args.tool else None)
+
+
+def pige_values(spec: str, machine: str, seed: int | None) -> dict[str, float]:
+    """``--pige``: ``random``, ``NAME=VALUE,...`` or a parameter file [µm, µrad].
+
+    A file goes through :func:`pige_sym.schema.read_params_file` (strict JSON, finite physical
+    numbers, the machine must agree); PIGEs it does not give are 0, as with ``NAME=VALUE``.
+    """
+    import os
+
+    from pige_sym.schema import read_params_file
+    from pige_sym.simulator import parse_pige
+
+    if not os.path.isfile(spec):
+        return parse_pige(spec, machine, seed)
+    params = read_params_file(spec, machine=machine, allow_missing=True)
+    if params.effect_values:
+        raise InputError(f"--pige {spec}: effect parameters ({', '.join(params.effect_values)}) are not PIGEs; "
+                         "give effects with --effect")
+    return dict(params.pige)
+
+
+def finite_option(value: float, name: str, *, minimum: float | None = None, positive: bool = False) -> float:
+    """A numeric option that must be finite (and >= ``minimum`` / > 0); InputError naming it otherwise."""
+    import math
+
+    if not math.isfinite(value):
+        raise InputError(f"{name}: {value!r} is not a finite number")
+    if positive and not value > 0:
+        raise InputError(f"{name} must be > 0, got {value:g}")
+    if minimum is not None and value < minimum:
+        raise InputError(f"{name} must be >= {minimum:g}, got {value:g}")
+    return value

@@ -4,14 +4,18 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import re
 import signal
 from typing import Any
 
 from pige_sym.acquisition.device import ADAPTERS, make_adapter
-from pige_sym.acquisition.engine import TRIGGERS, AcquisitionOptions, acquire, summary_path
+from pige_sym.acquisition.engine import TRIGGERS, AcquisitionOptions, acquire
 from pige_sym.acquisition.nest import parse_nest
+from pige_sym.acquisition.outputs import summary_path
 from pige_sym.acquisition.transport import PARITIES, STOPBITS, PortSettings
-from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
+from pige_sym.cli._setup import add_setup_arguments, finite_option, setup_geometry, trajectory_options
+from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.rtest_program import DEFAULT_DWELL_S, DEFAULT_MOVE_S, load_test_program
 
@@ -20,22 +24,37 @@ def _interrupt(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt  # SIGTERM ends the run like Ctrl-C: summary written, partial file valid
 
 
+_SIZE = re.compile(r"([0-9]{1,15})([kKmMgG]?)[bB]?")
+
+
+def parse_size(text: str) -> int:
+    """``500M``, ``2G``, ``65536`` → bytes (k, M, G are powers of 1024)."""
+    m = _SIZE.fullmatch(text.strip())
+    if not m:
+        raise InputError(f"--max-raw-log: expected a size like 65536, 500M or 2G, got {text!r}")
+    return int(m.group(1)) * 1024 ** " kmg".index(m.group(2).lower() or " ")
+
+
 def _run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, _interrupt)
     kern = load_kernels(args.machine)
     ball, pivots, tool = setup_geometry(args)
     program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=ball, pivots_mm=pivots, tool_mm=tool,
-                                move_s=args.move, dwell_s=args.dwell, **trajectory_options(args))
+                                move_s=finite_option(args.move, "--move", minimum=0.0),
+                                dwell_s=finite_option(args.dwell, "--dwell", positive=True), **trajectory_options(args))
     settings = PortSettings(baudrate=args.baud, bytesize=args.bytesize, parity=args.parity, stopbits=args.stopbits,
                             timeout_s=args.timeout)
     options = AcquisitionOptions(
         trigger=args.trigger, window_s=args.window, settle_s=args.settle, tolerance_um=args.tolerance,
         delay_s=args.delay, min_samples=args.min_samples, max_gap_s=args.max_gap,
         reconnect_timeout_s=args.reconnect_timeout, frame=args.frame, replay_tol_um=args.replay_tol,
+        timing_check=not args.no_timing_check, max_reconnects=args.max_reconnects,
+        max_bytes=parse_size(args.max_raw_log) if args.max_raw_log else None,
     )
+    inputs = [x for x in (args.trajectory, args.nest) if os.path.isfile(x)]
     summary = acquire(
         args.port, program, args.out, options=options, settings=settings, nest=parse_nest(args.nest),
-        adapter=make_adapter(args.protocol), resume=args.resume,
+        adapter=make_adapter(args.protocol), resume=args.resume, force=args.force, inputs=inputs,
         raw_log=args.raw_log if args.raw_log else (None if args.no_raw_log else True),
         progress=not (args.no_progress or args.json),
     )
@@ -72,8 +91,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "or an NC program (G4 F<s> / M00 per pose)")
     p.add_argument("--out", required=True, help="measurement file (pige-rtest 1), written row by row")
     p.add_argument("--resume", action="store_true", help="continue a partial --out file (run the program again)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing --out (and its raw log and summary) with a new run")
     p.add_argument("--raw-log", help="raw byte log (default: <out stem>.raw.log)")
     p.add_argument("--no-raw-log", action="store_true", help="do not keep the raw byte log")
+    p.add_argument("--max-raw-log", metavar="SIZE",
+                   help="stop after reading this many bytes (e.g. 200M; default sized for the program: "
+                        "16 MiB + 128 kB per program second)")
     p.add_argument("--frame", choices=["machine", "table"], default="machine", help="frame of the deviations")
     p.add_argument("--nest", default="default", help="nest geometry: default, key=value,... or a JSON file")
     p.add_argument("--protocol", choices=sorted(ADAPTERS), default="rtest", help="device protocol")
@@ -83,7 +107,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument("--parity", default="N", choices=sorted(PARITIES))
     g.add_argument("--stopbits", default="1", choices=sorted(STOPBITS))
     g.add_argument("--timeout", type=float, default=1.0, help="stall timeout: no byte for this long [s]")
-    g.add_argument("--reconnect-timeout", type=float, default=30.0, help="give up reopening the port after [s]")
+    g.add_argument("--reconnect-timeout", type=float, default=30.0,
+                   help="stop (exit 1, summary) after this long without a valid record [s]")
+    g.add_argument("--max-reconnects", type=int, default=20,
+                   help="stop after this many reconnections in a row without a valid record")
     a = p.add_argument_group("points")
     a.add_argument("--trigger", choices=TRIGGERS, default="stable",
                    help="stable: settle detection; schedule: program times; key: Enter per pose")
@@ -95,6 +122,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     a.add_argument("--max-gap", type=float, default=1.0, help="a longer data gap ends a window [s of device time]")
     a.add_argument("--move", type=float, default=DEFAULT_MOVE_S, help="program move time between poses [s]")
     a.add_argument("--dwell", type=float, default=DEFAULT_DWELL_S, help="program dwell per pose [s]")
+    a.add_argument("--no-timing-check", action="store_true",
+                   help="stable trigger: do not cross-check settles with the program timing (operator-paced runs)")
     a.add_argument("--replay-tol", type=float, default=1.0, help="resume: allowed difference of a replayed pose [um]")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object (no progress bars)")

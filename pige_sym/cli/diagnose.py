@@ -5,6 +5,21 @@ from __future__ import annotations
 import argparse
 
 
+def _check_plot_folder(args: argparse.Namespace, rotary_axes: tuple[str, ...]) -> None:
+    """Before the long diagnosis: the plot folder must be a folder, and its PNGs are replaced only with --force."""
+    from pathlib import Path
+
+    from pige_sym.errors import InputError
+    from pige_sym.files import check_output
+
+    folder = Path(args.plots)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"--plots {folder} is not a directory: give the folder the plots go into")
+    names = ["residual_time", *(f"residual_{a}" for a in rotary_axes), "residual_rows", "residual_approach"]
+    for name in names:
+        check_output(folder / f"{name}.png", force=args.force, inputs=[args.file], what="--plots")
+
+
 def _run(args: argparse.Namespace) -> int:
     from pige_sym.diagnosis import diagnose, residual_plots
     from pige_sym.files import to_json
@@ -12,6 +27,8 @@ def _run(args: argparse.Namespace) -> int:
     from pige_sym.io import read_measurement
 
     m = read_measurement(args.file)
+    if args.plots:
+        _check_plot_folder(args, m.rotary_axes)
     result = diagnose(m, progress=not args.json)
     if args.plots:
         residual_plots(m, result, args.plots)
@@ -45,4 +62,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("file", help="pige-rtest 1 measurement file")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plots", metavar="DIR", help="write residual plots (PNG) into DIR")
+    p.add_argument("--force", action="store_true", help="replace plots already in DIR")
     p.set_defaults(handler=_run)

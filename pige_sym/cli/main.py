@@ -41,8 +41,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def tolerant_console() -> None:
+    """Let stdout/stderr replace what their encoding cannot show (``µ``, ``→`` on a cp1252 console).
+
+    A command must not crash on its last line because the terminal cannot print a character.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None and getattr(stream, "errors", "strict") == "strict":
+            try:
+                reconfigure(errors="replace")
+            except (ValueError, OSError):  # a closed or detached stream: nothing to print to anyway
+                pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``pige``; returns the exit status."""
+    tolerant_console()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

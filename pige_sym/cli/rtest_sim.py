@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import secrets
 import signal
 import sys
@@ -10,11 +11,17 @@ from typing import Any
 
 from pige_sym.acquisition.nest import parse_nest
 from pige_sym.acquisition.virtual_device import FAULT_KINDS, DeviceConfig, parse_faults, run_device
-from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
+from pige_sym.cli._setup import (
+    add_setup_arguments,
+    finite_option,
+    pige_values,
+    setup_geometry,
+    trajectory_options,
+)
 from pige_sym.effects import parse_effect
+from pige_sym.files import check_output
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.rtest_program import DEFAULT_DWELL_S, DEFAULT_MOVE_S, load_test_program
-from pige_sym.simulator import parse_pige
 
 
 def _terminate(signum: int, frame: Any) -> None:
@@ -22,13 +29,17 @@ def _terminate(signum: int, frame: Any) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.truth:
+        inputs = [x for x in (args.trajectory, args.pige, args.nest) if os.path.isfile(x)]
+        check_output(args.truth, force=args.force, inputs=inputs, what="--truth")
     kern = load_kernels(args.machine)
     ball, pivots, tool = setup_geometry(args)
     program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=ball, pivots_mm=pivots, tool_mm=tool,
-                                move_s=args.move, dwell_s=args.dwell, **trajectory_options(args))
+                                move_s=finite_option(args.move, "--move", minimum=0.0),
+                                dwell_s=finite_option(args.dwell, "--dwell", positive=True), **trajectory_options(args))
     seed = args.seed if args.seed is not None else secrets.randbits(31)
     cfg = DeviceConfig(
-        program=program, pige=parse_pige(args.pige, kern.MACHINE_CODE, seed),
+        program=program, pige=pige_values(args.pige, kern.MACHINE_CODE, seed),
         effects=[parse_effect(e, tuple(kern.ROTARY_AXES)) for e in args.effect or []], seed=seed,
         noise_um=args.noise, repeatability_um=args.repeatability, rate_hz=args.rate, time_scale=args.time_scale,
         nest=parse_nest(args.nest), faults=parse_faults(args.faults), stall_s=args.stall_s, outage_s=args.outage_s,
@@ -71,6 +82,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--faults", metavar="KIND[=N],...",
                    help=f"inject faults: {', '.join(FAULT_KINDS)} (N of each, default 3)")
     p.add_argument("--truth", help="write the truth (PIGEs, faults injected) to this JSON file")
+    p.add_argument("--force", action="store_true", help="replace an existing --truth file")
     p.add_argument("--tcp", type=int, metavar="PORT", help="listen on 127.0.0.1:PORT (0: any) instead of a pty")
     p.add_argument("--nest", default="default", help="nest geometry: default, key=value,... or a JSON file")
     p.add_argument("--noise", type=float, default=0.25, help="sensor noise per sample [um] (default %(default)s)")

@@ -4,16 +4,26 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 
-from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
+from pige_sym.cli._setup import (
+    add_setup_arguments,
+    finite_option,
+    pige_values,
+    setup_geometry,
+    trajectory_options,
+)
 from pige_sym.effects import parse_effect
 from pige_sym.errors import InputError
+from pige_sym.files import atomic_write_text, check_output, to_json
+from pige_sym.io import write_measurement
 from pige_sym.kernels import load_kernels
-from pige_sym.simulator import parse_pige, simulate
+from pige_sym.simulator import simulate
 from pige_sym.trajectories import make_trajectory
 
 
 def _run(args: argparse.Namespace) -> int:
+    finite_option(args.noise, "--noise", minimum=0.0)
     kern = load_kernels(args.machine)
     traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
     ball, pivots, tool = setup_geometry(args)
@@ -21,13 +31,18 @@ def _run(args: argparse.Namespace) -> int:
         if axis not in kern.ROTARY_AXES:
             axes = ", ".join(kern.ROTARY_AXES)
             raise InputError(f"--pivot {axis}: not a rotary axis of {kern.MACHINE_CODE} ({axes})")
-    pige = parse_pige(args.pige, kern.MACHINE_CODE, args.seed)
+    pige = pige_values(args.pige, kern.MACHINE_CODE, args.seed)
     effects = [parse_effect(e, tuple(kern.ROTARY_AXES)) for e in args.effect or []]
+    inputs = [x for x in (args.trajectory, args.pige) if os.path.isfile(x)]
+    out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
+    truth_path = check_output(out.with_name(out.stem + ".truth.json"), force=args.force, inputs=inputs,
+                              what="truth sidecar")
     result = simulate(
         kern.MACHINE_CODE, traj, pige=pige, ball_mm=ball, pivots_mm=pivots, tool_mm=tool, effects=effects,
         noise_um=args.noise, seed=args.seed, frame=args.frame,
     )
-    csv, truth = result.write(args.out)
+    csv = write_measurement(result.measurement, out)
+    truth = atomic_write_text(truth_path, to_json(result.truth) + "\n")
     if args.json:
         print(json.dumps({"csv": str(csv), "truth_file": str(truth), "rows": result.measurement.n_rows,
                           "truth": result.truth}, indent=1))
@@ -57,5 +72,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None, help="random seed")
     p.add_argument("--frame", choices=["machine", "table"], default="machine", help="frame of the deviations")
     p.add_argument("--out", required=True, help="output CSV (a .truth.json sidecar is written beside it)")
+    p.add_argument("--force", action="store_true", help="replace an existing output CSV and its sidecar")
     p.add_argument("--json", action="store_true", help="print the files written and the truth as one JSON object")
     p.set_defaults(handler=_run)

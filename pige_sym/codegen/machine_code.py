@@ -7,13 +7,16 @@ Grammar (whitespace between any two tokens is ignored)::
     tool_axis  := LETTER SUFFIX?                (tool side, from the bed towards the tool)
     spindle    := "(" LETTER SUFFIX? ")"        (spindle rotation: recorded, no errors)
     LETTER     := "X" | "Y" | "Z" | "U" | "V" | "W" | "A" | "B" | "C"
-    SUFFIX     := DIGIT+
+    SUFFIX     := DIGIT{1,3}                (ASCII 0-9 only; "²" or "١" are not digits here)
     PRIME      := "'" | "’" | "ʹ" | "′"
 
 X Y Z (and U V W, parallel to them) are linear axes, A B C rotary axes about X Y Z.
-An axis name is its letter plus suffix (``C``, ``C2``); a name may appear once.
-Every violation raises :class:`~pige_sym.errors.MachineCodeError` naming the
-offending character and its 0-based position in the string as given.
+An axis name is its letter plus suffix read as a number (``C``, ``C2``; ``C01`` is
+``C1``); a name may appear once, and the spindle's name may not be one of the
+positioning axes' (``wC1'bXYZ(C1)t`` is refused).  A code is at most
+:data:`MAX_CODE_LENGTH` characters.  Every violation raises
+:class:`~pige_sym.errors.MachineCodeError` naming the offending character and its
+0-based position in the string as given.
 
 The rotary axes of a machine are put in *column order*: sorted by name
 (``A`` < ``B`` < ``C``, then by suffix).  Data files, kernels and parameter
@@ -31,6 +34,10 @@ PRIMES = ("'", "\u2019", "\u02b9", "\u2032")
 LINEAR_LETTERS = "XYZUVW"
 ROTARY_LETTERS = "ABC"
 AXIS_LETTERS = LINEAR_LETTERS + ROTARY_LETTERS
+ASCII_DIGITS = "0123456789"
+#: Longest code accepted [characters] (the longest real codes have about 20).
+MAX_CODE_LENGTH = 64
+MAX_SUFFIX_DIGITS = 3
 #: Direction index (0 = X, 1 = Y, 2 = Z) of each axis letter.
 DIRECTION_INDEX = {"X": 0, "Y": 1, "Z": 2, "U": 0, "V": 1, "W": 2, "A": 0, "B": 1, "C": 2}
 
@@ -164,96 +171,145 @@ def parse_machine_code(code: str) -> MachineStructure:
         With the offending character and its 0-based position.
     """
     if not isinstance(code, str):
-        raise MachineCodeError(str(code), 0, "a machine code must be a string")
-    n = len(code)
-    i = _skip_space(code, 0)
-    if i >= n:
-        raise MachineCodeError(code, i, "empty code; expected 'w' (workpiece) first, e.g. wC'A'bXYZ(C1)t")
-    if code[i] != "w":
-        raise MachineCodeError(code, i, "a code starts with 'w' (workpiece), e.g. wC'A'bXYZ(C1)t")
-    i += 1
-    seen: dict[str, int] = {}
-    wp: list[Axis] = []
-    tool: list[Axis] = []
-    spindle: str | None = None
-    side: Side = "workpiece"
+        raise MachineCodeError(str(code)[:MAX_CODE_LENGTH], 0, "a machine code must be a string")
+    if len(code) > MAX_CODE_LENGTH:
+        raise MachineCodeError(code, MAX_CODE_LENGTH, f"a machine code has at most {MAX_CODE_LENGTH} characters")
+    return _CodeParser(code).parse()
 
-    def read_axis(i: int) -> tuple[str, int, int]:
-        start = i
-        letter = code[i]
-        i += 1
-        while i < n and code[i].isdigit():
-            i += 1
-        return letter + code[start + 1 : i], start, i
 
-    while True:
-        i = _skip_space(code, i)
-        if i >= n:
-            expected = "'b' (bed)" if side == "workpiece" else "'t' (tool)"
-            raise MachineCodeError(code, i, f"code ends too early; expected {expected}")
-        ch = code[i]
+class _CodeParser:
+    """Recursive-descent parser of one code (module docstring grammar), one method per token kind."""
+
+    def __init__(self, code: str) -> None:
+        self.code = code
+        self.n = len(code)
+        self.i = 0
+        self.seen: dict[str, int] = {}
+        self.axes: dict[Side, list[Axis]] = {"workpiece": [], "tool": []}
+        self.spindle: str | None = None
+        self.spindle_at = 0
+        self.side: Side = "workpiece"
+
+    def fail(self, position: int, problem: str) -> MachineCodeError:
+        return MachineCodeError(self.code, position, problem)
+
+    def parse(self) -> MachineStructure:
+        self._start()
+        while not self._token():
+            pass
+        if self.spindle is not None and self.spindle in self.seen:
+            raise self.fail(self.spindle_at, f"the spindle ({self.spindle}) has the name of a positioning axis "
+                            f"(position {self.seen[self.spindle]}); give it another suffix, e.g. "
+                            f"({self.spindle[0]}{_free_suffix(self.spindle[0], self.seen)})")
+        return MachineStructure(code=self.code, workpiece_axes=tuple(self.axes["workpiece"]),
+                                tool_axes=tuple(self.axes["tool"]), spindle=self.spindle)
+
+    def _start(self) -> None:
+        i = _skip_space(self.code, 0)
+        if i >= self.n:
+            raise self.fail(i, "empty code; expected 'w' (workpiece) first, e.g. wC'A'bXYZ(C1)t")
+        if self.code[i] != "w":
+            raise self.fail(i, "a code starts with 'w' (workpiece), e.g. wC'A'bXYZ(C1)t")
+        self.i = i + 1
+
+    def _token(self) -> bool:
+        """Consume one token; True when the code has ended with 't'."""
+        self.i = _skip_space(self.code, self.i)
+        if self.i >= self.n:
+            expected = "'b' (bed)" if self.side == "workpiece" else "'t' (tool)"
+            raise self.fail(self.i, f"code ends too early; expected {expected}")
+        ch = self.code[self.i]
         if ch in AXIS_LETTERS:
-            name, start, i = read_axis(i)
-            if name in seen:
-                raise MachineCodeError(
-                    code, start, f"axis {name} appears twice (first at position {seen[name]}); "
-                    "give duplicates a digit suffix, e.g. C1 and C2"
-                )
-            j = _skip_space(code, i)
-            primed = j < n and code[j] in PRIMES
-            if side == "workpiece":
-                if not primed:
-                    raise MachineCodeError(
-                        code, j, f"workpiece-side axis {name} (between 'w' and 'b') must be primed, e.g. {name}'"
-                    )
-                i = j + 1
-            elif primed:
-                raise MachineCodeError(
-                    code, j, f"tool-side axis {name} (between 'b' and 't') must not be primed"
-                )
-            seen[name] = start
-            (wp if side == "workpiece" else tool).append(Axis(name, side, start))
-            continue
-        if ch in PRIMES:
-            raise MachineCodeError(code, i, "a prime must follow an axis letter")
-        if ch == "b":
-            if side == "tool":
-                raise MachineCodeError(code, i, "'b' (bed) appears twice")
-            side = "tool"
-            i += 1
-            continue
-        if ch == "(":
-            if side == "workpiece":
-                raise MachineCodeError(code, i, "the spindle '(...)' belongs after 'b', just before 't'")
-            if spindle is not None:
-                raise MachineCodeError(code, i, "only one spindle '(...)' is allowed")
-            j = _skip_space(code, i + 1)
-            if j >= n or code[j] not in AXIS_LETTERS:
-                raise MachineCodeError(code, j, "expected the spindle axis letter after '(', e.g. (C1)")
-            name, _, j = read_axis(j)
-            j = _skip_space(code, j)
-            if j >= n or code[j] != ")":
-                raise MachineCodeError(code, j, "unbalanced parenthesis: expected ')' after the spindle axis")
-            spindle = name
+            self._axis()
+        elif ch == "b":
+            self._bed()
+        elif ch == "(":
+            self._spindle()
+        elif ch == "t":
+            self._tool_end()
+            return True
+        else:
+            self._unexpected(ch)
+        return False
+
+    def _name(self, i: int) -> tuple[str, int]:
+        """Axis letter and ASCII suffix at ``i`` (normalised: ``C01`` → ``C1``); returns (name, end)."""
+        letter = self.code[i]
+        j = i + 1
+        while j < self.n and self.code[j] in ASCII_DIGITS:
+            j += 1
+        if j < self.n and self.code[j].isdigit() or j < self.n and self.code[j].isnumeric():
+            raise self.fail(j, "axis suffixes are ASCII digits 0-9")
+        digits = self.code[i + 1 : j]
+        if len(digits) > MAX_SUFFIX_DIGITS:
+            raise self.fail(i + 1, f"an axis suffix has at most {MAX_SUFFIX_DIGITS} digits")
+        return letter + (str(int(digits)) if digits else ""), j
+
+    def _axis(self) -> None:
+        start = self.i
+        name, i = self._name(start)
+        if name in self.seen:
+            raise self.fail(start, f"axis {name} appears twice (first at position {self.seen[name]}); "
+                            "give duplicates a digit suffix, e.g. C1 and C2")
+        j = _skip_space(self.code, i)
+        primed = j < self.n and self.code[j] in PRIMES
+        if self.side == "workpiece":
+            if not primed:
+                raise self.fail(j, f"workpiece-side axis {name} (between 'w' and 'b') must be primed, e.g. {name}'")
             i = j + 1
-            k = _skip_space(code, i)
-            if k < n and code[k] != "t":
-                raise MachineCodeError(code, k, "the spindle '(...)' must be followed by 't' (tool)")
-            continue
+        elif primed:
+            raise self.fail(j, f"tool-side axis {name} (between 'b' and 't') must not be primed")
+        self.seen[name] = start
+        self.axes[self.side].append(Axis(name, self.side, start))
+        self.i = i
+
+    def _bed(self) -> None:
+        if self.side == "tool":
+            raise self.fail(self.i, "'b' (bed) appears twice")
+        self.side = "tool"
+        self.i += 1
+
+    def _spindle(self) -> None:
+        if self.side == "workpiece":
+            raise self.fail(self.i, "the spindle '(...)' belongs after 'b', just before 't'")
+        if self.spindle is not None:
+            raise self.fail(self.i, "only one spindle '(...)' is allowed")
+        j = _skip_space(self.code, self.i + 1)
+        if j >= self.n or self.code[j] not in AXIS_LETTERS:
+            raise self.fail(j, "expected the spindle axis letter after '(', e.g. (C1)")
+        self.spindle_at = j
+        name, j = self._name(j)
+        j = _skip_space(self.code, j)
+        if j >= self.n or self.code[j] != ")":
+            raise self.fail(j, "unbalanced parenthesis: expected ')' after the spindle axis")
+        self.spindle = name
+        self.i = j + 1
+        k = _skip_space(self.code, self.i)
+        if k < self.n and self.code[k] != "t":
+            raise self.fail(k, "the spindle '(...)' must be followed by 't' (tool)")
+
+    def _tool_end(self) -> None:
+        if self.side == "workpiece":
+            raise self.fail(self.i, "'t' (tool) before 'b' (bed); the order is w ... b ... t")
+        i = _skip_space(self.code, self.i + 1)
+        if i < self.n:
+            raise self.fail(i, "unexpected text after 't' (tool), which ends the code")
+
+    def _unexpected(self, ch: str) -> None:
+        if ch in PRIMES:
+            raise self.fail(self.i, "a prime must follow an axis letter")
         if ch == ")":
-            raise MachineCodeError(code, i, "unbalanced parenthesis: ')' without '('")
-        if ch == "t":
-            if side == "workpiece":
-                raise MachineCodeError(code, i, "'t' (tool) before 'b' (bed); the order is w ... b ... t")
-            i = _skip_space(code, i + 1)
-            if i < n:
-                raise MachineCodeError(code, i, "unexpected text after 't' (tool), which ends the code")
-            break
+            raise self.fail(self.i, "unbalanced parenthesis: ')' without '('")
         if ch == "w":
-            raise MachineCodeError(code, i, "'w' (workpiece) appears twice")
+            raise self.fail(self.i, "'w' (workpiece) appears twice")
         if ch.upper() in AXIS_LETTERS:
-            raise MachineCodeError(code, i, f"axis letters are upper case: write {ch.upper()!r}")
-        raise MachineCodeError(
-            code, i, "unknown character; expected an axis letter (X Y Z U V W A B C), a prime, 'b', '(' or 't'"
-        )
-    return MachineStructure(code=code, workpiece_axes=tuple(wp), tool_axes=tuple(tool), spindle=spindle)
+            raise self.fail(self.i, f"axis letters are upper case: write {ch.upper()!r}")
+        raise self.fail(self.i, "unknown character; expected an axis letter (X Y Z U V W A B C), a prime, 'b', "
+                        "'(' or 't'")
+
+
+def _free_suffix(letter: str, seen: dict[str, int]) -> int:
+    k = 1
+    while f"{letter}{k}" in seen:
+        k += 1
+    return k
