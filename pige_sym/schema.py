@@ -252,6 +252,7 @@ class ParamsDocument:
         "method", "projection", "loss", "std", "ci95", "rank", "n_parameters", "condition", "rms_um", "sigma_um",
         "dof", "n_rows", "n_obs", "observability", "unidentifiable", "outlier_rows", "vif", "baseline", "options",
         "plots", "rejected", "params", "bic", "heldout_rms_um", "unobservable", "identifiable", "warnings",
+        "unobserved", "clusters",
     })
 
 
