@@ -1,0 +1,196 @@
+"""Lexer: one NC block (one line) into tokens that know their exact place in the line.
+
+Grammar (shared by the dialects; ``siemens`` switches on the 840D extensions)::
+
+    block    := [BOM] ["/"] token*
+    token    := comment | string | word | assign | call | name | other
+    comment  := ";" <rest of line>                    (every dialect)
+              | "(" <anything but ")"> ")"            (a parenthesis not attached to a name)
+    string   := '"' <anything but '"'> '"'            (840D: MSG("..."), T="tool")
+    word     := LETTER space* NUMBER                   (X  16.339, G43.4, N10, X-.5)
+    NUMBER   := [+-] (digits ["." digits*] | "." digits)   -- no exponent, no nan/inf
+    assign   := NAME space* "=" space* (FN "(" NUMBER ")" | NUMBER | <expression>)
+                                                       (840D: X=AC(10), C=DC(30), R1=5, A3=...)
+    call     := NAME "(" (string | <no parenthesis>)* ")"   (840D: TRAORI(1), CYCLE800(...))
+    name     := NAME [":"]                             (840D keywords TRAORI, GOTOF, labels LBL1:)
+    other    := any other character (#, [, ], =, ...)  -- expressions, macro variables
+
+A word must end at a word boundary: in the 840D dialect the next character may not be a
+letter, digit, ``.`` or ``_`` (``LABELC1`` is a name, never the word ``C1``); in ISO/Fanuc
+and rs274ngc words may be written without spaces (``G1X10.Y20.``) but a number followed by
+an exponent (``1e400``) or by another ``.`` is malformed.  The lexer never changes text:
+every token has ``start``/``end`` offsets into the line and, for numbers,
+``value_start``/``value_end`` so a rewrite replaces only the digits.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+NUMBER = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)"
+FUNCTIONS = ("ACP", "ACN", "AC", "IC", "DC", "CAC", "CIC", "CDC", "CACP", "CACN")
+
+_COMMON = (
+    r"(?P<space>\s+)"
+    r"|(?P<semi>;.*)"
+)
+_SIEMENS = re.compile(
+    _COMMON
+    + rf"|(?P<assign>(?P<aname>[A-Z_$][A-Z0-9_$]*)\s*=\s*"
+    rf"(?:(?P<fn>{'|'.join(FUNCTIONS)})\s*\(\s*(?P<fnum>{NUMBER})\s*\)|(?P<anum>{NUMBER}))?)"
+    rf"|(?P<word>(?P<letter>[A-Z])[ \t]*(?P<num>{NUMBER}))(?![A-Z0-9_.(])"
+    r"|(?P<call>(?P<cname>[A-Z_][A-Z0-9_]*)\s*\((?:\"[^\"]*\"|[^()\"])*\))"
+    r"|(?P<name>[A-Z_$][A-Z0-9_$]*:?)"
+    r"|(?P<paren>\([^()]*\))"
+    r"|(?P<string>\"[^\"]*\")"
+    r"|(?P<other>.)",
+    re.IGNORECASE,
+)
+_ISO = re.compile(
+    _COMMON
+    + r"|(?P<paren>\([^()]*\))"
+    rf"|(?P<word>(?P<letter>[A-Z])[ \t]*(?P<num>{NUMBER}))"
+    r"|(?P<other>.)",
+    re.IGNORECASE,
+)
+_BAD_NUMBER_END = re.compile(r"[eE][-+]?\d|\.|\d")
+
+
+@dataclass(frozen=True, slots=True)
+class Token:
+    """One token of a block.
+
+    Attributes
+    ----------
+    kind : str
+        ``comment``, ``string``, ``word``, ``assign``, ``call``, ``name`` or ``other``.
+    text : str
+        The token exactly as written.
+    start, end : int
+        Offsets of the token in the line (``line[start:end] == text``).
+    key : str
+        Upper-case address: the letter of a word (``X``), the name of an assignment,
+        call or name (``TRAORI``, ``R1``, ``GOTOF``); empty for comments and strings.
+    value : float or None
+        Numeric value of a word or of a numeric assignment.
+    value_start, value_end : int
+        Offsets of the digits of ``value`` in the line (−1 without a value).
+    function : str
+        ``AC``/``IC``/``DC``/``ACP``/``ACN`` of an 840D assignment ``X=AC(…)``; ``=`` for ``X=10``;
+        empty for plain words.
+    """
+
+    kind: str
+    text: str
+    start: int
+    end: int
+    key: str = ""
+    value: float | None = None
+    value_start: int = -1
+    value_end: int = -1
+    function: str = ""
+
+    @property
+    def has_point(self) -> bool:
+        """True when the number is written with a decimal point (ISO/Fanuc: ``X120.`` ≠ ``X120``)."""
+        return self.value_start >= 0 and "." in self.text[self.value_start - self.start:self.value_end - self.start]
+
+    @property
+    def code(self) -> str:
+        """Normalised G/M code of a word (``G01`` → ``G1``, ``G43.40`` → ``G43.4``); else the key."""
+        if self.kind != "word" or self.value is None:
+            return self.key
+        digits = self.text[self.value_start - self.start:self.value_end - self.start]
+        if digits.startswith(("+", "-")) or self.key not in "GM":
+            return self.key
+        whole, _, frac = digits.partition(".")
+        whole = whole.lstrip("0") or "0"
+        frac = frac.rstrip("0")
+        return f"{self.key}{whole}.{frac}" if frac else f"{self.key}{whole}"
+
+
+class LexError(ValueError):
+    """A malformed token; ``column`` is its 0-based offset in the line."""
+
+    def __init__(self, column: int, problem: str) -> None:
+        super().__init__(problem)
+        self.column = column
+        self.problem = problem
+
+
+def _number(text: str, column: int) -> float:
+    value = float(text)
+    if not math.isfinite(value):  # pragma: no cover - the grammar has no exponent
+        raise LexError(column, f"number {text!r} is not finite")
+    return value
+
+
+def tokenize(line: str, *, siemens: bool) -> list[Token]:
+    """Tokens of one line (without its line ending), comments and whitespace included.
+
+    Raises
+    ------
+    LexError
+        Unterminated comment/string, exponent notation (``1e400``), a number with two points.
+    """
+    pattern = _SIEMENS if siemens else _ISO
+    tokens: list[Token] = []
+    pos = 0
+    n = len(line)
+    while pos < n:
+        m = pattern.match(line, pos)
+        assert m is not None  # "other" matches any character
+        kind = m.lastgroup
+        end = m.end()
+        if kind == "space":
+            pos = end
+            continue
+        if kind == "semi":
+            tokens.append(Token("comment", m.group(), pos, end))
+        elif kind == "paren":
+            tokens.append(Token("comment", m.group(), pos, end))
+        elif kind == "string":
+            tokens.append(Token("string", m.group(), pos, end))
+        elif kind == "word":
+            tokens.append(_word(line, m, pos, end))
+        elif kind == "assign":
+            tokens.append(_assign(line, m, pos, end))
+        elif kind == "call":
+            tokens.append(Token("call", m.group(), pos, end, key=m.group("cname").upper()))
+        elif kind == "name":
+            tokens.append(Token("name", m.group(), pos, end, key=m.group().upper()))
+        else:
+            ch = m.group()
+            if ch == "(":
+                raise LexError(pos, "unterminated comment '(' (no closing ')')")
+            if ch == '"':
+                raise LexError(pos, "unterminated string")
+            tokens.append(Token("other", ch, pos, end, key=ch))
+        pos = end
+    return tokens
+
+
+def _word(line: str, m: re.Match[str], start: int, end: int) -> Token:
+    nxt = line[end:end + 3]
+    if nxt and _BAD_NUMBER_END.match(nxt):
+        raise LexError(start, f"malformed number in {line[start:end + 3].strip()!r} (exponents such as 1e400 "
+                       "and numbers with two points are not G-code)")
+    return Token("word", m.group(), start, end, key=m.group("letter").upper(),
+                 value=_number(m.group("num"), start), value_start=m.start("num"), value_end=m.end("num"))
+
+
+def _assign(line: str, m: re.Match[str], start: int, end: int) -> Token:
+    name = m.group("aname").upper()
+    if m.group("fnum") is not None:
+        return Token("assign", m.group(), start, end, key=name, value=_number(m.group("fnum"), start),
+                     value_start=m.start("fnum"), value_end=m.end("fnum"), function=m.group("fn").upper())
+    if m.group("anum") is not None:
+        rest = line[end:]
+        if rest[:1] and not (rest[:1].isspace() or rest[:1] == ";"):
+            # X=10+R1, X=10*2, X=1e4 ...: an expression, not a plain value
+            return Token("assign", m.group(), start, end, key=name, function="expr")
+        return Token("assign", m.group(), start, end, key=name, value=_number(m.group("anum"), start),
+                     value_start=m.start("anum"), value_end=m.end("anum"), function="=")
+    return Token("assign", m.group(), start, end, key=name, function="expr")

@@ -1,0 +1,82 @@
+"""Read-back: the written program, interpreted again from scratch, against the original.
+
+Checks (any failure means nothing is written):
+
+- the output has the input's lines plus the header lines, in order;
+- every line the rewriter did not change is byte-identical (line ending included);
+- every block is of the same kind (no move became something else) in the same modal state
+  (units, distance mode, RTCP, work offset, frame);
+- at every block the output pose and the original pose are both known or both unknown, and
+  differ by at most the change limit (``max_mm`` for X/Y/Z, ``max_deg`` for rotary axes),
+  so an uncompensated block that inherits a compensated position (an incremental move, an
+  axis not programmed) is also within it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from pige_sym.nc.interpreter import Program, interpret
+
+
+@dataclass
+class Verification:
+    """Result of the read-back.
+
+    Attributes
+    ----------
+    ok : bool
+    problems : list of str
+        One line each (``line N: …``), empty when ``ok``.
+    max_change_mm, max_change_deg : float
+        Largest difference between output and original pose over all blocks [mm], [deg].
+    """
+
+    ok: bool
+    problems: list[str] = field(default_factory=list)
+    max_change_mm: float = 0.0
+    max_change_deg: float = 0.0
+
+
+def verify(original: Program, out_text: str, changed_lines: set[int], header_lines: int, header_at: int, *,
+           max_mm: float, max_deg: float, pass_through: bool = False) -> Verification:
+    """Interpret ``out_text`` and compare it with ``original`` (module docstring).
+
+    ``changed_lines`` are input line numbers the rewriter changed; the header occupies output
+    lines ``header_at + 1 … header_at + header_lines`` (0-based insertion index ``header_at``).
+    """
+    out = interpret(out_text, original.dialect, original.rotary_axes, path=f"{original.path} (read back)",
+                    pass_through=pass_through)
+    problems: list[str] = []
+    blocks = out.blocks[:header_at] + out.blocks[header_at + header_lines:] if header_lines else out.blocks
+    if len(blocks) != len(original.blocks):
+        return Verification(False, [f"the output has {len(out.blocks)} lines, expected {len(original.blocks)} + "
+                                    f"{header_lines} header lines"])
+    worst_mm = worst_deg = 0.0
+    for a, b in zip(original.blocks, blocks, strict=True):
+        where = f"line {a.line_no}"
+        if a.line_no not in changed_lines and (a.text != b.text or a.ending != b.ending):
+            problems.append(f"{where}: changed although it should be byte-identical")
+        if a.kind != b.kind or _modal(a) != _modal(b):
+            problems.append(f"{where}: reads back as a different kind of block or modal state")
+        for i, (x, y) in enumerate(zip(a.after, b.after, strict=True)):
+            if (x is None) != (y is None):
+                problems.append(f"{where}: {a.axes[i]} is {'un' if y is None else ''}known after the rewrite")
+                continue
+            if x is None or y is None:
+                continue
+            d = abs(x - y)
+            if i < 3:
+                worst_mm = max(worst_mm, d)
+                if d > max_mm:
+                    problems.append(f"{where}: {a.axes[i]} moved by {d:.4f} mm (limit {max_mm:g} mm)")
+            else:
+                worst_deg = max(worst_deg, d)
+                if d > max_deg:
+                    problems.append(f"{where}: {a.axes[i]} moved by {d:.4f} deg (limit {max_deg:g} deg)")
+    return Verification(not problems, problems, worst_mm, worst_deg)
+
+
+def _modal(block: object) -> tuple:
+    st = block.state  # type: ignore[attr-defined]
+    return (st.incremental, st.inch, st.rtcp, st.offset, bool(st.frame), st.motion)
