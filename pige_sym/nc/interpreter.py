@@ -196,9 +196,9 @@ class Interpreter:
               refusals: list[tuple[str, Token]]) -> None:
         action = self.dialect.action(code)
         if action is None and code.startswith("M"):
-            self._note(code, f"{code} is not a known M code: assumed not to move the axes")
-            action = "benign"
-        if action is None:
+            refusals.append((f"unknown code {code} (if it switches RTCP declare it with --rtcp-on/--rtcp-off; "
+                             "the tool never guesses what a code does)", tok))
+        elif action is None:
             refusals.append((f"unknown code {code} (the tool never guesses what a code does)", tok))
         elif action.startswith("refuse:"):
             refusals.append((action.split(":", 1)[1], tok))

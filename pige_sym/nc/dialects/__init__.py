@@ -85,7 +85,7 @@ def common_codes() -> dict[str, str]:
              "G53": "machine", "G54": "offset", "G55": "offset", "G56": "offset", "G57": "offset",
              "G9": "benign", "G61": "benign", "G64": "benign", "G96": "benign", "G97": "benign",
              "M0": "stop", "M1": "stop", "M2": "end", "M30": "end"}
-    for m in (3, 4, 5, 6, 7, 8, 9, 10, 11, 19):
+    for m in (3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 19, 31, 33, 34, 50, 51, 88, 89):
         codes[f"M{m}"] = "benign"
     return codes
 
