@@ -346,11 +346,18 @@ def orientation_steps(kern: Any, angles_deg: np.ndarray, params: np.ndarray,
     safe = sig > 1e-9 * np.maximum(sig[:, :1], 1e-300)
     comp = np.where(safe, coef / np.where(safe, sig, 1.0), 0.0)  # step along each right singular vector
     limited = np.zeros(n, dtype=bool)
+    step = np.einsum("nk,nkj->nj", comp, vt)
     if max_step_deg is not None:
-        too_big = np.abs(comp) > max_step_deg
-        limited = too_big.any(axis=1)
-        comp = np.where(too_big, 0.0, comp)
-    return np.einsum("nk,nkj->nj", comp, vt), limited
+        # drop the largest singular components until no axis turns by more than the limit
+        for _ in range(k):
+            over = np.abs(step).max(axis=1) > max_step_deg
+            if not over.any():
+                break
+            limited |= over
+            biggest = np.argmax(np.abs(comp), axis=1)
+            comp[over, biggest[over]] = 0.0
+            step = np.einsum("nk,nkj->nj", comp, vt)
+    return step, limited
 
 
 def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndarray, xyz_mm: np.ndarray, *,

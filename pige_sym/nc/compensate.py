@@ -178,11 +178,10 @@ def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: s
     poses = _compensated_poses(params, chosen, max_change_deg)
     _guard(chosen, poses, max_change_mm, max_change_deg, path, CompensationError)
     targets = {b.line_no: tuple(poses.new_xyz_mm[i]) + tuple(poses.new_angles_deg[i]) for i, b in enumerate(chosen)}
-    rw = rewrite_program(program, targets, pass_through=pass_through)
-    if header and rw.changed:
-        rw = rewrite_program(program, targets, header=_header(params), pass_through=pass_through)
+    rw = rewrite_program(program, targets, header=_header(params) if header else None)
     check = verify(program, rw.text, {c.line_in for c in rw.changed}, rw.header_lines, header_position(program),
-                   max_mm=max_change_mm + 1e-4, max_deg=max_change_deg + 1e-4, pass_through=pass_through)
+                   max_mm=max_change_mm + 1e-4, max_deg=max_change_deg + 1e-4, pass_through=pass_through,
+                   targets=targets)
     if not check.ok:
         raise CompensationError(f"{path}: the compensated program did not read back as intended, nothing written: "
                                 + "; ".join(check.problems[:5]))
@@ -190,7 +189,7 @@ def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: s
         passed.append({"line": line, "reason": why})
     report = CompensationReport(
         path, d.name, params.machine, params.source, len(program.blocks), sum(b.kind == "move" for b in program.blocks),
-        len(rw.changed), _changes(params, chosen, poses, rw, text=rw.text, program=program),
+        len(rw.changed), _changes(params, chosen, poses, rw, check.read_back),
         sorted(passed, key=lambda p: p["line"]),
         [b.line_no for i, b in enumerate(chosen) if poses.orientation_limited[i]], program.notes,
         check.max_change_mm, check.max_change_deg, {"mm": max_change_mm, "deg": max_change_deg}, True,
@@ -236,18 +235,17 @@ def _guard(chosen: list[Block], poses: Any, max_mm: float, max_deg: float, path:
                     "(and their set-up: pivots, tool) or raise the limit")
 
 
-def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, *, text: str,
-             program: Program) -> list[BlockChange]:
-    """Per changed block: words, predicted errors before/after (read back from ``text``) and change."""
+def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog: Program | None,
+             ) -> list[BlockChange]:
+    """Per changed block: words, predicted errors before/after (from the read-back) and change."""
     from pige_sym.compensation import predicted_errors
 
-    if not rw.changed:
+    if not rw.changed or out_prog is None:
         return []
     index = {b.line_no: i for i, b in enumerate(chosen)}
-    out_prog = interpret(text, program.dialect, program.rotary_axes, pass_through=True)
     out_after = {b.line_no: b.after for b in out_prog.blocks}
     rows = [index[c.line_in] for c in rw.changed]
-    k = len(program.rotary_axes)
+    k = len(out_prog.rotary_axes)
     new = np.array([out_after[c.line_out] for c in rw.changed], dtype=float).reshape(-1, 3 + k)
     a, xyz, rtcp = poses.angles_deg[rows], poses.xyz_mm[rows], np.asarray(poses.rtcp, dtype=bool)[rows]
     tp0, or0 = predicted_errors(params, a, xyz, rtcp, a, xyz)
@@ -256,7 +254,8 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, *, text:
     for j, c in enumerate(rw.changed):
         i = rows[j]
         out.append(BlockChange(
-            c.line_in, c.line_out, [asdict(w) for w in c.words], bool(rtcp[j]), float(tp0[j]), float(tp1[j]),
+            c.line_in, c.line_out, [{"axis": w.axis, "old": w.old, "new": w.new} for w in c.words],
+            bool(rtcp[j]), float(tp0[j]), float(tp1[j]),
             float(or0[j]), float(or1[j]), float(np.abs(new[j, :3] - xyz[j]).max()),
             float(np.abs(new[j, 3:] - a[j]).max(initial=0.0)), bool(poses.orientation_limited[i])))
     return out

@@ -101,8 +101,8 @@ class Interpreter:
         """Interpret one line (without its ending) and return its block."""
         before = tuple(self.pos)
         lex_text = text.replace("\ufeff", " ") if line_no == 1 else text
-        skip_m = _SKIP.match(lex_text)
-        skip = bool(skip_m) and not lex_text.lstrip().startswith("/*")
+        skip_m = _SKIP.match(lex_text) if "/" in lex_text else None
+        skip = bool(skip_m)
         if skip and skip_m is not None:
             lex_text = " " * skip_m.end() + lex_text[skip_m.end():]
         stripped = lex_text.strip()
@@ -265,26 +265,28 @@ class Interpreter:
     # -- modal codes --------------------------------------------------------------------
     def _apply_modal(self, block: Block, codes: list[tuple[str, Token]]) -> None:
         st = self.state
-        has_axes = any(t.kind in ("word", "assign") and t.key in self.axes for t in block.tokens)
+        changes: dict[str, object] = {}
         for action, tok in codes:
             head, _, arg = action.partition(":")
             if head == "motion":
-                st = replace(st, motion=arg)
+                changes["motion"] = arg
             elif head == "dist":
-                st = replace(st, incremental=arg == "inc")
+                changes["incremental"] = arg == "inc"
             elif head == "units":
-                st = replace(st, inch=arg == "inch", units_programmed=True)
+                changes["inch"] = arg == "inch"
+                changes["units_programmed"] = True
             elif head == "rtcp":
-                st = replace(st, rtcp=arg == "on")
+                changes["rtcp"] = arg == "on"
             elif head == "offset":
-                st = replace(st, offset=self._offset_name(tok, block))
+                changes["offset"] = self._offset_name(tok, block)
             elif head == "frame":
-                st = self._frame(st, arg, tok, block, has_axes)
+                changes.update(self._frame(arg, tok, block))
             elif head == "comp":
-                st = replace(st, cutter_comp=arg == "on")
+                changes["cutter_comp"] = arg == "on"
             elif head == "cycle":
-                st = replace(st, cycle=arg != "cancel")
-        self.state = st
+                changes["cycle"] = arg != "cancel"
+        if changes and any(getattr(st, k) != v for k, v in changes.items()):
+            self.state = replace(st, **changes)  # type: ignore[arg-type]
 
     def _offset_name(self, tok: Token, block: Block) -> str:
         name = tok.code
@@ -293,18 +295,18 @@ class Interpreter:
             name += f"P{p.value:g}" if p is not None and p.value is not None else "P?"
         return name
 
-    def _frame(self, st: ModalState, arg: str, tok: Token, block: Block, has_axes: bool) -> ModalState:
+    def _frame(self, arg: str, tok: Token, block: Block) -> dict[str, str]:
         code = tok.code
         where = f"{code} at line {block.line_no}"
         if arg == "lock":
-            return replace(st, locked=f"{where} changes the work offsets")
+            return {"locked": f"{where} changes the work offsets"}
         if arg == "cancel":
-            return replace(st, frame="")
+            return {"frame": ""}
         if code == "G52" or (self.dialect.siemens and tok.kind == "name"):
             values = [t.value for t in block.tokens if t.kind in ("word", "assign") and t.key in self.axes]
-            if not has_axes or (code == "G52" and all(v == 0 for v in values)):
-                return replace(st, frame="")  # TRANS / ROT / G52 X0 Y0: frame cleared
-        return replace(st, frame=f"the frame {where} is active (program coordinates unknown)")
+            if not values or (code == "G52" and all(v == 0 for v in values)):
+                return {"frame": ""}  # TRANS / ROT / G52 X0 Y0: frame cleared
+        return {"frame": f"the frame {where} is active (program coordinates unknown)"}
 
     # -- words --------------------------------------------------------------------------
     def _dwell(self, block: Block, words: dict[str, Token]) -> None:

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from typing import NamedTuple
 
 NUMBER = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)"
 FUNCTIONS = ("ACP", "ACN", "AC", "IC", "DC", "CAC", "CIC", "CDC", "CACP", "CACN")
@@ -51,15 +51,15 @@ _SIEMENS = re.compile(
 _ISO = re.compile(
     _COMMON
     + r"|(?P<paren>\([^()]*\))"
-    rf"|(?P<word>(?P<letter>[A-Z])[ \t]*(?P<num>{NUMBER}))"
+    rf"|(?P<word>(?P<letter>[A-Z])[ \t]*(?P<num>{NUMBER}))(?![eE][-+]?\d|\.|\d)"
+    rf"|(?P<bad>[A-Z][ \t]*{NUMBER}(?:[eE][-+]?\d+|\.)?)"
     r"|(?P<other>.)",
     re.IGNORECASE,
 )
-_BAD_NUMBER_END = re.compile(r"[eE][-+]?\d|\.|\d")
+_CODES: dict[tuple[str, str], str] = {}
 
 
-@dataclass(frozen=True, slots=True)
-class Token:
+class Token(NamedTuple):
     """One token of a block.
 
     Attributes
@@ -100,15 +100,20 @@ class Token:
     @property
     def code(self) -> str:
         """Normalised G/M code of a word (``G01`` → ``G1``, ``G43.40`` → ``G43.4``); else the key."""
-        if self.kind != "word" or self.value is None:
+        if self.kind != "word" or self.value is None or self.key not in "GM":
             return self.key
         digits = self.text[self.value_start - self.start:self.value_end - self.start]
-        if digits.startswith(("+", "-")) or self.key not in "GM":
-            return self.key
-        whole, _, frac = digits.partition(".")
-        whole = whole.lstrip("0") or "0"
-        frac = frac.rstrip("0")
-        return f"{self.key}{whole}.{frac}" if frac else f"{self.key}{whole}"
+        cached = _CODES.get((self.key, digits))
+        if cached is None:
+            if digits.startswith(("+", "-")):
+                cached = self.key + digits
+            else:
+                whole, _, frac = digits.partition(".")
+                whole = whole.lstrip("0") or "0"
+                frac = frac.rstrip("0")
+                cached = f"{self.key}{whole}.{frac}" if frac else f"{self.key}{whole}"
+            _CODES[(self.key, digits)] = cached
+        return cached
 
 
 class LexError(ValueError):
@@ -137,48 +142,37 @@ def tokenize(line: str, *, siemens: bool) -> list[Token]:
     """
     pattern = _SIEMENS if siemens else _ISO
     tokens: list[Token] = []
-    pos = 0
-    n = len(line)
-    while pos < n:
-        m = pattern.match(line, pos)
-        assert m is not None  # "other" matches any character
+    append = tokens.append
+    for m in pattern.finditer(line):
         kind = m.lastgroup
-        end = m.end()
         if kind == "space":
-            pos = end
             continue
-        if kind == "semi":
-            tokens.append(Token("comment", m.group(), pos, end))
-        elif kind == "paren":
-            tokens.append(Token("comment", m.group(), pos, end))
+        pos, end = m.span()
+        if kind == "word":
+            num = m.group("num")
+            append(Token("word", m.group(), pos, end, m.group("letter").upper(), float(num), m.start("num"),
+                         m.end("num")))
+        elif kind == "semi" or kind == "paren":
+            append(Token("comment", m.group(), pos, end))
         elif kind == "string":
-            tokens.append(Token("string", m.group(), pos, end))
-        elif kind == "word":
-            tokens.append(_word(line, m, pos, end))
+            append(Token("string", m.group(), pos, end))
         elif kind == "assign":
-            tokens.append(_assign(line, m, pos, end))
+            append(_assign(line, m, pos, end))
         elif kind == "call":
-            tokens.append(Token("call", m.group(), pos, end, key=m.group("cname").upper()))
+            append(Token("call", m.group(), pos, end, key=m.group("cname").upper()))
         elif kind == "name":
-            tokens.append(Token("name", m.group(), pos, end, key=m.group().upper()))
+            append(Token("name", m.group(), pos, end, key=m.group().upper()))
+        elif kind == "bad":
+            raise LexError(pos, f"malformed number in {m.group().strip()!r} (exponents such as 1e400 "
+                           "and numbers with two points are not G-code)")
         else:
             ch = m.group()
             if ch == "(":
                 raise LexError(pos, "unterminated comment '(' (no closing ')')")
             if ch == '"':
                 raise LexError(pos, "unterminated string")
-            tokens.append(Token("other", ch, pos, end, key=ch))
-        pos = end
+            append(Token("other", ch, pos, end, key=ch))
     return tokens
-
-
-def _word(line: str, m: re.Match[str], start: int, end: int) -> Token:
-    nxt = line[end:end + 3]
-    if nxt and _BAD_NUMBER_END.match(nxt):
-        raise LexError(start, f"malformed number in {line[start:end + 3].strip()!r} (exponents such as 1e400 "
-                       "and numbers with two points are not G-code)")
-    return Token("word", m.group(), start, end, key=m.group("letter").upper(),
-                 value=_number(m.group("num"), start), value_start=m.start("num"), value_end=m.end("num"))
 
 
 def _assign(line: str, m: re.Match[str], start: int, end: int) -> Token:

@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pige_sym.nc.interpreter import Program, interpret
+from pige_sym.nc.state import MM_PER_INCH, Block
 
 
 @dataclass
@@ -36,14 +37,18 @@ class Verification:
     problems: list[str] = field(default_factory=list)
     max_change_mm: float = 0.0
     max_change_deg: float = 0.0
+    read_back: Program | None = None
 
 
 def verify(original: Program, out_text: str, changed_lines: set[int], header_lines: int, header_at: int, *,
-           max_mm: float, max_deg: float, pass_through: bool = False) -> Verification:
+           max_mm: float, max_deg: float, pass_through: bool = False,
+           targets: dict[int, tuple[float, ...]] | None = None) -> Verification:
     """Interpret ``out_text`` and compare it with ``original`` (module docstring).
 
     ``changed_lines`` are input line numbers the rewriter changed; the header occupies output
     lines ``header_at + 1 … header_at + header_lines`` (0-based insertion index ``header_at``).
+    ``targets`` (input line → pose [mm, deg]) must be reached by the changed blocks to within the
+    rounding of their words (half a unit of the last decimal written).
     """
     out = interpret(out_text, original.dialect, original.rotary_axes, path=f"{original.path} (read back)",
                     pass_through=pass_through)
@@ -59,6 +64,8 @@ def verify(original: Program, out_text: str, changed_lines: set[int], header_lin
             problems.append(f"{where}: changed although it should be byte-identical")
         if a.kind != b.kind or _modal(a) != _modal(b):
             problems.append(f"{where}: reads back as a different kind of block or modal state")
+        if targets and a.line_no in changed_lines:
+            problems += _missed(b, targets[a.line_no], where)
         for i, (x, y) in enumerate(zip(a.after, b.after, strict=True)):
             if (x is None) != (y is None):
                 problems.append(f"{where}: {a.axes[i]} is {'un' if y is None else ''}known after the rewrite")
@@ -74,9 +81,18 @@ def verify(original: Program, out_text: str, changed_lines: set[int], header_lin
                 worst_deg = max(worst_deg, d)
                 if d > max_deg:
                     problems.append(f"{where}: {a.axes[i]} moved by {d:.4f} deg (limit {max_deg:g} deg)")
-    return Verification(not problems, problems, worst_mm, worst_deg)
+    return Verification(not problems, problems, worst_mm, worst_deg, out)
 
 
-def _modal(block: object) -> tuple:
-    st = block.state  # type: ignore[attr-defined]
+def _missed(block: Block, target: tuple[float, ...], where: str) -> list[str]:
+    out = []
+    for i, (got, want) in enumerate(zip(block.after, target, strict=True)):
+        tol = (0.51e-5 * MM_PER_INCH if i < 3 and block.state.inch else 0.51e-4) + 1e-9
+        if got is None or abs(got - want) > tol:
+            out.append(f"{where}: the rewritten block reaches {block.axes[i]}={got} instead of {want:.6f}")
+    return out
+
+
+def _modal(block: Block) -> tuple:
+    st = block.state
     return (st.incremental, st.inch, st.rtcp, st.offset, bool(st.frame), st.motion)
