@@ -35,6 +35,7 @@ from pige_sym.nc.lexer import LexError, Token, tokenize
 from pige_sym.nc.state import Block, ModalState
 
 _SKIP = re.compile(r"\s*/\d?")
+_ISO_FLOW = re.compile(r"IF|GOTO|WHILE|DO\s*\d|END\s*\d|THEN", re.IGNORECASE)
 _ARC_NAMES = {"CR", "AR", "I", "J", "K", "I1", "J1", "K1", "TURN", "CT"}
 _LINEAR = {"G0", "G1", ""}
 _LINES = re.compile(r"[^\r\n]*(?:\r\n|\n|\r)?")
@@ -164,6 +165,11 @@ class Interpreter:
         codes: list[tuple[str, Token]] = []
         words: dict[str, Token] = {}
         refusals: list[tuple[str, Token]] = []
+        if not self.dialect.siemens and any(t.kind == "other" for t in block.tokens):
+            code_text = "".join(t.text if t.kind != "comment" else " " for t in block.tokens)
+            flow = _ISO_FLOW.search(code_text)
+            if flow:
+                refusals.append(("control flow", Token("other", flow.group(), 0, 0, flow.group().upper())))
         siemens = self.dialect.siemens
         for i, tok in enumerate(block.tokens):
             kind = tok.kind
@@ -287,6 +293,9 @@ class Interpreter:
                 changes["cycle"] = arg != "cancel"
         if changes and any(getattr(st, k) != v for k, v in changes.items()):
             self.state = replace(st, **changes)  # type: ignore[arg-type]
+            if self.state.rtcp != st.rtcp:
+                # X/Y/Z switch between machine and workpiece coordinates: where they stand is unknown
+                self.pos[0:3] = [None, None, None]
 
     def _offset_name(self, tok: Token, block: Block) -> str:
         name = tok.code
