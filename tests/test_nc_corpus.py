@@ -30,6 +30,9 @@ _WORD = re.compile(r"(?<![A-Z_])([XYZABC])[ \t]*(?:=\s*(?:[A-Z]+\()?)?\s*([-+]?(
                    re.IGNORECASE)
 
 
+_COMMENT = re.compile(r";|(?<![A-Z])\(", re.IGNORECASE)
+
+
 def _params(machine: str) -> CompensationParameters:
     kern = load_kernels(machine)
     values = {k: v for ax in kern.ROTARY_AXES for k, v in ERRORS[ax].items()}
@@ -69,7 +72,7 @@ def test_corpus_program(name):
 
 def _only_axis_values_changed(old: str, new: str, *, inch: bool) -> None:
     """Same text once axis words are taken out; every value present before moves by a compensation-sized amount."""
-    code_old, code_new = re.split(r"[;(]", old, maxsplit=1), re.split(r"[;(]", new, maxsplit=1)
+    code_old, code_new = _COMMENT.split(old, maxsplit=1), _COMMENT.split(new, maxsplit=1)
     assert code_old[1:] == code_new[1:], (old, new)  # comments untouched
     assert " ".join(_WORD.sub("", code_old[0]).split()) == " ".join(_WORD.sub("", code_new[0]).split()), (old, new)
     w_old = {m.group(1).upper(): float(m.group(2)) for m in _WORD.finditer(code_old[0])}
