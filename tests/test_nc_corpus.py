@@ -26,7 +26,7 @@ EXPECTED = json.loads((CORPUS / "expected.json").read_text())
 ERRORS = {"A": {"EY0A": 12.0, "EZ0A": -9.0, "EB0A": 25.0, "EC0A": -18.0},
           "B": {"EX0B": 12.0, "EZ0B": -9.0, "EA0B": 25.0, "EC0B": -18.0},
           "C": {"EX0C": -14.0, "EY0C": 10.0, "EA0C": 20.0, "EB0C": -22.0}}
-_WORD = re.compile(r"(?<![A-Z_])([XYZABC])[ \t]*(?:=\s*(?:[A-Z]+\()?)?\s*([-+]?(?:\d+\.?\d*|\.\d+))\)?",
+_WORD = re.compile(r"(?<![A-Z_])([XYZABC])[ \t]*(=\s*(?:[A-Z]+\()?)?\s*([-+]?(?:\d+\.?\d*|\.\d+))\)?",
                    re.IGNORECASE)
 
 
@@ -75,9 +75,11 @@ def _only_axis_values_changed(old: str, new: str, *, inch: bool) -> None:
     code_old, code_new = _COMMENT.split(old, maxsplit=1), _COMMENT.split(new, maxsplit=1)
     assert code_old[1:] == code_new[1:], (old, new)  # comments untouched
     assert " ".join(_WORD.sub("", code_old[0]).split()) == " ".join(_WORD.sub("", code_new[0]).split()), (old, new)
-    w_old = {m.group(1).upper(): float(m.group(2)) for m in _WORD.finditer(code_old[0])}
-    w_new = {m.group(1).upper(): float(m.group(2)) for m in _WORD.finditer(code_new[0])}
-    assert set(w_old) <= set(w_new)
+    w_old = {m.group(1).upper(): float(m.group(3)) for m in _WORD.finditer(code_old[0])}
+    w_new = {m.group(1).upper(): float(m.group(3)) for m in _WORD.finditer(code_new[0])}
+    forms_old = {m.group(1).upper(): (m.group(2) or "").upper() for m in _WORD.finditer(code_old[0])}
+    forms_new = {m.group(1).upper(): (m.group(2) or "").upper() for m in _WORD.finditer(code_new[0])}
+    assert set(w_old) <= set(w_new) and all(forms_new[a] == f for a, f in forms_old.items()), (old, new)
     limit = 0.2 / 25.4 if inch else 0.2
     for ax, v in w_old.items():
         assert abs(w_new[ax] - v) <= (0.1 if ax in "ABC" else limit) + 1e-9, (old, new)
