@@ -5,8 +5,8 @@ rewriter does with its own output).  Per block, in this order:
 
 1. ``%…`` lines (``%``, ``%_N_NAME_MPF``) and blank lines are kept as they are;
 2. a leading ``/`` (block skip) is noted: a skippable block is never changed, the axes it
-   moves become unknown unless they already stood there, and if it changes a modal code the
-   state is lost;
+   programs become unknown (they stand at one of two places), and if it changes a modal code
+   the state is lost;
 3. the line is lexed (:mod:`pige_sym.nc.lexer`; comments, strings and labels are never words);
 4. every G/M code and keyword is looked up in the dialect (:mod:`pige_sym.nc.dialects`);
    unknown G codes, calls, control flow, variables and expressions are refused with the
@@ -133,8 +133,9 @@ class Interpreter:
         state0, pos0 = self.state, list(self.pos)
         self._interpret(block)
         changed_state = self.state != state0
-        self.pos = [p if p is not None and p0 is not None and abs(p - p0) < 1e-12 else None
-                    for p, p0 in zip(self.pos, pos0, strict=True)]
+        # an axis the block programs is at one of two places depending on the switch: unknown
+        self.pos = [None if axis in block.axis_words or p is None else p
+                    for axis, p in zip(self.axes, self.pos, strict=True)]
         if changed_state:
             self.state = replace(state0, lost=f"the block-skip block at line {block.line_no} changes the modal "
                                  "state depending on the skip switch")
