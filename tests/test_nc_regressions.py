@@ -76,27 +76,27 @@ def test_incremental_blocks_stay_incremental_and_small():
     assert np.abs(np.array(after) - np.array(nominal)).max() < 0.05
 
 
-@pytest.mark.parametrize("dialect,block", [
-    ("siemens", "N20 SUPA G0 Z0"), ("siemens", "N20 G53 X10"), ("siemens", "N20 G74 Z1=0"),
-    ("siemens", "N20 TRANS X10"), ("siemens", "N20 ROT Z30"), ("siemens", "N20 MIRROR X0"),
-    ("siemens", "N20 SCALE X2"), ("fanuc", "N20 G28 G91 Z0."), ("fanuc", "N20 G30 X0."), ("fanuc", "N20 G92 X0."),
-    ("fanuc", "N20 G10 L2 P1 X10."), ("fanuc", "N20 G53 G00 Z0."), ("linuxcnc", "N20 G92 X0"),
+@pytest.mark.parametrize("dialect,block,frame", [
+    ("siemens", "N20 SUPA G0 Z0", False), ("siemens", "N20 G53 X10", False), ("siemens", "N20 TRANS X10", True),
+    ("siemens", "N20 ROT Z30", True), ("siemens", "N20 MIRROR X0", True), ("siemens", "N20 SCALE X2", True),
+    ("fanuc", "N20 G28 Z0.", False), ("fanuc", "N20 G91 G28 Z0.\nG90", False), ("fanuc", "N20 G30 X0.", False), ("fanuc", "N20 G92 X0.", True),
+    ("fanuc", "N20 G10 L2 P1 X10.", True), ("fanuc", "N20 G53 G00 Z0.", False), ("fanuc", "N20 G68 X0. Y0. R30.", True),
+    ("linuxcnc", "N20 G92 X0", True), ("linuxcnc", "N20 G28", False),
 ])
-def test_reference_machine_and_frame_blocks_are_never_changed(dialect, block):
+def test_reference_machine_and_frame_blocks_are_never_changed(dialect, block, frame):
     if dialect == "siemens":
         head, first, nxt = "G90 G71\n", "N10 G1 X120 Y30 Z80 A20 C30\n", "N30 G1 X100 Y10 Z70 A25 C40\n"
     else:
         head, first, nxt = "G90 G21\n", "N10 G01 X120. Y30. Z80. A20. C30.\n", "N30 G01 X100. Y10. Z70. A25. C40.\n"
-    if block.endswith("Z1=0"):
-        pytest.skip("G74 takes machine-axis names in 840D; not modelled")
     text = head + first + block + "\n" + nxt
     res = _comp(text, dialect)
     changed = _changed(text, res.text)
-    assert 3 not in changed
-    assert 4 not in changed or "TRANS" in block or "ROT" in block or "MIRROR" in block or "SCALE" in block \
-        or "G92" in block or "G10" in block or block.startswith("N20 G28") is False
-    if any(k in block for k in ("TRANS", "ROT", "MIRROR", "SCALE", "G92", "G10")):
-        assert 4 not in changed  # a frame makes the coordinates unknown: nothing after it is compensated
+    last = len(text.splitlines())
+    assert 2 in changed and 3 not in changed
+    if frame:  # a frame makes the program coordinates unknown: nothing after it is compensated
+        assert last not in changed
+    else:  # a full absolute pose after a reference / machine-coordinate move is known again
+        assert last in changed
 
 
 def test_after_an_arc_the_position_is_the_arc_end():
