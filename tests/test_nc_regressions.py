@@ -79,7 +79,8 @@ def test_incremental_blocks_stay_incremental_and_small():
 @pytest.mark.parametrize("dialect,block,frame", [
     ("siemens", "N20 SUPA G0 Z0", False), ("siemens", "N20 G53 X10", False), ("siemens", "N20 TRANS X10", True),
     ("siemens", "N20 ROT Z30", True), ("siemens", "N20 MIRROR X0", True), ("siemens", "N20 SCALE X2", True),
-    ("fanuc", "N20 G28 Z0.", False), ("fanuc", "N20 G91 G28 Z0.\nG90", False), ("fanuc", "N20 G30 X0.", False), ("fanuc", "N20 G92 X0.", True),
+    ("fanuc", "N20 G28 Z0.", False), ("fanuc", "N20 G91 G28 Z0.\nG90", False), ("fanuc", "N20 G30 X0.", False),
+    ("fanuc", "N20 G92 X0.", True),
     ("fanuc", "N20 G10 L2 P1 X10.", True), ("fanuc", "N20 G53 G00 Z0.", False), ("fanuc", "N20 G68 X0. Y0. R30.", True),
     ("linuxcnc", "N20 G92 X0", True), ("linuxcnc", "N20 G28", False),
 ])

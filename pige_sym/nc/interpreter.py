@@ -130,7 +130,7 @@ class Interpreter:
 
     # -- blocks -------------------------------------------------------------------------
     def _skippable(self, block: Block) -> None:
-        state0, pos0 = self.state, list(self.pos)
+        state0 = self.state
         self._interpret(block)
         changed_state = self.state != state0
         # an axis the block programs is at one of two places depending on the switch: unknown

@@ -33,7 +33,8 @@ _CODES = common_codes() | {
     "G451": "benign", "SOFT": "benign", "BRISK": "benign", "FFWON": "benign", "FFWOF": "benign",
     "COMPON": "benign", "COMPCURV": "benign", "COMPCAD": "benign", "COMPOF": "benign", "ORIWKS": "benign",
     "ORIMKS": "benign", "ORIAXES": "benign", "ORIVECT": "benign", "UPATH": "benign", "SPATH": "benign",
-    "STOPRE": "benign", "DIAMOF": "benign", "FNORM": "benign", "FLIN": "benign", "FCUB": "benign", "CYCLE832": "benign", "MSG": "benign", "FGROUP": "benign",
+    "STOPRE": "benign", "DIAMOF": "benign", "FNORM": "benign", "FLIN": "benign", "FCUB": "benign",
+    "CYCLE832": "benign", "MSG": "benign", "FGROUP": "benign",
     "M17": "end", "RET": "end", "CUT3DC": "comp:on", "CUT3DF": "comp:on", "CUT2D": "benign",
     "G40": "comp:off",
 }
