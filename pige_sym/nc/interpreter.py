@@ -35,6 +35,17 @@ from pige_sym.nc.lexer import LexError, Token, tokenize
 from pige_sym.nc.state import Block, ModalState
 
 _SKIP = re.compile(r"\s*/\d?")
+_NUM = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)"
+_SIMPLE_SIEMENS = re.compile(rf"(?P<words>(?:[ \t]*[A-Za-z][ \t]*{_NUM}(?=[ \t;]|$))*)[ \t]*(?:;.*)?")
+_SIMPLE_ISO = re.compile(rf"(?P<words>(?:[ \t]*[A-Za-z][ \t]*{_NUM}(?![eE.\d]))*)[ \t]*(?:\([^()]*\)[ \t]*)?")
+_SIMPLE_WORD = re.compile(rf"([A-Za-z])[ \t]*({_NUM})")
+_SIMPLE_EFFECTS: dict[str, object] = {
+    "motion:G0": {"motion": "G0"}, "motion:G1": {"motion": "G1"}, "motion:G2": {"motion": "G2"},
+    "motion:G3": {"motion": "G3"}, "dist:abs": {"incremental": False}, "dist:inc": {"incremental": True},
+    "units:mm": {"inch": False, "units_programmed": True}, "units:inch": {"inch": True, "units_programmed": True},
+    "feed": {}, "benign": {}, "end": {}, "rtcp:on": {"rtcp": True}, "rtcp:off": {"rtcp": False}, "stop": "stop",
+    "comp:on": {"cutter_comp": True}, "comp:off": {"cutter_comp": False}, "cycle:cancel": {"cycle": False},
+}
 _ISO_FLOW = re.compile(r"IF|GOTO|WHILE|DO\s*\d|END\s*\d|THEN", re.IGNORECASE)
 _ARC_NAMES = {"CR", "AR", "I", "J", "K", "I1", "J1", "K1", "TURN", "CT"}
 _LINEAR = {"G0", "G1", ""}
@@ -96,6 +107,9 @@ class Interpreter:
         self.pos: list[float | None] = [None] * len(self.axes)
         self.notes: list[str] = []
         self._noted: set[str] = set()
+        self._axis_set = frozenset(self.axes)
+        self._simple_rx = _SIMPLE_SIEMENS if dialect.siemens else _SIMPLE_ISO
+        self._simple_codes: dict[str, object] = {}
 
     # -- public -------------------------------------------------------------------------
     def feed(self, line_no: int, text: str, ending: str) -> Block:
@@ -109,6 +123,10 @@ class Interpreter:
         stripped = lex_text.strip()
         if not stripped or stripped.startswith("%"):
             return Block(line_no, text, ending, [], self.state, before, before, self.axes)
+        if not skip:
+            simple = self._simple(line_no, lex_text, text, ending, before)
+            if simple is not None:
+                return simple
         try:
             tokens = tokenize(lex_text, siemens=self.dialect.siemens)
         except LexError as exc:
@@ -129,6 +147,52 @@ class Interpreter:
         return out
 
     # -- blocks -------------------------------------------------------------------------
+    def _simple(self, line_no: int, lex_text: str, text: str, ending: str,
+                before: tuple[float | None, ...]) -> Block | None:
+        """Fast path for the commonest block: plain words and a trailing comment, nothing to refuse.
+
+        Gives the same result as the full path (the property tests exercise both); returns None
+        (use the full path) for anything else.  ``Block.tokens`` then holds only the axis words.
+        """
+        m = self._simple_rx.fullmatch(lex_text)
+        if m is None:
+            return None
+        changes: dict[str, object] = {}
+        stop = False
+        axis_words: dict[str, Token] = {}
+        cache = self._simple_codes
+        for w in _SIMPLE_WORD.finditer(lex_text, 0, m.end("words")):
+            letter = w.group(1).upper()
+            if letter in "GM":
+                key = letter + w.group(2)
+                effect = cache.get(key)
+                if effect is None:
+                    code = Token("word", w.group(), w.start(), w.end(), letter, float(w.group(2)), w.start(2),
+                                 w.end(2)).code
+                    effect = _SIMPLE_EFFECTS.get(self.dialect.action(code) or "")
+                    if effect is None:
+                        return None
+                    cache[key] = effect
+                if effect == "stop":
+                    stop = True
+                else:
+                    changes.update(effect)  # type: ignore[call-overload]
+            elif letter in self._axis_set:
+                if letter in axis_words:
+                    return None
+                axis_words[letter] = Token("word", w.group(), w.start(), w.end(), letter, float(w.group(2)),
+                                           w.start(2), w.end(2))
+            elif letter not in "NFSTDH":
+                return None
+        if changes:
+            self._set_state(changes)
+        block = Block(line_no, text, ending, list(axis_words.values()), self.state, before, before, self.axes)
+        block.stop = stop
+        if axis_words:
+            block.axis_words = axis_words
+            self._move(block, (), axis_words)
+        return block
+
     def _skippable(self, block: Block) -> None:
         state0 = self.state
         self._interpret(block)
@@ -271,7 +335,6 @@ class Interpreter:
 
     # -- modal codes --------------------------------------------------------------------
     def _apply_modal(self, block: Block, codes: list[tuple[str, Token]]) -> None:
-        st = self.state
         changes: dict[str, object] = {}
         for action, tok in codes:
             head, _, arg = action.partition(":")
@@ -292,7 +355,12 @@ class Interpreter:
                 changes["cutter_comp"] = arg == "on"
             elif head == "cycle":
                 changes["cycle"] = arg != "cancel"
-        if changes and any(getattr(st, k) != v for k, v in changes.items()):
+        if changes:
+            self._set_state(changes)
+
+    def _set_state(self, changes: dict[str, object]) -> None:
+        st = self.state
+        if any(getattr(st, k) != v for k, v in changes.items()):
             self.state = replace(st, **changes)  # type: ignore[arg-type]
             if self.state.rtcp != st.rtcp:
                 # X/Y/Z switch between machine and workpiece coordinates: where they stand is unknown
@@ -328,7 +396,7 @@ class Interpreter:
                 break
         block.after = tuple(self.pos)
 
-    def _move(self, block: Block, actions: list[str], axis_words: dict[str, Token]) -> None:
+    def _move(self, block: Block, actions: Iterable[str], axis_words: dict[str, Token]) -> None:
         st = self.state
         new = list(self.pos)
         inc_axes = set()
