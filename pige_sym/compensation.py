@@ -421,7 +421,7 @@ def compensate_program(program_text: str, params: CompensationParameters, *, pat
 
 def predicted_errors(params: CompensationParameters, angles_deg: np.ndarray, xyz_mm: np.ndarray,
                      rtcp: np.ndarray, cmd_angles_deg: np.ndarray, cmd_xyz_mm: np.ndarray,
-                     ) -> tuple[np.ndarray, np.ndarray]:
+                     approach: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Predicted errors of commanded poses on the machine described by ``params``.
 
     Parameters
@@ -432,6 +432,8 @@ def predicted_errors(params: CompensationParameters, angles_deg: np.ndarray, xyz
         Workpiece coordinates (True) or machine coordinates.
     cmd_angles_deg, cmd_xyz_mm : (n, k), (n, 3)
         The poses as commanded (the same, or compensated).
+    approach : (n, k), optional
+        Directions of approach (default: of ``angles_deg`` in order).
 
     Returns
     -------
@@ -449,7 +451,7 @@ def predicted_errors(params: CompensationParameters, angles_deg: np.ndarray, xyz
         pts[~rtcp] = workpiece_points(kern, a0[~rtcp], pts[~rtcp], pivots, params.tool_mm)
     if rtcp.any():
         machine_xyz[rtcp] = linear_commands_at(kern, a1[rtcp], machine_xyz[rtcp], pivots, params.tool_mm)
-    approach = approach_directions(a0)
+    approach = approach_directions(a0) if approach is None else approach
     err = tool_point_error(params.machine, params.values, a1, machine_xyz, pts, pivots_mm=pivots,
                            tool_mm=params.tool_mm, extensions=params.extensions, approach=approach)
     orient = np.full(a0.shape[0], np.nan)

@@ -248,8 +248,11 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
     k = len(out_prog.rotary_axes)
     new = np.array([out_after[c.line_out] for c in rw.changed], dtype=float).reshape(-1, 3 + k)
     a, xyz, rtcp = poses.angles_deg[rows], poses.xyz_mm[rows], np.asarray(poses.rtcp, dtype=bool)[rows]
-    tp0, or0 = predicted_errors(params, a, xyz, rtcp, a, xyz)
-    tp1, or1 = predicted_errors(params, a, xyz, rtcp, new[:, 3:], new[:, :3])
+    from pige_sym.trajectories import approach_directions
+
+    approach = approach_directions(a)
+    tp0, or0 = predicted_errors(params, a, xyz, rtcp, a, xyz, approach)
+    tp1, or1 = predicted_errors(params, a, xyz, rtcp, new[:, 3:], new[:, :3], approach)
     out = []
     for j, c in enumerate(rw.changed):
         i = rows[j]

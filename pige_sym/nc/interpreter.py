@@ -28,6 +28,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
+from typing import NoReturn
 
 from pige_sym.errors import NCProgramError
 from pige_sym.nc.dialects import Dialect
@@ -400,9 +401,16 @@ class Interpreter:
         st = self.state
         new = list(self.pos)
         inc_axes = set()
+        unit = st.unit_mm
+        check_point = self.dialect.decimal_point
         for key, tok in axis_words.items():
             i = self.axes.index(key)
-            value = self._value(block, tok, i)
+            value = tok.value
+            if value is None or abs(value) > MAX_ABS_VALUE or (check_point and value != 0 and not tok.has_point):
+                self._bad_value(block, tok)
+                continue  # unreachable: _bad_value raises
+            if i < 3:
+                value *= unit
             incremental = tok.function in ("IC", "CIC") or (st.incremental and tok.function in ("", "="))
             if incremental:
                 inc_axes.add(key)
@@ -427,15 +435,13 @@ class Interpreter:
         self.pos = new
         block.after = tuple(new)
 
-    def _value(self, block: Block, tok: Token, i: int) -> float:
-        assert tok.value is not None
-        if self.dialect.decimal_point and not tok.has_point and tok.value != 0:
+    def _bad_value(self, block: Block, tok: Token) -> NoReturn:
+        """Raise for an axis value that is absurd or, on ISO/Fanuc, has no decimal point."""
+        if tok.value is not None and abs(tok.value) <= MAX_ABS_VALUE:
             raise self._error(block.line_no, f"{tok.text.strip()!r} has no decimal point: on ISO/Fanuc controls "
                               "it means least input increments (0.001 mm), not mm; write it with a point "
                               f"({tok.key}{tok.value:g}.) so its meaning is unambiguous")
-        if abs(tok.value) > MAX_ABS_VALUE:
-            raise self._error(block.line_no, f"{tok.text.strip()!r}: value out of any machine's range")
-        return tok.value * (self.state.unit_mm if i < 3 else 1.0)
+        raise self._error(block.line_no, f"{tok.text.strip()!r}: value out of any machine's range")
 
     def _why_not(self, block: Block, new: list[float | None], inc_axes: set[str],
                  axis_words: dict[str, Token]) -> str:
