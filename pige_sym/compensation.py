@@ -364,7 +364,7 @@ def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndar
                      rtcp: bool | np.ndarray = False, pivots_mm: dict | None = None, tool_mm: Any = None,
                      extensions: list[AngleExtension] | tuple[()] = (),
                      approach: np.ndarray | None = None, max_angle_step_deg: float | None = None,
-                     ) -> CompensatedPoses:
+                     keep_turn: bool = False) -> CompensatedPoses:
     """Compensated commands for programmed poses (module docstring).
 
     Parameters
@@ -381,6 +381,8 @@ def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndar
     max_angle_step_deg : float, optional
         Orientation-pole guard: no rotary axis is turned by more than this to correct the orientation
         (:func:`orientation_steps`).
+    keep_turn : bool
+        Leave a rotary command that the correction would move across a multiple of 360° (NC programs).
     """
     kern = load_kernels(machine)
     a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
@@ -395,6 +397,12 @@ def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndar
     limited = np.zeros(n, dtype=bool)
     if kern.HAS_DIRECTION_SOLVER and n:
         step, limited = orientation_steps(kern, a, p, max_angle_step_deg)
+        if keep_turn:
+            # never move a rotary command across a multiple of 360 deg: on a roll-over axis that can
+            # mean a full turn of the table; the orientation of such a pose is left (reported as limited)
+            crossing = np.floor((a + step) / 360.0) != np.floor(a / 360.0)
+            step = np.where(crossing, 0.0, step)
+            limited |= crossing.any(axis=1)
         new_a = a + step
     d_raw = raw_offset(kern, new_a, pts, p, pivots_mm, tool_mm) * 1e-3  # mm
     new_xyz = np.empty_like(pts)

@@ -213,3 +213,14 @@ def test_cli_refuses_clobbering_and_prints_a_json_report(tmp_path, capsys):
                  "--max-change", "0.0001"]) == 2
     assert main(["compensate", str(prog), "--params", str(params), "--out", str(out), "--force",
                  "--max-change", "nan"]) == 2
+
+
+def test_rotary_commands_never_cross_a_multiple_of_360():
+    """C0 -> C-0.0002 could make a roll-over axis turn a full revolution: the orientation is left instead."""
+    text = "G90 G71\nN10 G1 X120 Y30 Z80 A20 C0\nN20 G1 X110 A25 C360\nN30 G1 C=DC(0)\n"
+    res = compensate_nc(text, _params({k: -v for k, v in ERRORS.items()}), dialect="siemens")  # ΔC < 0 here
+    before = [b.after for b in parse_program(text, dialect="siemens").blocks if b.is_motion]
+    after = [b.after for b in parse_program(res.text, dialect="siemens").blocks if b.is_motion]
+    for old, new in zip(before, after, strict=True):
+        assert all(np.floor(n / 360) == np.floor(o / 360) for o, n in zip(old[3:], new[3:], strict=True))
+    assert res.report.compensated >= 2 and res.report.orientation_limited_lines == [2, 3, 4]

@@ -10,7 +10,8 @@
 3. **Compensate** all planned poses at once (:func:`pige_sym.compensation.compensate_poses`) with
    the orientation-pole guard (no rotary axis turned by more than ``max_change_deg`` to fix
    the orientation; such poses are listed as *orientation limited*, their position is still
-   corrected).
+   corrected); a rotary command is never moved across a multiple of 360° (on a roll-over axis that
+   could turn the table a full revolution), that pose's orientation is left and listed too.
 4. **Guard**: a pose whose correction exceeds ``max_change_mm`` / ``max_change_deg`` refuses the
    whole program (like the change limits of a controller's own calibration cycle).
 5. **Rewrite** (:mod:`pige_sym.nc.rewrite`) and **read back** (:mod:`pige_sym.nc.verify`); the
@@ -221,7 +222,7 @@ def _compensated_poses(params: Any, chosen: list[Block], max_change_deg: float) 
     approach = approach_directions(angles) if len(chosen) else np.zeros((0, k))
     return compensate_poses(params.machine, params.values, angles, xyz, rtcp=rtcp, pivots_mm=pivots,
                             tool_mm=params.tool_mm, extensions=params.extensions, approach=approach,
-                            max_angle_step_deg=max_change_deg)
+                            max_angle_step_deg=max_change_deg, keep_turn=True)
 
 
 def _guard(chosen: list[Block], poses: Any, max_mm: float, max_deg: float, path: str, error: type) -> None:
