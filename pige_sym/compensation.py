@@ -533,10 +533,10 @@ def format_controller(params: CompensationParameters, style: str = "table", *, c
             "linuxcnc": _linuxcnc}[style](first, second, carrier)
     orient = [f"{r['axis']}: direction change ({', '.join(f'{x:+.9f}' for x in r['direction_delta'])})"
               for r in (first, second) if np.abs(r["direction_delta"]).max() > 0]
-    if orient:
-        body.append("axis-direction changes (not expressible as offsets; enter only where the controller has "
-                    "an axis-direction entry): " + "; ".join(orient))
     comment = "; " if style == "siemens" else "# " if style == "linuxcnc" else ""
+    if orient:
+        body.append(comment + "axis-direction changes (not expressible as offsets; enter only where the controller "
+                    "has an axis-direction entry): " + "; ".join(orient))
     return "\n".join([comment + h for h in head] + body)
 
 
@@ -545,10 +545,15 @@ def _siemens_fine(first: dict, second: dict, carrier: int) -> list[str]:
     vec = {44: d1, 55: d2 - d1, 58: -d2}  # fine offsets of l2 ($TC_CARR4..6), l3 (15..17), l4 (18..20)
     out = []
     for start, v in sorted(vec.items()):
-        out += [f"$TC_CARR{start + k}[{carrier}]=$TC_CARR{start + k}[{carrier}]+{v[k]:.6f}" for k in range(3)]
-    out.append(f"$TC_CARR64[{carrier}]=$TC_CARR64[{carrier}]+{first['zero_offset_deg']:.7f}")
-    out.append(f"$TC_CARR65[{carrier}]=$TC_CARR65[{carrier}]+{second['zero_offset_deg']:.7f}")
+        out += [f"$TC_CARR{start + k}[{carrier}]=$TC_CARR{start + k}[{carrier}]{_signed(v[k], 6)}" for k in range(3)]
+    out.append(f"$TC_CARR64[{carrier}]=$TC_CARR64[{carrier}]{_signed(first['zero_offset_deg'], 7)}")
+    out.append(f"$TC_CARR65[{carrier}]=$TC_CARR65[{carrier}]{_signed(second['zero_offset_deg'], 7)}")
     return out
+
+
+def _signed(value: float, decimals: int) -> str:
+    """``+0.012000`` / ``-0.009000`` (no ``-0.000000``)."""
+    return f"{round(float(value), decimals) + 0.0:+.{decimals}f}"
 
 
 def _heidenhain(first: dict, second: dict, carrier: int) -> list[str]:
@@ -575,8 +580,8 @@ def _linuxcnc(first: dict, second: dict, carrier: int) -> list[str]:
         tilt, rot = rot, tilt
     off = rot - tilt
     out = ["# trtkins: add to the HAL parameters (mm, machine frame, + = towards + of the machine axis)"]
-    out += [f"setp trtkins.{c}-rot-point [+{tilt[k]:.6f}]" for k, c in enumerate("xyz")]
-    out += [f"setp trtkins.{c}-offset [+{off[k]:.6f}]" for k, c in enumerate("yz")]
+    out += [f"setp trtkins.{c}-rot-point [{tilt[k]:+.6f}]" for k, c in enumerate("xyz")]
+    out += [f"setp trtkins.{c}-offset [{off[k]:+.6f}]" for k, c in enumerate("xyz")]
     out.append(f"# rotary zero offsets [deg]: {first['axis']} {first['zero_offset_deg']:+.7f}, "
                f"{second['axis']} {second['zero_offset_deg']:+.7f} (home offsets of the joints)")
     return out

@@ -20,6 +20,7 @@ from pige_sym.compensation import (
     tool_point_error,
 )
 from pige_sym.effects import EffectSpec
+from pige_sym.errors import InputError
 from pige_sym.identification import identify
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.program import NCProgramError, make_rtest_program
@@ -306,7 +307,7 @@ def test_cli_compensate_end_to_end(tmp_path, capsys):
     assert main(["compensate", str(program), "--params", str(result), "--out", str(out)]) == 0
     assert out.read_text().count("\nN") == program.read_text().count("\nN")
     assert main(["compensate", "--params", str(result), "--controller", "siemens"]) == 0
-    assert "$TC_CARR44[1]=$TC_CARR44[1]+" in capsys.readouterr().out
+    assert "$TC_CARR44[1]=$TC_CARR44[1]" in capsys.readouterr().out
     bad = tmp_path / "bad.mpf"
     bad.write_text("G90\nN10 G1 X1 Y2 Z3 A0 C0\nN20 G3 X1 Y1 R=R1\n")
     assert main(["compensate", str(bad), "--params", str(result), "--out", str(tmp_path / "x.mpf")]) == 2
@@ -332,3 +333,25 @@ def test_json_output_of_simulate_and_compensate(tmp_path, capsys):
     assert main(["compensate", "--params", str(diag), "--controller", "table", "--json"]) == 0
     axes = json.loads(capsys.readouterr().out)["axes"]
     assert [a["axis"] for a in axes] == ["A", "C"]
+
+
+def test_controller_styles_print_the_deltas_with_their_signs():
+    from pige_sym.compensation import format_controller
+
+    values = {"EY0A": 12.0, "EZ0A": -9.0, "EX0C": -14.0, "EY0C": 10.0, "EA0A": 100.0}
+    params = _params(AC, values)
+    siemens = dict(line.split("=", 1) for line in format_controller(params, "siemens", carrier=3).splitlines()
+                   if line.startswith("$"))
+    # l2 fine offset = shift of axis 1 (A), l3 = shift of C minus shift of A, l4 = minus shift of C
+    assert siemens["$TC_CARR45[3]"] == "$TC_CARR45[3]+0.012000"
+    assert siemens["$TC_CARR46[3]"] == "$TC_CARR46[3]-0.009000"
+    assert siemens["$TC_CARR55[3]"] == "$TC_CARR55[3]-0.014000"
+    assert siemens["$TC_CARR56[3]"] == "$TC_CARR56[3]-0.002000"
+    assert siemens["$TC_CARR58[3]"] == "$TC_CARR58[3]+0.014000"
+    assert siemens["$TC_CARR64[3]"] == f"$TC_CARR64[3]+{np.degrees(100e-6):.7f}"
+    linuxcnc = format_controller(params, "linuxcnc")
+    assert "setp trtkins.y-rot-point [+0.012000]" in linuxcnc and "setp trtkins.x-offset [-0.014000]" in linuxcnc
+    for style in ("heidenhain", "fanuc", "linuxcnc", "siemens"):
+        assert "NOT verified on a controller" in format_controller(params, style)
+    with pytest.raises(InputError):
+        format_controller(params, "okuma")

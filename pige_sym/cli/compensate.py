@@ -39,7 +39,7 @@ def _max_change(text: str) -> tuple[float, float]:
 def _run(args: argparse.Namespace) -> int:
     params = load_parameters(args.params, args.machine, allow_unidentifiable=args.allow_unidentifiable)
     if args.controller and not args.json:
-        print(format_controller(params, args.controller))
+        print(format_controller(params, args.controller, carrier=args.carrier))
     if args.controller and not args.program:
         if args.json:
             print(to_json({"machine": params.machine, "parameters_from": params.source,
@@ -123,6 +123,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--allow-unidentifiable", action="store_true", help="use 0 for parameters without a value")
     p.add_argument("--controller", choices=list(CONTROLLER_STYLES), help="print the corrected kinematics "
                    "(see docs/controller-corrections.md)")
+    p.add_argument("--carrier", type=int, default=1, help="Siemens swivel data record number (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print the change report as one JSON object")
     p.set_defaults(handler=_run)
 
