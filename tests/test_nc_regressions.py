@@ -224,3 +224,11 @@ def test_rotary_commands_never_cross_a_multiple_of_360():
     for old, new in zip(before, after, strict=True):
         assert all(np.floor(n / 360) == np.floor(o / 360) for o, n in zip(old[3:], new[3:], strict=True))
     assert res.report.compensated >= 2 and res.report.orientation_limited_lines == [2, 3, 4]
+
+
+def test_nothing_after_the_program_end_is_compensated():
+    text = ("%\nO1\nG90 G21\nG1 X120. Y30. Z80. A20. C30.\nM30\nO2 (SECOND PROGRAM)\n"
+            "G1 X120. Y30. Z80. A20. C30.\nM30\n%\n")
+    res = _comp(text, "fanuc")
+    assert [c.line_in for c in res.report.changes] == [4]
+    assert any(p["line"] == 7 and "end of the program" in p["reason"] for p in res.report.passed_through)

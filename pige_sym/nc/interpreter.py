@@ -44,7 +44,7 @@ _SIMPLE_EFFECTS: dict[str, object] = {
     "motion:G0": {"motion": "G0"}, "motion:G1": {"motion": "G1"}, "motion:G2": {"motion": "G2"},
     "motion:G3": {"motion": "G3"}, "dist:abs": {"incremental": False}, "dist:inc": {"incremental": True},
     "units:mm": {"inch": False, "units_programmed": True}, "units:inch": {"inch": True, "units_programmed": True},
-    "feed": {}, "benign": {}, "end": {}, "rtcp:on": {"rtcp": True}, "rtcp:off": {"rtcp": False}, "stop": "stop",
+    "feed": {}, "benign": {}, "end": "end", "rtcp:on": {"rtcp": True}, "rtcp:off": {"rtcp": False}, "stop": "stop",
     "comp:on": {"cutter_comp": True}, "comp:off": {"cutter_comp": False}, "cycle:cancel": {"cycle": False},
 }
 _ISO_FLOW = re.compile(r"IF|GOTO|WHILE|DO\s*\d|END\s*\d|THEN", re.IGNORECASE)
@@ -176,6 +176,8 @@ class Interpreter:
                     cache[key] = effect
                 if effect == "stop":
                     stop = True
+                elif effect == "end":
+                    changes["lost"] = f"after the end of the program at line {line_no}"
                 else:
                     changes.update(effect)  # type: ignore[call-overload]
             elif letter in self._axis_set:
@@ -356,6 +358,8 @@ class Interpreter:
                 changes["cutter_comp"] = arg == "on"
             elif head == "cycle":
                 changes["cycle"] = arg != "cancel"
+            elif head == "end":
+                changes["lost"] = f"after the end of the program at line {block.line_no}"
         if changes:
             self._set_state(changes)
 
