@@ -40,6 +40,7 @@ _NUM = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)"
 _SIMPLE_SIEMENS = re.compile(rf"(?P<words>(?:[ \t]*[A-Za-z][ \t]*{_NUM}(?=[ \t;]|$))*)[ \t]*(?:;.*)?")
 _SIMPLE_ISO = re.compile(rf"(?P<words>(?:[ \t]*[A-Za-z][ \t]*{_NUM}(?![eE.\d]))*)[ \t]*(?:\([^()]*\)[ \t]*)?")
 _SIMPLE_WORD = re.compile(rf"([A-Za-z])[ \t]*({_NUM})")
+_new_token = tuple.__new__
 _SIMPLE_EFFECTS: dict[str, object] = {
     "motion:G0": {"motion": "G0"}, "motion:G1": {"motion": "G1"}, "motion:G2": {"motion": "G2"},
     "motion:G3": {"motion": "G3"}, "dist:abs": {"incremental": False}, "dist:inc": {"incremental": True},
@@ -162,14 +163,13 @@ class Interpreter:
         stop = False
         axis_words: dict[str, Token] = {}
         cache = self._simple_codes
-        for w in _SIMPLE_WORD.finditer(lex_text, 0, m.end("words")):
-            letter = w.group(1).upper()
+        for letter, num in _SIMPLE_WORD.findall(lex_text, 0, m.end("words")):
+            letter = letter.upper()
             if letter in "GM":
-                key = letter + w.group(2)
+                key = letter + num
                 effect = cache.get(key)
                 if effect is None:
-                    code = Token("word", w.group(), w.start(), w.end(), letter, float(w.group(2)), w.start(2),
-                                 w.end(2)).code
+                    code = Token("word", key, 0, len(key), letter, float(num), 1, len(key)).code
                     effect = _SIMPLE_EFFECTS.get(self.dialect.action(code) or "")
                     if effect is None:
                         return None
@@ -183,8 +183,8 @@ class Interpreter:
             elif letter in self._axis_set:
                 if letter in axis_words:
                     return None
-                axis_words[letter] = Token("word", w.group(), w.start(), w.end(), letter, float(w.group(2)),
-                                           w.start(2), w.end(2))
+                # offsets -1: where the digits are is found again only if the block is rewritten
+                axis_words[letter] = _new_token(Token, ("word", letter + num, -1, -1, letter, float(num), -1, -1, ""))
             elif letter not in "NFSTDH":
                 return None
         if changes:

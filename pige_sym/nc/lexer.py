@@ -57,6 +57,7 @@ _ISO = re.compile(
     re.IGNORECASE,
 )
 _CODES: dict[tuple[str, str], str] = {}
+_PLAIN_WORD = re.compile(rf"([A-Z])[ \t]*({NUMBER})", re.IGNORECASE)
 
 
 class Token(NamedTuple):
@@ -69,7 +70,9 @@ class Token(NamedTuple):
     text : str
         The token exactly as written.
     start, end : int
-        Offsets of the token in the line (``line[start:end] == text``).
+        Offsets of the token in the line (``line[start:end] == text``); −1 for an axis word of a plain
+        block read by the interpreter's fast path (``text`` is then the letter and digits, and
+        :func:`locate_words` finds the offsets when the block is rewritten).
     key : str
         Upper-case address: the letter of a word (``X``), the name of an assignment,
         call or name (``TRAORI``, ``R1``, ``GOTOF``); empty for comments and strings.
@@ -95,6 +98,8 @@ class Token(NamedTuple):
     @property
     def has_point(self) -> bool:
         """True when the number is written with a decimal point (ISO/Fanuc: ``X120.`` ≠ ``X120``)."""
+        if self.start < 0:  # a word without offsets (fast path): text is letter + digits
+            return "." in self.text
         return self.value_start >= 0 and "." in self.text[self.value_start - self.start:self.value_end - self.start]
 
     @property
@@ -188,3 +193,18 @@ def _assign(line: str, m: re.Match[str], start: int, end: int) -> Token:
         return Token("assign", m.group(), start, end, key=name, value=_number(m.group("anum"), start),
                      value_start=m.start("anum"), value_end=m.end("anum"), function="=")
     return Token("assign", m.group(), start, end, key=name, function="expr")
+
+
+def locate_words(line: str, words: dict[str, Token]) -> dict[str, Token]:
+    """``words`` (by letter) with their offsets in ``line`` filled in (tokens from the fast path have −1)."""
+    if all(t.start >= 0 for t in words.values()):
+        return words
+    out = dict(words)
+    for m in _PLAIN_WORD.finditer(line):
+        letter = m.group(1).upper()
+        if letter in out and out[letter].start < 0:
+            out[letter] = out[letter]._replace(text=m.group(), start=m.start(), end=m.end(), value_start=m.start(2),
+                                               value_end=m.end(2))
+    if any(t.start < 0 for t in out.values()):
+        raise ValueError(f"cannot locate the axis words of {line!r}")
+    return out

@@ -23,6 +23,7 @@ import re
 from dataclasses import dataclass, field
 
 from pige_sym.nc.interpreter import Program
+from pige_sym.nc.lexer import locate_words
 from pige_sym.nc.program import format_number
 from pige_sym.nc.state import Block
 
@@ -154,12 +155,13 @@ def _rewrite_block(block: Block, target: tuple[float, ...], out_pos: list[float 
     added: list[str] = []
     words: list[WordChange] = []
     reached: list[float] = []
+    axis_words = locate_words(block.text, block.axis_words)
     for i, axis in enumerate(block.axes):
         factor = block.state.unit_mm if i < 3 else 1.0
         dec = decimals_for(block, i)
         want = target[i] / factor
         prev = None if out_pos[i] is None else out_pos[i] / factor  # type: ignore[operator]
-        tok = block.axis_words.get(axis)
+        tok = axis_words.get(axis)
         incremental = axis in block.incremental_axes if tok is not None else block.state.incremental
         if tok is not None:
             if incremental and prev is None:
@@ -184,7 +186,7 @@ def _rewrite_block(block: Block, target: tuple[float, ...], out_pos: list[float 
         words.append(WordChange(axis, "", added[-1]))
     text = block.text
     if added:
-        at = max(t.end for t in block.axis_words.values())
+        at = max(t.end for t in axis_words.values())
         edits.append((at, at, " " + " ".join(added)))
     for start, end, new in sorted(edits, reverse=True):
         text = text[:start] + new + text[end:]
