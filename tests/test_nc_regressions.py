@@ -232,3 +232,15 @@ def test_nothing_after_the_program_end_is_compensated():
     res = _comp(text, "fanuc")
     assert [c.line_in for c in res.report.changes] == [4]
     assert any(p["line"] == 7 and "end of the program" in p["reason"] for p in res.report.passed_through)
+
+
+def test_modal_state_is_tracked_through_every_block():
+    text = ("G90 G71 G17 G94\nG54\nTRAORI\nN10 G1 X1 Y2 Z3 A4 C5\nG91 G18 G93\nN20 X1 F100\nG70\nN30 G90 G0 X1\n"
+            "G55 TRAFOOF\n")
+    st = [b.state for b in parse_program(text, dialect="siemens").blocks]
+    assert (st[3].rtcp, st[3].offset, st[3].plane, st[3].feed, st[3].incremental) == (True, "G54", "G17", "G94", False)
+    assert (st[5].plane, st[5].feed, st[5].incremental, st[5].motion) == ("G18", "G93", True, "G1")
+    assert (st[7].inch, st[7].motion, st[7].incremental) == (True, "G0", False)
+    assert (st[8].offset, st[8].rtcp) == ("G55", False)
+    after = [b.after for b in parse_program(text, dialect="siemens").blocks]
+    assert after[5][0] == 2.0 and after[7][0] == 25.4  # incremental, then inch

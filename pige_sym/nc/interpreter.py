@@ -45,7 +45,9 @@ _SIMPLE_EFFECTS: dict[str, object] = {
     "motion:G0": {"motion": "G0"}, "motion:G1": {"motion": "G1"}, "motion:G2": {"motion": "G2"},
     "motion:G3": {"motion": "G3"}, "dist:abs": {"incremental": False}, "dist:inc": {"incremental": True},
     "units:mm": {"inch": False, "units_programmed": True}, "units:inch": {"inch": True, "units_programmed": True},
-    "feed": {}, "benign": {}, "end": "end", "rtcp:on": {"rtcp": True}, "rtcp:off": {"rtcp": False}, "stop": "stop",
+    "feed:G93": {"feed": "G93"}, "feed:G94": {"feed": "G94"}, "feed:G95": {"feed": "G95"},
+    "plane:G17": {"plane": "G17"}, "plane:G18": {"plane": "G18"}, "plane:G19": {"plane": "G19"}, "benign": {},
+    "end": "end", "rtcp:on": {"rtcp": True}, "rtcp:off": {"rtcp": False}, "stop": "stop",
     "comp:on": {"cutter_comp": True}, "comp:off": {"cutter_comp": False}, "cycle:cancel": {"cycle": False},
 }
 _ISO_FLOW = re.compile(r"IF|GOTO|WHILE|DO\s*\d|END\s*\d|THEN", re.IGNORECASE)
@@ -356,6 +358,8 @@ class Interpreter:
                 changes.update(self._frame(arg, tok, block))
             elif head == "comp":
                 changes["cutter_comp"] = arg == "on"
+            elif head in ("feed", "plane"):
+                changes[head] = arg
             elif head == "cycle":
                 changes["cycle"] = arg != "cancel"
             elif head == "end":

@@ -42,6 +42,10 @@ class ModalState:
         A canned cycle is modal (G81 …, until G80).
     lost : str
         Non-empty after a block passed through whose effect is unknown (a call, a jump): why.
+    plane : str
+        ``G17``/``G18``/``G19`` (``""`` before one is programmed).
+    feed : str
+        Feed mode ``G93`` (inverse time), ``G94``, ``G95`` (``""`` before one is programmed).
     """
 
     incremental: bool = False
@@ -55,6 +59,8 @@ class ModalState:
     cutter_comp: bool = False
     cycle: bool = False
     lost: str = ""
+    plane: str = ""
+    feed: str = ""
 
     @property
     def unit_mm(self) -> float:

@@ -8,7 +8,8 @@ applies.  Actions::
     motion:other                               other motion (thread, spline ...): end point unknown
     dist:abs dist:inc                          G90 / G91
     units:mm units:inch                        G21 G71 G710 / G20 G70 G700
-    feed                                       G93 G94 G95 (tracked, never changed)
+    feed:G93 feed:G94 feed:G95                 feed mode (tracked; F words are never changed)
+    plane:G17 plane:G18 plane:G19              working plane (tracked; arcs' end points do not depend on it)
     rtcp:on rtcp:off                           TRAORI G43.4 G43.5 M128 G234 / TRAFOOF G49 M129 ...
     offset                                     work offsets G54..G59, G54.1 P, G154 P, G505..G599, G500
     frame:set frame:cancel                     TRANS ROT SCALE MIRROR G68 G68.2 G51 G51.1 G52 G92 CYCLE800 ...
@@ -80,8 +81,9 @@ class Dialect:
 def common_codes() -> dict[str, str]:
     """G/M codes that mean the same on every supported controller."""
     codes = {"G0": "motion:G0", "G1": "motion:G1", "G2": "motion:G2", "G3": "motion:G3", "G4": "dwell",
-             "G17": "benign", "G18": "benign", "G19": "benign", "G40": "comp:off", "G41": "comp:on",
-             "G42": "comp:on", "G90": "dist:abs", "G91": "dist:inc", "G93": "feed", "G94": "feed", "G95": "feed",
+             "G17": "plane:G17", "G18": "plane:G18", "G19": "plane:G19", "G40": "comp:off", "G41": "comp:on",
+             "G42": "comp:on", "G90": "dist:abs", "G91": "dist:inc",
+             "G93": "feed:G93", "G94": "feed:G94", "G95": "feed:G95",
              "G53": "machine", "G54": "offset", "G55": "offset", "G56": "offset", "G57": "offset",
              "G9": "benign", "G61": "benign", "G64": "benign", "G96": "benign", "G97": "benign",
              "M0": "stop", "M1": "stop", "M2": "end", "M30": "end"}

@@ -26,7 +26,7 @@ _CODES = common_codes() | {
     "G28": "ref", "G30": "ref", "G80": "cycle:cancel", "G15": "benign", "G16": "refuse:polar coordinates",
     "G33": "motion:other", "G5": "refuse:high-speed machining data", "G6.2": "refuse:NURBS interpolation",
     "G5.1": "benign", "G8": "benign", "G187": "benign", "G98": "benign", "G99": "benign", "G40": "comp:off",
-    "G61.1": "benign", "G63": "benign", "G94": "feed", "G95": "feed", "G93": "feed",
+    "G61.1": "benign", "G63": "benign", "G94": "feed:G94", "G95": "feed:G95", "G93": "feed:G93",
     "M98": "refuse:subprogram call", "M99": "refuse:subprogram return", "M97": "refuse:subprogram call",
     "G65": "refuse:macro call", "G66": "refuse:macro call", "G67": "benign",
 }
