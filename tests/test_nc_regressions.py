@@ -244,3 +244,21 @@ def test_modal_state_is_tracked_through_every_block():
     assert (st[8].offset, st[8].rtcp) == ("G55", False)
     after = [b.after for b in parse_program(text, dialect="siemens").blocks]
     assert after[5][0] == 2.0 and after[7][0] == 25.4  # incremental, then inch
+
+
+def test_read_back_catches_a_wrong_output():
+    from pige_sym.nc.verify import verify
+
+    text = "G90 G71\nN10 G1 X120 Y30 Z80 A20 C30\nN20 G1 X110\nN30 G91 X1\n"
+    prog = parse_program(text, dialect="siemens")
+    ok = verify(prog, text, set(), 0, 0, max_mm=0.2, max_deg=0.1)
+    assert ok.ok and ok.max_change_mm == 0.0
+    moved = verify(prog, text.replace("X110", "X110.5"), {3}, 0, 0, max_mm=0.2, max_deg=0.1)
+    assert not moved.ok and any("line 3: X moved by 0.5000 mm" in p for p in moved.problems)
+    assert any("line 4: X moved" in p for p in moved.problems)  # the incremental block inherits it
+    touched = verify(prog, text.replace("N30 G91 X1", "N30 G91 X1 "), set(), 0, 0, max_mm=0.2, max_deg=0.1)
+    assert not touched.ok and "line 4: changed although it should be byte-identical" in touched.problems
+    mode = verify(prog, text.replace("G90 G71", "G90 G70"), {1}, 0, 0, max_mm=1e9, max_deg=0.1)
+    assert not mode.ok and any("modal state" in p for p in mode.problems)
+    header = verify(prog, "; h\n" + text, set(), 1, 0, max_mm=0.2, max_deg=0.1)
+    assert header.ok

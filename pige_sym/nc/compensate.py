@@ -269,12 +269,10 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
     approach = approach_directions(a) if params.extensions else np.zeros_like(a)
     tp0, or0 = predicted_errors(params, a, xyz, rtcp, a, xyz, approach)
     tp1, or1 = predicted_errors(params, a, xyz, rtcp, new[:, 3:], new[:, :3], approach)
-    out = []
-    for j, c in enumerate(rw.changed):
-        i = rows[j]
-        out.append(BlockChange(
-            c.line_in, c.line_out, [{"axis": w.axis, "old": w.old, "new": w.new} for w in c.words],
-            bool(rtcp[j]), float(tp0[j]), float(tp1[j]),
-            float(or0[j]), float(or1[j]), float(np.abs(new[j, :3] - xyz[j]).max()),
-            float(np.abs(new[j, 3:] - a[j]).max(initial=0.0)), bool(poses.orientation_limited[i])))
-    return out
+    d_mm = np.abs(new[:, :3] - xyz).max(axis=1).tolist()
+    d_deg = np.abs(new[:, 3:] - a).max(axis=1, initial=0.0).tolist()
+    limited = np.asarray(poses.orientation_limited)[rows].tolist()
+    cols = zip(rw.changed, rtcp.tolist(), tp0.tolist(), tp1.tolist(), or0.tolist(), or1.tolist(), d_mm, d_deg,
+               limited, strict=True)
+    return [BlockChange(c.line_in, c.line_out, [{"axis": w.axis, "old": w.old, "new": w.new} for w in c.words],
+                        *rest) for c, *rest in cols]

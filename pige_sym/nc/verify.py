@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from pige_sym.nc.interpreter import Program, interpret
 from pige_sym.nc.state import MM_PER_INCH, Block
 
@@ -57,31 +59,34 @@ def verify(original: Program, out_text: str, changed_lines: set[int], header_lin
     if len(blocks) != len(original.blocks):
         return Verification(False, [f"the output has {len(out.blocks)} lines, expected {len(original.blocks)} + "
                                     f"{header_lines} header lines"])
-    worst_mm = worst_deg = 0.0
     for a, b in zip(original.blocks, blocks, strict=True):
         where = f"line {a.line_no}"
         if a.line_no not in changed_lines and (a.text != b.text or a.ending != b.ending):
             problems.append(f"{where}: changed although it should be byte-identical")
-        if a.kind != b.kind or _modal(a) != _modal(b):
+        if a.kind != b.kind or (a.state is not b.state and _modal(a) != _modal(b)):
             problems.append(f"{where}: reads back as a different kind of block or modal state")
         if targets and a.line_no in changed_lines:
             problems += _missed(b, targets[a.line_no], where)
-        for i, (x, y) in enumerate(zip(a.after, b.after, strict=True)):
-            if (x is None) != (y is None):
-                problems.append(f"{where}: {a.axes[i]} is {'un' if y is None else ''}known after the rewrite")
-                continue
-            if x is None or y is None:
-                continue
-            d = abs(x - y)
-            if i < 3:
-                worst_mm = max(worst_mm, d)
-                if d > max_mm:
-                    problems.append(f"{where}: {a.axes[i]} moved by {d:.4f} mm (limit {max_mm:g} mm)")
-            else:
-                worst_deg = max(worst_deg, d)
-                if d > max_deg:
-                    problems.append(f"{where}: {a.axes[i]} moved by {d:.4f} deg (limit {max_deg:g} deg)")
+    worst_mm, worst_deg = _compare_poses(original, blocks, max_mm, max_deg, problems)
     return Verification(not problems, problems, worst_mm, worst_deg, out)
+
+
+def _compare_poses(original: Program, blocks: list[Block], max_mm: float, max_deg: float,
+                   problems: list[str]) -> tuple[float, float]:
+    """Poses known in both or neither, and within the limits; returns the largest changes [mm], [deg]."""
+    a = np.array([b.after for b in original.blocks], dtype=float).reshape(len(blocks), -1)
+    b = np.array([b.after for b in blocks], dtype=float).reshape(len(blocks), -1)
+    known = ~np.isnan(a)
+    for i, j in zip(*np.nonzero(known != ~np.isnan(b)), strict=True):
+        problems.append(f"line {original.blocks[i].line_no}: {original.axes[j]} is "
+                        f"{'un' if np.isnan(b[i, j]) else ''}known after the rewrite")
+    diff = np.where(known & ~np.isnan(b), np.abs(a - b), 0.0)
+    limit = np.array([max_mm] * 3 + [max_deg] * (a.shape[1] - 3))
+    for i, j in zip(*np.nonzero(diff > limit), strict=True):
+        unit = "mm" if j < 3 else "deg"
+        problems.append(f"line {original.blocks[i].line_no}: {original.axes[j]} moved by {diff[i, j]:.4f} {unit} "
+                        f"(limit {limit[j]:g} {unit})")
+    return float(diff[:, :3].max(initial=0.0)), float(diff[:, 3:].max(initial=0.0))
 
 
 def _missed(block: Block, target: tuple[float, ...], where: str) -> list[str]:
