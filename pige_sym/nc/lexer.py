@@ -72,7 +72,7 @@ class Token(NamedTuple):
     start, end : int
         Offsets of the token in the line (``line[start:end] == text``); −1 for an axis word of a plain
         block read by the interpreter's fast path (``text`` is then the letter and digits, and
-        :func:`locate_words` finds the offsets when the block is rewritten).
+        :func:`word_spans` finds the offsets when the block is rewritten).
     key : str
         Upper-case address: the letter of a word (``X``), the name of an assignment,
         call or name (``TRAORI``, ``R1``, ``GOTOF``); empty for comments and strings.
@@ -195,16 +195,18 @@ def _assign(line: str, m: re.Match[str], start: int, end: int) -> Token:
     return Token("assign", m.group(), start, end, key=name, function="expr")
 
 
-def locate_words(line: str, words: dict[str, Token]) -> dict[str, Token]:
-    """``words`` (by letter) with their offsets in ``line`` filled in (tokens from the fast path have −1)."""
-    if all(t.start >= 0 for t in words.values()):
-        return words
-    out = dict(words)
-    for m in _PLAIN_WORD.finditer(line):
-        letter = m.group(1).upper()
-        if letter in out and out[letter].start < 0:
-            out[letter] = out[letter]._replace(text=m.group(), start=m.start(), end=m.end(), value_start=m.start(2),
-                                               value_end=m.end(2))
-    if any(t.start < 0 for t in out.values()):
-        raise ValueError(f"cannot locate the axis words of {line!r}")
+def word_spans(line: str, words: dict[str, Token]) -> dict[str, tuple[int, int, int, int]]:
+    """Offsets ``(start, end, value_start, value_end)`` in ``line`` of each word in ``words`` (by letter).
+
+    Tokens of the interpreter's fast path carry no offsets (−1): they are found again here, in plain
+    blocks whose words all have the form letter + number.
+    """
+    out = {k: (t.start, t.end, t.value_start, t.value_end) for k, t in words.items() if t.start >= 0}
+    if len(out) < len(words):
+        for m in _PLAIN_WORD.finditer(line):
+            letter = m.group(1).upper()
+            if letter in words and letter not in out:
+                out[letter] = (m.start(), m.end(), m.start(2), m.end(2))
+        if len(out) < len(words):
+            raise ValueError(f"cannot locate the axis words of {line!r}")
     return out

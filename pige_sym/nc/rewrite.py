@@ -23,7 +23,7 @@ import re
 from dataclasses import dataclass, field
 
 from pige_sym.nc.interpreter import Program
-from pige_sym.nc.lexer import locate_words
+from pige_sym.nc.lexer import word_spans
 from pige_sym.nc.program import format_number
 from pige_sym.nc.state import Block
 
@@ -66,11 +66,6 @@ class Rewrite:
     changed: list[RewrittenBlock]
     header_lines: int
     skipped: dict[int, str]
-
-
-def decimals_for(block: Block, axis_index: int) -> int:
-    """Decimals written for an axis word: 4 (mm, deg) or 5 (inch)."""
-    return 5 if axis_index < 3 and block.state.inch else 4
 
 
 def header_position(program: Program) -> int:
@@ -151,43 +146,46 @@ def _rewrite_block(block: Block, target: tuple[float, ...], out_pos: list[float 
 
     None when an axis position the block needs is unknown.
     """
+    line = block.text
     edits: list[tuple[int, int, str]] = []
     added: list[str] = []
     words: list[WordChange] = []
     reached: list[float] = []
-    axis_words = locate_words(block.text, block.axis_words)
+    spans = word_spans(line, block.axis_words)
+    unit = block.state.unit_mm
     for i, axis in enumerate(block.axes):
-        factor = block.state.unit_mm if i < 3 else 1.0
-        dec = decimals_for(block, i)
+        factor = unit if i < 3 else 1.0
+        dec = 5 if i < 3 and block.state.inch else 4
         want = target[i] / factor
         prev = None if out_pos[i] is None else out_pos[i] / factor  # type: ignore[operator]
-        tok = axis_words.get(axis)
-        incremental = axis in block.incremental_axes if tok is not None else block.state.incremental
+        tok = block.axis_words.get(axis)
         if tok is not None:
+            incremental = axis in block.incremental_axes
             if incremental and prev is None:
                 return None
-            value = want - prev if incremental else want  # type: ignore[operator]
-            digits = format_number(value, dec, point=point)
-            written = float(digits) if float(digits) != tok.value else tok.value
+            digits = format_number(want - prev if incremental else want, dec, point=point)  # type: ignore[operator]
+            written = float(digits)
+            if written == tok.value:
+                written = tok.value
+            else:
+                start, end, v0, v1 = spans[axis]
+                edits.append((v0, v1, digits))
+                words.append(WordChange(axis, line[start:end], line[start:v0] + digits + line[v1:end]))
             reached.append(((prev or 0.0) + written if incremental else written) * factor)
-            if float(digits) != tok.value:
-                edits.append((tok.value_start, tok.value_end, digits))
-                rel0, rel1 = tok.value_start - tok.start, tok.value_end - tok.start
-                words.append(WordChange(axis, tok.text, tok.text[:rel0] + digits + tok.text[rel1:]))
             continue
         if prev is None:
             return None
         if abs(want - prev) < 0.5 * 10.0**-dec:
             reached.append(prev * factor)
             continue
+        incremental = block.state.incremental
         digits = format_number(want - prev if incremental else want, dec, point=point)
         reached.append((prev + float(digits) if incremental else float(digits)) * factor)
         added.append(f"{axis}{digits}")
         words.append(WordChange(axis, "", added[-1]))
-    text = block.text
     if added:
-        at = max(t.end for t in axis_words.values())
+        at = max(span[1] for span in spans.values())
         edits.append((at, at, " " + " ".join(added)))
     for start, end, new in sorted(edits, reverse=True):
-        text = text[:start] + new + text[end:]
-    return text, words, reached
+        line = line[:start] + new + line[end:]
+    return line, words, reached
