@@ -262,3 +262,12 @@ def test_read_back_catches_a_wrong_output():
     assert not mode.ok and any("modal state" in p for p in mode.problems)
     header = verify(prog, "; h\n" + text, set(), 1, 0, max_mm=0.2, max_deg=0.1)
     assert header.ok
+
+
+def test_an_arc_whose_start_moved_is_reported():
+    text = ("G90 G71\nN10 G1 X120 Y30 Z80 A20 C30\nN20 G1 Z70\nN30 G1 X100 Y0 Z70 A20 C30\nN40 G1 Z60\n"
+            "N50 G2 X80 Y20 I0 J20\n")
+    res = _comp(text, "siemens")
+    # N40 ends where the arc starts and is kept, but it inherits the X/Y offsets of N30
+    assert 5 not in {c.line_in for c in res.report.changes}
+    assert any("the arc at line 6 starts" in n for n in res.report.notes)

@@ -206,10 +206,31 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
         path, d.name, params.machine, params.source, len(program.blocks), sum(b.kind == "move" for b in program.blocks),
         len(rw.changed), _changes(params, chosen, poses, rw, check.read_back),
         sorted(passed, key=lambda p: p["line"]),
-        [b.line_no for i, b in enumerate(chosen) if poses.orientation_limited[i]], program.notes,
+        [b.line_no for i, b in enumerate(chosen) if poses.orientation_limited[i]],
+        program.notes + _arc_start_notes(program, check.read_back, rw.header_lines),
         check.max_change_mm, check.max_change_deg, {"mm": max_change_mm, "deg": max_change_deg}, True,
         list(params.ignored))
     return CompensationResult(rw.text, report)
+
+
+def _arc_start_notes(program: Program, out: Program | None, header_lines: int) -> list[str]:
+    """Arcs whose start the compensation of an earlier block moved (their end stays as programmed).
+
+    The centre (I/J/K) is relative to the start, so the end radius differs by up to the shift; a
+    controller accepts that within its circle end-point tolerance and stops with an alarm beyond it.
+    """
+    if out is None:
+        return []
+    at = header_position(program)
+    blocks = out.blocks[:at] + out.blocks[at + header_lines:] if header_lines else out.blocks
+    notes = []
+    for a, b in zip(program.blocks, blocks, strict=True):
+        if a.kind == "pass" and a.state.motion in ("G2", "G3") and None not in a.before and None not in b.before:
+            shift = max(abs(x - y) for x, y in zip(a.before[:3], b.before[:3], strict=True))  # type: ignore[operator]
+            if shift > 1e-4:
+                notes.append(f"the arc at line {a.line_no} starts {shift * 1e3:.1f} um from its programmed start "
+                             "(an earlier block was compensated); its end is as programmed")
+    return notes
 
 
 def _header(params: Any) -> list[str]:
