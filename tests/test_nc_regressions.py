@@ -271,3 +271,11 @@ def test_an_arc_whose_start_moved_is_reported():
     # N40 ends where the arc starts and is kept, but it inherits the X/Y offsets of N30
     assert 5 not in {c.line_in for c in res.report.changes}
     assert any("the arc at line 6 starts" in n for n in res.report.notes)
+
+
+def test_a_program_without_rtcp_code_says_what_it_assumed():
+    plain = _comp("G90 G71\nN10 G1 X120 Y30 Z80 A20 C30\n", "siemens").report.notes
+    assert any("no RTCP code before line 2" in n for n in plain)
+    for text, dialect in (("G90 G71\nTRAFOOF\nN10 G1 X120 Y30 Z80 A20 C30\n", "siemens"),
+                          ("G90 G21\nG43.4 H1\nN10 G1 X120. Y30. Z80. A20. C30.\n", "fanuc")):
+        assert not any("RTCP" in n for n in _comp(text, dialect).report.notes)

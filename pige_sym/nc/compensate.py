@@ -207,10 +207,18 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
         len(rw.changed), _changes(params, chosen, poses, rw, check.read_back),
         sorted(passed, key=lambda p: p["line"]),
         [b.line_no for i, b in enumerate(chosen) if poses.orientation_limited[i]],
-        program.notes + _arc_start_notes(program, check.read_back, rw.header_lines),
+        program.notes + _rtcp_note(program, chosen) + _arc_start_notes(program, check.read_back, rw.header_lines),
         check.max_change_mm, check.max_change_deg, {"mm": max_change_mm, "deg": max_change_deg}, True,
         list(params.ignored))
     return CompensationResult(rw.text, report)
+
+
+def _rtcp_note(program: Program, chosen: list[Block]) -> list[str]:
+    """A note when no RTCP code precedes the first compensated block (the reset state, off, is assumed)."""
+    if not chosen or chosen[0].state.rtcp_programmed:
+        return []
+    return [f"no RTCP code before line {chosen[0].line_no}: X/Y/Z are taken as machine coordinates (RTCP off, "
+            "the reset state); if RTCP is switched on outside this program, declare its code (--rtcp-on)"]
 
 
 def _arc_start_notes(program: Program, out: Program | None, header_lines: int) -> list[str]:

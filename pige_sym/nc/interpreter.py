@@ -47,7 +47,8 @@ _SIMPLE_EFFECTS: dict[str, object] = {
     "units:mm": {"inch": False, "units_programmed": True}, "units:inch": {"inch": True, "units_programmed": True},
     "feed:G93": {"feed": "G93"}, "feed:G94": {"feed": "G94"}, "feed:G95": {"feed": "G95"},
     "plane:G17": {"plane": "G17"}, "plane:G18": {"plane": "G18"}, "plane:G19": {"plane": "G19"}, "benign": {},
-    "end": "end", "rtcp:on": {"rtcp": True}, "rtcp:off": {"rtcp": False}, "stop": "stop",
+    "end": "end", "rtcp:on": {"rtcp": True, "rtcp_programmed": True},
+    "rtcp:off": {"rtcp": False, "rtcp_programmed": True}, "stop": "stop",
     "comp:on": {"cutter_comp": True}, "comp:off": {"cutter_comp": False}, "cycle:cancel": {"cycle": False},
 }
 _ISO_FLOW = re.compile(r"IF|GOTO|WHILE|DO\s*\d|END\s*\d|THEN", re.IGNORECASE)
@@ -352,6 +353,7 @@ class Interpreter:
                 changes["units_programmed"] = True
             elif head == "rtcp":
                 changes["rtcp"] = arg == "on"
+                changes["rtcp_programmed"] = True
             elif head == "offset":
                 changes["offset"] = self._offset_name(tok, block)
             elif head == "frame":

@@ -30,6 +30,8 @@ class ModalState:
         ``G0``, ``G1``, ``G2``, ``G3``, ``other`` or ``""`` (not programmed yet: a linear move).
     rtcp : bool
         Tool centre point control (TRAORI, G43.4 …) on.
+    rtcp_programmed : bool
+        Whether the program switched RTCP on or off (otherwise off, the reset state, is assumed).
     offset : str
         Active work offset (``G54``, ``G54.1P3`` …), ``""`` before one is programmed.
     frame : str
@@ -53,6 +55,7 @@ class ModalState:
     units_programmed: bool = False
     motion: str = ""
     rtcp: bool = False
+    rtcp_programmed: bool = False
     offset: str = ""
     frame: str = ""
     locked: str = ""
