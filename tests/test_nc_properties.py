@@ -90,3 +90,23 @@ def test_lexer_never_crashes_and_never_makes_non_finite_values(line, siemens):
         assert line[t.start:t.end] == t.text
         if t.value is not None:
             assert math.isfinite(t.value)
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(programs())
+def test_fast_path_and_full_path_agree(prog):
+    from pige_sym.nc.dialects import get_dialect
+    from pige_sym.nc.interpreter import Interpreter, split_lines
+
+    dialect, text = prog
+    results = []
+    for fast in (True, False):
+        interp = Interpreter(get_dialect(dialect), ("A", "C"), fast=fast)
+        try:
+            blocks = interp.run(split_lines(text))
+        except PigeError as exc:
+            results.append(("error", str(exc)))
+            continue
+        results.append([(b.kind, b.reason, b.after, b.state, b.stop, sorted(b.axis_words), b.incremental_axes)
+                        for b in blocks])
+    assert results[0] == results[1]

@@ -100,10 +100,12 @@ class Interpreter:
         File name for messages.
     pass_through : bool
         Keep refused blocks (calls, control flow, expressions) instead of raising.
+    fast : bool
+        Use the fast path for plain blocks (same results; off only to test that).
     """
 
     def __init__(self, dialect: Dialect, rotary_axes: tuple[str, ...], *, path: str = "<program>",
-                 pass_through: bool = False) -> None:
+                 pass_through: bool = False, fast: bool = True) -> None:
         self.dialect = dialect
         self.axes = ("X", "Y", "Z", *rotary_axes)
         self.path = path
@@ -113,6 +115,7 @@ class Interpreter:
         self.notes: list[str] = []
         self._noted: set[str] = set()
         self._axis_set = frozenset(self.axes)
+        self._fast = fast
         self._simple_rx = _SIMPLE_SIEMENS if dialect.siemens else _SIMPLE_ISO
         self._simple_codes: dict[str, object] = {}
 
@@ -128,7 +131,7 @@ class Interpreter:
         stripped = lex_text.strip()
         if not stripped or stripped.startswith("%"):
             return Block(line_no, text, ending, [], self.state, before, before, self.axes)
-        if not skip:
+        if self._fast and not skip:
             simple = self._simple(line_no, lex_text, text, ending, before)
             if simple is not None:
                 return simple
