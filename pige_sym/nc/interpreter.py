@@ -115,6 +115,7 @@ class Interpreter:
         self.notes: list[str] = []
         self._noted: set[str] = set()
         self._axis_set = frozenset(self.axes)
+        self._axis_index = {a: i for i, a in enumerate(self.axes)}
         self._fast = fast
         self._simple_rx = _SIMPLE_SIEMENS if dialect.siemens else _SIMPLE_ISO
         self._simple_codes: dict[str, object] = {}
@@ -416,8 +417,9 @@ class Interpreter:
         inc_axes = set()
         unit = st.unit_mm
         check_point = self.dialect.decimal_point
+        index = self._axis_index
         for key, tok in axis_words.items():
-            i = self.axes.index(key)
+            i = index[key]
             value = tok.value
             if value is None or abs(value) > MAX_ABS_VALUE or (check_point and value != 0 and not tok.has_point):
                 self._bad_value(block, tok)
@@ -430,8 +432,9 @@ class Interpreter:
                 new[i] = None if self.pos[i] is None else self.pos[i] + value  # type: ignore[operator]
             else:
                 new[i] = value
-        block.incremental_axes = frozenset(inc_axes)
-        special = next((a for a in actions if a in ("ref", "machine")), None)
+        if inc_axes:
+            block.incremental_axes = frozenset(inc_axes)
+        special = ("ref" if "ref" in actions else "machine" if "machine" in actions else None) if actions else None
         if special or st.cycle or st.motion == "other":
             for key in axis_words:
                 new[self.axes.index(key)] = None
@@ -464,11 +467,10 @@ class Interpreter:
                 return cause
         if st.cutter_comp:
             return "cutter radius compensation active"
-        if any(v is None for v in new):
+        if None in new:
             missing = [a for a, v in zip(self.axes, new, strict=True) if v is None]
             return f"pose not known ({', '.join(missing)} not programmed yet)"
-        full_absolute = len(axis_words) == len(self.axes) and not inc_axes
-        if any(v is None for v in self.pos) and not full_absolute:
+        if None in self.pos and (inc_axes or len(axis_words) != len(self.axes)):
             return "pose before the block not known"
         return ""
 
