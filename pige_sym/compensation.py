@@ -44,7 +44,6 @@ import numpy as np
 from pige_sym.effects import EffectSpec
 from pige_sym.errors import FileFormatError, InputError, PigeError
 from pige_sym.kernels import load_kernels
-from pige_sym.nc.program import NCBlock, parse_program, rewrite_program, to_fanuc
 from pige_sym.trajectories import approach_directions
 
 COMPENSABLE_KINDS = ("angular_error", "backlash")
@@ -253,136 +252,223 @@ def _param_vector(kern: Any, values: dict[str, float]) -> np.ndarray:
     return np.array([values.get(n, 0.0) for n in kern.PARAMETERS])
 
 
+def _affine_in_point(fn: Any, points_mm: np.ndarray, *, pose_axis: bool) -> np.ndarray:
+    """Evaluate ``fn(point)``, affine in the point, at each row of ``points_mm`` (n, 3) with 4 calls.
+
+    ``fn(point)`` returns an array whose first axis is the pose (``pose_axis``) or one without it.
+    """
+    base = np.asarray(fn(np.zeros(3)))
+    slopes = [np.asarray(fn(e)) - base for e in np.eye(3)]
+    pts = np.asarray(points_mm, dtype=float)
+    shape = (-1,) + (1,) * (base.ndim - 1 if pose_axis else base.ndim)
+    out = base + sum(pts[:, k].reshape(shape) * slopes[k] for k in range(3))
+    return np.asarray(out)
+
+
 def raw_offset(kern: Any, angles_deg: np.ndarray, points_mm: np.ndarray, params: np.ndarray,
                pivots: dict | None, tool: Any) -> np.ndarray:
     """Un-zeroed tool-point minus workpiece-point error per pose, shape=(n, 3) [µm].
 
-    ``params`` is one vector (P,) or one per pose (n, P).
+    ``params`` is one vector (P,) or one per pose (n, P).  Vectorised: the Jacobians are
+    affine in the point, so four evaluations serve every pose.
     """
-    out = np.empty((angles_deg.shape[0], 3))
-    rot = kern.workpiece_rotation(angles_deg)
-    per_pose = np.broadcast_to(params, (angles_deg.shape[0], np.shape(params)[-1]))
-    for i in range(angles_deg.shape[0]):
-        a = angles_deg[i : i + 1]
-        jac = kern.jacobian(a, None, points_mm[i], pivots, tool)[0]
-        ref = kern.reference_jacobian(points_mm[i], pivots, tool)
-        out[i] = (jac + rot[i] @ ref) @ per_pose[i]
-    return out
+    a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    pts = np.atleast_2d(np.asarray(points_mm, dtype=float))
+    if a.shape[0] == 0:
+        return np.zeros((0, 3))
+    jac = _affine_in_point(lambda x: kern.jacobian(a, None, x, pivots, tool), pts, pose_axis=True)  # (n, 3, P)
+    ref = _affine_in_point(lambda x: kern.reference_jacobian(x, pivots, tool), pts, pose_axis=False)  # (n, 3, P)
+    rot = kern.workpiece_rotation(a)
+    total = jac + np.einsum("nij,njp->nip", rot, ref)
+    per_pose = np.broadcast_to(params, (a.shape[0], np.shape(params)[-1]))
+    return np.asarray(np.einsum("nip,np->ni", total, per_pose))
+
+
+def _linear_affine(kern: Any, angles_deg: np.ndarray, pivots: dict | None, tool: Any) -> tuple[np.ndarray, np.ndarray]:
+    """RTCP commands as ``base + cols @ point``: base (n, 3) [mm], cols (n, 3, 3)."""
+    base = np.asarray(kern.linear_commands(angles_deg, np.zeros(3), pivots, tool))
+    cols = np.stack([np.asarray(kern.linear_commands(angles_deg, e, pivots, tool)) - base for e in np.eye(3)],
+                    axis=2)
+    return base, cols
+
+
+def linear_commands_at(kern: Any, angles_deg: np.ndarray, points_mm: np.ndarray, pivots: dict | None,
+                       tool: Any) -> np.ndarray:
+    """Nominal RTCP X, Y, Z for a different workpiece point per pose, shape=(n, 3) [mm]."""
+    base, cols = _linear_affine(kern, angles_deg, pivots, tool)
+    return np.asarray(base + np.einsum("nij,nj->ni", cols, points_mm))
 
 
 def workpiece_points(kern: Any, angles_deg: np.ndarray, xyz_mm: np.ndarray, pivots: dict | None,
                      tool: Any) -> np.ndarray:
     """Invert the nominal kinematics: workpiece points whose RTCP commands are ``xyz_mm``, shape=(n, 3)."""
-    out = np.empty_like(xyz_mm, dtype=float)
-    for i in range(angles_deg.shape[0]):
-        a = angles_deg[i : i + 1]
-        base = kern.linear_commands(a, np.zeros(3), pivots, tool)[0]
-        cols = np.column_stack([kern.linear_commands(a, e, pivots, tool)[0] - base for e in np.eye(3)])
-        out[i] = np.linalg.solve(cols, xyz_mm[i] - base)
-    return out
+    a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    base, cols = _linear_affine(kern, a, pivots, tool)
+    return np.asarray(np.linalg.solve(cols, (np.asarray(xyz_mm, dtype=float) - base)[..., None])[..., 0])
 
 
 @dataclass
 class CompensatedPoses:
-    """Original and compensated commands."""
+    """Original and compensated commands.
+
+    ``orientation_limited`` (n,) marks poses near the orientation pole where (part of) the
+    orientation correction was left out because it would have turned an axis by more than
+    the limit; their position is still corrected.
+    """
 
     angles_deg: np.ndarray
     xyz_mm: np.ndarray
     points_mm: np.ndarray
     new_angles_deg: np.ndarray
     new_xyz_mm: np.ndarray
-    rtcp: bool
+    rtcp: bool | np.ndarray
+    orientation_limited: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+
+
+def orientation_steps(kern: Any, angles_deg: np.ndarray, params: np.ndarray,
+                      max_step_deg: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Rotary-angle corrections Δθ (n, k) [deg] that cancel the orientation error to first order.
+
+    Solves ``(∂v/∂θ)·Δθ = −ω×v`` per pose by SVD.  With ``max_step_deg``, a singular
+    direction whose step would exceed it (near the orientation pole, where ∂v/∂C → 0) is
+    dropped; the second result (n,) marks the poses where that happened.
+    """
+    a = np.atleast_2d(angles_deg)
+    n, k = a.shape
+    v = kern.tool_direction(a)
+    omega = np.einsum("nip,np->ni", kern.orientation_jacobian(a), params) * 1e-6
+    target = -np.cross(omega, v)
+    h = 1e-4
+    dv = np.stack([(kern.tool_direction(a + h * e) - kern.tool_direction(a - h * e)) / (2 * h) for e in np.eye(k)],
+                  axis=2)  # (n, 3, k) per degree
+    u, sig, vt = np.linalg.svd(dv, full_matrices=False)  # (n,3,k) (n,k) (n,k,k)
+    coef = np.einsum("nik,ni->nk", u, target)
+    safe = sig > 1e-9 * np.maximum(sig[:, :1], 1e-300)
+    comp = np.where(safe, coef / np.where(safe, sig, 1.0), 0.0)  # step along each right singular vector
+    limited = np.zeros(n, dtype=bool)
+    step = np.einsum("nk,nkj->nj", comp, vt)
+    if max_step_deg is not None:
+        # drop the largest singular components until no axis turns by more than the limit
+        for _ in range(k):
+            over = np.abs(step).max(axis=1) > max_step_deg
+            if not over.any():
+                break
+            limited |= over
+            biggest = np.argmax(np.abs(comp), axis=1)
+            comp[over, biggest[over]] = 0.0
+            step = np.einsum("nk,nkj->nj", comp, vt)
+    return step, limited
 
 
 def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndarray, xyz_mm: np.ndarray, *,
-                     rtcp: bool = False, pivots_mm: dict | None = None, tool_mm: Any = None,
+                     rtcp: bool | np.ndarray = False, pivots_mm: dict | None = None, tool_mm: Any = None,
                      extensions: list[AngleExtension] | tuple[()] = (),
-                     approach: np.ndarray | None = None) -> CompensatedPoses:
+                     approach: np.ndarray | None = None, max_angle_step_deg: float | None = None,
+                     keep_turn: bool = False) -> CompensatedPoses:
     """Compensated commands for programmed poses (module docstring).
 
     Parameters
     ----------
     angles_deg : (n, k) [deg]
     xyz_mm : (n, 3) [mm]
-        Machine positions of the tool point (``rtcp=False``) or workpiece coordinates (``rtcp=True``).
+        Machine positions of the tool point (``rtcp`` False) or workpiece coordinates (``rtcp`` True).
+    rtcp : bool or (n,) bool
+        Per pose when an array.
     extensions : list of AngleExtension
         Accepted angular-positioning / reversal errors to compensate too.
     approach : (n, k) of {−1, 0, +1}, optional
         Directions of approach (default: from the poses in order); used by backlash.
+    max_angle_step_deg : float, optional
+        Orientation-pole guard: no rotary axis is turned by more than this to correct the orientation
+        (:func:`orientation_steps`).
+    keep_turn : bool
+        Leave a rotary command that the correction would move across a multiple of 360° (NC programs).
     """
     kern = load_kernels(machine)
     a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    n = a.shape[0]
     p = pose_parameters(kern, values, a, extensions, approach)
     xyz = np.atleast_2d(np.asarray(xyz_mm, dtype=float))
-    pts = xyz if rtcp else workpiece_points(kern, a, xyz, pivots_mm, tool_mm)
+    flags = np.broadcast_to(np.asarray(rtcp, dtype=bool), (n,))
+    pts = xyz.copy()
+    if (~flags).any():
+        pts[~flags] = workpiece_points(kern, a[~flags], xyz[~flags], pivots_mm, tool_mm)
     new_a = a.copy()
-    if kern.HAS_DIRECTION_SOLVER:
-        v = kern.tool_direction(a)
-        omega = np.einsum("nip,np->ni", kern.orientation_jacobian(a), p) * 1e-6
-        target = -np.cross(omega, v)
-        h = 1e-4
-        for i in range(a.shape[0]):
-            dv = np.column_stack([
-                (kern.tool_direction(a[i : i + 1] + h * e)[0] - kern.tool_direction(a[i : i + 1] - h * e)[0]) / (2 * h)
-                for e in np.eye(a.shape[1])
-            ])  # per degree
-            step, *_ = np.linalg.lstsq(dv, target[i], rcond=1e-9)
-            new_a[i] = a[i] + step
+    limited = np.zeros(n, dtype=bool)
+    if kern.HAS_DIRECTION_SOLVER and n:
+        step, limited = orientation_steps(kern, a, p, max_angle_step_deg)
+        if keep_turn:
+            # never move a rotary command across a multiple of 360 deg: on a roll-over axis that can
+            # mean a full turn of the table; the orientation of such a pose is left (reported as limited)
+            crossing = np.floor((a + step) / 360.0) != np.floor(a / 360.0)
+            step = np.where(crossing, 0.0, step)
+            limited |= crossing.any(axis=1)
+        new_a = a + step
     d_raw = raw_offset(kern, new_a, pts, p, pivots_mm, tool_mm) * 1e-3  # mm
-    if rtcp:
-        rot = kern.workpiece_rotation(new_a)
-        new_xyz = pts - np.einsum("nji,nj->ni", rot, d_raw)
-    else:
-        nominal = np.array([kern.linear_commands(new_a[i : i + 1], pts[i], pivots_mm, tool_mm)[0]
-                            for i in range(a.shape[0])])
-        new_xyz = nominal - d_raw
-    return CompensatedPoses(a, xyz, pts, new_a, new_xyz, rtcp)
+    new_xyz = np.empty_like(pts)
+    if flags.any():
+        rot = kern.workpiece_rotation(new_a[flags])
+        new_xyz[flags] = pts[flags] - np.einsum("nji,nj->ni", rot, d_raw[flags])
+    if (~flags).any():
+        nominal = linear_commands_at(kern, new_a[~flags], pts[~flags], pivots_mm, tool_mm)
+        new_xyz[~flags] = nominal - d_raw[~flags]
+    return CompensatedPoses(a, xyz, pts, new_a, new_xyz, rtcp, limited)
 
 
 def compensate_program(program_text: str, params: CompensationParameters, *, path: str = "<program>",
-                       dialect: str = "siemens", pass_through: bool = False, decimals: int = 4) -> str:
-    """Compensated program text (Siemens subset in, Siemens or Fanuc out)."""
+                       dialect: str | None = None, pass_through: bool = False, **guards: Any) -> str:
+    """Compensated program text, in the program's own dialect (:mod:`pige_sym.nc.compensate`).
+
+    ``guards``: ``max_change_mm``, ``max_change_deg``, ``rtcp_on``, ``rtcp_off``, ``header``.
+    """
+    from pige_sym.nc.compensate import compensate_nc
+
+    return compensate_nc(program_text, params, path=path, dialect=dialect, pass_through=pass_through,
+                         **guards).text
+
+
+def predicted_errors(params: CompensationParameters, angles_deg: np.ndarray, xyz_mm: np.ndarray,
+                     rtcp: np.ndarray, cmd_angles_deg: np.ndarray, cmd_xyz_mm: np.ndarray,
+                     approach: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Predicted errors of commanded poses on the machine described by ``params``.
+
+    Parameters
+    ----------
+    angles_deg, xyz_mm : (n, k), (n, 3) [deg, mm]
+        The poses as programmed (they define the intended point and tool direction).
+    rtcp : (n,) bool
+        Workpiece coordinates (True) or machine coordinates.
+    cmd_angles_deg, cmd_xyz_mm : (n, k), (n, 3)
+        The poses as commanded (the same, or compensated).
+    approach : (n, k), optional
+        Directions of approach (default: of ``angles_deg`` in order).
+
+    Returns
+    -------
+    tool_point_um : (n,) [µm]
+        |tool point − intended point|.
+    orientation_urad : (n,) [µrad]
+        |actual − intended tool direction| (NaN without a direction solver).
+    """
     kern = load_kernels(params.machine)
-    program = parse_program(program_text, path=path, rotary_axes=tuple(kern.ROTARY_AXES), pass_through=pass_through)
-    motion = [b for b in program.blocks if b.is_motion]
-    axes = ("X", "Y", "Z", *kern.ROTARY_AXES)
-    new: dict[int, dict[str, float]] = {}
-    tool = params.tool_mm
-    pivots = {k: np.asarray(v) for k, v in params.pivots_mm.items()} or None
-    for b in motion:
-        missing = [ax for ax in axes if b.position.get(ax) is None]
-        if missing:
-            raise CompensationError(f"{path}:{b.line_no}: position of {', '.join(missing)} unknown at this block; "
-                                    "program every axis before the first move")
-    sequence = np.array([[b.position[ax] for ax in kern.ROTARY_AXES] for b in motion], dtype=float)
-    approach = approach_directions(sequence) if motion else np.zeros((0, len(kern.ROTARY_AXES)))
-    for i, b in enumerate(motion):
-        a = sequence[i : i + 1]
-        xyz = np.array([[b.position[ax] for ax in ("X", "Y", "Z")]], dtype=float)
-        c = compensate_poses(params.machine, params.values, a, xyz, rtcp=b.rtcp, pivots_mm=pivots, tool_mm=tool,
-                             extensions=params.extensions, approach=approach[i : i + 1])
-        new[b.line_no] = {"X": c.new_xyz_mm[0, 0], "Y": c.new_xyz_mm[0, 1], "Z": c.new_xyz_mm[0, 2]} | {
-            ax: c.new_angles_deg[0, i] for i, ax in enumerate(kern.ROTARY_AXES)}
-    header = [f"compensated by pige_sym for {params.machine} with {params.source}",
-              "parameters: " + ", ".join(f"{k}={v:.4g}" for k, v in params.values.items())]
-    for ext in params.extensions:
-        opts = "".join(f" {k}={v:g}" for k, v in ext.spec.options.items())
-        header.append(f"compensated extension: {ext.spec.id}{opts}: "
-                      + ", ".join(f"{k}={v:.4g}" for k, v in ext.params.items()))
-    if params.ignored:
-        header.append("not compensated: " + ", ".join(params.ignored))
-
-    def positions(b: NCBlock) -> dict[str, float] | None:
-        return new.get(b.line_no)
-
-    if not motion and dialect == "siemens":
-        return program_text  # nothing to compensate: the program is returned unchanged
-
-    if dialect == "siemens":
-        return rewrite_program(program, positions, header_lines=header, decimals=decimals)
-    if dialect == "fanuc":
-        return to_fanuc(program, positions, header_lines=header, decimals=decimals)
-    raise InputError(f"unknown dialect {dialect!r}: use siemens or fanuc")
+    pivots = {k: np.asarray(v, dtype=float) for k, v in params.pivots_mm.items()} or None
+    a0, a1 = np.atleast_2d(angles_deg), np.atleast_2d(cmd_angles_deg)
+    pts = np.array(xyz_mm, dtype=float)
+    machine_xyz = np.array(cmd_xyz_mm, dtype=float)
+    if (~rtcp).any():
+        pts[~rtcp] = workpiece_points(kern, a0[~rtcp], pts[~rtcp], pivots, params.tool_mm)
+    if rtcp.any():
+        machine_xyz[rtcp] = linear_commands_at(kern, a1[rtcp], machine_xyz[rtcp], pivots, params.tool_mm)
+    approach = approach_directions(a0) if approach is None else approach
+    err = tool_point_error(params.machine, params.values, a1, machine_xyz, pts, pivots_mm=pivots,
+                           tool_mm=params.tool_mm, extensions=params.extensions, approach=approach)
+    orient = np.full(a0.shape[0], np.nan)
+    if kern.HAS_DIRECTION_SOLVER and a0.shape[0]:
+        p = pose_parameters(kern, params.values, a1, params.extensions, approach)
+        v1 = kern.tool_direction(a1)
+        omega = np.einsum("nip,np->ni", kern.orientation_jacobian(a1), p) * 1e-6
+        orient = np.linalg.norm(v1 + np.cross(omega, v1) - kern.tool_direction(a0), axis=1) * 1e6
+    return np.linalg.norm(err, axis=1), orient
 
 
 def controller_corrections(params: CompensationParameters) -> list[dict[str, Any]]:
@@ -405,19 +491,24 @@ def controller_corrections(params: CompensationParameters) -> list[dict[str, Any
         direction /= np.linalg.norm(direction)
         zero = params.values.get(f"E{ax[0]}0{ax}", 0.0)
         side = "workpiece" if ax in kern.WORKPIECE_ROTARY else "tool"
+        nominal = np.asarray(params.pivots_mm.get(ax, [0.0, 0.0, 0.0]), dtype=float)
         out.append({"axis": ax, "side": side, "pivot_mm": pivot.tolist(), "direction": direction.tolist(),
-                    "zero_offset_deg": float(np.degrees(zero * 1e-6))})
+                    "zero_offset_deg": float(np.degrees(zero * 1e-6)),
+                    "pivot_delta_mm": (pivot - nominal).tolist(), "direction_delta": (direction - u).tolist()})
     return out
 
 
-def format_controller(params: CompensationParameters, style: str = "table") -> str:
-    """Print the corrected kinematic chain as a table or a Siemens ``$TC_CARR`` swivel data record.
+CONTROLLER_STYLES = ("table", "siemens", "heidenhain", "fanuc", "linuxcnc")
+NOT_VERIFIED = "NOT verified on a controller: check every value against the machine's documentation"
 
-    Siemens mapping (see docs/controller-corrections.md): the first axis of the chain
-    (nearest the bed) is axis 1 (``$TC_CARR7..9`` direction v1), the second axis 2
-    (``$TC_CARR10..12`` v2); offsets ``l2 = pivot_1`` (``$TC_CARR4..6``) and
-    ``l3 = pivot_2 − pivot_1`` (``$TC_CARR15..17``), ``l4 = −pivot_2`` (``$TC_CARR18..20``)
-    close the chain; zero offsets go to ``$TC_CARR24/25``.
+
+def format_controller(params: CompensationParameters, style: str = "table", *, carrier: int = 1) -> str:
+    """The corrections as deltas to the machine's current kinematic description.
+
+    Styles (units, signs and mappings in docs/controller-corrections.md): ``table`` (corrected
+    axis lines, machine frame), ``siemens`` (``$TC_CARR`` *fine offsets* of swivel data record
+    ``carrier``), ``heidenhain`` (kinematics-table deltas), ``fanuc`` (rotation-axis centre and
+    direction deltas), ``linuxcnc`` (``trtkins`` rot-point / offset deltas).
     """
     rows = controller_corrections(params)
     if style == "table":
@@ -428,22 +519,72 @@ def format_controller(params: CompensationParameters, style: str = "table") -> s
             dirs = ", ".join(f"{x:.9f}" for x in r["direction"])
             lines.append(f"{r['axis']:<5}{r['side']:<11}{piv:<36}{dirs:<40}{r['zero_offset_deg']:.7f}")
         return "\n".join(lines)
-    if style != "siemens":
-        raise InputError(f"unknown controller style {style!r}: use table or siemens")
+    if style not in CONTROLLER_STYLES:
+        raise InputError(f"unknown controller style {style!r}: use {', '.join(CONTROLLER_STYLES)}")
+    if not isinstance(carrier, int) or carrier < 1:
+        raise InputError("--carrier must be a positive integer")
     kern = load_kernels(params.machine)
     chain = [a.name for a in reversed(kern_axes(params.machine, "workpiece"))] + kern_axes_names(params.machine)
     by = {r["axis"]: r for r in rows}
     first, second = by[chain[0]], by[chain[1]]
-    p1, p2 = np.array(first["pivot_mm"]), np.array(second["pivot_mm"])
-    vec = {4: p1, 7: np.array(first["direction"]), 10: np.array(second["direction"]), 15: p2 - p1, 18: -p2}
-    lines = [f"; $TC_CARR swivel data record for {kern.MACHINE_CODE} (axis 1 = {chain[0]}, axis 2 = {chain[1]})",
-             "; ASSUMED mapping, not verified on a controller: see docs/controller-corrections.md"]
+    head = [f"corrections for {kern.MACHINE_CODE} as DELTAS to the current kinematic description "
+            f"(axis 1 = {chain[0]}, axis 2 = {chain[1]}); parameters from {params.source}", NOT_VERIFIED]
+    body = {"siemens": _siemens_fine, "heidenhain": _heidenhain, "fanuc": _fanuc,
+            "linuxcnc": _linuxcnc}[style](first, second, carrier)
+    orient = [f"{r['axis']}: direction change ({', '.join(f'{x:+.9f}' for x in r['direction_delta'])})"
+              for r in (first, second) if np.abs(r["direction_delta"]).max() > 0]
+    comment = "; " if style == "siemens" else "# " if style == "linuxcnc" else ""
+    if orient:
+        body.append(comment + "axis-direction changes (not expressible as offsets; enter only where the controller "
+                    "has an axis-direction entry): " + "; ".join(orient))
+    return "\n".join([comment + h for h in head] + body)
+
+
+def _siemens_fine(first: dict, second: dict, carrier: int) -> list[str]:
+    d1, d2 = np.array(first["pivot_delta_mm"]), np.array(second["pivot_delta_mm"])
+    vec = {44: d1, 55: d2 - d1, 58: -d2}  # fine offsets of l2 ($TC_CARR4..6), l3 (15..17), l4 (18..20)
+    out = []
     for start, v in sorted(vec.items()):
-        for k in range(3):
-            lines.append(f"$TC_CARR{start + k}[1]={v[k]:.6f}")
-    lines.append(f"$TC_CARR24[1]={first['zero_offset_deg']:.7f}")
-    lines.append(f"$TC_CARR25[1]={second['zero_offset_deg']:.7f}")
-    return "\n".join(lines)
+        out += [f"$TC_CARR{start + k}[{carrier}]=$TC_CARR{start + k}[{carrier}]{_signed(v[k], 6)}" for k in range(3)]
+    out.append(f"$TC_CARR64[{carrier}]=$TC_CARR64[{carrier}]{_signed(first['zero_offset_deg'], 7)}")
+    out.append(f"$TC_CARR65[{carrier}]=$TC_CARR65[{carrier}]{_signed(second['zero_offset_deg'], 7)}")
+    return out
+
+
+def _signed(value: float, decimals: int) -> str:
+    """``+0.012000`` / ``-0.009000`` (no ``-0.000000``)."""
+    return f"{round(float(value), decimals) + 0.0:+.{decimals}f}"
+
+
+def _heidenhain(first: dict, second: dict, carrier: int) -> list[str]:
+    out = ["kinematics table: add to the transformation that places each rotary axis (mm, deg)"]
+    for r in (first, second):
+        d = r["pivot_delta_mm"]
+        out.append(f"  {r['axis']}: X {d[0]:+.6f}  Y {d[1]:+.6f}  Z {d[2]:+.6f} mm   "
+                   f"zero (axis datum) {r['zero_offset_deg']:+.7f} deg")
+    return out
+
+
+def _fanuc(first: dict, second: dict, carrier: int) -> list[str]:
+    out = ["tool centre point parameters: add to the rotation-axis centre / offset entries (mm, deg)"]
+    for r in (first, second):
+        d = r["pivot_delta_mm"]
+        out.append(f"  {r['axis']}: centre dX {d[0]:+.6f}  dY {d[1]:+.6f}  dZ {d[2]:+.6f} mm   "
+                   f"angle offset {r['zero_offset_deg']:+.7f} deg")
+    return out
+
+
+def _linuxcnc(first: dict, second: dict, carrier: int) -> list[str]:
+    tilt, rot = np.array(first["pivot_delta_mm"]), np.array(second["pivot_delta_mm"])
+    if first["axis"][0] == "C":
+        tilt, rot = rot, tilt
+    off = rot - tilt
+    out = ["# trtkins: add to the HAL parameters (mm, machine frame, + = towards + of the machine axis)"]
+    out += [f"setp trtkins.{c}-rot-point [{tilt[k]:+.6f}]" for k, c in enumerate("xyz")]
+    out += [f"setp trtkins.{c}-offset [{off[k]:+.6f}]" for k, c in enumerate("xyz")]
+    out.append(f"# rotary zero offsets [deg]: {first['axis']} {first['zero_offset_deg']:+.7f}, "
+               f"{second['axis']} {second['zero_offset_deg']:+.7f} (home offsets of the joints)")
+    return out
 
 
 def kern_axes(machine: str, side: str) -> list[Any]:
@@ -500,8 +641,7 @@ def tool_point_error(machine: str, values: dict[str, float], angles_deg: np.ndar
     """
     kern = load_kernels(machine)
     p = pose_parameters(kern, values, angles_deg, extensions, approach)
-    nominal = np.array([kern.linear_commands(angles_deg[i : i + 1], points_mm[i], pivots_mm, tool_mm)[0]
-                        for i in range(angles_deg.shape[0])])
+    nominal = linear_commands_at(kern, np.atleast_2d(angles_deg), np.atleast_2d(points_mm), pivots_mm, tool_mm)
     return (xyz_mm - nominal) * 1e3 + raw_offset(kern, angles_deg, points_mm, p, pivots_mm, tool_mm)
 
 

@@ -64,3 +64,7 @@ class AcquisitionError(PigeError):
     Rows written before the error stay in a valid ``pige-rtest 1`` file that
     ``pige acquire --resume`` continues.
     """
+
+
+class NCProgramError(FileFormatError):
+    """An NC program block the tool cannot read or compensate safely; names the file and line."""

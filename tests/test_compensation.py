@@ -20,6 +20,7 @@ from pige_sym.compensation import (
     tool_point_error,
 )
 from pige_sym.effects import EffectSpec
+from pige_sym.errors import InputError
 from pige_sym.identification import identify
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.program import NCProgramError, make_rtest_program
@@ -209,15 +210,16 @@ def test_rewrite_keeps_untouched_lines_byte_for_byte():
     out = compensate_program(PROGRAM, params, path="p.mpf")
     orig_lines = PROGRAM.splitlines(keepends=True)
     new_lines = out.splitlines(keepends=True)
-    header = [ln for ln in new_lines if ln.startswith("; compensated") or ln.startswith("; parameters")]
-    assert len(header) == 2 and all(ln.endswith("\r\n") for ln in header)
+    assert new_lines[0] == orig_lines[0]  # the header never goes before %_N_
+    header = [ln for ln in new_lines if ln.startswith("; compensated")]
+    assert len(header) == 1 and header[0].endswith("\r\n") and new_lines[1] == header[0]
     body = [ln for ln in new_lines if ln not in header]
     assert len(body) == len(orig_lines)
     changed = {i for i, (o, n) in enumerate(zip(orig_lines, body, strict=True)) if o != n}
     # only the motion blocks away from the reference pose change (N20, and the incremental N30)
     assert changed == {6, 8}
     assert "A=" in body[6] and "C=DC(" in body[6] and body[6].endswith("\r\n")
-    assert "C=AC(" in body[8]  # incremental word rewritten in absolute form
+    assert body[8].startswith("N30 G91 C") and "AC(" not in body[8]  # incremental stays incremental
 
 
 def test_program_without_motion_is_unchanged():
@@ -226,40 +228,33 @@ def test_program_without_motion_is_unchanged():
 
 
 @pytest.mark.parametrize("bad,line,words", [
-    ("G90\nN10 G1 X1 Y2 Z3 A0 C0\nN20 G2 X5 Y5 I1 J1\n", 3, "G2"),
-    ("G90\nN10 G1 X1 Y2 Z3 A0 C0\nCYCLE800(1)\n", 3, "CYCLE800"),
-    ("G91\nN10 G1 X1\n", 2, "incremental"),
+    ("G90\nN10 G1 X1 Y2 Z3 A0 C0\nCYCLE800(1)\nL100\n", 4, "subprogram call"),
+    ("G90\nN10 G1 X1 Y2 Z3 A0 C0\nGOTOF LABELC1\n", 3, "control flow"),
     ("G90\nN10 G1 X1 Y2 Z3 A0 B7 C0\n", 2, "B is not an axis"),
-    ("G90\nN10 G1 X1 Y2 Z3 A0 CX0\n", 2, "malformed"),
+    ("G90\nN10 G1 X1 Y2 Z3 A0 CX0\n", 2, "unknown code CX0"),
+    ("G90\nN10 G1 X1e400 Y2 Z3 A0 C0\n", 2, "unknown code X1E400"),
+    ("G90\nN10 G1 X=R1+2 Y2 Z3 A0 C0\n", 2, "expression"),
 ])
 def test_unsupported_programs_are_refused_with_the_line(bad, line, words):
     with pytest.raises(NCProgramError) as exc:
-        compensate_program(bad, _params(AC, {}), path="bad.mpf")
+        compensate_program(bad, _params(AC, {}), path="bad.mpf", dialect="siemens")
     assert f"bad.mpf:{line}:" in str(exc.value) and words in str(exc.value)
 
 
-def test_block_needs_every_axis_before_compensation():
-    with pytest.raises(CompensationError, match=r"p.mpf:2: position of .*unknown"):
-        compensate_program("G90\nN10 G1 X1 Y2 A0 C0\n", _params(AC, {}), path="p.mpf")
-
-
-def test_pass_through_keeps_unsupported_blocks_verbatim():
-    text = "G90\nN10 G1 X120 Y0 Z80 A0 C0\nN20 G2 X5 Y5 I1 J1 ; arc\nN30 G1 A20 C30\n"
-    out = compensate_program(text, _params(AC, random_pige(AC, 1)), pass_through=True)
-    assert "N20 G2 X5 Y5 I1 J1 ; arc\n" in out
-    fanuc = compensate_program(text, _params(AC, random_pige(AC, 1)), pass_through=True, dialect="fanuc")
-    assert "G2 X5 Y5 I1 J1 (arc; passed through, not compensated)" in fanuc
-
-
-def test_fanuc_dialect():
-    out = compensate_program(PROGRAM, _params(AC, random_pige(AC, 1)), dialect="fanuc")
+def test_block_with_unknown_pose_passes_through():
+    text = "G90 G71\nN10 G0 Z200\nN20 G1 X1 Y2 A10 C0\nN30 G1 X120 Y0 Z80 A20 C30\n"
+    out = compensate_program(text, _params(AC, random_pige(AC, 1)), path="p.mpf", dialect="siemens")
     lines = out.splitlines()
-    assert lines[0] == "%" and lines[-1] == "%"
-    assert any(ln.startswith("N") and " G49" in ln for ln in lines)
-    assert any("G04 X5" in ln for ln in lines)
-    motion = [ln for ln in lines if " G1 " in ln]
-    assert len(motion) == 3 and all(all(f" {ax}" in ln for ax in "XYZAC") for ln in motion)
-    assert "(R-test program [keep me])" in lines
+    assert "N10 G0 Z200" in lines and "N20 G1 X1 Y2 A10 C0" in lines
+    assert not any(ln == "N30 G1 X120 Y0 Z80 A20 C30" for ln in lines)
+
+
+def test_pass_through_keeps_refused_blocks_verbatim():
+    text = "G90 G71\nN10 G1 X120 Y0 Z80 A0 C0\nN20 L100 ; call\nN30 G1 A20 C30\n"
+    with pytest.raises(NCProgramError, match="--pass-through"):
+        compensate_program(text, _params(AC, random_pige(AC, 1)), dialect="siemens")
+    out = compensate_program(text, _params(AC, random_pige(AC, 1)), pass_through=True, dialect="siemens")
+    assert out == text  # after the call nothing is known: nothing else may change
 
 
 def test_load_parameters_from_identify_and_diagnose_json(tmp_path):
@@ -282,7 +277,7 @@ def test_load_parameters_from_identify_and_diagnose_json(tmp_path):
     assert [e.spec.id for e in params.extensions] == ["angular_error_C"]
     assert params.extensions[0].spec.harmonic == 2
     assert params.ignored == ["thermal_drift (time-dependent (depends on when the program runs))"]
-    text = compensate_program("G90\nN10 G1 X120 Y0 Z80 A0 C0\nN20 G1 A20 C30\n", params)
+    text = compensate_program("G90\nN10 G1 X120 Y0 Z80 A0 C0\nN20 G1 A20 C30\n", params, dialect="siemens")
     assert "; compensated extension: angular_error_C harmonic=2: cos_urad=5, sin_urad=1" in text
 
 
@@ -312,9 +307,9 @@ def test_cli_compensate_end_to_end(tmp_path, capsys):
     assert main(["compensate", str(program), "--params", str(result), "--out", str(out)]) == 0
     assert out.read_text().count("\nN") == program.read_text().count("\nN")
     assert main(["compensate", "--params", str(result), "--controller", "siemens"]) == 0
-    assert "$TC_CARR7[1]=" in capsys.readouterr().out
+    assert "$TC_CARR44[1]=$TC_CARR44[1]" in capsys.readouterr().out
     bad = tmp_path / "bad.mpf"
-    bad.write_text("G90\nN10 G1 X1 Y2 Z3 A0 C0\nN20 G3 X1 Y1\n")
+    bad.write_text("G90\nN10 G1 X1 Y2 Z3 A0 C0\nN20 G3 X1 Y1 R=R1\n")
     assert main(["compensate", str(bad), "--params", str(result), "--out", str(tmp_path / "x.mpf")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad.mpf:3:" in err[0]
@@ -338,3 +333,25 @@ def test_json_output_of_simulate_and_compensate(tmp_path, capsys):
     assert main(["compensate", "--params", str(diag), "--controller", "table", "--json"]) == 0
     axes = json.loads(capsys.readouterr().out)["axes"]
     assert [a["axis"] for a in axes] == ["A", "C"]
+
+
+def test_controller_styles_print_the_deltas_with_their_signs():
+    from pige_sym.compensation import format_controller
+
+    values = {"EY0A": 12.0, "EZ0A": -9.0, "EX0C": -14.0, "EY0C": 10.0, "EA0A": 100.0}
+    params = _params(AC, values)
+    siemens = dict(line.split("=", 1) for line in format_controller(params, "siemens", carrier=3).splitlines()
+                   if line.startswith("$"))
+    # l2 fine offset = shift of axis 1 (A), l3 = shift of C minus shift of A, l4 = minus shift of C
+    assert siemens["$TC_CARR45[3]"] == "$TC_CARR45[3]+0.012000"
+    assert siemens["$TC_CARR46[3]"] == "$TC_CARR46[3]-0.009000"
+    assert siemens["$TC_CARR55[3]"] == "$TC_CARR55[3]-0.014000"
+    assert siemens["$TC_CARR56[3]"] == "$TC_CARR56[3]-0.002000"
+    assert siemens["$TC_CARR58[3]"] == "$TC_CARR58[3]+0.014000"
+    assert siemens["$TC_CARR64[3]"] == f"$TC_CARR64[3]+{np.degrees(100e-6):.7f}"
+    linuxcnc = format_controller(params, "linuxcnc")
+    assert "setp trtkins.y-rot-point [+0.012000]" in linuxcnc and "setp trtkins.x-offset [-0.014000]" in linuxcnc
+    for style in ("heidenhain", "fanuc", "linuxcnc", "siemens"):
+        assert "NOT verified on a controller" in format_controller(params, style)
+    with pytest.raises(InputError):
+        format_controller(params, "okuma")

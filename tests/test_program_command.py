@@ -55,3 +55,22 @@ def test_bad_input_is_one_line(tmp_path, capsys):
     assert main(["program", "--ball", "1,2", "--out", str(tmp_path / "x.mpf")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(line.startswith("pige program:") for line in err)
+
+
+def test_linuxcnc_and_fanuc_programs_read_back_in_their_dialect(tmp_path):
+    code = "wC'A'bXYZ(C1)t"
+    traj = cone_frustum(code, incl_axis="X")
+    for dialect, suffix in (("linuxcnc", "ngc"), ("fanuc", "nc")):
+        out = tmp_path / f"cone.{suffix}"
+        assert main(["program", "--trajectory", "cone-frustum", "--dialect", dialect, "--dwell", "6",
+                     "--out", str(out)]) == 0
+        prog = parse_program(out.read_text())
+        assert prog.dialect.name == dialect
+        angles, _, rtcp, _ = poses_from_program(prog)
+        np.testing.assert_allclose(angles, traj.angles_deg, atol=1e-4)
+        assert not any(rtcp)
+        program = load_test_program(code, str(out))
+        assert np.all(program.dwell_s == 6.0)
+        assert main(["program", "--trajectory", "cone-frustum", "--dialect", dialect, "--out", str(out)]) == 2
+    assert main(["program", "--trajectory", "cone-frustum", "--dialect", "linuxcnc", "--rtcp",
+                 "--out", str(tmp_path / "x.ngc")]) == 2

@@ -180,7 +180,7 @@ def test_bad_input_gives_status_2_and_one_line(tmp_path: Path, capsys: pytest.Ca
         name = "fourier"
     else:
         prog = tmp_path / "p.mpf"
-        prog.write_text("G90\nTRAFOOF\nG1 X1 Y2 Z3 A0 C0\nG2 X1 Y1 I0 J1\n")
+        prog.write_text("G90\nTRAFOOF\nG1 X1 Y2 Z3 A0 C0\nL100\n")
         args += ["--program", str(prog)]
         name = f"{prog}:4"
     assert main([*args, "--out", str(tmp_path / "out")]) == 2

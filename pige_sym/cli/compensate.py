@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from pige_sym.compensation import (
-    compensate_program,
+    CONTROLLER_STYLES,
     compensation_study,
     controller_corrections,
     format_controller,
@@ -16,67 +17,114 @@ from pige_sym.compensation import (
     read_program,
 )
 from pige_sym.errors import InputError
+from pige_sym.files import atomic_write_text, check_output, to_json
 from pige_sym.identification import identify
 from pige_sym.kernels import DEFAULT_MACHINE, load_kernels
+from pige_sym.nc.compensate import DEFAULT_MAX_CHANGE_DEG, DEFAULT_MAX_CHANGE_MM, CompensationReport, compensate_nc
+from pige_sym.nc.dialects import DIALECTS
 from pige_sym.simulator import random_pige, simulate
 from pige_sym.trajectories import cone_frustum, figure_eight
+
+
+def _max_change(text: str) -> tuple[float, float]:
+    try:
+        parts = [float(x) for x in text.split(",")]
+    except ValueError:
+        parts = []
+    if len(parts) not in (1, 2) or not all(math.isfinite(x) and x > 0 for x in parts):
+        raise InputError(f"--max-change {text!r}: give MM or MM,DEG (positive numbers), e.g. 0.2,0.1")
+    return parts[0], parts[1] if len(parts) == 2 else DEFAULT_MAX_CHANGE_DEG
 
 
 def _run(args: argparse.Namespace) -> int:
     params = load_parameters(args.params, args.machine, allow_unidentifiable=args.allow_unidentifiable)
     if args.controller and not args.json:
-        print(format_controller(params, args.controller))
+        print(format_controller(params, args.controller, carrier=args.carrier))
     if args.controller and not args.program:
         if args.json:
-            print(json.dumps({"machine": params.machine, "parameters_from": params.source,
-                              "axes": controller_corrections(params)}, indent=1))
+            print(to_json({"machine": params.machine, "parameters_from": params.source,
+                           "axes": controller_corrections(params)}))
         return 0
     if not args.program:
         raise InputError("give a PROGRAM to compensate (or --controller to print the corrected kinematics)")
     if not args.out:
         raise InputError("give --out NEW_PROGRAM")
-    text = compensate_program(read_program(args.program), params, path=args.program, dialect=args.dialect,
-                              pass_through=args.pass_through)
-    with open(args.out, "w", encoding="utf-8", newline="") as fh:
-        fh.write(text)
+    out = check_output(args.out, force=args.force, inputs=[args.program, args.params], what="--out")
+    max_mm, max_deg = _max_change(args.max_change)
+    result = compensate_nc(read_program(args.program), params, path=args.program, dialect=args.dialect,
+                           pass_through=args.pass_through, max_change_mm=max_mm, max_change_deg=max_deg,
+                           rtcp_on=tuple(args.rtcp_on or ()), rtcp_off=tuple(args.rtcp_off or ()))
+    atomic_write_text(out, result.text, newline="")
+    rep = result.report
     if args.json:
-        print(json.dumps({"program": args.program, "out": args.out, "dialect": args.dialect,
-                          "machine": params.machine, "parameters_from": params.source, "pige": params.values,
-                          "extensions": [{"effect": e.spec.id, "options": e.spec.options, "params": e.params}
-                                         for e in params.extensions],
-                          "not_compensated": params.ignored}, indent=1))
+        print(to_json(rep.to_dict() | {"out": str(out), "pige": params.values,
+                                       "extensions": [{"effect": e.spec.id, "options": e.spec.options,
+                                                       "params": e.params} for e in params.extensions]}))
         return 0
-    print(f"wrote {args.out} ({args.dialect}); parameters from {params.source}")
-    for ext in params.extensions:
-        print(f"compensated extension: {ext.spec.id} " + ", ".join(f"{k}={v:.4g}" for k, v in ext.params.items()))
-    if params.ignored:
-        print("not compensated: " + ", ".join(params.ignored))
+    _print_report(rep, str(out))
     return 0
+
+
+def _print_report(rep: CompensationReport, out: str) -> None:
+    print(f"wrote {out} ({rep.dialect}): {rep.compensated} of {rep.moves} linear moves changed; "
+          f"parameters from {rep.parameters_from}; read back and verified")
+    print(f"largest change: {rep.max_change_mm:.4f} mm, {rep.max_change_deg:.4f} deg "
+          f"(limits {rep.limits['mm']:g} mm, {rep.limits['deg']:g} deg)")
+    for c in rep.changes[:20]:
+        words = " ".join(f"{w['old'] or '+'}->{w['new']}" for w in c.words)
+        pole = "  [orientation limited: pole]" if c.orientation_limited else ""
+        print(f"  line {c.line_in}: {words}; tool point {c.tool_point_error_before_um:.2f} -> "
+              f"{c.tool_point_error_after_um:.2f} um{pole}")
+    if len(rep.changes) > 20:
+        print(f"  ... {len(rep.changes) - 20} more changed blocks (--json lists all)")
+    for p in rep.passed_through[:20]:
+        print(f"  passed through, line {p['line']}: {p['reason']}")
+    if len(rep.passed_through) > 20:
+        print(f"  ... {len(rep.passed_through) - 20} more blocks passed through (--json lists all)")
+    if rep.orientation_limited_lines:
+        print(f"orientation correction limited near the pole at {len(rep.orientation_limited_lines)} block(s), "
+              f"first at line {rep.orientation_limited_lines[0]} (position still corrected)")
+    for note in rep.notes:
+        print(f"note: {note}")
+    if rep.not_compensated_parameters:
+        print("not compensated: " + ", ".join(rep.not_compensated_parameters))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "compensate",
         help="write a compensated NC program / print controller corrections",
-        description="Rewrite an 840D-style program so the tool lands where the nominal program intended.",
+        description="Rewrite an NC program (Siemens 840D, ISO/Fanuc/Haas or LinuxCNC; output in the same "
+                    "dialect) so the tool lands where the nominal program intended.  Only the axis words of "
+                    "compensable G0/G1 blocks change; everything else stays byte-identical; the output is "
+                    "read back and verified before it is written.",
         epilog=(
             "examples:\n"
             "  pige identify run.csv --json > result.json\n"
-            "  pige compensate rtest.mpf --params result.json --out rtest_comp.mpf\n"
-            "  pige compensate rtest.mpf --params result.json --dialect fanuc --out rtest_comp.nc\n"
+            "  pige compensate part.mpf --params result.json --out part_comp.mpf\n"
+            "  pige compensate part.nc --params result.json --max-change 0.1,0.05 --json --out part_comp.nc\n"
+            "  pige compensate part.ngc --params result.json --rtcp-on M428 --rtcp-off M429 --out comp.ngc\n"
             "  pige compensate --params result.json --controller siemens"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("program", nargs="?", help="Siemens 840D-style program (TRAORI or TRAFOOF)")
+    p.add_argument("program", nargs="?", help="NC program (TRAORI/G43.4/... or machine coordinates)")
     p.add_argument("--params", required=True, help="JSON printed by pige identify --json or pige diagnose --json")
     p.add_argument("--machine", help="machine code (default: from the JSON)")
-    p.add_argument("--out", help="compensated program to write")
-    p.add_argument("--dialect", choices=["siemens", "fanuc"], default="siemens")
-    p.add_argument("--pass-through", action="store_true", help="keep unsupported blocks verbatim (uncompensated)")
+    p.add_argument("--out", help="compensated program to write (never the input; existing only with --force)")
+    p.add_argument("--force", action="store_true", help="replace an existing --out")
+    p.add_argument("--dialect", choices=list(DIALECTS), help="the program's dialect (default: detected)")
+    p.add_argument("--pass-through", action="store_true",
+                   help="keep calls, control flow and expressions unchanged instead of refusing the program")
+    p.add_argument("--max-change", default=f"{DEFAULT_MAX_CHANGE_MM:g},{DEFAULT_MAX_CHANGE_DEG:g}",
+                   metavar="MM[,DEG]", help="refuse corrections larger than this (default %(default)s)")
+    p.add_argument("--rtcp-on", action="append", metavar="CODE", help="controller-specific RTCP-on code (M428)")
+    p.add_argument("--rtcp-off", action="append", metavar="CODE", help="controller-specific RTCP-off code (M429)")
     p.add_argument("--allow-unidentifiable", action="store_true", help="use 0 for parameters without a value")
-    p.add_argument("--controller", choices=["table", "siemens"], help="print the corrected kinematic chain")
-    p.add_argument("--json", action="store_true", help="print what was compensated as one JSON object")
+    p.add_argument("--controller", choices=list(CONTROLLER_STYLES), help="print the corrected kinematics "
+                   "(see docs/controller-corrections.md)")
+    p.add_argument("--carrier", type=int, default=1, help="Siemens swivel data record number (default %(default)s)")
+    p.add_argument("--json", action="store_true", help="print the change report as one JSON object")
     p.set_defaults(handler=_run)
 
 

@@ -1,7 +1,8 @@
 """``pige program``: write the R-test NC program of a test trajectory (to run on the machine).
 
-One positioning block per pose followed by a ``G4`` dwell (Siemens 840D subset of
-:mod:`pige_sym.nc.program`, or its ISO/Fanuc rendering).  In machine coordinates
+One positioning block per pose followed by a dwell, written natively in the chosen
+dialect (Siemens 840D, ISO/Fanuc/Haas with decimal points and ``G04 X``, or LinuxCNC with
+``G4 P``; :func:`pige_sym.nc.program.make_rtest_program`).  In machine coordinates
 (``TRAFOOF``, default) X/Y/Z are the RTCP commands of the nominal kinematics for the
 ball at ``--ball`` (honouring ``--pivot``/``--tool``); with ``--rtcp`` (``TRAORI``)
 they are the workpiece coordinates of the ball and the controller's RTCP moves the
@@ -12,17 +13,18 @@ linear axes.  The same file is what ``pige acquire --program`` and ``pige rtest-
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
 from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
+from pige_sym.files import atomic_write_text, check_output
 from pige_sym.kernels import load_kernels
-from pige_sym.nc.program import make_rtest_program, parse_program, to_fanuc
+from pige_sym.nc.program import make_rtest_program
 from pige_sym.nc.rtest_program import DEFAULT_DWELL_S, load_test_program
 
 
 def _run(args: argparse.Namespace) -> int:
+    out = check_output(args.out, force=args.force, what="--out")
     kern = load_kernels(args.machine)
     ball, pivots, tool = setup_geometry(args)
     program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=ball, pivots_mm=pivots, tool_mm=tool,
@@ -33,12 +35,8 @@ def _run(args: argparse.Namespace) -> int:
         xyz = program.linear_mm()
     text = make_rtest_program(program.angles_deg, xyz, tuple(kern.ROTARY_AXES), rtcp=args.rtcp, dwell_s=args.dwell,
                               feed=args.feed, title=f"R-test {program.description}, {kern.MACHINE_CODE}, "
-                              f"ball {', '.join(f'{x:g}' for x in program.ball_mm)} mm")
-    if args.dialect == "fanuc":
-        text = to_fanuc(parse_program(text, rotary_axes=tuple(kern.ROTARY_AXES)))
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text, encoding="utf-8")
+                              f"ball {', '.join(f'{x:g}' for x in program.ball_mm)} mm", dialect=args.dialect)
+    atomic_write_text(out, text)
     print(f"wrote {out}: {program.n_poses} poses ({program.description}), {'TRAORI' if args.rtcp else 'TRAFOOF'}, "
           f"{args.dwell:g} s dwell per pose, {args.dialect}")
     return 0
@@ -62,6 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="dwell per pose [s] (default %(default)s: ~1 s to settle, then a 5 s average)")
     p.add_argument("--feed", type=float, default=2000.0, help="feed of the positioning blocks (default %(default)s)")
     p.add_argument("--rtcp", action="store_true", help="workpiece coordinates with TRAORI instead of machine ones")
-    p.add_argument("--dialect", choices=["siemens", "fanuc"], default="siemens", help="output dialect")
+    p.add_argument("--dialect", choices=["siemens", "fanuc", "linuxcnc"], default="siemens", help="output dialect")
     p.add_argument("--out", required=True, help="program file to write")
+    p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.set_defaults(handler=_run)

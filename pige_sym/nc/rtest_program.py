@@ -2,8 +2,8 @@
 
 A test program is given either as a trajectory (a name of
 :func:`pige_sym.trajectories.make_trajectory`, or an angle CSV) or as an NC program
-(840D subset, :mod:`pige_sym.nc.program`) in which every measurement pose is a
-positioning block followed by a dwell ``G4 F<s>`` or a stop ``M00``/``M01``
+(any supported dialect, :mod:`pige_sym.nc.program`) in which every measurement pose is a
+positioning block followed by a dwell (``G4 F<s>``, ``G04 X<s>``, ``G4 P<s>``) or a stop ``M00``/``M01``
 (:func:`pige_sym.nc.program.make_rtest_program` writes such programs).
 
 Schedule: the machine starts at pose 0 (the reference pose, all rotary angles 0)
@@ -22,7 +22,6 @@ otherwise it is an angle CSV.
 from __future__ import annotations
 
 import os
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,7 +36,6 @@ from pige_sym.trajectories import NAMES, Trajectory, make_trajectory
 DEFAULT_MOVE_S = 5.0
 DEFAULT_DWELL_S = 7.0
 NC_SUFFIXES = (".mpf", ".spf", ".nc", ".ngc", ".cnc")
-_F_WORD = re.compile(r"\bF\s*=?\s*([-+]?(?:\d+\.?\d*|\.\d+))", re.IGNORECASE)
 
 
 @dataclass
@@ -124,8 +122,7 @@ def _nc_program(kern: Any, path: str, dwell_s: float) -> tuple[np.ndarray, np.nd
     dwell = []
     for ln in lines:
         b = blocks[ln]
-        m = _F_WORD.search(b.text.split(";", 1)[0]) if b.dwell else None
-        dwell.append(float(m.group(1)) if m else dwell_s)
+        dwell.append(b.dwell_s if b.dwell and b.dwell_s is not None and b.dwell_s > 0 else dwell_s)
     if np.abs(angles[0]).max() > 1e-9:
         got = ", ".join(f"{a}={v:g}" for a, v in zip(kern.ROTARY_AXES, angles[0], strict=True))
         raise InputError(f"{path}:{lines[0]}: the first measurement pose must be the reference pose "
