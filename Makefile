@@ -39,7 +39,7 @@ lint: $(STAMP)  ## ruff + mypy on pige_sym/
 	$(VENV)/bin/mypy pige_sym
 
 demo: $(STAMP)  ## the whole story on the default AC machine
-	$(PY) -m pige_sym demo
+	$(PY) -m pige_sym demo --force
 
 bench: $(STAMP)  ## run benchmarks/ and write benchmarks/RESULTS.md
 	$(PY) benchmarks/run.py

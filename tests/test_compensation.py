@@ -10,7 +10,6 @@ import pytest
 from pige_sym.cli.main import main
 from pige_sym.compensation import (
     AngleExtension,
-    CompensationError,
     CompensationParameters,
     compensate_poses,
     compensate_program,
@@ -20,7 +19,7 @@ from pige_sym.compensation import (
     tool_point_error,
 )
 from pige_sym.effects import EffectSpec
-from pige_sym.errors import InputError
+from pige_sym.errors import FileFormatError, InputError
 from pige_sym.identification import identify
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.program import NCProgramError, make_rtest_program
@@ -258,14 +257,19 @@ def test_pass_through_keeps_refused_blocks_verbatim():
 
 
 def test_load_parameters_from_identify_and_diagnose_json(tmp_path):
-    data = {"machine": AC, "pige": {"EX0C": 3.0, "EY0C": None}, "units": {}}
+    zeros = dict.fromkeys(("EY0A", "EZ0A", "EB0A", "EC0A", "EA0C", "EB0C"), 0.0)
+    data = {"machine": AC, "pige": {"EX0C": 3.0, "EY0C": None, **zeros}, "units": {}}
     path = tmp_path / "r.json"
     path.write_text(json.dumps(data))
-    with pytest.raises(CompensationError, match="EY0C was not identifiable"):
+    with pytest.raises(FileFormatError, match="EY0C: null"):
         load_parameters(path)
-    params = load_parameters(path, allow_unidentifiable=True)
-    assert params.values["EY0C"] == 0.0 and params.ignored == ["EY0C"]
-    data = {"machine": AC, "pige": {"EX0C": 3.0, "angular_error_C.cos_urad": 5.0, "angular_error_C.sin_urad": 1.0,
+    params = load_parameters(path, allow_missing=True)
+    assert params.values["EY0C"] == 0.0
+    assert params.ignored == ["EY0C (no value in the file: set to 0 by --allow-missing)"]
+    with pytest.raises(InputError, match="machine"):
+        load_parameters(path, "wC'B'bXYZ(C1)t", allow_missing=True)
+    data = {"machine": AC, "pige": {"EX0C": 3.0, "EY0C": 0.0, **zeros,
+                                    "angular_error_C.cos_urad": 5.0, "angular_error_C.sin_urad": 1.0,
                                     "thermal_drift.vx_um": 1.0, "thermal_drift.vy_um": 0.0,
                                     "thermal_drift.vz_um": 0.0},
             "findings": [{"effect": "angular_error_C", "options": {"harmonic": 2},
@@ -355,3 +359,21 @@ def test_controller_styles_print_the_deltas_with_their_signs():
         assert "NOT verified on a controller" in format_controller(params, style)
     with pytest.raises(InputError):
         format_controller(params, "okuma")
+
+
+def test_compensate_refuses_params_of_another_machine_than_the_programs(tmp_path):
+    """The program's header names its machine; parameters of another machine are refused (exit 2)."""
+    from pige_sym.cli import main
+
+    prog = tmp_path / "rtest.mpf"
+    assert main(["program", "--machine", AC, "--out", str(prog)]) == 0
+    bc = "wC'B'bXYZ(C1)t"
+    params = tmp_path / "bc.json"
+    params.write_text(json.dumps({"machine": bc, "pige": random_pige(bc, 2)}))
+    assert main(["compensate", str(prog), "--params", str(params), "--out", str(tmp_path / "o.mpf")]) == 2
+    assert not (tmp_path / "o.mpf").exists()
+    assert main(["compensate", str(prog), "--params", str(params), "--machine", bc,
+                 "--out", str(tmp_path / "o.mpf")]) == 2
+    good = tmp_path / "ac.json"
+    good.write_text(json.dumps({"machine": AC, "pige": random_pige(AC, 2)}))
+    assert main(["compensate", str(prog), "--params", str(good), "--out", str(tmp_path / "o.mpf")]) == 0

@@ -47,3 +47,13 @@ def test_demo_says_when_the_hidden_effect_is_missed(tmp_path, capsys):
     text = capsys.readouterr().out
     assert status == 1
     assert "NOT FOUND" in text
+
+
+def test_demo_does_not_replace_an_earlier_demo_without_force(tmp_path) -> None:
+    from pige_sym.cli import main
+
+    out = tmp_path / "demo-out"
+    out.mkdir()
+    (out / "rtest.csv").write_text("kept\n")
+    assert main(["demo", "--out", str(out), "--quiet"]) == 2
+    assert (out / "rtest.csv").read_text() == "kept\n"

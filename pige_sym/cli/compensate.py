@@ -14,6 +14,7 @@ from pige_sym.compensation import (
     format_controller,
     load_parameters,
     plot_compensation,
+    program_machine,
     read_program,
 )
 from pige_sym.errors import InputError
@@ -36,8 +37,29 @@ def _max_change(text: str) -> tuple[float, float]:
     return parts[0], parts[1] if len(parts) == 2 else DEFAULT_MAX_CHANGE_DEG
 
 
+def _machine(args: argparse.Namespace, text: str | None) -> str | None:
+    """``--machine``, checked against the machine the program's header names (either may be silent)."""
+    from pige_sym.codegen.machine_code import parse_machine_code
+
+    named = program_machine(text) if text is not None else None
+    if named is not None:
+        try:
+            named = parse_machine_code(named).canonical
+        except InputError:
+            named = None  # a header that is not a machine code says nothing
+    if args.machine and named and parse_machine_code(args.machine).canonical != named:
+        raise InputError(f"--machine {args.machine} but {args.program} was written for {named}: "
+                         "compensate a program with the parameters of its own machine")
+    return args.machine or named
+
+
 def _run(args: argparse.Namespace) -> int:
-    params = load_parameters(args.params, args.machine, allow_unidentifiable=args.allow_unidentifiable)
+    text = read_program(args.program) if args.program else None
+    machine = _machine(args, text)
+    params = load_parameters(args.params, machine, allow_missing=args.allow_missing)
+    for name in params.ignored:
+        if "--allow-missing" in name:
+            print(f"warning: {name}")
     if args.controller and not args.json:
         print(format_controller(params, args.controller, carrier=args.carrier))
     if args.controller and not args.program:
@@ -51,7 +73,8 @@ def _run(args: argparse.Namespace) -> int:
         raise InputError("give --out NEW_PROGRAM")
     out = check_output(args.out, force=args.force, inputs=[args.program, args.params], what="--out")
     max_mm, max_deg = _max_change(args.max_change)
-    result = compensate_nc(read_program(args.program), params, path=args.program, dialect=args.dialect,
+    assert text is not None
+    result = compensate_nc(text, params, path=args.program, dialect=args.dialect,
                            pass_through=args.pass_through, max_change_mm=max_mm, max_change_deg=max_deg,
                            rtcp_on=tuple(args.rtcp_on or ()), rtcp_off=tuple(args.rtcp_off or ()))
     atomic_write_text(out, result.text, newline="")
@@ -120,7 +143,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    metavar="MM[,DEG]", help="refuse corrections larger than this (default %(default)s)")
     p.add_argument("--rtcp-on", action="append", metavar="CODE", help="controller-specific RTCP-on code (M428)")
     p.add_argument("--rtcp-off", action="append", metavar="CODE", help="controller-specific RTCP-off code (M429)")
-    p.add_argument("--allow-unidentifiable", action="store_true", help="use 0 for parameters without a value")
+    p.add_argument("--allow-missing", action="store_true",
+                   help="set PIGEs without a value (missing, or not identifiable) to 0 and say which")
     p.add_argument("--controller", choices=list(CONTROLLER_STYLES), help="print the corrected kinematics "
                    "(see docs/controller-corrections.md)")
     p.add_argument("--carrier", type=int, default=1, help="Siemens swivel data record number (default %(default)s)")

@@ -63,6 +63,7 @@ def _run(args: argparse.Namespace) -> int:
     from pige_sym.acquisition.virtual_device import start_virtual_device
     from pige_sym.compensation import compensate_program, format_controller, load_parameters
     from pige_sym.diagnosis import diagnose
+    from pige_sym.errors import InputError
     from pige_sym.identification import format_result, identify
     from pige_sym.io import read_measurement
     from pige_sym.kernels import load_kernels
@@ -74,6 +75,9 @@ def _run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     progress = not args.quiet and sys.stderr.isatty()
     out = Path(args.out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not args.force:
+        raise InputError(f"--out {out} exists and is not an empty folder: pass --force to replace the demo's "
+                         "files in it, or choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     ball = [120.0, 0.0, 80.0]
     effect_id = args.effect.partition(":")[0]
@@ -104,12 +108,12 @@ def _run(args: argparse.Namespace) -> int:
     device_log = (out / "device.log").open("w", encoding="utf-8")
     with device_log, start_virtual_device(code, str(nc_path), ball_mm=ball, pige=pige, effects=[args.effect],
                                           seed=args.seed, truth=device_truth, time_scale=args.time_scale,
-                                          stderr=device_log) as device:
+                                          stderr=device_log, extra_args=["--force"] if args.force else []) as device:
         print(f"device streaming on {device.url} (its messages: {out / 'device.log'})")
 
         _stage(4, f"acquisition over the serial port {device.url}")
         csv = out / "rtest.csv"
-        summary = acquire(device.url, program, csv, progress=progress)
+        summary = acquire(device.url, program, csv, progress=progress, force=args.force)
         print(summary.format())
         device.wait(60)
     if not summary.completed:
@@ -188,4 +192,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--time-scale", type=float, default=100.0,
                    help="device seconds per wall second (default %(default)s)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--force", action="store_true", help="replace the files of an earlier demo in --out")
     p.set_defaults(handler=_run)
