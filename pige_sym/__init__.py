@@ -5,9 +5,28 @@ Data flows one way: machine code string → symbolic model (SymPy, :mod:`pige_sy
 (simulation, identification, diagnosis, compensation).  The runtime never imports SymPy.
 """
 
-from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
-from pige_sym.errors import PigeError
-from pige_sym.kernels import load_kernels
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
+    from pige_sym.errors import PigeError
+    from pige_sym.kernels import load_kernels
 
 __all__ = ["PigeError", "MachineStructure", "load_kernels", "parse_machine_code"]
 __version__ = "0.1.0"
+
+_LAZY = {
+    "PigeError": "pige_sym.errors",
+    "MachineStructure": "pige_sym.codegen.machine_code",
+    "parse_machine_code": "pige_sym.codegen.machine_code",
+    "load_kernels": "pige_sym.kernels",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """The public names, imported on first use (``import pige_sym`` stays as cheap as the command line)."""
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'pige_sym' has no attribute {name!r}")

@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from pige_sym.constants import CONTROLLER_STYLES as CONTROLLER_STYLES
 from pige_sym.effects import EffectSpec
 from pige_sym.errors import FileFormatError, InputError, PigeError
 from pige_sym.kernels import load_kernels
@@ -499,7 +500,6 @@ def controller_corrections(params: CompensationParameters) -> list[dict[str, Any
     return out
 
 
-CONTROLLER_STYLES = ("table", "siemens", "heidenhain", "fanuc", "linuxcnc")
 NOT_VERIFIED = "NOT verified on a controller: check every value against the machine's documentation"
 
 

@@ -20,3 +20,25 @@ SHIPPED_MACHINES: tuple[str, ...] = (
 
 #: Ball centre at the reference pose, workpiece frame [mm] (CONVENTIONS §4).
 DEFAULT_BALL_MM: tuple[float, float, float] = (120.0, 0.0, 80.0)
+
+# ---- choices of command-line options (defined here so that building the command line stays light)
+
+#: Acquisition triggers: settle detection, program schedule, operator key.
+TRIGGERS: tuple[str, ...] = ("stable", "schedule", "key")
+#: Device protocols of ``pige acquire --protocol`` (adapters in pige_sym.acquisition.device).
+DEVICE_PROTOCOLS: tuple[str, ...] = ("gauge", "rtest")
+#: Faults the virtual R-test device can inject (pige rtest-sim --faults).
+FAULT_KINDS: tuple[str, ...] = ("garbage", "checksum", "drop", "spike", "duplicate", "stall", "disconnect")
+#: Identification methods and losses.
+METHODS: tuple[str, ...] = ("gauss-newton", "double-differential")
+LOSSES: tuple[str, ...] = ("linear", "soft_l1", "huber")
+#: NC dialects (input and output of pige compensate / pige program).
+DIALECTS: tuple[str, ...] = ("siemens", "fanuc", "linuxcnc")
+#: Styles of the controller corrections of pige compensate --controller.
+CONTROLLER_STYLES: tuple[str, ...] = ("table", "siemens", "heidenhain", "fanuc", "linuxcnc")
+#: Test-program schedule: move time and dwell per pose [s].
+DEFAULT_MOVE_S = 5.0
+DEFAULT_DWELL_S = 7.0
+#: Largest change pige compensate may make to a word without refusing the program [mm], [deg].
+DEFAULT_MAX_CHANGE_MM = 0.2
+DEFAULT_MAX_CHANGE_DEG = 0.1

@@ -77,8 +77,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize_scalar
-from tqdm import tqdm
 
 from pige_sym.candidates import (
     Candidate,
@@ -222,6 +220,8 @@ def _refine_tau(selector: Selector, model: Model) -> tuple[Model, float]:
 
     g = int(np.argmin(np.abs(s - math.log(float(old.spec.options["tau_s"])))))
     lo, hi = s[max(g - 1, 0)], s[min(g + 1, len(s) - 1)]
+    from scipy.optimize import minimize_scalar
+
     opt = minimize_scalar(lambda x: with_tau(x).fit.rss, bounds=(lo, hi), method="bounded", options={"xatol": 1e-4})
     best = with_tau(float(opt.x))
     if best.fit.rss > model.fit.rss:
@@ -445,6 +445,8 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
         sums = _add_clusters(setup, sums, clusters0)
     _move_rows(sums, setup, suspects, -1.0)
     selector = Selector(sums, lay)
+    from tqdm import tqdm
+
     with tqdm(desc="diagnosis", unit="fit", disable=not progress, leave=False) as bar:
         final, reasons = select(selector, lay.candidates, delta_bic_max=delta_bic_max, p_max=p_max,
                                 min_gain=min_heldout_gain, progress=bar.update)

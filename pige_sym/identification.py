@@ -54,15 +54,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import optimize, stats
 
+from pige_sym.constants import LOSSES as LOSSES
+from pige_sym.constants import METHODS as METHODS
 from pige_sym.errors import InputError, PigeError
 from pige_sym.io import Measurement
 from pige_sym.kernels import load_kernels
 from pige_sym.projection import Projection, parse_projection
 
-METHODS = ("gauss-newton", "double-differential")
-LOSSES = ("linear", "soft_l1", "huber")
 RANK_RTOL = 1e-7
 NULL_RTOL = 1e-4
 NULL_WEIGHT = 1e-3
@@ -161,7 +160,9 @@ class IdentificationResult:
 
     def ci95(self) -> np.ndarray:
         """95 % confidence intervals, shape=(P, 2)."""
-        t = stats.t.ppf(0.975, max(self.dof, 1))
+        from scipy.special import stdtrit  # Student-t quantile (scipy.stats.t.ppf without its import cost)
+
+        t = stdtrit(max(self.dof, 1), 0.975)
         return np.column_stack([self.values - t * self.std, self.values + t * self.std])
 
     def to_dict(self) -> dict[str, Any]:
@@ -448,12 +449,15 @@ def _robust_rows(problem: Problem, loss: str, threshold: float) -> list[int]:
     def jac(xs: np.ndarray) -> np.ndarray:
         return a / diag / scale_r
 
+    from scipy import optimize
+    from scipy.special import chdtri, ndtr
+
     fit = optimize.least_squares(fun, first.values * diag, jac=jac, loss=loss, f_scale=1.0, method="trf")
     resid = (a @ (fit.x / diag) - y).reshape(rows.size, problem.m)
     clean = np.abs(resid)
     sigma_rob = 1.4826 * np.median(clean) if np.median(clean) > 0 else scale_r
     norms = np.sqrt((resid**2).sum(axis=1)) / sigma_rob
-    limit = math.sqrt(stats.chi2.ppf(stats.norm.cdf(threshold) * 2 - 1, problem.m))
+    limit = math.sqrt(chdtri(problem.m, 2.0 - 2.0 * ndtr(threshold)))  # chi2.ppf(2Φ(t) − 1, m)
     return [int(r) for r in rows[norms > limit]]
 
 

@@ -20,7 +20,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 CLUSTER_MIN = 3
 MAX_FRACTION = 0.05
@@ -67,7 +66,9 @@ def flag_rows(resid: np.ndarray, rows: np.ndarray, threshold: float = THRESHOLD)
     sigma = 1.4826 * float(np.median(np.abs(resid)))
     if sigma <= 0:
         return []
-    limit = math.sqrt(stats.chi2.ppf(2 * stats.norm.cdf(threshold) - 1, 3))
+    from scipy.special import chdtri, ndtr
+
+    limit = math.sqrt(chdtri(3, 2.0 - 2.0 * ndtr(threshold)))  # chi2.ppf(2Φ(t) − 1, 3)
     norms = np.sqrt((resid**2).sum(axis=1)) / sigma
     return [int(r) for r in rows[norms > limit]]
 

@@ -25,8 +25,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import stats
-from tqdm import tqdm
 
 from pige_sym.identification import identify
 from pige_sym.kernels import load_kernels
@@ -146,6 +144,8 @@ def projection_study(machine: str, trajectory: Trajectory, *, projections: list[
                              seed=10_000 + seed + i))
     rows = []
     total = len(projs) * presets
+    from tqdm import tqdm
+
     with tqdm(total=total, desc="projection study", disable=not progress, unit="fit") as bar:
         for proj in projs:
             ok = 0
@@ -221,6 +221,8 @@ def sobol_study(machine: str, trajectory: Trajectory, *, projections: list[str] 
     jac = kern.jacobian(trajectory.angles_deg, None, ball_mm, None, tool_mm)[1:, :, :8]  # (n, 3, 8)
     pj = [p.apply_model(jac).reshape(-1, 8) for p in projs]
     half = [float((ranges or {}).get(p, default_range)) for p in names]
+    from scipy import stats
+
     dists = [stats.uniform(loc=-h, scale=2 * h) for h in half]
 
     def func(x: np.ndarray) -> np.ndarray:

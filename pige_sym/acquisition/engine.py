@@ -102,8 +102,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import serial
-from tqdm import tqdm
 
 from pige_sym.acquisition.device import DeviceAdapter, Info, RecordError, RTestProtocolAdapter, Sample, readings_array
 from pige_sym.acquisition.nest import NestGeometry, default_nest
@@ -116,12 +114,12 @@ from pige_sym.acquisition.outputs import (
 from pige_sym.acquisition.transport import PortSettings, RawLog, open_port, read_available
 from pige_sym.acquisition.triggers import StdinKeys, _KeyTrigger, _ScheduleTrigger, _StableTrigger, _Stop, _Trigger
 from pige_sym.codegen.machine_code import parse_machine_code
+from pige_sym.constants import TRIGGERS as TRIGGERS
 from pige_sym.errors import AcquisitionError, FileFormatError, InputError
 from pige_sym.io import Measurement, MeasurementWriter, read_measurement
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.rtest_program import TestProgram
 
-TRIGGERS = ("stable", "schedule", "key")
 #: A sequence number seen among the last this many samples and received again is a duplicate, not a restart.
 RECENT_SEQS = 4096
 EXTRA_COLUMNS = ("pose", "seq_first", "seq_last", "r1_um", "r2_um", "r3_um")
@@ -721,6 +719,8 @@ class _ProgressBars:
     """Overall and per-point tqdm bars on stderr (disabled unless ``progress``)."""
 
     def __init__(self, n_poses: int, window_s: float, progress: bool) -> None:
+        from tqdm import tqdm
+
         self.window_s = window_s
         self.overall = tqdm(total=n_poses, unit="pose", desc="poses", disable=not progress, position=0,
                             dynamic_ncols=True, file=sys.stderr)
@@ -771,6 +771,8 @@ class _Session:
         self.last_status = 0.0
 
     def run(self) -> None:
+        import serial  # pyserial: imported when a port is used, not when the command line is built
+
         while not self.engine.done:
             self._check_valid_records()
             try:
@@ -858,6 +860,8 @@ class _Link:
         return conn
 
     def open(self) -> None:
+        import serial  # pyserial: imported when a port is used, not when the command line is built
+
         """First opening: a failure is the user's to fix (AcquisitionError)."""
         try:
             self.conn = self._open()
@@ -865,6 +869,8 @@ class _Link:
             raise AcquisitionError(str(exc)) from None
 
     def reopen(self, pose: int) -> None:
+        import serial  # pyserial: imported when a port is used, not when the command line is built
+
         """Close and reopen every ``retry_s`` until it works or ``reconnect_timeout_s`` has passed."""
         self.close()
         deadline = time.monotonic() + self.opts.reconnect_timeout_s

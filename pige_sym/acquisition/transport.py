@@ -46,14 +46,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-import serial
-
 from pige_sym.errors import AcquisitionError, InputError
 
-PARITIES = {"N": serial.PARITY_NONE, "E": serial.PARITY_EVEN, "O": serial.PARITY_ODD, "M": serial.PARITY_MARK,
-            "S": serial.PARITY_SPACE}
-STOPBITS = {"1": serial.STOPBITS_ONE, "1.5": serial.STOPBITS_ONE_POINT_FIVE, "2": serial.STOPBITS_TWO}
-BYTESIZES = {5: serial.FIVEBITS, 6: serial.SIXBITS, 7: serial.SEVENBITS, 8: serial.EIGHTBITS}
+#: Option value -> name of the pyserial constant (looked up when a port opens, so building the
+#: command line does not import pyserial).
+PARITIES = {"N": "PARITY_NONE", "E": "PARITY_EVEN", "O": "PARITY_ODD", "M": "PARITY_MARK", "S": "PARITY_SPACE"}
+STOPBITS = {"1": "STOPBITS_ONE", "1.5": "STOPBITS_ONE_POINT_FIVE", "2": "STOPBITS_TWO"}
+BYTESIZES = {5: "FIVEBITS", 6: "SIXBITS", 7: "SEVENBITS", 8: "EIGHTBITS"}
 POLL_S = 0.05
 
 
@@ -98,7 +97,7 @@ class PortSettings:
         return f"{self.baudrate} {self.bytesize}{self.parity.upper()}{self.stopbits}, timeout {self.timeout_s:g} s"
 
 
-def open_port(url: str, settings: PortSettings | None = None) -> serial.SerialBase:
+def open_port(url: str, settings: PortSettings | None = None) -> Any:
     """Open a port by URL or device path with :func:`serial.serial_for_url`.
 
     Raises
@@ -106,11 +105,14 @@ def open_port(url: str, settings: PortSettings | None = None) -> serial.SerialBa
     AcquisitionError
         When the port cannot be opened (the message names the port and the reason).
     """
+    import serial
+
     s = settings or PortSettings()
     try:
         return serial.serial_for_url(
-            url, baudrate=s.baudrate, bytesize=BYTESIZES[s.bytesize], parity=PARITIES[s.parity.upper()],
-            stopbits=STOPBITS[str(s.stopbits)], timeout=0, write_timeout=max(s.timeout_s, 1.0),
+            url, baudrate=s.baudrate, bytesize=getattr(serial, BYTESIZES[s.bytesize]),
+            parity=getattr(serial, PARITIES[s.parity.upper()]), stopbits=getattr(serial, STOPBITS[str(s.stopbits)]),
+            timeout=0, write_timeout=max(s.timeout_s, 1.0),
         )
     except (serial.SerialException, OSError, ValueError) as exc:
         raise AcquisitionError(f"cannot open port {url!r}: {exc}") from None

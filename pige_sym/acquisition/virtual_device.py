@@ -82,6 +82,7 @@ import numpy as np
 
 from pige_sym.acquisition.device import encode_info, encode_sample
 from pige_sym.acquisition.nest import NestGeometry, default_nest
+from pige_sym.constants import FAULT_KINDS as FAULT_KINDS
 from pige_sym.effects import EffectInstance
 from pige_sym.errors import AcquisitionError, InputError
 from pige_sym.files import atomic_write_text, to_json
@@ -89,7 +90,6 @@ from pige_sym.kernels import DEFAULT_MACHINE, load_kernels
 from pige_sym.nc.rtest_program import TestProgram
 from pige_sym.simulator import simulate
 
-FAULT_KINDS = ("garbage", "checksum", "drop", "spike", "duplicate", "stall", "disconnect")
 #: faults that change the byte stream only (no timing, no link action): :meth:`VirtualRTest.wire`
 STREAM_FAULTS = ("garbage", "checksum", "drop", "spike", "duplicate")
 SPIKE_UM = 50.0

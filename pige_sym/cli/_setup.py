@@ -11,8 +11,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from pige_sym.constants import DEFAULT_MACHINE
 from pige_sym.errors import InputError
-from pige_sym.kernels import DEFAULT_MACHINE
 
 
 def parse_vec3(text: str, what: str) -> list[float]:

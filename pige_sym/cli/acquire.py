@@ -9,15 +9,9 @@ import re
 import signal
 from typing import Any
 
-from pige_sym.acquisition.device import ADAPTERS, make_adapter
-from pige_sym.acquisition.engine import TRIGGERS, AcquisitionOptions, acquire
-from pige_sym.acquisition.nest import parse_nest
-from pige_sym.acquisition.outputs import summary_path
-from pige_sym.acquisition.transport import PARITIES, STOPBITS, PortSettings
 from pige_sym.cli._setup import add_setup_arguments, finite_option, setup_geometry, trajectory_options
+from pige_sym.constants import DEFAULT_DWELL_S, DEFAULT_MOVE_S, DEVICE_PROTOCOLS, TRIGGERS
 from pige_sym.errors import InputError
-from pige_sym.kernels import load_kernels
-from pige_sym.nc.rtest_program import DEFAULT_DWELL_S, DEFAULT_MOVE_S, load_test_program
 
 
 def _interrupt(signum: int, frame: Any) -> None:
@@ -36,6 +30,14 @@ def parse_size(text: str) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from pige_sym.acquisition.device import make_adapter
+    from pige_sym.acquisition.engine import AcquisitionOptions, acquire
+    from pige_sym.acquisition.nest import parse_nest
+    from pige_sym.acquisition.outputs import summary_path
+    from pige_sym.acquisition.transport import PortSettings
+    from pige_sym.kernels import load_kernels
+    from pige_sym.nc.rtest_program import load_test_program
+
     signal.signal(signal.SIGTERM, _interrupt)
     kern = load_kernels(args.machine)
     ball, pivots, tool = setup_geometry(args)
@@ -67,6 +69,8 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from pige_sym.acquisition.transport import PARITIES, STOPBITS
+
     p = subparsers.add_parser(
         "acquire",
         help="acquire an R-test measurement from a device over a serial port",
@@ -100,7 +104,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "16 MiB + 128 kB per program second)")
     p.add_argument("--frame", choices=["machine", "table"], default="machine", help="frame of the deviations")
     p.add_argument("--nest", default="default", help="nest geometry: default, key=value,... or a JSON file")
-    p.add_argument("--protocol", choices=sorted(ADAPTERS), default="rtest", help="device protocol")
+    p.add_argument("--protocol", choices=DEVICE_PROTOCOLS, default="rtest", help="device protocol")
     g = p.add_argument_group("port settings")
     g.add_argument("--baud", type=int, default=115200, help="baud rate (default %(default)s)")
     g.add_argument("--bytesize", type=int, default=8, choices=[5, 6, 7, 8])

@@ -6,25 +6,20 @@ import argparse
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from pige_sym.compensation import (
+from pige_sym.constants import (
     CONTROLLER_STYLES,
-    compensation_study,
-    controller_corrections,
-    format_controller,
-    load_parameters,
-    plot_compensation,
-    program_machine,
-    read_program,
+    DEFAULT_MACHINE,
+    DEFAULT_MAX_CHANGE_DEG,
+    DEFAULT_MAX_CHANGE_MM,
+    DIALECTS,
 )
 from pige_sym.errors import InputError
 from pige_sym.files import atomic_write_text, check_output, to_json
-from pige_sym.identification import identify
-from pige_sym.kernels import DEFAULT_MACHINE, load_kernels
-from pige_sym.nc.compensate import DEFAULT_MAX_CHANGE_DEG, DEFAULT_MAX_CHANGE_MM, CompensationReport, compensate_nc
-from pige_sym.nc.dialects import DIALECTS
-from pige_sym.simulator import random_pige, simulate
-from pige_sym.trajectories import cone_frustum, figure_eight
+
+if TYPE_CHECKING:
+    from pige_sym.nc.compensate import CompensationReport
 
 
 def _max_change(text: str) -> tuple[float, float]:
@@ -40,6 +35,7 @@ def _max_change(text: str) -> tuple[float, float]:
 def _machine(args: argparse.Namespace, text: str | None) -> str | None:
     """``--machine``, checked against the machine the program's header names (either may be silent)."""
     from pige_sym.codegen.machine_code import parse_machine_code
+    from pige_sym.compensation import program_machine
 
     named = program_machine(text) if text is not None else None
     if named is not None:
@@ -54,6 +50,9 @@ def _machine(args: argparse.Namespace, text: str | None) -> str | None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from pige_sym.compensation import controller_corrections, format_controller, load_parameters, read_program
+    from pige_sym.nc.compensate import compensate_nc
+
     text = read_program(args.program) if args.program else None
     machine = _machine(args, text)
     params = load_parameters(args.params, machine, allow_missing=args.allow_missing)
@@ -153,6 +152,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _study(args: argparse.Namespace) -> int:
+    from pige_sym.compensation import compensation_study, plot_compensation
+    from pige_sym.identification import identify
+    from pige_sym.kernels import load_kernels
+    from pige_sym.simulator import random_pige, simulate
+    from pige_sym.trajectories import cone_frustum, figure_eight
+
     kern = load_kernels(args.machine)
     code = kern.MACHINE_CODE
     incl = "X" if kern.ROTARY_AXES[0] == "A" else "Y"

@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 
-from pige_sym.identification import LOSSES, METHODS, format_result, identify
-from pige_sym.io import read_measurement
+from pige_sym.constants import LOSSES, METHODS
 
 
 def _run(args: argparse.Namespace) -> int:
+    from pige_sym.identification import format_result, identify
+    from pige_sym.io import read_measurement
+
     m = read_measurement(args.file)
     result = identify(m, method=args.method, projection=args.projection, loss=args.loss, with_zero=args.with_zero)
     if args.json:

@@ -15,8 +15,8 @@ import argparse
 import math
 from typing import Any
 
+from pige_sym.constants import DEFAULT_DWELL_S, DEFAULT_MACHINE, DEFAULT_MOVE_S
 from pige_sym.errors import InputError
-from pige_sym.kernels import DEFAULT_MACHINE
 
 
 def _points(args: argparse.Namespace, move_s: float, dwell_s: float) -> int:
@@ -139,8 +139,6 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from pige_sym.nc.rtest_program import DEFAULT_DWELL_S, DEFAULT_MOVE_S
-
     p = subparsers.add_parser(
         "plan", help="plan the R-test (trajectory, ball) for the best predicted precision, or grade one",
         description=__doc__.split("\n\n", 1)[1] if __doc__ else None,

@@ -14,16 +14,18 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
 from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
+from pige_sym.constants import DEFAULT_DWELL_S
 from pige_sym.files import atomic_write_text, check_output
-from pige_sym.kernels import load_kernels
-from pige_sym.nc.program import make_rtest_program
-from pige_sym.nc.rtest_program import DEFAULT_DWELL_S, load_test_program
 
 
 def _run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from pige_sym.kernels import load_kernels
+    from pige_sym.nc.program import make_rtest_program
+    from pige_sym.nc.rtest_program import load_test_program
+
     out = check_output(args.out, force=args.force, what="--out")
     kern = load_kernels(args.machine)
     ball, pivots, tool = setup_geometry(args)

@@ -9,8 +9,6 @@ import signal
 import sys
 from typing import Any
 
-from pige_sym.acquisition.nest import parse_nest
-from pige_sym.acquisition.virtual_device import FAULT_KINDS, DeviceConfig, parse_faults, run_device
 from pige_sym.cli._setup import (
     add_setup_arguments,
     finite_option,
@@ -18,10 +16,8 @@ from pige_sym.cli._setup import (
     setup_geometry,
     trajectory_options,
 )
-from pige_sym.effects import parse_effect
+from pige_sym.constants import DEFAULT_DWELL_S, DEFAULT_MOVE_S, FAULT_KINDS
 from pige_sym.files import check_output
-from pige_sym.kernels import load_kernels
-from pige_sym.nc.rtest_program import DEFAULT_DWELL_S, DEFAULT_MOVE_S, load_test_program
 
 
 def _terminate(signum: int, frame: Any) -> None:
@@ -29,6 +25,12 @@ def _terminate(signum: int, frame: Any) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from pige_sym.acquisition.nest import parse_nest
+    from pige_sym.acquisition.virtual_device import DeviceConfig, parse_faults, run_device
+    from pige_sym.effects import parse_effect
+    from pige_sym.kernels import load_kernels
+    from pige_sym.nc.rtest_program import load_test_program
+
     if args.truth:
         inputs = [x for x in (args.trajectory, args.pige, args.nest) if os.path.isfile(x)]
         check_output(args.truth, force=args.force, inputs=inputs, what="--truth")

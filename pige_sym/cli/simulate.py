@@ -13,16 +13,17 @@ from pige_sym.cli._setup import (
     setup_geometry,
     trajectory_options,
 )
-from pige_sym.effects import parse_effect
 from pige_sym.errors import InputError
 from pige_sym.files import atomic_write_text, check_output, to_json
-from pige_sym.io import write_measurement
-from pige_sym.kernels import load_kernels
-from pige_sym.simulator import simulate
-from pige_sym.trajectories import make_trajectory
 
 
 def _run(args: argparse.Namespace) -> int:
+    from pige_sym.effects import parse_effect
+    from pige_sym.io import write_measurement
+    from pige_sym.kernels import load_kernels
+    from pige_sym.simulator import simulate
+    from pige_sym.trajectories import make_trajectory
+
     finite_option(args.noise, "--noise", minimum=0.0)
     kern = load_kernels(args.machine)
     traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))

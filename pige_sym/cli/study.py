@@ -5,18 +5,21 @@ from __future__ import annotations
 import argparse
 import json
 
-from pige_sym.kernels import DEFAULT_MACHINE, load_kernels
-from pige_sym.studies import projection_study, sobol_study
-from pige_sym.trajectories import make_trajectory
+from pige_sym.constants import DEFAULT_MACHINE
 
 
 def _trajectory(args: argparse.Namespace):  # noqa: ANN202
+    from pige_sym.kernels import load_kernels
+    from pige_sym.trajectories import make_trajectory
+
     kern = load_kernels(args.machine)
     opts = {"incl_axis": args.incl_axis} if args.trajectory == "cone-frustum" and args.incl_axis else {}
     return kern, make_trajectory(kern.MACHINE_CODE, args.trajectory, **opts)
 
 
 def _projection(args: argparse.Namespace) -> int:
+    from pige_sym.studies import projection_study
+
     kern, traj = _trajectory(args)
     study = projection_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), sweep=args.sweep,
                              presets=args.presets, noise_um=args.noise, seed=args.seed, progress=not args.json)
@@ -25,6 +28,8 @@ def _projection(args: argparse.Namespace) -> int:
 
 
 def _sobol(args: argparse.Namespace) -> int:
+    from pige_sym.studies import sobol_study
+
     kern, traj = _trajectory(args)
     study = sobol_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), n=args.samples,
                         default_range=args.range, seed=args.seed)

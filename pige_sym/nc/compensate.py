@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from pige_sym.constants import DEFAULT_MAX_CHANGE_DEG as DEFAULT_MAX_CHANGE_DEG
+from pige_sym.constants import DEFAULT_MAX_CHANGE_MM as DEFAULT_MAX_CHANGE_MM
 from pige_sym.errors import InputError
 from pige_sym.nc.detect import detect_dialect
 from pige_sym.nc.dialects import Dialect, get_dialect
@@ -35,9 +37,6 @@ from pige_sym.nc.lexer import LexError, tokenize
 from pige_sym.nc.rewrite import Rewrite, header_position, rewrite_program
 from pige_sym.nc.state import Block
 from pige_sym.nc.verify import verify
-
-DEFAULT_MAX_CHANGE_MM = 0.2
-DEFAULT_MAX_CHANGE_DEG = 0.1
 
 
 @dataclass

@@ -28,13 +28,13 @@ from typing import Any
 
 import numpy as np
 
+from pige_sym.constants import DEFAULT_DWELL_S as DEFAULT_DWELL_S
+from pige_sym.constants import DEFAULT_MOVE_S as DEFAULT_MOVE_S
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.program import parse_program, poses_from_program
 from pige_sym.trajectories import NAMES, Trajectory, make_trajectory
 
-DEFAULT_MOVE_S = 5.0
-DEFAULT_DWELL_S = 7.0
 NC_SUFFIXES = (".mpf", ".spf", ".nc", ".ngc", ".cnc")
 
 

@@ -37,7 +37,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from tqdm import tqdm
 
 from pige_sym import __version__
 from pige_sym.compensation import (
@@ -544,6 +543,8 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     steps_per_file = 4 + len(study_set) + (program is not None)
     options = _Options(method, projection, with_zero, study_set, presets, sobol_samples, seed, tol, rule, k,
                        None if program is None else Path(program), program_text)
+    from tqdm import tqdm
+
     with tqdm(total=steps_per_file * len(paths), desc="report", unit="step", disable=not progress) as bar:
         reports = [_gather_one(p, label, m, truth, options, bar)
                    for (p, m, truth), label in zip(loaded, _labels(paths), strict=True)]

@@ -31,6 +31,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from pige_sym.constants import DIALECTS as DIALECTS
+
 
 @dataclass(frozen=True)
 class Dialect:
@@ -109,4 +111,3 @@ def get_dialect(name: str) -> Dialect:
     raise InputError(f"unknown dialect {name!r}: use siemens, fanuc (also Haas) or linuxcnc")
 
 
-DIALECTS = ("siemens", "fanuc", "linuxcnc")
