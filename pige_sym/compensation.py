@@ -42,8 +42,10 @@ from typing import Any
 import numpy as np
 
 from pige_sym.constants import CONTROLLER_STYLES as CONTROLLER_STYLES
+from pige_sym.constants import DEFAULT_BALL_MM
 from pige_sym.effects import EffectSpec
-from pige_sym.errors import FileFormatError, InputError, PigeError
+from pige_sym.errors import CompensationError as CompensationError
+from pige_sym.errors import FileFormatError, InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.trajectories import approach_directions
 
@@ -55,10 +57,6 @@ NOT_COMPENSATED_WHY = {
     "squareness": "a linear-axis error: enter it in the controller's squareness compensation",
     "setup_offset": "a set-up error of the test, not of the machine",
 }
-
-
-class CompensationError(PigeError):
-    """The parameters cannot be used for compensation as they are."""
 
 
 @dataclass
@@ -648,7 +646,7 @@ def tool_point_error(machine: str, values: dict[str, float], angles_deg: np.ndar
 
 def compensation_study(machine: str, trajectories: list[Any], *, truth: dict[str, float],
                        identified: dict[str, float], covariance: np.ndarray | None = None,
-                       ball_mm: Any = (120.0, 0.0, 80.0), tool_mm: Any = None,
+                       ball_mm: Any = DEFAULT_BALL_MM, tool_mm: Any = None,
                        pivots_mm: dict | None = None, truth_extensions: list[AngleExtension] | tuple[()] = (),
                        extensions: list[AngleExtension] | tuple[()] = ()) -> list[CompensationStudyRow]:
     """Run each test program uncompensated and compensated on a machine with the true errors.

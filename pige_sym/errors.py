@@ -68,3 +68,43 @@ class AcquisitionError(PigeError):
 
 class NCProgramError(FileFormatError):
     """An NC program block the tool cannot read or compensate safely; names the file and line."""
+
+
+class IdentificationError(PigeError):
+    """The identification cannot be carried out with the given data or options."""
+
+
+class CompensationError(PigeError):
+    """The parameters cannot be used for compensation as they are."""
+
+
+# ---- internal signals: raised and caught inside pige_sym, never shown to a user as such
+
+
+class RecordError(Exception):
+    """A device frame that is not a valid record; ``reason`` is one of ``pige_sym.acquisition.device.REASONS``."""
+
+    def __init__(self, reason: str, detail: str = "") -> None:
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+        self.reason = reason
+
+
+class SchemaRefusal(Exception):
+    """A JSON value that breaks the schema; :mod:`pige_sym.schema` turns it into a FileFormatError naming the field."""
+
+    def __init__(self, where: str, problem: str) -> None:
+        super().__init__(f"{where}: {problem}" if where else problem)
+
+
+class LexError(ValueError):
+    """A malformed NC token; ``column`` is its 0-based offset in the line."""
+
+    def __init__(self, column: int, problem: str) -> None:
+        super().__init__(problem)
+        self.column = column
+        self.problem = problem
+
+
+class AcquisitionStop(Exception):
+    """Ends the acquisition loop cleanly (reason in the message)."""
+

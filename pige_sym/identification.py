@@ -57,7 +57,8 @@ import numpy as np
 
 from pige_sym.constants import LOSSES as LOSSES
 from pige_sym.constants import METHODS as METHODS
-from pige_sym.errors import InputError, PigeError
+from pige_sym.errors import IdentificationError as IdentificationError
+from pige_sym.errors import InputError
 from pige_sym.io import Measurement
 from pige_sym.kernels import load_kernels
 from pige_sym.projection import Projection, parse_projection
@@ -66,10 +67,6 @@ RANK_RTOL = 1e-7
 NULL_RTOL = 1e-4
 NULL_WEIGHT = 1e-3
 ZERO_COLUMN_RTOL = 1e-9
-
-
-class IdentificationError(PigeError):
-    """The identification cannot be carried out with the given data or options."""
 
 
 @dataclass

@@ -143,20 +143,6 @@ class Measurement:
         rot = kern.workpiece_rotation(self.angles_deg)
         return np.einsum("nij,nj->ni", rot, self.deviation_um)
 
-    def with_rows(self, rows: np.ndarray) -> Measurement:
-        """A copy holding only the given rows (boolean mask or indices)."""
-        idx = np.arange(self.n_rows)[rows]
-        return Measurement(
-            machine=self.machine, ball_mm=self.ball_mm.copy(), t_s=self.t_s[idx], angles_deg=self.angles_deg[idx],
-            deviation_um=self.deviation_um[idx], rotary_axes=self.rotary_axes, frame=self.frame,
-            tool_mm=None if self.tool_mm is None else self.tool_mm.copy(),
-            pivots_mm={k: v.copy() for k, v in self.pivots_mm.items()}, trajectory=self.trajectory,
-            linear_mm=None if self.linear_mm is None else self.linear_mm[idx],
-            optional={k: v[idx] for k, v in self.optional.items()},
-            extra_columns={k: [v[i] for i in idx] for k, v in self.extra_columns.items()},
-            metadata=dict(self.metadata), path=self.path,
-        )
-
 
 def _fmt(x: float) -> str:
     """Shortest text that reads back to exactly the same float."""

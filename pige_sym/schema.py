@@ -48,7 +48,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
 
-from pige_sym.errors import FileFormatError, InputError, PigeError
+from pige_sym.errors import FileFormatError, InputError, PigeError, SchemaRefusal
 from pige_sym.files import PathLike, open_regular_file
 
 MAX_JSON_BYTES = 16 * 2**20
@@ -59,11 +59,6 @@ MAX_PIGE = 1e4
 MAX_POSITION_MM = 1e5
 
 T = TypeVar("T")
-
-
-class _Refusal(Exception):
-    def __init__(self, where: str, problem: str) -> None:
-        super().__init__(f"{where}: {problem}" if where else problem)
 
 
 def _reject_constant(token: str) -> float:
@@ -149,39 +144,40 @@ def _check(tp: Any, value: Any, where: str, meta: Mapping[str, Any]) -> Any:
         for a in rest:
             try:
                 return _check(a, value, where, meta)
-            except _Refusal:
+            except SchemaRefusal:
                 continue
-        raise _Refusal(where, f"unexpected {_type_name(value)}")
+        raise SchemaRefusal(where, f"unexpected {_type_name(value)}")
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise _Refusal(where, f"expected a number, got {_type_name(value)}")
+            raise SchemaRefusal(where, f"expected a number, got {_type_name(value)}")
         v = float(value)
         if not math.isfinite(v):
-            raise _Refusal(where, "expected a finite number")
+            raise SchemaRefusal(where, "expected a finite number")
         limit = meta.get("max_abs")
         if limit is not None and abs(v) > limit:
-            raise _Refusal(where, f"{v:g} is not physical (|value| <= {limit:g})")
+            raise SchemaRefusal(where, f"{v:g} is not physical (|value| <= {limit:g})")
         return v
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise _Refusal(where, f"expected an integer, got {_type_name(value)}")
+            raise SchemaRefusal(where, f"expected an integer, got {_type_name(value)}")
         return value
     if tp in (str, bool):
         if not isinstance(value, tp):
-            raise _Refusal(where, f"expected {'a string' if tp is str else 'true or false'}, got {_type_name(value)}")
+            wanted = "a string" if tp is str else "true or false"
+            raise SchemaRefusal(where, f"expected {wanted}, got {_type_name(value)}")
         return value
     if origin in (list, tuple):
         if not isinstance(value, list):
-            raise _Refusal(where, f"expected a list, got {_type_name(value)}")
+            raise SchemaRefusal(where, f"expected a list, got {_type_name(value)}")
         n = meta.get("length")
         if n is not None and len(value) != n:
-            raise _Refusal(where, f"expected {n} values, got {len(value)}")
+            raise SchemaRefusal(where, f"expected {n} values, got {len(value)}")
         (item,) = typing.get_args(tp)[:1]
         out = [_check(item, v, f"{where}[{i}]", meta) for i, v in enumerate(value)]
         return tuple(out) if origin is tuple else out
     if origin is dict:
         if not isinstance(value, dict):
-            raise _Refusal(where, f"expected an object, got {_type_name(value)}")
+            raise SchemaRefusal(where, f"expected an object, got {_type_name(value)}")
         _, item = typing.get_args(tp)
         return {str(k): _check(item, v, f"{where}.{k}", meta) for k, v in value.items()}
     if dataclasses.is_dataclass(tp) and isinstance(tp, type):
@@ -191,20 +187,20 @@ def _check(tp: Any, value: Any, where: str, meta: Mapping[str, Any]) -> Any:
 
 def _from_dict(cls: type[T], value: Any, where: str) -> T:
     if not isinstance(value, dict):
-        raise _Refusal(where, f"expected an object, got {_type_name(value)}")
+        raise SchemaRefusal(where, f"expected an object, got {_type_name(value)}")
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}  # type: ignore[arg-type]
     ignored: frozenset[str] = getattr(cls, "IGNORED_KEYS", frozenset())
     unknown = sorted(k for k in value if k not in fields and k not in ignored)
     if unknown:
         prefix = f"{where}." if where else ""
-        raise _Refusal("", f"unknown key {prefix}{unknown[0]!r} (known: {', '.join(fields)})")
+        raise SchemaRefusal("", f"unknown key {prefix}{unknown[0]!r} (known: {', '.join(fields)})")
     kwargs: dict[str, Any] = {}
     for name, f in fields.items():
         sub = f"{where}.{name}" if where else name
         if name not in value:
             if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise _Refusal(sub, "missing")
+                raise SchemaRefusal(sub, "missing")
             continue
         kwargs[name] = _check(hints[name], value[name], sub, f.metadata)
     return cls(**kwargs)
@@ -214,7 +210,7 @@ def from_json(cls: type[T], data: Any, path: PathLike) -> T:
     """Validate parsed JSON ``data`` against the dataclass ``cls``; FileFormatError naming the field."""
     try:
         return _from_dict(cls, data, "")
-    except _Refusal as exc:
+    except SchemaRefusal as exc:
         raise FileFormatError(str(path), None, str(exc)) from None
 
 

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from pige_sym.constants import DEFAULT_BALL_MM
 from pige_sym.effects import EffectContext, EffectInstance
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.io import Measurement, write_measurement
@@ -120,7 +121,7 @@ class SimulationResult:
 
 
 def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | None = None,
-             ball_mm: Any = (120.0, 0.0, 80.0), pivots_mm: dict[str, Any] | None = None, tool_mm: Any = None,
+             ball_mm: Any = DEFAULT_BALL_MM, pivots_mm: dict[str, Any] | None = None, tool_mm: Any = None,
              effects: list[EffectInstance] | None = None, noise_um: float = 0.25, seed: int | None = None,
              frame: str = "machine") -> SimulationResult:
     """Simulate an R-test measurement.

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from pige_sym.constants import DEFAULT_BALL_MM
 from pige_sym.identification import identify
 from pige_sym.kernels import load_kernels
 from pige_sym.projection import Projection, direction_sweep, parse_projection
@@ -116,7 +117,7 @@ def _verdict(machine: str, rows: list[ProjectionRow]) -> str:
 
 def projection_study(machine: str, trajectory: Trajectory, *, projections: list[str] | None = None,
                      sweep: int = 0, presets: int = 50, noise_um: float = 0.25, seed: int = 0,
-                     ball_mm: Any = (120.0, 0.0, 80.0), tool_mm: Any = None, accuracy: float = np.inf,
+                     ball_mm: Any = DEFAULT_BALL_MM, tool_mm: Any = None, accuracy: float = np.inf,
                      progress: bool = True) -> ProjectionStudy:
     """Run the projection study (module docstring).
 
@@ -213,7 +214,7 @@ class SobolStudy:
 
 def sobol_study(machine: str, trajectory: Trajectory, *, projections: list[str] | None = None,
                 ranges: dict[str, float] | None = None, default_range: float = 15.0, n: int = 2048,
-                ball_mm: Any = (120.0, 0.0, 80.0), tool_mm: Any = None, seed: int = 0) -> SobolStudy:
+                ball_mm: Any = DEFAULT_BALL_MM, tool_mm: Any = None, seed: int = 0) -> SobolStudy:
     """Sobol indices of the mean-square projected deviation w.r.t. each PIGE (module docstring)."""
     kern = load_kernels(machine)
     names = list(kern.LOCATION_PARAMETERS)

@@ -50,6 +50,7 @@ import numpy as np
 
 from pige_sym.acquisition.transport import LineFramer
 from pige_sym.errors import InputError
+from pige_sym.errors import RecordError as RecordError
 
 REASONS = ("format", "checksum", "type", "fields", "number", "truncated", "overlong", "duplicate")
 _HEX = re.compile(rb"[0-9A-F]{4}")
@@ -83,14 +84,6 @@ class Info:
     @property
     def is_end(self) -> bool:
         return self.text.strip().upper().startswith("END")
-
-
-class RecordError(Exception):
-    """A frame that is not a valid record; ``reason`` is one of :data:`REASONS`."""
-
-    def __init__(self, reason: str, detail: str = "") -> None:
-        super().__init__(f"{reason}: {detail}" if detail else reason)
-        self.reason = reason
 
 
 def crc16(payload: bytes) -> int:
@@ -178,9 +171,6 @@ class DeviceAdapter(ABC):
     def parse(self, frame: bytes) -> Sample | Info:
         """Turn one frame into a record or raise :class:`RecordError`."""
 
-    def describe(self) -> str:
-        return self.name
-
 
 class RTestProtocolAdapter(DeviceAdapter):
     """The default streaming protocol (module docstring)."""
@@ -189,9 +179,6 @@ class RTestProtocolAdapter(DeviceAdapter):
 
     def parse(self, frame: bytes) -> Sample | Info:
         return parse_record(frame)
-
-    def describe(self) -> str:
-        return "rtest 1 ($RT,seq,time,r1,r2,r3*CRC16)"
 
 
 class GaugeQueryAdapter(DeviceAdapter):
@@ -249,9 +236,6 @@ class GaugeQueryAdapter(DeviceAdapter):
         s = Sample(self._seq, time.monotonic() - self._t0, (vals[0], vals[1], vals[2]))
         self._seq += 1
         return s
-
-    def describe(self) -> str:
-        return f"gauge query {self.query!r}, unit {self.unit_um:g} um"
 
 
 ADAPTERS: dict[str, type[DeviceAdapter]] = {"rtest": RTestProtocolAdapter, "gauge": GaugeQueryAdapter}

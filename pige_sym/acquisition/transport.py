@@ -93,9 +93,6 @@ class PortSettings:
         """Read poll interval [s]."""
         return min(self.timeout_s, POLL_S)
 
-    def describe(self) -> str:
-        return f"{self.baudrate} {self.bytesize}{self.parity.upper()}{self.stopbits}, timeout {self.timeout_s:g} s"
-
 
 def open_port(url: str, settings: PortSettings | None = None) -> Any:
     """Open a port by URL or device path with :func:`serial.serial_for_url`.

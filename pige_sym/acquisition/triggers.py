@@ -17,14 +17,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pige_sym.acquisition.device import Sample
+from pige_sym.errors import AcquisitionStop as Stop
 from pige_sym.nc.rtest_program import TestProgram
 
 if TYPE_CHECKING:
     from pige_sym.acquisition.engine import AcquisitionOptions
-
-
-class Stop(Exception):
-    """Ends the acquisition loop cleanly (reason in the message)."""
 
 
 _Stop = Stop

@@ -82,6 +82,7 @@ import numpy as np
 
 from pige_sym.acquisition.device import encode_info, encode_sample
 from pige_sym.acquisition.nest import NestGeometry, default_nest
+from pige_sym.constants import DEFAULT_BALL_MM
 from pige_sym.constants import FAULT_KINDS as FAULT_KINDS
 from pige_sym.effects import EffectInstance
 from pige_sym.errors import AcquisitionError, InputError
@@ -719,7 +720,7 @@ class VirtualDeviceProcess:
 
 
 def start_virtual_device(machine: str = DEFAULT_MACHINE, trajectory: str = "cone-frustum", *,
-                         ball_mm: Sequence[float] = (120.0, 0.0, 80.0), pige: str | dict[str, float] = "random",
+                         ball_mm: Sequence[float] = DEFAULT_BALL_MM, pige: str | dict[str, float] = "random",
                          effects: Sequence[str] = (), seed: int | None = 0, faults: str | dict[str, int] | None = None,
                          truth: str | os.PathLike[str] | None = None, tcp: int | None = None, rate_hz: float = 20.0,
                          time_scale: float = 1.0, noise_um: float = 0.25, repeatability_um: float = 0.2,

@@ -33,7 +33,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from pige_sym.constants import DEFAULT_MACHINE
+from pige_sym.constants import DEFAULT_BALL_MM, DEFAULT_MACHINE
+from pige_sym.files import atomic_write_text, to_json
+
+BALL = DEFAULT_BALL_MM
 
 DEFAULT_EFFECT = "angular_error_C:harmonic=2,cos_urad=12,sin_urad=-8"
 
@@ -58,59 +61,50 @@ def _truth_sidecar(device_truth: dict[str, Any], machine: str, pige: dict[str, f
     }
 
 
-def _run(args: argparse.Namespace) -> int:
-    from pige_sym.acquisition.engine import acquire
-    from pige_sym.acquisition.virtual_device import start_virtual_device
-    from pige_sym.compensation import compensate_program, format_controller, load_parameters
-    from pige_sym.diagnosis import diagnose
+def _prepare(args: argparse.Namespace) -> Path:
+    """The output folder: refused when an earlier demo is in it, unless ``--force``."""
     from pige_sym.errors import InputError
-    from pige_sym.identification import format_result, identify
-    from pige_sym.io import read_measurement
-    from pige_sym.kernels import load_kernels
-    from pige_sym.nc.program import make_rtest_program
-    from pige_sym.nc.rtest_program import load_test_program
-    from pige_sym.report import gather_report, write_report
-    from pige_sym.simulator import random_pige
 
-    started = time.perf_counter()
-    progress = not args.quiet and sys.stderr.isatty()
     out = Path(args.out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())) and not args.force:
         raise InputError(f"--out {out} exists and is not an empty folder: pass --force to replace the demo's "
                          "files in it, or choose another --out")
     out.mkdir(parents=True, exist_ok=True)
-    ball = [120.0, 0.0, 80.0]
-    effect_id = args.effect.partition(":")[0]
+    return out
 
-    _stage(1, "kernels")
-    kern = load_kernels(args.machine)
+
+def _write_program(args: argparse.Namespace, kern: Any, out: Path) -> tuple[Any, Path]:
+    """Stage 2: the R-test program as an 840D file, read back as the test schedule."""
+    from pige_sym.nc.program import make_rtest_program
+    from pige_sym.nc.rtest_program import load_test_program
+
     code = kern.MACHINE_CODE
-    print(f"machine {code}: rotary axes {', '.join(kern.ROTARY_AXES)}; "
-          f"parameters {', '.join(f'{p} [{kern.UNITS[p]}]' for p in kern.LOCATION_PARAMETERS)}")
-
-    _stage(2, "R-test program")
     incl = "X" if kern.ROTARY_AXES[0] == "A" else "Y"
     options: dict[str, Any] = {"incl_axis": incl} if args.trajectory == "cone-frustum" else {}
-    program = load_test_program(code, args.trajectory, ball_mm=ball, **options)
-    stem = "rtest_" + args.trajectory.split("-")[0]
-    nc_path = out / f"{stem}.mpf"
+    program = load_test_program(code, args.trajectory, ball_mm=BALL, **options)
+    nc_path = out / f"rtest_{args.trajectory.split('-')[0]}.mpf"
     nc_path.write_text(make_rtest_program(program.angles_deg, program.linear_mm(), tuple(kern.ROTARY_AXES),
                                           dwell_s=7.0, title=f"R-test {program.description}, {code}"), encoding="utf-8")
-    program = load_test_program(code, str(nc_path), ball_mm=ball)
-    print(f"wrote {nc_path}: {program.n_poses} poses, "
-          f"{program.duration_s / 60:.1f} min of machine time")
+    program = load_test_program(code, str(nc_path), ball_mm=BALL)
+    print(f"wrote {nc_path}: {program.n_poses} poses, {program.duration_s / 60:.1f} min of machine time")
+    return program, nc_path
 
-    _stage(3, "virtual R-test device (separate process, pseudo-terminal)")
-    pige = random_pige(code, args.seed)
+
+def _measure(args: argparse.Namespace, code: str, program: Any, nc_path: Path, out: Path,
+             pige: dict[str, float]) -> Path | None:
+    """Stages 3-4: the virtual device on a pseudo-terminal and the acquisition; the CSV, or None if incomplete."""
+    from pige_sym.acquisition.engine import acquire
+    from pige_sym.acquisition.virtual_device import start_virtual_device
+
+    progress = not args.quiet and sys.stderr.isatty()
     device_truth = out / "device.truth.json"
     print(f"hidden in the machine: random PIGEs (seed {args.seed}) and an effect the demo does not tell the "
           f"diagnosis about; device time runs {args.time_scale:g}x faster than real time")
     device_log = (out / "device.log").open("w", encoding="utf-8")
-    with device_log, start_virtual_device(code, str(nc_path), ball_mm=ball, pige=pige, effects=[args.effect],
+    with device_log, start_virtual_device(code, str(nc_path), ball_mm=BALL, pige=pige, effects=[args.effect],
                                           seed=args.seed, truth=device_truth, time_scale=args.time_scale,
                                           stderr=device_log, extra_args=["--force"] if args.force else []) as device:
         print(f"device streaming on {device.url} (its messages: {out / 'device.log'})")
-
         _stage(4, f"acquisition over the serial port {device.url}")
         csv = out / "rtest.csv"
         summary = acquire(device.url, program, csv, progress=progress, force=args.force)
@@ -118,25 +112,30 @@ def _run(args: argparse.Namespace) -> int:
         device.wait(60)
     if not summary.completed:
         print("the acquisition did not complete: stopping the demo")
-        return 1
-    truth = _truth_sidecar(json.loads(device_truth.read_text()), code, pige, args.effect, ball)
-    (out / "rtest.truth.json").write_text(json.dumps(truth, indent=1) + "\n")
-    m = read_measurement(csv)
+        return None
+    truth = _truth_sidecar(json.loads(device_truth.read_text()), code, pige, args.effect, list(BALL))
+    atomic_write_text(out / "rtest.truth.json", to_json(truth) + "\n")
+    return csv
 
+
+def _analyse(args: argparse.Namespace, kern: Any, csv: Path, out: Path, pige: dict[str, float]) -> tuple[Path, bool]:
+    """Stages 5-6: both identifications and the diagnosis; the diagnosis JSON and whether it named the effect."""
+    from pige_sym.diagnosis import diagnose
+    from pige_sym.identification import format_result, identify
+    from pige_sym.io import read_measurement
+
+    m = read_measurement(csv)
     _stage(5, "identification")
     results = {}
     for method in ("gauss-newton", "double-differential"):
-        res = identify(m, method=method)
-        results[method] = res
-        (out / f"identify_{method}.json").write_text(json.dumps(res.to_dict(), indent=1) + "\n")
-        print(format_result(res))
-        print()
-
+        results[method] = res = identify(m, method=method)
+        atomic_write_text(out / f"identify_{method}.json", to_json(res.to_dict()) + "\n")
+        print(format_result(res) + "\n")
     _stage(6, "diagnosis: what does the PIGE model miss?")
-    diag = diagnose(m, progress=progress)
-    diag_json = out / "diagnosis.json"
-    diag_json.write_text(json.dumps(diag.to_dict(), indent=1) + "\n")
+    diag = diagnose(m, progress=not args.quiet and sys.stderr.isatty())
+    diag_json = atomic_write_text(out / "diagnosis.json", to_json(diag.to_dict()) + "\n")
     print(diag.verdict())
+    effect_id = args.effect.partition(":")[0]
     found = [f.effect for f in diag.findings]
     hit = bool(found) and found[0] == effect_id
     print(f"hidden effect: {effect_id}; diagnosis found: {', '.join(found) or 'nothing'} "
@@ -148,22 +147,51 @@ def _run(args: argparse.Namespace) -> int:
         i, j = gn.parameters.index(name), diag.final.parameters.index(name)
         print(f"{name:10s} {pige[name]:9.3f} {_num(gn.values[i]):>9s} {_num(gn.std[i]):>7s} "
               f"{_num(diag.final.values[j]):>10s} {_num(diag.final.std[j]):>7s}  {kern.UNITS[name]}")
+    return diag_json, hit
+
+
+def _compensate_and_report(args: argparse.Namespace, code: str, csv: Path, nc_path: Path, diag_json: Path,
+                           out: Path) -> None:
+    """Stages 7-8: the compensated test program, the controller corrections and the report."""
+    from pige_sym.compensation import compensate_program, format_controller, load_parameters
+    from pige_sym.report import gather_report, write_report
 
     _stage(7, "compensation of the test program")
     params = load_parameters(diag_json, code)
-    comp_path = out / f"{stem}_comp.mpf"
-    comp_path.write_text(compensate_program(nc_path.read_text(encoding="utf-8"), params, path=str(nc_path)),
-                         encoding="utf-8")
+    comp_path = nc_path.with_name(f"{nc_path.stem}_comp.mpf")
+    atomic_write_text(comp_path, compensate_program(nc_path.read_text(encoding="utf-8"), params, path=str(nc_path)),
+                      newline="")
     print(f"wrote {comp_path} (parameters from {params.source})")
     print(format_controller(params, "table"))
-
     _stage(8, "report")
-    data = gather_report([csv], program=nc_path, method="diagnosis", progress=progress)
+    data = gather_report([csv], program=nc_path, method="diagnosis", progress=not args.quiet and sys.stderr.isatty())
     row = data.measurements[0].compensation[-1]  # the NC program, run on the true machine (PIGEs + hidden effect)
     print(f"test program run on the true machine, tool-point error RMSE: {row.rmse_before_um:.3f} um as programmed, "
           f"{row.rmse_after_um:.3f} um compensated ({row.reduction:.1%} less)")
     report = write_report(data, out / "report")
     print(f"\nreport: {report.resolve()}")
+
+
+def _run(args: argparse.Namespace) -> int:
+    from pige_sym.kernels import load_kernels
+    from pige_sym.simulator import random_pige
+
+    started = time.perf_counter()
+    out = _prepare(args)
+    _stage(1, "kernels")
+    kern = load_kernels(args.machine)
+    code = kern.MACHINE_CODE
+    print(f"machine {code}: rotary axes {', '.join(kern.ROTARY_AXES)}; "
+          f"parameters {', '.join(f'{p} [{kern.UNITS[p]}]' for p in kern.LOCATION_PARAMETERS)}")
+    _stage(2, "R-test program")
+    program, nc_path = _write_program(args, kern, out)
+    _stage(3, "virtual R-test device (separate process, pseudo-terminal)")
+    pige = random_pige(code, args.seed)
+    csv = _measure(args, code, program, nc_path, out, pige)
+    if csv is None:
+        return 1
+    diag_json, hit = _analyse(args, kern, csv, out, pige)
+    _compensate_and_report(args, code, csv, nc_path, diag_json, out)
     print(f"demo finished in {time.perf_counter() - started:.1f} s; everything is in {out.resolve()}")
     return 0 if hit else 1
 

@@ -29,6 +29,8 @@ import math
 import re
 from typing import NamedTuple
 
+from pige_sym.errors import LexError as LexError
+
 NUMBER = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)"
 FUNCTIONS = ("ACP", "ACN", "AC", "IC", "DC", "CAC", "CIC", "CDC", "CACP", "CACN")
 
@@ -119,15 +121,6 @@ class Token(NamedTuple):
                 cached = f"{self.key}{whole}.{frac}" if frac else f"{self.key}{whole}"
             _CODES[(self.key, digits)] = cached
         return cached
-
-
-class LexError(ValueError):
-    """A malformed token; ``column`` is its 0-based offset in the line."""
-
-    def __init__(self, column: int, problem: str) -> None:
-        super().__init__(problem)
-        self.column = column
-        self.problem = problem
 
 
 def _number(text: str, column: int) -> float:

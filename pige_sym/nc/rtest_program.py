@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from pige_sym.constants import DEFAULT_BALL_MM
 from pige_sym.constants import DEFAULT_DWELL_S as DEFAULT_DWELL_S
 from pige_sym.constants import DEFAULT_MOVE_S as DEFAULT_MOVE_S
 from pige_sym.errors import InputError
@@ -130,7 +131,7 @@ def _nc_program(kern: Any, path: str, dwell_s: float) -> tuple[np.ndarray, np.nd
     return angles, np.array(dwell), lines
 
 
-def load_test_program(machine: str, spec: str, *, ball_mm: Any = (120.0, 0.0, 80.0),
+def load_test_program(machine: str, spec: str, *, ball_mm: Any = DEFAULT_BALL_MM,
                       pivots_mm: dict[str, Any] | None = None, tool_mm: Any = None,
                       move_s: float = DEFAULT_MOVE_S, dwell_s: float = DEFAULT_DWELL_S,
                       **trajectory_options: Any) -> TestProgram:

@@ -1,0 +1,59 @@
+"""The shape of the code: short functions, all errors in errors.py, SymPy only in codegen/."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "pige_sym"
+MAX_LINES = 80
+
+
+def _modules() -> list[Path]:
+    return [p for p in sorted(PACKAGE.rglob("*.py")) if "shipped" not in p.parts]
+
+
+def _functions(path: Path) -> list[tuple[str, int]]:
+    """(name, lines of code) of every function; the docstring does not count, everything else does."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    out = []
+    for n in ast.walk(tree):
+        if not isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        length = n.end_lineno - n.lineno + 1  # type: ignore[operator]
+        first = n.body[0]
+        if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str):
+            length -= first.end_lineno - first.lineno + 1  # type: ignore[operator]
+        out.append((n.name, length))
+    return out
+
+
+def test_no_function_is_longer_than_80_lines() -> None:
+    long = [f"{p.relative_to(PACKAGE)}:{name} ({n} lines)" for p in _modules() for name, n in _functions(p)
+            if n > MAX_LINES]
+    assert not long, "split into named steps: " + ", ".join(long)
+
+
+def test_every_exception_class_lives_in_errors_py() -> None:
+    found = []
+    for p in _modules():
+        if p.name == "errors.py":
+            continue
+        for node in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ClassDef) and any(
+                isinstance(b, ast.Name) and (b.id.endswith(("Error", "Exception"))) for b in node.bases
+            ):
+                found.append(f"{p.relative_to(PACKAGE)}:{node.name}")
+    assert not found, found
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_only_codegen_imports_sympy(path: Path) -> None:
+    if "codegen" in path.parts:
+        return
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+            [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+        assert not any(n.split(".")[0] == "sympy" for n in names), f"{path} imports SymPy"
