@@ -27,6 +27,7 @@ import numpy as np
 from pige_sym.constants import DEFAULT_BALL_MM
 from pige_sym.effects import EffectContext, EffectInstance
 from pige_sym.errors import FileFormatError, InputError
+from pige_sym.files import to_json
 from pige_sym.io import Measurement, write_measurement
 from pige_sym.kernels import load_kernels
 from pige_sym.trajectories import Trajectory
@@ -116,7 +117,7 @@ class SimulationResult:
         """Write the CSV and its sidecar ``<stem>.truth.json``."""
         p = write_measurement(self.measurement, path)
         truth_path = p.with_name(p.stem + ".truth.json")
-        truth_path.write_text(json.dumps(self.truth, indent=1) + "\n")
+        truth_path.write_text(to_json(self.truth) + "\n")
         return p, truth_path
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import re
 import signal
@@ -12,6 +11,7 @@ from typing import Any
 from pige_sym.cli._setup import add_setup_arguments, finite_option, setup_geometry, trajectory_options
 from pige_sym.constants import DEFAULT_DWELL_S, DEFAULT_MOVE_S, DEVICE_PROTOCOLS, TRIGGERS
 from pige_sym.errors import InputError
+from pige_sym.files import to_json
 
 
 def _interrupt(signum: int, frame: Any) -> None:
@@ -61,7 +61,7 @@ def _run(args: argparse.Namespace) -> int:
         progress=not (args.no_progress or args.json),
     )
     if args.json:
-        print(json.dumps({**summary.to_dict(), "summary_file": str(summary_path(args.out))}, indent=1))
+        print(to_json({**summary.to_dict(), "summary_file": str(summary_path(args.out))}))
     else:
         print(summary.format())
         print(f"summary: {summary_path(args.out)}")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -169,8 +168,8 @@ def _study(args: argparse.Namespace) -> int:
     rows = compensation_study(code, trajs, truth=truth, identified=ident, covariance=res.covariance)
     paths = plot_compensation(rows, args.plots) if args.plots else []
     if args.json:
-        print(json.dumps({"machine": code, "truth": truth, "identified": ident, "rows": [r.to_dict() for r in rows],
-                          "plots": paths}, indent=1))
+        print(to_json({"machine": code, "truth": truth, "identified": ident, "rows": [r.to_dict() for r in rows],
+                          "plots": paths}))
         return 0
     print(f"compensation study on {code}: PIGEs identified from a simulated cone test (noise {args.noise} um)")
     for r in rows:

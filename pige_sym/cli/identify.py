@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 
 from pige_sym.constants import LOSSES, METHODS
+from pige_sym.files import to_json
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -15,7 +15,7 @@ def _run(args: argparse.Namespace) -> int:
     m = read_measurement(args.file)
     result = identify(m, method=args.method, projection=args.projection, loss=args.loss, with_zero=args.with_zero)
     if args.json:
-        print(json.dumps(result.to_dict(), indent=1))
+        print(to_json(result.to_dict()))
     else:
         print(format_result(result))
     return 0

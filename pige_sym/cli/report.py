@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
+
+from pige_sym.files import to_json
 
 #: estimates a report can compensate with (pige_sym.report.PRIMARY_METHODS, kept here so --help stays light)
 METHODS = ("diagnosis", "gauss-newton", "double-differential")
@@ -20,7 +21,7 @@ def _run(args: argparse.Namespace) -> int:
                          compare=tuple(args.compare) if args.compare else None, history=args.history, db=args.db)
     path = write_report(data, args.out)
     if args.json:
-        print(json.dumps(data.to_dict(), indent=1))
+        print(to_json(data.to_dict()))
         return 0
     for rep in data.measurements:
         gn = rep.identification["gauss-newton"]

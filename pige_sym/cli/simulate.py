@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 
 from pige_sym.cli._setup import (
@@ -45,8 +44,8 @@ def _run(args: argparse.Namespace) -> int:
     csv = write_measurement(result.measurement, out)
     truth = atomic_write_text(truth_path, to_json(result.truth) + "\n")
     if args.json:
-        print(json.dumps({"csv": str(csv), "truth_file": str(truth), "rows": result.measurement.n_rows,
-                          "truth": result.truth}, indent=1))
+        print(to_json({"csv": str(csv), "truth_file": str(truth), "rows": result.measurement.n_rows,
+                          "truth": result.truth}))
     else:
         print(f"wrote {csv} ({result.measurement.n_rows} rows) and {truth}")
     return 0

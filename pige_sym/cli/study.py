@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 
 from pige_sym.constants import DEFAULT_MACHINE
+from pige_sym.files import to_json
 
 
 def _trajectory(args: argparse.Namespace):  # noqa: ANN202
@@ -23,7 +23,7 @@ def _projection(args: argparse.Namespace) -> int:
     kern, traj = _trajectory(args)
     study = projection_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), sweep=args.sweep,
                              presets=args.presets, noise_um=args.noise, seed=args.seed, progress=not args.json)
-    print(json.dumps(study.to_dict(), indent=1) if args.json else study.format())
+    print(to_json(study.to_dict()) if args.json else study.format())
     return 0
 
 
@@ -33,7 +33,7 @@ def _sobol(args: argparse.Namespace) -> int:
     kern, traj = _trajectory(args)
     study = sobol_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), n=args.samples,
                         default_range=args.range, seed=args.seed)
-    print(json.dumps(study.to_dict(), indent=1) if args.json else study.format())
+    print(to_json(study.to_dict()) if args.json else study.format())
     return 0
 
 
