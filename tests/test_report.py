@@ -383,3 +383,15 @@ def test_cli_methods_match_the_report() -> None:
     from pige_sym.report import PRIMARY_METHODS
 
     assert sorted(METHODS) == sorted(PRIMARY_METHODS)
+
+
+def test_report_grades_a_test_plan(tmp_path: Path) -> None:
+    """`pige report --plan` adds the predicted std per PIGE (graded test vs default cone) and the pose figure."""
+    csv = _simulate(tmp_path / "run.csv", 12)
+    out = tmp_path / "rep"
+    assert main(["report", str(csv), "--out", str(out), "--method", "gauss-newton", "--plan", "figure-eight"]) == 0
+    text = (out / "report.html").read_text(encoding="utf-8")
+    section = re.search(r'<section data-section="plan".*?</section>', text, re.DOTALL)
+    assert section is not None and 'data-figure="plan"' in section.group(0)
+    for name in load_kernels(AC).LOCATION_PARAMETERS:
+        assert f"<td>{name}</td>" in section.group(0)

@@ -4,11 +4,32 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 from pige_sym.files import to_json
 
 #: estimates a report can compensate with (pige_sym.report.PRIMARY_METHODS, kept here so --help stays light)
 METHODS = ("diagnosis", "gauss-newton", "double-differential")
+
+
+def _graded_plan(args: argparse.Namespace, data: Any) -> Any:
+    """The predicted figures of ``--plan`` (angle file or NC program) for the first measurement's set-up."""
+    import numpy as np
+
+    from pige_sym.constants import DEFAULT_BALL_MM, DEFAULT_MACHINE
+    from pige_sym.nc.rtest_program import load_test_program
+    from pige_sym.planning import Setup, grade_test
+
+    if data.measurements:
+        m = data.measurements[0].measurement
+        setup = Setup(m.machine, np.asarray(m.ball_mm, dtype=float), m.tool_mm, m.pivots_mm or None,
+                      noise_um=args.plan_noise)
+    else:
+        setup = Setup(DEFAULT_MACHINE, np.asarray(DEFAULT_BALL_MM, dtype=float), None, None, noise_um=args.plan_noise)
+    prog = load_test_program(setup.machine, args.plan, ball_mm=setup.ball_mm, pivots_mm=setup.pivots_mm,
+                             tool_mm=setup.tool_mm)
+    return grade_test(setup, prog.angles_deg, prog.arrive_s, description=prog.description,
+                      duration_s=prog.duration_s)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -19,6 +40,8 @@ def _run(args: argparse.Namespace) -> int:
                          sobol_samples=args.samples, seed=args.seed, progress=not args.json and sys.stderr.isatty(),
                          tolerances=args.tolerances, rule=args.rule, k=args.k,
                          compare=tuple(args.compare) if args.compare else None, history=args.history, db=args.db)
+    if args.plan:
+        data.plan = _graded_plan(args, data)
     path = write_report(data, args.out)
     if args.json:
         print(to_json(data.to_dict()))
@@ -79,6 +102,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="two measurements of the same program: the measured before/after section")
     p.add_argument("--history", metavar="ID", help="machine id: trend plots of its runs (pige history)")
     p.add_argument("--db", metavar="URL", help="history database (default: as pige history)")
+    p.add_argument("--plan", metavar="TRAJECTORY",
+                   help="grade a test (pige plan's angle file, an NC program, or cone-frustum/figure-eight/steps) "
+                        "for the first file's set-up: predicted std per PIGE against the default cone")
+    p.add_argument("--plan-noise", type=float, default=0.25, help="sensor noise for --plan [um] (default 0.25)")
     p.add_argument("--method", choices=METHODS, default="diagnosis",
                    help="estimate used for the model overlay and the compensation; diagnosis = the PIGEs fitted "
                         "jointly with the accepted extensions (default %(default)s)")

@@ -267,6 +267,8 @@ class ReportData:
     comparison: CompareResult | None = None
     history: HistoryData | None = None
     figures: list[ReportFigure] = field(default_factory=list)
+    plan: Any = None  # a graded test plan (pige_sym.planning.Plan), shown by report.plan_section
+    plan_html: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return json_ready({

@@ -50,6 +50,10 @@ def write_report(data: ReportData, out_dir: str | os.PathLike[str]) -> Path:
                 fh.write(text)
             rep.compensated_program = target
     data.figures = draw_report_figures(data, out / "_report")
+    if data.plan is not None:
+        from pige_sym.report.plan_section import plan_section
+
+        data.plan_html, _ = plan_section(data.plan, out / "_report")
     html_path = out / "report.html"
     atomic_write_text(html_path, render_html(data, base=out))
     data.html_path = html_path
@@ -726,7 +730,8 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
     """
     nav = " ".join([f'<a href="#m{i + 1}">{_e(r.path.name)}</a>' for i, r in enumerate(data.measurements)]
                    + (['<a href="#compare">measured before/after</a>'] if data.comparison is not None else [])
-                   + (['<a href="#history">history</a>'] if data.history is not None else []))
+                   + (['<a href="#history">history</a>'] if data.history is not None else [])
+                   + (['<a href="#plan">test plan</a>'] if data.plan_html or data.plan is not None else []))
     settings = "; ".join(f"{k}: {v}" for k, v in data.settings.items())
     parts = [
         "<!DOCTYPE html>",
@@ -752,6 +757,8 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
         parts += ['<section data-section="history" id="history"><h2>Machine history</h2>',
                   _history_html(data, base), "</section>"]
     parts += [_measurement_html(i, rep, base) for i, rep in enumerate(data.measurements)]
+    if data.plan_html:
+        parts.append(data.plan_html)
     parts += [
         "</main><footer><p>PIGEs: position-independent geometric errors of the rotary axes (ISO 230-7), position "
         "errors in µm, orientation errors in µrad, definitions in CONVENTIONS.md. Standard errors from "
