@@ -324,6 +324,49 @@ class _Solution:
     unobserved: list[int] = field(default_factory=list)  # zero or near-zero columns
 
 
+@dataclass
+class ScaledSpectrum:
+    """Eigen-decomposition of a column-scaled normal matrix with the rank and null-space rules.
+
+    Attributes
+    ----------
+    svals : (P,) singular values of the scaled design, descending
+    vectors : (P, P) right singular vectors (columns), same order
+    rank : int
+        Singular values above ``RANK_RTOL`` times the largest.
+    pinv : (P, P) pseudo-inverse of the scaled normal matrix
+    near_null : (P,) bool, singular values at or below ``NULL_RTOL`` times the largest
+    """
+
+    svals: np.ndarray
+    vectors: np.ndarray
+    rank: int
+    pinv: np.ndarray
+    near_null: np.ndarray
+
+    @property
+    def smax(self) -> float:
+        return float(self.svals[0]) if self.svals.size and self.svals[0] > 0 else 1.0
+
+    def null_weight(self) -> np.ndarray:
+        """(P,) largest weight of each parameter in a near-null direction (0 when there is none)."""
+        if not self.near_null.any():
+            return np.zeros(self.vectors.shape[0])
+        return np.abs(self.vectors[:, self.near_null]).max(axis=1)
+
+
+def scaled_spectrum(scaled_normal: np.ndarray) -> ScaledSpectrum:
+    """Spectrum, rank and pseudo-inverse of a column-scaled normal matrix (identification and planning share it)."""
+    w, v = np.linalg.eigh(scaled_normal)
+    w = np.clip(w, 0, None)[::-1]
+    v = v[:, ::-1]
+    svals = np.sqrt(w)
+    smax = svals[0] if svals.size and svals[0] > 0 else 1.0
+    keep = svals > RANK_RTOL * smax
+    inv_w = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
+    return ScaledSpectrum(svals, v, int(keep.sum()), (v * inv_w) @ v.T, svals <= NULL_RTOL * smax)
+
+
 def _solve(normal: np.ndarray, rhs: np.ndarray, yy: float) -> _Solution:
     p = normal.shape[0]
     diag = np.sqrt(np.clip(np.diag(normal), 0, None))
@@ -335,28 +378,18 @@ def _solve(normal: np.ndarray, rhs: np.ndarray, yy: float) -> _Solution:
     ns[dead, :] = 0.0
     ns[:, dead] = 0.0
     rhs = np.where(dead, 0.0, rhs)
-    w, v = np.linalg.eigh(ns)
-    w = np.clip(w, 0, None)[::-1]
-    v = v[:, ::-1]
-    svals = np.sqrt(w)
-    smax = svals[0] if p and svals[0] > 0 else 1.0
-    keep = svals > RANK_RTOL * smax
-    rank = int(keep.sum())
-    inv_w = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
-    pinv_scaled = (v * inv_w) @ v.T
+    spec = scaled_spectrum(ns)
+    svals, v, rank, pinv_scaled, near_null = spec.svals, spec.vectors, spec.rank, spec.pinv, spec.near_null
     xs = pinv_scaled @ (rhs * scale)
     values = xs * scale
     cov_unit = pinv_scaled * np.outer(scale, scale)
     rss = max(float(yy - 2 * values @ rhs + values @ normal @ values), 0.0)
-    near_null = svals <= NULL_RTOL * smax
     nulls = v[:, near_null] * scale[:, None] if near_null.any() else np.zeros((p, 0))
     for j in range(nulls.shape[1]):
         nulls[:, j] /= np.abs(nulls[:, j]).max()
     vif = np.diag(pinv_scaled).copy()
     vif[~np.isfinite(vif)] = np.inf
-    if near_null.any():
-        weights = np.abs(v[:, near_null]).max(axis=1)
-        vif[weights > NULL_WEIGHT] = np.inf
+    vif[spec.null_weight() > NULL_WEIGHT] = np.inf
     vif[dead] = np.inf
     values[dead] = 0.0
     return _Solution(values, cov_unit, rss, rank, svals, nulls, vif, [int(j) for j in np.flatnonzero(dead)])

@@ -69,7 +69,7 @@ def _no_repeats(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for k, v in pairs:
         if k in out:
-            raise ValueError(f"key {k!r} appears twice in one object")
+            raise ValueError(f"duplicate key {k!r}: it appears twice in one object")
         out[k] = v
     return out
 

@@ -122,41 +122,20 @@ class Tolerances:
         return out
 
 
-def _no_constants(name: str) -> Any:
-    raise ValueError(f"{name} is not a number JSON allows")
-
-
-def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for k, v in pairs:
-        if k in out:
-            raise ValueError(f"duplicate key {k!r}")
-        out[k] = v
-    return out
-
-
 def strict_json(path: str | os.PathLike[str]) -> Any:
-    """Parse a JSON file refusing NaN/Infinity and duplicate keys; errors name the file and line.
+    """Parse a JSON file strictly (NaN/Infinity, duplicate keys, non-UTF-8 refused): :func:`pige_sym.schema.load_json`.
 
     Raises
     ------
     FileFormatError
+    InputError
+        The file does not exist.
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{p}: no such file") from None
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(str(p), None, f"not a UTF-8 text file ({exc.reason})") from None
-    except OSError as exc:
-        raise InputError(f"{p}: cannot read ({exc.strerror or exc})") from None
-    try:
-        return json.loads(text, parse_constant=_no_constants, object_pairs_hook=_unique_keys)
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(str(p), exc.lineno, f"not valid JSON: {exc.msg}") from None
-    except ValueError as exc:
-        raise FileFormatError(str(p), None, f"not valid JSON: {exc}") from None
+    from pige_sym.schema import load_json
+
+    if not Path(path).exists():
+        raise InputError(f"{path}: no such file")
+    return load_json(path, "JSON file")
 
 
 def _limit(value: Any, path: str, where: str) -> float:

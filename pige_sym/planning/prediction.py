@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.errors import InputError
-from pige_sym.identification import NULL_RTOL, NULL_WEIGHT, RANK_RTOL
+from pige_sym.identification import NULL_RTOL, NULL_WEIGHT, scaled_spectrum
 from pige_sym.kernels import load_kernels
 from pige_sym.projection import Projection, parse_projection
 
@@ -226,21 +226,12 @@ def predict_from_normal(normal: np.ndarray, names: Sequence[str], units: dict[st
     p = normal.shape[0]
     normal, diag = _drop_unobserved(normal)
     scale = 1.0 / np.where(diag > 0, diag, 1.0)
-    w, v = np.linalg.eigh(normal * np.outer(scale, scale))
-    w = np.clip(w, 0, None)[::-1]
-    v = v[:, ::-1]
-    svals = np.sqrt(w)
-    smax = svals[0] if p and svals[0] > 0 else 1.0
-    keep = svals > RANK_RTOL * smax
-    rank = int(keep.sum())
-    inv_w = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
-    cov = ((v * inv_w) @ v.T) * np.outer(scale, scale) * noise_um**2
-    determined = diag > 0
-    near_null = svals <= NULL_RTOL * smax
-    if near_null.any():
-        determined &= np.abs(v[:, near_null]).max(axis=1) <= NULL_WEIGHT
+    spec = scaled_spectrum(normal * np.outer(scale, scale))
+    rank = spec.rank
+    cov = spec.pinv * np.outer(scale, scale) * noise_um**2
+    determined = (diag > 0) & (spec.null_weight() <= NULL_WEIGHT)
     std = np.where(determined, np.sqrt(np.clip(np.diag(cov), 0, None)), np.nan)
-    cond = float(smax / svals[rank - 1]) if rank == p and rank > 0 else math.inf
+    cond = float(spec.smax / spec.svals[rank - 1]) if rank == p and rank > 0 else math.inf
     undetermined = [names[j] for j in range(p) if not determined[j]]
     return Prediction(list(names), dict(units), std, cov, determined, undetermined, rank, cond, n_obs)
 
