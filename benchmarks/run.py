@@ -130,7 +130,7 @@ def bench_jacobian(rows: list[Row], sizes: list[int], machine: str) -> None:
     rng = np.random.default_rng(0)
     for n in sizes:
         ang = rng.uniform(-90, 90, (n, len(kern.ROTARY_AXES)))
-        reps = 7 if n <= 1000 else (3 if n <= 100_000 else 2)
+        reps = 7 if n <= 1000 else 5
 
         target = np.empty((n, 3, p))
         target.fill(0.0)  # allocated and touched: the floor measures writing only
