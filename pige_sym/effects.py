@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.errors import InputError
+from pige_sym.options import parse_number_assignments
 from pige_sym.trajectories import approach_directions
 
 _MOTION_COMPONENTS = ("dx", "dy", "dz", "rx", "ry", "rz")
@@ -327,15 +328,7 @@ def parse_effect(text: str, rotary_axes: tuple[str, ...]) -> EffectInstance:
     name = name.strip()
     if name not in catalogue(rotary_axes):
         raise InputError(f"unknown effect {name!r}; known for this machine: {', '.join(catalogue(rotary_axes))}")
-    given: dict[str, float] = {}
-    for item in filter(None, (x.strip() for x in rest.split(","))):
-        k, eq, v = item.partition("=")
-        if not eq:
-            raise InputError(f"effect {name}: expected key=value, got {item!r}")
-        try:
-            given[k.strip()] = float(v)
-        except ValueError:
-            raise InputError(f"effect {name}: {k.strip()}={v!r} is not a number") from None
+    given = parse_number_assignments(rest, f"effect {name}")
     spec0 = EffectSpec(name)
     defaults = dict(DEFAULTS[spec0.kind])
     options = {k: v for k, v in {**defaults, **given}.items() if k in OPTION_KEYS}

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -45,6 +44,7 @@ import numpy as np
 from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
 from pige_sym.errors import FileFormatError, InputError, PigeError
 from pige_sym.files import atomic_write_text, open_regular_file
+from pige_sym.options import strict_float
 
 FORMAT_LINE = "# pige-rtest 1"
 DEVIATION_COLUMNS = ("dx_um", "dy_um", "dz_um")
@@ -57,7 +57,6 @@ MAX_LINE_BYTES = 2**20
 #: Largest magnitude accepted per column or metadata kind (non-physical values are refused), in its unit.
 LIMITS: dict[str, float] = {"t_s": 1e9, "deg": 1e5, "um": 1e5, "mm": 1e5, "temp_C": 1e3, "n_samples": 1e9,
                             "sd_um": 1e5}
-_NUMBER = re.compile(r"[ \t]*[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?[ \t]*")
 _NUMERIC_BYTES = b"0123456789.+-eE, \t\r\n"
 
 
@@ -159,21 +158,13 @@ def _parse_vec3(text: str, path: str, line: int, key: str) -> np.ndarray:
         raise FileFormatError(path, line, f"{key}: expected 3 comma-separated numbers, got {text!r}")
     out = []
     for p in parts:
-        v = parse_number(p)
+        v = strict_float(p)
         if v is None:
             raise FileFormatError(path, line, f"{key}: {p!r} is not a number (ASCII decimal, e.g. 120.5 or -1e-3)")
         if abs(v) > LIMITS["mm"]:
             raise FileFormatError(path, line, f"{key}: {p} mm is not physical (|value| <= {LIMITS['mm']:g} mm)")
         out.append(v)
     return np.array(out)
-
-
-def parse_number(text: str) -> float | None:
-    """A strict ASCII decimal as float, None if ``text`` is not one (``1_000``, ``٣``, ``nan``, ``inf``)."""
-    if not _NUMBER.fullmatch(text):
-        return None
-    v = float(text)
-    return v if math.isfinite(v) else None
 
 
 def column_limit(name: str) -> tuple[float, str]:
@@ -352,7 +343,7 @@ def _check_numeric_block(
     out = np.empty((len(rows), len(numeric)))
     for i, r in enumerate(rows):
         for q, j in enumerate(numeric):
-            v = parse_number(r[j])
+            v = strict_float(r[j])
             if v is None:
                 raise FileFormatError(path, first_line + i, _bad_number(names[j], r[j]))
             out[i, q] = v

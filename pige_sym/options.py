@@ -18,17 +18,25 @@ import re
 
 from pige_sym.errors import InputError
 
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+#: The one number grammar of pige (options and data files): ASCII decimal, blanks around allowed.
+_NUMBER = re.compile(r"[ \t]*[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?[ \t]*")
+
+
+def strict_float(text: str) -> float | None:
+    """A finite float if ``text`` is a plain ASCII decimal, else None (``1_000``, ``٣``, ``nan``, ``1e400``)."""
+    if not _NUMBER.fullmatch(text):
+        return None
+    value = float(text)
+    return value if math.isfinite(value) else None
 
 
 def parse_number(text: str, what: str) -> float:
     """A finite float from an ASCII decimal literal (``what`` names the option in errors)."""
-    s = text.strip()
-    if not s.isascii() or not _NUMBER.fullmatch(s):
-        raise InputError(f"{what}: {text!r} is not a number (plain decimal digits, e.g. 12.5 or 1e-3)")
-    value = float(s)
-    if not math.isfinite(value):
-        raise InputError(f"{what}: {text!r} is out of range")
+    value = strict_float(text)
+    if value is None:
+        if _NUMBER.fullmatch(text):
+            raise InputError(f"{what}: {text.strip()!r} is out of range")
+        raise InputError(f"{what}: {text.strip()!r} is not a number (plain decimal digits, e.g. 12.5 or 1e-3)")
     return value
 
 
@@ -36,7 +44,7 @@ def parse_vector(text: str, what: str, length: int | None = None) -> list[float]
     """Comma-separated numbers, exactly ``length`` of them when given."""
     values = [parse_number(part, what) for part in text.split(",")]
     if length is not None and len(values) != length:
-        raise InputError(f"{what}: expected {length} comma-separated numbers, got {len(values)} in {text!r}")
+        raise InputError(f"{what}: expected {length} numbers (comma-separated), got {len(values)} in {text!r}")
     return values
 
 

@@ -16,7 +16,6 @@ lost) for position errors.
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,6 +29,7 @@ from pige_sym.errors import FileFormatError, InputError
 from pige_sym.files import to_json
 from pige_sym.io import Measurement, write_measurement
 from pige_sym.kernels import load_kernels
+from pige_sym.options import parse_number_assignments
 from pige_sym.trajectories import Trajectory
 
 ORIENTATION_RANGE_URAD = (1.0, 15.0)
@@ -69,23 +69,14 @@ def parse_pige(spec: str, machine: str, seed: int | None = None, **ranges: Any) 
     if spec.strip() == "random":
         return random_pige(machine, seed, **ranges)
     if os.path.exists(spec):
-        try:
-            data = json.loads(Path(spec).read_text())
-        except json.JSONDecodeError as exc:
-            raise FileFormatError(spec, exc.lineno, f"not valid JSON: {exc.msg}") from None
+        from pige_sym.schema import load_json
+
+        data = load_json(spec, "PIGE file")
         if not isinstance(data, dict) or not isinstance(data.get("pige"), dict):
             raise FileFormatError(spec, None, 'expected a JSON object with a "pige" object of name: value')
         items = {normalise_parameter_name(k): v for k, v in data["pige"].items()}
     else:
-        items = {}
-        for part in filter(None, (x.strip() for x in spec.split(","))):
-            name, eq, value = part.partition("=")
-            if not eq:
-                raise InputError(f"--pige: expected NAME=VALUE, got {part!r} (or 'random', or a JSON file)")
-            try:
-                items[normalise_parameter_name(name)] = float(value)
-            except ValueError:
-                raise InputError(f"--pige: {name.strip()}={value!r} is not a number") from None
+        items = {normalise_parameter_name(k): v for k, v in parse_number_assignments(spec, "--pige").items()}
     unknown = [k for k in items if k not in kern.PARAMETERS]
     if unknown:
         raise InputError(f"unknown parameter(s) {', '.join(unknown)} for {kern.MACHINE_CODE}; "
@@ -121,6 +112,38 @@ class SimulationResult:
         return p, truth_path
 
 
+def _check_inputs(kern: Any, trajectory: Trajectory, noise_um: float, frame: str, tool_mm: Any) -> None:
+    if tuple(trajectory.rotary_axes) != tuple(kern.ROTARY_AXES):
+        raise InputError(f"trajectory axes {trajectory.rotary_axes} do not match {kern.ROTARY_AXES}")
+    if noise_um < 0:
+        raise InputError("noise must be >= 0 µm")
+    if frame not in ("machine", "table"):
+        raise InputError("frame must be 'machine' or 'table'")
+    if kern.TOOL_ROTARY and tool_mm is None:
+        raise InputError(f"{kern.MACHINE_CODE} has tool-side rotary axes: give the tool (ball) offset --tool x,y,z")
+
+
+def _add_effects(dev: np.ndarray, effects: list[EffectInstance], ctx: EffectContext,
+                 rng: np.random.Generator) -> tuple[np.ndarray, list[int]]:
+    """Deviations (n, 3) [µm] with every effect added, and the rows that received an outlier."""
+    outlier_rows: set[int] = set()
+    n = dev.shape[0]
+    for eff in effects:
+        if eff.spec.kind != "outliers":
+            dev = dev + eff.spec.contribution(ctx, eff.params)
+            continue
+        count = int(eff.params.get("count", 2))
+        size = float(eff.params.get("size_um", 10.0))
+        if count >= n:
+            raise InputError("outliers: count must be smaller than the number of rows")
+        rows = np.sort(rng.choice(np.arange(1, n), size=count, replace=False))
+        direction = rng.normal(size=(count, 3))
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        dev[rows] += size * direction
+        outlier_rows |= {int(r) for r in rows}
+    return dev, sorted(outlier_rows)
+
+
 def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | None = None,
              ball_mm: Any = DEFAULT_BALL_MM, pivots_mm: dict[str, Any] | None = None, tool_mm: Any = None,
              effects: list[EffectInstance] | None = None, noise_um: float = 0.25, seed: int | None = None,
@@ -147,14 +170,7 @@ def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | N
     SimulationResult
     """
     kern = load_kernels(machine)
-    if tuple(trajectory.rotary_axes) != tuple(kern.ROTARY_AXES):
-        raise InputError(f"trajectory axes {trajectory.rotary_axes} do not match {kern.ROTARY_AXES}")
-    if noise_um < 0:
-        raise InputError("noise must be >= 0 µm")
-    if frame not in ("machine", "table"):
-        raise InputError("frame must be 'machine' or 'table'")
-    if kern.TOOL_ROTARY and tool_mm is None:
-        raise InputError(f"{kern.MACHINE_CODE} has tool-side rotary axes: give the tool (ball) offset --tool x,y,z")
+    _check_inputs(kern, trajectory, noise_um, frame, tool_mm)
     rng = np.random.default_rng(seed)
     ball = np.asarray(ball_mm, dtype=float)
     pivots = {k: np.asarray(v, dtype=float) for k, v in (pivots_mm or {}).items()}
@@ -164,22 +180,8 @@ def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | N
     angles = trajectory.angles_deg
     dev = kern.deviation(angles, params, ball, pivots or None, tool)
     ctx = EffectContext(kern, angles, trajectory.t_s, ball, pivots or None, tool)
-    outlier_rows: list[int] = []
-    effect_records = []
-    for eff in effects or []:
-        if eff.spec.kind == "outliers":
-            count = int(eff.params.get("count", 2))
-            size = float(eff.params.get("size_um", 10.0))
-            if count >= len(angles):
-                raise InputError("outliers: count must be smaller than the number of rows")
-            rows = np.sort(rng.choice(np.arange(1, len(angles)), size=count, replace=False))
-            direction = rng.normal(size=(count, 3))
-            direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-            dev[rows] += size * direction
-            outlier_rows = sorted(set(outlier_rows) | {int(r) for r in rows})
-        else:
-            dev = dev + eff.spec.contribution(ctx, eff.params)
-        effect_records.append(eff.to_dict())
+    dev, outlier_rows = _add_effects(dev, effects or [], ctx, rng)
+    effect_records = [eff.to_dict() for eff in effects or []]
     noise = rng.normal(scale=noise_um, size=dev.shape) if noise_um > 0 else np.zeros_like(dev)
     dev = dev + noise
     dev[0] = 0.0  # the reference row is zero by definition (zeroing), not just to rounding

@@ -625,9 +625,7 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
         written stay.
     """
     opts = options or AcquisitionOptions()
-    settings = settings or PortSettings()
     nest = nest or default_nest()
-    adapter = adapter or RTestProtocolAdapter()
     say = echo or (lambda msg: print(msg, file=sys.stderr))
     out_p = Path(out)
     log_path = _raw_log_path(out_p, raw_log)
@@ -640,18 +638,31 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
         _write_summary(summary, out_p)
         return summary
     trigger = _make_trigger(opts, program, key_source, say)
+    link = _Link(port, settings or PortSettings(), opts, adapter or RTestProtocolAdapter(), opener, summary)
+    session = _open_session(link, program, out_p, nest, state, trigger, RawLog(log_path, append=resume or not force),
+                            progress)
+    _run_session(session, started, out_p, say)
+    return summary
+
+
+def _open_session(link: _Link, program: TestProgram, out: Path, nest: NestGeometry, state: Any,
+                  trigger: _Trigger, log: RawLog, progress: bool) -> _Session:
+    """Open the port and assemble engine, record pipeline and progress bars (the bars close if it fails)."""
+    opts, summary = link.opts, link.summary
     bars = _ProgressBars(program.n_poses, opts.window_s, progress)
-    link = _Link(port, settings, opts, adapter, opener, summary)
     try:
         link.open()
     except AcquisitionError:
         bars.close()
         raise
-    engine = _Engine(program, out_p, nest, opts, summary, state, trigger, bars.on_pose)
-    records = _Records(adapter, summary, engine)
-    log = RawLog(log_path, append=resume or not force)
-    session = _Session(link, records, engine, log, summary, settings, opts,
-                       opts.max_bytes or default_max_bytes(program), bars, progress)
+    engine = _Engine(program, out, nest, opts, summary, state, trigger, bars.on_pose)
+    return _Session(link, _Records(link.adapter, summary, engine), engine, log, summary, link.settings, opts,
+                    opts.max_bytes or default_max_bytes(program), bars, progress)
+
+
+def _run_session(session: _Session, started: float, out: Path, say: Callable[[str], None]) -> None:
+    """Run the loop; whatever ends it, the file is closed and the summary written (re-raising interrupts)."""
+    summary = session.summary
     try:
         session.run()
         summary.completed = True
@@ -660,12 +671,11 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
     except (KeyboardInterrupt, AcquisitionError) as exc:
         interrupted = isinstance(exc, KeyboardInterrupt)
         summary.stop_reason = "interrupted (Ctrl-C or SIGTERM)" if interrupted else str(exc)
-        _finish(session, started, out_p)
+        _finish(session, started, out)
         if interrupted:
             say(summary.format())
         raise
-    _finish(session, started, out_p)
-    return summary
+    _finish(session, started, out)
 
 
 def default_max_bytes(program: TestProgram) -> int:

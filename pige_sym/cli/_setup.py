@@ -17,16 +17,10 @@ from pige_sym.errors import InputError
 
 def parse_vec3(text: str, what: str) -> list[float]:
     """Three comma-separated ASCII decimals within ±1e5 mm, or a clear InputError naming the option."""
-    from pige_sym.io import LIMITS, parse_number
+    from pige_sym.io import LIMITS
+    from pige_sym.options import parse_vector
 
-    parts = text.split(",")
-    if len(parts) != 3:
-        raise InputError(f"{what}: expected 3 numbers x,y,z, got {len(parts)}")
-    vals = [parse_number(x) for x in parts]
-    bad = [x for x, v in zip(parts, vals, strict=True) if v is None]
-    if bad:
-        raise InputError(f"{what}: {bad[0].strip()!r} is not a number (ASCII decimal); expected x,y,z in mm")
-    out = [float(v) for v in vals if v is not None]
+    out = parse_vector(text, what, 3)
     if max(abs(v) for v in out) > LIMITS["mm"]:
         raise InputError(f"{what}: {text} is not physical (|x|, |y|, |z| <= {LIMITS['mm']:g} mm)")
     return out

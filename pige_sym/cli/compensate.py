@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -22,11 +21,10 @@ if TYPE_CHECKING:
 
 
 def _max_change(text: str) -> tuple[float, float]:
-    try:
-        parts = [float(x) for x in text.split(",")]
-    except ValueError:
-        parts = []
-    if len(parts) not in (1, 2) or not all(math.isfinite(x) and x > 0 for x in parts):
+    from pige_sym.options import parse_vector
+
+    parts = parse_vector(text, "--max-change")
+    if len(parts) not in (1, 2) or min(parts) <= 0:
         raise InputError(f"--max-change {text!r}: give MM or MM,DEG (positive numbers), e.g. 0.2,0.1")
     return parts[0], parts[1] if len(parts) == 2 else DEFAULT_MAX_CHANGE_DEG
 

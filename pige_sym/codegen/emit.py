@@ -278,42 +278,76 @@ def _render_basis(model: SymbolicModel, monomials: Sequence[tuple[int, ...]]) ->
     return _function(spec, body, _trig_locals(model), geometry=False)
 
 
-def _tensor_lines(target: str, coefficients: Sequence[sp.Matrix], levers: _Levers) -> list[str]:
-    lines = []
-    for k, cm in enumerate(coefficients):
-        for i in range(cm.rows):
-            for j in range(cm.cols):
-                if cm[i, j] != 0:
-                    lines.append(f"    {target}[{k}, {i}, {j}] = {levers.code(cm[i, j])}")
+def _wrapped(items: Sequence[str], indent: str, width: int = 116) -> list[str]:
+    """``items`` joined by commas, as lines of at most ``width`` characters (inside brackets)."""
+    lines, line = [], indent
+    for item in items:
+        piece = f"{item},"
+        if len(line) + len(piece) + 1 > width and line.strip():
+            lines.append(line.rstrip())
+            line = indent
+        line += piece + " "
+    lines.append(line.rstrip())
     return lines
+
+
+def _sparse_fill(target: str, entries: Sequence[tuple[tuple[int, ...], str]], index_name: str) -> tuple[str, list[str]]:
+    """Fill the non-zero entries of ``target`` in one indexed assignment.
+
+    Returns the module-level constant holding the indices (one tuple per dimension) and the body
+    lines assigning the values in the same order.
+    """
+    if not entries:
+        return "", []
+    dims = len(entries[0][0])
+    const = [f"#: Indices (one tuple per dimension) of the non-zero entries that ``{target}`` receives.",
+             f"{index_name} = ("]
+    for d in range(dims):
+        const += ["    (", *_wrapped([str(idx[d]) for idx, _ in entries], "        "), "    ),"]
+    const.append(")")
+    body = [f"    {target}[{index_name}] = (", *_wrapped([code for _, code in entries], "        "), "    )"]
+    return "\n".join(const), body
+
+
+def _tensor_entries(coefficients: Sequence[sp.Matrix], levers: _Levers) -> list[tuple[tuple[int, ...], str]]:
+    """(k, i, j) and source of every non-zero coefficient, in order."""
+    return [((k, i, j), levers.code(cm[i, j])) for k, cm in enumerate(coefficients)
+            for i in range(cm.rows) for j in range(cm.cols) if cm[i, j] != 0]
+
+
+def _with_constant(constant: str, function: str) -> str:
+    return f"{constant}\n\n\n{function}" if constant else function
 
 
 def _render_coefficients(model: SymbolicModel, coefficients: Sequence[sp.Matrix]) -> str:
     levers = _Levers(model)
     k, p = len(coefficients), len(model.parameters)
-    body = [f"    g = np.zeros(({k}, 3, {p}))", *_tensor_lines("g", coefficients, levers), "    return g"]
+    const, fill = _sparse_fill("g", _tensor_entries(coefficients, levers), "_COEFFICIENTS_NONZERO")
+    body = [f"    g = np.zeros(({k}, 3, {p}))", *fill, "    return g"]
     spec = _SPECS["coefficients"].format(K=k, P=p)
-    return _function(spec, body, _geometry_locals(model, levers.locals()), geometry=True)
+    return _with_constant(const, _function(spec, body, _geometry_locals(model, levers.locals()), geometry=True))
 
 
 def _render_reference_jacobian(model: SymbolicModel) -> str:
     levers = _Levers(model)
     p = len(model.parameters)
-    body = [f"    out = np.zeros((3, {p}))"]
-    body += [ln.replace("out[0, ", "out[", 1) for ln in _tensor_lines("out", [model.reference_jacobian], levers)]
-    body.append("    return out")
-    return _function(_SPECS["reference_jacobian"].format(P=p), body, _geometry_locals(model, levers.locals()), True)
+    entries = [(idx[1:], code) for idx, code in _tensor_entries([model.reference_jacobian], levers)]
+    const, fill = _sparse_fill("out", entries, "_REFERENCE_NONZERO")
+    body = [f"    out = np.zeros((3, {p}))", *fill, "    return out"]
+    function = _function(_SPECS["reference_jacobian"].format(P=p), body, _geometry_locals(model, levers.locals()), True)
+    return _with_constant(const, function)
 
 
 def _render_motion_jacobian(model: SymbolicModel) -> str:
     mot = trig_basis(model.motion_jacobian, model.trig_pairs)
     levers = _Levers(model)
     k, m = len(mot.monomials), len(model.motion_parameters)
+    const, fill = _sparse_fill("g", _tensor_entries(mot.coefficients, levers), "_MOTION_NONZERO")
     body = [f"    b = np.empty((n, {k}), order='F')", *_basis_columns(model.rotary_axes, mot.monomials, "b")]
-    body += [f"    g = np.zeros(({k}, 3, {m}))", *_tensor_lines("g", mot.coefficients, levers)]
+    body += [f"    g = np.zeros(({k}, 3, {m}))", *fill]
     body.append(f"    return (b @ g.reshape({k}, -1)).reshape(n, 3, {m})")
     candidates = _trig_locals(model) + _geometry_locals(model, levers.locals())
-    return _function(_SPECS["motion_jacobian"], body, candidates, geometry=True)
+    return _with_constant(const, _function(_SPECS["motion_jacobian"], body, candidates, geometry=True))
 
 
 def _render_orientation_jacobian(model: SymbolicModel) -> str:

@@ -551,16 +551,8 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
         reports = [_gather_one(p, label, m, truth, options, bar)
                    for (p, m, truth), label in zip(loaded, _labels(paths), strict=True)]
     _share_identical_sobol(reports)
-    settings = {"primary method": method, "projection": projection, "zero-position errors": str(with_zero),
-                "studies": ", ".join(study_set) or "none"}
-    if "projection" in study_set:
-        settings["projection-study presets"] = str(presets)
-    if "sobol" in study_set:
-        settings["Sobol samples"] = str(sobol_samples)
-    if tol is not None:
-        settings["tolerances"] = f"{tol.path} ({rule} rule" + (f", k = {k:g})" if rule == "guard" else ")")
     created = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
-    data = ReportData(reports, study_set, options.program, settings, created)
+    data = ReportData(reports, study_set, options.program, _settings_shown(options), created)
     if compare is not None:
         from pige_sym.compare import compare_measurements
 
@@ -568,6 +560,20 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     if history is not None:
         data.history = gather_history(history, db, tol)
     return data
+
+
+def _settings_shown(o: _Options) -> dict[str, str]:
+    """The options a report was built with, as shown in its header."""
+    settings = {"primary method": o.method, "projection": o.projection, "zero-position errors": str(o.with_zero),
+                "studies": ", ".join(o.studies) or "none"}
+    if "projection" in o.studies:
+        settings["projection-study presets"] = str(o.presets)
+    if "sobol" in o.studies:
+        settings["Sobol samples"] = str(o.sobol_samples)
+    if o.tolerances is not None:
+        rule = f"{o.rule} rule" + (f", k = {o.k:g}" if o.rule == "guard" else "")
+        settings["tolerances"] = f"{o.tolerances.path} ({rule})"
+    return settings
 
 
 @dataclass

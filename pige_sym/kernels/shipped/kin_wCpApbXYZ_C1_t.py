@@ -14,7 +14,7 @@
 #    8  EA0A     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 344aa5aa18a2c0c4
+# input hash   : 1151c6c03ef26013
 """R-test kernels for wC'A'bXYZ(C1)t (generated; do not edit — pige gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -39,7 +39,7 @@ UNITS = {'EY0A': 'um', 'EZ0A': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EB0A': 'urad',
 BASIS = ('1', 'cos(A)', 'sin(A)', 'cos(C)', 'sin(C)', 'cos(A)*cos(C)', 'cos(A)*sin(C)', 'sin(A)*cos(C)', 'sin(A)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '344aa5aa18a2c0c4'
+GENERATOR_HASH = '1151c6c03ef26013'
 
 
 def _angles(angles_deg: Any) -> np.ndarray:
@@ -124,6 +124,26 @@ def basis(angles_deg):
     return out
 
 
+#: Indices (one tuple per dimension) of the non-zero entries that ``g`` receives.
+_COEFFICIENTS_NONZERO = (
+    (
+        0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3,
+        3, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8,
+        8, 8, 8, 8, 8,
+    ),
+    (
+        0, 0, 0, 0, 1, 1, 2, 2, 0, 0, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 0, 0, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 0, 0, 0, 1,
+        2, 0, 0, 0, 0, 1, 2, 0, 1, 1, 1, 1, 2, 2, 2, 2, 0, 1, 1, 1, 2, 2, 2, 2, 0, 1, 1, 1, 1, 2, 2, 2, 2, 0, 1, 1,
+        1, 1, 2, 2, 2,
+    ),
+    (
+        2, 3, 4, 7, 0, 3, 1, 2, 2, 3, 0, 3, 5, 6, 8, 1, 2, 6, 7, 8, 2, 3, 1, 2, 6, 7, 8, 0, 3, 5, 6, 8, 3, 4, 7, 3,
+        2, 3, 5, 6, 8, 3, 2, 3, 3, 5, 6, 8, 2, 6, 7, 8, 3, 3, 4, 7, 2, 6, 7, 8, 2, 2, 6, 7, 8, 3, 5, 6, 8, 2, 2, 6,
+        7, 8, 3, 4, 7,
+    ),
+)
+
+
 def coefficients(ball_mm, pivots_mm=None, tool_mm=None):
     """Coefficient tensor G, shape=(K=9, 3, P=10) [µm per µm or µrad]: jacobian = basis @ G."""
     _tool(tool_mm)
@@ -145,83 +165,19 @@ def coefficients(ball_mm, pivots_mm=None, tool_mm=None):
     d_pA_x_pC_x = 0.001 * (pA_x - pC_x)
     d_pA_y_pC_y = 0.001 * (pA_y - pC_y)
     g = np.zeros((9, 3, 10))
-    g[0, 0, 2] = d_ball_z_pA_z
-    g[0, 0, 3] = d_pA_y_pC_y
-    g[0, 0, 4] = -1
-    g[0, 0, 7] = -d_ball_z_pC_z
-    g[0, 1, 0] = -1
-    g[0, 1, 3] = d_pA_x_pC_x
-    g[0, 2, 1] = -1
-    g[0, 2, 2] = -d_pA_x_pC_x
-    g[1, 0, 2] = -d_ball_z_pA_z
-    g[1, 0, 3] = -d_pA_y_pC_y
-    g[1, 1, 0] = 1
-    g[1, 1, 3] = -d_pA_x_pC_x
-    g[1, 1, 5] = -1
-    g[1, 1, 6] = d_ball_z_pC_z
-    g[1, 1, 8] = -d_ball_z_pA_z
-    g[1, 2, 1] = 1
-    g[1, 2, 2] = d_pA_x_pC_x
-    g[1, 2, 6] = d_ball_y_pC_y
-    g[1, 2, 7] = -d_ball_x_pC_x
-    g[1, 2, 8] = -d_ball_y_pC_y
-    g[2, 0, 2] = -d_pA_y_pC_y
-    g[2, 0, 3] = d_ball_z_pA_z
-    g[2, 1, 1] = 1
-    g[2, 1, 2] = d_pA_x_pC_x
-    g[2, 1, 6] = d_ball_y_pC_y
-    g[2, 1, 7] = -d_ball_x_pC_x
-    g[2, 1, 8] = -d_ball_y_pC_y
-    g[2, 2, 0] = -1
-    g[2, 2, 3] = d_pA_x_pC_x
-    g[2, 2, 5] = 1
-    g[2, 2, 6] = -d_ball_z_pC_z
-    g[2, 2, 8] = d_ball_z_pA_z
-    g[3, 0, 3] = -d_ball_y_pC_y
-    g[3, 0, 4] = 1
-    g[3, 0, 7] = d_ball_z_pC_z
-    g[3, 1, 3] = -d_ball_x_pC_x
-    g[3, 2, 2] = d_ball_x_pC_x
-    g[4, 0, 3] = d_ball_x_pC_x
-    g[4, 0, 5] = 1
-    g[4, 0, 6] = -d_ball_z_pC_z
-    g[4, 0, 8] = d_ball_z_pA_z
-    g[4, 1, 3] = -d_ball_y_pC_y
-    g[4, 2, 2] = d_ball_y_pC_y
-    g[5, 0, 3] = d_ball_y_pC_y
-    g[5, 1, 3] = d_ball_x_pC_x
-    g[5, 1, 5] = 1
-    g[5, 1, 6] = -d_ball_z_pC_z
-    g[5, 1, 8] = d_ball_z_pA_z
-    g[5, 2, 2] = -d_ball_x_pC_x
-    g[5, 2, 6] = -d_ball_y_pC_y
-    g[5, 2, 7] = d_ball_x_pC_x
-    g[5, 2, 8] = d_ball_y_pC_y
-    g[6, 0, 3] = -d_ball_x_pC_x
-    g[6, 1, 3] = d_ball_y_pC_y
-    g[6, 1, 4] = -1
-    g[6, 1, 7] = -d_ball_z_pC_z
-    g[6, 2, 2] = -d_ball_y_pC_y
-    g[6, 2, 6] = d_ball_x_pC_x
-    g[6, 2, 7] = d_ball_y_pC_y
-    g[6, 2, 8] = -d_ball_x_pC_x
-    g[7, 0, 2] = d_ball_y_pC_y
-    g[7, 1, 2] = -d_ball_x_pC_x
-    g[7, 1, 6] = -d_ball_y_pC_y
-    g[7, 1, 7] = d_ball_x_pC_x
-    g[7, 1, 8] = d_ball_y_pC_y
-    g[7, 2, 3] = -d_ball_x_pC_x
-    g[7, 2, 5] = -1
-    g[7, 2, 6] = d_ball_z_pC_z
-    g[7, 2, 8] = -d_ball_z_pA_z
-    g[8, 0, 2] = -d_ball_x_pC_x
-    g[8, 1, 2] = -d_ball_y_pC_y
-    g[8, 1, 6] = d_ball_x_pC_x
-    g[8, 1, 7] = d_ball_y_pC_y
-    g[8, 1, 8] = -d_ball_x_pC_x
-    g[8, 2, 3] = -d_ball_y_pC_y
-    g[8, 2, 4] = 1
-    g[8, 2, 7] = d_ball_z_pC_z
+    g[_COEFFICIENTS_NONZERO] = (
+        d_ball_z_pA_z, d_pA_y_pC_y, -1, -d_ball_z_pC_z, -1, d_pA_x_pC_x, -1, -d_pA_x_pC_x, -d_ball_z_pA_z,
+        -d_pA_y_pC_y, 1, -d_pA_x_pC_x, -1, d_ball_z_pC_z, -d_ball_z_pA_z, 1, d_pA_x_pC_x, d_ball_y_pC_y,
+        -d_ball_x_pC_x, -d_ball_y_pC_y, -d_pA_y_pC_y, d_ball_z_pA_z, 1, d_pA_x_pC_x, d_ball_y_pC_y, -d_ball_x_pC_x,
+        -d_ball_y_pC_y, -1, d_pA_x_pC_x, 1, -d_ball_z_pC_z, d_ball_z_pA_z, -d_ball_y_pC_y, 1, d_ball_z_pC_z,
+        -d_ball_x_pC_x, d_ball_x_pC_x, d_ball_x_pC_x, 1, -d_ball_z_pC_z, d_ball_z_pA_z, -d_ball_y_pC_y,
+        d_ball_y_pC_y, d_ball_y_pC_y, d_ball_x_pC_x, 1, -d_ball_z_pC_z, d_ball_z_pA_z, -d_ball_x_pC_x,
+        -d_ball_y_pC_y, d_ball_x_pC_x, d_ball_y_pC_y, -d_ball_x_pC_x, d_ball_y_pC_y, -1, -d_ball_z_pC_z,
+        -d_ball_y_pC_y, d_ball_x_pC_x, d_ball_y_pC_y, -d_ball_x_pC_x, d_ball_y_pC_y, -d_ball_x_pC_x,
+        -d_ball_y_pC_y, d_ball_x_pC_x, d_ball_y_pC_y, -d_ball_x_pC_x, -1, d_ball_z_pC_z, -d_ball_z_pA_z,
+        -d_ball_x_pC_x, -d_ball_y_pC_y, d_ball_x_pC_x, d_ball_y_pC_y, -d_ball_x_pC_x, -d_ball_y_pC_y, 1,
+        d_ball_z_pC_z,
+    )
     return g
 
 
@@ -264,6 +220,17 @@ def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
     return basis(angles_deg) @ (g @ p)
 
 
+#: Indices (one tuple per dimension) of the non-zero entries that ``out`` receives.
+_REFERENCE_NONZERO = (
+    (
+        0, 1, 1, 2,
+    ),
+    (
+        9, 8, 9, 8,
+    ),
+)
+
+
 def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     """Un-zeroed offset Jacobian at the reference pose J_raw(0), shape=(3, P=10) [µm per µm or µrad].
 
@@ -286,11 +253,27 @@ def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     d_ball_y_pC_y = 0.001 * (ball_y - pC_y)
     d_ball_z_pA_z = 0.001 * (ball_z - pA_z)
     out = np.zeros((3, 10))
-    out[0, 9] = -d_ball_y_pC_y
-    out[1, 8] = -d_ball_z_pA_z
-    out[1, 9] = d_ball_x_pC_x
-    out[2, 8] = d_ball_y_pA_y
+    out[_REFERENCE_NONZERO] = (
+        -d_ball_y_pC_y, -d_ball_z_pA_z, d_ball_x_pC_x, d_ball_y_pA_y,
+    )
     return out
+
+
+#: Indices (one tuple per dimension) of the non-zero entries that ``g`` receives.
+_MOTION_NONZERO = (
+    (
+        0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5, 5, 5, 6, 6, 6, 6,
+        6, 7, 7, 7, 7, 7, 8, 8, 8, 8, 8,
+    ),
+    (
+        0, 0, 0, 1, 1, 2, 2, 0, 0, 1, 1, 1, 2, 2, 0, 0, 1, 1, 2, 2, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 2, 2, 0, 1, 2, 2,
+        2, 0, 1, 1, 1, 2, 0, 1, 1, 1, 2,
+    ),
+    (
+        0, 6, 10, 1, 5, 2, 4, 4, 5, 3, 7, 9, 3, 8, 4, 5, 3, 8, 3, 7, 9, 11, 5, 4, 11, 5, 4, 5, 11, 3, 9, 10, 5, 11,
+        3, 9, 10, 4, 3, 9, 10, 11, 4, 3, 9, 10, 11,
+    ),
+)
 
 
 def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
@@ -336,53 +319,15 @@ def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
     np.multiply(s_A, c_C, out=b[:, 7])
     np.multiply(s_A, s_C, out=b[:, 8])
     g = np.zeros((9, 3, 12))
-    g[0, 0, 0] = -1
-    g[0, 0, 6] = -1
-    g[0, 0, 10] = -d_ball_z_pC_z
-    g[0, 1, 1] = -1
-    g[0, 1, 5] = d_pA_x_pC_x
-    g[0, 2, 2] = -1
-    g[0, 2, 4] = -d_pA_x_pC_x
-    g[1, 0, 4] = -d_ball_z_pA_z
-    g[1, 0, 5] = -d_pA_y_pC_y
-    g[1, 1, 3] = d_ball_z_pA_z
-    g[1, 1, 7] = -1
-    g[1, 1, 9] = d_ball_z_pC_z
-    g[1, 2, 3] = d_pA_y_pC_y
-    g[1, 2, 8] = -1
-    g[2, 0, 4] = -d_pA_y_pC_y
-    g[2, 0, 5] = d_ball_z_pA_z
-    g[2, 1, 3] = d_pA_y_pC_y
-    g[2, 1, 8] = -1
-    g[2, 2, 3] = -d_ball_z_pA_z
-    g[2, 2, 7] = 1
-    g[2, 2, 9] = -d_ball_z_pC_z
-    g[3, 0, 11] = d_ball_y_pC_y
-    g[3, 1, 5] = -d_ball_x_pC_x
-    g[3, 2, 4] = d_ball_x_pC_x
-    g[4, 0, 11] = -d_ball_x_pC_x
-    g[4, 1, 5] = -d_ball_y_pC_y
-    g[4, 2, 4] = d_ball_y_pC_y
-    g[5, 0, 5] = d_ball_y_pC_y
-    g[5, 1, 11] = -d_ball_x_pC_x
-    g[5, 2, 3] = -d_ball_y_pC_y
-    g[5, 2, 9] = -d_ball_y_pC_y
-    g[5, 2, 10] = d_ball_x_pC_x
-    g[6, 0, 5] = -d_ball_x_pC_x
-    g[6, 1, 11] = -d_ball_y_pC_y
-    g[6, 2, 3] = d_ball_x_pC_x
-    g[6, 2, 9] = d_ball_x_pC_x
-    g[6, 2, 10] = d_ball_y_pC_y
-    g[7, 0, 4] = d_ball_y_pC_y
-    g[7, 1, 3] = -d_ball_y_pC_y
-    g[7, 1, 9] = -d_ball_y_pC_y
-    g[7, 1, 10] = d_ball_x_pC_x
-    g[7, 2, 11] = d_ball_x_pC_x
-    g[8, 0, 4] = -d_ball_x_pC_x
-    g[8, 1, 3] = d_ball_x_pC_x
-    g[8, 1, 9] = d_ball_x_pC_x
-    g[8, 1, 10] = d_ball_y_pC_y
-    g[8, 2, 11] = d_ball_y_pC_y
+    g[_MOTION_NONZERO] = (
+        -1, -1, -d_ball_z_pC_z, -1, d_pA_x_pC_x, -1, -d_pA_x_pC_x, -d_ball_z_pA_z, -d_pA_y_pC_y, d_ball_z_pA_z, -1,
+        d_ball_z_pC_z, d_pA_y_pC_y, -1, -d_pA_y_pC_y, d_ball_z_pA_z, d_pA_y_pC_y, -1, -d_ball_z_pA_z, 1,
+        -d_ball_z_pC_z, d_ball_y_pC_y, -d_ball_x_pC_x, d_ball_x_pC_x, -d_ball_x_pC_x, -d_ball_y_pC_y,
+        d_ball_y_pC_y, d_ball_y_pC_y, -d_ball_x_pC_x, -d_ball_y_pC_y, -d_ball_y_pC_y, d_ball_x_pC_x,
+        -d_ball_x_pC_x, -d_ball_y_pC_y, d_ball_x_pC_x, d_ball_x_pC_x, d_ball_y_pC_y, d_ball_y_pC_y, -d_ball_y_pC_y,
+        -d_ball_y_pC_y, d_ball_x_pC_x, d_ball_x_pC_x, -d_ball_x_pC_x, d_ball_x_pC_x, d_ball_x_pC_x, d_ball_y_pC_y,
+        d_ball_y_pC_y,
+    )
     return (b @ g.reshape(9, -1)).reshape(n, 3, 12)
 
 

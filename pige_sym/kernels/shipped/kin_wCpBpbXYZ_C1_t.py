@@ -14,7 +14,7 @@
 #    8  EB0B     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 3b42da0a601406ea
+# input hash   : c9e4afa9adc8883b
 """R-test kernels for wC'B'bXYZ(C1)t (generated; do not edit — pige gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -39,7 +39,7 @@ UNITS = {'EX0B': 'um', 'EZ0B': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EA0B': 'urad',
 BASIS = ('1', 'cos(B)', 'sin(B)', 'cos(C)', 'sin(C)', 'cos(B)*cos(C)', 'cos(B)*sin(C)', 'sin(B)*cos(C)', 'sin(B)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '3b42da0a601406ea'
+GENERATOR_HASH = 'c9e4afa9adc8883b'
 
 
 def _angles(angles_deg: Any) -> np.ndarray:
@@ -124,6 +124,26 @@ def basis(angles_deg):
     return out
 
 
+#: Indices (one tuple per dimension) of the non-zero entries that ``g`` receives.
+_COEFFICIENTS_NONZERO = (
+    (
+        0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3,
+        3, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8,
+        8, 8, 8, 8, 8,
+    ),
+    (
+        0, 0, 1, 1, 1, 1, 2, 2, 0, 0, 0, 0, 0, 1, 1, 2, 2, 2, 2, 2, 0, 0, 0, 0, 0, 1, 1, 2, 2, 2, 2, 2, 0, 1, 1, 1,
+        2, 0, 1, 1, 1, 1, 2, 0, 0, 0, 0, 1, 2, 2, 2, 2, 0, 0, 0, 1, 2, 2, 2, 2, 0, 0, 0, 0, 1, 2, 2, 2, 2, 0, 0, 0,
+        0, 1, 2, 2, 2,
+    ),
+    (
+        0, 3, 2, 3, 5, 6, 1, 2, 0, 3, 4, 7, 8, 2, 3, 1, 2, 6, 7, 8, 1, 2, 6, 7, 8, 2, 3, 0, 3, 4, 7, 8, 3, 3, 5, 6,
+        2, 3, 3, 4, 7, 8, 2, 3, 4, 7, 8, 3, 2, 6, 7, 8, 3, 5, 6, 3, 2, 6, 7, 8, 2, 6, 7, 8, 2, 3, 4, 7, 8, 2, 6, 7,
+        8, 2, 3, 5, 6,
+    ),
+)
+
+
 def coefficients(ball_mm, pivots_mm=None, tool_mm=None):
     """Coefficient tensor G, shape=(K=9, 3, P=10) [µm per µm or µrad]: jacobian = basis @ G."""
     _tool(tool_mm)
@@ -145,83 +165,18 @@ def coefficients(ball_mm, pivots_mm=None, tool_mm=None):
     d_pB_x_pC_x = 0.001 * (pB_x - pC_x)
     d_pB_y_pC_y = 0.001 * (pB_y - pC_y)
     g = np.zeros((9, 3, 10))
-    g[0, 0, 0] = -1
-    g[0, 0, 3] = -d_pB_y_pC_y
-    g[0, 1, 2] = -d_ball_z_pB_z
-    g[0, 1, 3] = -d_pB_x_pC_x
-    g[0, 1, 5] = -1
-    g[0, 1, 6] = d_ball_z_pC_z
-    g[0, 2, 1] = -1
-    g[0, 2, 2] = d_pB_y_pC_y
-    g[1, 0, 0] = 1
-    g[1, 0, 3] = d_pB_y_pC_y
-    g[1, 0, 4] = -1
-    g[1, 0, 7] = -d_ball_z_pC_z
-    g[1, 0, 8] = d_ball_z_pB_z
-    g[1, 1, 2] = d_ball_z_pB_z
-    g[1, 1, 3] = d_pB_x_pC_x
-    g[1, 2, 1] = 1
-    g[1, 2, 2] = -d_pB_y_pC_y
-    g[1, 2, 6] = d_ball_y_pC_y
-    g[1, 2, 7] = -d_ball_x_pC_x
-    g[1, 2, 8] = d_ball_x_pC_x
-    g[2, 0, 1] = -1
-    g[2, 0, 2] = d_pB_y_pC_y
-    g[2, 0, 6] = -d_ball_y_pC_y
-    g[2, 0, 7] = d_ball_x_pC_x
-    g[2, 0, 8] = -d_ball_x_pC_x
-    g[2, 1, 2] = -d_pB_x_pC_x
-    g[2, 1, 3] = d_ball_z_pB_z
-    g[2, 2, 0] = 1
-    g[2, 2, 3] = d_pB_y_pC_y
-    g[2, 2, 4] = -1
-    g[2, 2, 7] = -d_ball_z_pC_z
-    g[2, 2, 8] = d_ball_z_pB_z
-    g[3, 0, 3] = d_ball_y_pC_y
-    g[3, 1, 3] = d_ball_x_pC_x
-    g[3, 1, 5] = 1
-    g[3, 1, 6] = -d_ball_z_pC_z
-    g[3, 2, 2] = -d_ball_y_pC_y
-    g[4, 0, 3] = -d_ball_x_pC_x
-    g[4, 1, 3] = d_ball_y_pC_y
-    g[4, 1, 4] = -1
-    g[4, 1, 7] = -d_ball_z_pC_z
-    g[4, 1, 8] = d_ball_z_pB_z
-    g[4, 2, 2] = d_ball_x_pC_x
-    g[5, 0, 3] = -d_ball_y_pC_y
-    g[5, 0, 4] = 1
-    g[5, 0, 7] = d_ball_z_pC_z
-    g[5, 0, 8] = -d_ball_z_pB_z
-    g[5, 1, 3] = -d_ball_x_pC_x
-    g[5, 2, 2] = d_ball_y_pC_y
-    g[5, 2, 6] = -d_ball_y_pC_y
-    g[5, 2, 7] = d_ball_x_pC_x
-    g[5, 2, 8] = -d_ball_x_pC_x
-    g[6, 0, 3] = d_ball_x_pC_x
-    g[6, 0, 5] = 1
-    g[6, 0, 6] = -d_ball_z_pC_z
-    g[6, 1, 3] = -d_ball_y_pC_y
-    g[6, 2, 2] = -d_ball_x_pC_x
-    g[6, 2, 6] = d_ball_x_pC_x
-    g[6, 2, 7] = d_ball_y_pC_y
-    g[6, 2, 8] = -d_ball_y_pC_y
-    g[7, 0, 2] = -d_ball_y_pC_y
-    g[7, 0, 6] = d_ball_y_pC_y
-    g[7, 0, 7] = -d_ball_x_pC_x
-    g[7, 0, 8] = d_ball_x_pC_x
-    g[7, 1, 2] = d_ball_x_pC_x
-    g[7, 2, 3] = -d_ball_y_pC_y
-    g[7, 2, 4] = 1
-    g[7, 2, 7] = d_ball_z_pC_z
-    g[7, 2, 8] = -d_ball_z_pB_z
-    g[8, 0, 2] = d_ball_x_pC_x
-    g[8, 0, 6] = -d_ball_x_pC_x
-    g[8, 0, 7] = -d_ball_y_pC_y
-    g[8, 0, 8] = d_ball_y_pC_y
-    g[8, 1, 2] = d_ball_y_pC_y
-    g[8, 2, 3] = d_ball_x_pC_x
-    g[8, 2, 5] = 1
-    g[8, 2, 6] = -d_ball_z_pC_z
+    g[_COEFFICIENTS_NONZERO] = (
+        -1, -d_pB_y_pC_y, -d_ball_z_pB_z, -d_pB_x_pC_x, -1, d_ball_z_pC_z, -1, d_pB_y_pC_y, 1, d_pB_y_pC_y, -1,
+        -d_ball_z_pC_z, d_ball_z_pB_z, d_ball_z_pB_z, d_pB_x_pC_x, 1, -d_pB_y_pC_y, d_ball_y_pC_y, -d_ball_x_pC_x,
+        d_ball_x_pC_x, -1, d_pB_y_pC_y, -d_ball_y_pC_y, d_ball_x_pC_x, -d_ball_x_pC_x, -d_pB_x_pC_x, d_ball_z_pB_z,
+        1, d_pB_y_pC_y, -1, -d_ball_z_pC_z, d_ball_z_pB_z, d_ball_y_pC_y, d_ball_x_pC_x, 1, -d_ball_z_pC_z,
+        -d_ball_y_pC_y, -d_ball_x_pC_x, d_ball_y_pC_y, -1, -d_ball_z_pC_z, d_ball_z_pB_z, d_ball_x_pC_x,
+        -d_ball_y_pC_y, 1, d_ball_z_pC_z, -d_ball_z_pB_z, -d_ball_x_pC_x, d_ball_y_pC_y, -d_ball_y_pC_y,
+        d_ball_x_pC_x, -d_ball_x_pC_x, d_ball_x_pC_x, 1, -d_ball_z_pC_z, -d_ball_y_pC_y, -d_ball_x_pC_x,
+        d_ball_x_pC_x, d_ball_y_pC_y, -d_ball_y_pC_y, -d_ball_y_pC_y, d_ball_y_pC_y, -d_ball_x_pC_x, d_ball_x_pC_x,
+        d_ball_x_pC_x, -d_ball_y_pC_y, 1, d_ball_z_pC_z, -d_ball_z_pB_z, d_ball_x_pC_x, -d_ball_x_pC_x,
+        -d_ball_y_pC_y, d_ball_y_pC_y, d_ball_y_pC_y, d_ball_x_pC_x, 1, -d_ball_z_pC_z,
+    )
     return g
 
 
@@ -264,6 +219,17 @@ def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
     return basis(angles_deg) @ (g @ p)
 
 
+#: Indices (one tuple per dimension) of the non-zero entries that ``out`` receives.
+_REFERENCE_NONZERO = (
+    (
+        0, 0, 1, 2,
+    ),
+    (
+        8, 9, 9, 8,
+    ),
+)
+
+
 def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     """Un-zeroed offset Jacobian at the reference pose J_raw(0), shape=(3, P=10) [µm per µm or µrad].
 
@@ -286,11 +252,27 @@ def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     d_ball_y_pC_y = 0.001 * (ball_y - pC_y)
     d_ball_z_pB_z = 0.001 * (ball_z - pB_z)
     out = np.zeros((3, 10))
-    out[0, 8] = d_ball_z_pB_z
-    out[0, 9] = -d_ball_y_pC_y
-    out[1, 9] = d_ball_x_pC_x
-    out[2, 8] = -d_ball_x_pB_x
+    out[_REFERENCE_NONZERO] = (
+        d_ball_z_pB_z, -d_ball_y_pC_y, d_ball_x_pC_x, -d_ball_x_pB_x,
+    )
     return out
+
+
+#: Indices (one tuple per dimension) of the non-zero entries that ``g`` receives.
+_MOTION_NONZERO = (
+    (
+        0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5, 5, 5, 6, 6, 6, 6,
+        6, 7, 7, 7, 7, 7, 8, 8, 8, 8, 8,
+    ),
+    (
+        0, 0, 1, 1, 1, 2, 2, 0, 0, 0, 1, 1, 2, 2, 0, 0, 1, 1, 2, 2, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 2, 2, 0, 1, 2, 2,
+        2, 0, 0, 0, 1, 2, 0, 0, 0, 1, 2,
+    ),
+    (
+        0, 5, 1, 7, 9, 2, 3, 4, 6, 10, 3, 5, 4, 8, 4, 8, 3, 5, 4, 6, 10, 5, 11, 3, 5, 11, 3, 11, 5, 4, 9, 10, 11,
+        5, 4, 9, 10, 4, 9, 10, 3, 11, 4, 9, 10, 3, 11,
+    ),
+)
 
 
 def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
@@ -336,53 +318,15 @@ def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
     np.multiply(s_B, c_C, out=b[:, 7])
     np.multiply(s_B, s_C, out=b[:, 8])
     g = np.zeros((9, 3, 12))
-    g[0, 0, 0] = -1
-    g[0, 0, 5] = -d_pB_y_pC_y
-    g[0, 1, 1] = -1
-    g[0, 1, 7] = -1
-    g[0, 1, 9] = d_ball_z_pC_z
-    g[0, 2, 2] = -1
-    g[0, 2, 3] = d_pB_y_pC_y
-    g[1, 0, 4] = -d_ball_z_pB_z
-    g[1, 0, 6] = -1
-    g[1, 0, 10] = -d_ball_z_pC_z
-    g[1, 1, 3] = d_ball_z_pB_z
-    g[1, 1, 5] = d_pB_x_pC_x
-    g[1, 2, 4] = -d_pB_x_pC_x
-    g[1, 2, 8] = -1
-    g[2, 0, 4] = d_pB_x_pC_x
-    g[2, 0, 8] = 1
-    g[2, 1, 3] = -d_pB_x_pC_x
-    g[2, 1, 5] = d_ball_z_pB_z
-    g[2, 2, 4] = -d_ball_z_pB_z
-    g[2, 2, 6] = -1
-    g[2, 2, 10] = -d_ball_z_pC_z
-    g[3, 0, 5] = d_ball_y_pC_y
-    g[3, 1, 11] = -d_ball_x_pC_x
-    g[3, 2, 3] = -d_ball_y_pC_y
-    g[4, 0, 5] = -d_ball_x_pC_x
-    g[4, 1, 11] = -d_ball_y_pC_y
-    g[4, 2, 3] = d_ball_x_pC_x
-    g[5, 0, 11] = d_ball_y_pC_y
-    g[5, 1, 5] = -d_ball_x_pC_x
-    g[5, 2, 4] = d_ball_x_pC_x
-    g[5, 2, 9] = -d_ball_y_pC_y
-    g[5, 2, 10] = d_ball_x_pC_x
-    g[6, 0, 11] = -d_ball_x_pC_x
-    g[6, 1, 5] = -d_ball_y_pC_y
-    g[6, 2, 4] = d_ball_y_pC_y
-    g[6, 2, 9] = d_ball_x_pC_x
-    g[6, 2, 10] = d_ball_y_pC_y
-    g[7, 0, 4] = -d_ball_x_pC_x
-    g[7, 0, 9] = d_ball_y_pC_y
-    g[7, 0, 10] = -d_ball_x_pC_x
-    g[7, 1, 3] = d_ball_x_pC_x
-    g[7, 2, 11] = d_ball_y_pC_y
-    g[8, 0, 4] = -d_ball_y_pC_y
-    g[8, 0, 9] = -d_ball_x_pC_x
-    g[8, 0, 10] = -d_ball_y_pC_y
-    g[8, 1, 3] = d_ball_y_pC_y
-    g[8, 2, 11] = -d_ball_x_pC_x
+    g[_MOTION_NONZERO] = (
+        -1, -d_pB_y_pC_y, -1, -1, d_ball_z_pC_z, -1, d_pB_y_pC_y, -d_ball_z_pB_z, -1, -d_ball_z_pC_z,
+        d_ball_z_pB_z, d_pB_x_pC_x, -d_pB_x_pC_x, -1, d_pB_x_pC_x, 1, -d_pB_x_pC_x, d_ball_z_pB_z, -d_ball_z_pB_z,
+        -1, -d_ball_z_pC_z, d_ball_y_pC_y, -d_ball_x_pC_x, -d_ball_y_pC_y, -d_ball_x_pC_x, -d_ball_y_pC_y,
+        d_ball_x_pC_x, d_ball_y_pC_y, -d_ball_x_pC_x, d_ball_x_pC_x, -d_ball_y_pC_y, d_ball_x_pC_x, -d_ball_x_pC_x,
+        -d_ball_y_pC_y, d_ball_y_pC_y, d_ball_x_pC_x, d_ball_y_pC_y, -d_ball_x_pC_x, d_ball_y_pC_y, -d_ball_x_pC_x,
+        d_ball_x_pC_x, d_ball_y_pC_y, -d_ball_y_pC_y, -d_ball_x_pC_x, -d_ball_y_pC_y, d_ball_y_pC_y,
+        -d_ball_x_pC_x,
+    )
     return (b @ g.reshape(9, -1)).reshape(n, 3, 12)
 
 

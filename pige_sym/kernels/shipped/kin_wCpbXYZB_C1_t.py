@@ -14,7 +14,7 @@
 #    8  EB0B     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 00702a1f9a15eae4
+# input hash   : 1259bf208a1a8b23
 """R-test kernels for wC'bXYZB(C1)t (generated; do not edit — pige gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -39,7 +39,7 @@ UNITS = {'EX0B': 'um', 'EZ0B': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EA0B': 'urad',
 BASIS = ('1', 'cos(B)', 'sin(B)', 'cos(C)', 'sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '00702a1f9a15eae4'
+GENERATOR_HASH = '1259bf208a1a8b23'
 
 
 def _angles(angles_deg: Any) -> np.ndarray:
@@ -120,6 +120,23 @@ def basis(angles_deg):
     return out
 
 
+#: Indices (one tuple per dimension) of the non-zero entries that ``g`` receives.
+_COEFFICIENTS_NONZERO = (
+    (
+        0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3,
+        4, 4, 4, 4, 4, 4, 4,
+    ),
+    (
+        0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 2, 0, 0, 0, 1, 1, 2, 2, 2, 0, 0, 0, 1, 1, 2, 2, 2, 0, 0, 0, 1, 1, 2, 2,
+        0, 0, 1, 1, 1, 2, 2,
+    ),
+    (
+        0, 3, 4, 7, 2, 3, 5, 6, 1, 2, 6, 7, 8, 0, 3, 8, 2, 3, 1, 2, 8, 1, 2, 8, 2, 3, 0, 3, 8, 4, 7, 8, 5, 6, 6, 7,
+        5, 6, 4, 7, 8, 6, 7,
+    ),
+)
+
+
 def coefficients(ball_mm, pivots_mm=None, tool_mm=None):
     """Coefficient tensor G, shape=(K=5, 3, P=10) [µm per µm or µrad]: jacobian = basis @ G."""
     ball = _vec3(ball_mm, 'ball_mm')
@@ -138,49 +155,13 @@ def coefficients(ball_mm, pivots_mm=None, tool_mm=None):
     d_ball_y_pC_y = 0.001 * (ball_y - pC_y)
     d_ball_z_pC_z = 0.001 * (ball_z - pC_z)
     g = np.zeros((5, 3, 10))
-    g[0, 0, 0] = 1
-    g[0, 0, 3] = -0.001*tool_y
-    g[0, 0, 4] = -1
-    g[0, 0, 7] = -d_ball_z_pC_z
-    g[0, 1, 2] = 0.001*tool_z
-    g[0, 1, 3] = -0.001*tool_x
-    g[0, 1, 5] = -1
-    g[0, 1, 6] = d_ball_z_pC_z
-    g[0, 2, 1] = 1
-    g[0, 2, 2] = 0.001*tool_y
-    g[0, 2, 6] = d_ball_y_pC_y
-    g[0, 2, 7] = -d_ball_x_pC_x
-    g[0, 2, 8] = 0.001*tool_x
-    g[1, 0, 0] = -1
-    g[1, 0, 3] = 0.001*tool_y
-    g[1, 0, 8] = 0.001*tool_z
-    g[1, 1, 2] = -0.001*tool_z
-    g[1, 1, 3] = 0.001*tool_x
-    g[1, 2, 1] = -1
-    g[1, 2, 2] = -0.001*tool_y
-    g[1, 2, 8] = -0.001*tool_x
-    g[2, 0, 1] = -1
-    g[2, 0, 2] = -0.001*tool_y
-    g[2, 0, 8] = -0.001*tool_x
-    g[2, 1, 2] = 0.001*tool_x
-    g[2, 1, 3] = 0.001*tool_z
-    g[2, 2, 0] = 1
-    g[2, 2, 3] = -0.001*tool_y
-    g[2, 2, 8] = -0.001*tool_z
-    g[3, 0, 4] = 1
-    g[3, 0, 7] = d_ball_z_pC_z
-    g[3, 0, 8] = -0.001*tool_z
-    g[3, 1, 5] = 1
-    g[3, 1, 6] = -d_ball_z_pC_z
-    g[3, 2, 6] = -d_ball_y_pC_y
-    g[3, 2, 7] = d_ball_x_pC_x
-    g[4, 0, 5] = 1
-    g[4, 0, 6] = -d_ball_z_pC_z
-    g[4, 1, 4] = -1
-    g[4, 1, 7] = -d_ball_z_pC_z
-    g[4, 1, 8] = 0.001*tool_z
-    g[4, 2, 6] = d_ball_x_pC_x
-    g[4, 2, 7] = d_ball_y_pC_y
+    g[_COEFFICIENTS_NONZERO] = (
+        1, -0.001*tool_y, -1, -d_ball_z_pC_z, 0.001*tool_z, -0.001*tool_x, -1, d_ball_z_pC_z, 1, 0.001*tool_y,
+        d_ball_y_pC_y, -d_ball_x_pC_x, 0.001*tool_x, -1, 0.001*tool_y, 0.001*tool_z, -0.001*tool_z, 0.001*tool_x,
+        -1, -0.001*tool_y, -0.001*tool_x, -1, -0.001*tool_y, -0.001*tool_x, 0.001*tool_x, 0.001*tool_z, 1,
+        -0.001*tool_y, -0.001*tool_z, 1, d_ball_z_pC_z, -0.001*tool_z, 1, -d_ball_z_pC_z, -d_ball_y_pC_y,
+        d_ball_x_pC_x, 1, -d_ball_z_pC_z, -1, -d_ball_z_pC_z, 0.001*tool_z, d_ball_x_pC_x, d_ball_y_pC_y,
+    )
     return g
 
 
@@ -223,6 +204,17 @@ def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
     return basis(angles_deg) @ (g @ p)
 
 
+#: Indices (one tuple per dimension) of the non-zero entries that ``out`` receives.
+_REFERENCE_NONZERO = (
+    (
+        0, 0, 1, 2,
+    ),
+    (
+        8, 9, 9, 8,
+    ),
+)
+
+
 def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     """Un-zeroed offset Jacobian at the reference pose J_raw(0), shape=(3, P=10) [µm per µm or µrad].
 
@@ -242,11 +234,24 @@ def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     d_ball_x_pC_x = 0.001 * (ball_x - pC_x)
     d_ball_y_pC_y = 0.001 * (ball_y - pC_y)
     out = np.zeros((3, 10))
-    out[0, 8] = 0.001*tool_z
-    out[0, 9] = -d_ball_y_pC_y
-    out[1, 9] = d_ball_x_pC_x
-    out[2, 8] = -0.001*tool_x
+    out[_REFERENCE_NONZERO] = (
+        0.001*tool_z, -d_ball_y_pC_y, d_ball_x_pC_x, -0.001*tool_x,
+    )
     return out
+
+
+#: Indices (one tuple per dimension) of the non-zero entries that ``g`` receives.
+_MOTION_NONZERO = (
+    (
+        0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4,
+    ),
+    (
+        0, 0, 0, 0, 1, 1, 1, 2, 2, 2, 0, 1, 1, 2, 0, 1, 1, 2, 0, 1, 2, 2, 0, 1, 2, 2,
+    ),
+    (
+        0, 5, 6, 10, 1, 7, 9, 2, 3, 8, 4, 3, 5, 4, 4, 3, 5, 4, 11, 11, 9, 10, 11, 11, 9, 10,
+    ),
+)
 
 
 def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
@@ -285,32 +290,12 @@ def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
     b[:, 3] = c_C
     b[:, 4] = s_C
     g = np.zeros((5, 3, 12))
-    g[0, 0, 0] = 1
-    g[0, 0, 5] = -0.001*tool_y
-    g[0, 0, 6] = -1
-    g[0, 0, 10] = -d_ball_z_pC_z
-    g[0, 1, 1] = 1
-    g[0, 1, 7] = -1
-    g[0, 1, 9] = d_ball_z_pC_z
-    g[0, 2, 2] = 1
-    g[0, 2, 3] = 0.001*tool_y
-    g[0, 2, 8] = -1
-    g[1, 0, 4] = 0.001*tool_z
-    g[1, 1, 3] = -0.001*tool_z
-    g[1, 1, 5] = 0.001*tool_x
-    g[1, 2, 4] = -0.001*tool_x
-    g[2, 0, 4] = -0.001*tool_x
-    g[2, 1, 3] = 0.001*tool_x
-    g[2, 1, 5] = 0.001*tool_z
-    g[2, 2, 4] = -0.001*tool_z
-    g[3, 0, 11] = d_ball_y_pC_y
-    g[3, 1, 11] = -d_ball_x_pC_x
-    g[3, 2, 9] = -d_ball_y_pC_y
-    g[3, 2, 10] = d_ball_x_pC_x
-    g[4, 0, 11] = -d_ball_x_pC_x
-    g[4, 1, 11] = -d_ball_y_pC_y
-    g[4, 2, 9] = d_ball_x_pC_x
-    g[4, 2, 10] = d_ball_y_pC_y
+    g[_MOTION_NONZERO] = (
+        1, -0.001*tool_y, -1, -d_ball_z_pC_z, 1, -1, d_ball_z_pC_z, 1, 0.001*tool_y, -1, 0.001*tool_z,
+        -0.001*tool_z, 0.001*tool_x, -0.001*tool_x, -0.001*tool_x, 0.001*tool_x, 0.001*tool_z, -0.001*tool_z,
+        d_ball_y_pC_y, -d_ball_x_pC_x, -d_ball_y_pC_y, d_ball_x_pC_x, -d_ball_x_pC_x, -d_ball_y_pC_y,
+        d_ball_x_pC_x, d_ball_y_pC_y,
+    )
     return (b @ g.reshape(5, -1)).reshape(n, 3, 12)
 
 

@@ -14,7 +14,7 @@
 #    8  EA0A     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : b761cb7c3cf07ec6
+# input hash   : 8b4c001d52edd2ff
 """R-test kernels for wbXYZCA(C1)t (generated; do not edit — pige gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -39,7 +39,7 @@ UNITS = {'EY0A': 'um', 'EZ0A': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EB0A': 'urad',
 BASIS = ('1', 'cos(A)', 'sin(A)', 'cos(C)', 'sin(C)', 'cos(A)*cos(C)', 'cos(A)*sin(C)', 'sin(A)*cos(C)', 'sin(A)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = 'b761cb7c3cf07ec6'
+GENERATOR_HASH = '8b4c001d52edd2ff'
 
 
 def _angles(angles_deg: Any) -> np.ndarray:
@@ -124,6 +124,26 @@ def basis(angles_deg):
     return out
 
 
+#: Indices (one tuple per dimension) of the non-zero entries that ``g`` receives.
+_COEFFICIENTS_NONZERO = (
+    (
+        0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3,
+        4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7,
+        7, 7, 7, 8, 8, 8, 8, 8, 8, 8, 8, 8,
+    ),
+    (
+        0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 2, 0, 1, 2, 2, 2, 2, 0, 1, 2, 2, 2, 2, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 2, 2,
+        0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 2, 2, 0, 0, 0, 0, 1, 1, 1, 1, 2, 0, 0, 0, 0, 1, 1, 1, 1, 2, 0, 0, 0, 0, 1, 1,
+        1, 1, 2, 0, 0, 0, 0, 1, 1, 1, 1, 2,
+    ),
+    (
+        4, 7, 9, 5, 6, 8, 9, 1, 2, 6, 7, 8, 7, 6, 1, 2, 6, 8, 7, 6, 0, 3, 6, 8, 2, 3, 4, 7, 9, 0, 3, 5, 6, 9, 6, 7,
+        0, 3, 5, 6, 9, 2, 3, 4, 7, 9, 6, 7, 2, 3, 7, 9, 0, 3, 6, 8, 6, 0, 3, 6, 8, 2, 3, 7, 9, 7, 2, 3, 7, 9, 1, 2,
+        6, 8, 6, 1, 2, 6, 8, 2, 3, 7, 9, 7,
+    ),
+)
+
+
 def coefficients(ball_mm, pivots_mm=None, tool_mm=None):
     """Coefficient tensor G, shape=(K=9, 3, P=10) [µm per µm or µrad]: jacobian = basis @ G."""
     _vec3(ball_mm, 'ball_mm')
@@ -141,90 +161,21 @@ def coefficients(ball_mm, pivots_mm=None, tool_mm=None):
     d_pA_y_pC_y = 0.001 * (pA_y - pC_y)
     d_pA_z_pC_z = 0.001 * (pA_z - pC_z)
     g = np.zeros((9, 3, 10))
-    g[0, 0, 4] = 1
-    g[0, 0, 7] = d_pA_z_pC_z
-    g[0, 0, 9] = 0.001*pA_y - 0.001*pC_y + 0.001*tool_y
-    g[0, 1, 5] = 1
-    g[0, 1, 6] = -d_pA_z_pC_z
-    g[0, 1, 8] = 0.001*tool_z
-    g[0, 1, 9] = -0.001*pA_x + 0.001*pC_x - 0.001*tool_x
-    g[0, 2, 1] = 1
-    g[0, 2, 2] = -0.001*tool_x
-    g[0, 2, 6] = -d_pA_y_pC_y
-    g[0, 2, 7] = 0.001*pA_x - 0.001*pC_x + 0.001*tool_x
-    g[0, 2, 8] = -0.001*tool_y
-    g[1, 0, 7] = 0.001*tool_z
-    g[1, 1, 6] = -0.001*tool_z
-    g[1, 2, 1] = -1
-    g[1, 2, 2] = 0.001*tool_x
-    g[1, 2, 6] = -0.001*tool_y
-    g[1, 2, 8] = 0.001*tool_y
-    g[2, 0, 7] = 0.001*tool_y
-    g[2, 1, 6] = -0.001*tool_y
-    g[2, 2, 0] = -1
-    g[2, 2, 3] = -0.001*tool_x
-    g[2, 2, 6] = 0.001*tool_z
-    g[2, 2, 8] = -0.001*tool_z
-    g[3, 0, 2] = -0.001*tool_z
-    g[3, 0, 3] = 0.001*tool_y
-    g[3, 0, 4] = -1
-    g[3, 0, 7] = -d_pA_z_pC_z
-    g[3, 0, 9] = -d_pA_y_pC_y
-    g[3, 1, 0] = 1
-    g[3, 1, 3] = 0.001*tool_x
-    g[3, 1, 5] = -1
-    g[3, 1, 6] = d_pA_z_pC_z
-    g[3, 1, 9] = 0.001*pA_x - 0.001*pC_x + 0.001*tool_x
-    g[3, 2, 6] = d_pA_y_pC_y
-    g[3, 2, 7] = -0.001*pA_x + 0.001*pC_x - 0.001*tool_x
-    g[4, 0, 0] = -1
-    g[4, 0, 3] = -0.001*tool_x
-    g[4, 0, 5] = 1
-    g[4, 0, 6] = -d_pA_z_pC_z
-    g[4, 0, 9] = -0.001*pA_x + 0.001*pC_x - 0.001*tool_x
-    g[4, 1, 2] = -0.001*tool_z
-    g[4, 1, 3] = 0.001*tool_y
-    g[4, 1, 4] = -1
-    g[4, 1, 7] = -d_pA_z_pC_z
-    g[4, 1, 9] = -d_pA_y_pC_y
-    g[4, 2, 6] = 0.001*pA_x - 0.001*pC_x + 0.001*tool_x
-    g[4, 2, 7] = d_pA_y_pC_y
-    g[5, 0, 2] = 0.001*tool_z
-    g[5, 0, 3] = -0.001*tool_y
-    g[5, 0, 7] = -0.001*tool_z
-    g[5, 0, 9] = -0.001*tool_y
-    g[5, 1, 0] = -1
-    g[5, 1, 3] = -0.001*tool_x
-    g[5, 1, 6] = 0.001*tool_z
-    g[5, 1, 8] = -0.001*tool_z
-    g[5, 2, 6] = 0.001*tool_y
-    g[6, 0, 0] = 1
-    g[6, 0, 3] = 0.001*tool_x
-    g[6, 0, 6] = -0.001*tool_z
-    g[6, 0, 8] = 0.001*tool_z
-    g[6, 1, 2] = 0.001*tool_z
-    g[6, 1, 3] = -0.001*tool_y
-    g[6, 1, 7] = -0.001*tool_z
-    g[6, 1, 9] = -0.001*tool_y
-    g[6, 2, 7] = 0.001*tool_y
-    g[7, 0, 2] = 0.001*tool_y
-    g[7, 0, 3] = 0.001*tool_z
-    g[7, 0, 7] = -0.001*tool_y
-    g[7, 0, 9] = 0.001*tool_z
-    g[7, 1, 1] = 1
-    g[7, 1, 2] = -0.001*tool_x
-    g[7, 1, 6] = 0.001*tool_y
-    g[7, 1, 8] = -0.001*tool_y
-    g[7, 2, 6] = -0.001*tool_z
-    g[8, 0, 1] = -1
-    g[8, 0, 2] = 0.001*tool_x
-    g[8, 0, 6] = -0.001*tool_y
-    g[8, 0, 8] = 0.001*tool_y
-    g[8, 1, 2] = 0.001*tool_y
-    g[8, 1, 3] = 0.001*tool_z
-    g[8, 1, 7] = -0.001*tool_y
-    g[8, 1, 9] = 0.001*tool_z
-    g[8, 2, 7] = -0.001*tool_z
+    g[_COEFFICIENTS_NONZERO] = (
+        1, d_pA_z_pC_z, 0.001*pA_y - 0.001*pC_y + 0.001*tool_y, 1, -d_pA_z_pC_z, 0.001*tool_z,
+        -0.001*pA_x + 0.001*pC_x - 0.001*tool_x, 1, -0.001*tool_x, -d_pA_y_pC_y,
+        0.001*pA_x - 0.001*pC_x + 0.001*tool_x, -0.001*tool_y, 0.001*tool_z, -0.001*tool_z, -1, 0.001*tool_x,
+        -0.001*tool_y, 0.001*tool_y, 0.001*tool_y, -0.001*tool_y, -1, -0.001*tool_x, 0.001*tool_z, -0.001*tool_z,
+        -0.001*tool_z, 0.001*tool_y, -1, -d_pA_z_pC_z, -d_pA_y_pC_y, 1, 0.001*tool_x, -1, d_pA_z_pC_z,
+        0.001*pA_x - 0.001*pC_x + 0.001*tool_x, d_pA_y_pC_y, -0.001*pA_x + 0.001*pC_x - 0.001*tool_x, -1,
+        -0.001*tool_x, 1, -d_pA_z_pC_z, -0.001*pA_x + 0.001*pC_x - 0.001*tool_x, -0.001*tool_z, 0.001*tool_y, -1,
+        -d_pA_z_pC_z, -d_pA_y_pC_y, 0.001*pA_x - 0.001*pC_x + 0.001*tool_x, d_pA_y_pC_y, 0.001*tool_z,
+        -0.001*tool_y, -0.001*tool_z, -0.001*tool_y, -1, -0.001*tool_x, 0.001*tool_z, -0.001*tool_z, 0.001*tool_y,
+        1, 0.001*tool_x, -0.001*tool_z, 0.001*tool_z, 0.001*tool_z, -0.001*tool_y, -0.001*tool_z, -0.001*tool_y,
+        0.001*tool_y, 0.001*tool_y, 0.001*tool_z, -0.001*tool_y, 0.001*tool_z, 1, -0.001*tool_x, 0.001*tool_y,
+        -0.001*tool_y, -0.001*tool_z, -1, 0.001*tool_x, -0.001*tool_y, 0.001*tool_y, 0.001*tool_y, 0.001*tool_z,
+        -0.001*tool_y, 0.001*tool_z, -0.001*tool_z,
+    )
     return g
 
 
@@ -267,6 +218,17 @@ def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
     return basis(angles_deg) @ (g @ p)
 
 
+#: Indices (one tuple per dimension) of the non-zero entries that ``out`` receives.
+_REFERENCE_NONZERO = (
+    (
+        0, 1, 1, 2,
+    ),
+    (
+        9, 8, 9, 8,
+    ),
+)
+
+
 def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     """Un-zeroed offset Jacobian at the reference pose J_raw(0), shape=(3, P=10) [µm per µm or µrad].
 
@@ -285,11 +247,28 @@ def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
     tool_y = tool[1]
     tool_z = tool[2]
     out = np.zeros((3, 10))
-    out[0, 9] = -0.001*pA_y + 0.001*pC_y - 0.001*tool_y
-    out[1, 8] = -0.001*tool_z
-    out[1, 9] = 0.001*pA_x - 0.001*pC_x + 0.001*tool_x
-    out[2, 8] = 0.001*tool_y
+    out[_REFERENCE_NONZERO] = (
+        -0.001*pA_y + 0.001*pC_y - 0.001*tool_y, -0.001*tool_z, 0.001*pA_x - 0.001*pC_x + 0.001*tool_x,
+        0.001*tool_y,
+    )
     return out
+
+
+#: Indices (one tuple per dimension) of the non-zero entries that ``g`` receives.
+_MOTION_NONZERO = (
+    (
+        0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 6, 6, 6, 6,
+        6, 7, 7, 7, 7, 7, 8, 8, 8, 8, 8,
+    ),
+    (
+        0, 0, 1, 1, 2, 2, 2, 0, 1, 2, 0, 1, 2, 0, 0, 1, 1, 1, 2, 2, 0, 0, 0, 1, 1, 2, 2, 0, 0, 0, 1, 2, 0, 1, 1, 1,
+        2, 0, 0, 0, 1, 2, 0, 1, 1, 1, 2,
+    ),
+    (
+        6, 10, 7, 9, 2, 4, 8, 10, 9, 3, 10, 9, 3, 0, 11, 1, 5, 11, 9, 10, 1, 5, 11, 0, 11, 9, 10, 4, 5, 11, 3, 9,
+        3, 4, 5, 11, 10, 4, 5, 11, 3, 9, 3, 4, 5, 11, 10,
+    ),
+)
 
 
 def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
@@ -331,53 +310,16 @@ def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
     np.multiply(s_A, c_C, out=b[:, 7])
     np.multiply(s_A, s_C, out=b[:, 8])
     g = np.zeros((9, 3, 12))
-    g[0, 0, 6] = 1
-    g[0, 0, 10] = d_pA_z_pC_z
-    g[0, 1, 7] = 1
-    g[0, 1, 9] = -d_pA_z_pC_z
-    g[0, 2, 2] = 1
-    g[0, 2, 4] = -0.001*tool_x
-    g[0, 2, 8] = 1
-    g[1, 0, 10] = 0.001*tool_z
-    g[1, 1, 9] = -0.001*tool_z
-    g[1, 2, 3] = 0.001*tool_y
-    g[2, 0, 10] = 0.001*tool_y
-    g[2, 1, 9] = -0.001*tool_y
-    g[2, 2, 3] = -0.001*tool_z
-    g[3, 0, 0] = 1
-    g[3, 0, 11] = -d_pA_y_pC_y
-    g[3, 1, 1] = 1
-    g[3, 1, 5] = 0.001*tool_x
-    g[3, 1, 11] = 0.001*pA_x - 0.001*pC_x + 0.001*tool_x
-    g[3, 2, 9] = d_pA_y_pC_y
-    g[3, 2, 10] = -0.001*pA_x + 0.001*pC_x - 0.001*tool_x
-    g[4, 0, 1] = -1
-    g[4, 0, 5] = -0.001*tool_x
-    g[4, 0, 11] = -0.001*pA_x + 0.001*pC_x - 0.001*tool_x
-    g[4, 1, 0] = 1
-    g[4, 1, 11] = -d_pA_y_pC_y
-    g[4, 2, 9] = 0.001*pA_x - 0.001*pC_x + 0.001*tool_x
-    g[4, 2, 10] = d_pA_y_pC_y
-    g[5, 0, 4] = 0.001*tool_z
-    g[5, 0, 5] = -0.001*tool_y
-    g[5, 0, 11] = -0.001*tool_y
-    g[5, 1, 3] = -0.001*tool_z
-    g[5, 2, 9] = 0.001*tool_y
-    g[6, 0, 3] = 0.001*tool_z
-    g[6, 1, 4] = 0.001*tool_z
-    g[6, 1, 5] = -0.001*tool_y
-    g[6, 1, 11] = -0.001*tool_y
-    g[6, 2, 10] = 0.001*tool_y
-    g[7, 0, 4] = 0.001*tool_y
-    g[7, 0, 5] = 0.001*tool_z
-    g[7, 0, 11] = 0.001*tool_z
-    g[7, 1, 3] = -0.001*tool_y
-    g[7, 2, 9] = -0.001*tool_z
-    g[8, 0, 3] = 0.001*tool_y
-    g[8, 1, 4] = 0.001*tool_y
-    g[8, 1, 5] = 0.001*tool_z
-    g[8, 1, 11] = 0.001*tool_z
-    g[8, 2, 10] = -0.001*tool_z
+    g[_MOTION_NONZERO] = (
+        1, d_pA_z_pC_z, 1, -d_pA_z_pC_z, 1, -0.001*tool_x, 1, 0.001*tool_z, -0.001*tool_z, 0.001*tool_y,
+        0.001*tool_y, -0.001*tool_y, -0.001*tool_z, 1, -d_pA_y_pC_y, 1, 0.001*tool_x,
+        0.001*pA_x - 0.001*pC_x + 0.001*tool_x, d_pA_y_pC_y, -0.001*pA_x + 0.001*pC_x - 0.001*tool_x, -1,
+        -0.001*tool_x, -0.001*pA_x + 0.001*pC_x - 0.001*tool_x, 1, -d_pA_y_pC_y,
+        0.001*pA_x - 0.001*pC_x + 0.001*tool_x, d_pA_y_pC_y, 0.001*tool_z, -0.001*tool_y, -0.001*tool_y,
+        -0.001*tool_z, 0.001*tool_y, 0.001*tool_z, 0.001*tool_z, -0.001*tool_y, -0.001*tool_y, 0.001*tool_y,
+        0.001*tool_y, 0.001*tool_z, 0.001*tool_z, -0.001*tool_y, -0.001*tool_z, 0.001*tool_y, 0.001*tool_y,
+        0.001*tool_z, 0.001*tool_z, -0.001*tool_z,
+    )
     return (b @ g.reshape(9, -1)).reshape(n, 3, 12)
 
 
