@@ -525,6 +525,16 @@ def axis_frames(m: Measurement, kern: Any) -> dict[str, np.ndarray]:
     return out
 
 
+def _save(fig: Any, path: Path) -> str:
+    """Lay out, write (PNG, 90 dpi) and close a figure; returns the path."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return str(path)
+
+
 def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path) -> list[str]:
     """Write the residual-signature plots (PNG) of the baseline PIGE fit; returns their paths."""
     import matplotlib
@@ -547,10 +557,7 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
     ax.set_ylabel("residual [µm]")
     ax.set_title("PIGE-fit residual vs time")
     ax.legend()
-    fig.tight_layout()
-    paths.append(str(out / "residual_time.png"))
-    fig.savefig(paths[-1], dpi=90)
-    plt.close(fig)
+    paths.append(_save(fig, out / "residual_time.png"))
     frames = axis_frames(m, kern)
     for k, axis in enumerate(kern.ROTARY_AXES):
         if axis not in frames:
@@ -563,10 +570,7 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
         ax.set_ylabel("residual [µm]")
         ax.set_title(f"residual in the frame of axis {axis}")
         ax.legend()
-        fig.tight_layout()
-        paths.append(str(out / f"residual_{axis}.png"))
-        fig.savefig(paths[-1], dpi=90)
-        plt.close(fig)
+        paths.append(_save(fig, out / f"residual_{axis}.png"))
     appr = EffectContext(kern, m.angles_deg, m.t_s, m.ball_mm).approach
     assert appr is not None
     fig, axs = plt.subplots(1, 2, figsize=(9, 3.5))
@@ -582,10 +586,7 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
     axs[1].stem(range(len(ac)), ac)
     axs[1].set_xlabel("lag [rows]")
     axs[1].set_title("autocorrelation in time")
-    fig.tight_layout()
-    paths.append(str(out / "residual_rows.png"))
-    fig.savefig(paths[-1], dpi=90)
-    plt.close(fig)
+    paths.append(_save(fig, out / "residual_rows.png"))
     if (appr != 0).any():
         fig, ax = plt.subplots(figsize=(7, 3.5))
         for k, axis in enumerate(kern.ROTARY_AXES):
@@ -598,9 +599,6 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
         ax.set_ylabel("tangential residual [µm]")
         ax.set_title("residual by direction of approach")
         ax.legend()
-        fig.tight_layout()
-        paths.append(str(out / "residual_approach.png"))
-        fig.savefig(paths[-1], dpi=90)
-        plt.close(fig)
+        paths.append(_save(fig, out / "residual_approach.png"))
     result.plots = paths
     return paths
