@@ -63,12 +63,16 @@ def _file_hash(path: Path) -> str | None:
     return m.group(1) if m else None
 
 
-def _is_current(path: Path, structure: MachineStructure) -> bool:
-    if not path.is_file():
-        return False
+def _locate(structure: MachineStructure) -> tuple[Path, bool]:
+    """Where the machine's kernels are (shipped if current, else the cache) and whether that file is current."""
     from pige_sym.codegen.fingerprint import current_hash
 
-    return _file_hash(path) == current_hash(structure)
+    fingerprint = current_hash(structure)
+    shipped = shipped_dir() / f"{structure.module_name}.py"
+    if shipped.is_file() and _file_hash(shipped) == fingerprint:
+        return shipped, True
+    cached = cache_dir() / f"{structure.module_name}.py"
+    return cached, cached.is_file() and _file_hash(cached) == fingerprint
 
 
 def kernel_path(code: str | MachineStructure) -> Path:
@@ -77,10 +81,7 @@ def kernel_path(code: str | MachineStructure) -> Path:
     The returned file may not exist yet; :func:`load_kernels` generates it there.
     """
     structure = parse_machine_code(code) if isinstance(code, str) else code
-    shipped = shipped_dir() / f"{structure.module_name}.py"
-    if _is_current(shipped, structure):
-        return shipped
-    return cache_dir() / f"{structure.module_name}.py"
+    return _locate(structure)[0]
 
 
 def _generate(structure: MachineStructure, path: Path) -> None:
@@ -114,8 +115,8 @@ def load_kernels(code: str | MachineStructure) -> KernelModule:
     key = structure.canonical
     if key in _CACHE:
         return _CACHE[key]
-    path = kernel_path(structure)
-    if not _is_current(path, structure):
+    path, current = _locate(structure)
+    if not current:
         _generate(structure, path)
     spec = importlib.util.spec_from_file_location(f"pige_generated.{structure.module_name}", path)
     if spec is None or spec.loader is None:
