@@ -283,6 +283,7 @@ class MeasurementWriter:
     def __init__(self, path: str | os.PathLike[str], template: Measurement, *, append: bool = False) -> None:
         self.path = Path(path)
         self.template = template
+        self._rows_at_open = self.rows_in_file() if append else 0
         self._fh: IO[str] = open(self.path, "a" if append else "w", encoding="utf-8")  # noqa: SIM115
         if not append:
             self._fh.write(header_text(template))
@@ -320,6 +321,16 @@ class MeasurementWriter:
 
     def close(self) -> None:
         self._fh.close()
+
+    def rows_in_file(self) -> int:
+        """Data rows the file holds now (lines after the column header), counted on disk."""
+        with open(self.path, encoding="utf-8") as fh:
+            body = [line for line in fh if line.strip() and not line.startswith("#")]
+        return max(len(body) - 1, 0)
+
+    def rows_written(self) -> int:
+        """Rows this writer added, counted on disk: right even if an interrupt fell between a write and its caller."""
+        return self.rows_in_file() - self._rows_at_open
 
     def __enter__(self) -> MeasurementWriter:
         return self

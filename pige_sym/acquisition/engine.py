@@ -429,6 +429,7 @@ class _Engine:
     def close(self) -> None:
         if self.writer is not None:
             self.writer.close()
+            self.summary.rows_written = self.writer.rows_written()  # the file decides, not the counter
 
     def on_sample(self, s: Sample) -> None:
         gap = False
@@ -639,15 +640,18 @@ def acquire(port: str, program: TestProgram, out: str | os.PathLike[str], *,
         return summary
     trigger = _make_trigger(opts, program, key_source, say)
     link = _Link(port, settings or PortSettings(), opts, adapter or RTestProtocolAdapter(), opener, summary)
-    session = _open_session(link, program, out_p, nest, state, trigger, RawLog(log_path, append=resume or not force),
-                            progress)
+    session = _open_session(link, program, out_p, nest, state, trigger, (log_path, resume or not force), progress)
     _run_session(session, started, out_p, say)
     return summary
 
 
 def _open_session(link: _Link, program: TestProgram, out: Path, nest: NestGeometry, state: Any,
-                  trigger: _Trigger, log: RawLog, progress: bool) -> _Session:
-    """Open the port and assemble engine, record pipeline and progress bars (the bars close if it fails)."""
+                  trigger: _Trigger, raw_log: tuple[Path | None, bool], progress: bool) -> _Session:
+    """Open the port, then assemble engine, raw log, record pipeline and progress bars.
+
+    Nothing is written before the port is open: a failing port leaves an existing raw log as it was.
+    ``raw_log`` is (path or None, append).
+    """
     opts, summary = link.opts, link.summary
     bars = _ProgressBars(program.n_poses, opts.window_s, progress)
     try:
@@ -656,6 +660,7 @@ def _open_session(link: _Link, program: TestProgram, out: Path, nest: NestGeomet
         bars.close()
         raise
     engine = _Engine(program, out, nest, opts, summary, state, trigger, bars.on_pose)
+    log = RawLog(raw_log[0], append=raw_log[1])
     return _Session(link, _Records(link.adapter, summary, engine), engine, log, summary, link.settings, opts,
                     opts.max_bytes or default_max_bytes(program), bars, progress)
 
