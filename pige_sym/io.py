@@ -21,8 +21,10 @@ Arabic-Indic or full-width digits, ``nan`` and ``inf`` are not numbers.  Values 
 be physical (:data:`LIMITS`: e.g. a deviation within ±1e5 µm, a ball position within
 ±1e5 mm).  A row that repeats an earlier row exactly (a duplicated record) is refused.
 Only regular files are read (not FIFOs or devices).  The data body is read in chunks
-of :data:`CHUNK_BYTES` and parsed with NumPy after the header is validated, so large
-files stream; a line longer than :data:`MAX_LINE_BYTES` is refused.
+of :data:`CHUNK_BYTES` after the header is validated, so large files stream; a chunk
+whose lines all have the header's number of fields is parsed by the vectorised
+:mod:`pige_sym.decimal_fields` (bit-identical to the strict grammar), any other chunk
+line by line; a line longer than :data:`MAX_LINE_BYTES` is refused.
 
 Every refusal is a :class:`~pige_sym.errors.FileFormatError` naming the file, the
 1-based line and the problem.  Numbers are written with ``repr`` so that a
@@ -33,7 +35,6 @@ from __future__ import annotations
 
 import math
 import os
-import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,6 +43,7 @@ from typing import IO, Any
 import numpy as np
 
 from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
+from pige_sym.decimal_fields import field_ends, parse_decimal_fields
 from pige_sym.errors import FileFormatError, InputError, PigeError
 from pige_sym.files import atomic_write_text, open_regular_file
 from pige_sym.options import strict_float
@@ -52,12 +54,11 @@ LINEAR_COLUMNS = ("X_mm", "Y_mm", "Z_mm")
 OPTIONAL_COLUMNS = ("temp_C", "n_samples", "sd_um")
 FRAMES = ("machine", "table")
 REFERENCE_TOLERANCE = 1e-9
-CHUNK_BYTES = 8 * 2**20
+CHUNK_BYTES = 4 * 2**20
 MAX_LINE_BYTES = 2**20
 #: Largest magnitude accepted per column or metadata kind (non-physical values are refused), in its unit.
 LIMITS: dict[str, float] = {"t_s": 1e9, "deg": 1e5, "um": 1e5, "mm": 1e5, "temp_C": 1e3, "n_samples": 1e9,
                             "sd_um": 1e5}
-_NUMERIC_BYTES = b"0123456789.+-eE, \t\r\n"
 
 
 @dataclass
@@ -494,40 +495,30 @@ class _Body:
                     raise FileFormatError(self.path, self.line + chunk.count(b"\n"),
                                           f"line longer than {MAX_LINE_BYTES} bytes")
                 chunk += tail
-            n_lines = chunk.count(b"\n") + (0 if chunk.endswith(b"\n") else 1)
-            block = self._fast(chunk, n_lines)
+            block = self._fast(chunk)
             if block is None:
                 block = self._strict(chunk)
             else:
-                self.line += n_lines
+                self.line += block.shape[0]
             self.blocks.append(block)
 
-    def _fast(self, chunk: bytes, n_lines: int) -> np.ndarray | None:
-        """All-numeric chunk with the right number of fields on every line, or None (strict path)."""
-        ncols = len(self.h.names)
-        if self.h.extras or self.blank_at is not None or chunk.translate(None, _NUMERIC_BYTES):
+    def _fast(self, chunk: bytes) -> np.ndarray | None:
+        """Every line of the chunk with exactly the header's number of numeric fields, parsed
+        vectorised (:mod:`pige_sym.decimal_fields`, bit-identical to the strict grammar), or None
+        (the strict path decides and names the line)."""
+        if self.h.extras or self.blank_at is not None:
             return None
         if b"\r" in chunk:
             chunk = chunk.replace(b"\r\n", b"\n")
-        if any(x in chunk for x in (b" ", b"\t", b"\r", b",,", b",\n", b"\n,")) or chunk[:1] == b"," or \
-                chunk[-1:] == b",":
-            return None  # blanks or empty fields: the strict path decides (and names the line)
-        buf = np.frombuffer(chunk, np.uint8)
-        ends = np.flatnonzero(buf == 10)
         if not chunk.endswith(b"\n"):
-            ends = np.append(ends, len(chunk))
-        commas = np.flatnonzero(buf == 44)
-        if (np.diff(np.searchsorted(commas, ends), prepend=0) != ncols - 1).any():
+            chunk += b"\n"
+        buf = np.frombuffer(chunk, np.uint8)
+        ends = field_ends(buf)
+        line_ends = np.flatnonzero(buf[ends] == ord("\n"))
+        if (np.diff(line_ends, prepend=-1) != len(self.h.names)).any():
             return None
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            try:
-                values = np.fromstring(chunk.replace(b"\n", b","), sep=",")
-            except (ValueError, DeprecationWarning):
-                return None
-        if values.size != n_lines * ncols:
-            return None
-        return values.reshape(n_lines, ncols)
+        values = parse_decimal_fields(buf, ends)
+        return None if values is None else values.reshape(line_ends.size, len(self.h.names))
 
     def _strict(self, chunk: bytes) -> np.ndarray:
         p, names, numeric = self.path, self.h.names, self.h.numeric
@@ -565,6 +556,16 @@ class _Body:
         if not self.blocks or sum(b.shape[0] for b in self.blocks) == 0:
             raise FileFormatError(self.path, self.h.header_line, "no data rows")
         return np.concatenate(self.blocks) if len(self.blocks) > 1 else self.blocks[0]
+
+    def gather(self, columns: Iterable[str]) -> np.ndarray:
+        """The named numeric columns, shape (n_rows, len(columns)), copied once from the blocks."""
+        positions = [self.h.numeric.index(self.h.names.index(c)) for c in columns]
+        out = np.empty((sum(b.shape[0] for b in self.blocks), len(positions)))
+        row = 0
+        for block in self.blocks:
+            np.take(block, positions, axis=1, out=out[row : row + block.shape[0]])
+            row += block.shape[0]
+        return out
 
 
 def _check_values(p: str, first_line: int, col: dict[str, np.ndarray], extras: dict[str, list[str]],
@@ -635,18 +636,23 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
         raise FileFormatError(p, meta_line.get("frame"), f"frame must be 'machine' or 'table', got {frame!r}")
     tool = _parse_vec3(meta["tool_mm"], p, meta_line["tool_mm"], "tool_mm") if "tool_mm" in meta else None
     pivots = _read_pivots(p, h)
-    arr = body.array()
-    names = h.names
-    col = {names[j]: arr[:, q] for q, j in enumerate(h.numeric)}
+    body.array()  # refuses a file without data rows
     angle_cols = [f"{a}_deg" for a in h.rotary]
+    groups = {"t_s": body.gather(["t_s"]), "angles": body.gather(angle_cols),
+              "deviation": body.gather(DEVIATION_COLUMNS)}
+    names = {"t_s": ["t_s"], "angles": angle_cols, "deviation": list(DEVIATION_COLUMNS)}
+    if "X_mm" in h.names:
+        groups["linear"], names["linear"] = body.gather(LINEAR_COLUMNS), list(LINEAR_COLUMNS)
+    for c in OPTIONAL_COLUMNS:
+        if c in h.names:
+            groups[c], names[c] = body.gather([c]), [c]
+    col = {c: groups[g][:, i] for g, cs in names.items() for i, c in enumerate(cs)}
     _check_values(p, body.first_line, col, body.extras, angle_cols)
     return Measurement(
-        machine=meta["machine"], ball_mm=ball, t_s=col["t_s"].copy(),
-        angles_deg=np.column_stack([col[c] for c in angle_cols]),
-        deviation_um=np.column_stack([col[c] for c in DEVIATION_COLUMNS]), rotary_axes=h.rotary,
-        frame=frame, tool_mm=tool, pivots_mm=pivots, trajectory=meta.get("trajectory"),
-        linear_mm=np.column_stack([col[c] for c in LINEAR_COLUMNS]) if "X_mm" in col else None,
-        optional={c: col[c].copy() for c in OPTIONAL_COLUMNS if c in col},
+        machine=meta["machine"], ball_mm=ball, t_s=groups["t_s"][:, 0], angles_deg=groups["angles"],
+        deviation_um=groups["deviation"], rotary_axes=h.rotary, frame=frame, tool_mm=tool, pivots_mm=pivots,
+        trajectory=meta.get("trajectory"), linear_mm=groups.get("linear"),
+        optional={c: groups[c][:, 0] for c in OPTIONAL_COLUMNS if c in groups},
         extra_columns=body.extras, metadata=meta, path=p,
     )
 

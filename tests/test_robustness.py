@@ -132,7 +132,7 @@ def test_the_numpy_fast_path_accepts_exactly_what_the_strict_path_accepts(tmp_pa
             header = _read_header(fh, str(path))
             body = _Body(str(path), header)
             if not fast:
-                body._fast = lambda chunk, n: None  # type: ignore[method-assign]
+                body._fast = lambda chunk: None  # type: ignore[method-assign]
             try:
                 body.read(fh)
                 outcome.append(("parsed", body.array().tobytes()))

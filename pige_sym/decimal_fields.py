@@ -1,0 +1,194 @@
+"""Vectorised parsing of ASCII decimal fields, bit-identical to :func:`pige_sym.options.strict_float`.
+
+Grammar of one field (the tool's one number grammar, ``options._NUMBER``)::
+
+    field := [+-]? (digits [. digits?] | . digits) ([eE] [+-]? digits)?
+
+Input is a byte buffer and the offsets of the separator that ends each field (``,`` or
+``\\n``; the last field may end at the buffer's end).  The result is exactly what
+``strict_float`` gives for every field's text, or ``None`` when one field is not a number
+(the caller then re-reads the chunk strictly to name the line).
+
+Method (NumPy only; no Python work per field on the common path):
+
+1. The last :data:`WINDOW` bytes of every field are gathered into a ``(WINDOW, n)`` byte
+   matrix, one row per column position, so every later step is a long, contiguous
+   ``uint8`` operation.
+2. Column by column: which bytes belong to the field, which are digits, the dot, the sign;
+   a field whose bytes are not all of the plain grammar (an exponent, a blank, a stray
+   character), that is longer than the window or has more than :data:`MAX_DIGITS` digits
+   is *deferred*.
+3. The digits, shifted over the dot, are accumulated (Horner) into the exact integer
+   mantissa ``M < 10**19`` (``uint64``), with ``k`` digits after the dot.
+4. ``M / 10**k = (M / 5**k) * 2**-k``.  The quotient by ``5**k`` (exact in a double for
+   ``k <= 22``) is computed in double-double arithmetic: ``q = fl(M) / 5**k``, the residual
+   ``M - q * 5**k`` exactly (Dekker's two-product), ``q + residual / 5**k`` rounded once.
+   The result is the correctly rounded quotient unless the exact value lies within
+   ``2**-30`` ulp of a rounding midpoint (the approximation error is below ``2**-48`` ulp);
+   those fields are deferred.  Scaling by ``2**-k`` is exact.
+5. Deferred fields are parsed one by one with ``strict_float``.
+
+So the fast path never decides a value it cannot prove: it either reproduces the correctly
+rounded double (which is what ``float()`` returns) or hands the text to ``strict_float``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pige_sym.options import strict_float
+
+#: Bytes of a field's tail examined by the vectorised path (longer fields are deferred).
+WINDOW = 20
+#: Most significant digits whose integer still fits ``uint64`` exactly (10**19 < 2**64).
+MAX_DIGITS = 19
+_SPLIT = 134217729.0  # 2**27 + 1, Veltkamp's splitter for a 53-bit significand
+_FIVE = np.array([5.0**k for k in range(WINDOW)])
+_FIVE_HI = (_FIVE * _SPLIT) - ((_FIVE * _SPLIT) - _FIVE)
+_FIVE_LO = _FIVE - _FIVE_HI
+_MIDPOINT_MARGIN = 2.0**-30
+_HALF_POWERS = np.array([2.0**-k for k in range(WINDOW)])  # exact
+_ASCII_ZERO, _DOT, _PLUS, _MINUS = 48, 46, 43, 45
+#: Column groups accumulated in int32 (at most 9 digits each), and each column's group.
+_GROUPS = ((0, 7), (7, 14), (14, WINDOW))
+_GROUP_OF = [next(g for g, (lo, hi) in enumerate(_GROUPS) if lo <= j < hi) for j in range(WINDOW)]
+
+
+def field_ends(buf: np.ndarray) -> np.ndarray:
+    """Offsets of the byte ending each field: every ``,`` and ``\\n``, plus ``len(buf)`` if the
+    buffer does not end with a separator.
+
+    Parameters
+    ----------
+    buf : ndarray, shape=(n_bytes,), uint8
+        The text.
+
+    Returns
+    -------
+    ndarray, shape=(n_fields,), int64
+    """
+    ends = np.flatnonzero((buf == ord(",")) | (buf == ord("\n")))
+    if buf.size and buf[-1] not in (ord(","), ord("\n")):
+        ends = np.append(ends, buf.size)
+    return ends
+
+
+def parse_decimal_fields(buf: np.ndarray, ends: np.ndarray) -> np.ndarray | None:
+    """Every field of ``buf`` as a float64, exactly ``strict_float`` of its text.
+
+    Parameters
+    ----------
+    buf : ndarray, shape=(n_bytes,), uint8
+        The text; field ``i`` is ``buf[ends[i-1] + 1 : ends[i]]`` (the first starts at 0).
+    ends : ndarray, shape=(n_fields,), int64
+        Offset of the separator after each field (:func:`field_ends`).
+
+    Returns
+    -------
+    ndarray, shape=(n_fields,), float64, or None
+        None when a field is not a number under the grammar (module docstring).
+    """
+    n = ends.size
+    if n == 0:
+        return np.empty(0)
+    starts = np.empty_like(ends)
+    starts[0] = 0
+    starts[1:] = ends[:-1] + 1
+    length = ends - starts
+    mantissa, k, negative, deferred = _mantissas(buf, ends, length)
+    values, ambiguous = _quotients(mantissa, k)
+    np.negative(values, out=values, where=negative)
+    for i in np.flatnonzero(deferred | ambiguous):
+        value = strict_float(buf[starts[i] : ends[i]].tobytes().decode("ascii", "replace"))
+        if value is None:
+            return None
+        values[i] = value
+    return values
+
+
+def _columns(buf: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """The last :data:`WINDOW` bytes before each field's end, one row per column: shape (WINDOW, n)."""
+    padded = np.concatenate((np.full(WINDOW, ord(","), np.uint8), buf))
+    columns = np.empty((WINDOW, ends.size), np.uint8)
+    index = ends.copy()  # padded[ends + j] is buf[ends - WINDOW + j]
+    for j in range(WINDOW):
+        np.take(padded, index, out=columns[j])
+        index += 1
+    return columns
+
+
+def _mantissas(
+    buf: np.ndarray, ends: np.ndarray, length: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Integer mantissa (uint64), digits after the dot, sign and the deferred mask of each field.
+
+    The bytes before each field and its sign are first replaced by ``0`` (leading zeros).  Then
+    one pass over the columns, left to right, accumulates the digits by Horner's rule in exact
+    int32 groups of columns (:data:`_GROUPS`); at the dot the multiplier is 1 instead of 10, so
+    the dot is skipped.  Any byte that is neither a digit nor a dot defers the field.
+    """
+    n = ends.size
+    columns = _columns(buf, ends)
+    first = np.clip(WINDOW - length, 0, WINDOW - 1)  # column of the field's first byte
+    sign = columns[first, np.arange(n)]
+    negative = sign == _MINUS
+    has_sign = negative | (sign == _PLUS)
+    columns[first[has_sign], np.flatnonzero(has_sign)] = _ASCII_ZERO
+    first8 = first.astype(np.uint8)
+    groups = [np.zeros(n, np.int32) for _ in _GROUPS]
+    dot_after = np.zeros(n, np.uint8)  # 1 + column of the dot, 0 if none
+    n_dots = np.zeros(n, np.uint8)
+    stray = np.zeros(n, bool)
+    for j in range(WINDOW):
+        byte = columns[j]
+        np.copyto(byte, np.uint8(_ASCII_ZERO), where=first8 > j)
+        digit = byte - np.uint8(_ASCII_ZERO)
+        is_digit = digit < 10
+        is_dot = byte == _DOT
+        stray |= ~(is_digit | is_dot)
+        n_dots += is_dot
+        np.maximum(dot_after, is_dot * np.uint8(j + 1), out=dot_after)
+        acc = groups[_GROUP_OF[j]]
+        acc *= np.uint8(10) - np.uint8(9) * is_dot
+        acc += digit * is_digit
+    n_digits = length - has_sign - n_dots
+    deferred = (length > WINDOW) | stray | (n_dots > 1) | (n_digits < 1) | (n_digits > MAX_DIGITS)
+    mantissa = groups[0].astype(np.uint64)
+    for (lo, hi), acc in zip(_GROUPS[1:], groups[1:], strict=True):
+        dot_here = (dot_after > lo) & (dot_after <= hi)  # the dot is in columns lo..hi-1
+        mantissa *= np.where(dot_here, np.uint64(10 ** (hi - lo - 1)), np.uint64(10 ** (hi - lo)))
+        mantissa += acc.view(np.uint32)
+    k = WINDOW - dot_after.astype(np.int64)
+    k[dot_after == 0] = 0
+    return mantissa, k, negative, deferred
+
+
+def _quotients(mantissa: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Correctly rounded ``mantissa / 10**k`` (float64) and the fields too close to a midpoint to tell."""
+    five, five_hi, five_lo = _FIVE[k], _FIVE_HI[k], _FIVE_LO[k]
+    m_hi = mantissa.astype(np.float64)
+    m_lo = (mantissa.view(np.int64) - m_hi.astype(np.uint64).view(np.int64)).astype(np.float64)
+    q = m_hi / five
+    product, product_err = _two_product(q, five, five_hi, five_lo)
+    residual = ((m_hi - product) - product_err) + m_lo  # M - q * 5**k, to 2**-52 relative
+    correction = residual / five
+    total = q + correction
+    rest = np.abs((q - total) + correction)  # exact: |q| >= |correction| (Fast2Sum)
+    # the power of two of total's binade (0 for 0): rest / ulp near 1/2 (or 1/4 below a power of two)
+    binade = (total.view(np.uint64) & np.uint64(0x7FF0000000000000)).view(np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        in_ulps = rest / binade * 2.0**52
+    ambiguous = (np.abs(in_ulps - 0.5) <= _MIDPOINT_MARGIN) | (np.abs(in_ulps - 0.25) <= _MIDPOINT_MARGIN)
+    return total * _HALF_POWERS[k], ambiguous
+
+
+def _two_product(
+    a: np.ndarray, b: np.ndarray, b_hi: np.ndarray, b_lo: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Dekker's two-product: ``a * b == p + e`` exactly (``b`` already split into ``b_hi + b_lo``)."""
+    p = a * b
+    t = a * _SPLIT
+    a_hi = t - (t - a)
+    a_lo = a - a_hi
+    e = ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo
+    return p, e
