@@ -73,15 +73,18 @@ def field_ends(buf: np.ndarray) -> np.ndarray:
     return ends
 
 
-def parse_decimal_fields(buf: np.ndarray, ends: np.ndarray) -> np.ndarray | None:
+def parse_decimal_fields(buf: np.ndarray, ends: np.ndarray, starts: np.ndarray | None = None) -> np.ndarray | None:
     """Every field of ``buf`` as a float64, exactly ``strict_float`` of its text.
 
     Parameters
     ----------
     buf : ndarray, shape=(n_bytes,), uint8
-        The text; field ``i`` is ``buf[ends[i-1] + 1 : ends[i]]`` (the first starts at 0).
+        The text; field ``i`` is ``buf[starts[i] : ends[i]]``.
     ends : ndarray, shape=(n_fields,), int64
         Offset of the separator after each field (:func:`field_ends`).
+    starts : ndarray, shape=(n_fields,), int64, optional
+        Offset of each field's first byte; default: every field starts after the previous
+        field's separator (the first at 0), i.e. ``ends`` lists every field of ``buf``.
 
     Returns
     -------
@@ -91,9 +94,10 @@ def parse_decimal_fields(buf: np.ndarray, ends: np.ndarray) -> np.ndarray | None
     n = ends.size
     if n == 0:
         return np.empty(0)
-    starts = np.empty_like(ends)
-    starts[0] = 0
-    starts[1:] = ends[:-1] + 1
+    if starts is None:
+        starts = np.empty_like(ends)
+        starts[0] = 0
+        starts[1:] = ends[:-1] + 1
     length = ends - starts
     mantissa, k, negative, deferred = _mantissas(buf, ends, length)
     values, ambiguous = _quotients(mantissa, k)

@@ -503,22 +503,41 @@ class _Body:
             self.blocks.append(block)
 
     def _fast(self, chunk: bytes) -> np.ndarray | None:
-        """Every line of the chunk with exactly the header's number of numeric fields, parsed
-        vectorised (:mod:`pige_sym.decimal_fields`, bit-identical to the strict grammar), or None
-        (the strict path decides and names the line)."""
-        if self.h.extras or self.blank_at is not None:
+        """Every line of the chunk with exactly the header's number of fields, the numeric ones
+        parsed vectorised (:mod:`pige_sym.decimal_fields`, bit-identical to the strict grammar)
+        and text columns sliced as they are; or None (the strict path decides and names the line)."""
+        if self.blank_at is not None:
             return None
         if b"\r" in chunk:
             chunk = chunk.replace(b"\r\n", b"\n")
         if not chunk.endswith(b"\n"):
             chunk += b"\n"
+        if b"\r" in chunk or (self.h.extras and not chunk.isascii()):
+            return None
         buf = np.frombuffer(chunk, np.uint8)
         ends = field_ends(buf)
+        ncols = len(self.h.names)
         line_ends = np.flatnonzero(buf[ends] == ord("\n"))
-        if (np.diff(line_ends, prepend=-1) != len(self.h.names)).any():
+        if (np.diff(line_ends, prepend=-1) != ncols).any():
             return None
-        values = parse_decimal_fields(buf, ends)
-        return None if values is None else values.reshape(line_ends.size, len(self.h.names))
+        if buf[0] == ord("#") or (buf[line_ends[:-1] + 1] == ord("#")).any():
+            return None  # a comment line: the strict path names it
+        numeric = self.h.numeric
+        if not self.h.extras:
+            values = parse_decimal_fields(buf, ends)
+            return None if values is None else values.reshape(-1, ncols)
+        starts = np.empty_like(ends)
+        starts[0] = 0
+        starts[1:] = ends[:-1] + 1
+        ends, starts = ends.reshape(-1, ncols), starts.reshape(-1, ncols)
+        values = parse_decimal_fields(buf, ends[:, numeric].ravel(), starts[:, numeric].ravel())
+        if values is None:
+            return None
+        text = chunk.decode("ascii")
+        for j in self.h.extras:
+            bounds = zip(starts[:, j].tolist(), ends[:, j].tolist(), strict=True)
+            self.extras[self.h.names[j]] += [text[a:b] for a, b in bounds]
+        return values.reshape(-1, len(numeric))
 
     def _strict(self, chunk: bytes) -> np.ndarray:
         p, names, numeric = self.path, self.h.names, self.h.numeric
@@ -552,9 +571,13 @@ class _Body:
             n += 1
         return rows[:n]
 
-    def array(self) -> np.ndarray:
+    def require_rows(self) -> None:
+        """Refuse a file without data rows."""
         if not self.blocks or sum(b.shape[0] for b in self.blocks) == 0:
             raise FileFormatError(self.path, self.h.header_line, "no data rows")
+
+    def array(self) -> np.ndarray:
+        self.require_rows()
         return np.concatenate(self.blocks) if len(self.blocks) > 1 else self.blocks[0]
 
     def gather(self, columns: Iterable[str]) -> np.ndarray:
@@ -636,7 +659,7 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
         raise FileFormatError(p, meta_line.get("frame"), f"frame must be 'machine' or 'table', got {frame!r}")
     tool = _parse_vec3(meta["tool_mm"], p, meta_line["tool_mm"], "tool_mm") if "tool_mm" in meta else None
     pivots = _read_pivots(p, h)
-    body.array()  # refuses a file without data rows
+    body.require_rows()
     angle_cols = [f"{a}_deg" for a in h.rotary]
     groups = {"t_s": body.gather(["t_s"]), "angles": body.gather(angle_cols),
               "deviation": body.gather(DEVIATION_COLUMNS)}

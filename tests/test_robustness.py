@@ -142,6 +142,36 @@ def test_the_numpy_fast_path_accepts_exactly_what_the_strict_path_accepts(tmp_pa
     _tally("numeric body (fast vs strict path)", "agree: " + outcome[0][0])
 
 
+text_field = st.text(alphabet=st.characters(blacklist_characters=",\n", blacklist_categories=("Cs",)), max_size=6)
+line_with_text = st.one_of(
+    st.tuples(st.lists(number_like, min_size=10, max_size=10), text_field).map(lambda p: ",".join([*p[0], p[1]])),
+    st.text(alphabet=NUMERIC_ALPHABET + "#a\u00b5", max_size=60))
+
+
+@FUZZ
+@given(st.lists(line_with_text, min_size=1, max_size=5))
+def test_fast_and_strict_paths_agree_with_a_text_column(tmp_path_factory, lines) -> None:
+    """Differential, with a text column: values, kept texts and refusals (with their line) agree."""
+    head, _, body = GOOD.partition("t_s,")
+    text = head + "t_s," + body.split("\n", 1)[0] + "\n0,0,0,0,0,0,1,2,3,100,x\n" + "\n".join(lines) + "\n"
+    path = tmp_path_factory.mktemp("fpt") / "d.csv"
+    path.write_bytes(text.encode("utf-8", "surrogatepass"))
+    outcome = []
+    for fast in (True, False):
+        with open(path, "rb") as fh:
+            header = _read_header(fh, str(path))
+            body_reader = _Body(str(path), header)
+            if not fast:
+                body_reader._fast = lambda chunk: None  # type: ignore[method-assign]
+            try:
+                body_reader.read(fh)
+                outcome.append(("parsed", body_reader.array().tobytes(), body_reader.extras))
+            except FileFormatError as exc:
+                outcome.append(("refused", str(exc), {}))
+    assert outcome[0] == outcome[1]
+    _tally("numeric body with a text column (fast vs strict path)", "agree: " + outcome[0][0])
+
+
 @pytest.mark.parametrize("bad, line, fragment", [
     ("1_000", 9, "not a number"),
     ("\u0661\u0662", 9, "not a number"),
