@@ -54,7 +54,9 @@ def test_random_numeric_text_matches_strict_float(fields) -> None:
 
 doubles = st.floats(allow_nan=False, allow_infinity=False, width=64)
 written = st.one_of(doubles.map(repr), doubles.map(lambda x: f"{x:.17g}"), doubles.map(lambda x: f"{x:.6f}"),
-                    doubles.map(lambda x: f"{x:.3e}"), st.integers(-10**20, 10**20).map(str))
+                    doubles.map(lambda x: f"{x:.3e}"), doubles.map(lambda x: f"{x:.16E}"),
+                    st.integers(-10**20, 10**20).map(str),
+                    st.tuples(st.integers(-10**19, 10**19), st.integers(-30, 30)).map(lambda p: f"{p[0]}e{p[1]:+03d}"))
 
 
 @settings(max_examples=400, deadline=None)
@@ -68,7 +70,9 @@ def test_numbers_as_programs_write_them(fields) -> None:
     "1234567890123456789", "12345678901234567890", "9999999999999999999", "0.9999999999999999999",
     ".1234567890123456789", "123456789.0123456789", "1" * WINDOW, "1" * (WINDOW + 1), "0." + "0" * 18 + "1",
     "9007199254740993", "9007199254740993.0", "4503599627370496.5", "4503599627370497.5", "2251799813685248.25",
-    "-1e5", "1E+05", "1e-400", "1e400", "1.5 ", " 1.5", "\t2", "", ".", "-", "+", "-.", "1.2.3", "--1", "+-1",
+    "-1e5", "1E+05", "1e-400", "1e400", "1e0005", "1e00005", "1.5e-22", "9999999999999999999e22", "1e23",
+    "1e-23", "5e-324", "1.7976931348623157e308", "1e+", "1e-", "1e+-5", "1e5e3", "1.e5", ".5e-3", "-.5E+3",
+    "1.5 ", " 1.5", "\t2", "", ".", "-", "+", "-.", "1.2.3", "--1", "+-1",
     "1-", "1+1", "e5", "1e", "1e+", "0x10", "1_0", "nan", "inf", "١", "1;5",
 ])
 def test_edge_cases(text) -> None:
@@ -114,6 +118,17 @@ def test_bulk_long_mantissas_seeded() -> None:
         s = "".join(map(str, rng.integers(0, 10, int(d))))
         s = s if dot >= d else s[:dot] + "." + s[dot:]
         fields.append(("-" if neg else "") + s)
+    assert_bit_exact(fields)
+
+
+def test_exponent_forms_seeded() -> None:
+    """``%e`` output of devices and ``repr`` of small numbers: every mantissa/exponent combination
+    the vectorised path takes (|power| <= 22), including 17–19-digit mantissas scaled up."""
+    rng = np.random.default_rng(4)
+    x = rng.normal(0, 1, 60_000) * 10.0 ** rng.integers(-12, 12, 60_000)
+    fields = [f"{v:.6e}" for v in x] + [f"{v:.16e}" for v in x] + [repr(float(v)) for v in x]
+    fields += [f"{int(m)}e{int(p)}" for m, p in zip(rng.integers(1, 2**63, 20_000, dtype=np.uint64),
+                                                    rng.integers(-25, 25, 20_000), strict=True)]
     assert_bit_exact(fields)
 
 
