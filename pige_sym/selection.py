@@ -135,18 +135,25 @@ class Selector:
     sums: NormalSums
     layout: Layout
     cache: dict[tuple[str, ...], Model] = field(default_factory=dict)
+    quick_cache: dict[tuple[str, ...], Model] = field(default_factory=dict)
 
-    def model(self, cands: list[Candidate]) -> Model:
-        """The fitted model of the PIGEs plus ``cands`` (each reduced against those before it)."""
+    def model(self, cands: list[Candidate], heldout: bool = True) -> Model:
+        """The fitted model of the PIGEs plus ``cands`` (each reduced against those before it).
+
+        With ``heldout=False`` the k-fold held-out RMS is not computed (NaN; values, RSS,
+        rank and BIC are the same): a cheaper model for ranking by BIC only.
+        """
         key = tuple(c.label for c in cands)
         if key in self.cache:
             return self.cache[key]
+        if not heldout and key in self.quick_cache:
+            return self.quick_cache[key]
         if not cands:
             p = len(self.layout.pige)
             w = np.eye(self.layout.n_columns)[:, :p]
-            model = Model([], [], w, list(self.layout.pige), [], fit(self.sums, w))
+            model = Model([], [], w, list(self.layout.pige), [], fit(self.sums, w, heldout=heldout))
         else:
-            base = self.model(cands[:-1])  # prefixes are cached: one reduction per new model
+            base = self.model(cands[:-1], heldout=False)  # prefixes are cached: one reduction per new model
             c = cands[-1]
             units = dict(self.layout.units)
             red = reduce_candidate(self.sums.total_gram, base.w, c, base.names, units, base.pinv(self.sums))
@@ -155,8 +162,8 @@ class Selector:
             w = np.concatenate([base.w, emb], axis=1)
             model = Model(list(cands), base.reductions + [red], w, base.names + [f"{c.label}#{j}" for j in
                                                                                    range(emb.shape[1])],
-                          base.blocks + [slice(k, k + emb.shape[1])], fit(self.sums, w))
-        self.cache[key] = model
+                          base.blocks + [slice(k, k + emb.shape[1])], fit(self.sums, w, heldout=heldout))
+        (self.cache if heldout else self.quick_cache)[key] = model
         return model
 
     def forward(self, current: Model, pool: list[Candidate], progress: Callable[[int], None] | None = None
@@ -219,31 +226,34 @@ class Selector:
         return current
 
 
-def best_subset(selector: Selector, pool: list[Candidate], *, delta_bic_max: float, p_max: float,
+def best_subset(selector: Selector, pool: list[Candidate], *, below: float, delta_bic_max: float, p_max: float,
                 min_gain: float, max_effects: int = BEST_SUBSET_MAX,
-                progress: Callable[[int], None] | None = None) -> Model:
-    """The least-BIC model over every subset of up to ``max_effects`` pooled candidates (distinct keys)
-    in which every effect earns its place (supported against the same subset without it).
+                progress: Callable[[int], None] | None = None) -> Model | None:
+    """The least-BIC model with a BIC under ``below`` over every subset of up to ``max_effects`` pooled
+    candidates (distinct keys) in which every effect earns its place (supported against the same
+    subset without it); None when there is none.
 
     Subsets are fitted in pool order, so every prefix is a cached model; the order of the
-    reductions does not change the fitted span (module docstring).  The empty model is
-    returned when no subset qualifies.
+    reductions does not change the fitted span (module docstring).  They are ranked by BIC
+    alone (no held-out error: cheaper); only those under ``below`` are fitted in full and
+    checked, best first.
     """
-    fitted: list[Model] = []
+    ranked: list[Model] = []
     for k in range(1, min(max_effects, len(pool)) + 1):
         for combo in itertools.combinations(pool, k):
             if len({c.key for c in combo}) < k:
                 continue
-            model = selector.model(list(combo))
-            if all(r.basis.shape[1] for r in model.reductions):  # no candidate wholly confounded
-                fitted.append(model)
+            model = selector.model(list(combo), heldout=False)
+            if model.bic < below and all(r.basis.shape[1] for r in model.reductions):  # none wholly confounded
+                ranked.append(model)
             if progress is not None:
                 progress(1)
-    for model in sorted(fitted, key=lambda m: m.bic):
+    for quick in sorted(ranked, key=lambda m: m.bic):
+        model = selector.model(quick.cands)
         if all(compare(selector.without(model, i), model).supported(delta_bic_max, p_max, min_gain)
                for i in range(len(model.cands))):
             return model
-    return selector.model([])
+    return None
 
 
 def _screened(best_dbic: dict[str, tuple[float, Candidate]], current: Model, delta_bic_max: float
@@ -297,9 +307,9 @@ def select(selector: Selector, pool: list[Candidate], *, delta_bic_max: float, p
     current = _grow(selector, selector.model([]), pool, reasons, best_dbic, crit, progress)
     current = selector.backward(selector.swap(current, pool), *crit)
     if len(current.cands) <= BEST_SUBSET_MAX:
-        exact = best_subset(selector, _screened(best_dbic, current, delta_bic_max), delta_bic_max=delta_bic_max,
-                            p_max=p_max, min_gain=min_gain, progress=progress)
-        if exact.bic < current.bic - SWAP_MARGIN:  # a better combination than the greedy path found
+        exact = best_subset(selector, _screened(best_dbic, current, delta_bic_max), below=current.bic - SWAP_MARGIN,
+                            delta_bic_max=delta_bic_max, p_max=p_max, min_gain=min_gain, progress=progress)
+        if exact is not None:  # a better combination than the greedy path found
             current = _grow(selector, exact, pool, reasons, best_dbic, crit, progress)
             current = selector.backward(selector.swap(current, pool), *crit)
     for c in current.cands:
