@@ -466,7 +466,8 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
 
     with tqdm(desc="diagnosis", unit="fit", disable=not progress, leave=False) as bar:
         final, reasons = select(selector, lay.candidates, delta_bic_max=delta_bic_max, p_max=p_max,
-                                min_gain=min_heldout_gain, progress=bar.update)
+                                min_gain=min_heldout_gain, progress=bar.update,
+                                refine=lambda sel, model: _refine_tau(sel, model)[0])
     selector, final, out_finding, out_note, clusters = _outlier_step(setup, selector, final, all_rows, suspects,
                                                                      delta_bic_max)
     final, tau_std = _refine_tau(selector, final)

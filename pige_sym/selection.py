@@ -291,8 +291,13 @@ def _grow(selector: Selector, current: Model, pool: list[Candidate], reasons: di
 
 
 def select(selector: Selector, pool: list[Candidate], *, delta_bic_max: float, p_max: float, min_gain: float,
-           progress: Callable[[int], None] | None = None) -> tuple[Model, dict[str, str]]:
+           progress: Callable[[int], None] | None = None, refine: Callable[[Selector, Model], Model] | None = None
+           ) -> tuple[Model, dict[str, str]]:
     """Forward + swap + backward selection, then the exact best-subset check (module docstring).
+
+    ``refine`` (e.g. the interpolated τ of a thermal drift) is applied to the greedy model
+    before the exact search, so that subsets compete against its best non-linear fit: a
+    drift at a τ-grid point leaves a misfit that other effects could otherwise absorb.
 
     Returns
     -------
@@ -307,6 +312,8 @@ def select(selector: Selector, pool: list[Candidate], *, delta_bic_max: float, p
     current = _grow(selector, selector.model([]), pool, reasons, best_dbic, crit, progress)
     current = selector.backward(selector.swap(current, pool), *crit)
     if len(current.cands) <= BEST_SUBSET_MAX:
+        if refine is not None:
+            current = refine(selector, current)
         exact = best_subset(selector, _screened(best_dbic, current, delta_bic_max), below=current.bic - SWAP_MARGIN,
                             delta_bic_max=delta_bic_max, p_max=p_max, min_gain=min_gain, progress=progress)
         if exact is not None:  # a better combination than the greedy path found
