@@ -19,10 +19,11 @@ Procedure
    backward elimination (every accepted effect must still earn its place).  Then an
    **exact best-subset** check: every subset of up to three *screened* candidates (those
    of the greedy model and the ten strongest others whose ΔBIC passed −10 against some
-   model on the forward path, one per key) is fitted, and the least-BIC subset in which
-   every effect is still supported against the same subset without it replaces the
-   greedy model when its BIC is lower by more than 2 (forward steps then continue from
-   it).  No VIF cutoff: the VIF and inflated standard errors are reported.  Near-ties go
+   model on the forward path, one per key; a drift of the greedy model at its
+   interpolated τ, step 5, so that no other effect can win by absorbing the misfit of a
+   grid τ) is ranked by BIC, and the least-BIC subset in which every effect is still
+   supported against the same subset without it replaces the greedy model when its BIC
+   is lower by more than 2 (forward steps then continue from it).  No VIF cutoff: the VIF and inflated standard errors are reported.  Near-ties go
    to the candidate with fewer parameters, and every candidate that replaces a finding
    almost as well (BIC gap < 10: naming one effect rather than another needs the same
    very strong evidence as accepting it at all) is reported with it as an alternative:

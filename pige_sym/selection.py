@@ -23,12 +23,14 @@ standard errors are reported.
 4. **Exact best subset** (when the model has at most ``BEST_SUBSET_MAX`` = 3 effects):
    the pool is the model's candidates plus the best variant of every other key whose
    ΔBIC against some model of the forward path reached ``delta_bic_max`` (at most
-   ``BEST_SUBSET_POOL`` = 10 keys).  Every subset of up to three distinct keys is fitted;
-   the least-BIC one in which every effect is supported against the same subset without
-   it replaces the greedy model if that lowers the BIC by more than ``SWAP_MARGIN``, and
-   steps 1–3 continue from it.  The fitted span of a subset does not depend on the order
-   of its reductions (a removed direction is already in the span), so subsets are built
-   in pool order and share their cached prefixes: at most 175 small fits.
+   ``BEST_SUBSET_POOL`` = 10 keys; a drift of the model enters at its interpolated τ,
+   ``refine``).  Every subset of up to three distinct keys is fitted without its held-out
+   error and ranked by BIC; the least-BIC one in which every effect is supported against
+   the same subset without it replaces the greedy model if that lowers the BIC by more
+   than ``SWAP_MARGIN`` (only those are fitted in full), and steps 1–3 continue from it.
+   The fitted span of a subset does not depend on the order of its reductions (a removed
+   direction is already in the span), so subsets are built in pool order and share their
+   cached prefixes: at most 175 small fits.
 """
 
 from __future__ import annotations
