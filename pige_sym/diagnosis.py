@@ -23,8 +23,9 @@ Procedure
    interpolated τ, step 5, so that no other effect can win by absorbing the misfit of a
    grid τ) is ranked by BIC, and the least-BIC subset in which every effect is still
    supported against the same subset without it replaces the greedy model when its BIC
-   is lower by more than 2 (forward steps then continue from it).  No VIF cutoff: the VIF and inflated standard errors are reported.  Near-ties go
-   to the candidate with fewer parameters, and every candidate that replaces a finding
+   is lower by more than 2 (forward steps then continue from it).  No VIF cutoff: the
+   VIF and inflated standard errors are reported.  Near-ties go to the candidate with
+   fewer parameters, and every candidate that replaces a finding
    almost as well (BIC gap < 10: naming one effect rather than another needs the same
    very strong evidence as accepting it at all) is reported with it as an alternative:
    the finding is then *ambiguous* ("ambiguous: …" in its sentence), because the data
