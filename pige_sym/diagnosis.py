@@ -16,10 +16,29 @@ Procedure
    is *unidentifiable*, never found.
 4. **Selection** (:mod:`pige_sym.selection`): forward steps on ΔBIC with the F-test and
    the 5-fold held-out RMS, swaps (an early proxy cannot block the true effect) and
-   backward elimination (every accepted effect must still earn its place).  No VIF
-   cutoff: the VIF and inflated standard errors are reported.  Near-ties go to the
-   candidate with fewer parameters, and every candidate that replaces a finding almost
-   as well (BIC gap < 6) is reported with it as an alternative.
+   backward elimination (every accepted effect must still earn its place).  Then an
+   **exact best-subset** check: every subset of up to three *screened* candidates (those
+   of the greedy model and the ten strongest others whose ΔBIC passed −10 against some
+   model on the forward path, one per key; a drift of the greedy model at its
+   interpolated τ, step 5, so that no other effect can win by absorbing the misfit of a
+   grid τ) is ranked by BIC, and the least-BIC subset in which every effect is still
+   supported against the same subset without it replaces the greedy model when its BIC
+   is lower by more than 2 (forward steps then continue from it).  No VIF cutoff: the
+   VIF and inflated standard errors are reported.  Near-ties go to the candidate with
+   fewer parameters, and every candidate that replaces a finding
+   almost as well (BIC gap < 10: naming one effect rather than another needs the same
+   very strong evidence as accepting it at all) is reported with it as an alternative:
+   the finding is then *ambiguous* ("ambiguous: …" in its sentence), because the data
+   cannot tell the two apart.  That is a property of the trajectory, not of the method,
+   and no selection rule can fix it.  Largest canonical correlations after the PIGEs: on
+   a single cone, two squareness pairs 0.91–0.97 and a squareness with a first-harmonic
+   runout of C 0.99–1.0; with C swept at ten tilts over 0..−90° only, neighbouring
+   harmonics of the tilt axis 0.999.  C swept at 19 tilts over ±90° brings the
+   squareness pairs to ≤ 0.16 and the tilt-axis harmonics to 0.97 (separable at
+   10–40 µrad, 1–5 µm; ``tests/test_diagnosis_grid.py`` uses it for both).  On
+   head machines, with the ball on the tool axis only the tool's tilt normal to it is
+   seen, so wobble harmonics h and h + 2 of the tilt axis share a two-dimensional
+   subspace on any trajectory and are told apart by their other halves only.
 5. **Thermal τ** is refined by interpolating the drift columns between grid points
    (exact linear combinations of the accumulated sums); its standard error comes from
    the Gauss–Newton covariance with the ∂/∂ln τ column.
@@ -103,7 +122,7 @@ DELTA_BIC_MAX = -10.0
 P_MAX = 1e-4
 MIN_HELDOUT_GAIN = 0.02
 MAX_CLUSTERS = 5
-AMBIGUOUS_BIC = 6.0  # below this BIC gap, another candidate is reported as an alternative (not "strong" evidence)
+AMBIGUOUS_BIC = 10.0  # below this BIC gap, another candidate is reported as an alternative (not "very strong" evidence)
 
 
 @dataclass
@@ -449,7 +468,8 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
 
     with tqdm(desc="diagnosis", unit="fit", disable=not progress, leave=False) as bar:
         final, reasons = select(selector, lay.candidates, delta_bic_max=delta_bic_max, p_max=p_max,
-                                min_gain=min_heldout_gain, progress=bar.update)
+                                min_gain=min_heldout_gain, progress=bar.update,
+                                refine=lambda sel, model: _refine_tau(sel, model)[0])
     selector, final, out_finding, out_note, clusters = _outlier_step(setup, selector, final, all_rows, suspects,
                                                                      delta_bic_max)
     final, tau_std = _refine_tau(selector, final)

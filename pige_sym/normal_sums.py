@@ -217,9 +217,12 @@ def _solve_folds(g: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 def fit(sums: NormalSums, w: np.ndarray, heldout: bool = True) -> LinearFit:
     """Least-squares fit of the model ``X·W`` (W: C × K) with its k-fold held-out RMS."""
-    gf = w.T @ sums.gram @ w
-    rf = sums.rhs @ w  # (F, K)
-    g, r = gf.sum(axis=0), rf.sum(axis=0)
+    if heldout:
+        gf = w.T @ sums.gram @ w
+        rf = sums.rhs @ w  # (F, K)
+        g, r = gf.sum(axis=0), rf.sum(axis=0)
+    else:  # the totals only
+        g, r = w.T @ sums.total_gram @ w, sums.total_rhs @ w
     yy = float(sums.yy.sum())
     x, cov, rank, vif, svals, nulls = _solve(g, r)
     rss = max(yy - 2 * float(x @ r) + float(x @ g @ x), 0.0)

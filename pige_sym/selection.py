@@ -15,15 +15,27 @@ standard errors are reported.
 1. **Forward**: add the supported candidate with the lowest ΔBIC (at most one per key:
    the harmonics of an effect are separate keys, the τ grid of the drift one key); an
    tie (ΔBIC within ``TIE_BIC``) goes to the candidate with fewer catalogue parameters.  Candidates that
-   replace a finding almost as well (BIC gap < 6) are reported with it as alternatives.
+   replace a finding almost as well (BIC gap < 10) are reported with it as alternatives.
 2. **Swap**: replace an accepted candidate by a pooled one while that lowers the BIC
    by more than ``SWAP_MARGIN``, so an early proxy cannot block the true effect.
 3. **Backward**: every accepted candidate must still be supported against the final
    model without it; the weakest one that is not is dropped, and steps 2–3 repeat.
+4. **Exact best subset** (when the model has at most ``BEST_SUBSET_MAX`` = 3 effects):
+   the pool is the model's candidates plus the best variant of every other key whose
+   ΔBIC against some model of the forward path reached ``delta_bic_max`` (at most
+   ``BEST_SUBSET_POOL`` = 10 keys; a drift of the model enters at its interpolated τ,
+   ``refine``).  Every subset of up to three distinct keys is fitted without its held-out
+   error and ranked by BIC; the least-BIC one in which every effect is supported against
+   the same subset without it replaces the greedy model if that lowers the BIC by more
+   than ``SWAP_MARGIN`` (only those are fitted in full), and steps 1–3 continue from it.
+   The fitted span of a subset does not depend on the order of its reductions (a removed
+   direction is already in the span), so subsets are built in pool order and share their
+   cached prefixes: at most 175 small fits.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -36,6 +48,8 @@ from pige_sym.normal_sums import LinearFit, NormalSums, fit
 SWAP_MARGIN = 2.0
 TIE_BIC = 0.5
 MAX_EFFECTS = 6
+BEST_SUBSET_MAX = 3  # exact search over every subset of up to this many effects
+BEST_SUBSET_POOL = 10  # screened candidates (distinct keys) entering it
 
 
 @dataclass
@@ -123,18 +137,25 @@ class Selector:
     sums: NormalSums
     layout: Layout
     cache: dict[tuple[str, ...], Model] = field(default_factory=dict)
+    quick_cache: dict[tuple[str, ...], Model] = field(default_factory=dict)
 
-    def model(self, cands: list[Candidate]) -> Model:
-        """The fitted model of the PIGEs plus ``cands`` (each reduced against those before it)."""
+    def model(self, cands: list[Candidate], heldout: bool = True) -> Model:
+        """The fitted model of the PIGEs plus ``cands`` (each reduced against those before it).
+
+        With ``heldout=False`` the k-fold held-out RMS is not computed (NaN; values, RSS,
+        rank and BIC are the same): a cheaper model for ranking by BIC only.
+        """
         key = tuple(c.label for c in cands)
         if key in self.cache:
             return self.cache[key]
+        if not heldout and key in self.quick_cache:
+            return self.quick_cache[key]
         if not cands:
             p = len(self.layout.pige)
             w = np.eye(self.layout.n_columns)[:, :p]
-            model = Model([], [], w, list(self.layout.pige), [], fit(self.sums, w))
+            model = Model([], [], w, list(self.layout.pige), [], fit(self.sums, w, heldout=heldout))
         else:
-            base = self.model(cands[:-1])  # prefixes are cached: one reduction per new model
+            base = self.model(cands[:-1], heldout=False)  # prefixes are cached: one reduction per new model
             c = cands[-1]
             units = dict(self.layout.units)
             red = reduce_candidate(self.sums.total_gram, base.w, c, base.names, units, base.pinv(self.sums))
@@ -143,8 +164,8 @@ class Selector:
             w = np.concatenate([base.w, emb], axis=1)
             model = Model(list(cands), base.reductions + [red], w, base.names + [f"{c.label}#{j}" for j in
                                                                                    range(emb.shape[1])],
-                          base.blocks + [slice(k, k + emb.shape[1])], fit(self.sums, w))
-        self.cache[key] = model
+                          base.blocks + [slice(k, k + emb.shape[1])], fit(self.sums, w, heldout=heldout))
+        (self.cache if heldout else self.quick_cache)[key] = model
         return model
 
     def forward(self, current: Model, pool: list[Candidate], progress: Callable[[int], None] | None = None
@@ -207,9 +228,78 @@ class Selector:
         return current
 
 
+def best_subset(selector: Selector, pool: list[Candidate], *, below: float, delta_bic_max: float, p_max: float,
+                min_gain: float, max_effects: int = BEST_SUBSET_MAX,
+                progress: Callable[[int], None] | None = None) -> Model | None:
+    """The least-BIC model with a BIC under ``below`` over every subset of up to ``max_effects`` pooled
+    candidates (distinct keys) in which every effect earns its place (supported against the same
+    subset without it); None when there is none.
+
+    Subsets are fitted in pool order, so every prefix is a cached model; the order of the
+    reductions does not change the fitted span (module docstring).  They are ranked by BIC
+    alone (no held-out error: cheaper); only those under ``below`` are fitted in full and
+    checked, best first.
+    """
+    ranked: list[Model] = []
+    for k in range(1, min(max_effects, len(pool)) + 1):
+        for combo in itertools.combinations(pool, k):
+            if len({c.key for c in combo}) < k:
+                continue
+            model = selector.model(list(combo), heldout=False)
+            if model.bic < below and all(r.basis.shape[1] for r in model.reductions):  # none wholly confounded
+                ranked.append(model)
+            if progress is not None:
+                progress(1)
+    for quick in sorted(ranked, key=lambda m: m.bic):
+        model = selector.model(quick.cands)
+        if all(compare(selector.without(model, i), model).supported(delta_bic_max, p_max, min_gain)
+               for i in range(len(model.cands))):
+            return model
+    return None
+
+
+def _screened(best_dbic: dict[str, tuple[float, Candidate]], current: Model, delta_bic_max: float
+              ) -> list[Candidate]:
+    """The best-subset pool: the current model's candidates, then the best variant of every other key
+    whose ΔBIC against some model of the forward path passed ``delta_bic_max``, strongest first,
+    ``BEST_SUBSET_POOL`` keys in all."""
+    pool = list(current.cands)
+    others = sorted((v for k, v in best_dbic.items() if k not in current.keys and v[0] <= delta_bic_max),
+                    key=lambda v: v[0])
+    pool += [c for _, c in others[: max(BEST_SUBSET_POOL - len(pool), 0)]]
+    return pool
+
+
+def _grow(selector: Selector, current: Model, pool: list[Candidate], reasons: dict[str, str],
+          best_dbic: dict[str, tuple[float, Candidate]], crit: tuple[float, float, float],
+          progress: Callable[[int], None] | None) -> Model:
+    """Forward steps, each followed by swaps and backward elimination, while an addition is supported."""
+    for _ in range(MAX_EFFECTS):
+        if len(current.cands) >= MAX_EFFECTS:
+            break
+        scored, confounded = selector.forward(current, pool, progress)
+        for c, red in confounded:
+            reasons[c.label] = "unidentifiable with the PIGEs: " + "; ".join(red.removed)
+        for c, _, cmp in scored:
+            reasons[c.label] = (f"not supported (ΔBIC {cmp.delta_bic:.1f}, p {cmp.p_value:.2g}, "
+                                f"held-out gain {cmp.heldout_gain:.1%})")
+            if cmp.delta_bic < best_dbic.get(c.key, (math.inf, c))[0]:
+                best_dbic[c.key] = (cmp.delta_bic, c)
+        if not scored or not scored[0][2].supported(*crit):
+            break
+        current = selector.swap(scored[0][1], pool)
+        current = selector.backward(current, *crit)
+    return current
+
+
 def select(selector: Selector, pool: list[Candidate], *, delta_bic_max: float, p_max: float, min_gain: float,
-           progress: Callable[[int], None] | None = None) -> tuple[Model, dict[str, str]]:
-    """Forward + swap + backward selection (module docstring).
+           progress: Callable[[int], None] | None = None, refine: Callable[[Selector, Model], Model] | None = None
+           ) -> tuple[Model, dict[str, str]]:
+    """Forward + swap + backward selection, then the exact best-subset check (module docstring).
+
+    ``refine`` (e.g. the interpolated τ of a thermal drift) is applied to the greedy model
+    before the exact search, so that subsets compete against its best non-linear fit: a
+    drift at a τ-grid point leaves a misfit that other effects could otherwise absorb.
 
     Returns
     -------
@@ -218,22 +308,19 @@ def select(selector: Selector, pool: list[Candidate], *, delta_bic_max: float, p
     dict of str to str
         Why each candidate that is not in the final model was left out, by candidate label.
     """
-    current = selector.model([])
+    crit = (delta_bic_max, p_max, min_gain)
     reasons: dict[str, str] = {}
-    for _ in range(MAX_EFFECTS):
-        scored, confounded = selector.forward(current, pool, progress)
-        for c, red in confounded:
-            reasons[c.label] = "unidentifiable with the PIGEs: " + "; ".join(red.removed)
-        for c, _, cmp in scored:
-            reasons[c.label] = (f"not supported (ΔBIC {cmp.delta_bic:.1f}, p {cmp.p_value:.2g}, "
-                                f"held-out gain {cmp.heldout_gain:.1%})")
-        if not scored or not scored[0][2].supported(delta_bic_max, p_max, min_gain):
-            break
-        current = scored[0][1]
-        current = selector.swap(current, pool)
-        current = selector.backward(current, delta_bic_max, p_max, min_gain)
-    current = selector.swap(current, pool)
-    current = selector.backward(current, delta_bic_max, p_max, min_gain)
+    best_dbic: dict[str, tuple[float, Candidate]] = {}
+    current = _grow(selector, selector.model([]), pool, reasons, best_dbic, crit, progress)
+    current = selector.backward(selector.swap(current, pool), *crit)
+    if len(current.cands) <= BEST_SUBSET_MAX:
+        if refine is not None:
+            current = refine(selector, current)
+        exact = best_subset(selector, _screened(best_dbic, current, delta_bic_max), below=current.bic - SWAP_MARGIN,
+                            delta_bic_max=delta_bic_max, p_max=p_max, min_gain=min_gain, progress=progress)
+        if exact is not None:  # a better combination than the greedy path found
+            current = _grow(selector, exact, pool, reasons, best_dbic, crit, progress)
+            current = selector.backward(selector.swap(current, pool), *crit)
     for c in current.cands:
         reasons.pop(c.label, None)
     return current, reasons

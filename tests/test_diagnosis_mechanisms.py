@@ -123,8 +123,8 @@ def test_harmonics_the_data_cannot_separate_are_reported_as_alternatives() -> No
 
     for seed in (1, 7):
         e = effect("wobble_B", np.random.default_rng(seed), 2)
-        sim = simulate(TABLE_HEAD, trajectory(TABLE_HEAD, "tilt"), pige=random_pige(TABLE_HEAD, seed), effects=[e],
-                       noise_um=0.25, seed=seed, ball_mm=BALL, tool_mm=TOOL)
+        sim = simulate(TABLE_HEAD, trajectory(TABLE_HEAD, "tilt-short"), pige=random_pige(TABLE_HEAD, seed),
+                       effects=[e], noise_um=0.25, seed=seed, ball_mm=BALL, tool_mm=TOOL)
         f = diagnose(sim.measurement).findings[0]
         assert f.effect == "wobble_B"
         if f.options["harmonic"] != 2:
