@@ -27,8 +27,12 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterable
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field, replace
+from itertools import chain, repeat
 from typing import NoReturn
+
+import numpy as np
 
 from pige_sym.errors import NCProgramError
 from pige_sym.nc.dialects import Dialect
@@ -119,6 +123,8 @@ class Interpreter:
         self._fast = fast
         self._simple_rx = _SIMPLE_SIEMENS if dialect.siemens else _SIMPLE_ISO
         self._simple_codes: dict[str, object] = {}
+        self._plain_rx = plain_pattern(self.axes, dialect) if fast else None
+        self._plain_words_rx = plain_pattern(self.axes, dialect, spans=True)
 
     # -- public -------------------------------------------------------------------------
     def feed(self, line_no: int, text: str, ending: str) -> Block:
@@ -148,12 +154,102 @@ class Interpreter:
         return block
 
     def run(self, lines: Iterable[str], first_line: int = 1) -> list[Block]:
-        """Interpret lines that keep their endings (``str.splitlines(keepends=True)``)."""
-        out = []
-        for i, raw in enumerate(lines, start=first_line):
-            body = raw.rstrip("\r\n")
-            out.append(self.feed(i, body, raw[len(body):]))
+        """Interpret lines that keep their endings (``str.splitlines(keepends=True)``).
+
+        Runs of plain blocks (:func:`plain_pattern`) in a linear motion mode are read in one batch
+        (:meth:`_plain_run`: same blocks as line by line, which the property tests check).
+        """
+        raws = list(lines)
+        texts = [raw.rstrip("\r\n") for raw in raws]
+        endings = [raw[len(t):] for raw, t in zip(raws, texts, strict=True)]
+        n = len(texts)
+        matches = list(map(self._plain_rx.fullmatch, texts)) if self._plain_rx is not None else [None] * n
+        out: list[Block] = []
+        i = 0
+        while i < n:
+            if matches[i] is not None and not self.state.cycle and self.state.motion in _LINEAR:
+                j = i + 1
+                while j < n and matches[j] is not None:
+                    j += 1
+                done = self._plain_run(first_line + i, texts[i:j], endings[i:j], matches[i:j])  # type: ignore[arg-type]
+                out += done
+                i += len(done)
+                if done:
+                    continue
+            out.append(self.feed(first_line + i, texts[i], endings[i]))
+            i += 1
         return out
+
+    def _plain_run(self, first: int, texts: list[str], endings: list[str],
+                   matches: list[re.Match[str]]) -> list[Block]:
+        """Blocks of consecutive plain lines, read at once (motion G0/G1, no cycle: :meth:`run`).
+
+        Stops before a line whose value the full path would refuse (absurd, or an ISO integer), so that
+        line gets the full path and its message.
+        """
+        k = len(self.axes)
+        groups = list(map(re.Match.groups, matches, repeat("nan", len(matches))))
+        table = np.array(list(map(float, chain.from_iterable(groups))), dtype=float).reshape(-1, k + 1)
+        values = table[:, 1:]
+        bad = np.abs(values) > MAX_ABS_VALUE
+        if self.dialect.decimal_point:
+            bad |= np.array([[v != "nan" and "." not in v for v in g[1:]] for g in groups], dtype=bool) & (values != 0)
+        rows = int(np.argmax(bad.any(axis=1))) if bad.any() else len(texts)
+        if rows == 0:
+            return []
+        values, motion = values[:rows], table[:rows, 0]
+        values[:, :3] *= self.state.unit_mm
+        present = ~np.isnan(values)
+        start = np.array([np.nan if p is None else p for p in self.pos], dtype=float)
+        after = _track(values, present, start, self.state.incremental)
+        states = self._motion_states(motion)
+        return self._batch_blocks(first, texts[:rows], endings[:rows], states, present, after)
+
+    def _motion_states(self, motion: np.ndarray) -> list[ModalState]:
+        """The modal state of each plain block (after its own G0/G1: ``motion`` 0, 1 or NaN); sets the last."""
+        st = self.state
+        by_code = {0.0: st if st.motion == "G0" else replace(st, motion="G0"),
+                   1.0: st if st.motion == "G1" else replace(st, motion="G1")}
+        states = []
+        current = st
+        for g in motion.tolist():
+            if g == g:
+                current = by_code[g]
+            states.append(current)
+        self.state = current
+        return states
+
+    def _batch_blocks(self, first: int, texts: list[str], endings: list[str], states: list[ModalState],
+                      present: np.ndarray, after: np.ndarray) -> list[Block]:
+        """The blocks of a plain run, with the reasons :meth:`_why_not` gives, and the position after it."""
+        n, k = present.shape
+        st = states[0]  # the run changes only the motion mode
+        inc = st.incremental
+        moves = present.any(axis=1)
+        unknown = np.isnan(after)
+        rows_after = after.tolist()
+        for r in np.flatnonzero(unknown.any(axis=1)).tolist():
+            rows_after[r] = [None if u else x for x, u in zip(rows_after[r], unknown[r].tolist(), strict=True)]
+        after_t = list(map(tuple, rows_after))
+        before_t = [tuple(self.pos), *after_t[:-1]]
+        cause = st.lost or st.locked or st.frame or ("cutter radius compensation active" if st.cutter_comp else "")
+        reasons = [""] * n
+        if cause:
+            reasons = [cause] * n
+        else:
+            before_unknown = np.concatenate(([None in before_t[0]], unknown[:-1].any(axis=1)))
+            partial = np.full(n, inc) | (present.sum(axis=1) != k)
+            for r in np.flatnonzero(moves & (unknown.any(axis=1) | (before_unknown & partial))).tolist():
+                missing = [a for a, v in zip(self.axes, after_t[r], strict=True) if v is None]
+                reasons[r] = (f"pose not known ({', '.join(missing)} not programmed yet)" if missing
+                              else "pose before the block not known")
+        kinds = ["move" if m else "" for m in moves.tolist()]
+        incs = [frozenset()] * n
+        if inc:
+            incs = [frozenset(a for a, p in zip(self.axes, row, strict=True) if p) for row in present.tolist()]
+        self.pos = list(after_t[-1])
+        return list(map(Block, range(first, first + n), texts, endings, [[] for _ in range(n)], states, before_t,
+                        after_t, repeat(self.axes), repeat(None), repeat(self._plain_words_rx), incs, kinds, reasons))
 
     # -- blocks -------------------------------------------------------------------------
     def _simple(self, line_no: int, lex_text: str, text: str, ending: str,
@@ -459,7 +555,7 @@ class Interpreter:
                               f"({tok.key}{tok.value:g}.) so its meaning is unambiguous")
         raise self._error(block.line_no, f"{tok.text.strip()!r}: value out of any machine's range")
 
-    def _why_not(self, block: Block, new: list[float | None], inc_axes: set[str],
+    def _why_not(self, block: Block, new: list[float | None], inc_axes: AbstractSet[str],
                  axis_words: dict[str, Token]) -> str:
         st = self.state
         for cause in (st.lost, st.locked, st.frame):
@@ -482,6 +578,44 @@ class Interpreter:
 
     def _error(self, line_no: int, problem: str) -> NCProgramError:
         return NCProgramError(self.path, line_no, problem)
+
+
+def plain_pattern(axes: tuple[str, ...], dialect: Dialect, *, spans: bool = False) -> re.Pattern[str] | None:
+    """The regex of a *plain* block: ``[N…] [G0|G1] [axis words in machine order] [F…] [; comment]``.
+
+    Every word must end at a boundary at least as strict as the lexer's (840D: a space, ``;`` or the
+    end of the line; ISO: no exponent, point or digit).  Group 1 holds the motion code's digits, then
+    each axis has one group, its number (``spans=True``: two, its word and its number).  None when the
+    dialect gives G0/G1 another meaning (``--rtcp-on G1``) or an axis name is not one letter.
+    """
+    if dialect.action("G0") != "motion:G0" or dialect.action("G1") != "motion:G1" or \
+            not all(len(a) == 1 and "A" <= a <= "Z" for a in axes):
+        return None
+    end = r"(?=[ \t;]|$)" if dialect.siemens else r"(?![eE.\d])"
+    word = r"(?:[ \t]*({a}[ \t]*({num})){end})?" if spans else r"(?:[ \t]*{a}[ \t]*({num}){end})?"
+    parts = [rf"[ \t]*(?:N[ \t]*{_NUM}{end})?", rf"(?:[ \t]*G[ \t]*(0*[01]){end})?"]
+    parts += [word.format(a=a, num=_NUM, end=end) for a in axes]
+    parts.append(rf"(?:[ \t]*F[ \t]*{_NUM}{end})?[ \t]*(?:;.*)?")
+    return re.compile("".join(parts), re.IGNORECASE)
+
+
+def _track(values: np.ndarray, present: np.ndarray, start: np.ndarray, incremental: bool) -> np.ndarray:
+    """Positions after each block of a plain run, shape=(n, k) [mm, deg] (NaN: unknown).
+
+    ``values`` (n, k) are the words in mm/deg (NaN where ``present`` is False), ``start`` (k,) the
+    position before the run.  Absolute words set their axis; incremental words add, in order (the
+    same floating-point sums as block by block: ``np.add.accumulate`` adds left to right).
+    """
+    n, k = values.shape
+    if not incremental:
+        last = np.maximum.accumulate(np.where(present, np.arange(n)[:, None], -1), axis=0)
+        taken = np.take_along_axis(values, np.maximum(last, 0), axis=0)
+        return np.where(last >= 0, taken, start)
+    out = np.empty((n, k))
+    for j in range(k):
+        acc = np.add.accumulate(np.concatenate(([start[j]], values[present[:, j], j])))
+        out[:, j] = acc[np.cumsum(present[:, j])]
+    return out
 
 
 def split_lines(text: str) -> list[str]:

@@ -203,3 +203,22 @@ def word_spans(line: str, words: dict[str, Token]) -> dict[str, tuple[int, int, 
         if len(out) < len(words):
             raise ValueError(f"cannot locate the axis words of {line!r}")
     return out
+
+
+def plain_words(line: str, axes: tuple[str, ...], pattern: re.Pattern[str]) -> dict[str, Token]:
+    """The axis words of a plain block, with their offsets, by axis letter.
+
+    ``pattern`` is :func:`pige_sym.nc.interpreter.plain_pattern` with ``spans=True`` for ``axes``
+    (group 1 the motion code, then per axis its word and its number).
+    """
+    m = pattern.fullmatch(line)
+    if m is None:
+        raise ValueError(f"not a plain block: {line!r}")
+    regs = m.regs
+    out: dict[str, Token] = {}
+    for i, axis in enumerate(axes):
+        ws, we = regs[2 * i + 2]
+        if ws >= 0:
+            vs, ve = regs[2 * i + 3]
+            out[axis] = Token("word", line[ws:we], ws, we, axis, float(line[vs:ve]), vs, ve)
+    return out
