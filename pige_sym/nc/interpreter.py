@@ -235,7 +235,7 @@ class Interpreter:
         cause = st.lost or st.locked or st.frame or ("cutter radius compensation active" if st.cutter_comp else "")
         reasons = [""] * n
         if cause:
-            reasons = [cause] * n
+            reasons = [cause if m else "" for m in moves.tolist()]
         else:
             before_unknown = np.concatenate(([None in before_t[0]], unknown[:-1].any(axis=1)))
             partial = np.full(n, inc) | (present.sum(axis=1) != k)

@@ -22,15 +22,17 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from pige_sym.nc.interpreter import Program
 from pige_sym.nc.lexer import word_spans
-from pige_sym.nc.program import format_number
-from pige_sym.nc.state import Block
+from pige_sym.nc.program import format_number, format_numbers
+from pige_sym.nc.state import MM_PER_INCH, Block
 
 _LEAD = re.compile(r"^\ufeff?\s*(?:%|O\d+|;\s*\$PATH)", re.IGNORECASE)
 
 
-@dataclass
+@dataclass(slots=True)
 class WordChange:
     """One word of one block: as written and as rewritten (``old`` empty for an added word)."""
 
@@ -96,10 +98,17 @@ def rewrite_program(program: Program, targets: dict[int, tuple[float, ...]], *,
     pieces: list[str] = []
     changed: list[RewrittenBlock] = []
     skipped: dict[int, str] = {}
+    ready = _rewrite_plain(program, targets, dialect.decimal_point)
     for block in program.blocks:
         text = block.text
         target = targets.get(block.line_no)
-        if target is not None:
+        done = ready.get(block.line_no) if target is not None else None
+        if done is not None:
+            if done[0] != text:
+                text = done[0]
+                changed.append(RewrittenBlock(block.line_no, block.line_no, block.text, text, done[1]))
+            offset = done[2]
+        elif target is not None:
             out_pos = [None if b is None or o is None else b + o for b, o in zip(block.before, offset, strict=True)]
             new = _rewrite_block(block, target, out_pos, dialect.decimal_point)
             if new is None:
@@ -123,6 +132,66 @@ def rewrite_program(program: Program, targets: dict[int, tuple[float, ...]], *,
         for c in changed:
             c.line_out = c.line_in + n_head if c.line_in > at else c.line_in
     return Rewrite("".join(pieces), changed, n_head, skipped)
+
+
+def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
+                   point: bool) -> dict[int, tuple[str, list[WordChange], list[float | None]]]:
+    """:func:`_rewrite_block` for every target block that is plain and programs every axis absolutely, at once.
+
+    Such a block does not depend on where the output program stands before it, so all are done
+    together: numbers formatted in one call (:func:`format_numbers`), compared as floats with numpy.
+    Returns per line the new text, its word changes and the offsets (output − input) after it.
+    """
+    axes = program.axes
+    k = len(axes)
+    rows = [b for b in program.blocks if b.plain_ is not None and b.line_no in targets and not b.state.incremental
+            and b.kind == "move"]
+    if not rows:
+        return {}
+    found = list(map(re.Pattern.fullmatch, [b.plain_ for b in rows], [b.text for b in rows]))  # type: ignore[misc]
+    groups = list(map(re.Match.groups, found))  # type: ignore[arg-type]
+    keep = [r for r, g in enumerate(groups) if None not in g[2::2]]
+    if not keep:
+        return {}
+    rows, found, groups = [rows[r] for r in keep], [found[r] for r in keep], [groups[r] for r in keep]
+    inch = np.array([b.state.inch for b in rows], dtype=bool)
+    factor = np.where(inch[:, None] & (np.arange(k) < 3), MM_PER_INCH, 1.0)
+    decimals = np.where(inch[:, None] & (np.arange(k) < 3), 5, 4)
+    want = np.array([targets[b.line_no] for b in rows], dtype=float) / factor
+    digits = format_numbers(want.ravel(), decimals.ravel(), point=point)
+    old = np.array(list(map(float, [v for g in groups for v in g[2::2]])))
+    new = np.array(list(map(float, digits)))
+    same = new == old
+    written = np.where(same, old, new).reshape(-1, k)
+    offsets = (written * factor - np.array([b.after for b in rows], dtype=float)).tolist()
+    out = {}
+    same_rows = same.reshape(-1, k).tolist()
+    for r, (b, m) in enumerate(zip(rows, found, strict=True)):
+        row_same = same_rows[r]
+        if all(row_same):
+            out[b.line_no] = (b.text, [], offsets[r])
+            continue
+        out[b.line_no] = (*_splice(b, m, [None if s else digits[r * k + i] for i, s in enumerate(row_same)]),
+                          offsets[r])
+    return out
+
+
+def _splice(block: Block, m: re.Match[str], new_digits: list[str | None]) -> tuple[str, list[WordChange]]:
+    """The plain block's text (matched as ``m``) with axis ``i``'s digits replaced by ``new_digits[i]`` (None: kept)."""
+    line = block.text
+    regs = m.regs
+    pieces = []
+    words = []
+    at = 0
+    for i, digits in enumerate(new_digits):
+        if digits is None:
+            continue
+        (start, end), (v0, v1) = regs[2 * i + 2], regs[2 * i + 3]
+        pieces += (line[at:v0], digits)
+        at = v1
+        words.append(WordChange(block.axes[i], line[start:end], line[start:v0] + digits + line[v1:end]))
+    pieces.append(line[at:])
+    return "".join(pieces), words
 
 
 def _carry(block: Block, offset: list[float | None]) -> list[float | None]:
