@@ -302,5 +302,4 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
     limited = np.asarray(poses.orientation_limited)[rows].tolist()
     cols = zip(rw.changed, rtcp.tolist(), tp0.tolist(), tp1.tolist(), or0.tolist(), or1.tolist(), d_mm, d_deg,
                limited, strict=True)
-    return [BlockChange(c.line_in, c.line_out, [{"axis": w.axis, "old": w.old, "new": w.new} for w in c.words],
-                        *rest) for c, *rest in cols]
+    return [BlockChange(c.line_in, c.line_out, c.words, *rest) for c, *rest in cols]

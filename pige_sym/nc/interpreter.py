@@ -124,7 +124,7 @@ class Interpreter:
         self._simple_rx = _SIMPLE_SIEMENS if dialect.siemens else _SIMPLE_ISO
         self._simple_codes: dict[str, object] = {}
         self._plain_rx = plain_pattern(self.axes, dialect) if fast else None
-        self._plain_words_rx = plain_pattern(self.axes, dialect, spans=True)
+        self._plain_words_rx = plain_pattern(self.axes, dialect, form="spans")
 
     # -- public -------------------------------------------------------------------------
     def feed(self, line_no: int, text: str, ending: str) -> Block:
@@ -580,23 +580,32 @@ class Interpreter:
         return NCProgramError(self.path, line_no, problem)
 
 
-def plain_pattern(axes: tuple[str, ...], dialect: Dialect, *, spans: bool = False) -> re.Pattern[str] | None:
+def plain_pattern(axes: tuple[str, ...], dialect: Dialect, *, form: str = "values") -> re.Pattern[str] | None:
     """The regex of a *plain* block: ``[N…] [G0|G1] [axis words in machine order] [F…] [; comment]``.
 
     Every word must end at a boundary at least as strict as the lexer's (840D: a space, ``;`` or the
-    end of the line; ISO: no exponent, point or digit).  Group 1 holds the motion code's digits, then
-    each axis has one group, its number (``spans=True``: two, its word and its number).  None when the
-    dialect gives G0/G1 another meaning (``--rtcp-on G1``) or an axis name is not one letter.
+    end of the line; ISO: no exponent, point or digit).  Groups by ``form``:
+
+    - ``values``: the motion code's digits, then each axis' number;
+    - ``spans``: the motion code's digits, then each axis' word and number;
+    - ``segments`` (only blocks that program every axis): each axis' leading text, letter (with the
+      spaces after it) and number, then the rest of the line: the groups joined are the line.
+
+    None when the dialect gives G0/G1 another meaning (``--rtcp-on G1``) or an axis name is not one letter.
     """
     if dialect.action("G0") != "motion:G0" or dialect.action("G1") != "motion:G1" or \
             not all(len(a) == 1 and "A" <= a <= "Z" for a in axes):
         return None
     end = r"(?=[ \t;]|$)" if dialect.siemens else r"(?![eE.\d])"
-    word = r"(?:[ \t]*({a}[ \t]*({num})){end})?" if spans else r"(?:[ \t]*{a}[ \t]*({num}){end})?"
-    parts = [rf"[ \t]*(?:N[ \t]*{_NUM}{end})?", rf"(?:[ \t]*G[ \t]*(0*[01]){end})?"]
-    parts += [word.format(a=a, num=_NUM, end=end) for a in axes]
-    parts.append(rf"(?:[ \t]*F[ \t]*{_NUM}{end})?[ \t]*(?:;.*)?")
-    return re.compile("".join(parts), re.IGNORECASE)
+    head = [rf"[ \t]*(?:N[ \t]*{_NUM}{end})?", rf"(?:[ \t]*G[ \t]*(0*[01]){end})?"]
+    tail = rf"(?:[ \t]*F[ \t]*{_NUM}{end})?[ \t]*(?:;.*)?"
+    if form == "segments":
+        head[1] = head[1].replace("(0*[01])", "0*[01]")
+        words = [rf"({''.join(head) if i == 0 else ''}[ \t]*)({a}[ \t]*)({_NUM}){end}" for i, a in enumerate(axes)]
+        return re.compile("".join(words) + f"({tail})", re.IGNORECASE)
+    word = r"(?:[ \t]*({a}[ \t]*({num})){end})?" if form == "spans" else r"(?:[ \t]*{a}[ \t]*({num}){end})?"
+    parts = head + [word.format(a=a, num=_NUM, end=end) for a in axes]
+    return re.compile("".join(parts) + tail, re.IGNORECASE)
 
 
 def _track(values: np.ndarray, present: np.ndarray, start: np.ndarray, incremental: bool) -> np.ndarray:

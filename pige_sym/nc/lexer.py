@@ -208,7 +208,7 @@ def word_spans(line: str, words: dict[str, Token]) -> dict[str, tuple[int, int, 
 def plain_words(line: str, axes: tuple[str, ...], pattern: re.Pattern[str]) -> dict[str, Token]:
     """The axis words of a plain block, with their offsets, by axis letter.
 
-    ``pattern`` is :func:`pige_sym.nc.interpreter.plain_pattern` with ``spans=True`` for ``axes``
+    ``pattern`` is :func:`pige_sym.nc.interpreter.plain_pattern` with ``form="spans"`` for ``axes``
     (group 1 the motion code, then per axis its word and its number).
     """
     m = pattern.fullmatch(line)

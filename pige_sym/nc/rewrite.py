@@ -24,21 +24,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pige_sym.nc.interpreter import Program
+from pige_sym.nc.interpreter import Program, plain_pattern
 from pige_sym.nc.lexer import word_spans
 from pige_sym.nc.program import format_number, format_numbers
 from pige_sym.nc.state import MM_PER_INCH, Block
 
 _LEAD = re.compile(r"^\ufeff?\s*(?:%|O\d+|;\s*\$PATH)", re.IGNORECASE)
-
-
-@dataclass(slots=True)
-class WordChange:
-    """One word of one block: as written and as rewritten (``old`` empty for an added word)."""
-
-    axis: str
-    old: str
-    new: str
 
 
 @dataclass
@@ -50,14 +41,16 @@ class RewrittenBlock:
     line_in, line_out : int
         Line number in the input and in the output.
     text_in, text_out : str
-    words : list of WordChange
+    words : list of dict
+        ``{"axis", "old", "new"}`` per changed or added word: the word as written and as rewritten
+        (``old`` empty for an added word), as in the change report.
     """
 
     line_in: int
     line_out: int
     text_in: str
     text_out: str
-    words: list[WordChange] = field(default_factory=list)
+    words: list[dict[str, str]] = field(default_factory=list)
 
 
 @dataclass
@@ -95,32 +88,35 @@ def rewrite_program(program: Program, targets: dict[int, tuple[float, ...]], *,
     ending = next((b.ending for b in program.blocks if b.ending), "\n")
     n = len(program.axes)
     offset: list[float | None] = [0.0] * n  # output minus input position [mm, deg]
-    pieces: list[str] = []
     changed: list[RewrittenBlock] = []
     skipped: dict[int, str] = {}
-    ready = _rewrite_plain(program, targets, dialect.decimal_point)
+    ready = _rewrite_plain(program, targets)
+    texts: list[str] = []
     for block in program.blocks:
-        text = block.text
-        target = targets.get(block.line_no)
-        done = ready.get(block.line_no) if target is not None else None
+        line_no = block.line_no
+        done = ready.get(line_no)
         if done is not None:
-            if done[0] != text:
-                text = done[0]
-                changed.append(RewrittenBlock(block.line_no, block.line_no, block.text, text, done[1]))
+            if done[1]:
+                changed.append(RewrittenBlock(line_no, line_no, block.text, done[0], done[1]))
+            texts.append(done[0])
             offset = done[2]
-        elif target is not None:
+            continue
+        text = block.text
+        target = targets.get(line_no)
+        if target is not None:
             out_pos = [None if b is None or o is None else b + o for b, o in zip(block.before, offset, strict=True)]
             new = _rewrite_block(block, target, out_pos, dialect.decimal_point)
             if new is None:
-                skipped[block.line_no] = "an axis this block would need to program has no known output position"
+                skipped[line_no] = "an axis this block would need to program has no known output position"
             else:
                 if new[0] != text:
                     text = new[0]
-                    changed.append(RewrittenBlock(block.line_no, block.line_no, block.text, text, new[1]))
+                    changed.append(RewrittenBlock(line_no, line_no, block.text, text, new[1]))
                 offset = [None if a is None else w - a for w, a in zip(new[2], block.after, strict=True)]
         else:
             offset = _carry(block, offset)
-        pieces.append(text + block.ending)
+        texts.append(text)
+    pieces = list(map(str.__add__, texts, [b.ending for b in program.blocks]))
     n_head = 0
     if header and changed:
         at = header_position(program)
@@ -135,63 +131,46 @@ def rewrite_program(program: Program, targets: dict[int, tuple[float, ...]], *,
 
 
 def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
-                   point: bool) -> dict[int, tuple[str, list[WordChange], list[float | None]]]:
+                   ) -> dict[int, tuple[str, list[dict[str, str]], list[float | None]]]:
     """:func:`_rewrite_block` for every target block that is plain and programs every axis absolutely, at once.
 
     Such a block does not depend on where the output program stands before it, so all are done
-    together: numbers formatted in one call (:func:`format_numbers`), compared as floats with numpy.
-    Returns per line the new text, its word changes and the offsets (output − input) after it.
+    together: the line cut into its text and numbers (:func:`plain_pattern` ``segments``), the new
+    numbers formatted in one call (:func:`format_numbers`) and compared as floats with numpy (a number
+    whose value would not change keeps its digits).  Returns per line the new text, its word changes
+    and the offsets (output − input) after it [mm, deg].
     """
-    axes = program.axes
-    k = len(axes)
-    rows = [b for b in program.blocks if b.plain_ is not None and b.line_no in targets and not b.state.incremental
-            and b.kind == "move"]
+    axes, k = program.axes, len(program.axes)
+    pattern = plain_pattern(axes, program.dialect, form="segments")
+    rows = [b for b in program.blocks
+            if b.plain_ is not None and b.kind == "move" and not b.state.incremental and b.line_no in targets]
+    if pattern is None or not rows:
+        return {}
+    found = list(map(pattern.fullmatch, [b.text for b in rows]))
+    rows = [b for b, m in zip(rows, found, strict=True) if m is not None]
     if not rows:
         return {}
-    found = list(map(re.Pattern.fullmatch, [b.plain_ for b in rows], [b.text for b in rows]))  # type: ignore[misc]
-    groups = list(map(re.Match.groups, found))  # type: ignore[arg-type]
-    keep = [r for r, g in enumerate(groups) if None not in g[2::2]]
-    if not keep:
-        return {}
-    rows, found, groups = [rows[r] for r in keep], [found[r] for r in keep], [groups[r] for r in keep]
-    inch = np.array([b.state.inch for b in rows], dtype=bool)
-    factor = np.where(inch[:, None] & (np.arange(k) < 3), MM_PER_INCH, 1.0)
-    decimals = np.where(inch[:, None] & (np.arange(k) < 3), 5, 4)
+    table = np.array([m.groups() for m in found if m is not None], dtype=object)  # (n, 3k + 1)
+    letters, old = table[:, 1:3 * k:3], table[:, 2:3 * k:3]
+    linear = np.array([b.state.inch for b in rows], dtype=bool)[:, None] & (np.arange(k) < 3)
+    factor = np.where(linear, MM_PER_INCH, 1.0)
     want = np.array([targets[b.line_no] for b in rows], dtype=float) / factor
-    digits = format_numbers(want.ravel(), decimals.ravel(), point=point)
-    old = np.array(list(map(float, [v for g in groups for v in g[2::2]])))
-    new = np.array(list(map(float, digits)))
-    same = new == old
-    written = np.where(same, old, new).reshape(-1, k)
-    offsets = (written * factor - np.array([b.after for b in rows], dtype=float)).tolist()
-    out = {}
-    same_rows = same.reshape(-1, k).tolist()
-    for r, (b, m) in enumerate(zip(rows, found, strict=True)):
-        row_same = same_rows[r]
+    digits = np.array(format_numbers(want.ravel(), np.where(linear, 5, 4).ravel(),
+                                     point=program.dialect.decimal_point), dtype=object).reshape(-1, k)
+    old_value = np.array(list(map(float, old.ravel().tolist()))).reshape(-1, k)
+    new_value = np.array(list(map(float, digits.ravel().tolist()))).reshape(-1, k)
+    same = old_value == new_value
+    offsets = (np.where(same, old_value, new_value) * factor - np.array([b.after for b in rows], dtype=float)).tolist()
+    table[:, 2:3 * k:3] = np.where(same, old, digits)
+    old_words, new_words = (letters + old).tolist(), (letters + digits).tolist()
+    out: dict[int, tuple[str, list[dict[str, str]], list[float | None]]] = {}
+    for r, (b, row_same, cut) in enumerate(zip(rows, same.tolist(), table.tolist(), strict=True)):
         if all(row_same):
             out[b.line_no] = (b.text, [], offsets[r])
-            continue
-        out[b.line_no] = (*_splice(b, m, [None if s else digits[r * k + i] for i, s in enumerate(row_same)]),
-                          offsets[r])
+        else:
+            out[b.line_no] = ("".join(cut), [{"axis": axes[i], "old": old_words[r][i], "new": new_words[r][i]}
+                                             for i in range(k) if not row_same[i]], offsets[r])
     return out
-
-
-def _splice(block: Block, m: re.Match[str], new_digits: list[str | None]) -> tuple[str, list[WordChange]]:
-    """The plain block's text (matched as ``m``) with axis ``i``'s digits replaced by ``new_digits[i]`` (None: kept)."""
-    line = block.text
-    regs = m.regs
-    pieces = []
-    words = []
-    at = 0
-    for i, digits in enumerate(new_digits):
-        if digits is None:
-            continue
-        (start, end), (v0, v1) = regs[2 * i + 2], regs[2 * i + 3]
-        pieces += (line[at:v0], digits)
-        at = v1
-        words.append(WordChange(block.axes[i], line[start:end], line[start:v0] + digits + line[v1:end]))
-    pieces.append(line[at:])
-    return "".join(pieces), words
 
 
 def _carry(block: Block, offset: list[float | None]) -> list[float | None]:
@@ -210,7 +189,7 @@ def _carry(block: Block, offset: list[float | None]) -> list[float | None]:
 
 
 def _rewrite_block(block: Block, target: tuple[float, ...], out_pos: list[float | None],
-                   point: bool) -> tuple[str, list[WordChange], list[float]] | None:
+                   point: bool) -> tuple[str, list[dict[str, str]], list[float]] | None:
     """New text of one block, its word changes and the pose it reaches [mm, deg] (as written, rounded).
 
     None when an axis position the block needs is unknown.
@@ -218,7 +197,7 @@ def _rewrite_block(block: Block, target: tuple[float, ...], out_pos: list[float 
     line = block.text
     edits: list[tuple[int, int, str]] = []
     added: list[str] = []
-    words: list[WordChange] = []
+    words: list[dict[str, str]] = []
     reached: list[float] = []
     spans = word_spans(line, block.axis_words)
     unit = block.state.unit_mm
@@ -239,7 +218,7 @@ def _rewrite_block(block: Block, target: tuple[float, ...], out_pos: list[float 
             else:
                 start, end, v0, v1 = spans[axis]
                 edits.append((v0, v1, digits))
-                words.append(WordChange(axis, line[start:end], line[start:v0] + digits + line[v1:end]))
+                words.append({"axis": axis, "old": line[start:end], "new": line[start:v0] + digits + line[v1:end]})
             reached.append(((prev or 0.0) + written if incremental else written) * factor)
             continue
         if prev is None:
@@ -251,7 +230,7 @@ def _rewrite_block(block: Block, target: tuple[float, ...], out_pos: list[float 
         digits = format_number(want - prev if incremental else want, dec, point=point)
         reached.append((prev + float(digits) if incremental else float(digits)) * factor)
         added.append(f"{axis}{digits}")
-        words.append(WordChange(axis, "", added[-1]))
+        words.append({"axis": axis, "old": "", "new": added[-1]})
     if added:
         at = max(span[1] for span in spans.values())
         edits.append((at, at, " " + " ".join(added)))
