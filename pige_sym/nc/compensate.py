@@ -39,7 +39,7 @@ from pige_sym.nc.state import Block
 from pige_sym.nc.verify import verify
 
 
-@dataclass
+@dataclass(slots=True)
 class BlockChange:
     """One changed block of the change report.
 
@@ -191,7 +191,8 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
     chosen, passed = plan(program)
     poses = _compensated_poses(params, chosen, max_change_deg)
     _guard(chosen, poses, max_change_mm, max_change_deg, path, CompensationError)
-    targets = {b.line_no: tuple(poses.new_xyz_mm[i]) + tuple(poses.new_angles_deg[i]) for i, b in enumerate(chosen)}
+    new_poses = np.hstack([poses.new_xyz_mm, poses.new_angles_deg]).tolist() if chosen else []
+    targets = dict(zip([b.line_no for b in chosen], map(tuple, new_poses), strict=True))
     rw = rewrite_program(program, targets, header=_header(params) if header else None)
     check = verify(program, rw.text, {c.line_in for c in rw.changed}, rw.header_lines, header_position(program),
                    max_mm=max_change_mm + 1e-4, max_deg=max_change_deg + 1e-4, pass_through=pass_through,

@@ -4,6 +4,10 @@ Checks (any failure means nothing is written):
 
 - the output has the input's lines plus the header lines, in order;
 - every line the rewriter did not change is byte-identical (line ending included);
+- every changed line is the input line with only its axis words' numbers changed and, perhaps, words
+  appended (a space and the word each): its text with those numbers taken out (and the added words)
+  is byte for byte the input's with its axis numbers taken out, so a dropped word, a changed F or N
+  word, comment or space is caught;
 - every block is of the same kind (no move became something else) in the same modal state
   (units, distance mode, RTCP, work offset, frame);
 - at every block the output pose and the original pose are both known or both unknown, and
@@ -14,12 +18,14 @@ Checks (any failure means nothing is written):
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from pige_sym.nc.interpreter import Program, interpret
-from pige_sym.nc.state import MM_PER_INCH, Block
+from pige_sym.nc.interpreter import Program, interpret, plain_pattern
+from pige_sym.nc.lexer import word_spans
+from pige_sym.nc.state import MM_PER_INCH, Block, ModalState
 
 
 @dataclass
@@ -54,21 +60,85 @@ def verify(original: Program, out_text: str, changed_lines: set[int], header_lin
     """
     out = interpret(out_text, original.dialect, original.rotary_axes, path=f"{original.path} (read back)",
                     pass_through=pass_through)
-    problems: list[str] = []
     blocks = out.blocks[:header_at] + out.blocks[header_at + header_lines:] if header_lines else out.blocks
     if len(blocks) != len(original.blocks):
         return Verification(False, [f"the output has {len(out.blocks)} lines, expected {len(original.blocks)} + "
                                     f"{header_lines} header lines"])
-    for a, b in zip(original.blocks, blocks, strict=True):
-        where = f"line {a.line_no}"
-        if a.line_no not in changed_lines and (a.text != b.text or a.ending != b.ending):
-            problems.append(f"{where}: changed although it should be byte-identical")
-        if a.kind != b.kind or (a.state is not b.state and _modal(a) != _modal(b)):
-            problems.append(f"{where}: reads back as a different kind of block or modal state")
-        if targets and a.line_no in changed_lines:
-            problems += _missed(b, targets[a.line_no], where)
+    problems: list[str] = []
+    pairs = [(a, b) for a, b in zip(original.blocks, blocks, strict=True) if a.text != b.text or a.ending != b.ending]
+    problems += [f"line {a.line_no}: changed although it should be byte-identical"
+                 for a, _ in pairs if a.line_no not in changed_lines]
+    problems += _skeletons([(a, b) for a, b in pairs if a.line_no in changed_lines], original)
+    problems += _kinds_and_states(original.blocks, blocks)
+    if targets and changed_lines:
+        problems += _missed([(a, b) for a, b in zip(original.blocks, blocks, strict=True) if a.line_no in changed_lines],
+                            targets)
     worst_mm, worst_deg = _compare_poses(original, blocks, max_mm, max_deg, problems)
     return Verification(not problems, problems, worst_mm, worst_deg, out)
+
+
+def _kinds_and_states(original: list[Block], blocks: list[Block]) -> list[str]:
+    """Lines that read back as another kind of block or in another modal state (:func:`_modal`)."""
+    modal: dict[int, tuple] = {}
+    for b in (*original, *blocks):
+        if id(b.state) not in modal:
+            modal[id(b.state)] = _modal(b.state)
+    kinds_a, kinds_b = [b.kind for b in original], [b.kind for b in blocks]
+    modal_a, modal_b = [modal[id(b.state)] for b in original], [modal[id(b.state)] for b in blocks]
+    if kinds_a == kinds_b and modal_a == modal_b:
+        return []
+    return [f"line {a.line_no}: reads back as a different kind of block or modal state"
+            for a, ka, kb, ma, mb in zip(original, kinds_a, kinds_b, modal_a, modal_b, strict=True)
+            if ka != kb or ma != mb]
+
+
+def _skeletons(pairs: list[tuple[Block, Block]], original: Program) -> list[str]:
+    """Changed lines whose text differs from the input's anywhere but in axis numbers and added words.
+
+    Lines that program every axis plainly are compared at once (one substitution over all of them,
+    :func:`pige_sym.nc.interpreter.plain_pattern` ``segments``); the others word by word.
+    """
+    if not pairs:
+        return []
+    k = len(original.axes)
+    pattern = plain_pattern(original.axes, original.dialect, form="segments")
+    sk_a = sk_b = [""] * len(pairs)
+    if pattern is not None:
+        template = "\x00" + "".join(f"\\{3 * i + 1}\\{3 * i + 2}#" for i in range(k)) + f"\\{3 * k + 1}"
+        multi = re.compile(f"^(?:{pattern.pattern})$", re.IGNORECASE | re.MULTILINE)
+        sk_a = multi.sub(template, "\n".join(a.text for a, _ in pairs)).split("\n")
+        sk_b = multi.sub(template, "\n".join(b.text for _, b in pairs)).split("\n")
+    problems = []
+    for (a, b), x, y in zip(pairs, sk_a, sk_b, strict=True):
+        if x.startswith("\x00") and y.startswith("\x00") and "\x00" not in a.text:
+            same = x == y
+        else:
+            x, y = _word_skeleton(a, set()), _word_skeleton(b, set(b.axis_words) - set(a.axis_words))
+            same = x is not None and x == y
+        if not same:
+            problems.append(f"line {a.line_no}: the rewritten line differs from the input in more than its axis "
+                            "numbers (a word dropped or another character changed)")
+    return problems
+
+
+def _word_skeleton(block: Block, added: set[str]) -> str | None:
+    """The line with its axis numbers replaced by ``#`` and the ``added`` words (with the space before) cut out."""
+    line = block.text
+    try:
+        spans = word_spans(line, block.axis_words)
+    except ValueError:
+        return None
+    pieces, at = [], 0
+    for axis, (start, end, v0, v1) in sorted(spans.items(), key=lambda kv: kv[1][0]):
+        if axis in added:
+            if line[start - 1:start] != " ":
+                return None
+            pieces.append(line[at:start - 1])
+        else:
+            pieces += (line[at:v0], "#")
+        at = v1 if axis not in added else end
+    pieces.append(line[at:])
+    return "".join(pieces)
 
 
 def _compare_poses(original: Program, blocks: list[Block], max_mm: float, max_deg: float,
@@ -89,15 +159,23 @@ def _compare_poses(original: Program, blocks: list[Block], max_mm: float, max_de
     return float(diff[:, :3].max(initial=0.0)), float(diff[:, 3:].max(initial=0.0))
 
 
-def _missed(block: Block, target: tuple[float, ...], where: str) -> list[str]:
+def _missed(pairs: list[tuple[Block, Block]], targets: dict[int, tuple[float, ...]]) -> list[str]:
+    """Changed blocks (input, read back) that do not reach their target to within the rounding of their words."""
+    if not pairs:
+        return []
+    got = np.array([b.after for _, b in pairs], dtype=float).reshape(len(pairs), -1)
+    want = np.array([targets[a.line_no] for a, _ in pairs], dtype=float).reshape(got.shape)
+    inch = np.array([b.state.inch for _, b in pairs], dtype=bool)[:, None] & (np.arange(got.shape[1]) < 3)
+    tol = np.where(inch, 0.51e-5 * MM_PER_INCH, 0.51e-4) + 1e-9
+    bad = np.isnan(got) | ~(np.abs(got - want) <= tol)
     out = []
-    for i, (got, want) in enumerate(zip(block.after, target, strict=True)):
-        tol = (0.51e-5 * MM_PER_INCH if i < 3 and block.state.inch else 0.51e-4) + 1e-9
-        if got is None or abs(got - want) > tol:
-            out.append(f"{where}: the rewritten block reaches {block.axes[i]}={got} instead of {want:.6f}")
+    for r, i in zip(*np.nonzero(bad), strict=True):
+        a, b = pairs[r]
+        out.append(f"line {a.line_no}: the rewritten block reaches {b.axes[i]}={b.after[i]} instead of "
+                   f"{want[r, i]:.6f}")
     return out
 
 
-def _modal(block: Block) -> tuple:
-    st = block.state
+def _modal(st: ModalState) -> tuple:
+    """What must read back the same: distance mode, units, RTCP, work offset, frame, motion mode."""
     return (st.incremental, st.inch, st.rtcp, st.offset, bool(st.frame), st.motion)
