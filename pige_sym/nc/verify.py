@@ -18,8 +18,8 @@ Checks (any failure means nothing is written):
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
+from operator import itemgetter
 
 import numpy as np
 
@@ -95,26 +95,26 @@ def _kinds_and_states(original: list[Block], blocks: list[Block]) -> list[str]:
 def _skeletons(pairs: list[tuple[Block, Block]], original: Program) -> list[str]:
     """Changed lines whose text differs from the input's anywhere but in axis numbers and added words.
 
-    Lines that program every axis plainly are compared at once (one substitution over all of them,
-    :func:`pige_sym.nc.interpreter.plain_pattern` ``segments``); the others word by word.
+    Lines that program every axis plainly are compared by the text around their numbers
+    (:func:`pige_sym.nc.interpreter.plain_pattern` ``segments``); the others word by word.
     """
     if not pairs:
         return []
     k = len(original.axes)
     pattern = plain_pattern(original.axes, original.dialect, form="segments")
-    sk_a = sk_b = [""] * len(pairs)
+    sk_a: list[tuple | None] = [None] * len(pairs)
+    sk_b = sk_a
     if pattern is not None:
-        template = "\x00" + "".join(f"\\{3 * i + 1}\\{3 * i + 2}#" for i in range(k)) + f"\\{3 * k + 1}"
-        multi = re.compile(f"^(?:{pattern.pattern})$", re.IGNORECASE | re.MULTILINE)
-        sk_a = multi.sub(template, "\n".join(a.text for a, _ in pairs)).split("\n")
-        sk_b = multi.sub(template, "\n".join(b.text for _, b in pairs)).split("\n")
+        text_only = itemgetter(*[j for j in range(3 * k + 1) if j % 3 != 2])  # every group but the numbers
+        sk_a = [None if m is None else text_only(m.groups()) for m in map(pattern.fullmatch, [a.text for a, _ in pairs])]
+        sk_b = [None if m is None else text_only(m.groups()) for m in map(pattern.fullmatch, [b.text for _, b in pairs])]
     problems = []
     for (a, b), x, y in zip(pairs, sk_a, sk_b, strict=True):
-        if x.startswith("\x00") and y.startswith("\x00") and "\x00" not in a.text:
+        if x is not None and y is not None:
             same = x == y
         else:
-            x, y = _word_skeleton(a, set()), _word_skeleton(b, set(b.axis_words) - set(a.axis_words))
-            same = x is not None and x == y
+            wa, wb = _word_skeleton(a, set()), _word_skeleton(b, set(b.axis_words) - set(a.axis_words))
+            same = wa is not None and wa == wb
         if not same:
             problems.append(f"line {a.line_no}: the rewritten line differs from the input in more than its axis "
                             "numbers (a word dropped or another character changed)")
