@@ -30,6 +30,7 @@ from collections.abc import Iterable
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field, replace
 from itertools import chain, repeat
+from operator import itemgetter
 from typing import NoReturn
 
 import numpy as np
@@ -124,7 +125,7 @@ class Interpreter:
         self._simple_rx = _SIMPLE_SIEMENS if dialect.siemens else _SIMPLE_ISO
         self._simple_codes: dict[str, object] = {}
         self._plain_rx = plain_pattern(self.axes, dialect) if fast else None
-        self._plain_words_rx = plain_pattern(self.axes, dialect, form="spans")
+        self._plain_numbers = itemgetter(1, *plain_groups(len(self.axes))[0])
 
     # -- public -------------------------------------------------------------------------
     def feed(self, line_no: int, text: str, ending: str) -> Block:
@@ -188,7 +189,7 @@ class Interpreter:
         line gets the full path and its message.
         """
         k = len(self.axes)
-        groups = list(map(re.Match.groups, matches, repeat("nan", len(matches))))
+        groups = list(map(self._plain_numbers, map(re.Match.groups, matches, repeat("nan", len(matches)))))
         table = np.array(list(map(float, chain.from_iterable(groups))), dtype=float).reshape(-1, k + 1)
         values = table[:, 1:]
         bad = np.abs(values) > MAX_ABS_VALUE
@@ -203,7 +204,7 @@ class Interpreter:
         start = np.array([np.nan if p is None else p for p in self.pos], dtype=float)
         after = _track(values, present, start, self.state.incremental)
         states = self._motion_states(motion)
-        return self._batch_blocks(first, texts[:rows], endings[:rows], states, present, after)
+        return self._batch_blocks(first, texts[:rows], endings[:rows], states, present, after, matches[:rows])
 
     def _motion_states(self, motion: np.ndarray) -> list[ModalState]:
         """The modal state of each plain block (after its own G0/G1: ``motion`` 0, 1 or NaN); sets the last."""
@@ -220,7 +221,7 @@ class Interpreter:
         return states
 
     def _batch_blocks(self, first: int, texts: list[str], endings: list[str], states: list[ModalState],
-                      present: np.ndarray, after: np.ndarray) -> list[Block]:
+                      present: np.ndarray, after: np.ndarray, matches: list[re.Match[str]]) -> list[Block]:
         """The blocks of a plain run, with the reasons :meth:`_why_not` gives, and the position after it."""
         n, k = present.shape
         st = states[0]  # the run changes only the motion mode
@@ -249,7 +250,7 @@ class Interpreter:
             incs = [frozenset(a for a, p in zip(self.axes, row, strict=True) if p) for row in present.tolist()]
         self.pos = list(after_t[-1])
         return list(map(Block, range(first, first + n), texts, endings, [[] for _ in range(n)], states, before_t,
-                        after_t, repeat(self.axes), repeat(None), repeat(self._plain_words_rx), incs, kinds, reasons))
+                        after_t, repeat(self.axes), repeat(None), matches, incs, kinds, reasons))
 
     # -- blocks -------------------------------------------------------------------------
     def _simple(self, line_no: int, lex_text: str, text: str, ending: str,
@@ -580,32 +581,32 @@ class Interpreter:
         return NCProgramError(self.path, line_no, problem)
 
 
-def plain_pattern(axes: tuple[str, ...], dialect: Dialect, *, form: str = "values") -> re.Pattern[str] | None:
+def plain_pattern(axes: tuple[str, ...], dialect: Dialect) -> re.Pattern[str] | None:
     """The regex of a *plain* block: ``[N…] [G0|G1] [axis words in machine order] [F…] [; comment]``.
 
     Every word must end at a boundary at least as strict as the lexer's (840D: a space, ``;`` or the
-    end of the line; ISO: no exponent, point or digit).  Groups by ``form``:
-
-    - ``values``: the motion code's digits, then each axis' number;
-    - ``spans``: the motion code's digits, then each axis' word and number;
-    - ``segments`` (only blocks that program every axis): each axis' leading text, letter (with the
-      spaces after it) and number, then the rest of the line: the groups joined are the line.
-
+    end of the line; ISO: no exponent, point or digit).  The groups cut the line into pieces that,
+    joined, are the line (:func:`plain_groups` tells which is which): the head (``N…``, ``G…``; it
+    holds group 2, the motion code's digits), then per axis the spaces before it, its letter (with the
+    spaces after it) and its number (None when the block does not program it), then the rest.
     None when the dialect gives G0/G1 another meaning (``--rtcp-on G1``) or an axis name is not one letter.
     """
     if dialect.action("G0") != "motion:G0" or dialect.action("G1") != "motion:G1" or \
             not all(len(a) == 1 and "A" <= a <= "Z" for a in axes):
         return None
     end = r"(?=[ \t;]|$)" if dialect.siemens else r"(?![eE.\d])"
-    head = [rf"[ \t]*(?:N[ \t]*{_NUM}{end})?", rf"(?:[ \t]*G[ \t]*(0*[01]){end})?"]
-    tail = rf"(?:[ \t]*F[ \t]*{_NUM}{end})?[ \t]*(?:;.*)?"
-    if form == "segments":
-        head[1] = head[1].replace("(0*[01])", "0*[01]")
-        words = [rf"({''.join(head) if i == 0 else ''}[ \t]*)({a}[ \t]*)({_NUM}){end}" for i, a in enumerate(axes)]
-        return re.compile("".join(words) + f"({tail})", re.IGNORECASE)
-    word = r"(?:[ \t]*({a}[ \t]*({num})){end})?" if form == "spans" else r"(?:[ \t]*{a}[ \t]*({num}){end})?"
-    parts = head + [word.format(a=a, num=_NUM, end=end) for a in axes]
-    return re.compile("".join(parts) + tail, re.IGNORECASE)
+    head = rf"([ \t]*(?:N[ \t]*{_NUM}{end})?(?:[ \t]*G[ \t]*(0*[01]){end})?)"
+    words = "".join(rf"(?:([ \t]*)({a}[ \t]*)({_NUM}){end})?" for a in axes)
+    return re.compile(head + words + rf"((?:[ \t]*F[ \t]*{_NUM}{end})?[ \t]*(?:;.*)?)", re.IGNORECASE)
+
+
+def plain_groups(k: int) -> tuple[list[int], list[int]]:
+    """Indices in ``match.groups()`` of a plain block with ``k`` axes: its numbers, and all pieces in line order.
+
+    The pieces (head, then per axis the spaces before it, its letter and its number, then the rest)
+    joined are the line; the number of axis ``i`` is piece ``3i + 3``, its letter piece ``3i + 2``.
+    """
+    return [3 * i + 4 for i in range(k)], [0, *range(2, 3 * k + 3)]
 
 
 def _track(values: np.ndarray, present: np.ndarray, start: np.ndarray, incremental: bool) -> np.ndarray:

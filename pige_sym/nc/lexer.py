@@ -205,20 +205,17 @@ def word_spans(line: str, words: dict[str, Token]) -> dict[str, tuple[int, int, 
     return out
 
 
-def plain_words(line: str, axes: tuple[str, ...], pattern: re.Pattern[str]) -> dict[str, Token]:
+def plain_words(axes: tuple[str, ...], match: re.Match[str]) -> dict[str, Token]:
     """The axis words of a plain block, with their offsets, by axis letter.
 
-    ``pattern`` is :func:`pige_sym.nc.interpreter.plain_pattern` with ``form="spans"`` for ``axes``
-    (group 1 the motion code, then per axis its word and its number).
+    ``match`` is the block's line matched by :func:`pige_sym.nc.interpreter.plain_pattern` for ``axes``
+    (per axis ``i``: group ``3i + 4`` its letter, ``3i + 5`` its number).
     """
-    m = pattern.fullmatch(line)
-    if m is None:
-        raise ValueError(f"not a plain block: {line!r}")
-    regs = m.regs
+    line, regs = match.string, match.regs
     out: dict[str, Token] = {}
     for i, axis in enumerate(axes):
-        ws, we = regs[2 * i + 2]
+        ws = regs[3 * i + 4][0]
         if ws >= 0:
-            vs, ve = regs[2 * i + 3]
-            out[axis] = Token("word", line[ws:we], ws, we, axis, float(line[vs:ve]), vs, ve)
+            vs, ve = regs[3 * i + 5]
+            out[axis] = Token("word", line[ws:ve], ws, ve, axis, float(line[vs:ve]), vs, ve)
     return out

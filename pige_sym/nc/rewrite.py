@@ -21,10 +21,11 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from operator import itemgetter
 
 import numpy as np
 
-from pige_sym.nc.interpreter import Program, plain_pattern
+from pige_sym.nc.interpreter import Program, plain_groups
 from pige_sym.nc.lexer import word_spans
 from pige_sym.nc.program import format_number, format_numbers
 from pige_sym.nc.state import MM_PER_INCH, Block
@@ -135,23 +136,24 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     """:func:`_rewrite_block` for every target block that is plain and programs every axis absolutely, at once.
 
     Such a block does not depend on where the output program stands before it, so all are done
-    together: the line cut into its text and numbers (:func:`plain_pattern` ``segments``), the new
-    numbers formatted in one call (:func:`format_numbers`) and compared as floats with numpy (a number
+    together: the line is already cut into its text and numbers (``Block.plain_``), the new numbers
+    are formatted in one call (:func:`format_numbers`) and compared as floats with numpy (a number
     whose value would not change keeps its digits).  Returns per line the new text, its word changes
     and the offsets (output − input) after it [mm, deg].
     """
     axes, k = program.axes, len(program.axes)
-    pattern = plain_pattern(axes, program.dialect, form="segments")
-    rows = [b for b in program.blocks
-            if b.plain_ is not None and b.kind == "move" and not b.state.incremental and b.line_no in targets]
-    if pattern is None or not rows:
-        return {}
-    found = list(map(pattern.fullmatch, [b.text for b in rows]))
-    rows = [b for b, m in zip(rows, found, strict=True) if m is not None]
+    numbers, order = plain_groups(k)
+    rows, cuts = [], []
+    for b in program.blocks:
+        if b.plain_ is not None and b.kind == "move" and not b.state.incremental and b.line_no in targets:
+            cut = b.plain_.groups()
+            if None not in itemgetter(*numbers)(cut):  # every axis programmed
+                rows.append(b)
+                cuts.append(cut)
     if not rows:
         return {}
-    table = np.array([m.groups() for m in found if m is not None], dtype=object)  # (n, 3k + 1)
-    letters, old = table[:, 1:3 * k:3], table[:, 2:3 * k:3]
+    table = np.array(cuts, dtype=object)[:, order]  # (n, 3k + 2): the line's pieces, joined the line
+    letters, old = table[:, 2:3 * k:3], table[:, 3:3 * k + 1:3]
     linear = np.array([b.state.inch for b in rows], dtype=bool)[:, None] & (np.arange(k) < 3)
     factor = np.where(linear, MM_PER_INCH, 1.0)
     want = np.array([targets[b.line_no] for b in rows], dtype=float) / factor
@@ -161,7 +163,7 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     new_value = np.array(list(map(float, digits.ravel().tolist()))).reshape(-1, k)
     same = old_value == new_value
     offsets = (np.where(same, old_value, new_value) * factor - np.array([b.after for b in rows], dtype=float)).tolist()
-    table[:, 2:3 * k:3] = np.where(same, old, digits)
+    table[:, 3:3 * k + 1:3] = np.where(same, old, digits)
     old_words, new_words = (letters + old).tolist(), (letters + digits).tolist()
     out: dict[int, tuple[str, list[dict[str, str]], list[float | None]]] = {}
     for r, (b, row_same, cut) in enumerate(zip(rows, same.tolist(), table.tolist(), strict=True)):

@@ -91,7 +91,9 @@ class Block:
         Position of every axis (``axes`` order) before and after the block [mm, deg].
     axis_words : dict of str to Token
         The block's axis words by axis letter (property: for a plain block read in a batch they are
-        made from ``text`` on first use, with :func:`pige_sym.nc.lexer.plain_words`).
+        made on first use from ``plain_``, with :func:`pige_sym.nc.lexer.plain_words`).
+    plain_ : re.Match or None
+        A plain block read in a batch: its line cut by :func:`pige_sym.nc.interpreter.plain_pattern`.
     incremental_axes : frozenset of str
         Axes whose word is incremental (G91 or ``=IC()``).
     kind : str
@@ -119,7 +121,7 @@ class Block:
     after: tuple[float | None, ...]
     axes: tuple[str, ...]
     words_: dict[str, Token] | None = field(default=None, repr=False, compare=False)
-    plain_: re.Pattern[str] | None = field(default=None, repr=False, compare=False)
+    plain_: re.Match[str] | None = field(default=None, repr=False, compare=False)
     incremental_axes: frozenset[str] = frozenset()
     kind: str = ""
     reason: str = ""
@@ -133,7 +135,7 @@ class Block:
         """The block's axis words by axis letter (class docstring)."""
         words = self.words_
         if words is None:
-            words = {} if self.plain_ is None else plain_words(self.text, self.axes, self.plain_)
+            words = {} if self.plain_ is None else plain_words(self.axes, self.plain_)
             self.words_ = words
         return words
 

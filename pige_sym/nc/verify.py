@@ -23,7 +23,7 @@ from operator import itemgetter
 
 import numpy as np
 
-from pige_sym.nc.interpreter import Program, interpret, plain_pattern
+from pige_sym.nc.interpreter import Program, interpret, plain_groups
 from pige_sym.nc.lexer import word_spans
 from pige_sym.nc.state import MM_PER_INCH, Block, ModalState
 
@@ -95,19 +95,21 @@ def _kinds_and_states(original: list[Block], blocks: list[Block]) -> list[str]:
 def _skeletons(pairs: list[tuple[Block, Block]], original: Program) -> list[str]:
     """Changed lines whose text differs from the input's anywhere but in axis numbers and added words.
 
-    Lines that program every axis plainly are compared by the text around their numbers
-    (:func:`pige_sym.nc.interpreter.plain_pattern` ``segments``); the others word by word.
+    Lines that program every axis plainly (and read back plainly) are compared by the text around
+    their numbers (:func:`pige_sym.nc.interpreter.plain_groups`); the others word by word.
     """
     if not pairs:
         return []
-    k = len(original.axes)
-    pattern = plain_pattern(original.axes, original.dialect, form="segments")
+    numbers, order = plain_groups(len(original.axes))
+    text_only = itemgetter(*[j for j in order if j not in numbers])  # every piece but the numbers
+    all_axes = itemgetter(*numbers)
     sk_a: list[tuple | None] = [None] * len(pairs)
-    sk_b = sk_a
-    if pattern is not None:
-        text_only = itemgetter(*[j for j in range(3 * k + 1) if j % 3 != 2])  # every group but the numbers
-        sk_a = [None if m is None else text_only(m.groups()) for m in map(pattern.fullmatch, [a.text for a, _ in pairs])]
-        sk_b = [None if m is None else text_only(m.groups()) for m in map(pattern.fullmatch, [b.text for _, b in pairs])]
+    sk_b = list(sk_a)
+    for r, (a, b) in enumerate(pairs):
+        if a.plain_ is not None and b.plain_ is not None:
+            cut_a = a.plain_.groups()
+            if None not in all_axes(cut_a):
+                sk_a[r], sk_b[r] = text_only(cut_a), text_only(b.plain_.groups())
     problems = []
     for (a, b), x, y in zip(pairs, sk_a, sk_b, strict=True):
         if x is not None and y is not None:
