@@ -26,6 +26,7 @@ and either the pose before is known or the block programs every axis absolutely.
 from __future__ import annotations
 
 import re
+import sys
 from collections.abc import Iterable
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field, replace
@@ -595,9 +596,16 @@ def plain_pattern(axes: tuple[str, ...], dialect: Dialect) -> re.Pattern[str] | 
             not all(len(a) == 1 and "A" <= a <= "Z" for a in axes):
         return None
     end = r"(?=[ \t;]|$)" if dialect.siemens else r"(?![eE.\d])"
-    head = rf"([ \t]*(?:N[ \t]*{_NUM}{end})?(?:[ \t]*G[ \t]*(0*[01]){end})?)"
-    words = "".join(rf"(?:([ \t]*)({a}[ \t]*)({_NUM}){end})?" for a in axes)
-    return re.compile(head + words + rf"((?:[ \t]*F[ \t]*{_NUM}{end})?[ \t]*(?:;.*)?)", re.IGNORECASE)
+    num, sp = _NUM, r"[ \t]*"
+    if sys.version_info >= (3, 11):  # the same matches without backtracking: a number can only end where it does
+        num, sp = r"[-+]?+(?>\d++(?:\.\d*+)?+|\.\d++)", r"[ \t]*+"
+
+    def letter(a: str) -> str:
+        return f"[{a}{a.lower()}]"
+
+    head = rf"({sp}(?:{letter('N')}{sp}{num}{end})?(?:{sp}{letter('G')}{sp}(0*[01]){end})?)"
+    words = "".join(rf"(?:({sp})({letter(a)}{sp})({num}){end})?" for a in axes)
+    return re.compile(head + words + rf"((?:{sp}{letter('F')}{sp}{num}{end})?{sp}(?:;.*)?)")
 
 
 def plain_groups(k: int) -> tuple[list[int], list[int]]:

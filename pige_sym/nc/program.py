@@ -14,7 +14,7 @@ mm and degrees.  R-test programs are written natively in each dialect:
 
 from __future__ import annotations
 
-import re
+from itertools import repeat
 
 import numpy as np
 
@@ -27,8 +27,6 @@ from pige_sym.nc.state import Block
 NCProgram = Program
 NCBlock = Block
 AXES = ("X", "Y", "Z", "A", "B", "C")
-_TRAILING_ZEROS = re.compile(r"0+\n")
-_NEGATIVE_ZERO = re.compile(r"(?<![^\n])-0\.(?=\n)")
 
 __all__ = ["AXES", "NCBlock", "NCProgram", "NCProgramError", "format_number", "make_rtest_program",
            "parse_program", "poses_from_program"]
@@ -65,19 +63,22 @@ def format_number(value: float, decimals: int, *, point: bool) -> str:
 
 
 def format_numbers(values: np.ndarray, decimals: np.ndarray, *, point: bool) -> list[str]:
-    """:func:`format_number` of every value (1-D), byte for byte, in a few C-level string operations.
+    """:func:`format_number` of every value (1-D), byte for byte, with C-level string operations.
 
     ``decimals`` (same shape, each >= 1) per value.  ``"%.nf" % v`` is the formatting of ``f"{v:.nf}"``.
     """
     if len(values) == 0:
         return []
-    fmt = "".join(["%.4f\n", "%.5f\n"][d - 4] if d in (4, 5) else f"%.{d}f\n" for d in decimals.tolist())
-    text = fmt % tuple(values.tolist())
-    text = _TRAILING_ZEROS.sub("\n", text)  # 120.5000 -> 120.5, 120.0000 -> 120.
-    text = _NEGATIVE_ZERO.sub("0.", text)  # -0.0000 -> -0. -> 0.
+    if (decimals == decimals[0]).all():
+        fmt = f"%.{int(decimals[0])}f\n" * len(values)
+    else:
+        fmt = "".join([f"%.{d}f\n" for d in decimals.tolist()])
+    out = list(map(str.rstrip, (fmt % tuple(values.tolist())).split("\n")[:-1], repeat("0")))  # 120.5000 -> 120.5
+    if "-0." in out:
+        out = ["0." if s == "-0." else s for s in out]  # -0.0000 -> -0. -> 0.
     if not point:
-        text = text.replace(".\n", "\n")  # 120. -> 120
-    return text.split("\n")[:-1]
+        out = list(map(str.rstrip, out, repeat(".")))  # 120. -> 120, 0. -> 0
+    return out
 
 
 def make_rtest_program(angles_deg: np.ndarray, linear_mm: np.ndarray, rotary_axes: tuple[str, ...], *,

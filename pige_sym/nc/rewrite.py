@@ -143,13 +143,13 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     """
     axes, k = program.axes, len(program.axes)
     numbers, order = plain_groups(k)
-    rows, cuts = [], []
-    for b in program.blocks:
-        if b.plain_ is not None and b.kind == "move" and not b.state.incremental and b.line_no in targets:
-            cut = b.plain_.groups()
-            if None not in itemgetter(*numbers)(cut):  # every axis programmed
-                rows.append(b)
-                cuts.append(cut)
+    programs_all = itemgetter(*numbers)
+    rows = [b for b in program.blocks if b.plain_ is not None and b.kind == "move" and b.line_no in targets
+            and not b.state.incremental]
+    cuts = [b.plain_.groups() for b in rows]  # type: ignore[union-attr]
+    if any(None in programs_all(cut) for cut in cuts):  # keep the blocks that program every axis
+        rows, cuts = [b for b, c in zip(rows, cuts, strict=True) if None not in programs_all(c)], \
+            [c for c in cuts if None not in programs_all(c)]
     if not rows:
         return {}
     table = np.array(cuts, dtype=object)[:, order]  # (n, 3k + 2): the line's pieces, joined the line
@@ -166,12 +166,13 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     table[:, 3:3 * k + 1:3] = np.where(same, old, digits)
     old_words, new_words = (letters + old).tolist(), (letters + digits).tolist()
     out: dict[int, tuple[str, list[dict[str, str]], list[float | None]]] = {}
-    for r, (b, row_same, cut) in enumerate(zip(rows, same.tolist(), table.tolist(), strict=True)):
+    for b, row_same, cut, olds, news, offset in zip(rows, same.tolist(), table.tolist(), old_words, new_words,
+                                                    offsets, strict=True):
         if all(row_same):
-            out[b.line_no] = (b.text, [], offsets[r])
+            out[b.line_no] = (b.text, [], offset)
         else:
-            out[b.line_no] = ("".join(cut), [{"axis": axes[i], "old": old_words[r][i], "new": new_words[r][i]}
-                                             for i in range(k) if not row_same[i]], offsets[r])
+            out[b.line_no] = ("".join(cut), [{"axis": a, "old": o, "new": w}
+                                             for a, o, w, kept in zip(axes, olds, news, row_same) if not kept], offset)
     return out
 
 
