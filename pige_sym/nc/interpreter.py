@@ -286,10 +286,12 @@ class Interpreter:
                 else:
                     changes.update(effect)  # type: ignore[call-overload]
             elif letter in self._axis_set:
-                if letter in axis_words:
-                    return None
+                value = float(num)
+                if letter in axis_words or abs(value) > MAX_ABS_VALUE or \
+                        (self.dialect.decimal_point and value != 0 and "." not in num):
+                    return None  # the full path refuses it, with the word as written
                 # offsets -1: where the digits are is found again only if the block is rewritten
-                axis_words[letter] = _new_token(Token, ("word", letter + num, -1, -1, letter, float(num), -1, -1, ""))
+                axis_words[letter] = _new_token(Token, ("word", letter + num, -1, -1, letter, value, -1, -1, ""))
             elif letter not in "NFSTDH":
                 return None
         if changes:

@@ -163,8 +163,8 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     new_value = np.array(list(map(float, digits.ravel().tolist()))).reshape(-1, k)
     same = old_value == new_value
     offsets = (np.where(same, old_value, new_value) * factor - np.array([b.after for b in rows], dtype=float)).tolist()
-    table[:, 3:3 * k + 1:3] = np.where(same, old, digits)
     old_words, new_words = (letters + old).tolist(), (letters + digits).tolist()
+    table[:, 3:3 * k + 1:3] = np.where(same, old, digits)  # (``old`` is a view of ``table``)
     out: dict[int, tuple[str, list[dict[str, str]], list[float | None]]] = {}
     for b, row_same, cut, olds, news, offset in zip(rows, same.tolist(), table.tolist(), old_words, new_words,
                                                     offsets, strict=True):
