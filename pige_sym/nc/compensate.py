@@ -127,21 +127,21 @@ def plan(program: Program) -> tuple[list[Block], list[dict[str, Any]]]:
     excluded: dict[int, str] = {}
     last_mover: Block | None = None
     offset: str | None = None
-    for b in program.blocks:
+    movers = [b for b in program.blocks if b.kind]
+    for b in movers:
         if b.kind == "pass" and b.state.motion in ("G2", "G3") and last_mover is not None and last_mover.compensable:
             excluded[last_mover.line_no] = f"start point of the arc at line {b.line_no} (kept as programmed)"
-        if b.kind:
-            last_mover = b
-        if b.compensable:
+        last_mover = b
+        if b.kind == "move" and not b.reason:  # compensable
             if offset is None:
                 offset = b.state.offset
             elif b.state.offset != offset:
                 excluded[b.line_no] = (f"work offset {b.state.offset or 'none'} differs from "
                                        f"{offset or 'none'} of the first compensated block")
-    for b in program.blocks:
-        if b.compensable and b.line_no not in excluded:
+    for b in movers:
+        if b.kind == "move" and not b.reason and b.line_no not in excluded:
             chosen.append(b)
-        elif b.kind:
+        else:
             passed.append({"line": b.line_no, "reason": excluded.get(b.line_no) or b.reason})
     return chosen, passed
 
@@ -288,10 +288,10 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
     if not rw.changed or out_prog is None:
         return []
     index = {b.line_no: i for i, b in enumerate(chosen)}
-    out_after = {b.line_no: b.after for b in out_prog.blocks}
     rows = [index[c.line_in] for c in rw.changed]
     k = len(out_prog.rotary_axes)
-    new = np.array([out_after[c.line_out] for c in rw.changed], dtype=float).reshape(-1, 3 + k)
+    out_blocks = out_prog.blocks  # line numbers count from 1
+    new = np.array([out_blocks[c.line_out - 1].after for c in rw.changed], dtype=float).reshape(-1, 3 + k)
     a, xyz, rtcp = poses.angles_deg[rows], poses.xyz_mm[rows], np.asarray(poses.rtcp, dtype=bool)[rows]
     from pige_sym.trajectories import approach_directions
 
@@ -301,6 +301,6 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
     d_mm = np.abs(new[:, :3] - xyz).max(axis=1).tolist()
     d_deg = np.abs(new[:, 3:] - a).max(axis=1, initial=0.0).tolist()
     limited = np.asarray(poses.orientation_limited)[rows].tolist()
-    cols = zip(rw.changed, rtcp.tolist(), tp0.tolist(), tp1.tolist(), or0.tolist(), or1.tolist(), d_mm, d_deg,
-               limited, strict=True)
-    return [BlockChange(c.line_in, c.line_out, c.words, *rest) for c, *rest in cols]
+    return list(map(BlockChange, [c.line_in for c in rw.changed], [c.line_out for c in rw.changed],
+                    [c.words for c in rw.changed], rtcp.tolist(), tp0.tolist(), tp1.tolist(), or0.tolist(),
+                    or1.tolist(), d_mm, d_deg, limited))

@@ -33,7 +33,7 @@ from pige_sym.nc.state import MM_PER_INCH, Block
 _LEAD = re.compile(r"^\ufeff?\s*(?:%|O\d+|;\s*\$PATH)", re.IGNORECASE)
 
 
-@dataclass
+@dataclass(slots=True)
 class RewrittenBlock:
     """A block the rewriter changed.
 
