@@ -87,36 +87,7 @@ def rewrite_program(program: Program, targets: dict[int, tuple[float, ...]], *,
     """
     dialect = program.dialect
     ending = next((b.ending for b in program.blocks if b.ending), "\n")
-    n = len(program.axes)
-    offset: list[float | None] = [0.0] * n  # output minus input position [mm, deg]
-    changed: list[RewrittenBlock] = []
-    skipped: dict[int, str] = {}
-    ready = _rewrite_plain(program, targets)
-    texts: list[str] = []
-    for block in program.blocks:
-        line_no = block.line_no
-        done = ready.get(line_no)
-        if done is not None:
-            if done[1]:
-                changed.append(RewrittenBlock(line_no, line_no, block.text, done[0], done[1]))
-            texts.append(done[0])
-            offset = done[2]
-            continue
-        text = block.text
-        target = targets.get(line_no)
-        if target is not None:
-            out_pos = [None if b is None or o is None else b + o for b, o in zip(block.before, offset, strict=True)]
-            new = _rewrite_block(block, target, out_pos, dialect.decimal_point)
-            if new is None:
-                skipped[line_no] = "an axis this block would need to program has no known output position"
-            else:
-                if new[0] != text:
-                    text = new[0]
-                    changed.append(RewrittenBlock(line_no, line_no, block.text, text, new[1]))
-                offset = [None if a is None else w - a for w, a in zip(new[2], block.after, strict=True)]
-        else:
-            offset = _carry(block, offset)
-        texts.append(text)
+    texts, changed, skipped = _rewrite_all(program, targets)
     pieces = list(map(str.__add__, texts, [b.ending for b in program.blocks]))
     n_head = 0
     if header and changed:
@@ -131,6 +102,45 @@ def rewrite_program(program: Program, targets: dict[int, tuple[float, ...]], *,
     return Rewrite("".join(pieces), changed, n_head, skipped)
 
 
+def _rewrite_all(program: Program, targets: dict[int, tuple[float, ...]],
+                 ) -> tuple[list[str], list[RewrittenBlock], dict[int, str]]:
+    """Every line's new text, the changed blocks in line order, and the targets left out (with why).
+
+    Plain blocks that program every axis absolutely are done at once (:func:`_rewrite_plain`); the
+    others one by one in order, following the output's offset from the input (:func:`rewrite_program`).
+    """
+    blocks = program.blocks
+    ready = _rewrite_plain(program, targets)
+    texts = [b.text for b in blocks]
+    found: list[tuple[int, RewrittenBlock]] = []
+    for i, (text, words, _) in ready.items():
+        if words:
+            texts[i] = text
+            found.append((i, RewrittenBlock(blocks[i].line_no, blocks[i].line_no, blocks[i].text, text, words)))
+    skipped: dict[int, str] = {}
+    offset: list[float | None] = [0.0] * len(program.axes)  # output minus input position [mm, deg]
+    others = [i for i in range(len(blocks)) if i not in ready]
+    for i in others:
+        block = blocks[i]
+        if i - 1 in ready:
+            offset = ready[i - 1][2]
+        target = targets.get(block.line_no)
+        if target is None:
+            offset = _carry(block, offset)
+            continue
+        out_pos = [None if b is None or o is None else b + o for b, o in zip(block.before, offset, strict=True)]
+        new = _rewrite_block(block, target, out_pos, program.dialect.decimal_point)
+        if new is None:
+            skipped[block.line_no] = "an axis this block would need to program has no known output position"
+            continue
+        if new[0] != block.text:
+            texts[i] = new[0]
+            found.append((i, RewrittenBlock(block.line_no, block.line_no, block.text, new[0], new[1])))
+        offset = [None if a is None else w - a for w, a in zip(new[2], block.after, strict=True)]
+    found.sort(key=itemgetter(0))  # (already in order but for the blocks done one by one)
+    return texts, [c for _, c in found], skipped
+
+
 def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
                    ) -> dict[int, tuple[str, list[dict[str, str]], list[float | None]]]:
     """:func:`_rewrite_block` for every target block that is plain and programs every axis absolutely, at once.
@@ -138,18 +148,19 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     Such a block does not depend on where the output program stands before it, so all are done
     together: the line is already cut into its text and numbers (``Block.plain_``), the new numbers
     are formatted in one call (:func:`format_numbers`) and compared as floats with numpy (a number
-    whose value would not change keeps its digits).  Returns per line the new text, its word changes
-    and the offsets (output − input) after it [mm, deg].
+    whose value would not change keeps its digits).  Returns per block (index in ``program.blocks``)
+    the new text, its word changes and the offsets (output − input) after it [mm, deg].
     """
     axes, k = program.axes, len(program.axes)
     numbers, order = plain_groups(k)
     programs_all = itemgetter(*numbers)
-    rows = [b for b in program.blocks if b.plain_ is not None and b.kind == "move" and b.line_no in targets
-            and not b.state.incremental]
+    index = [i for i, b in enumerate(program.blocks) if b.plain_ is not None and b.kind == "move"
+             and b.line_no in targets and not b.state.incremental]
+    rows = [program.blocks[i] for i in index]
     cuts = [b.plain_.groups() for b in rows]  # type: ignore[union-attr]
     if any(None in programs_all(cut) for cut in cuts):  # keep the blocks that program every axis
-        rows, cuts = [b for b, c in zip(rows, cuts, strict=True) if None not in programs_all(c)], \
-            [c for c in cuts if None not in programs_all(c)]
+        keep = [r for r, c in enumerate(cuts) if None not in programs_all(c)]
+        index, rows, cuts = [index[r] for r in keep], [rows[r] for r in keep], [cuts[r] for r in keep]
     if not rows:
         return {}
     table = np.array(cuts, dtype=object)[:, order]  # (n, 3k + 2): the line's pieces, joined the line
@@ -166,13 +177,13 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     old_words, new_words = (letters + old).tolist(), (letters + digits).tolist()
     table[:, 3:3 * k + 1:3] = np.where(same, old, digits)  # (``old`` is a view of ``table``)
     out: dict[int, tuple[str, list[dict[str, str]], list[float | None]]] = {}
-    for b, row_same, cut, olds, news, offset in zip(rows, same.tolist(), table.tolist(), old_words, new_words,
-                                                    offsets, strict=True):
+    for i, b, row_same, cut, olds, news, offset in zip(index, rows, same.tolist(), table.tolist(), old_words,
+                                                       new_words, offsets, strict=True):
         if all(row_same):
-            out[b.line_no] = (b.text, [], offset)
+            out[i] = (b.text, [], offset)
         else:
-            out[b.line_no] = ("".join(cut), [{"axis": a, "old": o, "new": w}
-                                             for a, o, w, kept in zip(axes, olds, news, row_same) if not kept], offset)
+            out[i] = ("".join(cut), [{"axis": a, "old": o, "new": w}
+                                     for a, o, w, kept in zip(axes, olds, news, row_same) if not kept], offset)
     return out
 
 
