@@ -163,27 +163,34 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
         index, rows, cuts = [index[r] for r in keep], [rows[r] for r in keep], [cuts[r] for r in keep]
     if not rows:
         return {}
-    table = np.array(cuts, dtype=object)[:, order]  # (n, 3k + 2): the line's pieces, joined the line
-    letters, old = table[:, 2:3 * k:3], table[:, 3:3 * k + 1:3]
-    linear = np.array([b.state.inch for b in rows], dtype=bool)[:, None] & (np.arange(k) < 3)
+    n = len(rows)
+    cols = list(zip(*cuts))  # per group of the pattern, its text in every row
+    old = [cols[j] for j in numbers]
+    linear = (np.arange(k) < 3)[:, None] & np.array([b.state.inch for b in rows], dtype=bool)  # (k, n)
     factor = np.where(linear, MM_PER_INCH, 1.0)
-    want = np.array([targets[b.line_no] for b in rows], dtype=float) / factor
-    digits = np.array(format_numbers(want.ravel(), np.where(linear, 5, 4).ravel(),
-                                     point=program.dialect.decimal_point), dtype=object).reshape(-1, k)
-    old_value = np.array(list(map(float, old.ravel().tolist()))).reshape(-1, k)
-    new_value = np.array(list(map(float, digits.ravel().tolist()))).reshape(-1, k)
-    same = old_value == new_value
-    offsets = (np.where(same, old_value, new_value) * factor - np.array([b.after for b in rows], dtype=float)).tolist()
-    old_words, new_words = (letters + old).tolist(), (letters + digits).tolist()
-    table[:, 3:3 * k + 1:3] = np.where(same, old, digits)  # (``old`` is a view of ``table``)
+    want = np.array([targets[b.line_no] for b in rows], dtype=float).T / factor
+    flat = format_numbers(want.ravel(), np.where(linear, 5, 4).ravel(), point=program.dialect.decimal_point)
+    digits = [flat[i * n:(i + 1) * n] for i in range(k)]
+    old_value = np.array([list(map(float, col)) for col in old])
+    same = old_value == np.array(list(map(float, flat))).reshape(k, n)
+    written = np.where(same, old_value, np.array(list(map(float, flat))).reshape(k, n))
+    offsets = (written * factor - np.array([b.after for b in rows], dtype=float).T).T.tolist()
+    pieces = [cols[j] for j in order]  # the line in pieces; the numbers, kept or new:
+    for i, j in enumerate(numbers):
+        pieces[order.index(j)] = np.where(same[i], np.array(old[i], dtype=object),
+                                          np.array(digits[i], dtype=object)).tolist()
+    texts = list(map("".join, zip(*pieces)))
+    letters = [cols[j - 1] for j in numbers]
+    old_words = list(zip(*[list(map(str.__add__, letters[i], old[i])) for i in range(k)]))
+    new_words = list(zip(*[list(map(str.__add__, letters[i], digits[i])) for i in range(k)]))
     out: dict[int, tuple[str, list[dict[str, str]], list[float | None]]] = {}
-    for i, b, row_same, cut, olds, news, offset in zip(index, rows, same.tolist(), table.tolist(), old_words,
-                                                       new_words, offsets, strict=True):
+    for i, b, row_same, text, olds, news, offset in zip(index, rows, same.T.tolist(), texts, old_words, new_words,
+                                                        offsets, strict=True):
         if all(row_same):
             out[i] = (b.text, [], offset)
         else:
-            out[i] = ("".join(cut), [{"axis": a, "old": o, "new": w}
-                                     for a, o, w, kept in zip(axes, olds, news, row_same) if not kept], offset)
+            out[i] = (text, [{"axis": a, "old": o, "new": w}
+                             for a, o, w, kept in zip(axes, olds, news, row_same) if not kept], offset)
     return out
 
 
