@@ -171,10 +171,15 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     want = np.array([targets[b.line_no] for b in rows], dtype=float).T / factor
     flat = format_numbers(want.ravel(), np.where(linear, 5, 4).ravel(), point=program.dialect.decimal_point)
     digits = [flat[i * n:(i + 1) * n] for i in range(k)]
-    old_value = np.array([list(map(float, col)) for col in old])
-    same = old_value == np.array(list(map(float, flat))).reshape(k, n)
-    written = np.where(same, old_value, np.array(list(map(float, flat))).reshape(k, n))
-    offsets = (written * factor - np.array([b.after for b in rows], dtype=float).T).T.tolist()
+    after = np.array([b.after for b in rows], dtype=float).T
+    old_value = after.copy()  # an absolute mm or degree word's value is where its axis is after the block
+    for i in range(min(k, 3)):
+        inch = np.flatnonzero(linear[i])
+        if inch.size:  # inch: the value as written, not the mm it was converted to
+            old_value[i, inch] = [float(old[i][r]) for r in inch.tolist()]
+    new_value = np.array(list(map(float, flat))).reshape(k, n)
+    same = old_value == new_value
+    offsets = (np.where(same, old_value, new_value) * factor - after).T.tolist()
     pieces = [cols[j] for j in order]  # the line in pieces; the numbers, kept or new:
     for i, j in enumerate(numbers):
         pieces[order.index(j)] = np.where(same[i], np.array(old[i], dtype=object),
