@@ -61,6 +61,7 @@ _ISO_FLOW = re.compile(r"IF|GOTO|WHILE|DO\s*\d|END\s*\d|THEN", re.IGNORECASE)
 _ARC_NAMES = {"CR", "AR", "I", "J", "K", "I1", "J1", "K1", "TURN", "CT"}
 _LINEAR = {"G0", "G1", ""}
 _LINES = re.compile(r"[^\r\n]*(?:\r\n|\n|\r)?")
+_LINE_PARTS = re.compile(r"([^\r\n]*)(\r\n|\n|\r|)")
 MAX_ABS_VALUE = 1e5  # mm or deg: larger axis values are refused as absurd
 
 
@@ -163,7 +164,10 @@ class Interpreter:
         """
         raws = list(lines)
         texts = [raw.rstrip("\r\n") for raw in raws]
-        endings = [raw[len(t):] for raw, t in zip(raws, texts, strict=True)]
+        return self.run_parts(texts, [raw[len(t):] for raw, t in zip(raws, texts, strict=True)], first_line)
+
+    def run_parts(self, texts: list[str], endings: list[str], first_line: int = 1) -> list[Block]:
+        """:meth:`run` on lines given as their texts and their endings (:func:`split_parts`)."""
         n = len(texts)
         matches = list(map(self._plain_rx.fullmatch, texts)) if self._plain_rx is not None else [None] * n
         out: list[Block] = []
@@ -646,11 +650,22 @@ def split_lines(text: str) -> list[str]:
     return lines
 
 
+def split_parts(text: str) -> tuple[list[str], list[str]]:
+    """:func:`split_lines` as two lists: each line without its ending, and its ending (``""`` for the last)."""
+    parts = _LINE_PARTS.findall(text)
+    if parts and parts[-1] == ("", ""):
+        parts.pop()
+    if not parts:
+        return [], []
+    texts, endings = zip(*parts, strict=True)
+    return list(texts), list(endings)
+
+
 def interpret(text: str, dialect: Dialect, rotary_axes: tuple[str, ...], *, path: str = "<program>",
               pass_through: bool = False) -> Program:
     """Interpret a whole program (module docstring); never alters the text."""
     interp = Interpreter(dialect, rotary_axes, path=path, pass_through=pass_through)
-    blocks = interp.run(split_lines(text))
+    blocks = interp.run_parts(*split_parts(text))
     notes = list(interp.notes)
     if any(b.kind == "move" for b in blocks) and not any(b.state.units_programmed for b in blocks):
         notes.append("the program does not state its units: mm assumed (the controller's power-on default)")
