@@ -63,8 +63,9 @@ def main(n_blocks: int = 100_000) -> None:
                                                             max_angle_step_deg=0.1, keep_turn=True))
     a, xyz, on = comp.angles_deg, comp.xyz_mm, np.ones(len(poses), dtype=bool)
     zero = np.zeros_like(a)
+    new_a, new_xyz = comp.new_angles_deg, comp.new_xyz_mm
     _, w_pred, c_pred = timed(lambda: (predicted_errors(params, a, xyz, on, a, xyz, zero),
-                                       predicted_errors(params, a, xyz, on, comp.new_angles_deg, comp.new_xyz_mm, zero)))
+                                       predicted_errors(params, a, xyz, on, new_a, new_xyz, zero)))
     res, w_all, c_all = timed(lambda: compensate_nc(text, params, path="bench.mpf", dialect="siemens"))
     print(f"## NC compensation ({n_blocks} blocks, 840D, TRAORI)\n")
     print("| step | wall [s] | CPU [s] | CPU ratio to whole |")

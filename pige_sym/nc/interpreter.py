@@ -231,7 +231,7 @@ class Interpreter:
         n, k = present.shape
         st = states[0]  # the run changes only the motion mode
         inc = st.incremental
-        moves = present.any(axis=1)
+        moves = np.asarray(present.any(axis=1), dtype=bool)
         unknown = np.isnan(after)
         rows_after = after.tolist()
         for r in np.flatnonzero(unknown.any(axis=1)).tolist():
@@ -250,7 +250,7 @@ class Interpreter:
                 reasons[r] = (f"pose not known ({', '.join(missing)} not programmed yet)" if missing
                               else "pose before the block not known")
         kinds = ["move" if m else "" for m in moves.tolist()]
-        incs = [frozenset()] * n
+        incs: list[frozenset[str]] = [frozenset()] * n
         if inc:
             incs = [frozenset(a for a, p in zip(self.axes, row, strict=True) if p) for row in present.tolist()]
         self.pos = list(after_t[-1])

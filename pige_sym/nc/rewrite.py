@@ -164,7 +164,7 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     if not rows:
         return {}
     n = len(rows)
-    cols = list(zip(*cuts))  # per group of the pattern, its text in every row
+    cols = list(zip(*cuts, strict=True))  # per group of the pattern, its text in every row
     old = [cols[j] for j in numbers]
     linear = (np.arange(k) < 3)[:, None] & np.array([b.state.inch for b in rows], dtype=bool)  # (k, n)
     factor = np.where(linear, MM_PER_INCH, 1.0)
@@ -184,10 +184,10 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     for i, j in enumerate(numbers):
         pieces[order.index(j)] = np.where(same[i], np.array(old[i], dtype=object),
                                           np.array(digits[i], dtype=object)).tolist()
-    texts = list(map("".join, zip(*pieces)))
+    texts = list(map("".join, zip(*pieces, strict=True)))
     letters = [cols[j - 1] for j in numbers]
-    old_words = list(zip(*[list(map(str.__add__, letters[i], old[i])) for i in range(k)]))
-    new_words = list(zip(*[list(map(str.__add__, letters[i], digits[i])) for i in range(k)]))
+    old_words = list(zip(*[list(map(str.__add__, letters[i], old[i])) for i in range(k)], strict=True))
+    new_words = list(zip(*[list(map(str.__add__, letters[i], digits[i])) for i in range(k)], strict=True))
     out: dict[int, tuple[str, list[dict[str, str]], list[float | None]]] = {}
     for i, b, row_same, text, olds, news, offset in zip(index, rows, same.T.tolist(), texts, old_words, new_words,
                                                         offsets, strict=True):
@@ -195,7 +195,7 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
             out[i] = (b.text, [], offset)
         else:
             out[i] = (text, [{"axis": a, "old": o, "new": w}
-                             for a, o, w, kept in zip(axes, olds, news, row_same) if not kept], offset)
+                             for a, o, w, kept in zip(axes, olds, news, row_same, strict=True) if not kept], offset)
     return out
 
 

@@ -71,8 +71,8 @@ def verify(original: Program, out_text: str, changed_lines: set[int], header_lin
     problems += _skeletons([(a, b) for a, b in pairs if a.line_no in changed_lines], original)
     problems += _kinds_and_states(original.blocks, blocks)
     if targets and changed_lines:
-        problems += _missed([(a, b) for a, b in zip(original.blocks, blocks, strict=True) if a.line_no in changed_lines],
-                            targets)
+        problems += _missed([(a, b) for a, b in zip(original.blocks, blocks, strict=True)
+                             if a.line_no in changed_lines], targets)
     worst_mm, worst_deg = _compare_poses(original, blocks, max_mm, max_deg, problems)
     return Verification(not problems, problems, worst_mm, worst_deg, out)
 
