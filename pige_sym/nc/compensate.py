@@ -206,7 +206,7 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
         path, d.name, params.machine, params.source, len(program.blocks), sum(b.kind == "move" for b in program.blocks),
         len(rw.changed), _changes(params, chosen, poses, rw, check.read_back),
         sorted(passed, key=lambda p: p["line"]),
-        [b.line_no for i, b in enumerate(chosen) if poses.orientation_limited[i]],
+        [chosen[i].line_no for i in np.flatnonzero(poses.orientation_limited).tolist()],
         program.notes + _rtcp_note(program, chosen) + _arc_start_notes(program, check.read_back, rw.header_lines),
         check.max_change_mm, check.max_change_deg, {"mm": max_change_mm, "deg": max_change_deg}, True,
         list(params.ignored))
