@@ -110,20 +110,22 @@ def _rewrite_all(program: Program, targets: dict[int, tuple[float, ...]],
     others one by one in order, following the output's offset from the input (:func:`rewrite_program`).
     """
     blocks = program.blocks
-    ready = _rewrite_plain(program, targets)
+    index, new_texts, new_words, offsets = _rewrite_plain(program, targets)
+    ready = dict(zip(index, offsets, strict=True))
     texts = [b.text for b in blocks]
-    found: list[tuple[int, RewrittenBlock]] = []
-    for i, (text, words, _) in ready.items():
-        if words:
-            texts[i] = text
-            found.append((i, RewrittenBlock(blocks[i].line_no, blocks[i].line_no, blocks[i].text, text, words)))
+    rows = [r for r, words in enumerate(new_words) if words]
+    for r in rows:
+        texts[index[r]] = new_texts[r]
+    lines = [blocks[index[r]].line_no for r in rows]
+    found = list(zip([index[r] for r in rows], map(RewrittenBlock, lines, lines, [blocks[index[r]].text for r in rows],
+                                                   [new_texts[r] for r in rows], [new_words[r] for r in rows]),
+                     strict=True))
     skipped: dict[int, str] = {}
     offset: list[float | None] = [0.0] * len(program.axes)  # output minus input position [mm, deg]
-    others = [i for i in range(len(blocks)) if i not in ready]
-    for i in others:
+    for i in sorted(set(range(len(blocks))).difference(index)):
         block = blocks[i]
         if i - 1 in ready:
-            offset = ready[i - 1][2]
+            offset = ready[i - 1]
         target = targets.get(block.line_no)
         if target is None:
             offset = _carry(block, offset)
@@ -142,14 +144,15 @@ def _rewrite_all(program: Program, targets: dict[int, tuple[float, ...]],
 
 
 def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
-                   ) -> dict[int, tuple[str, list[dict[str, str]], list[float | None]]]:
+                   ) -> tuple[list[int], list[str], list[list[dict[str, str]]], list[list[float | None]]]:
     """:func:`_rewrite_block` for every target block that is plain and programs every axis absolutely, at once.
 
     Such a block does not depend on where the output program stands before it, so all are done
     together: the line is already cut into its text and numbers (``Block.plain_``), the new numbers
     are formatted in one call (:func:`format_numbers`) and compared as floats with numpy (a number
-    whose value would not change keeps its digits).  Returns per block (index in ``program.blocks``)
-    the new text, its word changes and the offsets (output − input) after it [mm, deg].
+    whose value would not change keeps its digits).  Returns the blocks' indices in ``program.blocks``
+    and per block its new text, its word changes (empty: unchanged) and the offsets (output − input)
+    after it [mm, deg].
     """
     axes, k = program.axes, len(program.axes)
     numbers, order = plain_groups(k)
@@ -162,7 +165,7 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
         keep = [r for r, c in enumerate(cuts) if None not in programs_all(c)]
         index, rows, cuts = [index[r] for r in keep], [rows[r] for r in keep], [cuts[r] for r in keep]
     if not rows:
-        return {}
+        return [], [], [], []
     n = len(rows)
     cols = list(zip(*cuts, strict=True))  # per group of the pattern, its text in every row
     old = [cols[j] for j in numbers]
@@ -188,15 +191,9 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     letters = [cols[j - 1] for j in numbers]
     old_words = list(zip(*[list(map(str.__add__, letters[i], old[i])) for i in range(k)], strict=True))
     new_words = list(zip(*[list(map(str.__add__, letters[i], digits[i])) for i in range(k)], strict=True))
-    out: dict[int, tuple[str, list[dict[str, str]], list[float | None]]] = {}
-    for i, b, row_same, text, olds, news, offset in zip(index, rows, same.T.tolist(), texts, old_words, new_words,
-                                                        offsets, strict=True):
-        if all(row_same):
-            out[i] = (b.text, [], offset)
-        else:
-            out[i] = (text, [{"axis": a, "old": o, "new": w}
-                             for a, o, w, kept in zip(axes, olds, news, row_same, strict=True) if not kept], offset)
-    return out
+    words = [[{"axis": a, "old": o, "new": w} for a, o, w, kept in zip(axes, olds, news, row_same, strict=True)
+              if not kept] for olds, news, row_same in zip(old_words, new_words, same.T.tolist(), strict=True)]
+    return index, texts, words, offsets
 
 
 def _carry(block: Block, offset: list[float | None]) -> list[float | None]:
