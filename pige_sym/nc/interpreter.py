@@ -1,7 +1,10 @@
 """The modal NC interpreter: every block of a program, with the pose before and after it.
 
-One pass over the lines (:class:`Interpreter` can also be fed line by line, which the
-rewriter does with its own output).  Per block, in this order:
+One pass over the lines (:class:`Interpreter` can also be fed line by line).  Runs of *plain*
+blocks (``[N…] [G0|G1] [axis words in machine order] [F…] [; comment]``, :func:`plain_pattern`,
+what CAM posts write) are read in one batch with the same result as block by block
+(``tests/test_nc_fastpath.py`` compares them on random plain and near-plain blocks); anything
+else is read block by block.  Per block, in this order:
 
 1. ``%…`` lines (``%``, ``%_N_NAME_MPF``) and blank lines are kept as they are;
 2. a leading ``/`` (block skip) is noted: a skippable block is never changed, the axes it
@@ -108,7 +111,8 @@ class Interpreter:
     pass_through : bool
         Keep refused blocks (calls, control flow, expressions) instead of raising.
     fast : bool
-        Use the fast path for plain blocks (same results; off only to test that).
+        Use the fast paths for plain blocks: batches (:meth:`run`) and the per-line one (same results; off
+        only to test that).
     """
 
     def __init__(self, dialect: Dialect, rotary_axes: tuple[str, ...], *, path: str = "<program>",
