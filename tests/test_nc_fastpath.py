@@ -183,6 +183,7 @@ TARGETS = {2: (120.01, 30.0, 80.0, 20.0, 30.0), 3: (110.0, 31.02, 80.0, 20.0, 30
     ("Z79 Y31 C30.01", "Z79 Y31 C30.02"),  # an added word with a wrong value
     ("Z79 Y31 C30.01", "Z79 Y31  C30.01"),  # an added word written otherwise
     ("N40 G91 X1", "N40 G91 X1.0"),  # an unchanged line
+    ("F100\nN30", "F100\r\nN30"),  # the line ending of a changed line
 ])
 def test_the_read_back_catches_a_wrong_rewrite(wrong):
     prog = _program(TEXT, "siemens", True)

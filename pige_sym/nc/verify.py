@@ -65,14 +65,18 @@ def verify(original: Program, out_text: str, changed_lines: set[int], header_lin
         return Verification(False, [f"the output has {len(out.blocks)} lines, expected {len(original.blocks)} + "
                                     f"{header_lines} header lines"])
     problems: list[str] = []
-    pairs = [(a, b) for a, b in zip(original.blocks, blocks, strict=True) if a.text != b.text or a.ending != b.ending]
-    problems += [f"line {a.line_no}: changed although it should be byte-identical"
-                 for a, _ in pairs if a.line_no not in changed_lines]
-    problems += _skeletons([(a, b) for a, b in pairs if a.line_no in changed_lines], original)
+    changed: list[tuple[Block, Block]] = []  # the pairs of the lines the rewriter changed
+    for a, b in zip(original.blocks, blocks, strict=True):
+        if a.line_no in changed_lines:
+            changed.append((a, b))
+            if a.ending != b.ending:
+                problems.append(f"line {a.line_no}: its line ending changed")
+        elif a.text != b.text or a.ending != b.ending:
+            problems.append(f"line {a.line_no}: changed although it should be byte-identical")
+    problems += _skeletons([(a, b) for a, b in changed if a.text != b.text], original)
     problems += _kinds_and_states(original.blocks, blocks)
-    if targets and changed_lines:
-        problems += _missed([(a, b) for a, b in zip(original.blocks, blocks, strict=True)
-                             if a.line_no in changed_lines], targets)
+    if targets and changed:
+        problems += _missed(changed, targets)
     worst_mm, worst_deg = _compare_poses(original, blocks, max_mm, max_deg, problems)
     return Verification(not problems, problems, worst_mm, worst_deg, out)
 
