@@ -289,9 +289,7 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
         return []
     index = {b.line_no: i for i, b in enumerate(chosen)}
     rows = [index[c.line_in] for c in rw.changed]
-    k = len(out_prog.rotary_axes)
-    out_blocks = out_prog.blocks  # line numbers count from 1
-    new = np.array([out_blocks[c.line_out - 1].after for c in rw.changed], dtype=float).reshape(-1, 3 + k)
+    new = out_prog.after_array()[[c.line_out - 1 for c in rw.changed]]  # line numbers count from 1
     a, xyz, rtcp = poses.angles_deg[rows], poses.xyz_mm[rows], np.asarray(poses.rtcp, dtype=bool)[rows]
     from pige_sym.trajectories import approach_directions
 

@@ -88,6 +88,16 @@ class Program:
     dialect: Dialect
     axes: tuple[str, ...]
     notes: list[str] = field(default_factory=list)
+    after_: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+
+    def after_array(self) -> np.ndarray:
+        """Position after every block, shape=(len(blocks), len(axes)) [mm, deg], NaN where unknown.
+
+        Made once (the blocks of an interpreted program do not change).
+        """
+        if self.after_ is None:
+            self.after_ = np.array([b.after for b in self.blocks], dtype=float).reshape(len(self.blocks), -1)
+        return self.after_
 
     @property
     def rotary_axes(self) -> tuple[str, ...]:

@@ -174,7 +174,7 @@ def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
     want = np.array([targets[b.line_no] for b in rows], dtype=float).T / factor
     flat = format_numbers(want.ravel(), np.where(linear, 5, 4).ravel(), point=program.dialect.decimal_point)
     digits = [flat[i * n:(i + 1) * n] for i in range(k)]
-    after = np.array([b.after for b in rows], dtype=float).T
+    after = program.after_array()[index].T
     old_value = after.copy()  # an absolute mm or degree word's value is where its axis is after the block
     for i in range(min(k, 3)):
         inch = np.flatnonzero(linear[i])

@@ -66,18 +66,23 @@ def verify(original: Program, out_text: str, changed_lines: set[int], header_lin
                                     f"{header_lines} header lines"])
     problems: list[str] = []
     changed: list[tuple[Block, Block]] = []  # the pairs of the lines the rewriter changed
-    for a, b in zip(original.blocks, blocks, strict=True):
+    rows: list[int] = []
+    for i, (a, b) in enumerate(zip(original.blocks, blocks, strict=True)):
         if a.line_no in changed_lines:
             changed.append((a, b))
+            rows.append(i)
             if a.ending != b.ending:
                 problems.append(f"line {a.line_no}: its line ending changed")
         elif a.text != b.text or a.ending != b.ending:
             problems.append(f"line {a.line_no}: changed although it should be byte-identical")
     problems += _skeletons([(a, b) for a, b in changed if a.text != b.text], original)
     problems += _kinds_and_states(original.blocks, blocks)
+    after = out.after_array()
+    if header_lines:
+        after = np.delete(after, np.s_[header_at:header_at + header_lines], axis=0)
     if targets and changed:
-        problems += _missed(changed, targets)
-    worst_mm, worst_deg = _compare_poses(original, blocks, max_mm, max_deg, problems)
+        problems += _missed(changed, after[rows], targets)
+    worst_mm, worst_deg = _compare_poses(original, after, max_mm, max_deg, problems)
     return Verification(not problems, problems, worst_mm, worst_deg, out)
 
 
@@ -147,11 +152,13 @@ def _word_skeleton(block: Block, added: set[str]) -> str | None:
     return "".join(pieces)
 
 
-def _compare_poses(original: Program, blocks: list[Block], max_mm: float, max_deg: float,
+def _compare_poses(original: Program, b: np.ndarray, max_mm: float, max_deg: float,
                    problems: list[str]) -> tuple[float, float]:
-    """Poses known in both or neither, and within the limits; returns the largest changes [mm], [deg]."""
-    a = np.array([b.after for b in original.blocks], dtype=float).reshape(len(blocks), -1)
-    b = np.array([b.after for b in blocks], dtype=float).reshape(len(blocks), -1)
+    """Poses known in both or neither, and within the limits; returns the largest changes [mm], [deg].
+
+    ``b`` (n, k): the read-back's position after each of the original's blocks [mm, deg].
+    """
+    a = original.after_array()
     known = ~np.isnan(a)
     for i, j in zip(*np.nonzero(known != ~np.isnan(b)), strict=True):
         problems.append(f"line {original.blocks[i].line_no}: {original.axes[j]} is "
@@ -165,11 +172,13 @@ def _compare_poses(original: Program, blocks: list[Block], max_mm: float, max_de
     return float(diff[:, :3].max(initial=0.0)), float(diff[:, 3:].max(initial=0.0))
 
 
-def _missed(pairs: list[tuple[Block, Block]], targets: dict[int, tuple[float, ...]]) -> list[str]:
-    """Changed blocks (input, read back) that do not reach their target to within the rounding of their words."""
+def _missed(pairs: list[tuple[Block, Block]], got: np.ndarray, targets: dict[int, tuple[float, ...]]) -> list[str]:
+    """Changed blocks (input, read back) that do not reach their target to within the rounding of their words.
+
+    ``got`` (len(pairs), k): where the read-back blocks end [mm, deg].
+    """
     if not pairs:
         return []
-    got = np.array([b.after for _, b in pairs], dtype=float).reshape(len(pairs), -1)
     want = np.array([targets[a.line_no] for a, _ in pairs], dtype=float).reshape(got.shape)
     inch = np.array([b.state.inch for _, b in pairs], dtype=bool)[:, None] & (np.arange(got.shape[1]) < 3)
     tol = np.where(inch, 0.51e-5 * MM_PER_INCH, 0.51e-4) + 1e-9
