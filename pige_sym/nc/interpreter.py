@@ -96,7 +96,8 @@ class Program:
         Made once (the blocks of an interpreted program do not change).
         """
         if self.after_ is None:
-            self.after_ = np.array([b.after for b in self.blocks], dtype=float).reshape(len(self.blocks), len(self.axes))
+            after = np.array([b.after for b in self.blocks], dtype=float)
+            self.after_ = after.reshape(len(self.blocks), len(self.axes))
         return self.after_
 
     @property
