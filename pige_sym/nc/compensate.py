@@ -39,7 +39,7 @@ from pige_sym.nc.state import Block
 from pige_sym.nc.verify import verify
 
 
-@dataclass
+@dataclass(slots=True)
 class BlockChange:
     """One changed block of the change report.
 
@@ -127,21 +127,21 @@ def plan(program: Program) -> tuple[list[Block], list[dict[str, Any]]]:
     excluded: dict[int, str] = {}
     last_mover: Block | None = None
     offset: str | None = None
-    for b in program.blocks:
+    movers = [b for b in program.blocks if b.kind]
+    for b in movers:
         if b.kind == "pass" and b.state.motion in ("G2", "G3") and last_mover is not None and last_mover.compensable:
             excluded[last_mover.line_no] = f"start point of the arc at line {b.line_no} (kept as programmed)"
-        if b.kind:
-            last_mover = b
-        if b.compensable:
+        last_mover = b
+        if b.kind == "move" and not b.reason:  # compensable
             if offset is None:
                 offset = b.state.offset
             elif b.state.offset != offset:
                 excluded[b.line_no] = (f"work offset {b.state.offset or 'none'} differs from "
                                        f"{offset or 'none'} of the first compensated block")
-    for b in program.blocks:
-        if b.compensable and b.line_no not in excluded:
+    for b in movers:
+        if b.kind == "move" and not b.reason and b.line_no not in excluded:
             chosen.append(b)
-        elif b.kind:
+        else:
             passed.append({"line": b.line_no, "reason": excluded.get(b.line_no) or b.reason})
     return chosen, passed
 
@@ -191,7 +191,8 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
     chosen, passed = plan(program)
     poses = _compensated_poses(params, chosen, max_change_deg)
     _guard(chosen, poses, max_change_mm, max_change_deg, path, CompensationError)
-    targets = {b.line_no: tuple(poses.new_xyz_mm[i]) + tuple(poses.new_angles_deg[i]) for i, b in enumerate(chosen)}
+    new_poses = np.hstack([poses.new_xyz_mm, poses.new_angles_deg]).tolist() if chosen else []
+    targets = dict(zip([b.line_no for b in chosen], map(tuple, new_poses), strict=True))
     rw = rewrite_program(program, targets, header=_header(params) if header else None)
     check = verify(program, rw.text, {c.line_in for c in rw.changed}, rw.header_lines, header_position(program),
                    max_mm=max_change_mm + 1e-4, max_deg=max_change_deg + 1e-4, pass_through=pass_through,
@@ -205,7 +206,7 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
         path, d.name, params.machine, params.source, len(program.blocks), sum(b.kind == "move" for b in program.blocks),
         len(rw.changed), _changes(params, chosen, poses, rw, check.read_back),
         sorted(passed, key=lambda p: p["line"]),
-        [b.line_no for i, b in enumerate(chosen) if poses.orientation_limited[i]],
+        [chosen[i].line_no for i in np.flatnonzero(poses.orientation_limited).tolist()],
         program.notes + _rtcp_note(program, chosen) + _arc_start_notes(program, check.read_back, rw.header_lines),
         check.max_change_mm, check.max_change_deg, {"mm": max_change_mm, "deg": max_change_deg}, True,
         list(params.ignored))
@@ -287,10 +288,8 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
     if not rw.changed or out_prog is None:
         return []
     index = {b.line_no: i for i, b in enumerate(chosen)}
-    out_after = {b.line_no: b.after for b in out_prog.blocks}
     rows = [index[c.line_in] for c in rw.changed]
-    k = len(out_prog.rotary_axes)
-    new = np.array([out_after[c.line_out] for c in rw.changed], dtype=float).reshape(-1, 3 + k)
+    new = out_prog.after_array()[[c.line_out - 1 for c in rw.changed]]  # line numbers count from 1
     a, xyz, rtcp = poses.angles_deg[rows], poses.xyz_mm[rows], np.asarray(poses.rtcp, dtype=bool)[rows]
     from pige_sym.trajectories import approach_directions
 
@@ -300,7 +299,6 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
     d_mm = np.abs(new[:, :3] - xyz).max(axis=1).tolist()
     d_deg = np.abs(new[:, 3:] - a).max(axis=1, initial=0.0).tolist()
     limited = np.asarray(poses.orientation_limited)[rows].tolist()
-    cols = zip(rw.changed, rtcp.tolist(), tp0.tolist(), tp1.tolist(), or0.tolist(), or1.tolist(), d_mm, d_deg,
-               limited, strict=True)
-    return [BlockChange(c.line_in, c.line_out, [{"axis": w.axis, "old": w.old, "new": w.new} for w in c.words],
-                        *rest) for c, *rest in cols]
+    return list(map(BlockChange, [c.line_in for c in rw.changed], [c.line_out for c in rw.changed],
+                    [c.words for c in rw.changed], rtcp.tolist(), tp0.tolist(), tp1.tolist(), or0.tolist(),
+                    or1.tolist(), d_mm, d_deg, limited))

@@ -1,7 +1,10 @@
 """The modal NC interpreter: every block of a program, with the pose before and after it.
 
-One pass over the lines (:class:`Interpreter` can also be fed line by line, which the
-rewriter does with its own output).  Per block, in this order:
+One pass over the lines (:class:`Interpreter` can also be fed line by line).  Runs of *plain*
+blocks (``[N…] [G0|G1] [axis words in machine order] [F…] [; comment]``, :func:`plain_pattern`,
+what CAM posts write) are read in one batch with the same result as block by block
+(``tests/test_nc_fastpath.py`` compares them on random plain and near-plain blocks); anything
+else is read block by block.  Per block, in this order:
 
 1. ``%…`` lines (``%``, ``%_N_NAME_MPF``) and blank lines are kept as they are;
 2. a leading ``/`` (block skip) is noted: a skippable block is never changed, the axes it
@@ -26,9 +29,15 @@ and either the pose before is known or the block programs every axis absolutely.
 from __future__ import annotations
 
 import re
+import sys
 from collections.abc import Iterable
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field, replace
+from itertools import chain, repeat
+from operator import itemgetter
 from typing import NoReturn
+
+import numpy as np
 
 from pige_sym.errors import NCProgramError
 from pige_sym.nc.dialects import Dialect
@@ -55,6 +64,7 @@ _ISO_FLOW = re.compile(r"IF|GOTO|WHILE|DO\s*\d|END\s*\d|THEN", re.IGNORECASE)
 _ARC_NAMES = {"CR", "AR", "I", "J", "K", "I1", "J1", "K1", "TURN", "CT"}
 _LINEAR = {"G0", "G1", ""}
 _LINES = re.compile(r"[^\r\n]*(?:\r\n|\n|\r)?")
+_LINE_PARTS = re.compile(r"([^\r\n]*)(\r\n|\n|\r|)")
 MAX_ABS_VALUE = 1e5  # mm or deg: larger axis values are refused as absurd
 
 
@@ -78,6 +88,17 @@ class Program:
     dialect: Dialect
     axes: tuple[str, ...]
     notes: list[str] = field(default_factory=list)
+    after_: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+
+    def after_array(self) -> np.ndarray:
+        """Position after every block, shape=(len(blocks), len(axes)) [mm, deg], NaN where unknown.
+
+        Made once (the blocks of an interpreted program do not change).
+        """
+        if self.after_ is None:
+            after = np.array([b.after for b in self.blocks], dtype=float)
+            self.after_ = after.reshape(len(self.blocks), len(self.axes))
+        return self.after_
 
     @property
     def rotary_axes(self) -> tuple[str, ...]:
@@ -101,7 +122,8 @@ class Interpreter:
     pass_through : bool
         Keep refused blocks (calls, control flow, expressions) instead of raising.
     fast : bool
-        Use the fast path for plain blocks (same results; off only to test that).
+        Use the fast paths for plain blocks: batches (:meth:`run`) and the per-line one (same results; off
+        only to test that).
     """
 
     def __init__(self, dialect: Dialect, rotary_axes: tuple[str, ...], *, path: str = "<program>",
@@ -119,6 +141,8 @@ class Interpreter:
         self._fast = fast
         self._simple_rx = _SIMPLE_SIEMENS if dialect.siemens else _SIMPLE_ISO
         self._simple_codes: dict[str, object] = {}
+        self._plain_rx = plain_pattern(self.axes, dialect) if fast else None
+        self._plain_numbers = itemgetter(1, *plain_groups(len(self.axes))[0])
 
     # -- public -------------------------------------------------------------------------
     def feed(self, line_no: int, text: str, ending: str) -> Block:
@@ -148,12 +172,105 @@ class Interpreter:
         return block
 
     def run(self, lines: Iterable[str], first_line: int = 1) -> list[Block]:
-        """Interpret lines that keep their endings (``str.splitlines(keepends=True)``)."""
-        out = []
-        for i, raw in enumerate(lines, start=first_line):
-            body = raw.rstrip("\r\n")
-            out.append(self.feed(i, body, raw[len(body):]))
+        """Interpret lines that keep their endings (``str.splitlines(keepends=True)``).
+
+        Runs of plain blocks (:func:`plain_pattern`) in a linear motion mode are read in one batch
+        (:meth:`_plain_run`: same blocks as line by line, which the property tests check).
+        """
+        raws = list(lines)
+        texts = [raw.rstrip("\r\n") for raw in raws]
+        return self.run_parts(texts, [raw[len(t):] for raw, t in zip(raws, texts, strict=True)], first_line)
+
+    def run_parts(self, texts: list[str], endings: list[str], first_line: int = 1) -> list[Block]:
+        """:meth:`run` on lines given as their texts and their endings (:func:`split_parts`)."""
+        n = len(texts)
+        matches = list(map(self._plain_rx.fullmatch, texts)) if self._plain_rx is not None else [None] * n
+        out: list[Block] = []
+        i = 0
+        while i < n:
+            if matches[i] is not None and not self.state.cycle and self.state.motion in _LINEAR:
+                j = i + 1
+                while j < n and matches[j] is not None:
+                    j += 1
+                done = self._plain_run(first_line + i, texts[i:j], endings[i:j], matches[i:j])  # type: ignore[arg-type]
+                out += done
+                i += len(done)
+                if done:
+                    continue
+            out.append(self.feed(first_line + i, texts[i], endings[i]))
+            i += 1
         return out
+
+    def _plain_run(self, first: int, texts: list[str], endings: list[str],
+                   matches: list[re.Match[str]]) -> list[Block]:
+        """Blocks of consecutive plain lines, read at once (motion G0/G1, no cycle: :meth:`run`).
+
+        Stops before a line whose value the full path would refuse (absurd, or an ISO integer), so that
+        line gets the full path and its message.
+        """
+        k = len(self.axes)
+        groups = list(map(self._plain_numbers, map(re.Match.groups, matches, repeat("nan", len(matches)))))
+        table = np.array(list(map(float, chain.from_iterable(groups))), dtype=float).reshape(-1, k + 1)
+        values = table[:, 1:]
+        bad = np.abs(values) > MAX_ABS_VALUE
+        if self.dialect.decimal_point:
+            bad |= np.array([[v != "nan" and "." not in v for v in g[1:]] for g in groups], dtype=bool) & (values != 0)
+        rows = int(np.argmax(bad.any(axis=1))) if bad.any() else len(texts)
+        if rows == 0:
+            return []
+        values, motion = values[:rows], table[:rows, 0]
+        values[:, :3] *= self.state.unit_mm
+        present = ~np.isnan(values)
+        start = np.array([np.nan if p is None else p for p in self.pos], dtype=float)
+        after = _track(values, present, start, self.state.incremental)
+        states = self._motion_states(motion)
+        return self._batch_blocks(first, texts[:rows], endings[:rows], states, present, after, matches[:rows])
+
+    def _motion_states(self, motion: np.ndarray) -> list[ModalState]:
+        """The modal state of each plain block (after its own G0/G1: ``motion`` 0, 1 or NaN); sets the last."""
+        st = self.state
+        by_code = {0.0: st if st.motion == "G0" else replace(st, motion="G0"),
+                   1.0: st if st.motion == "G1" else replace(st, motion="G1")}
+        states = []
+        current = st
+        for g in motion.tolist():
+            if g == g:
+                current = by_code[g]
+            states.append(current)
+        self.state = current
+        return states
+
+    def _batch_blocks(self, first: int, texts: list[str], endings: list[str], states: list[ModalState],
+                      present: np.ndarray, after: np.ndarray, matches: list[re.Match[str]]) -> list[Block]:
+        """The blocks of a plain run, with the reasons :meth:`_why_not` gives, and the position after it."""
+        n, k = present.shape
+        st = states[0]  # the run changes only the motion mode
+        inc = st.incremental
+        moves = np.asarray(present.any(axis=1), dtype=bool)
+        unknown = np.isnan(after)
+        rows_after = after.tolist()
+        for r in np.flatnonzero(unknown.any(axis=1)).tolist():
+            rows_after[r] = [None if u else x for x, u in zip(rows_after[r], unknown[r].tolist(), strict=True)]
+        after_t = list(map(tuple, rows_after))
+        before_t = [tuple(self.pos), *after_t[:-1]]
+        cause = st.lost or st.locked or st.frame or ("cutter radius compensation active" if st.cutter_comp else "")
+        reasons = [""] * n
+        if cause:
+            reasons = [cause if m else "" for m in moves.tolist()]
+        else:
+            before_unknown = np.concatenate(([None in before_t[0]], unknown[:-1].any(axis=1)))
+            partial = np.full(n, inc) | (present.sum(axis=1) != k)
+            for r in np.flatnonzero(moves & (unknown.any(axis=1) | (before_unknown & partial))).tolist():
+                missing = [a for a, v in zip(self.axes, after_t[r], strict=True) if v is None]
+                reasons[r] = (f"pose not known ({', '.join(missing)} not programmed yet)" if missing
+                              else "pose before the block not known")
+        kinds = ["move" if m else "" for m in moves.tolist()]
+        incs: list[frozenset[str]] = [frozenset()] * n
+        if inc:
+            incs = [frozenset(a for a, p in zip(self.axes, row, strict=True) if p) for row in present.tolist()]
+        self.pos = list(after_t[-1])
+        return list(map(Block, range(first, first + n), texts, endings, [[] for _ in range(n)], states, before_t,
+                        after_t, repeat(self.axes), repeat(None), matches, incs, kinds, reasons))
 
     # -- blocks -------------------------------------------------------------------------
     def _simple(self, line_no: int, lex_text: str, text: str, ending: str,
@@ -188,10 +305,12 @@ class Interpreter:
                 else:
                     changes.update(effect)  # type: ignore[call-overload]
             elif letter in self._axis_set:
-                if letter in axis_words:
-                    return None
+                value = float(num)
+                if letter in axis_words or abs(value) > MAX_ABS_VALUE or \
+                        (self.dialect.decimal_point and value != 0 and "." not in num):
+                    return None  # the full path refuses it, with the word as written
                 # offsets -1: where the digits are is found again only if the block is rewritten
-                axis_words[letter] = _new_token(Token, ("word", letter + num, -1, -1, letter, float(num), -1, -1, ""))
+                axis_words[letter] = _new_token(Token, ("word", letter + num, -1, -1, letter, value, -1, -1, ""))
             elif letter not in "NFSTDH":
                 return None
         if changes:
@@ -459,7 +578,7 @@ class Interpreter:
                               f"({tok.key}{tok.value:g}.) so its meaning is unambiguous")
         raise self._error(block.line_no, f"{tok.text.strip()!r}: value out of any machine's range")
 
-    def _why_not(self, block: Block, new: list[float | None], inc_axes: set[str],
+    def _why_not(self, block: Block, new: list[float | None], inc_axes: AbstractSet[str],
                  axis_words: dict[str, Token]) -> str:
         st = self.state
         for cause in (st.lost, st.locked, st.frame):
@@ -484,6 +603,60 @@ class Interpreter:
         return NCProgramError(self.path, line_no, problem)
 
 
+def plain_pattern(axes: tuple[str, ...], dialect: Dialect) -> re.Pattern[str] | None:
+    """The regex of a *plain* block: ``[N…] [G0|G1] [axis words in machine order] [F…] [; comment]``.
+
+    Every word must end at a boundary at least as strict as the lexer's (840D: a space, ``;`` or the
+    end of the line; ISO: no exponent, point or digit).  The groups cut the line into pieces that,
+    joined, are the line (:func:`plain_groups` tells which is which): the head (``N…``, ``G…``; it
+    holds group 2, the motion code's digits), then per axis the spaces before it, its letter (with the
+    spaces after it) and its number (None when the block does not program it), then the rest.
+    None when the dialect gives G0/G1 another meaning (``--rtcp-on G1``) or an axis name is not one letter.
+    """
+    if dialect.action("G0") != "motion:G0" or dialect.action("G1") != "motion:G1" or \
+            not all(len(a) == 1 and "A" <= a <= "Z" for a in axes):
+        return None
+    end = r"(?=[ \t;]|$)" if dialect.siemens else r"(?![eE.\d])"
+    num, sp = _NUM, r"[ \t]*"
+    if sys.version_info >= (3, 11):  # the same matches without backtracking: a number can only end where it does
+        num, sp = r"[-+]?+(?>\d++(?:\.\d*+)?+|\.\d++)", r"[ \t]*+"
+
+    def letter(a: str) -> str:
+        return f"[{a}{a.lower()}]"
+
+    head = rf"({sp}(?:{letter('N')}{sp}{num}{end})?(?:{sp}{letter('G')}{sp}(0*[01]){end})?)"
+    words = "".join(rf"(?:({sp})({letter(a)}{sp})({num}){end})?" for a in axes)
+    return re.compile(head + words + rf"((?:{sp}{letter('F')}{sp}{num}{end})?{sp}(?:;.*)?)")
+
+
+def plain_groups(k: int) -> tuple[list[int], list[int]]:
+    """Indices in ``match.groups()`` of a plain block with ``k`` axes: its numbers, and all pieces in line order.
+
+    The pieces (head, then per axis the spaces before it, its letter and its number, then the rest)
+    joined are the line; the number of axis ``i`` is piece ``3i + 3``, its letter piece ``3i + 2``.
+    """
+    return [3 * i + 4 for i in range(k)], [0, *range(2, 3 * k + 3)]
+
+
+def _track(values: np.ndarray, present: np.ndarray, start: np.ndarray, incremental: bool) -> np.ndarray:
+    """Positions after each block of a plain run, shape=(n, k) [mm, deg] (NaN: unknown).
+
+    ``values`` (n, k) are the words in mm/deg (NaN where ``present`` is False), ``start`` (k,) the
+    position before the run.  Absolute words set their axis; incremental words add, in order (the
+    same floating-point sums as block by block: ``np.add.accumulate`` adds left to right).
+    """
+    n, k = values.shape
+    if not incremental:
+        last = np.maximum.accumulate(np.where(present, np.arange(n)[:, None], -1), axis=0)
+        taken = np.take_along_axis(values, np.maximum(last, 0), axis=0)
+        return np.where(last >= 0, taken, start)
+    out = np.empty((n, k))
+    for j in range(k):
+        acc = np.add.accumulate(np.concatenate(([start[j]], values[present[:, j], j])))
+        out[:, j] = acc[np.cumsum(present[:, j])]
+    return out
+
+
 def split_lines(text: str) -> list[str]:
     """Lines with their endings; only ``\\r\\n``, ``\\n`` and ``\\r`` end a line (not form feeds etc.)."""
     lines = _LINES.findall(text)
@@ -492,11 +665,22 @@ def split_lines(text: str) -> list[str]:
     return lines
 
 
+def split_parts(text: str) -> tuple[list[str], list[str]]:
+    """:func:`split_lines` as two lists: each line without its ending, and its ending (``""`` for the last)."""
+    parts = _LINE_PARTS.findall(text)
+    if parts and parts[-1] == ("", ""):
+        parts.pop()
+    if not parts:
+        return [], []
+    texts, endings = zip(*parts, strict=True)
+    return list(texts), list(endings)
+
+
 def interpret(text: str, dialect: Dialect, rotary_axes: tuple[str, ...], *, path: str = "<program>",
               pass_through: bool = False) -> Program:
     """Interpret a whole program (module docstring); never alters the text."""
     interp = Interpreter(dialect, rotary_axes, path=path, pass_through=pass_through)
-    blocks = interp.run(split_lines(text))
+    blocks = interp.run_parts(*split_parts(text))
     notes = list(interp.notes)
     if any(b.kind == "move" for b in blocks) and not any(b.state.units_programmed for b in blocks):
         notes.append("the program does not state its units: mm assumed (the controller's power-on default)")

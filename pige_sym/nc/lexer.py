@@ -73,7 +73,7 @@ class Token(NamedTuple):
         The token exactly as written.
     start, end : int
         Offsets of the token in the line (``line[start:end] == text``); −1 for an axis word of a plain
-        block read by the interpreter's fast path (``text`` is then the letter and digits, and
+        block read by the interpreter's per-line fast path (``text`` is then the letter and digits, and
         :func:`word_spans` finds the offsets when the block is rewritten).
     key : str
         Upper-case address: the letter of a word (``X``), the name of an assignment,
@@ -191,7 +191,7 @@ def _assign(line: str, m: re.Match[str], start: int, end: int) -> Token:
 def word_spans(line: str, words: dict[str, Token]) -> dict[str, tuple[int, int, int, int]]:
     """Offsets ``(start, end, value_start, value_end)`` in ``line`` of each word in ``words`` (by letter).
 
-    Tokens of the interpreter's fast path carry no offsets (−1): they are found again here, in plain
+    Tokens of the interpreter's per-line fast path carry no offsets (−1): they are found again here, in plain
     blocks whose words all have the form letter + number.
     """
     out = {k: (t.start, t.end, t.value_start, t.value_end) for k, t in words.items() if t.start >= 0}
@@ -202,4 +202,20 @@ def word_spans(line: str, words: dict[str, Token]) -> dict[str, tuple[int, int, 
                 out[letter] = (m.start(), m.end(), m.start(2), m.end(2))
         if len(out) < len(words):
             raise ValueError(f"cannot locate the axis words of {line!r}")
+    return out
+
+
+def plain_words(axes: tuple[str, ...], match: re.Match[str]) -> dict[str, Token]:
+    """The axis words of a plain block, with their offsets, by axis letter.
+
+    ``match`` is the block's line matched by :func:`pige_sym.nc.interpreter.plain_pattern` for ``axes``
+    (per axis ``i``: group ``3i + 4`` its letter, ``3i + 5`` its number).
+    """
+    line, regs = match.string, match.regs
+    out: dict[str, Token] = {}
+    for i, axis in enumerate(axes):
+        ws = regs[3 * i + 4][0]
+        if ws >= 0:
+            vs, ve = regs[3 * i + 5]
+            out[axis] = Token("word", line[ws:ve], ws, ve, axis, float(line[vs:ve]), vs, ve)
     return out

@@ -14,6 +14,8 @@ mm and degrees.  R-test programs are written natively in each dialect:
 
 from __future__ import annotations
 
+from itertools import repeat
+
 import numpy as np
 
 from pige_sym.errors import InputError, NCProgramError
@@ -58,6 +60,25 @@ def format_number(value: float, decimals: int, *, point: bool) -> str:
         s = s.rstrip(".")
         return s or "0"
     return s if s not in ("", ".") else "0."
+
+
+def format_numbers(values: np.ndarray, decimals: np.ndarray, *, point: bool) -> list[str]:
+    """:func:`format_number` of every value (1-D), byte for byte, with C-level string operations.
+
+    ``decimals`` (same shape, each >= 1) per value.  ``"%.nf" % v`` is the formatting of ``f"{v:.nf}"``.
+    """
+    if len(values) == 0:
+        return []
+    if (decimals == decimals[0]).all():
+        fmt = f"%.{int(decimals[0])}f\n" * len(values)
+    else:
+        fmt = "".join([f"%.{d}f\n" for d in decimals.tolist()])
+    out = list(map(str.rstrip, (fmt % tuple(values.tolist())).split("\n")[:-1], repeat("0")))  # 120.5000 -> 120.5
+    if "-0." in out:
+        out = ["0." if s == "-0." else s for s in out]  # -0.0000 -> -0. -> 0.
+    if not point:
+        out = list(map(str.rstrip, out, repeat(".")))  # 120. -> 120, 0. -> 0
+    return out
 
 
 def make_rtest_program(angles_deg: np.ndarray, linear_mm: np.ndarray, rotary_axes: tuple[str, ...], *,

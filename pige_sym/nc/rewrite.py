@@ -21,25 +21,19 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from operator import itemgetter
 
-from pige_sym.nc.interpreter import Program
+import numpy as np
+
+from pige_sym.nc.interpreter import Program, plain_groups
 from pige_sym.nc.lexer import word_spans
-from pige_sym.nc.program import format_number
-from pige_sym.nc.state import Block
+from pige_sym.nc.program import format_number, format_numbers
+from pige_sym.nc.state import MM_PER_INCH, Block
 
 _LEAD = re.compile(r"^\ufeff?\s*(?:%|O\d+|;\s*\$PATH)", re.IGNORECASE)
 
 
-@dataclass
-class WordChange:
-    """One word of one block: as written and as rewritten (``old`` empty for an added word)."""
-
-    axis: str
-    old: str
-    new: str
-
-
-@dataclass
+@dataclass(slots=True)
 class RewrittenBlock:
     """A block the rewriter changed.
 
@@ -48,14 +42,16 @@ class RewrittenBlock:
     line_in, line_out : int
         Line number in the input and in the output.
     text_in, text_out : str
-    words : list of WordChange
+    words : list of dict
+        ``{"axis", "old", "new"}`` per changed or added word: the word as written and as rewritten
+        (``old`` empty for an added word), as in the change report.
     """
 
     line_in: int
     line_out: int
     text_in: str
     text_out: str
-    words: list[WordChange] = field(default_factory=list)
+    words: list[dict[str, str]] = field(default_factory=list)
 
 
 @dataclass
@@ -91,27 +87,8 @@ def rewrite_program(program: Program, targets: dict[int, tuple[float, ...]], *,
     """
     dialect = program.dialect
     ending = next((b.ending for b in program.blocks if b.ending), "\n")
-    n = len(program.axes)
-    offset: list[float | None] = [0.0] * n  # output minus input position [mm, deg]
-    pieces: list[str] = []
-    changed: list[RewrittenBlock] = []
-    skipped: dict[int, str] = {}
-    for block in program.blocks:
-        text = block.text
-        target = targets.get(block.line_no)
-        if target is not None:
-            out_pos = [None if b is None or o is None else b + o for b, o in zip(block.before, offset, strict=True)]
-            new = _rewrite_block(block, target, out_pos, dialect.decimal_point)
-            if new is None:
-                skipped[block.line_no] = "an axis this block would need to program has no known output position"
-            else:
-                if new[0] != text:
-                    text = new[0]
-                    changed.append(RewrittenBlock(block.line_no, block.line_no, block.text, text, new[1]))
-                offset = [None if a is None else w - a for w, a in zip(new[2], block.after, strict=True)]
-        else:
-            offset = _carry(block, offset)
-        pieces.append(text + block.ending)
+    texts, changed, skipped = _rewrite_all(program, targets)
+    pieces = list(map(str.__add__, texts, [b.ending for b in program.blocks]))
     n_head = 0
     if header and changed:
         at = header_position(program)
@@ -123,6 +100,100 @@ def rewrite_program(program: Program, targets: dict[int, tuple[float, ...]], *,
         for c in changed:
             c.line_out = c.line_in + n_head if c.line_in > at else c.line_in
     return Rewrite("".join(pieces), changed, n_head, skipped)
+
+
+def _rewrite_all(program: Program, targets: dict[int, tuple[float, ...]],
+                 ) -> tuple[list[str], list[RewrittenBlock], dict[int, str]]:
+    """Every line's new text, the changed blocks in line order, and the targets left out (with why).
+
+    Plain blocks that program every axis absolutely are done at once (:func:`_rewrite_plain`); the
+    others one by one in order, following the output's offset from the input (:func:`rewrite_program`).
+    """
+    blocks = program.blocks
+    index, new_texts, new_words, offsets = _rewrite_plain(program, targets)
+    ready = dict(zip(index, offsets, strict=True))
+    texts = [b.text for b in blocks]
+    rows = [r for r, words in enumerate(new_words) if words]
+    for r in rows:
+        texts[index[r]] = new_texts[r]
+    lines = [blocks[index[r]].line_no for r in rows]
+    found = list(zip([index[r] for r in rows], map(RewrittenBlock, lines, lines, [blocks[index[r]].text for r in rows],
+                                                   [new_texts[r] for r in rows], [new_words[r] for r in rows]),
+                     strict=True))
+    skipped: dict[int, str] = {}
+    offset: list[float | None] = [0.0] * len(program.axes)  # output minus input position [mm, deg]
+    for i in sorted(set(range(len(blocks))).difference(index)):
+        block = blocks[i]
+        if i - 1 in ready:
+            offset = ready[i - 1]
+        target = targets.get(block.line_no)
+        if target is None:
+            offset = _carry(block, offset)
+            continue
+        out_pos = [None if b is None or o is None else b + o for b, o in zip(block.before, offset, strict=True)]
+        new = _rewrite_block(block, target, out_pos, program.dialect.decimal_point)
+        if new is None:
+            skipped[block.line_no] = "an axis this block would need to program has no known output position"
+            continue
+        if new[0] != block.text:
+            texts[i] = new[0]
+            found.append((i, RewrittenBlock(block.line_no, block.line_no, block.text, new[0], new[1])))
+        offset = [None if a is None else w - a for w, a in zip(new[2], block.after, strict=True)]
+    found.sort(key=itemgetter(0))  # (already in order but for the blocks done one by one)
+    return texts, [c for _, c in found], skipped
+
+
+def _rewrite_plain(program: Program, targets: dict[int, tuple[float, ...]],
+                   ) -> tuple[list[int], list[str], list[list[dict[str, str]]], list[list[float | None]]]:
+    """:func:`_rewrite_block` for every target block that is plain and programs every axis absolutely, at once.
+
+    Such a block does not depend on where the output program stands before it, so all are done
+    together: the line is already cut into its text and numbers (``Block.plain_``), the new numbers
+    are formatted in one call (:func:`format_numbers`) and compared as floats with numpy (a number
+    whose value would not change keeps its digits).  Returns the blocks' indices in ``program.blocks``
+    and per block its new text, its word changes (empty: unchanged) and the offsets (output − input)
+    after it [mm, deg].
+    """
+    axes, k = program.axes, len(program.axes)
+    numbers, order = plain_groups(k)
+    programs_all = itemgetter(*numbers)
+    index = [i for i, b in enumerate(program.blocks) if b.plain_ is not None and b.kind == "move"
+             and b.line_no in targets and not b.state.incremental]
+    rows = [program.blocks[i] for i in index]
+    cuts = [b.plain_.groups() for b in rows]  # type: ignore[union-attr]
+    if any(None in programs_all(cut) for cut in cuts):  # keep the blocks that program every axis
+        keep = [r for r, c in enumerate(cuts) if None not in programs_all(c)]
+        index, rows, cuts = [index[r] for r in keep], [rows[r] for r in keep], [cuts[r] for r in keep]
+    if not rows:
+        return [], [], [], []
+    n = len(rows)
+    cols = list(zip(*cuts, strict=True))  # per group of the pattern, its text in every row
+    old = [cols[j] for j in numbers]
+    linear = (np.arange(k) < 3)[:, None] & np.array([b.state.inch for b in rows], dtype=bool)  # (k, n)
+    factor = np.where(linear, MM_PER_INCH, 1.0)
+    want = np.array([targets[b.line_no] for b in rows], dtype=float).T / factor
+    flat = format_numbers(want.ravel(), np.where(linear, 5, 4).ravel(), point=program.dialect.decimal_point)
+    digits = [flat[i * n:(i + 1) * n] for i in range(k)]
+    after = program.after_array()[index].T
+    old_value = after.copy()  # an absolute mm or degree word's value is where its axis is after the block
+    for i in range(min(k, 3)):
+        inch = np.flatnonzero(linear[i])
+        if inch.size:  # inch: the value as written, not the mm it was converted to
+            old_value[i, inch] = [float(old[i][r]) for r in inch.tolist()]
+    new_value = np.array(list(map(float, flat))).reshape(k, n)
+    same = old_value == new_value
+    offsets = (np.where(same, old_value, new_value) * factor - after).T.tolist()
+    pieces = [cols[j] for j in order]  # the line in pieces; the numbers, kept or new:
+    for i, j in enumerate(numbers):
+        pieces[order.index(j)] = np.where(same[i], np.array(old[i], dtype=object),
+                                          np.array(digits[i], dtype=object)).tolist()
+    texts = list(map("".join, zip(*pieces, strict=True)))
+    letters = [cols[j - 1] for j in numbers]
+    old_words = list(zip(*[list(map(str.__add__, letters[i], old[i])) for i in range(k)], strict=True))
+    new_words = list(zip(*[list(map(str.__add__, letters[i], digits[i])) for i in range(k)], strict=True))
+    words = [[{"axis": a, "old": o, "new": w} for a, o, w, kept in zip(axes, olds, news, row_same, strict=True)
+              if not kept] for olds, news, row_same in zip(old_words, new_words, same.T.tolist(), strict=True)]
+    return index, texts, words, offsets
 
 
 def _carry(block: Block, offset: list[float | None]) -> list[float | None]:
@@ -141,7 +212,7 @@ def _carry(block: Block, offset: list[float | None]) -> list[float | None]:
 
 
 def _rewrite_block(block: Block, target: tuple[float, ...], out_pos: list[float | None],
-                   point: bool) -> tuple[str, list[WordChange], list[float]] | None:
+                   point: bool) -> tuple[str, list[dict[str, str]], list[float]] | None:
     """New text of one block, its word changes and the pose it reaches [mm, deg] (as written, rounded).
 
     None when an axis position the block needs is unknown.
@@ -149,7 +220,7 @@ def _rewrite_block(block: Block, target: tuple[float, ...], out_pos: list[float 
     line = block.text
     edits: list[tuple[int, int, str]] = []
     added: list[str] = []
-    words: list[WordChange] = []
+    words: list[dict[str, str]] = []
     reached: list[float] = []
     spans = word_spans(line, block.axis_words)
     unit = block.state.unit_mm
@@ -170,7 +241,7 @@ def _rewrite_block(block: Block, target: tuple[float, ...], out_pos: list[float 
             else:
                 start, end, v0, v1 = spans[axis]
                 edits.append((v0, v1, digits))
-                words.append(WordChange(axis, line[start:end], line[start:v0] + digits + line[v1:end]))
+                words.append({"axis": axis, "old": line[start:end], "new": line[start:v0] + digits + line[v1:end]})
             reached.append(((prev or 0.0) + written if incremental else written) * factor)
             continue
         if prev is None:
@@ -182,7 +253,7 @@ def _rewrite_block(block: Block, target: tuple[float, ...], out_pos: list[float 
         digits = format_number(want - prev if incremental else want, dec, point=point)
         reached.append((prev + float(digits) if incremental else float(digits)) * factor)
         added.append(f"{axis}{digits}")
-        words.append(WordChange(axis, "", added[-1]))
+        words.append({"axis": axis, "old": "", "new": added[-1]})
     if added:
         at = max(span[1] for span in spans.values())
         edits.append((at, at, " " + " ".join(added)))

@@ -7,9 +7,10 @@ position of that axis is not known at this point of the program.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
-from pige_sym.nc.lexer import Token
+from pige_sym.nc.lexer import Token, plain_words
 
 MM_PER_INCH = 25.4
 
@@ -82,12 +83,17 @@ class Block:
     text, ending : str
         The line without / with only its line ending (``\\n``, ``\\r\\n``, ``""`` for the last line).
     tokens : list of Token
+        Empty for a plain block read in a batch (:meth:`Interpreter.run`), only the axis words for one
+        read by the per-line fast path.
     state : ModalState
         Modal state in force for this block's motion (after its own modal codes).
     before, after : tuple of float or None
         Position of every axis (``axes`` order) before and after the block [mm, deg].
     axis_words : dict of str to Token
-        The block's axis words by axis letter.
+        The block's axis words by axis letter (property: for a plain block read in a batch they are
+        made on first use from ``plain_``, with :func:`pige_sym.nc.lexer.plain_words`).
+    plain_ : re.Match or None
+        A plain block read in a batch: its line cut by :func:`pige_sym.nc.interpreter.plain_pattern`.
     incremental_axes : frozenset of str
         Axes whose word is incremental (G91 or ``=IC()``).
     kind : str
@@ -114,7 +120,8 @@ class Block:
     before: tuple[float | None, ...]
     after: tuple[float | None, ...]
     axes: tuple[str, ...]
-    axis_words: dict[str, Token] = field(default_factory=dict)
+    words_: dict[str, Token] | None = field(default=None, repr=False, compare=False)
+    plain_: re.Match[str] | None = field(default=None, repr=False, compare=False)
     incremental_axes: frozenset[str] = frozenset()
     kind: str = ""
     reason: str = ""
@@ -122,6 +129,19 @@ class Block:
     dwell: bool = False
     stop: bool = False
     skip: bool = False
+
+    @property
+    def axis_words(self) -> dict[str, Token]:
+        """The block's axis words by axis letter (class docstring)."""
+        words = self.words_
+        if words is None:
+            words = {} if self.plain_ is None else plain_words(self.axes, self.plain_)
+            self.words_ = words
+        return words
+
+    @axis_words.setter
+    def axis_words(self, words: dict[str, Token]) -> None:
+        self.words_ = words
 
     @property
     def position(self) -> dict[str, float | None]:
