@@ -252,36 +252,41 @@ def _param_vector(kern: Any, values: dict[str, float]) -> np.ndarray:
     return np.array([values.get(n, 0.0) for n in kern.PARAMETERS])
 
 
-def _affine_in_point(fn: Any, points_mm: np.ndarray, *, pose_axis: bool) -> np.ndarray:
-    """Evaluate ``fn(point)``, affine in the point, at each row of ``points_mm`` (n, 3) with 4 calls.
-
-    ``fn(point)`` returns an array whose first axis is the pose (``pose_axis``) or one without it.
-    """
+def _affine_parts(fn: Any) -> tuple[np.ndarray, list[np.ndarray]]:
+    """``fn(point)``, affine in the point: its value at the origin and its three slopes."""
     base = np.asarray(fn(np.zeros(3)))
-    slopes = [np.asarray(fn(e)) - base for e in np.eye(3)]
-    pts = np.asarray(points_mm, dtype=float)
-    shape = (-1,) + (1,) * (base.ndim - 1 if pose_axis else base.ndim)
-    out = base + sum(pts[:, k].reshape(shape) * slopes[k] for k in range(3))
-    return np.asarray(out)
+    return base, [np.asarray(fn(e)) - base for e in np.eye(3)]
 
 
 def raw_offset(kern: Any, angles_deg: np.ndarray, points_mm: np.ndarray, params: np.ndarray,
                pivots: dict | None, tool: Any) -> np.ndarray:
     """Un-zeroed tool-point minus workpiece-point error per pose, shape=(n, 3) [µm].
 
-    ``params`` is one vector (P,) or one per pose (n, P).  Vectorised: the Jacobians are
-    affine in the point, so four evaluations serve every pose.
+    ``params`` is one vector (P,) or one per pose (n, P).  Vectorised without forming the
+    (n, 3, P) Jacobian: the deviation is ``basis(angles) @ coefficients(point) @ params`` and the
+    coefficients are affine in the point, so they are applied to the parameters first (four
+    coefficient tensors), then to the per-pose basis and points.
     """
     a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
     pts = np.atleast_2d(np.asarray(points_mm, dtype=float))
-    if a.shape[0] == 0:
+    n = a.shape[0]
+    if n == 0:
         return np.zeros((0, 3))
-    jac = _affine_in_point(lambda x: kern.jacobian(a, None, x, pivots, tool), pts, pose_axis=True)  # (n, 3, P)
-    ref = _affine_in_point(lambda x: kern.reference_jacobian(x, pivots, tool), pts, pose_axis=False)  # (n, 3, P)
-    rot = kern.workpiece_rotation(a)
-    total = jac + np.einsum("nij,njp->nip", rot, ref)
-    per_pose = np.broadcast_to(params, (a.shape[0], np.shape(params)[-1]))
-    return np.asarray(np.einsum("nip,np->ni", total, per_pose))
+    per_pose = np.broadcast_to(params, (n, np.shape(params)[-1]))
+    g0, g_slopes = _affine_parts(lambda x: kern.coefficients(x, pivots, tool))  # (nb, 3, P)
+    r0, r_slopes = _affine_parts(lambda x: kern.reference_jacobian(x, pivots, tool))  # (3, P)
+    b = kern.basis(a)  # (n, nb)
+    if (per_pose == per_pose[0]).all():  # one parameter vector: contract it first
+        p = per_pose[0]
+        moving = b @ (g0 @ p) + sum(pts[:, k, None] * (b @ (g_slopes[k] @ p)) for k in range(3))
+        fixed = r0 @ p + sum(pts[:, k, None] * (r_slopes[k] @ p)[None, :] for k in range(3))
+    else:
+        coef = np.einsum("jip,np->nji", g0, per_pose) + sum(
+            pts[:, k, None, None] * np.einsum("jip,np->nji", g_slopes[k], per_pose) for k in range(3))
+        moving = np.einsum("nj,nji->ni", b, coef)
+        fixed = per_pose @ r0.T + sum(pts[:, k, None] * (per_pose @ r_slopes[k].T) for k in range(3))
+    fixed = np.broadcast_to(fixed, (n, 3))
+    return np.asarray(moving + np.einsum("nij,nj->ni", kern.workpiece_rotation(a), fixed))
 
 
 def _linear_affine(kern: Any, angles_deg: np.ndarray, pivots: dict | None, tool: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -325,6 +330,40 @@ class CompensatedPoses:
     orientation_limited: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
+def svd_3x2(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Thin SVD of a stack of 3×2 matrices in closed form, like ``np.linalg.svd(m, full_matrices=False)``.
+
+    Parameters
+    ----------
+    m : ndarray, shape=(n, 3, 2)
+
+    Returns
+    -------
+    u : (n, 3, 2), sigma : (n, 2) descending, vt : (n, 2, 2)
+        ``m = u * sigma @ vt``.  The larger singular value comes from the 2×2 Gram matrix, the
+        smaller from ``|m0 × m1| / sigma_1`` (no cancellation near rank 1), the second left vector
+        from ``n × u_1`` with its sign fixed by ``m v_2`` (accurate however small sigma_2 is).  A
+        singular value 0 gets a zero left vector.
+    """
+    m0, m1 = m[:, :, 0], m[:, :, 1]
+    a, d, b = np.einsum("ni,ni->n", m0, m0), np.einsum("ni,ni->n", m1, m1), np.einsum("ni,ni->n", m0, m1)
+    normal = np.cross(m0, m1)
+    area = np.linalg.norm(normal, axis=1)
+    s1 = np.sqrt((a + d) / 2 + np.hypot((a - d) / 2, b))
+    s2 = np.divide(area, s1, out=np.zeros_like(s1), where=s1 > 0)
+    lam = s1**2
+    first, second = np.stack([b, lam - a], axis=1), np.stack([lam - d, b], axis=1)
+    v1 = np.where((np.linalg.norm(first, axis=1) >= np.linalg.norm(second, axis=1))[:, None], first, second)
+    norm = np.linalg.norm(v1, axis=1)
+    v1 = np.where(norm[:, None] > 0, v1 / np.where(norm > 0, norm, 1.0)[:, None], np.array([1.0, 0.0]))
+    v2 = np.stack([-v1[:, 1], v1[:, 0]], axis=1)
+    u1 = np.divide(np.einsum("nik,nk->ni", m, v1), s1[:, None], out=np.zeros_like(m0), where=s1[:, None] > 0)
+    unit = np.divide(normal, area[:, None], out=np.zeros_like(normal), where=area[:, None] > 0)
+    u2 = np.cross(unit, u1)
+    u2 *= np.where(np.einsum("ni,ni->n", np.einsum("nik,nk->ni", m, v2), u2) < 0, -1.0, 1.0)[:, None]
+    return np.stack([u1, u2], axis=2), np.stack([s1, s2], axis=1), np.stack([v1, v2], axis=1)
+
+
 def orientation_steps(kern: Any, angles_deg: np.ndarray, params: np.ndarray,
                       max_step_deg: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Rotary-angle corrections Δθ (n, k) [deg] that cancel the orientation error to first order.
@@ -341,7 +380,7 @@ def orientation_steps(kern: Any, angles_deg: np.ndarray, params: np.ndarray,
     h = 1e-4
     dv = np.stack([(kern.tool_direction(a + h * e) - kern.tool_direction(a - h * e)) / (2 * h) for e in np.eye(k)],
                   axis=2)  # (n, 3, k) per degree
-    u, sig, vt = np.linalg.svd(dv, full_matrices=False)  # (n,3,k) (n,k) (n,k,k)
+    u, sig, vt = svd_3x2(dv) if k == 2 else np.linalg.svd(dv, full_matrices=False)  # (n,3,k) (n,k) (n,k,k)
     coef = np.einsum("nik,ni->nk", u, target)
     safe = sig > 1e-9 * np.maximum(sig[:, :1], 1e-300)
     comp = np.where(safe, coef / np.where(safe, sig, 1.0), 0.0)  # step along each right singular vector

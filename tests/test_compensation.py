@@ -189,6 +189,63 @@ def test_extensions_act_like_the_effect_catalogue(effect):
     np.testing.assert_allclose(zeroed, expected, atol=1e-9)
 
 
+@pytest.mark.parametrize("machine", ["wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t", "wbXYZCA(C1)t", "wC'bXYZB(C1)t"])
+@pytest.mark.parametrize("per_pose", [False, True])
+def test_raw_offset_equals_the_jacobian_written_out(machine, per_pose):
+    """Oracle: for each pose, the kernel's (3, P) Jacobian at that pose's own point plus the rotated
+    reference Jacobian, times that pose's parameters (the contraction order of ``raw_offset`` differs)."""
+    from pige_sym.compensation import raw_offset
+
+    kern = load_kernels(machine)
+    rng = np.random.default_rng(11)
+    n, n_par = 25, len(kern.PARAMETERS)
+    a = rng.uniform(-60, 60, (n, 2))
+    pts = rng.uniform(-150, 150, (n, 3))
+    tool = (0.0, 0.0, -250.0) if kern.TOOL_ROTARY else None
+    pivots = {ax: rng.uniform(-50, 50, 3) for ax in kern.ROTARY_AXES}
+    params = rng.normal(0, 20, (n, n_par)) if per_pose else rng.normal(0, 20, n_par)
+    rows = []
+    for i in range(n):
+        p = params[i] if per_pose else params
+        jac = kern.jacobian(a[i : i + 1], None, pts[i], pivots, tool)[0]
+        ref = kern.workpiece_rotation(a[i : i + 1])[0] @ kern.reference_jacobian(pts[i], pivots, tool)
+        rows.append((jac + ref) @ p)
+    np.testing.assert_allclose(raw_offset(kern, a, pts, params, pivots, tool), np.array(rows), rtol=1e-12,
+                               atol=1e-9)
+
+
+def test_closed_form_svd_matches_lapack_down_to_rank_one():
+    """``svd_3x2`` against ``np.linalg.svd``: random, nearly parallel columns (the orientation pole),
+    rank one, zero; reconstruction, orthonormal vectors, the same singular values, and the same
+    least-squares step ``sum_i (u_i . t / s_i) v_i`` wherever ``s_i`` is clearly non-zero."""
+    from pige_sym.compensation import svd_3x2
+
+    rng = np.random.default_rng(8)
+    m = rng.normal(0, 1, (400, 3, 2))
+    m[100:200, :, 1] = m[100:200, :, 0] * rng.uniform(-2, 2, (100, 1)) + rng.normal(0, 1, (100, 3)) * 10.0 ** \
+        rng.uniform(-12, -3, (100, 1))
+    m[200:250, :, 1] = 0.0
+    m[250:260] = 0.0
+    m[260:300, :, 0] *= 1e-6
+    u, s, vt = svd_3x2(m)
+    u_ref, s_ref, vt_ref = np.linalg.svd(m, full_matrices=False)
+    assert np.all(np.abs(s - s_ref) <= 1e-10 * s_ref + 1e-14 * s_ref[:, :1])
+    np.testing.assert_allclose(np.einsum("nik,nk,nkj->nij", u, s, vt), m, atol=1e-12)
+    np.testing.assert_allclose(np.einsum("nki,nkj->nij", vt, vt), np.broadcast_to(np.eye(2), (400, 2, 2)), atol=1e-12)
+    full = s > 1e-9 * s[:, :1]
+    gram = np.einsum("nki,nkj->nij", u, u)
+    assert np.allclose(gram[full[:, 1]], np.eye(2), atol=1e-9)
+    t = rng.normal(0, 1, (400, 3))
+
+    def step(u_, s_, vt_):
+        safe = s_ > 1e-9 * np.maximum(s_[:, :1], 1e-300)
+        comp = np.where(safe, np.einsum("nik,ni->nk", u_, t) / np.where(safe, s_, 1.0), 0.0)
+        return np.einsum("nk,nkj->nj", comp, vt_)
+
+    clear = (s_ref[:, 1] > 1e-7 * s_ref[:, 0]) | (s_ref[:, 1] < 1e-11 * np.maximum(s_ref[:, 0], 1e-300))
+    np.testing.assert_allclose(step(u, s, vt)[clear], step(u_ref, s_ref, vt_ref)[clear], rtol=1e-6, atol=1e-9)
+
+
 PROGRAM = (
     "%_N_RTEST_MPF\r\n"
     "; R-test program (keep me)\r\n"
