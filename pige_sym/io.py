@@ -35,7 +35,9 @@ from __future__ import annotations
 
 import math
 import os
+from collections import deque
 from collections.abc import Iterable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -55,6 +57,8 @@ OPTIONAL_COLUMNS = ("temp_C", "n_samples", "sd_um")
 FRAMES = ("machine", "table")
 REFERENCE_TOLERANCE = 1e-9
 CHUNK_BYTES = 4 * 2**20
+#: Threads parsing chunks at once (NumPy releases the GIL; results are taken in file order).
+PARSE_THREADS = 2
 MAX_LINE_BYTES = 2**20
 #: Largest magnitude accepted per column or metadata kind (non-physical values are refused), in its unit.
 LIMITS: dict[str, float] = {"t_s": 1e9, "deg": 1e5, "um": 1e5, "mm": 1e5, "temp_C": 1e3, "n_samples": 1e9,
@@ -474,6 +478,10 @@ def _check_columns(p: str, header_line: int, names: list[str], structure: Machin
     return [j for j, c in enumerate(names) if c in known]
 
 
+#: A chunk's vectorised parse: its rows (n, numeric columns) and its text columns, or None.
+_FastResult = tuple[np.ndarray, dict[str, list[str]]] | None
+
+
 class _Body:
     """The data rows, read chunk by chunk: a NumPy fast path for all-numeric chunks, a strict
     line-by-line path that names the first bad line (and keeps text columns)."""
@@ -488,26 +496,43 @@ class _Body:
         self.extras: dict[str, list[str]] = {header.names[j]: [] for j in header.extras}
 
     def read(self, fh: IO[bytes]) -> None:
-        while chunk := fh.read(CHUNK_BYTES):
-            if not chunk.endswith(b"\n"):
-                tail = fh.readline(MAX_LINE_BYTES + 1)
-                if len(tail) > MAX_LINE_BYTES or (b"\n" not in chunk and len(chunk) > MAX_LINE_BYTES):
-                    raise FileFormatError(self.path, self.line + chunk.count(b"\n"),
-                                          f"line longer than {MAX_LINE_BYTES} bytes")
-                chunk += tail
-            block = self._fast(chunk)
-            if block is None:
-                block = self._strict(chunk)
-            else:
-                self.line += block.shape[0]
-            self.blocks.append(block)
+        """Read every chunk: the vectorised parses run in :data:`PARSE_THREADS` threads (NumPy
+        releases the GIL), the results are taken in file order, so lines, refusals and text
+        columns are exactly those of a sequential read."""
+        pending: deque[tuple[bytes, Future[_FastResult]]] = deque()
+        with ThreadPoolExecutor(max_workers=PARSE_THREADS) as pool:
+            while chunk := fh.read(CHUNK_BYTES):
+                if not chunk.endswith(b"\n"):
+                    tail = fh.readline(MAX_LINE_BYTES + 1)
+                    if len(tail) > MAX_LINE_BYTES or (b"\n" not in chunk and len(chunk) > MAX_LINE_BYTES):
+                        while pending:
+                            self._take(*pending.popleft())
+                        raise FileFormatError(self.path, self.line + chunk.count(b"\n"),
+                                              f"line longer than {MAX_LINE_BYTES} bytes")
+                    chunk += tail
+                pending.append((chunk, pool.submit(self._fast, chunk)))
+                if len(pending) > PARSE_THREADS:
+                    self._take(*pending.popleft())
+            while pending:
+                self._take(*pending.popleft())
 
-    def _fast(self, chunk: bytes) -> np.ndarray | None:
+    def _take(self, chunk: bytes, parsed: Future[_FastResult]) -> None:
+        """The next chunk in file order: its vectorised parse, or the strict path."""
+        result = parsed.result()
+        if result is None or self.blank_at is not None:
+            self.blocks.append(self._strict(chunk))
+            return
+        block, texts = result
+        self.line += block.shape[0]
+        for name, values in texts.items():
+            self.extras[name] += values
+        self.blocks.append(block)
+
+    def _fast(self, chunk: bytes) -> _FastResult:
         """Every line of the chunk with exactly the header's number of fields, the numeric ones
         parsed vectorised (:mod:`pige_sym.decimal_fields`, bit-identical to the strict grammar)
-        and text columns sliced as they are; or None (the strict path decides and names the line)."""
-        if self.blank_at is not None:
-            return None
+        and text columns sliced as they are; or None (the strict path decides and names the line).
+        Reads nothing but the header, so it can run in a thread."""
         if b"\r" in chunk:
             chunk = chunk.replace(b"\r\n", b"\n")
         if not chunk.endswith(b"\n"):
@@ -525,7 +550,7 @@ class _Body:
         numeric = self.h.numeric
         if not self.h.extras:
             values = parse_decimal_fields(buf, ends)
-            return None if values is None else values.reshape(-1, ncols)
+            return None if values is None else (values.reshape(-1, ncols), {})
         starts = np.empty_like(ends)
         starts[0] = 0
         starts[1:] = ends[:-1] + 1
@@ -534,10 +559,11 @@ class _Body:
         if values is None:
             return None
         text = chunk.decode("ascii")
+        texts = {}
         for j in self.h.extras:
             bounds = zip(starts[:, j].tolist(), ends[:, j].tolist(), strict=True)
-            self.extras[self.h.names[j]] += [text[a:b] for a, b in bounds]
-        return values.reshape(-1, len(numeric))
+            texts[self.h.names[j]] = [text[a:b] for a, b in bounds]
+        return values.reshape(-1, len(numeric)), texts
 
     def _strict(self, chunk: bytes) -> np.ndarray:
         p, names, numeric = self.path, self.h.names, self.h.numeric

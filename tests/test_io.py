@@ -187,7 +187,7 @@ def test_chunked_fast_path_equals_line_by_line_path_with_text_columns(tmp_path, 
     vectorised = io_module._Body._fast
     taken = []
     monkeypatch.setattr(io_module._Body, "_fast",
-                        lambda self, chunk: taken.append(vectorised(self, chunk)) or taken[-1])
+                        lambda self, chunk: (result := vectorised(self, chunk), taken.append(result))[0])
     fast = read_measurement(path)
     assert sum(block is not None for block in taken) >= len(taken) - 1  # only a chunk of the header's tail may not
     monkeypatch.setattr(io_module._Body, "_fast", lambda self, chunk: None)
