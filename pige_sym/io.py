@@ -37,10 +37,9 @@ import math
 import os
 from collections import deque
 from collections.abc import Iterable
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -49,6 +48,9 @@ from pige_sym.decimal_fields import field_ends, parse_decimal_fields
 from pige_sym.errors import FileFormatError, InputError, PigeError
 from pige_sym.files import atomic_write_text, open_regular_file
 from pige_sym.options import strict_float
+
+if TYPE_CHECKING:
+    from concurrent.futures import Future
 
 FORMAT_LINE = "# pige-rtest 1"
 DEVIATION_COLUMNS = ("dx_um", "dy_um", "dz_um")
@@ -499,6 +501,8 @@ class _Body:
         """Read every chunk: the vectorised parses run in :data:`PARSE_THREADS` threads (NumPy
         releases the GIL), the results are taken in file order, so lines, refusals and text
         columns are exactly those of a sequential read."""
+        from concurrent.futures import ThreadPoolExecutor  # here: its import costs 13 ms of start-up
+
         pending: deque[tuple[bytes, Future[_FastResult]]] = deque()
         with ThreadPoolExecutor(max_workers=PARSE_THREADS) as pool:
             while chunk := fh.read(CHUNK_BYTES):
