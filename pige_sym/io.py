@@ -498,31 +498,48 @@ class _Body:
         self.extras: dict[str, list[str]] = {header.names[j]: [] for j in header.extras}
 
     def read(self, fh: IO[bytes]) -> None:
-        """Read every chunk: the vectorised parses run in :data:`PARSE_THREADS` threads (NumPy
-        releases the GIL), the results are taken in file order, so lines, refusals and text
-        columns are exactly those of a sequential read."""
+        """Read every chunk.  With more than one chunk the vectorised parses run in
+        :data:`PARSE_THREADS` threads (NumPy releases the GIL); results are taken in file order, so
+        lines, refusals and text columns are exactly those of a sequential read."""
+        pending: deque[tuple[bytes, Future[_FastResult] | None]] = deque()
+        first = self._next_chunk(fh, pending)
+        if first is None:
+            return
+        pending.append((first, None))
+        second = self._next_chunk(fh, pending)
+        if second is None:  # one chunk (most files): no threads
+            self._take(*pending.popleft())
+            return
         from concurrent.futures import ThreadPoolExecutor  # here: its import costs 13 ms of start-up
 
-        pending: deque[tuple[bytes, Future[_FastResult]]] = deque()
         with ThreadPoolExecutor(max_workers=PARSE_THREADS) as pool:
-            while chunk := fh.read(CHUNK_BYTES):
-                if not chunk.endswith(b"\n"):
-                    tail = fh.readline(MAX_LINE_BYTES + 1)
-                    if len(tail) > MAX_LINE_BYTES or (b"\n" not in chunk and len(chunk) > MAX_LINE_BYTES):
-                        while pending:
-                            self._take(*pending.popleft())
-                        raise FileFormatError(self.path, self.line + chunk.count(b"\n"),
-                                              f"line longer than {MAX_LINE_BYTES} bytes")
-                    chunk += tail
+            pending.append((second, pool.submit(self._fast, second)))
+            while chunk := self._next_chunk(fh, pending):
                 pending.append((chunk, pool.submit(self._fast, chunk)))
                 if len(pending) > PARSE_THREADS:
                     self._take(*pending.popleft())
             while pending:
                 self._take(*pending.popleft())
 
-    def _take(self, chunk: bytes, parsed: Future[_FastResult]) -> None:
-        """The next chunk in file order: its vectorised parse, or the strict path."""
-        result = parsed.result()
+    def _next_chunk(self, fh: IO[bytes], pending: deque[tuple[bytes, Future[_FastResult] | None]]) -> bytes | None:
+        """The next chunk, ending at a line end; a too-long line is refused with its number (after
+        the chunks still ``pending`` are taken, so the count is exact)."""
+        chunk = fh.read(CHUNK_BYTES)
+        if not chunk:
+            return None
+        if not chunk.endswith(b"\n"):
+            tail = fh.readline(MAX_LINE_BYTES + 1)
+            if len(tail) > MAX_LINE_BYTES or (b"\n" not in chunk and len(chunk) > MAX_LINE_BYTES):
+                while pending:
+                    self._take(*pending.popleft())
+                raise FileFormatError(self.path, self.line + chunk.count(b"\n"),
+                                      f"line longer than {MAX_LINE_BYTES} bytes")
+            chunk += tail
+        return chunk
+
+    def _take(self, chunk: bytes, parsed: Future[_FastResult] | None) -> None:
+        """The next chunk in file order: its vectorised parse (done in a thread, or now), or the strict path."""
+        result = self._fast(chunk) if parsed is None else parsed.result()
         if result is None or self.blank_at is not None:
             self.blocks.append(self._strict(chunk))
             return

@@ -198,3 +198,21 @@ def test_chunked_fast_path_equals_line_by_line_path_with_text_columns(tmp_path, 
         assert np.array_equal(a.view(np.int64), b.view(np.int64))
     assert fast.extra_columns == strict.extra_columns
     assert fast.extra_columns["note"][7] == "spike at 7" and fast.extra_columns["pose"][-1] == str(rows - 1)
+
+
+@pytest.mark.parametrize("chunk_bytes", [64, 300, 2**22])
+def test_a_too_long_line_is_named_exactly_whatever_the_chunks(tmp_path, monkeypatch, chunk_bytes) -> None:
+    """The line number of a too-long line is exact although chunks are parsed ahead in threads."""
+    import pige_sym.io as io_module
+
+    rows = [f"{i}.0,{-i * 0.1!r},{i}.5,0.1,0.2,0.3" for i in range(1, 60)]
+    rows[40] += "," + "9" * 500  # line 41 of the data
+    head = GOOD.split("t_s,")[0] + "t_s,A_deg,C_deg,dx_um,dy_um,dz_um\n0.0,0.0,0.0,0.0,0.0,0.0\n"
+    text = head + "\n".join(rows) + "\n"
+    path = write(tmp_path, text)
+    monkeypatch.setattr(io_module, "CHUNK_BYTES", chunk_bytes)
+    monkeypatch.setattr(io_module, "MAX_LINE_BYTES", 200)
+    header_lines = GOOD.split("t_s,")[0].count("\n") + 1
+    with pytest.raises(FileFormatError, match="line longer than 200 bytes") as err:
+        read_measurement(path)
+    assert f":{header_lines + 1 + 41}:" in str(err.value), str(err.value)
