@@ -291,10 +291,8 @@ def raw_offset(kern: Any, angles_deg: np.ndarray, points_mm: np.ndarray, params:
 
 def _linear_affine(kern: Any, angles_deg: np.ndarray, pivots: dict | None, tool: Any) -> tuple[np.ndarray, np.ndarray]:
     """RTCP commands as ``base + cols @ point``: base (n, 3) [mm], cols (n, 3, 3)."""
-    base = np.asarray(kern.linear_commands(angles_deg, np.zeros(3), pivots, tool))
-    cols = np.stack([np.asarray(kern.linear_commands(angles_deg, e, pivots, tool)) - base for e in np.eye(3)],
-                    axis=2)
-    return base, cols
+    base, slopes = _affine_parts(lambda x: kern.linear_commands(angles_deg, x, pivots, tool))
+    return base, np.stack(slopes, axis=2)
 
 
 def linear_commands_at(kern: Any, angles_deg: np.ndarray, points_mm: np.ndarray, pivots: dict | None,

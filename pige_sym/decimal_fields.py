@@ -55,11 +55,18 @@ MAX_POWER = 22
 #: Most bytes after the ``e`` handled vectorised (sign and up to four digits).
 MAX_EXPONENT_BYTES = 5
 _FIVE = np.array([5.0**k for k in range(MAX_POWER + 1)])
-_FIVE_HI = (_FIVE * _SPLIT) - ((_FIVE * _SPLIT) - _FIVE)
-_FIVE_LO = _FIVE - _FIVE_HI
+
+
+def _split(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Veltkamp's split: ``x == hi + lo`` exactly, each half with at most 26 significant bits."""
+    t = x * _SPLIT
+    hi = t - (t - x)
+    return hi, x - hi
+
+
+_FIVE_HI, _FIVE_LO = _split(_FIVE)
 _TEN = np.array([float(10**k) for k in range(MAX_POWER + 1)])  # exact: 10**22 = 5**22 * 2**22
-_TEN_HI = (_TEN * _SPLIT) - ((_TEN * _SPLIT) - _TEN)
-_TEN_LO = _TEN - _TEN_HI
+_TEN_HI, _TEN_LO = _split(_TEN)
 _MIDPOINT_MARGIN = 2.0**-30
 _HALF_POWERS = np.array([2.0**-k for k in range(MAX_POWER + 1)])  # exact
 _ASCII_ZERO, _DOT, _PLUS, _MINUS = 48, 46, 43, 45
@@ -87,6 +94,24 @@ def field_ends(buf: np.ndarray) -> np.ndarray:
     return ends
 
 
+def field_starts(ends: np.ndarray) -> np.ndarray:
+    """Offset of each field's first byte when every field starts after the previous one's separator.
+
+    Parameters
+    ----------
+    ends : ndarray, shape=(n_fields,), int64
+        :func:`field_ends`.
+
+    Returns
+    -------
+    ndarray, shape=(n_fields,), int64
+    """
+    starts = np.empty_like(ends)
+    starts[:1] = 0
+    starts[1:] = ends[:-1] + 1
+    return starts
+
+
 def parse_decimal_fields(buf: np.ndarray, ends: np.ndarray, starts: np.ndarray | None = None) -> np.ndarray | None:
     """Every field of ``buf`` as a float64, exactly ``strict_float`` of its text.
 
@@ -109,9 +134,7 @@ def parse_decimal_fields(buf: np.ndarray, ends: np.ndarray, starts: np.ndarray |
     if n == 0:
         return np.empty(0)
     if starts is None:
-        starts = np.empty_like(ends)
-        starts[0] = 0
-        starts[1:] = ends[:-1] + 1
+        starts = field_starts(ends)
     mantissa_end, exponent, deferred = _exponents(buf, starts, ends)
     mantissa, k, negative, deferred_mantissa = _mantissas(buf, mantissa_end, mantissa_end - starts)
     deferred |= deferred_mantissa
@@ -144,7 +167,8 @@ def _exponents(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> tuple[n
     mantissa_end[field] = e_at
     size = ends[field] - e_at - 1
     value, sign = np.zeros(field.size, np.int64), np.ones(field.size, np.int64)
-    bad = (size < 1) | (size > MAX_EXPONENT_BYTES)
+    n_digits = np.zeros(field.size, np.int64)
+    bad = size > MAX_EXPONENT_BYTES
     for c in range(MAX_EXPONENT_BYTES):
         present = c < size
         byte = buf[np.minimum(e_at + 1 + c, buf.size - 1)]
@@ -153,8 +177,9 @@ def _exponents(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> tuple[n
         signed = (c == 0) & ((byte == _PLUS) | (byte == _MINUS))
         sign[signed & (byte == _MINUS)] = -1
         bad |= present & ~(is_digit | signed)
+        n_digits += present & is_digit
         value = np.where(present & is_digit, value * 10 + digit, value)
-    bad |= (size == 1) & ~((buf[np.minimum(e_at + 1, buf.size - 1)] - np.uint8(_ASCII_ZERO)) < 10)  # "e+" alone
+    bad |= n_digits == 0  # "1e", "1e+"
     exponent[field] = sign * value
     deferred[field[bad]] = True
     deferred |= twice
@@ -272,8 +297,6 @@ def _two_product(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Dekker's two-product: ``a * b == p + e`` exactly (``b`` already split into ``b_hi + b_lo``)."""
     p = a * b
-    t = a * _SPLIT
-    a_hi = t - (t - a)
-    a_lo = a - a_hi
+    a_hi, a_lo = _split(a)
     e = ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo
     return p, e

@@ -44,7 +44,7 @@ from typing import IO, TYPE_CHECKING, Any
 import numpy as np
 
 from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
-from pige_sym.decimal_fields import field_ends, parse_decimal_fields
+from pige_sym.decimal_fields import field_ends, field_starts, parse_decimal_fields
 from pige_sym.errors import FileFormatError, InputError, PigeError
 from pige_sym.files import atomic_write_text, open_regular_file
 from pige_sym.options import strict_float
@@ -485,8 +485,8 @@ _FastResult = tuple[np.ndarray, dict[str, list[str]]] | None
 
 
 class _Body:
-    """The data rows, read chunk by chunk: a NumPy fast path for all-numeric chunks, a strict
-    line-by-line path that names the first bad line (and keeps text columns)."""
+    """The data rows, read chunk by chunk: a vectorised path (:meth:`_fast`) for chunks whose lines all
+    have the header's fields, a strict line-by-line path (:meth:`_strict`) that names the first bad line."""
 
     def __init__(self, path: str, header: _Header) -> None:
         self.path = path
@@ -568,14 +568,11 @@ class _Body:
             return None
         if buf[0] == ord("#") or (buf[line_ends[:-1] + 1] == ord("#")).any():
             return None  # a comment line: the strict path names it
-        numeric = self.h.numeric
-        if not self.h.extras:
+        if not self.h.extras:  # every field numeric: no per-column selection (it would copy the offsets)
             values = parse_decimal_fields(buf, ends)
             return None if values is None else (values.reshape(-1, ncols), {})
-        starts = np.empty_like(ends)
-        starts[0] = 0
-        starts[1:] = ends[:-1] + 1
-        ends, starts = ends.reshape(-1, ncols), starts.reshape(-1, ncols)
+        numeric = self.h.numeric
+        ends, starts = ends.reshape(-1, ncols), field_starts(ends).reshape(-1, ncols)
         values = parse_decimal_fields(buf, ends[:, numeric].ravel(), starts[:, numeric].ravel())
         if values is None:
             return None

@@ -116,6 +116,23 @@ line_like = st.one_of(st.lists(number_like, min_size=10, max_size=10).map(",".jo
                       st.text(alphabet=NUMERIC_ALPHABET, max_size=60))
 
 
+def _fast_and_strict(path: Path) -> list[tuple]:
+    """The body of ``path`` read with the vectorised path, then with the strict path alone: per read
+    ``("parsed", values as bytes, text columns)`` or ``("refused", the message, {})``."""
+    outcome: list[tuple] = []
+    for fast in (True, False):
+        with open(path, "rb") as fh:
+            body = _Body(str(path), _read_header(fh, str(path)))
+            if not fast:
+                body._fast = lambda chunk: None  # type: ignore[method-assign]
+            try:
+                body.read(fh)
+                outcome.append(("parsed", body.array().tobytes(), body.extras))
+            except FileFormatError as exc:
+                outcome.append(("refused", str(exc), {}))
+    return outcome
+
+
 @FUZZ
 @given(st.lists(line_like, min_size=1, max_size=5))
 def test_the_numpy_fast_path_accepts_exactly_what_the_strict_path_accepts(tmp_path_factory, lines) -> None:
@@ -126,18 +143,8 @@ def test_the_numpy_fast_path_accepts_exactly_what_the_strict_path_accepts(tmp_pa
     text = head + ",".join(plain) + "\n0,0,0,0,0,0,1,2,3,100\n" + "\n".join(lines) + "\n"
     path = tmp_path_factory.mktemp("fp") / "d.csv"
     path.write_text(text)
-    outcome = []
-    for fast in (True, False):
-        with open(path, "rb") as fh:
-            header = _read_header(fh, str(path))
-            body = _Body(str(path), header)
-            if not fast:
-                body._fast = lambda chunk: None  # type: ignore[method-assign]
-            try:
-                body.read(fh)
-                outcome.append(("parsed", body.array().tobytes()))
-            except FileFormatError as exc:
-                outcome.append(("refused", str(exc).split(": ", 1)[0]))
+    outcome = [(kind, detail if kind == "parsed" else detail.split(": ", 1)[0])
+               for kind, detail, _ in _fast_and_strict(path)]
     assert outcome[0] == outcome[1]
     _tally("numeric body (fast vs strict path)", "agree: " + outcome[0][0])
 
@@ -156,18 +163,7 @@ def test_fast_and_strict_paths_agree_with_a_text_column(tmp_path_factory, lines)
     text = head + "t_s," + body.split("\n", 1)[0] + "\n0,0,0,0,0,0,1,2,3,100,x\n" + "\n".join(lines) + "\n"
     path = tmp_path_factory.mktemp("fpt") / "d.csv"
     path.write_bytes(text.encode("utf-8", "surrogatepass"))
-    outcome = []
-    for fast in (True, False):
-        with open(path, "rb") as fh:
-            header = _read_header(fh, str(path))
-            body_reader = _Body(str(path), header)
-            if not fast:
-                body_reader._fast = lambda chunk: None  # type: ignore[method-assign]
-            try:
-                body_reader.read(fh)
-                outcome.append(("parsed", body_reader.array().tobytes(), body_reader.extras))
-            except FileFormatError as exc:
-                outcome.append(("refused", str(exc), {}))
+    outcome = _fast_and_strict(path)
     assert outcome[0] == outcome[1]
     _tally("numeric body with a text column (fast vs strict path)", "agree: " + outcome[0][0])
 

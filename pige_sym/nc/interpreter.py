@@ -134,8 +134,6 @@ class Interpreter:
         self.pass_through = pass_through
         self.state = ModalState()
         self.pos: list[float | None] = [None] * len(self.axes)
-        self.notes: list[str] = []
-        self._noted: set[str] = set()
         self._axis_set = frozenset(self.axes)
         self._axis_index = {a: i for i, a in enumerate(self.axes)}
         self._fast = fast
@@ -594,11 +592,6 @@ class Interpreter:
         return ""
 
     # -- helpers ------------------------------------------------------------------------
-    def _note(self, key: str, text: str) -> None:
-        if key not in self._noted:
-            self._noted.add(key)
-            self.notes.append(text)
-
     def _error(self, line_no: int, problem: str) -> NCProgramError:
         return NCProgramError(self.path, line_no, problem)
 
@@ -681,7 +674,7 @@ def interpret(text: str, dialect: Dialect, rotary_axes: tuple[str, ...], *, path
     """Interpret a whole program (module docstring); never alters the text."""
     interp = Interpreter(dialect, rotary_axes, path=path, pass_through=pass_through)
     blocks = interp.run_parts(*split_parts(text))
-    notes = list(interp.notes)
+    notes = []
     if any(b.kind == "move" for b in blocks) and not any(b.state.units_programmed for b in blocks):
         notes.append("the program does not state its units: mm assumed (the controller's power-on default)")
     return Program(path, blocks, dialect, interp.axes, notes)
