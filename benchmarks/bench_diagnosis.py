@@ -30,11 +30,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pige_sym.diagnosis import diagnose  # noqa: E402
-from pige_sym.effects import parse_effect  # noqa: E402
-from pige_sym.io import Measurement  # noqa: E402
-from pige_sym.simulator import random_pige, simulate  # noqa: E402
-from pige_sym.trajectories import Trajectory, cone_frustum, dwell_times  # noqa: E402
+from pige_sym.diagnosis.diagnose import diagnose  # noqa: E402
+from pige_sym.measurements.measurement import Measurement  # noqa: E402
+from pige_sym.model.effects import parse_effect  # noqa: E402
+from pige_sym.model.trajectories import Trajectory, cone_frustum, dwell_times  # noqa: E402
+from pige_sym.simulation.simulator import random_pige, simulate  # noqa: E402
 
 AC = "wC'A'bXYZ(C1)t"
 
@@ -58,8 +58,8 @@ def decimate(m: Measurement, rows: int) -> Measurement:
 
 def floor_pass(m: Measurement) -> float:
     """Seconds to evaluate the super design of every row once (module docstring)."""
-    from pige_sym.diagnosis import _setup
-    from pige_sym.normal_sums import CHUNK_ROWS
+    from pige_sym.diagnosis.diagnose import _setup
+    from pige_sym.identification.normal_sums import CHUNK_ROWS
 
     setup = _setup(m, None)
     design = setup.design()

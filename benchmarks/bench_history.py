@@ -1,7 +1,7 @@
 """Benchmark of the history's change test: false-alarm rate and power, measured in one run.
 
 Pairs of simulated runs of the default AC machine (cone frustum, 30 points, 0.25 µm noise) are
-identified (Gauss–Newton) and compared with :func:`pige_sym.history.compare_runs` at α = 1 %:
+identified (Gauss–Newton) and compared with :func:`pige_sym.verdict.history.compare_runs` at α = 1 %:
 
 - *false alarms*: both runs of an unchanged machine; the share of pairs in which any parameter
   is flagged, against the nominal α (the ratio must stay <= 1);
@@ -22,10 +22,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pige_sym.history import compare_runs  # noqa: E402
-from pige_sym.identification import identify  # noqa: E402
-from pige_sym.simulator import random_pige, simulate  # noqa: E402
-from pige_sym.trajectories import cone_frustum  # noqa: E402
+from pige_sym.identification.least_squares import identify  # noqa: E402
+from pige_sym.model.trajectories import cone_frustum  # noqa: E402
+from pige_sym.simulation.simulator import random_pige, simulate  # noqa: E402
+from pige_sym.verdict.history import compare_runs  # noqa: E402
 
 AC = "wC'A'bXYZ(C1)t"
 ALPHA = 0.01

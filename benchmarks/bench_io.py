@@ -7,7 +7,7 @@ peak resident memory (``ru_maxrss``) belongs to that step alone:
 * **floor**: reading the file's bytes into memory (``Path.read_bytes``), the I/O every reader pays;
 * **reference**: ``numpy.fromstring`` of the file's numeric body, already in memory: NumPy's own
   text-to-float conversion (no validation, no line numbers), which the reader used until it got
-  its own vectorised parser (:mod:`pige_sym.decimal_fields`);
+  its own vectorised parser (:mod:`pige_sym.measurements.decimal_fields`);
 * **read_measurement**: the validating reader (header checks, strict numbers, physical
   limits, duplicate rows), reading the file in chunks;
 * **baseline**: an empty Python process importing NumPy and pige_sym (the memory every
@@ -34,12 +34,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pige_sym.io import Measurement, header_text  # noqa: E402
+from pige_sym.measurements.measurement import Measurement  # noqa: E402
+from pige_sym.measurements.rtest_writer import header_text  # noqa: E402
 
 STEP = r"""
 import json, sys, time
 import numpy as np
-from pige_sym.io import read_measurement
+from pige_sym.measurements.rtest import read_measurement
 path, what = sys.argv[1], sys.argv[2]
 t0 = time.perf_counter()
 if what == "bytes":

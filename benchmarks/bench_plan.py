@@ -25,12 +25,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pige_sym.constants import SHIPPED_MACHINES  # noqa: E402
-from pige_sym.identification import identify  # noqa: E402
+from pige_sym.identification.least_squares import identify  # noqa: E402
 from pige_sym.kernels import load_kernels  # noqa: E402
+from pige_sym.model.trajectories import Trajectory  # noqa: E402
 from pige_sym.planning import PlanRequest, Setup, parse_limits, plan_test  # noqa: E402
-from pige_sym.planning.search import schedule_times  # noqa: E402
-from pige_sym.simulator import random_pige, simulate  # noqa: E402
-from pige_sym.trajectories import Trajectory  # noqa: E402
+from pige_sym.planning.plan import schedule_times  # noqa: E402
+from pige_sym.simulation.simulator import random_pige, simulate  # noqa: E402
 
 POINTS = 30
 NOISE = 0.25

@@ -36,10 +36,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pige_sym import load_kernels  # noqa: E402
-from pige_sym.identification import identify  # noqa: E402
+from pige_sym.identification.least_squares import identify  # noqa: E402
 from pige_sym.kernels import SHIPPED_MACHINES  # noqa: E402
-from pige_sym.simulator import random_pige, simulate  # noqa: E402
-from pige_sym.trajectories import Trajectory, dwell_times  # noqa: E402
+from pige_sym.model.trajectories import Trajectory, dwell_times  # noqa: E402
+from pige_sym.simulation.simulator import random_pige, simulate  # noqa: E402
 
 TOOL = (0.0, 0.0, -250.0)
 BALL = (120.0, 30.0, 80.0)
@@ -201,8 +201,8 @@ def bench_startup(rows: list[Row], machine: str, repeats: int) -> None:
     py = sys.executable
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        from pige_sym.io import write_measurement
-        from pige_sym.trajectories import make_trajectory
+        from pige_sym.measurements.rtest_writer import write_measurement
+        from pige_sym.model.trajectories import make_trajectory
 
         sim = simulate(machine, make_trajectory(machine, "cone-frustum"), pige=random_pige(machine, 2),
                        ball_mm=BALL, noise_um=0.25, seed=2)

@@ -7,13 +7,14 @@ Data flows one way: machine code string → symbolic model (SymPy, :mod:`pige_sy
 
 from typing import TYPE_CHECKING, Any
 
+from pige_sym.constants import VERSION as __version__
+
 if TYPE_CHECKING:
     from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
     from pige_sym.errors import PigeError
     from pige_sym.kernels import load_kernels
 
-__all__ = ["PigeError", "MachineStructure", "load_kernels", "parse_machine_code"]
-__version__ = "0.1.0"
+__all__ = ["PigeError", "MachineStructure", "load_kernels", "parse_machine_code", "__version__"]
 
 _LAZY = {
     "PigeError": "pige_sym.errors",

@@ -6,6 +6,9 @@ studies, the virtual device and the NC program writer alike.
 
 from __future__ import annotations
 
+#: The package version (``pige --version``, reports); pyproject.toml carries the same number.
+VERSION = "0.1.0"
+
 #: Machine used when no ``--machine`` is given: an AC tilting table (ISO 10791 code).
 DEFAULT_MACHINE = "wC'A'bXYZ(C1)t"
 

@@ -90,7 +90,7 @@ class RecordError(Exception):
 
 
 class SchemaRefusal(Exception):
-    """A JSON value that breaks the schema; :mod:`pige_sym.schema` turns it into a FileFormatError naming the field."""
+    """A JSON value that breaks the schema (:mod:`~pige_sym.measurements.schema` makes it a FileFormatError)."""
 
     def __init__(self, where: str, problem: str) -> None:
         super().__init__(f"{where}: {problem}" if where else problem)

@@ -26,18 +26,20 @@ from pige_sym.acquisition.device import (
     encode_sample,
     parse_record,
 )
-from pige_sym.acquisition.engine import AcquisitionOptions, acquire
+from pige_sym.acquisition.engine import acquire
 from pige_sym.acquisition.nest import NestGeometry, parse_nest, tripod
+from pige_sym.acquisition.options import AcquisitionOptions
 from pige_sym.acquisition.outputs import default_raw_log, summary_path
 from pige_sym.acquisition.transport import LineFramer, PortSettings, open_port, read_available
-from pige_sym.acquisition.virtual_device import DeviceConfig, VirtualRTest, start_virtual_device
+from pige_sym.acquisition.virtual_device import DeviceConfig, VirtualRTest
+from pige_sym.acquisition.virtual_run import start_virtual_device
 from pige_sym.cli.main import main
 from pige_sym.errors import AcquisitionError
-from pige_sym.identification import identify
-from pige_sym.io import read_measurement
+from pige_sym.identification.least_squares import identify
+from pige_sym.measurements.rtest import read_measurement
 from pige_sym.nc.program import make_rtest_program
 from pige_sym.nc.rtest_program import load_test_program
-from pige_sym.simulator import random_pige
+from pige_sym.simulation.simulator import random_pige
 
 AC = "wC'A'bXYZ(C1)t"
 REPO = Path(__file__).resolve().parents[1]
@@ -220,8 +222,8 @@ def test_schedule_and_key_triggers_agree_with_stability(tmp_path) -> None:
 
 @pytest.mark.parametrize("machine, tool, frame", [(AC, None, "table"), ("wbXYZCA(C1)t", (0.0, 0.0, -250.0), "machine")])
 def test_point_probe_nest_and_frames_end_to_end(tmp_path, machine, tool, frame) -> None:
-    from pige_sym.effects import parse_effect
     from pige_sym.kernels import load_kernels
+    from pige_sym.model.effects import parse_effect
 
     kern = load_kernels(machine)
     program = load_test_program(machine, "cone-frustum", points=6, tool_mm=tool)

@@ -10,11 +10,11 @@ import pytest
 
 from conftest import load_reference
 from pige_sym.cli.main import main
-from pige_sym.compare import compare_measurements
-from pige_sym.effects import EffectContext, parse_effect
 from pige_sym.kernels import load_kernels
-from pige_sym.simulator import random_pige, simulate
-from pige_sym.trajectories import cone_frustum
+from pige_sym.model.effects import EffectContext, parse_effect
+from pige_sym.model.trajectories import cone_frustum
+from pige_sym.simulation.simulator import random_pige, simulate
+from pige_sym.verdict.compare import compare_measurements
 
 AC = "wC'A'bXYZ(C1)t"
 EFFECT = "angular_error_C:harmonic=2,cos_urad=12,sin_urad=-8"

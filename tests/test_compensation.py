@@ -8,23 +8,18 @@ import numpy as np
 import pytest
 
 from pige_sym.cli.main import main
-from pige_sym.compensation import (
-    AngleExtension,
-    CompensationParameters,
-    compensate_poses,
-    compensate_program,
-    compensation_study,
-    controller_corrections,
-    load_parameters,
-    tool_point_error,
-)
-from pige_sym.effects import EffectSpec
+from pige_sym.compensation.controller import controller_corrections
+from pige_sym.compensation.kinematics import compensate_poses, tool_point_error
+from pige_sym.compensation.parameters import AngleExtension, CompensationParameters, load_parameters
+from pige_sym.compensation.study import compensation_study
 from pige_sym.errors import FileFormatError, InputError
-from pige_sym.identification import identify
+from pige_sym.identification.least_squares import identify
 from pige_sym.kernels import load_kernels
+from pige_sym.model.effects import EffectSpec
+from pige_sym.model.trajectories import cone_frustum, figure_eight, steps
+from pige_sym.nc.compensate import compensate_program
 from pige_sym.nc.program import NCProgramError, make_rtest_program
-from pige_sym.simulator import random_pige, simulate
-from pige_sym.trajectories import cone_frustum, figure_eight, steps
+from pige_sym.simulation.simulator import random_pige, simulate
 
 AC, BC, HEAD, MIXED = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t", "wbXYZCA(C1)t", "wC'bXYZB(C1)t"
 TOOL = {HEAD: (0.0, 0.0, -250.0), MIXED: (0.0, 0.0, -250.0)}
@@ -110,7 +105,7 @@ def test_orientation_is_corrected_to_first_order():
 @pytest.mark.parametrize("effect,trajectory", [("angular_error_C:harmonic=2,cos_urad=25,sin_urad=-15", "cone"),
                                                ("backlash_C:b_urad=40", "steps")])
 def test_angle_extensions_are_compensated(effect, trajectory):
-    from pige_sym.effects import parse_effect
+    from pige_sym.model.effects import parse_effect
 
     eff = parse_effect(effect, ("A", "C"))
     ext = AngleExtension(eff.spec, eff.params)
@@ -137,7 +132,7 @@ def test_angle_extensions_are_compensated(effect, trajectory):
 def test_study_with_an_angle_error_on_the_true_machine():
     """The true machine has an angular positioning error of C: compensating the PIGEs alone leaves it,
     compensating the accepted extension too removes it."""
-    from pige_sym.effects import parse_effect
+    from pige_sym.model.effects import parse_effect
 
     eff = parse_effect("angular_error_C:harmonic=2,cos_urad=20,sin_urad=-10", ("A", "C"))
     ext = [AngleExtension(eff.spec, eff.params)]
@@ -171,8 +166,8 @@ def test_extension_equals_a_zero_position_error_per_pose():
 def test_extensions_act_like_the_effect_catalogue(effect):
     """The compensated angle error is the same physics as the simulator's effect: the machine with the
     extension (per-pose zero errors) shows, zeroed at the reference, exactly the effect's contribution."""
-    from pige_sym.compensation import raw_offset
-    from pige_sym.effects import EffectContext, parse_effect
+    from pige_sym.compensation.kinematics import raw_offset
+    from pige_sym.model.effects import EffectContext, parse_effect
 
     kern = load_kernels(AC)
     eff = parse_effect(effect, ("A", "C"))
@@ -181,7 +176,7 @@ def test_extensions_act_like_the_effect_catalogue(effect):
     pts = np.tile(ball, (a.shape[0], 1))
     ctx = EffectContext(kern, a, traj.t_s, ball, None, None)
     expected = eff.spec.contribution(ctx, eff.params)
-    from pige_sym.compensation import pose_parameters
+    from pige_sym.compensation.parameters import pose_parameters
 
     raw = raw_offset(kern, a, pts, pose_parameters(kern, {}, a, [AngleExtension(eff.spec, eff.params)]), None, None)
     zeroed = raw - np.einsum("nij,j->ni", kern.workpiece_rotation(a), raw[0])
@@ -194,7 +189,7 @@ def test_extensions_act_like_the_effect_catalogue(effect):
 def test_raw_offset_equals_the_jacobian_written_out(machine, per_pose):
     """Oracle: for each pose, the kernel's (3, P) Jacobian at that pose's own point plus the rotated
     reference Jacobian, times that pose's parameters (the contraction order of ``raw_offset`` differs)."""
-    from pige_sym.compensation import raw_offset
+    from pige_sym.compensation.kinematics import raw_offset
 
     kern = load_kernels(machine)
     rng = np.random.default_rng(11)
@@ -218,7 +213,7 @@ def test_closed_form_svd_matches_lapack_down_to_rank_one():
     """``svd_3x2`` against ``np.linalg.svd``: random, nearly parallel columns (the orientation pole),
     rank one, zero; reconstruction, orthonormal vectors, the same singular values, and the same
     least-squares step ``sum_i (u_i . t / s_i) v_i`` wherever ``s_i`` is clearly non-zero."""
-    from pige_sym.compensation import svd_3x2
+    from pige_sym.compensation.kinematics import svd_3x2
 
     rng = np.random.default_rng(8)
     m = rng.normal(0, 1, (400, 3, 2))
@@ -397,7 +392,7 @@ def test_json_output_of_simulate_and_compensate(tmp_path, capsys):
 
 
 def test_controller_styles_print_the_deltas_with_their_signs():
-    from pige_sym.compensation import format_controller
+    from pige_sym.compensation.controller import format_controller
 
     values = {"EY0A": 12.0, "EZ0A": -9.0, "EX0C": -14.0, "EY0C": 10.0, "EA0A": 100.0}
     params = _params(AC, values)

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pige_sym.decimal_fields import MAX_DIGITS, WINDOW, field_ends, parse_decimal_fields
+from pige_sym.measurements.decimal_fields import MAX_DIGITS, WINDOW, field_ends, parse_decimal_fields
 from pige_sym.options import strict_float
 
 
@@ -143,7 +143,7 @@ def test_doubles_round_trip_through_repr_seeded() -> None:
 
 def test_exact_midpoints_are_deferred_to_strict_float() -> None:
     """The fast path does not decide a tie itself: a value on a rounding midpoint is flagged."""
-    from pige_sym.decimal_fields import _quotients
+    from pige_sym.measurements.decimal_fields import _quotients
 
     mantissa = np.array([9007199254740993, 45035996273704965, 12345], dtype=np.uint64)  # 2**53 + 1; its 5x / 10
     values, ambiguous = _quotients(mantissa, np.array([0, 1, 2]))

@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from pige_sym.cli.main import main
-from pige_sym.io import read_measurement
+from pige_sym.measurements.rtest import read_measurement
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="the virtual device needs a POSIX pty")
 

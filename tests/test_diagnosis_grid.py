@@ -23,11 +23,11 @@ import functools
 import numpy as np
 import pytest
 
-from pige_sym.diagnosis import diagnose
-from pige_sym.effects import EffectInstance, EffectSpec
+from pige_sym.diagnosis.diagnose import diagnose
 from pige_sym.kernels import load_kernels
-from pige_sym.simulator import random_pige, simulate
-from pige_sym.trajectories import cone_frustum, figure_eight, steps
+from pige_sym.model.effects import EffectInstance, EffectSpec
+from pige_sym.model.trajectories import cone_frustum, figure_eight, steps
+from pige_sym.simulation.simulator import random_pige, simulate
 
 AC, BC, FORK, TABLE_HEAD = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t", "wbXYZCA(C1)t", "wC'bXYZB(C1)t"
 MACHINES = (AC, BC, FORK, TABLE_HEAD)

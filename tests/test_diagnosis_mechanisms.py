@@ -9,10 +9,10 @@ import sys
 import numpy as np
 
 from conftest import REPO
-from pige_sym.diagnosis import diagnose
-from pige_sym.effects import EffectInstance, EffectSpec, parse_effect
-from pige_sym.simulator import random_pige, simulate
-from pige_sym.trajectories import cone_frustum, steps
+from pige_sym.diagnosis.diagnose import diagnose
+from pige_sym.model.effects import EffectInstance, EffectSpec, parse_effect
+from pige_sym.model.trajectories import cone_frustum, steps
+from pige_sym.simulation.simulator import random_pige, simulate
 
 AC = "wC'A'bXYZ(C1)t"
 
@@ -98,7 +98,7 @@ def test_head_machines_diagnose_and_cli_never_exits_2(tmp_path) -> None:
 
 def test_decimated_file_gives_the_same_findings() -> None:
     """A dense file and every 10th row of it name the same effect (scale: same findings)."""
-    from pige_sym.trajectories import Trajectory, dwell_times
+    from pige_sym.model.trajectories import Trajectory, dwell_times
 
     base = cone_frustum(AC, points=2000)
     tr = Trajectory("dense", base.rotary_axes, base.angles_deg, dwell_times(base.angles_deg, move_s=0.1, dwell_s=0.1),
@@ -108,7 +108,7 @@ def test_decimated_file_gives_the_same_findings() -> None:
     dense = diagnose(sim.measurement)
     m = sim.measurement
     keep = np.arange(0, m.n_rows, 10)
-    from pige_sym.io import Measurement
+    from pige_sym.measurements.measurement import Measurement
 
     small = Measurement(**{**m.__dict__, "t_s": m.t_s[keep], "angles_deg": m.angles_deg[keep],
                            "deviation_um": m.deviation_um[keep], "linear_mm": m.linear_mm[keep]})

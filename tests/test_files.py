@@ -166,7 +166,7 @@ def test_diagnose_refuses_to_replace_plots_before_the_long_work(tmp_path, capsys
 
 
 def test_an_unreadable_acquisition_summary_is_kept_aside_not_dropped(tmp_path) -> None:
-    from pige_sym.acquisition.engine import AcquisitionSummary
+    from pige_sym.acquisition.options import AcquisitionSummary
     from pige_sym.acquisition.outputs import _write_summary, summary_path
 
     out = tmp_path / "run.csv"

@@ -19,12 +19,12 @@ from scipy import stats
 
 from pige_sym.cli.main import main
 from pige_sym.errors import InputError
-from pige_sym.history import compare_runs, connect, list_runs
-from pige_sym.history import tables as T
-from pige_sym.history.migrations import MIGRATIONS
-from pige_sym.identification import identify
-from pige_sym.simulator import random_pige, simulate
-from pige_sym.trajectories import cone_frustum
+from pige_sym.identification.least_squares import identify
+from pige_sym.model.trajectories import cone_frustum
+from pige_sym.simulation.simulator import random_pige, simulate
+from pige_sym.verdict.history import compare_runs, connect, list_runs
+from pige_sym.verdict.history import tables as T
+from pige_sym.verdict.history.migrations import MIGRATIONS
 
 AC = "wC'A'bXYZ(C1)t"
 TRAJ = cone_frustum(AC, points=30)
@@ -197,7 +197,7 @@ def test_migrations_build_the_tables_and_refuse_a_newer_schema(tmp_path: Path) -
 
 
 def test_default_database_follows_the_environment(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from pige_sym.history import default_url
+    from pige_sym.verdict.history import default_url
 
     monkeypatch.setenv("PIGE_HISTORY_DB", str(tmp_path / "env.sqlite"))
     assert default_url() == str(tmp_path / "env.sqlite")

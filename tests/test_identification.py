@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from conftest import REPO, reference_files, require_shared
-from pige_sym.effects import parse_effect
-from pige_sym.identification import IdentificationResult, identify
-from pige_sym.io import read_measurement
-from pige_sym.simulator import random_pige, simulate
-from pige_sym.trajectories import cone_frustum, figure_eight
+from pige_sym.identification.least_squares import identify
+from pige_sym.identification.result import IdentificationResult
+from pige_sym.measurements.rtest import read_measurement
+from pige_sym.model.effects import parse_effect
+from pige_sym.model.trajectories import cone_frustum, figure_eight
+from pige_sym.simulation.simulator import random_pige, simulate
 
 AC, BC = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t"
 BALLS = {AC: (120.0, 0.0, 80.0), BC: (60.0, 90.0, 110.0)}
@@ -120,7 +121,7 @@ def test_json_round_trip_and_cli(tmp_path) -> None:
 
 
 def test_large_input_uses_basis_sums() -> None:
-    from pige_sym.identification import build_problem
+    from pige_sym.identification.problem import build_problem
 
     tr = cone_frustum(AC, points=20000)
     sim = simulate(AC, tr, pige=random_pige(AC, 5), noise_um=0.25, seed=5)
@@ -132,13 +133,13 @@ def test_large_input_uses_basis_sums() -> None:
 
 def test_near_zero_column_is_unobserved_not_amplified() -> None:
     """A ~1e-18 column (round-off) must not be scaled up into a value of 1e17: no value, named."""
-    from pige_sym.identification import _solve
+    from pige_sym.identification.spectrum import solve_scaled
 
     rng = np.random.default_rng(0)
     a = rng.normal(size=(60, 3))
     a[:, 2] = 1e-18 * rng.normal(size=60)
     y = a[:, :2] @ np.array([1.5, -2.0]) + 0.01 * rng.normal(size=60)
-    sol = _solve(a.T @ a, a.T @ y, float(y @ y))
+    sol = solve_scaled(a.T @ a, a.T @ y, float(y @ y))
     assert sol.unobserved == [2] and np.isinf(sol.vif[2])
     assert np.all(np.isfinite(sol.vif[:2])) and np.allclose(sol.values[:2], [1.5, -2.0], atol=0.05)
     sim = simulate(AC, cone_frustum(AC), pige=random_pige(AC, 1), noise_um=0.25, seed=1)
@@ -153,7 +154,7 @@ def test_near_zero_column_is_unobserved_not_amplified() -> None:
 def test_single_projection_gn_and_double_differential_agree(projection) -> None:
     """Both methods give values for exactly the identifiable PIGEs, consistent with the truth,
     and the projection study reports identify's undetermined combinations."""
-    from pige_sym.studies import projection_study
+    from pige_sym.identification.studies import projection_study
 
     tr = cone_frustum(AC)
     sim = simulate(AC, tr, pige=random_pige(AC, 3), noise_um=0.25, seed=3)

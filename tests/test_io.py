@@ -11,7 +11,9 @@ from hypothesis import strategies as st
 
 from conftest import reference_files, require_shared
 from pige_sym.errors import FileFormatError
-from pige_sym.io import Measurement, MeasurementWriter, read_angle_file, read_measurement, write_measurement
+from pige_sym.measurements.measurement import Measurement
+from pige_sym.measurements.rtest import read_angle_file, read_measurement
+from pige_sym.measurements.rtest_writer import MeasurementWriter, write_measurement
 
 GOOD = """# pige-rtest 1
 # machine: wC'A'bXYZ(C1)t
@@ -170,7 +172,7 @@ def test_reference_files_read_and_round_trip(tmp_path, path) -> None:
 def test_chunked_fast_path_equals_line_by_line_path_with_text_columns(tmp_path, monkeypatch, chunk_bytes) -> None:
     """Many rows, across chunk boundaries, with text columns and CRLF: the vectorised path reads
     exactly what the strict line-by-line path reads (values bit for bit, texts verbatim)."""
-    import pige_sym.io as io_module
+    import pige_sym.measurements.rtest_body as io_module
 
     rng = np.random.default_rng(5)
     rows = 400
@@ -184,13 +186,13 @@ def test_chunked_fast_path_equals_line_by_line_path_with_text_columns(tmp_path, 
     path = tmp_path / "crlf.csv"
     path.write_bytes(("\r\n".join(lines) + "\r\n").encode())
     monkeypatch.setattr(io_module, "CHUNK_BYTES", chunk_bytes)
-    vectorised = io_module._Body._fast
+    vectorised = io_module.DataBody._fast
     taken = []
-    monkeypatch.setattr(io_module._Body, "_fast",
+    monkeypatch.setattr(io_module.DataBody, "_fast",
                         lambda self, chunk: (result := vectorised(self, chunk), taken.append(result))[0])
     fast = read_measurement(path)
     assert sum(block is not None for block in taken) >= len(taken) - 1  # only a chunk of the header's tail may not
-    monkeypatch.setattr(io_module._Body, "_fast", lambda self, chunk: None)
+    monkeypatch.setattr(io_module.DataBody, "_fast", lambda self, chunk: None)
     strict = read_measurement(path)
     assert fast.n_rows == rows
     pairs = ((fast.t_s, strict.t_s), (fast.angles_deg, strict.angles_deg), (fast.deviation_um, strict.deviation_um))
@@ -203,7 +205,7 @@ def test_chunked_fast_path_equals_line_by_line_path_with_text_columns(tmp_path, 
 @pytest.mark.parametrize("chunk_bytes", [64, 300, 2**22])
 def test_a_too_long_line_is_named_exactly_whatever_the_chunks(tmp_path, monkeypatch, chunk_bytes) -> None:
     """The line number of a too-long line is exact although chunks are parsed ahead in threads."""
-    import pige_sym.io as io_module
+    import pige_sym.measurements.rtest_body as io_module
 
     rows = [f"{i}.0,{-i * 0.1!r},{i}.5,0.1,0.2,0.3" for i in range(1, 60)]
     rows[40] += "," + "9" * 500  # line 41 of the data

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from pige_sym.compensation import CompensationParameters
+from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import NCProgramError
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.compensate import compensate_nc

@@ -8,7 +8,7 @@ import math
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pige_sym.compensation import CompensationParameters
+from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import PigeError
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.compensate import compensate_nc

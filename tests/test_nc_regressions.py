@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from pige_sym.cli.main import main
-from pige_sym.compensation import CompensationError, CompensationParameters
-from pige_sym.errors import NCProgramError
+from pige_sym.compensation.parameters import CompensationParameters
+from pige_sym.errors import CompensationError, NCProgramError
 from pige_sym.kernels import load_kernels
 from pige_sym.nc.compensate import compensate_nc
 from pige_sym.nc.detect import detect_dialect

@@ -13,20 +13,21 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import optimize
 
-from pige_sym.acquisition.virtual_device import start_virtual_device
+from pige_sym.acquisition.virtual_run import start_virtual_device
 from pige_sym.cli.main import main
-from pige_sym.diagnosis import diagnose
-from pige_sym.effects import parse_effect
+from pige_sym.diagnosis.diagnose import diagnose
 from pige_sym.errors import InputError
-from pige_sym.identification import identify
-from pige_sym.io import read_angle_file, read_measurement
+from pige_sym.identification.least_squares import identify
 from pige_sym.kernels import load_kernels
+from pige_sym.measurements.rtest import read_angle_file, read_measurement
+from pige_sym.model.effects import parse_effect
+from pige_sym.model.trajectories import Trajectory, cone_frustum, steps
 from pige_sym.planning import PlanRequest, Setup, grade_test, parse_limits, plan_test, predict
 from pige_sym.planning.families import linear_violation
+from pige_sym.planning.plan import schedule_times
 from pige_sym.planning.prediction import Estimable, criterion_gradient, projected_coefficients
-from pige_sym.planning.search import schedule_times, search_ball_region, within_limits
-from pige_sym.simulator import random_pige, simulate
-from pige_sym.trajectories import Trajectory, cone_frustum, steps
+from pige_sym.planning.search import search_ball_region, within_limits
+from pige_sym.simulation.simulator import random_pige, simulate
 
 AC, BC, HEAD, MIXED = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t", "wbXYZCA(C1)t", "wC'bXYZB(C1)t"
 TOOL = {HEAD: (0.0, 0.0, -250.0), MIXED: (0.0, 0.0, -250.0)}
@@ -79,7 +80,7 @@ def test_prediction_is_what_identify_reports_for_the_same_noise(code) -> None:
 
 @pytest.mark.parametrize("projection, with_zero", [("y", False), ("xyz", True), ("0.6,0.8,0", True)])
 def test_prediction_follows_projection_and_zero_position_errors(projection, with_zero) -> None:
-    from pige_sym.projection import parse_projection
+    from pige_sym.model.projection import parse_projection
 
     tr = cone_frustum(BC, points=24, incl_axis="Y")
     sim = simulate(BC, tr, pige=random_pige(BC, 2), ball_mm=BALL, noise_um=NOISE, seed=5)

@@ -6,9 +6,9 @@ import numpy as np
 
 from pige_sym.cli.main import main
 from pige_sym.kernels import load_kernels
+from pige_sym.model.trajectories import cone_frustum, figure_eight
 from pige_sym.nc.program import parse_program, poses_from_program
 from pige_sym.nc.rtest_program import load_test_program
-from pige_sym.trajectories import cone_frustum, figure_eight
 
 
 def test_machine_coordinate_program_holds_the_rtcp_commands(tmp_path):

@@ -14,12 +14,12 @@ import pytest
 
 from conftest import REPO
 from pige_sym.cli.main import main
-from pige_sym.compensation import compensation_study
+from pige_sym.compensation.study import compensation_study
 from pige_sym.kernels import load_kernels
+from pige_sym.model.trajectories import cone_frustum, figure_eight
 from pige_sym.nc.program import make_rtest_program
 from pige_sym.report import ReportData, build_report, gather_report, write_report
-from pige_sym.simulator import random_pige, simulate
-from pige_sym.trajectories import cone_frustum, figure_eight
+from pige_sym.simulation.simulator import random_pige, simulate
 
 AC = "wC'A'bXYZ(C1)t"
 WEIRD = 'odd <b>&"name'
@@ -245,7 +245,7 @@ def test_renders_in_headless_chromium(built: tuple[ReportData, Path, str], tmp_p
 
 
 def test_a_failing_diagnosis_is_reported_not_fatal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from pige_sym.identification import IdentificationError
+    from pige_sym.identification.least_squares import IdentificationError
     from pige_sym.report import gather as report
 
     def boom(*args: object, **kwargs: object) -> None:

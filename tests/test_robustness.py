@@ -22,14 +22,18 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pige_sym.acquisition.device import RecordError, Sample, encode_sample, parse_record
-from pige_sym.acquisition.engine import AcquisitionOptions, acquire
+from pige_sym.acquisition.engine import acquire
+from pige_sym.acquisition.options import AcquisitionOptions
 from pige_sym.acquisition.transport import LineFramer, PortSettings
 from pige_sym.cli.main import main
 from pige_sym.codegen.machine_code import parse_machine_code
 from pige_sym.errors import FileFormatError, MachineCodeError, PigeError
-from pige_sym.io import Measurement, _Body, _read_header, read_measurement, write_measurement
+from pige_sym.measurements.measurement import Measurement
+from pige_sym.measurements.rtest import _read_header, read_measurement
+from pige_sym.measurements.rtest_body import DataBody
+from pige_sym.measurements.rtest_writer import write_measurement
+from pige_sym.measurements.schema import MAX_PIGE, read_params_file
 from pige_sym.nc.rtest_program import load_test_program
-from pige_sym.schema import MAX_PIGE, read_params_file
 
 AC = "wC'A'bXYZ(C1)t"
 LOCATION = ("EY0A", "EZ0A", "EB0A", "EC0A", "EX0C", "EY0C", "EA0C", "EB0C")
@@ -58,7 +62,7 @@ def _good_text(rows: int = 6) -> str:
     m = Measurement(machine=AC, ball_mm=np.array([120.0, 0.0, 80.0]), t_s=np.arange(rows) * 10.0, angles_deg=angles,
                     deviation_um=dev, rotary_axes=("A", "C"), linear_mm=rng.uniform(-100, 100, (rows, 3)),
                     optional={"n_samples": np.full(rows, 100.0)}, extra_columns={"note": ["a"] * rows})
-    from pige_sym.io import format_measurement
+    from pige_sym.measurements.rtest_writer import format_measurement
 
     return format_measurement(m)
 
@@ -122,7 +126,7 @@ def _fast_and_strict(path: Path) -> list[tuple]:
     outcome: list[tuple] = []
     for fast in (True, False):
         with open(path, "rb") as fh:
-            body = _Body(str(path), _read_header(fh, str(path)))
+            body = DataBody(str(path), _read_header(fh, str(path)))
             if not fast:
                 body._fast = lambda chunk: None  # type: ignore[method-assign]
             try:
@@ -209,7 +213,7 @@ def test_ball_of_1e308_duplicated_rows_fifos_and_very_long_lines_are_refused(tmp
 
 
 def test_large_file_streams_in_chunks_with_the_same_result(tmp_path, monkeypatch) -> None:
-    import pige_sym.io as io_mod
+    import pige_sym.measurements.rtest_body as io_mod
 
     rng = np.random.default_rng(3)
     n = 20000
@@ -451,7 +455,7 @@ def test_simulate_pige_file_goes_through_the_schema(tmp_path, capsys) -> None:
 
 def test_non_finite_options_are_refused_and_nothing_writes_nan(tmp_path, capsys) -> None:
     from pige_sym.errors import InputError
-    from pige_sym.io import MeasurementWriter
+    from pige_sym.measurements.rtest_writer import MeasurementWriter
 
     for argv, fragment in ((["simulate", "--noise", "nan"], "--noise: nan"),
                            (["acquire", "--port", "x", "--move", "inf"], "--move: inf"),

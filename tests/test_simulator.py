@@ -12,12 +12,12 @@ import pytest
 
 from conftest import REPO, reference_files, require_shared
 from pige_sym import load_kernels
-from pige_sym.effects import EffectContext, EffectSpec, parse_effect
 from pige_sym.errors import InputError
-from pige_sym.io import read_measurement
-from pige_sym.projection import parse_projection
-from pige_sym.simulator import parse_pige, random_pige, simulate
-from pige_sym.trajectories import approach_directions, cone_frustum, figure_eight, from_angle_file, steps
+from pige_sym.measurements.rtest import read_measurement
+from pige_sym.model.effects import EffectContext, EffectSpec, parse_effect
+from pige_sym.model.projection import parse_projection
+from pige_sym.model.trajectories import approach_directions, cone_frustum, figure_eight, from_angle_file, steps
+from pige_sym.simulation.simulator import parse_pige, random_pige, simulate
 
 AC, BC = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t"
 

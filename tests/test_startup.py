@@ -41,9 +41,9 @@ def test_help_imports_nothing_heavy(tmp_path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def measurement(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from pige_sym.io import write_measurement
-    from pige_sym.simulator import random_pige, simulate
-    from pige_sym.trajectories import make_trajectory
+    from pige_sym.measurements.rtest_writer import write_measurement
+    from pige_sym.model.trajectories import make_trajectory
+    from pige_sym.simulation.simulator import random_pige, simulate
 
     machine = "wC'A'bXYZ(C1)t"
     sim = simulate(machine, make_trajectory(machine, "cone-frustum"), pige=random_pige(machine, 1), seed=1)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pige_sym.studies import projection_study, sobol_study
-from pige_sym.trajectories import cone_frustum, figure_eight
+from pige_sym.identification.studies import projection_study, sobol_study
+from pige_sym.model.trajectories import cone_frustum, figure_eight
 
 AC, BC = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t"
 

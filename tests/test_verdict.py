@@ -13,9 +13,9 @@ from hypothesis import strategies as st
 from conftest import REPO
 from pige_sym.cli.main import main
 from pige_sym.errors import FileFormatError
-from pige_sym.simulator import random_pige, simulate
-from pige_sym.trajectories import cone_frustum
-from pige_sym.verdict import Estimates, check, decide, overall, read_tolerances, tolerances_from_dict
+from pige_sym.model.trajectories import cone_frustum
+from pige_sym.simulation.simulator import random_pige, simulate
+from pige_sym.verdict.check import Estimates, check, decide, overall, read_tolerances, tolerances_from_dict
 
 AC = "wC'A'bXYZ(C1)t"
 FMT = "pige-tolerances 1"
@@ -212,7 +212,7 @@ def test_bad_coverage_factor_is_refused(tmp_path: Path, capsys: pytest.CaptureFi
 
 
 def test_effect_limits_from_a_saved_diagnosis(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from pige_sym.effects import parse_effect
+    from pige_sym.model.effects import parse_effect
 
     eff = [parse_effect("angular_error_C:harmonic=2,cos_urad=12,sin_urad=-8", ("A", "C"))]
     sim = simulate(AC, cone_frustum(AC, points=30), pige=random_pige(AC, 2), effects=eff, noise_um=0.25, seed=2)

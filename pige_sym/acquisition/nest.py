@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.errors import FileFormatError, InputError
-from pige_sym.schema import read_json_file
+from pige_sym.measurements.schema import read_json_file
 
 CUBE_CORNER_TILT_DEG = math.degrees(math.atan(1 / math.sqrt(2)))  # 35.264°
 PROBES = ("flat", "point")
@@ -66,7 +66,7 @@ PROBES = ("flat", "point")
 
 @dataclass(frozen=True)
 class NestDocument:
-    """Schema of a nest JSON file (:mod:`pige_sym.schema`)."""
+    """Schema of a nest JSON file (:mod:`pige_sym.measurements.schema`)."""
 
     directions: list[list[float]] = field(metadata={"length": 3, "max_abs": 1e6})
     probe: str | list[str] = field(default="flat", metadata={"length": 3})

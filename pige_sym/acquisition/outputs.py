@@ -18,10 +18,10 @@ from typing import TYPE_CHECKING, Any
 
 from pige_sym.errors import InputError
 from pige_sym.files import atomic_write_text, check_output, to_json
-from pige_sym.io import FORMAT_LINE
+from pige_sym.measurements.measurement import FORMAT_LINE
 
 if TYPE_CHECKING:
-    from pige_sym.acquisition.engine import AcquisitionSummary
+    from pige_sym.acquisition.options import AcquisitionSummary
 
 
 def summary_path(out: str | os.PathLike[str]) -> Path:
@@ -119,7 +119,7 @@ def _write_summary(summary: AcquisitionSummary, out: Path) -> None:
     An earlier summary that cannot be read is kept under ``<stem>.acq.json.unreadable[-N]``, never dropped.
     """
     from pige_sym.errors import PigeError
-    from pige_sym.schema import load_json
+    from pige_sym.measurements.schema import load_json
 
     path = summary_path(out)
     sessions: list[Any] = []

@@ -21,7 +21,7 @@ from pige_sym.errors import AcquisitionStop as Stop
 from pige_sym.nc.rtest_program import TestProgram
 
 if TYPE_CHECKING:
-    from pige_sym.acquisition.engine import AcquisitionOptions
+    from pige_sym.acquisition.options import AcquisitionOptions
 
 
 _Stop = Stop

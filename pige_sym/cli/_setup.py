@@ -17,7 +17,7 @@ from pige_sym.errors import InputError
 
 def parse_vec3(text: str, what: str) -> list[float]:
     """Three comma-separated ASCII decimals within ±1e5 mm, or a clear InputError naming the option."""
-    from pige_sym.io import LIMITS
+    from pige_sym.measurements.measurement import LIMITS
     from pige_sym.options import parse_vector
 
     out = parse_vector(text, what, 3)
@@ -74,13 +74,13 @@ def setup_geometry(args: argparse.Namespace) -> tuple[list[float], dict[str, lis
 def pige_values(spec: str, machine: str, seed: int | None) -> dict[str, float]:
     """``--pige``: ``random``, ``NAME=VALUE,...`` or a parameter file [µm, µrad].
 
-    A file goes through :func:`pige_sym.schema.read_params_file` (strict JSON, finite physical
+    A file goes through :func:`pige_sym.measurements.schema.read_params_file` (strict JSON, finite physical
     numbers, the machine must agree); PIGEs it does not give are 0, as with ``NAME=VALUE``.
     """
     import os
 
-    from pige_sym.schema import read_params_file
-    from pige_sym.simulator import parse_pige
+    from pige_sym.measurements.schema import read_params_file
+    from pige_sym.simulation.simulator import parse_pige
 
     if not os.path.isfile(spec):
         return parse_pige(spec, machine, seed)

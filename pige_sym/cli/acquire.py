@@ -31,8 +31,9 @@ def parse_size(text: str) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from pige_sym.acquisition.device import make_adapter
-    from pige_sym.acquisition.engine import AcquisitionOptions, acquire
+    from pige_sym.acquisition.engine import acquire
     from pige_sym.acquisition.nest import parse_nest
+    from pige_sym.acquisition.options import AcquisitionOptions
     from pige_sym.acquisition.outputs import summary_path
     from pige_sym.acquisition.transport import PortSettings
     from pige_sym.kernels import load_kernels

@@ -6,46 +6,15 @@ Exit status: 0 only when every judged item passes; 1 when any fails or is undeci
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 ESTIMATES = ("diagnosis", "gauss-newton", "double-differential")
 
 
-def _is_json(path: str) -> bool:
-    """True when the file's first non-blank character opens a JSON object (a saved result)."""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(4096).lstrip()
-    except OSError:
-        return False
-    return head.startswith(b"{")
-
-
-def load_estimates(path: str, method: str) -> Any:
-    """Estimates of a measurement file (identified/diagnosed now) or of a saved identify/diagnose JSON."""
-    from pige_sym.verdict import estimates_from_json, estimates_from_result, strict_json
-
-    if _is_json(path):
-        return estimates_from_json(strict_json(path), path)
-    from pige_sym.io import read_measurement
-
-    m = read_measurement(path)
-    if method == "diagnosis":
-        from pige_sym.diagnosis import diagnose
-
-        return estimates_from_result(diagnose(m), path)
-    from pige_sym.identification import identify
-
-    return estimates_from_result(identify(m, method=method), path)
-
-
 def _run(args: argparse.Namespace) -> int:
+    from pige_sym import api
     from pige_sym.files import to_json
-    from pige_sym.verdict import check, read_tolerances
 
-    tol = read_tolerances(args.tolerances)
-    est = load_estimates(args.file, args.method)
-    result = check(est, tol, rule=args.rule, k=args.k)
+    result = api.check(args.file, args.tolerances, rule=args.rule, k=args.k, method=args.method)
     print(to_json(result.to_dict()) if args.json else result.format())
     return result.exit_status
 

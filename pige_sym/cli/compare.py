@@ -6,8 +6,8 @@ import argparse
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pige_sym.compare import compare_measurements
     from pige_sym.files import to_json
+    from pige_sym.verdict.compare import compare_measurements
 
     result = compare_measurements(args.before, args.after, explain=not args.no_explain)
     print(to_json(result.to_dict()) if args.json else result.format())

@@ -32,7 +32,7 @@ def _max_change(text: str) -> tuple[float, float]:
 def _machine(args: argparse.Namespace, text: str | None) -> str | None:
     """``--machine``, checked against the machine the program's header names (either may be silent)."""
     from pige_sym.codegen.machine_code import parse_machine_code
-    from pige_sym.compensation import program_machine
+    from pige_sym.nc.program_file import program_machine
 
     named = program_machine(text) if text is not None else None
     if named is not None:
@@ -47,8 +47,10 @@ def _machine(args: argparse.Namespace, text: str | None) -> str | None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pige_sym.compensation import controller_corrections, format_controller, load_parameters, read_program
-    from pige_sym.nc.compensate import compensate_nc
+    from pige_sym import api
+    from pige_sym.compensation.controller import controller_corrections, format_controller
+    from pige_sym.compensation.parameters import load_parameters
+    from pige_sym.nc.program_file import read_program
 
     text = read_program(args.program) if args.program else None
     machine = _machine(args, text)
@@ -69,10 +71,9 @@ def _run(args: argparse.Namespace) -> int:
         raise InputError("give --out NEW_PROGRAM")
     out = check_output(args.out, force=args.force, inputs=[args.program, args.params], what="--out")
     max_mm, max_deg = _max_change(args.max_change)
-    assert text is not None
-    result = compensate_nc(text, params, path=args.program, dialect=args.dialect,
-                           pass_through=args.pass_through, max_change_mm=max_mm, max_change_deg=max_deg,
-                           rtcp_on=tuple(args.rtcp_on or ()), rtcp_off=tuple(args.rtcp_off or ()))
+    result = api.compensate(args.program, params, dialect=args.dialect, pass_through=args.pass_through,
+                            max_change_mm=max_mm, max_change_deg=max_deg, rtcp_on=args.rtcp_on or (),
+                            rtcp_off=args.rtcp_off or ())
     atomic_write_text(out, result.text, newline="")
     rep = result.report
     if args.json:
@@ -149,11 +150,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _study(args: argparse.Namespace) -> int:
-    from pige_sym.compensation import compensation_study, plot_compensation
-    from pige_sym.identification import identify
+    from pige_sym.compensation.study import compensation_study, plot_compensation
+    from pige_sym.identification.least_squares import identify
     from pige_sym.kernels import load_kernels
-    from pige_sym.simulator import random_pige, simulate
-    from pige_sym.trajectories import cone_frustum, figure_eight
+    from pige_sym.model.trajectories import cone_frustum, figure_eight
+    from pige_sym.simulation.simulator import random_pige, simulate
 
     kern = load_kernels(args.machine)
     code = kern.MACHINE_CODE

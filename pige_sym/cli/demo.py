@@ -94,7 +94,7 @@ def _measure(args: argparse.Namespace, code: str, program: Any, nc_path: Path, o
              pige: dict[str, float]) -> Path | None:
     """Stages 3-4: the virtual device on a pseudo-terminal and the acquisition; the CSV, or None if incomplete."""
     from pige_sym.acquisition.engine import acquire
-    from pige_sym.acquisition.virtual_device import start_virtual_device
+    from pige_sym.acquisition.virtual_run import start_virtual_device
 
     progress = not args.quiet and sys.stderr.isatty()
     device_truth = out / "device.truth.json"
@@ -120,9 +120,10 @@ def _measure(args: argparse.Namespace, code: str, program: Any, nc_path: Path, o
 
 def _analyse(args: argparse.Namespace, kern: Any, csv: Path, out: Path, pige: dict[str, float]) -> tuple[Path, bool]:
     """Stages 5-6: both identifications and the diagnosis; the diagnosis JSON and whether it named the effect."""
-    from pige_sym.diagnosis import diagnose
-    from pige_sym.identification import format_result, identify
-    from pige_sym.io import read_measurement
+    from pige_sym.diagnosis.diagnose import diagnose
+    from pige_sym.identification.least_squares import identify
+    from pige_sym.identification.result import format_result
+    from pige_sym.measurements.rtest import read_measurement
 
     m = read_measurement(csv)
     _stage(5, "identification")
@@ -153,7 +154,9 @@ def _analyse(args: argparse.Namespace, kern: Any, csv: Path, out: Path, pige: di
 def _compensate_and_report(args: argparse.Namespace, code: str, csv: Path, nc_path: Path, diag_json: Path,
                            out: Path) -> None:
     """Stages 7-8: the compensated test program, the controller corrections and the report."""
-    from pige_sym.compensation import compensate_program, format_controller, load_parameters
+    from pige_sym.compensation.controller import format_controller
+    from pige_sym.compensation.parameters import load_parameters
+    from pige_sym.nc.compensate import compensate_program
     from pige_sym.report import gather_report, write_report
 
     _stage(7, "compensation of the test program")
@@ -174,7 +177,7 @@ def _compensate_and_report(args: argparse.Namespace, code: str, csv: Path, nc_pa
 
 def _run(args: argparse.Namespace) -> int:
     from pige_sym.kernels import load_kernels
-    from pige_sym.simulator import random_pige
+    from pige_sym.simulation.simulator import random_pige
 
     started = time.perf_counter()
     out = _prepare(args)

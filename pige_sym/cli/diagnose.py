@@ -21,15 +21,15 @@ def _check_plot_folder(args: argparse.Namespace, rotary_axes: tuple[str, ...]) -
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pige_sym.diagnosis import diagnose, residual_plots
+    from pige_sym import api
+    from pige_sym.diagnosis.residual_plots import residual_plots
     from pige_sym.files import to_json
-    from pige_sym.identification import format_result
-    from pige_sym.io import read_measurement
+    from pige_sym.identification.result import format_result
 
-    m = read_measurement(args.file)
+    m = api.read(args.file)
     if args.plots:
         _check_plot_folder(args, m.rotary_axes)
-    result = diagnose(m, progress=not args.json)
+    result = api.diagnose(m, progress=not args.json)
     if args.plots:
         residual_plots(m, result, args.plots)
     if args.json:

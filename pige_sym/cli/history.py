@@ -16,7 +16,7 @@ DB_HELP = ("history database: a file path, sqlite:///PATH or postgresql://user@h
 
 def _add(args: argparse.Namespace) -> int:
     from pige_sym.files import to_json
-    from pige_sym.history import add_run, connect
+    from pige_sym.verdict.history import add_run, connect
 
     engine = connect(args.db)
     run = add_run(engine, args.file, args.machine_id, method=args.method, tolerances=args.tolerances,
@@ -33,7 +33,7 @@ def _add(args: argparse.Namespace) -> int:
 
 def history_comparisons(runs: list[Any], alpha: float) -> list[Any]:
     """Comparisons of consecutive runs."""
-    from pige_sym.history import compare_runs
+    from pige_sym.verdict.history import compare_runs
 
     return [compare_runs(a, b, alpha=alpha, from_run=a.id, to_run=b.id) for a, b in zip(runs, runs[1:], strict=False)]
 
@@ -66,7 +66,7 @@ def _show_text(runs: list[Any], comparisons: list[Any]) -> None:
 
 def _show(args: argparse.Namespace) -> int:
     from pige_sym.files import to_json
-    from pige_sym.history import connect, list_runs
+    from pige_sym.verdict.history import connect, list_runs
 
     if not 0 < args.alpha < 1:
         from pige_sym.errors import InputError

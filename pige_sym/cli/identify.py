@@ -9,11 +9,11 @@ from pige_sym.files import to_json
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pige_sym.identification import format_result, identify
-    from pige_sym.io import read_measurement
+    from pige_sym import api
+    from pige_sym.identification.result import format_result
 
-    m = read_measurement(args.file)
-    result = identify(m, method=args.method, projection=args.projection, loss=args.loss, with_zero=args.with_zero)
+    result = api.identify(args.file, method=args.method, projection=args.projection, loss=args.loss,
+                          with_zero=args.with_zero)
     if args.json:
         print(to_json(result.to_dict()))
     else:

@@ -29,7 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Identify and compensate the rotary-axis PIGEs of five-axis machines from R-test data.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    from pige_sym import __version__
+    from pige_sym.constants import VERSION as __version__
 
     parser.add_argument("--version", action="version", version=f"pige {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)

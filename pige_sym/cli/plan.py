@@ -41,8 +41,8 @@ def _setup(args: argparse.Namespace) -> Any:
     import numpy as np
 
     from pige_sym.cli._setup import parse_pivots, parse_vec3
+    from pige_sym.model.projection import parse_projection
     from pige_sym.planning import Setup
-    from pige_sym.projection import parse_projection
 
     tool = parse_vec3(args.tool, "--tool") if args.tool else None
     pivots = {a: np.asarray(v, dtype=float) for a, v in parse_pivots(args.pivot).items()}
@@ -52,9 +52,9 @@ def _setup(args: argparse.Namespace) -> Any:
 
 
 def _grade(args: argparse.Namespace, setup: Any, limits: Any) -> Any:
+    from pige_sym.model.trajectories import NAMES
     from pige_sym.nc.rtest_program import load_test_program
     from pige_sym.planning import grade_test
-    from pige_sym.trajectories import NAMES
 
     options = {"points": args.points} if args.points is not None and args.grade in NAMES else {}
     prog = load_test_program(setup.machine, args.grade, ball_mm=setup.ball_mm, pivots_mm=setup.pivots_mm,
@@ -65,7 +65,7 @@ def _grade(args: argparse.Namespace, setup: Any, limits: Any) -> Any:
 
 def _plan(args: argparse.Namespace, setup: Any, limits: Any) -> Any:
     from pige_sym.files import atomic_write_text, check_output
-    from pige_sym.io import read_angle_file
+    from pige_sym.measurements.rtest import read_angle_file
     from pige_sym.planning import PlanRequest, parse_reveal, plan_test, search_ball_region
 
     if not args.out:

@@ -10,16 +10,15 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
-
-import pige_sym.cli as _package
+from pathlib import Path
 
 _NOT_COMMANDS = {"main", "registry"}
 
 
 def register_all(subparsers: argparse._SubParsersAction) -> None:
     """Import every command module of :mod:`pige_sym.cli` and let it register itself."""
-    for info in sorted(pkgutil.iter_modules(_package.__path__), key=lambda i: i.name):
+    for info in sorted(pkgutil.iter_modules([str(Path(__file__).parent)]), key=lambda i: i.name):
         if info.name.startswith("_") or info.name in _NOT_COMMANDS:
             continue
-        module = importlib.import_module(f"{_package.__name__}.{info.name}")
+        module = importlib.import_module(f"{__package__}.{info.name}")
         module.register(subparsers)

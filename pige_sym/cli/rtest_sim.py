@@ -26,9 +26,10 @@ def _terminate(signum: int, frame: Any) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from pige_sym.acquisition.nest import parse_nest
-    from pige_sym.acquisition.virtual_device import DeviceConfig, parse_faults, run_device
-    from pige_sym.effects import parse_effect
+    from pige_sym.acquisition.virtual_device import DeviceConfig, parse_faults
+    from pige_sym.acquisition.virtual_run import run_device
     from pige_sym.kernels import load_kernels
+    from pige_sym.model.effects import parse_effect
     from pige_sym.nc.rtest_program import load_test_program
 
     if args.truth:

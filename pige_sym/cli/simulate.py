@@ -17,11 +17,11 @@ from pige_sym.files import atomic_write_text, check_output, to_json
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pige_sym.effects import parse_effect
-    from pige_sym.io import write_measurement
     from pige_sym.kernels import load_kernels
-    from pige_sym.simulator import simulate
-    from pige_sym.trajectories import make_trajectory
+    from pige_sym.measurements.rtest_writer import write_measurement
+    from pige_sym.model.effects import parse_effect
+    from pige_sym.model.trajectories import make_trajectory
+    from pige_sym.simulation.simulator import simulate
 
     finite_option(args.noise, "--noise", minimum=0.0)
     kern = load_kernels(args.machine)

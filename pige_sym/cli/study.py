@@ -10,7 +10,7 @@ from pige_sym.files import to_json
 
 def _trajectory(args: argparse.Namespace):  # noqa: ANN202
     from pige_sym.kernels import load_kernels
-    from pige_sym.trajectories import make_trajectory
+    from pige_sym.model.trajectories import make_trajectory
 
     kern = load_kernels(args.machine)
     opts = {"incl_axis": args.incl_axis} if args.trajectory == "cone-frustum" and args.incl_axis else {}
@@ -18,7 +18,7 @@ def _trajectory(args: argparse.Namespace):  # noqa: ANN202
 
 
 def _projection(args: argparse.Namespace) -> int:
-    from pige_sym.studies import projection_study
+    from pige_sym.identification.studies import projection_study
 
     kern, traj = _trajectory(args)
     study = projection_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), sweep=args.sweep,
@@ -28,7 +28,7 @@ def _projection(args: argparse.Namespace) -> int:
 
 
 def _sobol(args: argparse.Namespace) -> int:
-    from pige_sym.studies import sobol_study
+    from pige_sym.identification.studies import sobol_study
 
     kern, traj = _trajectory(args)
     study = sobol_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), n=args.samples,

@@ -13,7 +13,7 @@ The module is rendered to a string first (:func:`render_module`), then written
   and ``angles_for_direction`` (see :class:`pige_sym.kernels.protocol.KernelModule`).
 
 How a function is rendered: the fixed parts (signatures and docstrings) are templates
-in :data:`_SPECS`; the body is the symbolic expressions printed with plain float
+in :data:`SPECS`; the body is the symbolic expressions printed with plain float
 literals; the locals a body needs are chosen from the candidates of
 :func:`_trig_locals` and :func:`_geometry_locals` (each angle's cos/sin evaluated once,
 lever arms ``d_P_Q = 0.001 * (P - Q)`` [mm → µm per µrad] as named locals) and nothing
@@ -34,105 +34,20 @@ from pathlib import Path
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
+from pige_sym.codegen.decompose import DirectionSolver, direction_solver, trig_basis
 from pige_sym.codegen.fingerprint import current_hash
 from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
-from pige_sym.codegen.symbolic import DirectionSolver, SymbolicModel, build_model, direction_solver, trig_basis
+from pige_sym.codegen.symbolic import SymbolicModel, build_model
+from pige_sym.codegen.templates import LINEAR_FUNCTIONS, SPECS
 from pige_sym.files import atomic_write_text
 
 _HELPERS_FILE = Path(__file__).with_name("kernel_helpers.py")
+
+
 _MARKER = "# --- copied into every kernel module ---"
+
+
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-
-#: Signature and docstring of every generated function; ``{K}`` and ``{P}`` are filled in.
-_SPECS: dict[str, str] = {
-    "basis": '''def basis(angles_deg):
-    """Trigonometric basis, shape=(n, K={K}) [1]; columns named in BASIS."""''',
-    "coefficients": '''def coefficients(ball_mm, pivots_mm=None, tool_mm=None):
-    """Coefficient tensor G, shape=(K={K}, 3, P={P}) [µm per µm or µrad]: jacobian = basis @ G."""''',
-    "reference_jacobian": '''def reference_jacobian(ball_mm, pivots_mm=None, tool_mm=None):
-    """Un-zeroed offset Jacobian at the reference pose J_raw(0), shape=(3, P={P}) [µm per µm or µrad].
-
-    The ball-minus-nest offset before zeroing is, at any pose,
-    ``(jacobian + workpiece_rotation @ reference_jacobian) @ params``; effects whose
-    size changes with the pose (angle-dependent errors) need it.
-    """''',
-    "motion_jacobian": '''def motion_jacobian(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
-    """Un-zeroed offset per unit error motion, shape=(n, 3, 6k) [µm per µm or µrad].
-
-    Columns MOTION_PARAMETERS: per rotary axis dx, dy, dz [µm] and rx, ry, rz [µrad],
-    a small rigid motion of the body the axis carries (carrier frame, rotations about
-    the nominal pivot) applied after the axis' own motion.  Zeroing at the reference
-    pose is the caller's business (subtract workpiece_rotation @ value at the reference).
-    """''',
-    "orientation_jacobian": '''def orientation_jacobian(angles_deg):
-    """Tool-orientation error Jacobian, shape=(n, 3, P={P}) [µrad per µm or µrad].
-
-    ω = orientation_jacobian @ params is the small rotation of the spindle frame
-    relative to the workpiece, expressed in W: R_rel_actual = (I + [ω]x) R_rel_nominal.
-    """''',
-    "workpiece_rotation": '''def workpiece_rotation(angles_deg):
-    """Nominal rotation of the workpiece frame W into M, shape=(n, 3, 3)."""''',
-    "tool_rotation": '''def tool_rotation(angles_deg):
-    """Nominal rotation of the spindle frame into M, shape=(n, 3, 3)."""''',
-    "linear_commands": '''def linear_commands(angles_deg, ball_mm, pivots_mm=None, tool_mm=None):
-    """Commanded X, Y, Z (RTCP, nominal kinematics), shape=(n, 3) [mm]; ball_mm at the reference pose."""''',
-    "tool_direction": '''def tool_direction(angles_deg):
-    """Spindle direction in the workpiece frame W, shape=(n, 3) [unit vectors]."""''',
-    "angles_for_direction": '''def angles_for_direction(direction, branch=1, previous_deg=None):
-    """Rotary angles that put a workpiece-frame tool direction on the spindle axis.
-
-    Parameters
-    ----------
-    direction : array, shape=(n, 3)
-        Tool direction in the workpiece frame W (normalised here).
-    branch : {{+1, -1}}
-        Which of the two solutions of the primary (tilting) axis to take.
-    previous_deg : array, shape=(k,), optional
-        Angles used where the secondary axis is undetermined (singular pose).
-
-    Returns
-    -------
-    angles_deg : array, shape=(n, k) [deg], secondary axis unwrapped to be continuous.
-    """''',
-}
-
-_LINEAR_FUNCTIONS = '''def jacobian(angles_deg, params=None, ball_mm=None, pivots_mm=None, tool_mm=None, out=None):
-    """Jacobian of the deviation, shape=(n, 3, P) [µm per µm or µrad].
-
-    The first-order model is linear in the parameters, so ``params`` is accepted
-    for a uniform signature but does not change the result.  ``out``, a C-contiguous
-    float array of shape (n, 3, P), receives the result without a new allocation.
-    """
-    if ball_mm is None:
-        raise ValueError("jacobian needs ball_mm")
-    b = basis(angles_deg)
-    g = coefficients(ball_mm, pivots_mm, tool_mm)
-    n = b.shape[0]
-    if out is None:
-        out = np.empty((n, 3, g.shape[2]))
-    elif out.shape != (n, 3, g.shape[2]) or not out.flags.c_contiguous:
-        raise ValueError(f"out must be a C-contiguous array of shape {(n, 3, g.shape[2])}, got {out.shape}")
-    np.matmul(b, g.reshape(g.shape[0], -1), out=out.reshape(n, -1))
-    return out
-
-
-def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
-    """Ball-minus-nest deviation in the machine frame, shape=(n, 3) [µm].
-
-    Parameters
-    ----------
-    angles_deg : array, shape=(n, k) [deg]
-        Commanded rotary angles, columns in ROTARY_AXES order.
-    params : array, shape=(P,) or (8,)-like
-        Error parameters in PARAMETERS order [µm, µrad]; the location errors alone
-        are accepted (zero-position errors then 0).
-    ball_mm : array, shape=(3,) [mm]
-    pivots_mm : dict axis -> (3,) [mm], optional
-    tool_mm : (3,) [mm], required with tool-side rotary axes
-    """
-    p = _params(params)
-    g = coefficients(ball_mm, pivots_mm, tool_mm)
-    return basis(angles_deg) @ (g @ p)'''
 
 
 class _Printer(PythonCodePrinter):
@@ -152,9 +67,6 @@ def _code(expr: sp.Expr) -> str:
     """Python source of an expression; non-integer rationals become float literals."""
     floats = {r: sp.Float(r) for r in expr.atoms(sp.Rational) if not r.is_Integer}
     return str(_Printer({"standard": "python3"}).doprint(expr.xreplace(floats)))
-
-
-# ---------------------------------------------------------------- locals of a body
 
 
 def _tokens(lines: Iterable[str]) -> set[str]:
@@ -234,9 +146,6 @@ class _Levers:
         return sorted(self.used.items())
 
 
-# ---------------------------------------------------------------- rendered functions
-
-
 def _monomial_name(names: Sequence[str], m: tuple[int, ...]) -> str:
     parts = []
     for i, nm in enumerate(names):
@@ -274,7 +183,7 @@ def _render_basis(model: SymbolicModel, monomials: Sequence[tuple[int, ...]]) ->
     body = [f"    out = np.empty((n, {len(monomials)}), order='F')"]
     body += _basis_columns(model.rotary_axes, monomials, "out")
     body.append("    return out")
-    spec = _SPECS["basis"].format(K=len(monomials), P=len(model.parameters))
+    spec = SPECS["basis"].format(K=len(monomials), P=len(model.parameters))
     return _function(spec, body, _trig_locals(model), geometry=False)
 
 
@@ -324,7 +233,7 @@ def _render_coefficients(model: SymbolicModel, coefficients: Sequence[sp.Matrix]
     k, p = len(coefficients), len(model.parameters)
     const, fill = _sparse_fill("g", _tensor_entries(coefficients, levers), "_COEFFICIENTS_NONZERO")
     body = [f"    g = np.zeros(({k}, 3, {p}))", *fill, "    return g"]
-    spec = _SPECS["coefficients"].format(K=k, P=p)
+    spec = SPECS["coefficients"].format(K=k, P=p)
     return _with_constant(const, _function(spec, body, _geometry_locals(model, levers.locals()), geometry=True))
 
 
@@ -334,7 +243,7 @@ def _render_reference_jacobian(model: SymbolicModel) -> str:
     entries = [(idx[1:], code) for idx, code in _tensor_entries([model.reference_jacobian], levers)]
     const, fill = _sparse_fill("out", entries, "_REFERENCE_NONZERO")
     body = [f"    out = np.zeros((3, {p}))", *fill, "    return out"]
-    function = _function(_SPECS["reference_jacobian"].format(P=p), body, _geometry_locals(model, levers.locals()), True)
+    function = _function(SPECS["reference_jacobian"].format(P=p), body, _geometry_locals(model, levers.locals()), True)
     return _with_constant(const, function)
 
 
@@ -347,7 +256,7 @@ def _render_motion_jacobian(model: SymbolicModel) -> str:
     body += [f"    g = np.zeros(({k}, 3, {m}))", *fill]
     body.append(f"    return (b @ g.reshape({k}, -1)).reshape(n, 3, {m})")
     candidates = _trig_locals(model) + _geometry_locals(model, levers.locals())
-    return _with_constant(const, _function(_SPECS["motion_jacobian"], body, candidates, geometry=True))
+    return _with_constant(const, _function(SPECS["motion_jacobian"], body, candidates, geometry=True))
 
 
 def _render_orientation_jacobian(model: SymbolicModel) -> str:
@@ -361,7 +270,7 @@ def _render_orientation_jacobian(model: SymbolicModel) -> str:
                 if cm[i, j] != 0:
                     body.append(f"    out[:, {i}, {j}] += {_code(cm[i, j])} * {term}")
     body.append("    return out")
-    return _function(_SPECS["orientation_jacobian"].format(P=p), body, _trig_locals(model), geometry=False)
+    return _function(SPECS["orientation_jacobian"].format(P=p), body, _trig_locals(model), geometry=False)
 
 
 def _render_matrix(model: SymbolicModel, matrix: sp.Matrix, name: str, geometry: bool) -> str:
@@ -376,11 +285,11 @@ def _render_matrix(model: SymbolicModel, matrix: sp.Matrix, name: str, geometry:
                 body.append(f"    out{idx} = {_code(matrix[i, j])}")
     body.append("    return out")
     candidates = _trig_locals(model) + (_geometry_locals(model) if geometry else [])
-    return _function(_SPECS[name], body, candidates, geometry)
+    return _function(SPECS[name], body, candidates, geometry)
 
 
 def _render_direction_solver(model: SymbolicModel, solver: DirectionSolver | None) -> str:
-    spec = _SPECS["angles_for_direction"].format()
+    spec = SPECS["angles_for_direction"].format()
     if solver is None:
         return spec + (
             "\n    raise NotImplementedError(f'{MACHINE_CODE}: no closed-form tool-direction inverse "
@@ -425,9 +334,6 @@ def _render_direction_solver(model: SymbolicModel, solver: DirectionSolver | Non
     used = _tokens(body)
     primary = [f"    {sym.name} = np.{fn}(theta_p)" for sym, fn in ((pc, "cos"), (ps, "sin")) if sym.name in used]
     return "\n".join([spec, *body[:7], *primary, *body[7:]])
-
-
-# ---------------------------------------------------------------- module
 
 
 def _copied_helpers() -> str:
@@ -500,7 +406,7 @@ def render_module(code: str | MachineStructure) -> str:
         _copied_helpers(),
         _render_basis(model, basis.monomials),
         _render_coefficients(model, basis.coefficients),
-        _LINEAR_FUNCTIONS,
+        LINEAR_FUNCTIONS,
         _render_reference_jacobian(model),
         _render_motion_jacobian(model),
         _render_orientation_jacobian(model),

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from pige_sym.codegen.machine_code import MachineStructure
 
-GENERATOR_SOURCES = ("machine_code.py", "symbolic.py", "emit.py", "kernel_helpers.py")
+GENERATOR_SOURCES = ("machine_code.py", "symbolic.py", "decompose.py", "templates.py", "emit.py", "kernel_helpers.py")
 
 
 def current_hash(structure: MachineStructure) -> str:

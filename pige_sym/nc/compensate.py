@@ -7,7 +7,7 @@
    exactly as programmed) and moves under a work offset other than the one of the first
    compensated move (the parameters hold for one set-up).  Every other block that moves an
    axis is listed with the reason it passes through.
-3. **Compensate** all planned poses at once (:func:`pige_sym.compensation.compensate_poses`) with
+3. **Compensate** all planned poses at once (:func:`pige_sym.compensation.kinematics.compensate_poses`) with
    the orientation-pole guard (no rotary axis turned by more than ``max_change_deg`` to fix
    the orientation; such poses are listed as *orientation limited*, their position is still
    corrected); a rotary command is never moved across a multiple of 360° (on a roll-over axis that
@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.constants import DEFAULT_MAX_CHANGE_DEG as DEFAULT_MAX_CHANGE_DEG
 from pige_sym.constants import DEFAULT_MAX_CHANGE_MM as DEFAULT_MAX_CHANGE_MM
 from pige_sym.errors import InputError
@@ -180,7 +181,7 @@ def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: s
 def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_through: bool,
                    max_change_mm: float, max_change_deg: float, rtcp_on: tuple[str, ...], rtcp_off: tuple[str, ...],
                    header: bool) -> CompensationResult:
-    from pige_sym.compensation import CompensationError
+    from pige_sym.errors import CompensationError
     from pige_sym.kernels import load_kernels
 
     if not (max_change_mm > 0 and max_change_deg > 0 and np.isfinite([max_change_mm, max_change_deg]).all()):
@@ -253,9 +254,9 @@ def _header(params: Any) -> list[str]:
 
 
 def _compensated_poses(params: Any, chosen: list[Block], max_change_deg: float) -> Any:
-    from pige_sym.compensation import compensate_poses
+    from pige_sym.compensation.kinematics import compensate_poses
     from pige_sym.kernels import load_kernels
-    from pige_sym.trajectories import approach_directions
+    from pige_sym.model.trajectories import approach_directions
 
     k = len(load_kernels(params.machine).ROTARY_AXES)
     after = np.array([b.after for b in chosen], dtype=float).reshape(-1, 3 + k)
@@ -283,7 +284,7 @@ def _guard(chosen: list[Block], poses: Any, max_mm: float, max_deg: float, path:
 def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog: Program | None,
              ) -> list[BlockChange]:
     """Per changed block: words, predicted errors before/after (from the read-back) and change."""
-    from pige_sym.compensation import predicted_errors
+    from pige_sym.compensation.kinematics import predicted_errors
 
     if not rw.changed or out_prog is None:
         return []
@@ -291,7 +292,7 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
     rows = [index[c.line_in] for c in rw.changed]
     new = out_prog.after_array()[[c.line_out - 1 for c in rw.changed]]  # line numbers count from 1
     a, xyz, rtcp = poses.angles_deg[rows], poses.xyz_mm[rows], np.asarray(poses.rtcp, dtype=bool)[rows]
-    from pige_sym.trajectories import approach_directions
+    from pige_sym.model.trajectories import approach_directions
 
     approach = approach_directions(a) if params.extensions else np.zeros_like(a)
     tp0, or0 = predicted_errors(params, a, xyz, rtcp, a, xyz, approach)
@@ -302,3 +303,13 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
     return list(map(BlockChange, [c.line_in for c in rw.changed], [c.line_out for c in rw.changed],
                     [c.words for c in rw.changed], rtcp.tolist(), tp0.tolist(), tp1.tolist(), or0.tolist(),
                     or1.tolist(), d_mm, d_deg, limited))
+
+
+def compensate_program(program_text: str, params: CompensationParameters, *, path: str = "<program>",
+                       dialect: str | None = None, pass_through: bool = False, **guards: Any) -> str:
+    """Compensated program text, in the program's own dialect (:mod:`pige_sym.nc.compensate`).
+
+    ``guards``: ``max_change_mm``, ``max_change_deg``, ``rtcp_on``, ``rtcp_off``, ``header``.
+    """
+    return compensate_nc(program_text, params, path=path, dialect=dialect, pass_through=pass_through,
+                         **guards).text

@@ -208,7 +208,7 @@ def word_spans(line: str, words: dict[str, Token]) -> dict[str, tuple[int, int, 
 def plain_words(axes: tuple[str, ...], match: re.Match[str]) -> dict[str, Token]:
     """The axis words of a plain block, with their offsets, by axis letter.
 
-    ``match`` is the block's line matched by :func:`pige_sym.nc.interpreter.plain_pattern` for ``axes``
+    ``match`` is the block's line matched by :func:`pige_sym.nc.plain_blocks.plain_pattern` for ``axes``
     (per axis ``i``: group ``3i + 4`` its letter, ``3i + 5`` its number).
     """
     line, regs = match.string, match.regs

@@ -25,8 +25,9 @@ from operator import itemgetter
 
 import numpy as np
 
-from pige_sym.nc.interpreter import Program, plain_groups
+from pige_sym.nc.interpreter import Program
 from pige_sym.nc.lexer import word_spans
+from pige_sym.nc.plain_blocks import plain_groups
 from pige_sym.nc.program import format_number, format_numbers
 from pige_sym.nc.state import MM_PER_INCH, Block
 

@@ -1,7 +1,7 @@
 """R-test programs: the poses a machine visits, with their move and dwell times.
 
 A test program is given either as a trajectory (a name of
-:func:`pige_sym.trajectories.make_trajectory`, or an angle CSV) or as an NC program
+:func:`pige_sym.model.trajectories.make_trajectory`, or an angle CSV) or as an NC program
 (any supported dialect, :mod:`pige_sym.nc.program`) in which every measurement pose is a
 positioning block followed by a dwell (``G4 F<s>``, ``G04 X<s>``, ``G4 P<s>``) or a stop ``M00``/``M01``
 (:func:`pige_sym.nc.program.make_rtest_program` writes such programs).
@@ -33,8 +33,8 @@ from pige_sym.constants import DEFAULT_DWELL_S as DEFAULT_DWELL_S
 from pige_sym.constants import DEFAULT_MOVE_S as DEFAULT_MOVE_S
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
+from pige_sym.model.trajectories import NAMES, Trajectory, make_trajectory
 from pige_sym.nc.program import parse_program, poses_from_program
-from pige_sym.trajectories import NAMES, Trajectory, make_trajectory
 
 NC_SUFFIXES = (".mpf", ".spf", ".nc", ".ngc", ".cnc")
 
@@ -93,7 +93,7 @@ class TestProgram:
         return float(self.arrive_s[-1] + self.dwell_s[-1])
 
     def trajectory(self) -> Trajectory:
-        """The poses as a :class:`~pige_sym.trajectories.Trajectory` (times = dwell starts)."""
+        """The poses as a :class:`~pige_sym.model.trajectories.Trajectory` (times = dwell starts)."""
         return Trajectory("program", self.rotary_axes, self.angles_deg.copy(), self.arrive_s, self.description)
 
     def linear_mm(self) -> np.ndarray:
@@ -147,7 +147,7 @@ def load_test_program(machine: str, spec: str, *, ball_mm: Any = DEFAULT_BALL_MM
     move_s, dwell_s : float [s]
         Schedule (module docstring).
     **trajectory_options
-        Passed to :func:`~pige_sym.trajectories.make_trajectory` (``points``, ``turns`` …).
+        Passed to :func:`~pige_sym.model.trajectories.make_trajectory` (``points``, ``turns`` …).
     """
     kern = load_kernels(machine)
     if move_s < 0 or dwell_s <= 0:

@@ -93,7 +93,7 @@ class Block:
         The block's axis words by axis letter (property: for a plain block read in a batch they are
         made on first use from ``plain_``, with :func:`pige_sym.nc.lexer.plain_words`).
     plain_ : re.Match or None
-        A plain block read in a batch: its line cut by :func:`pige_sym.nc.interpreter.plain_pattern`.
+        A plain block read in a batch: its line cut by :func:`pige_sym.nc.plain_blocks.plain_pattern`.
     incremental_axes : frozenset of str
         Axes whose word is incremental (G91 or ``=IC()``).
     kind : str

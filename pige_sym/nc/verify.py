@@ -23,8 +23,9 @@ from operator import itemgetter
 
 import numpy as np
 
-from pige_sym.nc.interpreter import Program, interpret, plain_groups
+from pige_sym.nc.interpreter import Program, interpret
 from pige_sym.nc.lexer import word_spans
+from pige_sym.nc.plain_blocks import plain_groups
 from pige_sym.nc.state import MM_PER_INCH, Block, ModalState
 
 
@@ -105,7 +106,7 @@ def _skeletons(pairs: list[tuple[Block, Block]], original: Program) -> list[str]
     """Changed lines whose text differs from the input's anywhere but in axis numbers and added words.
 
     Lines that program every axis plainly (and read back plainly) are compared by the text around
-    their numbers (:func:`pige_sym.nc.interpreter.plain_groups`); the others word by word.
+    their numbers (:func:`pige_sym.nc.plain_blocks.plain_groups`); the others word by word.
     """
     if not pairs:
         return []

@@ -12,9 +12,9 @@ Limits (``--limits AXIS=lo:hi``)
     the controller's linear path between poses is not checked.
 
 Families (poses after the reference pose; n of them)
-    ``cone-frustum``  :func:`pige_sym.trajectories.cone_frustum`; half angle and
+    ``cone-frustum``  :func:`pige_sym.model.trajectories.cone_frustum`; half angle and
                       inclination continuous, inclination axis X/Y, branch ±1, turns 1–2;
-    ``figure-eight``  :func:`pige_sym.trajectories.figure_eight`; both amplitudes and the phase;
+    ``figure-eight``  :func:`pige_sym.model.trajectories.figure_eight`; both amplitudes and the phase;
     ``steps``         stepped sweeps: at L = 1–3 tilts the rotary axis steps from ``lo`` to
                       ``hi`` and back (every position but the turning one approached from
                       both sides);
@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.errors import InputError
-from pige_sym.trajectories import _roles, cone_frustum, figure_eight
+from pige_sym.model.trajectories import _roles, cone_frustum, figure_eight
 
 DEFAULT_TILT_LIMIT_DEG = 90.0
 LINEAR_AXES = ("X", "Y", "Z")

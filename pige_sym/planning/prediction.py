@@ -8,7 +8,7 @@ kernels, D the excitation projection (m × 3, CONVENTIONS §5) and white noise o
 deviation σ per observed component.  The normal matrix is
 ``N = Σ_i w_i A_iᵀA_i`` (``A_i = D·J(θ_i)``, w_i the number of times the pose is
 measured) and the predicted covariance is ``σ²·N⁺``, with the rank, near-null and
-identifiability rules of :mod:`pige_sym.identification` (unit-norm column scaling,
+identifiability rules of :mod:`pige_sym.identification.least_squares` (unit-norm column scaling,
 ``RANK_RTOL``, ``NULL_RTOL``, ``NULL_WEIGHT``): a parameter with weight in a near-null
 direction is *undetermined* and gets no standard error; so is one whose column is below
 ``UNOBSERVED_RTOL`` (1e-9) times the largest column (round-off, e.g. the A-axis errors when
@@ -46,9 +46,9 @@ from typing import Any
 import numpy as np
 
 from pige_sym.errors import InputError
-from pige_sym.identification import NULL_RTOL, NULL_WEIGHT, scaled_spectrum
+from pige_sym.identification.spectrum import NULL_RTOL, NULL_WEIGHT, scaled_spectrum
 from pige_sym.kernels import load_kernels
-from pige_sym.projection import Projection, parse_projection
+from pige_sym.model.projection import Projection, parse_projection
 
 CRITERIA = ("worst", "A", "D")
 SMOOTH_MAX_POWER = 16.0

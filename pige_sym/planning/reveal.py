@@ -1,11 +1,11 @@
-"""Which catalogue effects (:mod:`pige_sym.effects`) a test can reveal, and why (not).
+"""Which catalogue effects (:mod:`pige_sym.model.effects`) a test can reveal, and why (not).
 
 Rule
 ----
 An effect is *revealable* by a test when its parameters are determined jointly with the
 PIGEs on the test's poses and times (the identification's rank/null rules, see
 :mod:`pige_sym.planning.prediction`), with the effect's default shape options
-(:data:`pige_sym.effects.DEFAULTS`: harmonic 2, thermal time constant 150 s).  The
+(:data:`pige_sym.model.effects.DEFAULTS`: harmonic 2, thermal time constant 150 s).  The
 predicted standard errors of its parameters are given at the planned noise.  ``outliers``
 (gross reading errors) are revealable when every row is backed up by the others: the
 largest leverage of a row (largest eigenvalue of its block of the hat matrix) is at most
@@ -30,10 +30,10 @@ from typing import Any
 
 import numpy as np
 
-from pige_sym.effects import EffectContext, EffectSpec, catalogue, parse_effect
 from pige_sym.errors import InputError
+from pige_sym.model.effects import EffectContext, EffectSpec, catalogue, parse_effect
+from pige_sym.model.trajectories import approach_directions
 from pige_sym.planning.prediction import Setup, design_rows, predict
-from pige_sym.trajectories import approach_directions
 
 MAX_LEVERAGE = 0.5
 

@@ -16,13 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from pige_sym.compensation import CompensationStudyRow
-from pige_sym.diagnosis import residual_plots
+from pige_sym.compensation.study import CompensationStudyRow
+from pige_sym.diagnosis.residual_plots import residual_plots
 from pige_sym.errors import InputError
-from pige_sym.identification import IdentificationResult
-from pige_sym.io import Measurement
-from pige_sym.report.gather import UNIT_TEXT, HistoryData, MeasurementReport, ReportData, ReportFigure, Truth
-from pige_sym.studies import SobolStudy
+from pige_sym.identification.result import IdentificationResult
+from pige_sym.identification.studies import SobolStudy
+from pige_sym.measurements.measurement import Measurement
+from pige_sym.report.data import UNIT_TEXT, HistoryData, MeasurementReport, ReportData, ReportFigure, Truth
 
 
 def _pyplot() -> Any:

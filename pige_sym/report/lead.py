@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pige_sym.kernels import load_kernels
-from pige_sym.report.gather import UNIT_TEXT, MeasurementReport, ReportData, sobol_half_ranges
+from pige_sym.report.data import UNIT_TEXT, MeasurementReport, ReportData
+from pige_sym.report.gather import sobol_half_ranges
 
 
 @dataclass

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.planning import Plan
-from pige_sym.planning.search import default_cone
+from pige_sym.planning.plan import default_cone
 
 
 def _pyplot() -> Any:

@@ -29,69 +29,7 @@ unknown code does.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
-from pige_sym.constants import DIALECTS as DIALECTS
-
-
-@dataclass(frozen=True)
-class Dialect:
-    """One controller family's codes and output rules.
-
-    Attributes
-    ----------
-    name : str
-        ``siemens``, ``fanuc`` or ``linuxcnc``.
-    siemens : bool
-        Lex with the 840D extensions (``X=AC(…)``, keywords, calls, strings).
-    codes : dict of str to str
-        Action per normalised G/M code or keyword (module docstring).
-    decimal_point : bool
-        Axis values must carry a decimal point (ISO/Fanuc: ``X120`` is 120 increments, not 120 mm);
-        integers are refused on input and never written.
-    dwell_letters : dict of str to float
-        Address of the dwell time and its factor to seconds (``{"F": 1}``, ``{"X": 1, "P": 0.001}``).
-    comment_open, comment_close : str
-        How a comment line is written (header).
-    """
-
-    name: str
-    siemens: bool
-    codes: dict[str, str]
-    decimal_point: bool
-    dwell_letters: dict[str, float]
-    comment_open: str
-    comment_close: str = ""
-    extra_codes: dict[str, str] = field(default_factory=dict)
-
-    def action(self, code: str) -> str | None:
-        """Action of a normalised code, or None when the dialect does not know it."""
-        return self.extra_codes.get(code) or self.codes.get(code)
-
-    def with_codes(self, extra: dict[str, str]) -> Dialect:
-        """The dialect with controller-specific codes added (``--rtcp-on M428``)."""
-        return Dialect(self.name, self.siemens, self.codes, self.decimal_point, self.dwell_letters,
-                       self.comment_open, self.comment_close, {**self.extra_codes, **extra})
-
-    def comment(self, text: str) -> str:
-        """A comment line holding ``text`` (parentheses removed where they would end it)."""
-        if self.comment_close:
-            text = text.replace("(", "[").replace(")", "]")
-        return f"{self.comment_open}{text}{self.comment_close}"
-
-
-def common_codes() -> dict[str, str]:
-    """G/M codes that mean the same on every supported controller."""
-    codes = {"G0": "motion:G0", "G1": "motion:G1", "G2": "motion:G2", "G3": "motion:G3", "G4": "dwell",
-             "G17": "plane:G17", "G18": "plane:G18", "G19": "plane:G19", "G40": "comp:off", "G41": "comp:on",
-             "G42": "comp:on", "G90": "dist:abs", "G91": "dist:inc",
-             "G93": "feed:G93", "G94": "feed:G94", "G95": "feed:G95",
-             "G53": "machine", "G54": "offset", "G55": "offset", "G56": "offset", "G57": "offset",
-             "G9": "benign", "G61": "benign", "G64": "benign", "G96": "benign", "G97": "benign",
-             "M0": "stop", "M1": "stop", "M2": "end", "M30": "end"}
-    for m in (3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 19, 31, 33, 34, 50, 51, 88, 89):
-        codes[f"M{m}"] = "benign"
-    return codes
+from pige_sym.nc.dialects.base import Dialect as Dialect
 
 
 def get_dialect(name: str) -> Dialect:

@@ -14,7 +14,7 @@ are refused.  Dwell ``G04 X<s>`` or ``G04 P<ms>``.
 
 from __future__ import annotations
 
-from pige_sym.nc.dialects import Dialect, common_codes
+from pige_sym.nc.dialects.base import Dialect, common_codes
 
 _CODES = common_codes() | {
     "G20": "units:inch", "G21": "units:mm", "G58": "offset", "G59": "offset", "G54.1": "offset",

@@ -13,7 +13,7 @@ refused.  Dwell ``G4 P<s>`` (seconds).
 
 from __future__ import annotations
 
-from pige_sym.nc.dialects import Dialect, common_codes
+from pige_sym.nc.dialects.base import Dialect, common_codes
 
 _CODES = common_codes() | {
     "G20": "units:inch", "G21": "units:mm", "G58": "offset", "G59": "offset", "G59.1": "offset",

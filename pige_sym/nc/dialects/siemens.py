@@ -13,7 +13,7 @@ Calls (``L…``, ``CALL``, cycles other than the settings cycle ``CYCLE832``) an
 
 from __future__ import annotations
 
-from pige_sym.nc.dialects import Dialect, common_codes
+from pige_sym.nc.dialects.base import Dialect, common_codes
 
 _CODES = common_codes() | {
     "G70": "units:inch", "G700": "units:inch", "G71": "units:mm", "G710": "units:mm",

@@ -1,0 +1,132 @@
+"""Controller corrections: the corrected rotary axis lines, and their rendering per controller.
+
+:func:`controller_corrections` gives per rotary axis the corrected pivot [mm], unit direction and zero
+offset [deg] in the machine frame; :func:`format_controller` writes them in the words of one controller
+style (``CONTROLLER_STYLES``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from pige_sym.compensation.parameters import CompensationParameters, kern_axes, kern_axes_names
+from pige_sym.constants import CONTROLLER_STYLES as CONTROLLER_STYLES
+from pige_sym.errors import InputError
+from pige_sym.kernels import load_kernels
+
+
+def controller_corrections(params: CompensationParameters) -> list[dict[str, Any]]:
+    """Corrected axis lines: per rotary axis the pivot point [mm] and unit direction, machine frame."""
+    kern = load_kernels(params.machine)
+    out = []
+    pos_idx = {"A": (1, 2), "B": (0, 2), "C": (0, 1)}
+    for ax in kern.ROTARY_AXES:
+        names = [n for n in kern.LOCATION_PARAMETERS if n.endswith("0" + ax)]
+        vals = [params.values.get(n, 0.0) for n in names]
+        d = "ABC".index(ax[0])
+        u = np.eye(3)[d]
+        pivot = np.asarray(params.pivots_mm.get(ax, [0.0, 0.0, 0.0]), dtype=float).copy()
+        i1, i2 = pos_idx[ax[0]]
+        pivot[i1] += vals[0] * 1e-3
+        pivot[i2] += vals[1] * 1e-3
+        eps = np.zeros(3)
+        eps[i1], eps[i2] = vals[2] * 1e-6, vals[3] * 1e-6
+        direction = u + np.cross(eps, u)
+        direction /= np.linalg.norm(direction)
+        zero = params.values.get(f"E{ax[0]}0{ax}", 0.0)
+        side = "workpiece" if ax in kern.WORKPIECE_ROTARY else "tool"
+        nominal = np.asarray(params.pivots_mm.get(ax, [0.0, 0.0, 0.0]), dtype=float)
+        out.append({"axis": ax, "side": side, "pivot_mm": pivot.tolist(), "direction": direction.tolist(),
+                    "zero_offset_deg": float(np.degrees(zero * 1e-6)),
+                    "pivot_delta_mm": (pivot - nominal).tolist(), "direction_delta": (direction - u).tolist()})
+    return out
+
+
+NOT_VERIFIED = "NOT verified on a controller: check every value against the machine's documentation"
+
+
+def format_controller(params: CompensationParameters, style: str = "table", *, carrier: int = 1) -> str:
+    """The corrections as deltas to the machine's current kinematic description.
+
+    Styles (units, signs and mappings in docs/controller-corrections.md): ``table`` (corrected
+    axis lines, machine frame), ``siemens`` (``$TC_CARR`` *fine offsets* of swivel data record
+    ``carrier``), ``heidenhain`` (kinematics-table deltas), ``fanuc`` (rotation-axis centre and
+    direction deltas), ``linuxcnc`` (``trtkins`` rot-point / offset deltas).
+    """
+    rows = controller_corrections(params)
+    if style == "table":
+        lines = [f"corrected kinematic chain of {params.machine} (machine frame, reference pose)",
+                 f"{'axis':<5}{'side':<11}{'pivot x,y,z [mm]':<36}{'direction':<40}zero [deg]"]
+        for r in rows:
+            piv = ", ".join(f"{x:.6f}" for x in r["pivot_mm"])
+            dirs = ", ".join(f"{x:.9f}" for x in r["direction"])
+            lines.append(f"{r['axis']:<5}{r['side']:<11}{piv:<36}{dirs:<40}{r['zero_offset_deg']:.7f}")
+        return "\n".join(lines)
+    if style not in CONTROLLER_STYLES:
+        raise InputError(f"unknown controller style {style!r}: use {', '.join(CONTROLLER_STYLES)}")
+    if not isinstance(carrier, int) or carrier < 1:
+        raise InputError("--carrier must be a positive integer")
+    kern = load_kernels(params.machine)
+    chain = [a.name for a in reversed(kern_axes(params.machine, "workpiece"))] + kern_axes_names(params.machine)
+    by = {r["axis"]: r for r in rows}
+    first, second = by[chain[0]], by[chain[1]]
+    head = [f"corrections for {kern.MACHINE_CODE} as DELTAS to the current kinematic description "
+            f"(axis 1 = {chain[0]}, axis 2 = {chain[1]}); parameters from {params.source}", NOT_VERIFIED]
+    body = {"siemens": _siemens_fine, "heidenhain": _heidenhain, "fanuc": _fanuc,
+            "linuxcnc": _linuxcnc}[style](first, second, carrier)
+    orient = [f"{r['axis']}: direction change ({', '.join(f'{x:+.9f}' for x in r['direction_delta'])})"
+              for r in (first, second) if np.abs(r["direction_delta"]).max() > 0]
+    comment = "; " if style == "siemens" else "# " if style == "linuxcnc" else ""
+    if orient:
+        body.append(comment + "axis-direction changes (not expressible as offsets; enter only where the controller "
+                    "has an axis-direction entry): " + "; ".join(orient))
+    return "\n".join([comment + h for h in head] + body)
+
+
+def _siemens_fine(first: dict, second: dict, carrier: int) -> list[str]:
+    d1, d2 = np.array(first["pivot_delta_mm"]), np.array(second["pivot_delta_mm"])
+    vec = {44: d1, 55: d2 - d1, 58: -d2}  # fine offsets of l2 ($TC_CARR4..6), l3 (15..17), l4 (18..20)
+    out = []
+    for start, v in sorted(vec.items()):
+        out += [f"$TC_CARR{start + k}[{carrier}]=$TC_CARR{start + k}[{carrier}]{_signed(v[k], 6)}" for k in range(3)]
+    out.append(f"$TC_CARR64[{carrier}]=$TC_CARR64[{carrier}]{_signed(first['zero_offset_deg'], 7)}")
+    out.append(f"$TC_CARR65[{carrier}]=$TC_CARR65[{carrier}]{_signed(second['zero_offset_deg'], 7)}")
+    return out
+
+
+def _signed(value: float, decimals: int) -> str:
+    """``+0.012000`` / ``-0.009000`` (no ``-0.000000``)."""
+    return f"{round(float(value), decimals) + 0.0:+.{decimals}f}"
+
+
+def _heidenhain(first: dict, second: dict, carrier: int) -> list[str]:
+    out = ["kinematics table: add to the transformation that places each rotary axis (mm, deg)"]
+    for r in (first, second):
+        d = r["pivot_delta_mm"]
+        out.append(f"  {r['axis']}: X {d[0]:+.6f}  Y {d[1]:+.6f}  Z {d[2]:+.6f} mm   "
+                   f"zero (axis datum) {r['zero_offset_deg']:+.7f} deg")
+    return out
+
+
+def _fanuc(first: dict, second: dict, carrier: int) -> list[str]:
+    out = ["tool centre point parameters: add to the rotation-axis centre / offset entries (mm, deg)"]
+    for r in (first, second):
+        d = r["pivot_delta_mm"]
+        out.append(f"  {r['axis']}: centre dX {d[0]:+.6f}  dY {d[1]:+.6f}  dZ {d[2]:+.6f} mm   "
+                   f"angle offset {r['zero_offset_deg']:+.7f} deg")
+    return out
+
+
+def _linuxcnc(first: dict, second: dict, carrier: int) -> list[str]:
+    tilt, rot = np.array(first["pivot_delta_mm"]), np.array(second["pivot_delta_mm"])
+    if first["axis"][0] == "C":
+        tilt, rot = rot, tilt
+    off = rot - tilt
+    out = ["# trtkins: add to the HAL parameters (mm, machine frame, + = towards + of the machine axis)"]
+    out += [f"setp trtkins.{c}-rot-point [{tilt[k]:+.6f}]" for k, c in enumerate("xyz")]
+    out += [f"setp trtkins.{c}-offset [{off[k]:+.6f}]" for k, c in enumerate("xyz")]
+    out.append(f"# rotary zero offsets [deg]: {first['axis']} {first['zero_offset_deg']:+.7f}, "
+               f"{second['axis']} {second['zero_offset_deg']:+.7f} (home offsets of the joints)")
+    return out

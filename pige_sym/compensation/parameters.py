@@ -1,0 +1,238 @@
+"""What compensation starts from: identified parameters, accepted diagnosis extensions, per-pose values.
+
+A parameter file is the JSON that ``pige identify --json`` (optionally with the accepted findings of
+``pige diagnose --json``) writes: ``machine``, ``parameters`` (name → value [µm, µrad]), ``ball_mm``,
+``pivots_mm``, ``tool_mm``.  Angle extensions (``angular_error_<AXIS>``, ``backlash_<AXIS>``) become a
+pose-dependent zero-position error :math:`E_{a0a}` (CONVENTIONS §3); the other findings are listed with
+the reason they are not compensated.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pige_sym.errors import FileFormatError, InputError
+from pige_sym.kernels import load_kernels
+from pige_sym.model.effects import EffectSpec
+from pige_sym.model.trajectories import approach_directions
+
+COMPENSABLE_KINDS = ("angular_error", "backlash")
+
+
+NOT_COMPENSATED_WHY = {
+    "thermal_drift": "time-dependent (depends on when the program runs)",
+    "wobble": "an error motion: enter it in the controller's rotary-axis error tables",
+    "radial_runout": "an error motion: enter it in the controller's rotary-axis error tables",
+    "squareness": "a linear-axis error: enter it in the controller's squareness compensation",
+    "setup_offset": "a set-up error of the test, not of the machine",
+}
+
+
+@dataclass
+class AngleExtension:
+    """An accepted extension acting as a pose-dependent zero-position error of a rotary axis.
+
+    Attributes
+    ----------
+    spec : EffectSpec
+        ``angular_error_<AXIS>`` or ``backlash_<AXIS>`` with its options (harmonic).
+    params : dict of str to float
+        Fitted values [µrad] by parameter name (``cos_urad``, ``sin_urad`` or ``b_urad``).
+    """
+
+    spec: EffectSpec
+    params: dict[str, float]
+
+    def zero_error_urad(self, angles_deg: np.ndarray, rotary_axes: tuple[str, ...],
+                        approach: np.ndarray) -> np.ndarray:
+        """Angle error of the axis at each pose, shape=(n,) [µrad].
+
+        Parameters
+        ----------
+        angles_deg : shape=(n, k) [deg]
+        rotary_axes : names of the columns of ``angles_deg``
+        approach : shape=(n, k) of {−1, 0, +1}
+            Direction of approach of each axis (:func:`~pige_sym.model.trajectories.approach_directions`).
+        """
+        k = rotary_axes.index(self.spec.axis)
+        if self.spec.kind == "angular_error":
+            h = self.spec.harmonic
+            theta = np.radians(angles_deg[:, k])
+            return self.params["cos_urad"] * np.cos(h * theta) + self.params["sin_urad"] * np.sin(h * theta)
+        return 0.5 * self.params["b_urad"] * approach[:, k]
+
+
+@dataclass
+class CompensationParameters:
+    """Parameters read from an identify/diagnose JSON result.
+
+    Attributes
+    ----------
+    machine : str
+    values : dict of str to float
+        PIGEs and zero-position errors [µm, µrad].
+    units : dict of str to str
+    tool_mm : list of float or None
+    pivots_mm : dict of str to list of float
+    source : str
+        Where the values come from (file name).
+    ignored : list of str
+        Names (and reasons) of what is not compensated.
+    extensions : list of AngleExtension
+        Accepted extensions that are compensated (module docstring).
+    """
+
+    machine: str
+    values: dict[str, float]
+    units: dict[str, str]
+    tool_mm: list[float] | None
+    pivots_mm: dict[str, list[float]]
+    source: str
+    ignored: list[str]
+    extensions: list[AngleExtension] = field(default_factory=list)
+
+
+def load_parameters(path: str | os.PathLike[str], machine: str | None = None, *,
+                    allow_missing: bool = False) -> CompensationParameters:
+    """Read ``pige identify/diagnose --json`` output (validated by :mod:`~pige_sym.measurements.schema`).
+
+    A PIGE without a value (not identifiable, or missing) is refused unless ``allow_missing``;
+    then it is set to 0 and named in ``ignored``.  ``machine`` (``--machine`` or the program's
+    header) must agree with the file's machine.
+    """
+    from pige_sym.measurements.schema import read_params_file
+
+    return _parameters(read_params_file(path, machine=machine, allow_missing=allow_missing))
+
+
+def parameters_from_result(result: Any, machine: str | None = None, *,
+                           allow_missing: bool = False) -> CompensationParameters:
+    """:func:`load_parameters` on a result in memory (``IdentificationResult`` or ``DiagnosisResult``).
+
+    The result goes through its JSON form and the same validation as a file, so a script and
+    ``pige compensate`` accept and refuse exactly the same estimates.
+    """
+    import json
+
+    from pige_sym.files import to_json
+    from pige_sym.measurements.schema import params_document
+
+    source = "<diagnosis>" if hasattr(result, "final") else "<identification>"
+    data = json.loads(to_json(result.to_dict()))
+    return _parameters(params_document(data, source, machine=machine, allow_missing=allow_missing))
+
+
+def _parameters(doc: Any) -> CompensationParameters:
+    """Compensation parameters of a validated parameter document (:class:`~pige_sym.measurements.schema.ParamsFile`)."""
+    kern = load_kernels(doc.machine)
+    ignored = [f"{k} (no value in the file: set to 0 by --allow-missing)" for k in doc.set_to_zero]
+    extensions, skipped = _extensions({"findings": doc.findings}, doc.path, tuple(kern.ROTARY_AXES))
+    ignored += [f"{effect} ({why})" for effect, why in skipped.items()]
+    described = {e.spec.id for e in extensions} | set(skipped)
+    ignored += [f"{name} (no finding describes it)" for name in doc.effect_values
+                if name.split(".", 1)[0] not in described]
+    tool = None if doc.tool_mm is None else list(doc.tool_mm)
+    pivots = {a: list(v) for a, v in doc.pivots_mm.items()}
+    return CompensationParameters(kern.MACHINE_CODE, dict(doc.pige), dict(doc.units), tool, pivots, doc.path,
+                                  ignored, extensions)
+
+
+def _extensions(data: dict[str, Any], path: str,
+                rotary_axes: tuple[str, ...]) -> tuple[list[AngleExtension], dict[str, str]]:
+    """Compensable accepted findings of a ``pige diagnose --json`` result, and the others with the reason."""
+    findings = data.get("findings", [])
+    if not isinstance(findings, list):
+        raise FileFormatError(path, None, '"findings" must be a list')
+    for f in findings:
+        if not isinstance(f, dict) or not isinstance(f.get("effect"), str) or not isinstance(f.get("params"), dict):
+            raise FileFormatError(path, None, 'each finding needs "effect" and "params"')
+    try:
+        return angle_extensions(findings, rotary_axes)
+    except InputError as exc:
+        raise FileFormatError(path, None, str(exc)) from None
+
+
+def angle_extensions(records: Any, rotary_axes: tuple[str, ...]) -> tuple[list[AngleExtension], dict[str, str]]:
+    """Split effect records into compensable angle extensions and the rest (with the reason).
+
+    Parameters
+    ----------
+    records : iterable of dict
+        Either findings (``{"effect", "options", "params"}``, as ``pige diagnose --json``
+        prints them) or flat simulator records (``{"effect": id, option: value, param:
+        value}``, as in a ``*.truth.json`` sidecar).
+    rotary_axes : tuple of str
+
+    Returns
+    -------
+    extensions : list of AngleExtension
+    not_compensated : dict of str to str
+        Every other effect id with the reason it is not compensated.
+
+    Raises
+    ------
+    InputError
+        A record names an axis the machine does not have or lacks a parameter.
+    """
+    from pige_sym.model.effects import OPTION_KEYS
+
+    out: list[AngleExtension] = []
+    skipped: dict[str, str] = {}
+    for rec in records:
+        if "params" in rec:
+            options, values = dict(rec.get("options") or {}), dict(rec["params"])
+        else:
+            options = {k: v for k, v in rec.items() if k in OPTION_KEYS}
+            values = {k: v for k, v in rec.items() if k != "effect" and k not in OPTION_KEYS}
+        spec = EffectSpec(str(rec["effect"]), options)
+        if spec.kind not in COMPENSABLE_KINDS:
+            skipped[spec.id] = NOT_COMPENSATED_WHY.get(spec.kind, "not compensable")
+            continue
+        if spec.axis not in rotary_axes:
+            raise InputError(f"effect {spec.id}: {spec.axis} is not a rotary axis of the machine")
+        params = {}
+        for name in spec.param_names:
+            v = values.get(name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                raise InputError(f"effect {spec.id}: {name} must be a finite number")
+            params[name] = float(v)
+        out.append(AngleExtension(spec, params))
+    return out, skipped
+
+
+def pose_parameters(kern: Any, values: dict[str, float], angles_deg: np.ndarray,
+                    extensions: list[AngleExtension] | tuple[()] = (),
+                    approach: np.ndarray | None = None) -> np.ndarray:
+    """Parameter vector of every pose, shape=(n, P) [µm, µrad]: the values plus the extensions' zero errors.
+
+    ``approach`` (n, k) defaults to the directions of approach of the poses in order.
+    """
+    a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    out = np.tile(parameter_vector(kern, values), (a.shape[0], 1))
+    if extensions:
+        appr = approach_directions(a) if approach is None else np.atleast_2d(approach)
+        axes = tuple(kern.ROTARY_AXES)
+        for ext in extensions:
+            ax = ext.spec.axis
+            out[:, kern.PARAMETERS.index(f"E{ax[0]}0{ax}")] += ext.zero_error_urad(a, axes, appr)
+    return out
+
+
+def parameter_vector(kern: Any, values: dict[str, float]) -> np.ndarray:
+    return np.array([values.get(n, 0.0) for n in kern.PARAMETERS])
+
+
+def kern_axes(machine: str, side: str) -> list[Any]:
+    from pige_sym.codegen.machine_code import parse_machine_code
+
+    st = parse_machine_code(machine)
+    axes = st.workpiece_axes if side == "workpiece" else st.tool_axes
+    return [a for a in axes if a.kind == "rotary"]
+
+
+def kern_axes_names(machine: str) -> list[str]:
+    return [a.name for a in kern_axes(machine, "tool")]

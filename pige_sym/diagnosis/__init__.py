@@ -1,0 +1,1 @@
+"""What the PIGE model misses: candidate effects, selection, outliers, results."""

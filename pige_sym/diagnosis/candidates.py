@@ -1,0 +1,361 @@
+"""Diagnosis candidates: the super design of PIGEs plus every catalogue effect, and reduction.
+
+Layout
+------
+The *super design* has one column per PIGE (the machine's location errors, in the
+order of the kernels) followed by the columns of every candidate effect
+(:mod:`pige_sym.model.effects`), evaluated row by row in the machine frame.  A row's block is
+``(3, C)``: the zeroed deviation [µm] per unit parameter [µm or µrad].  Thermal drift
+enters once per time constant of a log-spaced grid (so τ can later be interpolated
+between grid columns, which are exact linear combinations of the accumulated sums).
+
+Candidates
+----------
+A :class:`Candidate` is one effect with fixed shape options (harmonic or τ) and the
+slice of its columns in the super design.  Harmonics 1–4 of the angular error, wobble
+and radial runout of every rotary axis that moves, backlash of every axis approached
+from both sides, the three squareness pairs, setup offset, thermal drift.
+
+Reduction to the identifiable part
+----------------------------------
+Jointly with the current model (PIGEs + accepted effects) a candidate's parameter
+space splits into a part the data determine and *null directions* ``c₀`` whose
+deviation ``C·c₀`` the current model reproduces exactly (or which leave no trace at
+all).  With ``G`` the normal matrix, the Schur complement
+``S = C'C − C'M (M'M)⁺ M'C`` scaled to unit diagonal has eigenvalues ``λ = 1/VIF``
+along its eigenvectors; directions with ``λ ≤ NULL_LAMBDA`` are removed, named with
+the model combination that absorbs them, and the rest is fitted: the reduced columns
+are ``C·T`` (``T`` = kept eigenvectors, unscaled), reported back in the catalogue's
+parameters as ``c = T·θ``.  Example: a first-harmonic wobble of a table axis whose
+tilt turns with the table is a location error of that axis (its co-rotating half);
+the counter-rotating half stays and is fitted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from pige_sym.model.effects import EffectContext, EffectSpec
+
+HARMONICS = (1, 2, 3, 4)
+TAU_GRID_FRACTIONS = tuple(float(x) for x in np.geomspace(0.03, 5.0, 10))
+NULL_LAMBDA = 1e-7  # 1/VIF below which a direction counts as undetermined (std inflated > ~3000x)
+ZERO_COLUMN = 1e-10  # relative column norm below which a candidate column leaves no trace
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate extension with fixed shape options.
+
+    Attributes
+    ----------
+    spec : EffectSpec
+    key : str
+        Identity for selection: effects with the same key are alternatives (e.g. τ grid).
+    cols : tuple of int
+        Column indices of its raw parameters in the super design.
+    extra_params : int
+        Non-linear parameters chosen from data (τ: 1), counted in the BIC.
+    """
+
+    spec: EffectSpec
+    key: str
+    cols: tuple[int, ...]
+    extra_params: int = 0
+    mix: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    def embedding(self, n_columns: int) -> np.ndarray:
+        """Its columns as combinations of super-design columns, shape=(C, q).
+
+        ``mix`` (C, q), when given, replaces the unit columns of ``cols`` (e.g. a thermal
+        drift at a τ between grid points, interpolated from the grid's columns).
+        """
+        if self.mix is not None:
+            return self.mix
+        e = np.zeros((n_columns, len(self.cols)))
+        e[list(self.cols), np.arange(len(self.cols))] = 1.0
+        return e
+
+    @property
+    def label(self) -> str:
+        """Id with options, e.g. ``wobble_C harmonic=2``."""
+        opts = "".join(f" {k}={v:g}" for k, v in self.spec.options.items())
+        return f"{self.spec.id}{opts}"
+
+
+@dataclass
+class Layout:
+    """Column layout of the super design.
+
+    Attributes
+    ----------
+    pige : list of str
+        PIGE names (first columns).
+    units : dict of str to str
+    candidates : list of Candidate
+    n_columns : int
+    tau_grid_s : ndarray, shape=(g,) [s]
+        Thermal time constants of the drift candidates (empty when the file has no duration).
+    drift_cols : list of tuple of int
+        Column triples (vx, vy, vz) of each τ grid point.
+    """
+
+    pige: list[str]
+    units: dict[str, str]
+    candidates: list[Candidate]
+    n_columns: int
+    tau_grid_s: np.ndarray
+    drift_cols: list[tuple[int, ...]] = field(default_factory=list)
+
+
+def _moves(angles: np.ndarray, k: int) -> bool:
+    return bool(np.ptp(angles[:, k]) > 1e-9)
+
+
+def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: np.ndarray,
+                 restrict: list[str] | None = None) -> Layout:
+    """Every applicable candidate of a measurement, in super-design column order.
+
+    Parameters
+    ----------
+    kern : KernelModule
+    angles_deg : ndarray, shape=(n, k) [deg]
+    t_s : ndarray, shape=(n,) [s]
+    approach : ndarray, shape=(n, k)
+        Direction of approach per axis (−1, 0, +1).
+    restrict : list of str, optional
+        Keep only these catalogue ids.
+    """
+    pige = list(kern.LOCATION_PARAMETERS)
+    units = {p: kern.UNITS[p] for p in pige}
+    specs: list[tuple[EffectSpec, str, int]] = []
+    duration = float(t_s[-1] - t_s[0]) if len(t_s) > 1 else 0.0
+    taus = np.array([f * duration for f in TAU_GRID_FRACTIONS]) if duration > 0 else np.zeros(0)
+    for tau in taus:
+        specs.append((EffectSpec("thermal_drift", {"tau_s": float(tau)}), "thermal_drift", 1))
+    for k, ax in enumerate(kern.ROTARY_AXES):
+        if not _moves(angles_deg, k):
+            continue
+        for kind in ("angular_error", "wobble", "radial_runout"):
+            for h in HARMONICS:
+                specs.append((EffectSpec(f"{kind}_{ax}", {"harmonic": h}), f"{kind}_{ax} h{h}", 0))
+        if np.unique(approach[1:, k]).size >= 2:  # approached from both sides, or from one side after rest
+            specs.append((EffectSpec(f"backlash_{ax}"), f"backlash_{ax}", 0))
+    for pair in ("XY", "YZ", "ZX"):
+        specs.append((EffectSpec(f"squareness_{pair}"), f"squareness_{pair}", 0))
+    specs.append((EffectSpec("setup_offset"), "setup_offset", 0))
+    col = len(pige)
+    cands: list[Candidate] = []
+    drift_cols: list[tuple[int, ...]] = []
+    for spec, key, extra in specs:
+        q = len(spec.param_names)
+        cols = tuple(range(col, col + q))
+        col += q
+        if spec.kind == "thermal_drift":
+            drift_cols.append(cols)
+        if restrict is None or spec.id in restrict:
+            cands.append(Candidate(spec, key, cols, extra))
+    return Layout(pige, units, cands, col, taus, drift_cols)
+
+
+def add_pose_clusters(layout: Layout, options: list[dict[str, float]]) -> list[Candidate]:
+    """Append a ``pose_cluster`` candidate per pose (3 new columns each); returns the new candidates."""
+    new = []
+    for opt in options:
+        spec = EffectSpec("pose_cluster", dict(opt))
+        cols = tuple(range(layout.n_columns, layout.n_columns + 3))
+        layout.n_columns += 3
+        key = "pose_cluster " + " ".join(f"{k}={v:g}" for k, v in opt.items())
+        new.append(Candidate(spec, key, cols))
+    layout.candidates += new
+    return new
+
+
+def all_specs(layout: Layout) -> list[tuple[EffectSpec, tuple[int, ...]]]:
+    """Every candidate's effect block of the super design, in column order."""
+    return [(c.spec, c.cols) for c in layout.candidates]
+
+
+def evaluate_rows(layout: Layout, blocks: list[tuple[EffectSpec, tuple[int, ...]]], kern: Any, m: Any,
+                  approach: np.ndarray, rows: np.ndarray, compact: bool = False) -> np.ndarray:
+    """Super-design rows, shape=(r, 3, C) [µm per parameter unit].
+
+    With ``compact`` only the PIGE columns and the given blocks, in that order, are
+    returned, shape=(r, 3, P + Σq) (see :func:`compact_columns`).
+
+    Parameters
+    ----------
+    blocks : list of (EffectSpec, column indices)
+        The effect blocks to fill (others stay zero).
+    m : Measurement
+        In the machine frame.
+    rows : ndarray of int, shape=(r,)
+        Row indices (the reference row 0 is prepended internally for zeroing).
+    """
+    idx = np.concatenate([[0], np.asarray(rows, dtype=int)])
+    angles = m.angles_deg[idx]
+    pivots = m.pivots_mm or None
+    jac = kern.jacobian(angles, None, m.ball_mm, pivots, m.tool_mm)
+    loc = [kern.PARAMETERS.index(p) for p in layout.pige]
+    width = len(compact_columns(layout, blocks)) if compact else layout.n_columns
+    if not blocks:
+        out = np.zeros((len(rows), 3, width))
+        out[:, :, : len(loc)] = jac[1:, :, loc]
+        return out
+    raw = np.zeros((len(idx), 3, width))
+    ctx = EffectContext(kern, angles, m.t_s[idx], m.ball_mm, pivots, m.tool_mm, approach=approach[idx])
+    at = len(loc)
+    for spec, cols in blocks:
+        start = at if compact else cols[0]
+        raw[:, :, start: start + len(cols)] = spec.raw_columns(ctx)[0]
+        at += len(cols)
+    # zero all effect columns at once: raw − R_w · raw(reference row); the columns that need no
+    # zeroing (squareness: travel from the reference; drift: t = 0) are zero at the reference anyway
+    p = len(loc)
+    raw[:, :, p:] -= ctx.rot_w @ raw[0][:, p:]
+    raw[:, :, :p] = jac[:, :, loc]
+    return raw[1:]
+
+
+def compact_columns(layout: Layout, blocks: list[tuple[EffectSpec, tuple[int, ...]]]) -> list[int]:
+    """Super-design indices of the columns of a compact evaluation (PIGEs, then the blocks in order)."""
+    return list(range(len(layout.pige))) + [c for _, cols in blocks for c in cols]
+
+
+@dataclass
+class Reduction:
+    """A candidate reduced to its identifiable part, jointly with a model.
+
+    Attributes
+    ----------
+    basis : ndarray, shape=(q, q')
+        Kept directions in the catalogue's parameter units (``c = basis @ θ``).
+    null : ndarray, shape=(q, q − q')
+        Removed directions (catalogue units, max |.| = 1).
+    absorbed : ndarray, shape=(K, q − q')
+        Model coefficients reproducing each removed direction (``M·absorbed ≈ C·null``).
+    vif : ndarray, shape=(q',)
+        Variance inflation of each kept direction.
+    """
+
+    basis: np.ndarray
+    null: np.ndarray
+    absorbed: np.ndarray
+    vif: np.ndarray
+    _describe: Any = field(default=None, repr=False, compare=False)
+
+    @cached_property
+    def removed(self) -> list[str]:
+        """One sentence per removed direction, naming what absorbs it (built on first use)."""
+        return [] if self._describe is None else list(self._describe())
+
+
+def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, model_names: list[str],
+                     model_units: dict[str, str], model_pinv: np.ndarray | None = None) -> Reduction:
+    """Split a candidate into its identifiable part and named null directions (module docstring).
+
+    Parameters
+    ----------
+    gram : ndarray, shape=(C, C)
+        Super-design normal matrix.
+    model_w : ndarray, shape=(C, K)
+        Current model columns as combinations of super-design columns.
+    cand : Candidate
+    model_names : list of str
+        Names of the K model columns.
+    model_units : dict
+    model_pinv : ndarray, shape=(K, K), optional
+        ``(WᵀGW)⁺`` when already known (it is the same for every candidate against one model).
+    """
+    emb = cand.embedding(gram.shape[0])
+    gcc = emb.T @ gram @ emb
+    gmc = model_w.T @ gram @ emb
+    if model_pinv is None:
+        model_pinv = np.linalg.pinv(model_w.T @ gram @ model_w, rcond=1e-12, hermitian=True)
+    coef = model_pinv @ gmc  # (K, q) model fit of each candidate column
+    schur = gcc - gmc.T @ coef
+    d = np.sqrt(np.clip(np.diag(gcc), 0, None))
+    dmax = float(d.max()) if d.size else 0.0
+    dead = d <= ZERO_COLUMN * max(dmax, 1e-300)
+    s = 1.0 / np.where(dead, 1.0, d)
+    scaled = schur * np.outer(s, s)
+    scaled[dead, :] = 0.0
+    scaled[:, dead] = 0.0
+    lam, vec = np.linalg.eigh((scaled + scaled.T) / 2)
+    keep = lam > NULL_LAMBDA
+    basis = vec[:, keep] * s[:, None]
+    null = vec[:, ~keep] * s[:, None]
+    if null.shape[1] > 1:  # within the null space, separate directions without trace from absorbed ones
+        lam0, rot = np.linalg.eigh(null.T @ gcc @ null)
+        null = null @ rot
+    half = _rotating_half(cand, null) if null.shape[1] == 2 else None
+    if half is not None:  # name the rotating half in its canonical directions
+        sign = 1.0 if half == "+" else -1.0
+        null = np.array([[1.0, 0, 0, sign], [0, 1.0, -sign, 0]]).T
+    absorbed = coef @ null if null.size else np.zeros((model_w.shape[1], 0))
+    for j in range(null.shape[1]):
+        scale = np.abs(null[:, j]).max()
+        null[:, j] /= scale
+        absorbed[:, j] /= scale
+
+    def describe() -> list[str]:
+        return [_removed_sentence(cand, null[:, j], absorbed[:, j], gcc, model_names, model_units, half)
+                for j in range(null.shape[1])]
+
+    return Reduction(basis, null, absorbed, 1.0 / np.clip(lam[keep], 1e-300, None), describe)
+
+
+def combination(vec: np.ndarray, names: list[str] | tuple[str, ...], units: dict[str, str] | None = None) -> str:
+    """``a·p1 + b·p2 …`` of the non-negligible terms, largest first, normalised to the largest."""
+    order = np.argsort(-np.abs(vec))
+    if not vec.size or abs(vec[order[0]]) == 0:
+        return "0"
+    lead = vec[order[0]]
+    terms = []
+    for j in order:
+        coef = vec[j] / lead
+        if abs(coef) < 1e-3:
+            continue
+        sign = "-" if coef < 0 else "+"
+        mag = "" if np.isclose(abs(coef), 1.0, atol=1e-3) else f"{abs(coef):.3g}·"
+        unit = f" [{units[names[j]]}]" if units and names[j] in units else ""
+        terms.append(f"{sign} {mag}{names[j]}{unit}")
+    text = " ".join(terms)
+    return text[2:] if text.startswith("+ ") else text
+
+
+def _rotating_half(cand: Candidate, null: np.ndarray) -> str | None:
+    """Whether the null space of a first-harmonic wobble/runout contains a whole rotating half.
+
+    A 1×-per-revolution tilt/offset vector of constant length turning with (or against)
+    θ is ``(a_cos, a_sin, b_cos, b_sin) ∝ (1, 0, 0, ±1)`` and ``(0, 1, ∓1, 0)``.  The
+    half that the PIGEs (or the zeroing) absorb is the one fixed in the rotating body.
+    """
+    if cand.spec.kind not in ("wobble", "radial_runout") or cand.spec.harmonic != 1:
+        return None
+    q, _ = np.linalg.qr(null)
+    halves = {"+": np.array([[1.0, 0, 0, 1], [0, 1, -1, 0]]) / np.sqrt(2),
+              "-": np.array([[1.0, 0, 0, -1], [0, 1, 1, 0]]) / np.sqrt(2)}
+    for which, basis in halves.items():
+        if np.linalg.norm(q.T @ basis.T) > np.sqrt(2) * (1 - 1e-3):
+            return which
+    return None
+
+
+def _removed_sentence(cand: Candidate, vec: np.ndarray, absorbed: np.ndarray, gcc: np.ndarray,
+                      model_names: list[str], model_units: dict[str, str], half: str | None) -> str:
+    combo = combination(vec, cand.spec.param_names)
+    trace = float(vec @ gcc @ vec)
+    prefix = ""
+    if half is not None:
+        kind = "a tilt" if cand.spec.kind == "wobble" else "an offset"
+        prefix = (f"co-rotating half ({kind} that turns with axis {cand.spec.axis}, i.e. fixed in its body: "
+                  f"a location or setup error): ")
+    if trace <= 1e-16 * max(float(np.trace(gcc)), 1e-300):
+        return f"{prefix}{combo} leaves no trace in the zeroed data"
+    what = combination(absorbed, model_names, model_units)
+    return f"{prefix}{combo} is indistinguishable from {what}"

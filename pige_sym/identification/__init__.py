@@ -1,0 +1,1 @@
+"""Least squares: the PIGEs with uncertainty and identifiability, and the studies built on it."""

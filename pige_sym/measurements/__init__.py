@@ -1,0 +1,1 @@
+"""File formats and their readers and writers: what each instrument records."""

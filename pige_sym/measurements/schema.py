@@ -1,0 +1,366 @@
+"""One strict validator for every JSON file pige reads: dataclasses describe the documents.
+
+Reading (:func:`load_json`)
+---------------------------
+Only regular files (no FIFO or device), at most :data:`MAX_JSON_BYTES`, UTF-8 (a BOM is
+allowed), strict JSON: ``NaN``/``Infinity`` tokens, repeated keys and nesting deeper
+than :data:`MAX_DEPTH` are refused.  Every refusal is a
+:class:`~pige_sym.errors.FileFormatError` naming the file, the line when known, and the
+field as a path (``pige.EX0C``).
+
+Schemas (:func:`from_json`)
+---------------------------
+A schema is a dataclass; its type hints say what each key holds:
+
+``str``, ``bool``, ``int``, ``float``
+    exactly that JSON type (a bool is not a number, ``"5"`` is not a number); a float is
+    finite and, when the field's metadata has ``max_abs``, within ±max_abs;
+``list[T]``, ``tuple[T, ...]``
+    a JSON array (metadata ``length`` fixes its length);
+``dict[str, T]``
+    a JSON object;
+``T | None``
+    ``null`` allowed;
+``Any``
+    any JSON value (still depth-bounded).
+
+Keys not declared are refused (with the list of known keys), except those in the
+schema's ``IGNORED_KEYS`` (informational keys other pige commands write).  Fields
+without a default are required.
+
+Parameter files (:func:`read_params_file`)
+------------------------------------------
+The output of ``pige identify --json`` / ``pige diagnose --json`` or a hand-written
+``{"machine": "...", "pige": {"EX0C": 5.0, ...}}``: every location PIGE of the machine
+must have a finite value within ±:data:`MAX_PIGE` µm or µrad; a missing or ``null`` one
+is refused unless ``allow_missing`` (then it is set to 0 and named in
+``ParamsFile.set_to_zero``).  The file's ``machine`` must agree with the caller's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import types
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, TypeVar
+
+from pige_sym.errors import FileFormatError, InputError, PigeError, SchemaRefusal
+from pige_sym.files import PathLike, open_regular_file
+
+MAX_JSON_BYTES = 16 * 2**20
+MAX_DEPTH = 16
+#: Largest magnitude of a PIGE [µm or µrad]: 10 mm or 10 mrad is far beyond a machine that runs at all.
+MAX_PIGE = 1e4
+#: Largest magnitude of a position in a parameter file [mm].
+MAX_POSITION_MM = 1e5
+
+T = TypeVar("T")
+
+
+def _reject_constant(token: str) -> float:
+    raise ValueError(f"{token} is not allowed in pige JSON (use null for 'no value')")
+
+
+def _no_repeats(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in pairs:
+        if k in out:
+            raise ValueError(f"duplicate key {k!r}: it appears twice in one object")
+        out[k] = v
+    return out
+
+
+def _depth(x: Any, limit: int, level: int = 1) -> int:
+    if level > limit:
+        return level
+    if isinstance(x, dict):
+        return max([_depth(v, limit, level + 1) for v in x.values()], default=level)
+    if isinstance(x, list):
+        return max([_depth(v, limit, level + 1) for v in x], default=level)
+    return level
+
+
+def load_json(path: PathLike, what: str = "JSON file") -> Any:
+    """Parse a JSON file strictly (module docstring); returns plain Python values.
+
+    Raises
+    ------
+    FileFormatError
+        Not a regular file, too large, not UTF-8, not strict JSON, or nested too deeply.
+    """
+    p = str(path)
+    with open_regular_file(path) as fh:
+        raw = fh.read(MAX_JSON_BYTES + 1)
+    if len(raw) > MAX_JSON_BYTES:
+        raise FileFormatError(p, None, f"{what} larger than {MAX_JSON_BYTES // 2**20} MiB")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(p, None, f"{what} is not UTF-8 text ({exc.reason} at byte {exc.start}): save it as "
+                              "UTF-8") from None
+    try:
+        data = json.loads(text, parse_constant=_reject_constant, object_pairs_hook=_no_repeats)
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(p, exc.lineno, f"not valid JSON: {exc.msg}") from None
+    except ValueError as exc:
+        raise FileFormatError(p, None, f"not valid pige JSON: {exc}") from None
+    except RecursionError:
+        raise FileFormatError(p, None, f"nested deeper than {MAX_DEPTH} levels") from None
+    if _depth(data, MAX_DEPTH) > MAX_DEPTH:
+        raise FileFormatError(p, None, f"nested deeper than {MAX_DEPTH} levels")
+    return data
+
+
+def _type_name(x: Any) -> str:
+    if x is None:
+        return "null"
+    if isinstance(x, bool):
+        return "a boolean"
+    if isinstance(x, (int, float)):
+        return "a number"
+    if isinstance(x, str):
+        return f"a string {x[:20]!r}"
+    if isinstance(x, list):
+        return "a list"
+    return "an object"
+
+
+def _check(tp: Any, value: Any, where: str, meta: Mapping[str, Any]) -> Any:
+    """``value`` validated against the type hint ``tp`` (module docstring)."""
+    origin = typing.get_origin(tp)
+    if tp is Any:
+        return value
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        rest = [a for a in args if a is not type(None)]
+        if len(rest) == 1:
+            return _check(rest[0], value, where, meta)
+        for a in rest:
+            try:
+                return _check(a, value, where, meta)
+            except SchemaRefusal:
+                continue
+        raise SchemaRefusal(where, f"unexpected {_type_name(value)}")
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SchemaRefusal(where, f"expected a number, got {_type_name(value)}")
+        v = float(value)
+        if not math.isfinite(v):
+            raise SchemaRefusal(where, "expected a finite number")
+        limit = meta.get("max_abs")
+        if limit is not None and abs(v) > limit:
+            raise SchemaRefusal(where, f"{v:g} is not physical (|value| <= {limit:g})")
+        return v
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SchemaRefusal(where, f"expected an integer, got {_type_name(value)}")
+        return value
+    if tp in (str, bool):
+        if not isinstance(value, tp):
+            wanted = "a string" if tp is str else "true or false"
+            raise SchemaRefusal(where, f"expected {wanted}, got {_type_name(value)}")
+        return value
+    if origin in (list, tuple):
+        if not isinstance(value, list):
+            raise SchemaRefusal(where, f"expected a list, got {_type_name(value)}")
+        n = meta.get("length")
+        if n is not None and len(value) != n:
+            raise SchemaRefusal(where, f"expected {n} values, got {len(value)}")
+        (item,) = typing.get_args(tp)[:1]
+        out = [_check(item, v, f"{where}[{i}]", meta) for i, v in enumerate(value)]
+        return tuple(out) if origin is tuple else out
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise SchemaRefusal(where, f"expected an object, got {_type_name(value)}")
+        _, item = typing.get_args(tp)
+        return {str(k): _check(item, v, f"{where}.{k}", meta) for k, v in value.items()}
+    if dataclasses.is_dataclass(tp) and isinstance(tp, type):
+        return _from_dict(tp, value, where)
+    raise TypeError(f"schema type {tp!r} is not supported")  # pragma: no cover - a programming error
+
+
+def _from_dict(cls: type[T], value: Any, where: str) -> T:
+    if not isinstance(value, dict):
+        raise SchemaRefusal(where, f"expected an object, got {_type_name(value)}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}  # type: ignore[arg-type]
+    ignored: frozenset[str] = getattr(cls, "IGNORED_KEYS", frozenset())
+    unknown = sorted(k for k in value if k not in fields and k not in ignored)
+    if unknown:
+        prefix = f"{where}." if where else ""
+        raise SchemaRefusal("", f"unknown key {prefix}{unknown[0]!r} (known: {', '.join(fields)})")
+    kwargs: dict[str, Any] = {}
+    for name, f in fields.items():
+        sub = f"{where}.{name}" if where else name
+        if name not in value:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise SchemaRefusal(sub, "missing")
+            continue
+        kwargs[name] = _check(hints[name], value[name], sub, f.metadata)
+    return cls(**kwargs)
+
+
+def from_json(cls: type[T], data: Any, path: PathLike) -> T:
+    """Validate parsed JSON ``data`` against the dataclass ``cls``; FileFormatError naming the field."""
+    try:
+        return _from_dict(cls, data, "")
+    except SchemaRefusal as exc:
+        raise FileFormatError(str(path), None, str(exc)) from None
+
+
+def read_json_file(path: PathLike, cls: type[T], what: str = "JSON file") -> T:
+    """:func:`load_json` then :func:`from_json`."""
+    return from_json(cls, load_json(path, what), path)
+
+
+# --------------------------------------------------------------------------------------------- parameter files
+
+
+def _vec3_mm() -> Any:
+    return field(default=None, metadata={"length": 3, "max_abs": MAX_POSITION_MM})
+
+
+@dataclass(frozen=True)
+class ParamsDocument:
+    """A parameter file as written (``pige identify --json``, ``pige diagnose --json`` or by hand).
+
+    ``pige`` maps a parameter name to its value [µm or µrad] or ``null`` (not identifiable);
+    names with a dot (``angular_error_C.cos_urad``) are effect parameters of a diagnosis.
+    """
+
+    pige: dict[str, float | None] = field(metadata={"max_abs": MAX_PIGE})
+    machine: str | None = None
+    units: dict[str, str] | None = None
+    tool_mm: list[float] | None = _vec3_mm()
+    ball_mm: list[float] | None = _vec3_mm()
+    pivots_mm: dict[str, list[float]] | None = field(default=None, metadata={"length": 3,
+                                                                              "max_abs": MAX_POSITION_MM})
+    findings: list[Any] | None = None
+
+    #: Keys ``pige identify/diagnose --json`` write that a parameter file does not use.
+    IGNORED_KEYS: ClassVar[frozenset[str]] = frozenset({
+        "method", "projection", "loss", "std", "ci95", "rank", "n_parameters", "condition", "rms_um", "sigma_um",
+        "dof", "n_rows", "n_obs", "observability", "unidentifiable", "outlier_rows", "vif", "baseline", "options",
+        "plots", "rejected", "params", "bic", "heldout_rms_um", "unobservable", "identifiable", "warnings",
+        "unobserved", "clusters",
+    })
+
+
+@dataclass(frozen=True)
+class ParamsFile:
+    """A validated parameter file.
+
+    Attributes
+    ----------
+    path : str
+    machine : str
+        Canonical machine code.
+    pige : dict of str to float [µm, µrad]
+        Every location PIGE of the machine, plus the zero-position ones the file gives.
+    effect_values : dict of str to float
+        Effect parameters (names with a dot), finite, as given.
+    set_to_zero : tuple of str
+        PIGEs missing or null in the file, set to 0 because ``allow_missing`` was given.
+    units : dict of str to str
+    tool_mm : tuple of 3 float [mm] or None
+    pivots_mm : dict of str to tuple of 3 float [mm]
+    findings : list
+        ``findings`` of a diagnosis (unvalidated structure beyond strict JSON).
+    """
+
+    path: str
+    machine: str
+    pige: dict[str, float]
+    effect_values: dict[str, float]
+    set_to_zero: tuple[str, ...]
+    units: dict[str, str]
+    tool_mm: tuple[float, float, float] | None
+    pivots_mm: dict[str, tuple[float, float, float]]
+    findings: list[Any]
+
+
+def read_params_file(path: PathLike, *, machine: str | None = None, allow_missing: bool = False) -> ParamsFile:
+    """Read and validate a parameter file (module docstring); :func:`params_document` on its JSON."""
+    return params_document(load_json(path, "parameter file"), path, machine=machine, allow_missing=allow_missing)
+
+
+def params_document(data: Any, path: PathLike, *, machine: str | None = None,
+                    allow_missing: bool = False) -> ParamsFile:
+    """Validate a parameter document already in memory (a file's JSON, or a result's ``to_dict()``).
+
+    Parameters
+    ----------
+    data : JSON value
+    path : path-like
+        Where it comes from, for messages (a file name, or e.g. ``<identification>``).
+    machine : str or None
+        The machine the caller works on (``--machine`` or an NC program's header); must agree
+        with the file's ``machine`` when both are given.
+    allow_missing : bool
+        Set missing or ``null`` location PIGEs to 0 (named in ``set_to_zero``) instead of refusing.
+
+    Raises
+    ------
+    FileFormatError
+        Malformed file (names the field).
+    InputError
+        Machine missing or disagreeing.
+    """
+    from pige_sym.codegen.machine_code import parse_machine_code
+    from pige_sym.kernels import load_kernels
+
+    p = str(path)
+    doc = from_json(ParamsDocument, data, path)
+    code = _agreed_machine(p, doc.machine, machine, parse_machine_code)
+    kern = load_kernels(code)
+    known = set(kern.PARAMETERS)
+    unknown = sorted(k for k in doc.pige if "." not in k and k not in known)
+    if unknown:
+        raise FileFormatError(p, None, f"pige.{unknown[0]}: not a parameter of {kern.MACHINE_CODE} "
+                              f"(known: {', '.join(kern.PARAMETERS)})")
+    for name, unit in (doc.units or {}).items():
+        if name in kern.UNITS and unit != kern.UNITS[name]:
+            raise FileFormatError(p, None, f"units.{name}: {unit!r}, but {name} is in {kern.UNITS[name]}")
+    values = {k: v for k, v in doc.pige.items() if "." not in k and v is not None}
+    missing = [k for k in kern.LOCATION_PARAMETERS if doc.pige.get(k) is None]
+    if missing and not allow_missing:
+        said = "null (not identifiable)" if all(k in doc.pige for k in missing) else "missing or null"
+        raise FileFormatError(p, None, f"pige.{missing[0]}: {said}; every PIGE of {kern.MACHINE_CODE} needs a value "
+                              f"({', '.join(missing)}); pass --allow-missing to set them to 0")
+    for k in missing:
+        values[k] = 0.0
+    effects = {k: v for k, v in doc.pige.items() if "." in k}
+    bad_effect = [k for k, v in effects.items() if v is None]
+    if bad_effect:
+        raise FileFormatError(p, None, f"pige.{bad_effect[0]}: an effect parameter needs a value")
+    return ParamsFile(
+        path=p, machine=kern.MACHINE_CODE, pige=values, effect_values={k: float(v or 0.0) for k, v in effects.items()},
+        set_to_zero=tuple(missing), units=dict(doc.units or kern.UNITS),
+        tool_mm=None if doc.tool_mm is None else (doc.tool_mm[0], doc.tool_mm[1], doc.tool_mm[2]),
+        pivots_mm={a: (v[0], v[1], v[2]) for a, v in (doc.pivots_mm or {}).items()}, findings=list(doc.findings or []),
+    )
+
+
+def _agreed_machine(path: str, in_file: str | None, given: str | None, parse: Any) -> str:
+    """The canonical machine both the file and the caller name (one of them may be silent)."""
+    def canon(code: str, who: str) -> str:
+        try:
+            return str(parse(code).canonical)
+        except PigeError as exc:
+            raise FileFormatError(path, None, f"{who}: {exc}") from None
+
+    file_code = canon(in_file, "machine") if in_file is not None else None
+    given_code = canon(given, "--machine") if given is not None else None
+    if file_code and given_code and file_code != given_code:
+        raise InputError(f"{path} is for machine {file_code}, but this run is for {given_code}: use the parameter "
+                         "file identified on this machine")
+    code = file_code or given_code
+    if code is None:
+        raise InputError(f"{path} names no machine: give --machine")
+    return code

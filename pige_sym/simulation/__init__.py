@@ -1,0 +1,1 @@
+"""Synthetic measurements on a machine with known errors (truth sidecars)."""
