@@ -8,19 +8,63 @@ ball at ``--ball`` (honouring ``--pivot``/``--tool``); with ``--rtcp`` (``TRAORI
 they are the workpiece coordinates of the ball and the controller's RTCP moves the
 linear axes.  The same file is what ``pige acquire --program`` and ``pige rtest-sim
 --trajectory`` read, and what ``pige compensate`` rewrites.
+
+With ``--instrument sphere-probe`` it writes the sphere-probing program instead
+(:mod:`pige_sym.nc.probe_program`): per pose the rotary axes positioned (RTCP off), k contacts
+probed along machine axes (G38.2 / G31 / MEAS / TCH PROBE) and logged; the program is read back and
+replayed against the nominal sphere before it is written (:mod:`pige_sym.nc.probe_readback`).
+Heidenhain programs print with FN 16: the format file is written beside the program (``.A``).
 """
 
 from __future__ import annotations
 
 import argparse
 
+from pige_sym.cli._probe import INSTRUMENT_CHOICES, add_probe_program_arguments
 from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
 from pige_sym.constants import DEFAULT_DWELL_S
 from pige_sym.files import atomic_write_text, check_output
 
 
+def _run_probe(args: argparse.Namespace) -> int:
+    from pige_sym.cli._probe import probe_setup
+    from pige_sym.kernels import load_kernels
+    from pige_sym.model.trajectories import make_trajectory
+    from pige_sym.nc.probe_program import plan_probing
+    from pige_sym.nc.probe_readback import verify_probe_program
+    from pige_sym.nc.probe_render import heidenhain_format_file, render_probe_program
+
+    kern = load_kernels(args.machine)
+    setup = probe_setup(args, kern.MACHINE_CODE)
+    traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
+    plan = plan_probing(setup, traj.angles_deg, traj.description)
+    text = render_probe_program(plan, args.dialect)
+    check = verify_probe_program(text, args.dialect, setup, plan.rotary_axes, path=args.out)
+    inputs = [args.trajectory]
+    out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
+    fmt = check_output(out.with_suffix(".A"), force=args.force, inputs=inputs, what="format file") \
+        if args.dialect == "heidenhain" else None
+    atomic_write_text(out, text)
+    if fmt is not None:
+        atomic_write_text(fmt, heidenhain_format_file(plan))
+    print(f"wrote {out}: {check.poses} poses ({plan.description}), {sum(check.contacts)} contacts "
+          f"({min(check.contacts)}-{max(check.contacts)} per pose), {args.dialect}"
+          + (f", format file {fmt}" if fmt is not None else ""))
+    print(f"read back: rapid moves at least {check.min_rapid_clearance_mm:.2f} mm from the sphere, rotary moves "
+          f"{check.min_rotary_clearance_mm:.1f} mm above it, every probing move {check.min_overtravel_mm:.2f} mm past "
+          f"its surface; safe Z {plan.safe_z_mm:.3f} mm")
+    return 0
+
+
 def _run(args: argparse.Namespace) -> int:
     import numpy as np
+
+    if args.instrument == "sphere-probe":
+        return _run_probe(args)
+    if args.dialect == "heidenhain":
+        from pige_sym.errors import InputError
+
+        raise InputError("R-test programs are written for siemens, fanuc or linuxcnc (heidenhain: sphere-probe)")
 
     from pige_sym.kernels import load_kernels
     from pige_sym.nc.program import make_rtest_program
@@ -53,7 +97,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "examples:\n"
             "  pige program --machine \"wC'A'bXYZ(C1)t\" --trajectory cone-frustum --ball 120,0,80 --out rtest.mpf\n"
             "  pige program --machine \"wC'B'bXYZ(C1)t\" --trajectory figure-eight --rtcp --out fig8.mpf\n"
-            "  pige program --trajectory steps --dialect fanuc --out steps.nc"
+            "  pige program --trajectory steps --dialect fanuc --out steps.nc\n"
+            "  pige program --instrument sphere-probe --dialect linuxcnc --sphere 100,20,60 --sphere-radius 12.7 \\\n"
+            "      --stylus-radius 1.5 --trajectory plan.csv --out probe.ngc"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -62,7 +108,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="dwell per pose [s] (default %(default)s: ~1 s to settle, then a 5 s average)")
     p.add_argument("--feed", type=float, default=2000.0, help="feed of the positioning blocks (default %(default)s)")
     p.add_argument("--rtcp", action="store_true", help="workpiece coordinates with TRAORI instead of machine ones")
-    p.add_argument("--dialect", choices=["siemens", "fanuc", "linuxcnc"], default="siemens", help="output dialect")
+    p.add_argument("--dialect", choices=["siemens", "fanuc", "linuxcnc", "heidenhain"], default="siemens",
+                   help="output dialect (heidenhain: sphere-probe only)")
+    p.add_argument("--instrument", choices=INSTRUMENT_CHOICES, default="rtest", help="the test's instrument")
+    add_probe_program_arguments(p)
     p.add_argument("--out", required=True, help="program file to write")
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.set_defaults(handler=_run)

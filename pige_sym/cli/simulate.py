@@ -1,10 +1,16 @@
-"""``pige simulate``: write a synthetic R-test file and its truth sidecar."""
+"""``pige simulate``: write a synthetic R-test file and its truth sidecar.
+
+With ``--instrument sphere-probe`` it writes the probe log a probing program produces on the virtual
+probing machine (:mod:`pige_sym.simulation.probe_machine`): the program given with ``--program``, or the
+one ``pige program --instrument sphere-probe`` would write for the same options.
+"""
 
 from __future__ import annotations
 
 import argparse
 import os
 
+from pige_sym.cli._probe import INSTRUMENT_CHOICES, add_probe_program_arguments
 from pige_sym.cli._setup import (
     add_setup_arguments,
     finite_option,
@@ -14,10 +20,57 @@ from pige_sym.cli._setup import (
 )
 from pige_sym.errors import InputError
 from pige_sym.files import atomic_write_text, check_output, to_json
+from pige_sym.nc.probe_program import PROBE_DIALECTS
+
+
+def _run_probe(args: argparse.Namespace) -> int:
+    from pige_sym.cli._probe import probe_setup
+    from pige_sym.cli._setup import parse_vec3
+    from pige_sym.kernels import load_kernels
+    from pige_sym.model.effects import parse_effect
+    from pige_sym.model.trajectories import make_trajectory
+    from pige_sym.nc.probe_program import plan_probing
+    from pige_sym.nc.probe_readback import verify_probe_program
+    from pige_sym.nc.probe_render import render_probe_program
+    from pige_sym.nc.program_file import read_program
+    from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
+
+    kern = load_kernels(args.machine)
+    setup = probe_setup(args, kern.MACHINE_CODE)
+    for name in ("noise", "pretravel", "lobing", "vertical_pretravel"):
+        finite_option(getattr(args, name), "--" + name.replace("_", "-"), minimum=0.0 if name == "noise" else None)
+    if args.program:
+        text = read_program(args.program)
+    else:
+        traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
+        text = render_probe_program(plan_probing(setup, traj.angles_deg, traj.description), args.dialect)
+    verify_probe_program(text, args.dialect, setup, tuple(kern.ROTARY_AXES), path=args.program or "<program>")
+    offset = parse_vec3(args.setup_offset, "--setup-offset")
+    machine = ProbeMachine(setup, pige_values(args.pige, kern.MACHINE_CODE, args.seed),
+                           [parse_effect(e, tuple(kern.ROTARY_AXES)) for e in args.effect or []],
+                           (offset[0], offset[1], offset[2]), args.noise, args.pretravel, args.lobing,
+                           args.vertical_pretravel, args.seed)
+    inputs = [x for x in (args.trajectory, args.pige, args.program) if x and os.path.isfile(x)]
+    out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
+    truth_path = check_output(out.with_name(out.stem + ".truth.json"), force=args.force, inputs=inputs,
+                              what="truth sidecar")
+    log = run_probe_program(text, args.dialect, machine, path=args.program or "<program>")
+    atomic_write_text(out, log)
+    truth = {"machine": kern.MACHINE_CODE, "instrument": "sphere-probe", "dialect": args.dialect,
+             "pige": machine.pige, "effects": args.effect or [], "sphere_mm": list(setup.sphere_mm),
+             "setup_offset_um": list(machine.setup_offset_um), "pivot_mm": list(setup.pivot_mm),
+             "contact_noise_um": args.noise, "pretravel_um": args.pretravel, "lobing_um": args.lobing,
+             "vertical_pretravel_um": args.vertical_pretravel, "seed": args.seed}
+    atomic_write_text(truth_path, to_json(truth) + "\n")
+    print(f"wrote {out} ({log.count(chr(10))} contacts, {args.dialect} log) and {truth_path}")
+    return 0
 
 
 def _run(args: argparse.Namespace) -> int:
     from pige_sym.kernels import load_kernels
+
+    if args.instrument == "sphere-probe":
+        return _run_probe(args)
     from pige_sym.measurements.rtest_writer import write_measurement
     from pige_sym.model.effects import parse_effect
     from pige_sym.model.trajectories import make_trajectory
@@ -74,4 +127,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output CSV (a .truth.json sidecar is written beside it)")
     p.add_argument("--force", action="store_true", help="replace an existing output CSV and its sidecar")
     p.add_argument("--json", action="store_true", help="print the files written and the truth as one JSON object")
+    p.add_argument("--instrument", choices=INSTRUMENT_CHOICES, default="rtest",
+                   help="rtest (a measurement file) or sphere-probe (the probe log of a probing program)")
+    add_probe_program_arguments(p)
+    p.add_argument("--dialect", choices=PROBE_DIALECTS, default="linuxcnc", help="probing program and log dialect")
+    p.add_argument("--program", help="probing program to run (default: the one pige program would write)")
+    p.add_argument("--setup-offset", default="0,0,0", help="true minus nominal sphere centre [um] (default 0,0,0)")
+    p.add_argument("--pretravel", type=float, default=0.0, help="constant probe pre-travel [um]")
+    p.add_argument("--lobing", type=float, default=0.0, help="three-lobed pre-travel amplitude [um]")
+    p.add_argument("--vertical-pretravel", type=float, default=0.0, help="extra pre-travel of Z probing moves [um]")
     p.set_defaults(handler=_run)

@@ -56,6 +56,7 @@ from pige_sym.constants import LOSSES as LOSSES
 from pige_sym.constants import METHODS as METHODS
 from pige_sym.errors import IdentificationError as IdentificationError
 from pige_sym.errors import InputError
+from pige_sym.identification.instruments import instrument
 from pige_sym.identification.problem import ExtraColumns, Problem, build_problem
 from pige_sym.identification.result import IdentificationResult, Stage
 from pige_sym.identification.spectrum import Solution, combination_text, observability, solve_scaled
@@ -168,6 +169,9 @@ def identify(measurement: Measurement, *, method: str = "gauss-newton", projecti
     problem = build_problem(measurement, proj, with_zero=with_zero, extra=extra, rows=rows,
                             explicit=True if loss != "linear" else None)
     outliers: list[int] = []
+    if loss != "linear" and instrument(measurement) != "rtest":
+        raise InputError(f"loss={loss}: robust fits treat rows as independent; the rows of a "
+                         f"{instrument(measurement)} measurement are correlated (use loss=linear)")
     if loss != "linear":
         outliers = _robust_rows(problem, loss, outlier_threshold)
         if outliers:

@@ -14,6 +14,8 @@ import numpy as np
 from pige_sym.constants import LOSSES as LOSSES
 from pige_sym.constants import METHODS as METHODS
 from pige_sym.errors import IdentificationError as IdentificationError
+from pige_sym.errors import InputError
+from pige_sym.identification.instruments import instrument, whitened_normal
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import Measurement
 from pige_sym.model.projection import Projection, parse_projection
@@ -99,8 +101,12 @@ def build_problem(measurement: Measurement, projection: str | Projection = "xyz"
     y_all = proj.apply_data(measurement.deviation_um)  # (n, m): projection in the measurement frame
     m = dirs.shape[0]
     q = 0 if extra is None else len(extra.names)
+    probe = instrument(measurement) != "rtest"
+    if probe and (proj.name != "xyz" or measurement.frame != "machine"):
+        raise InputError(f"a {instrument(measurement)} measurement is identified with the full 3-D projection "
+                         f"(xyz) in the machine frame, not {proj.name!r}")
     if explicit is None:
-        explicit = extra is not None or n * m * (len(names) + q) <= 5_000_000
+        explicit = probe or extra is not None or n * m * (len(names) + q) <= 5_000_000
     g = kern.coefficients(measurement.ball_mm, measurement.pivots_mm or None, measurement.tool_mm)[:, :, p_idx]
     if explicit or dirs_rows is not None:
         jac = kern.basis(measurement.angles_deg) @ g.reshape(g.shape[0], -1)
@@ -115,6 +121,10 @@ def build_problem(measurement: Measurement, projection: str | Projection = "xyz"
             design = np.concatenate([design, ex_p], axis=2)
             names = names + list(extra.names)
             units = units | dict(extra.units)
+        if probe:
+            rot = kern.workpiece_rotation(measurement.angles_deg)
+            normal, rhs, yy = whitened_normal(measurement, design, y_all, rot, rows)
+            return Problem(names, units, normal, rhs, yy, rows.size * m, n, m, design, y_all, rows)
         a = design[rows].reshape(-1, design.shape[2])
         y = y_all[rows].reshape(-1)
         return Problem(names, units, a.T @ a, a.T @ y, float(y @ y), a.shape[0], n, m, design, y_all, rows)

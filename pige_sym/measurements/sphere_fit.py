@@ -1,0 +1,167 @@
+"""Least-squares sphere centres from touch-probe contacts (CONVENTIONS §7).
+
+Model: contact ``j`` of pose ``i`` (stylus-tip centre ``x_ij`` [mm]) lies at the effective radius
+``R_eff`` from the pose's sphere centre ``c_i``: ``|x_ij − c_i| = R_eff + ε_ij`` with independent contact
+errors ``ε`` of one standard deviation σ (the probe's repeatability, along the surface normal).
+
+:func:`fit_centres` solves every pose's centre and, unless it is given, one ``R_eff`` shared by all poses
+(the same sphere and stylus: a radius per pose would leave a four-contact pose without redundancy),
+by Gauss–Newton from the algebraic (linear) solution of each pose.  σ is pooled over all contacts
+(``RSS / (N − 3n − 1)``); the covariance of each centre is ``σ² (GᵢᵀGᵢ)⁻¹`` with ``Gᵢ`` the unit normals of
+its contacts, the conditional covariance given ``R_eff`` (the radius error moves every centre along the
+mean normal of its pattern; with the same pattern at every pose that is nearly a common offset, which
+the identification's reference coupling absorbs).  A pose whose normals do not span three directions
+(``s_min/s_max`` of ``Gᵢ`` below :data:`MIN_SPREAD`) is *degenerate*: its centre is not determined.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pige_sym.errors import InputError
+
+#: Smallest ratio of the smallest to the largest singular value of a pose's contact normals.
+MIN_SPREAD = 0.1
+MIN_CONTACTS = 4
+
+
+@dataclass
+class SphereFit:
+    """Sphere centres of every pose.
+
+    Attributes
+    ----------
+    centres_mm : ndarray, shape=(n, 3) [mm]
+    covariance_um2 : ndarray, shape=(n, 3, 3) [µm²]
+        Covariance of each centre (pooled σ, the pose's contact geometry).
+    radius_mm : float
+        Effective radius ``R + r − pre-travel`` (fitted, or as given).
+    radius_fitted : bool
+    sigma_um : float
+        Pooled contact standard deviation (NaN without redundancy).
+    residuals_um : list of ndarray
+        Per pose, the contacts' radial residuals ``|x − c| − R_eff`` [µm].
+    dof : int
+    """
+
+    centres_mm: np.ndarray
+    covariance_um2: np.ndarray
+    radius_mm: float
+    radius_fitted: bool
+    sigma_um: float
+    residuals_um: list[np.ndarray]
+    dof: int
+
+
+def algebraic_centre(points_mm: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre and radius of the sphere through ≥ 4 points, linear least squares on ``|x|² = 2c·x + k``.
+
+    Parameters
+    ----------
+    points_mm : ndarray, shape=(k, 3) [mm]
+
+    Returns
+    -------
+    centre_mm : ndarray, shape=(3,) [mm]
+    radius_mm : float
+    """
+    x = np.asarray(points_mm, dtype=float)
+    mean = x.mean(axis=0)
+    xc = x - mean  # centred for conditioning
+    a = np.column_stack([2 * xc, np.ones(len(xc))])
+    sol, *_ = np.linalg.lstsq(a, (xc**2).sum(axis=1), rcond=None)
+    centre = sol[:3]
+    return centre + mean, float(np.sqrt(max(sol[3] + centre @ centre, 0.0)))
+
+
+def contact_spread(points_mm: np.ndarray, centre_mm: np.ndarray) -> float:
+    """``s_min / s_max`` of the unit normals of a pose's contacts (0: the centre is not determined)."""
+    n = np.asarray(points_mm, dtype=float) - centre_mm
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    s = np.linalg.svd(n, compute_uv=False)
+    return float(s[-1] / s[0]) if s.size == 3 and s[0] > 0 else 0.0
+
+
+def _normals(points: list[np.ndarray], centres: np.ndarray) -> list[np.ndarray]:
+    out = []
+    for x, c in zip(points, centres, strict=True):
+        v = x - c
+        out.append(v / np.linalg.norm(v, axis=1, keepdims=True))
+    return out
+
+
+def fit_centres(points_mm: list[np.ndarray], *, radius_mm: float | None = None, iterations: int = 20) -> SphereFit:
+    """Fit every pose's centre (and one shared effective radius unless given).
+
+    Parameters
+    ----------
+    points_mm : list of ndarray, each shape=(k_i, 3) [mm]
+        Stylus-tip centres at contact, per pose, k_i ≥ 4.
+    radius_mm : float, optional
+        The effective radius when known (calibrated on a ring or sphere); fitted otherwise.
+    iterations : int
+        Gauss–Newton iterations at most (converges in 2–3 from the algebraic start).
+
+    Returns
+    -------
+    SphereFit
+
+    Raises
+    ------
+    InputError
+        A pose with fewer than four contacts or a degenerate contact pattern (its index in the message).
+    """
+    pts = [np.asarray(p, dtype=float) for p in points_mm]
+    for i, p in enumerate(pts):
+        if p.ndim != 2 or p.shape[0] < MIN_CONTACTS or p.shape[1] != 3:
+            raise InputError(f"pose {i}: {p.shape[0] if p.ndim == 2 else 0} contacts; a sphere centre needs at "
+                             f"least {MIN_CONTACTS}")
+    starts = [algebraic_centre(p) for p in pts]
+    centres = np.array([c for c, _ in starts])
+    for i, p in enumerate(pts):
+        spread = contact_spread(p, centres[i])
+        if spread < MIN_SPREAD:
+            raise InputError(f"pose {i}: degenerate contact pattern (normals spread {spread:.3f} < {MIN_SPREAD}: "
+                             "contacts must not lie on one circle or line); probe it from more directions")
+    fitted = radius_mm is None
+    radius = float(np.median([r for _, r in starts])) if radius_mm is None else float(radius_mm)
+    for _ in range(iterations):
+        centres, radius, step = _gauss_newton_step(pts, centres, radius, fitted)
+        if step < 1e-10:
+            break
+    return _finish(pts, centres, radius, fitted)
+
+
+def _gauss_newton_step(pts: list[np.ndarray], centres: np.ndarray, radius: float,
+                       fitted: bool) -> tuple[np.ndarray, float, float]:
+    """One Gauss–Newton step; the radius is eliminated per pose (Schur complement) so the cost is O(n)."""
+    normals = _normals(pts, centres)
+    h_rr, g_r = 0.0, 0.0
+    blocks = []
+    for x, c, g in zip(pts, centres, normals, strict=True):
+        r = np.linalg.norm(x - c, axis=1) - radius  # residual; ∂r/∂c = −g, ∂r/∂R = −1
+        h_cc = g.T @ g
+        h_cr = g.sum(axis=0)
+        inv = np.linalg.inv(h_cc)
+        g_c = g.T @ r  # = −Jᵀr for c: step solves H Δ = −Jᵀ r with J = [−g, −1]
+        blocks.append((inv, h_cr, g_c))
+        if fitted:
+            h_rr += len(r) - h_cr @ inv @ h_cr
+            g_r += r.sum() - h_cr @ inv @ g_c
+    d_r = g_r / h_rr if fitted and h_rr > 0 else 0.0
+    new = np.array([c + inv @ (g_c - h_cr * d_r) for c, (inv, h_cr, g_c) in zip(centres, blocks, strict=True)])
+    step = max(float(np.abs(new - centres).max()), abs(d_r))
+    return new, radius + d_r, step
+
+
+def _finish(pts: list[np.ndarray], centres: np.ndarray, radius: float, fitted: bool) -> SphereFit:
+    normals = _normals(pts, centres)
+    residuals = [(np.linalg.norm(x - c, axis=1) - radius) * 1e3 for x, c in zip(pts, centres, strict=True)]
+    n_contacts = sum(len(r) for r in residuals)
+    dof = n_contacts - 3 * len(pts) - (1 if fitted else 0)
+    rss = float(sum((r**2).sum() for r in residuals))
+    sigma = float(np.sqrt(rss / dof)) if dof > 0 else float("nan")
+    cov = np.array([np.linalg.inv(g.T @ g) for g in normals]) * (sigma**2 if dof > 0 else np.nan)
+    return SphereFit(centres, cov, radius, fitted, sigma, residuals, dof)

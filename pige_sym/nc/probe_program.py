@@ -1,0 +1,195 @@
+"""Sphere-probing programs: visit each pose, touch the calibration sphere k times, log every contact.
+
+Geometry (machine frame, mm; CONVENTIONS §7)
+-------------------------------------------
+The sphere's nominal centre at a pose is ``c(θ) = pivot + R_w(θ)·(sphere − pivot)`` (the nominal
+workpiece-side rotation of the kernels); ``R_eff = R + r`` is the stylus-centre radius.  Contacts are
+probed along machine axes, what every controller's basic probing cycle does: one from above (−Z onto the
+top) and rings of horizontal probes (±X, ±Y) at elevations ε above the centre (the contact normal is
+``cos ε·u + sin ε·z``).  A contact whose normal points within ``stand_cone_deg`` of the sphere's stand
+(the table's −z, turned with the table) is left out; a pose needs at least four contacts.
+
+Every probing move starts ``clearance`` outside the ``R_eff`` sphere and its target lies ``overtravel``
+inside it (so the probe trips; a probe that does not trip stops LinuxCNC's G38.2 with an error and raises
+an alarm on Fanuc and Siemens, checked after the move).  Between contacts the probe goes up to the
+pose's clearance plane ``c_z + R_eff + clearance``, horizontally over the next start, then straight
+down to it (a vertical line outside the ``R_eff + clearance`` circle of every height above the contact
+cannot meet the sphere); before the rotary axes move it retracts to ``safe_z``, which must be above every
+pose's clearance plane.  RTCP is off: X Y Z are machine-axis coordinates (work offset such that the
+coordinates are those of ``--sphere`` and ``--pivot``), the tool length set to the stylus centre.
+
+Dialects and their logs (read by :mod:`pige_sym.measurements.probe_log`)
+-----------------------------------------------------------------------
+``linuxcnc``: ``G38.2``, log by ``(PROBEOPEN pige_probe.txt)`` … ``(PROBECLOSE)``;
+``fanuc``: ``G31`` and ``DPRNT`` of the skip position ``#5061–#5063`` between ``POPEN``/``PCLOS``;
+``siemens``: ``MEAS=1`` and ``WRITE`` of ``$AA_MW`` to the file ``PIGE_PROBE``;
+``heidenhain``: ``TCH PROBE 0`` (reference plane) and ``FN 16: F-PRINT`` with the format file written
+beside the program (:func:`heidenhain_format_file`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pige_sym.errors import InputError
+from pige_sym.kernels import load_kernels
+
+PROBE_DIALECTS = ("linuxcnc", "fanuc", "siemens", "heidenhain")
+HEIDENHAIN_LOG = "TNC:\\PIGE\\PROBE.TXT"
+HEIDENHAIN_FORMAT = "TNC:\\PIGE\\PROBE.A"
+
+
+@dataclass(frozen=True)
+class ProbeSetup:
+    """What a probing program is planned from.
+
+    Attributes
+    ----------
+    machine : str
+    sphere_mm : ndarray, shape=(3,) [mm]
+        Nominal sphere centre at the reference pose (all angles 0), program coordinates.
+    pivot_mm : ndarray, shape=(3,) [mm]
+        Nominal intersection of the rotary axis lines, program coordinates.
+    sphere_radius_mm, stylus_radius_mm : float [mm]
+    clearance_mm : float [mm]
+        Start of each probing move outside the ``R + r`` sphere.
+    overtravel_mm : float [mm]
+        How far inside the sphere each probing move's target lies.
+    elevations_deg : tuple of float [deg]
+        Elevations of the rings of horizontal contacts.
+    contacts : int
+        Contacts per pose (4–9): the top, then the rings' ±X, ±Y in order.
+    stand_cone_deg : float [deg]
+        Half-angle around the stand direction where no contact is placed.
+    safe_z_mm : float or None [mm]
+        Retract height before rotary moves (default: 20 mm above the highest clearance plane).
+    feed_mm_min, probe_feed_mm_min : float [mm/min]
+    """
+
+    machine: str
+    sphere_mm: np.ndarray
+    pivot_mm: np.ndarray
+    sphere_radius_mm: float
+    stylus_radius_mm: float
+    clearance_mm: float = 3.0
+    overtravel_mm: float = 1.0
+    elevations_deg: tuple[float, ...] = (15.0, 50.0)
+    contacts: int = 5
+    stand_cone_deg: float = 60.0
+    safe_z_mm: float | None = None
+    feed_mm_min: float = 2000.0
+    probe_feed_mm_min: float = 100.0
+
+    @property
+    def r_eff_mm(self) -> float:
+        return self.sphere_radius_mm + self.stylus_radius_mm
+
+
+@dataclass
+class Contact:
+    """One probing move, machine frame [mm]: from ``start`` along ``direction`` to ``target``."""
+
+    start: np.ndarray
+    target: np.ndarray
+    axis: str  # "X", "Y" or "Z": the machine axis the move runs along
+    sign: int  # direction of the move along it
+
+
+@dataclass
+class ProbePlan:
+    """Poses and their contacts.
+
+    Attributes
+    ----------
+    setup : ProbeSetup
+    rotary_axes : tuple of str
+    angles_deg : ndarray, shape=(n, k) [deg]
+    centres_mm : ndarray, shape=(n, 3) [mm]
+        Nominal sphere centre at each pose.
+    contacts : list of list of Contact
+    clear_z_mm : ndarray, shape=(n,) [mm]
+        Clearance plane of each pose.
+    safe_z_mm : float [mm]
+    description : str
+    """
+
+    setup: ProbeSetup
+    rotary_axes: tuple[str, ...]
+    angles_deg: np.ndarray
+    centres_mm: np.ndarray
+    contacts: list[list[Contact]]
+    clear_z_mm: np.ndarray
+    safe_z_mm: float
+    description: str
+
+
+def nominal_centres(machine: str, angles_deg: np.ndarray, sphere_mm: np.ndarray, pivot_mm: np.ndarray) -> np.ndarray:
+    """Nominal sphere centre at each pose, ``pivot + R_w(θ)(sphere − pivot)``, shape=(n, 3) [mm]."""
+    kern = load_kernels(machine)
+    rot = kern.workpiece_rotation(np.atleast_2d(angles_deg))
+    return pivot_mm + np.einsum("nij,j->ni", rot, np.asarray(sphere_mm, dtype=float) - pivot_mm)
+
+
+def _candidates(setup: ProbeSetup) -> list[tuple[np.ndarray, str, int]]:
+    """(contact normal, move axis, move sign) in contact order."""
+    out = [(np.array([0.0, 0.0, 1.0]), "Z", -1)]
+    for elev in setup.elevations_deg:
+        e = np.radians(elev)
+        for axis, sign in (("X", 1), ("Y", 1), ("X", -1), ("Y", -1)):
+            u = np.zeros(3)
+            u["XY".index(axis)] = sign
+            out.append((np.cos(e) * u + np.sin(e) * np.array([0.0, 0.0, 1.0]), axis, -sign))
+    return out
+
+
+def _pose_contacts(setup: ProbeSetup, centre: np.ndarray, stand: np.ndarray) -> list[Contact]:
+    r = setup.r_eff_mm
+    limit = np.cos(np.radians(setup.stand_cone_deg))
+    out = []
+    for normal, axis, sign in _candidates(setup):
+        if normal @ stand > limit:
+            continue  # the stand is there
+        contact = centre + r * normal
+        move = np.zeros(3)
+        move["XYZ".index(axis)] = sign
+        out.append(Contact(contact - move * setup.clearance_mm, contact + move * setup.overtravel_mm, axis, sign))
+        if len(out) == setup.contacts:
+            break
+    return out
+
+
+def plan_probing(setup: ProbeSetup, angles_deg: np.ndarray, description: str = "") -> ProbePlan:
+    """Contacts of every pose, clearance planes and the safe height (module docstring).
+
+    Raises
+    ------
+    InputError
+        Bad geometry, fewer than four reachable contacts at a pose, or ``safe_z`` too low.
+    """
+    kern = load_kernels(setup.machine)
+    if kern.TOOL_ROTARY:
+        raise InputError(f"{kern.MACHINE_CODE} turns the probe (tool-side rotary axes "
+                         f"{', '.join(kern.TOOL_ROTARY)}): sphere probing is supported on workpiece-side axes only")
+    if not (0 < setup.sphere_radius_mm <= 100 and 0 < setup.stylus_radius_mm <= 20):
+        raise InputError("--sphere-radius must be in (0, 100] mm and --stylus-radius in (0, 20] mm")
+    if not 4 <= setup.contacts <= 1 + 4 * len(setup.elevations_deg):
+        raise InputError(f"--contacts {setup.contacts}: give 4 to {1 + 4 * len(setup.elevations_deg)}")
+    if not (0 < setup.clearance_mm <= 50 and 0 < setup.overtravel_mm < setup.r_eff_mm):
+        raise InputError("--clearance must be in (0, 50] mm and --overtravel in (0, R + r) mm")
+    angles = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    centres = nominal_centres(setup.machine, angles, setup.sphere_mm, setup.pivot_mm)
+    stands = np.einsum("nij,j->ni", kern.workpiece_rotation(angles), np.array([0.0, 0.0, -1.0]))
+    contacts = [_pose_contacts(setup, c, s) for c, s in zip(centres, stands, strict=True)]
+    for i, cs in enumerate(contacts):
+        if len(cs) < 4:
+            ang = ", ".join(f"{a}={v:g}" for a, v in zip(kern.ROTARY_AXES, angles[i], strict=True))
+            raise InputError(f"pose {i} ({ang} deg): only {len(cs)} contacts can be reached away from the sphere's "
+                             "stand; a sphere centre needs 4 (leave this pose out, or lower --stand-cone)")
+    clear = centres[:, 2] + setup.r_eff_mm + setup.clearance_mm
+    safe = float(clear.max() + 20.0) if setup.safe_z_mm is None else float(setup.safe_z_mm)
+    if safe < clear.max():
+        raise InputError(f"--safe-z {safe:g} mm is below the clearance plane {clear.max():.3f} mm of a pose: "
+                         "the rotary axes would turn the sphere into the probe")
+    return ProbePlan(setup, tuple(kern.ROTARY_AXES), angles, centres, contacts, clear, safe, description)

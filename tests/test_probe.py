@@ -1,0 +1,238 @@
+"""Touch probe and calibration sphere (CONVENTIONS §7): programs, logs, sphere fit, import, identification.
+
+``probe_logs/linuxcnc_ac_4poses.txt`` is written as LinuxCNC writes a probe log
+(``src/emc/task/emccanon.cc``: ``fprintf(probefile, "%f %f %f %f %f %f %f %f %f\\n", x, y, z, a, b, c, u, v,
+w)``): contacts of a sphere (R + r = 14.2 mm) at (80, −15, 45) on an AC table at four poses, the sphere
+5 µm +X and 2 µm −Z off its nominal motion at the third pose.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pige_sym.cli.main import main
+from pige_sym.errors import FileFormatError, InputError, NCProgramError
+from pige_sym.identification.least_squares import identify
+from pige_sym.measurements.probe_import import ProbeImport, import_probe_log, probe_measurement
+from pige_sym.measurements.probe_log import group_poses, read_probe_log
+from pige_sym.measurements.rtest import read_measurement
+from pige_sym.measurements.sphere_fit import fit_centres
+from pige_sym.model.trajectories import make_trajectory
+from pige_sym.nc.probe_program import ProbeSetup, plan_probing
+from pige_sym.nc.probe_readback import verify_probe_program
+from pige_sym.nc.probe_render import render_probe_program
+from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
+from pige_sym.simulation.simulator import random_pige
+
+AC = "wC'A'bXYZ(C1)t"
+LOGS = Path(__file__).parent / "probe_logs"
+SETUP = ProbeSetup(AC, np.array([100.0, 20.0, 60.0]), np.zeros(3), 12.7, 1.5)
+SPEC = ProbeImport(AC, (0.0, 0.0, 0.0), 12.7, 1.5)
+
+
+def _rot_x(t: float) -> np.ndarray:
+    c, s = math.cos(t), math.sin(t)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _rot_z(t: float) -> np.ndarray:
+    c, s = math.cos(t), math.sin(t)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+# ------------------------------------------------------------------------------------------------ sphere fit
+
+
+def test_four_exact_points_give_the_closed_form_sphere() -> None:
+    """Independent closed form: the centre solves 2(p_i − p_0)·c = |p_i|² − |p_0|² (three equations)."""
+    rng = np.random.default_rng(1)
+    centre, radius = np.array([3.0, -4.0, 10.0]), 7.5
+    dirs = rng.normal(size=(4, 3))
+    pts = centre + radius * dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    a = 2 * (pts[1:] - pts[0])
+    b = (pts[1:] ** 2).sum(axis=1) - (pts[0] ** 2).sum()
+    closed = np.linalg.solve(a, b)
+    fit = fit_centres([pts])
+    np.testing.assert_allclose(fit.centres_mm[0], closed, atol=1e-9)
+    np.testing.assert_allclose(fit.centres_mm[0], centre, atol=1e-9)
+    assert fit.radius_mm == pytest.approx(radius, abs=1e-9) and fit.dof == 0
+
+
+def test_centre_covariance_matches_monte_carlo() -> None:
+    rng = np.random.default_rng(2)
+    centre, radius, sigma = np.zeros(3), 10.0, 0.001
+    normals = np.array([[0, 0, 1], [1, 0, 0.3], [0, 1, 0.3], [-1, 0, 0.3], [0, -1, 0.3], [0.7, 0.7, 0.8]], float)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    est = []
+    for _ in range(400):
+        pts = centre + normals * (radius + rng.normal(0, sigma, (len(normals), 1)))
+        est.append(fit_centres([pts], radius_mm=radius).centres_mm[0])
+    predicted = np.linalg.inv(normals.T @ normals) * (sigma * 1e3) ** 2
+    np.testing.assert_allclose(np.cov(np.array(est).T) * 1e6, predicted, rtol=0.25, atol=0.02 * predicted.max())
+
+
+def test_degenerate_and_short_poses_are_refused() -> None:
+    ring = np.array([[10 * math.cos(t), 10 * math.sin(t), 0.0] for t in np.linspace(0, 5, 6)])
+    with pytest.raises(InputError, match="degenerate"):
+        fit_centres([ring])
+    with pytest.raises(InputError, match="3 contacts"):
+        fit_centres([ring[:3]])
+
+
+# ------------------------------------------------------------------------------------------------ logs
+
+
+def test_linuxcnc_fixture_gives_the_known_deviation() -> None:
+    log = read_probe_log(LOGS / "linuxcnc_ac_4poses.txt", "linuxcnc", ("A", "C"))
+    assert log.xyz_mm.shape == (20, 3) and [len(g) for g in group_poses(log)] == [5, 5, 5, 5]
+    m = probe_measurement(log, SPEC)
+    # independent sense check (CONVENTIONS §3): the table turns the sphere by R_x(−A)·R_z(−C)
+    a, c = np.radians(m.angles_deg[1])
+    np.testing.assert_allclose(_rot_x(-a) @ _rot_z(-c) @ np.array([80.0, -15.0, 45.0]),
+                               [float(m.extra_columns[k][1]) for k in ("cx_mm", "cy_mm", "cz_mm")], atol=2e-6)
+    np.testing.assert_allclose(m.deviation_um, [[0, 0, 0], [0, 0, 0], [-5.0, 0, 2.0], [0, 0, 0]], atol=0.01)
+    np.testing.assert_allclose(m.ball_mm, [80.0, -15.0, 45.0], atol=1e-6)
+
+
+def _write(tmp_path: Path, text: str, name: str = "log.txt") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+FIXTURE = (LOGS / "linuxcnc_ac_4poses.txt").read_text().splitlines(keepends=True)
+
+
+@pytest.mark.parametrize(("edit", "line", "fragment"), [
+    (lambda ls: ls[:3] + ls[5:], 1, "3 contacts"),                       # a pose with 3 contacts
+    (lambda ls: ls[:6] + [" ".join(ls[6].split()[:8]) + "\n"] + ls[7:], 7, "8 fields"),
+    (lambda ls: ls[:2] + [ls[2].replace("-1.656365", "nan")] + ls[3:], 3, "'nan'"),
+    (lambda ls: ls[:7] + [ls[7].replace("0.000000 0.000000 90.000000", "0.000000 2.000000 90.000000")] + ls[8:],
+     8, "another machine"),
+    (lambda ls: ls[:1] + [ls[1].replace("93.343635", "93.443635")] + ls[2:], 1, "lines 1-5 is .* off the best"),
+    (lambda ls: ls[:4] + [ls[4].replace(" ", "  ", 1)] + ls[5:], 5, "single spaces"),
+])
+def test_bad_logs_are_refused_with_their_line(tmp_path, edit, line, fragment) -> None:
+    path = _write(tmp_path, "".join(edit(list(FIXTURE))))
+    with pytest.raises(FileFormatError, match=fragment) as err:
+        import_probe_log(path, "linuxcnc", SPEC)
+    assert f":{line}:" in str(err.value) or f"line {line}" in str(err.value), str(err.value)
+
+
+def test_a_log_must_start_at_the_reference_pose(tmp_path) -> None:
+    with pytest.raises(FileFormatError, match="reference pose"):
+        import_probe_log(_write(tmp_path, "".join(FIXTURE[5:])), "linuxcnc", SPEC)
+
+
+def test_pige_layout_pose_numbers_must_agree_with_the_angles(tmp_path) -> None:
+    text = "PIGE P0 K0 X1 Y2 Z3 A0 C0\nPIGE P0 K1 X1 Y2 Z3 A-10 C0\n"
+    with pytest.raises(FileFormatError, match=":2: pose P0: the rotary angles changed"):
+        group_poses(read_probe_log(_write(tmp_path, text), "siemens", ("A", "C")))
+    with pytest.raises(FileFormatError, match="fields"):
+        read_probe_log(_write(tmp_path, "PIGE P0 K0 X1 Y2 A0 C0\n", "b.txt"), "fanuc", ("A", "C"))
+
+
+# ------------------------------------------------------------------------------------------------ programs
+
+
+@pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc", "siemens", "heidenhain"])
+def test_round_trip_program_machine_log_import_identify(tmp_path, dialect) -> None:
+    traj = make_trajectory(AC, "cone-frustum")
+    plan = plan_probing(SETUP, traj.angles_deg, traj.description)
+    text = render_probe_program(plan, dialect)
+    check = verify_probe_program(text, dialect, SETUP, ("A", "C"))
+    assert check.poses == traj.angles_deg.shape[0] and min(check.contacts) >= 4
+    assert check.min_overtravel_mm >= SETUP.overtravel_mm - 2e-4 and check.min_rapid_clearance_mm > 0.5
+    truth = random_pige(AC, 11)
+    machine = ProbeMachine(SETUP, truth, setup_offset_um=(40.0, -25.0, 15.0), noise_um=0.5, seed=3)
+    log = _write(tmp_path, run_probe_program(text, dialect, machine))
+    result = identify(import_probe_log(log, dialect, SPEC))
+    z = [(result.value(n) - truth[n]) / result.std[i] for i, n in enumerate(result.parameters)]
+    assert max(abs(v) for v in z) < 4.5, dict(zip(result.parameters, np.round(z, 2), strict=True))
+
+
+def _first_line(text: str, needle: str) -> int:
+    return next(i for i, ln in enumerate(text.splitlines()) if needle in ln)
+
+
+def test_read_back_refuses_unsafe_edits() -> None:
+    traj = make_trajectory(AC, "steps")
+    text = render_probe_program(plan_probing(SETUP, traj.angles_deg, traj.description), "linuxcnc")
+    lines = text.splitlines()
+    k = _first_line(text, "G38.2")
+    into = lines[:k - 1] + ["G0 X100 Y20 Z62"] + lines[k - 1:]  # a rapid into the sphere
+    with pytest.raises(NCProgramError, match=f":{k}:.*hit"):
+        verify_probe_program("\n".join(into) + "\n", "linuxcnc", SETUP, ("A", "C"))
+    r = next(i for i, ln in enumerate(lines) if ln.startswith("G0 A") and i > k)
+    no_retract = lines[:r - 2] + lines[r:]  # rotary move while the stylus is still beside the sphere
+    with pytest.raises(NCProgramError, match="rotary axes move"):
+        verify_probe_program("\n".join(no_retract) + "\n", "linuxcnc", SETUP, ("A", "C"))
+    short = [ln.replace("G38.2", "G38.2") if "G38.2" not in ln else ln.replace("Z73.2", "Z74.9") for ln in lines]
+    with pytest.raises(NCProgramError, match="past its surface"):
+        verify_probe_program("\n".join(short) + "\n", "linuxcnc", SETUP, ("A", "C"))
+    with pytest.raises(NCProgramError, match="not a statement"):
+        verify_probe_program(text.replace("M2", "M3 S1000\nM2"), "linuxcnc", SETUP, ("A", "C"))
+
+
+def test_a_pose_the_stand_hides_is_refused() -> None:
+    with pytest.raises(InputError, match="stand"):
+        plan_probing(ProbeSetup(AC, np.array([0.0, 0.0, 50.0]), np.zeros(3), 12.7, 1.5, stand_cone_deg=150.0),
+                     np.array([[0.0, 0.0], [-90.0, 0.0]]))
+
+
+def test_head_machines_are_refused_clearly() -> None:
+    with pytest.raises(InputError, match="tool-side"):
+        plan_probing(ProbeSetup("wbXYZCA(C1)t", np.zeros(3), np.zeros(3), 12.7, 1.5), np.zeros((1, 2)))
+
+
+# ------------------------------------------------------------------------------------------------ honesty
+
+
+def test_standard_errors_hold_up_against_the_truth(tmp_path) -> None:
+    """Over 100 independent runs the errors divided by the reported std have unit spread, thanks to the
+    reference-pose coupling; the same data fitted as independent rows (an R-test file) are overconfident."""
+    import dataclasses
+
+    traj = make_trajectory(AC, "cone-frustum", points=12)
+    text = render_probe_program(plan_probing(SETUP, traj.angles_deg, traj.description), "siemens")
+    truth = random_pige(AC, 5)
+    coupled, independent = [], []
+    for seed in range(100):
+        log = _write(tmp_path, run_probe_program(text, "siemens", ProbeMachine(SETUP, truth, noise_um=1.0, seed=seed)))
+        m = import_probe_log(log, "siemens", SPEC)
+        plain = dataclasses.replace(m, metadata={k: v for k, v in m.metadata.items() if k != "instrument"})
+        for out, meas in ((coupled, m), (independent, plain)):
+            r = identify(meas)
+            out.append([(r.value(n) - truth[n]) / r.std[i] for i, n in enumerate(r.parameters)])
+    spread = np.std(np.array(coupled), axis=0)
+    assert np.all((spread > 0.75) & (spread < 1.3)), np.round(spread, 2)
+    assert np.std(np.array(independent), axis=0).max() > 1.4
+
+
+# ------------------------------------------------------------------------------------------------ commands
+
+
+def test_the_commands_tell_the_whole_story(tmp_path, capsys) -> None:
+    prog, log, csv = tmp_path / "probe.h", tmp_path / "probe.txt", tmp_path / "probe.csv"
+    common = ["--machine", AC, "--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius", "1.5"]
+    assert main(["program", "--instrument", "sphere-probe", "--dialect", "heidenhain", *common,
+                 "--trajectory", "steps", "--out", str(prog)]) == 0
+    assert prog.with_suffix(".A").read_text().startswith('"PIGE P%5.0LF')
+    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "heidenhain", "--program", str(prog),
+                 *common, "--pige", "EX0C=8,EB0A=-12", "--seed", "2", "--out", str(log)]) == 0
+    assert main(["import-probe", str(log), "--format", "heidenhain", "--machine", AC, "--sphere-radius", "12.7",
+                 "--stylus-radius", "1.5", "--out", str(csv)]) == 0
+    m = read_measurement(csv)
+    assert m.metadata["instrument"] == "sphere-probe" and m.n_rows == len(make_trajectory(AC, "steps").angles_deg)
+    capsys.readouterr()
+    assert main(["identify", str(csv), "--json"]) == 0
+    assert main(["import-probe", str(log), "--format", "heidenhain", "--machine", AC, "--sphere-radius", "12.7",
+                 "--stylus-radius", "1.5", "--out", str(csv)]) == 2  # never over an existing file
+    with pytest.raises(InputError, match="robust"):
+        identify(m, loss="soft_l1")
+    with pytest.raises(InputError, match="3-D"):
+        identify(m, projection="x")
