@@ -236,3 +236,10 @@ def test_the_commands_tell_the_whole_story(tmp_path, capsys) -> None:
         identify(m, loss="soft_l1")
     with pytest.raises(InputError, match="3-D"):
         identify(m, projection="x")
+
+
+def test_the_probe_demo_finds_the_truth(tmp_path, capsys) -> None:
+    assert main(["demo", "--instrument", "sphere-probe", "--out", str(tmp_path / "demo")]) == 0
+    out = capsys.readouterr().out
+    assert "within" in out and "standard errors of its estimate: yes" in out
+    assert (tmp_path / "demo" / "part_comp.ngc").read_text() != (tmp_path / "demo" / "part.ngc").read_text()

@@ -181,8 +181,14 @@ def _run(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     out = _prepare(args)
-    _stage(1, "kernels")
     kern = load_kernels(args.machine)
+    if args.instrument == "sphere-probe":
+        from pige_sym.cli._demo_probe import run_probe_demo
+
+        status = run_probe_demo(args, kern, out)
+        print(f"demo finished in {time.perf_counter() - started:.1f} s; everything is in {out.resolve()}")
+        return status
+    _stage(1, "kernels")
     code = kern.MACHINE_CODE
     print(f"machine {code}: rotary axes {', '.join(kern.ROTARY_AXES)}; "
           f"parameters {', '.join(f'{p} [{kern.UNITS[p]}]' for p in kern.LOCATION_PARAMETERS)}")
@@ -210,7 +216,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=("Virtual R-test device with a hidden effect -> acquisition over a pseudo-terminal -> "
                      "identification -> diagnosis -> compensated program -> HTML report."),
         epilog=("examples:\n  pige demo\n  pige demo --out /tmp/demo --effect thermal_drift --seed 3\n"
-                "  pige demo --trajectory steps --effect backlash_C:b_urad=30"),
+                "  pige demo --trajectory steps --effect backlash_C:b_urad=30\n"
+                "  pige demo --instrument sphere-probe --out /tmp/probe-demo"),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--machine", default=DEFAULT_MACHINE, help="machine structure code (default %(default)s)")
@@ -224,4 +231,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="device seconds per wall second (default %(default)s)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--force", action="store_true", help="replace the files of an earlier demo in --out")
+    p.add_argument("--instrument", choices=["rtest", "sphere-probe"], default="rtest",
+                   help="the instrument of the story (sphere-probe: touch probe and calibration sphere)")
     p.set_defaults(handler=_run)

@@ -109,6 +109,8 @@ from pige_sym.diagnosis.results import EVIDENCE, DiagnosisResult, Finding, Rejec
 from pige_sym.diagnosis.selection import Model, Selector, compare, select
 from pige_sym.diagnosis.thermal import refine_tau
 from pige_sym.errors import InputError
+from pige_sym.identification.instruments import instrument
+from pige_sym.identification.least_squares import identify
 from pige_sym.identification.normal_sums import NormalSums, accumulate, extend, fold_of_rows
 from pige_sym.identification.outliers import Cluster, flag_rows, row_residuals, split_clusters
 from pige_sym.identification.result import IdentificationResult
@@ -436,14 +438,32 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
     final_result = _identification(setup, final, final_resid)
     final_result.outlier_rows = outlier_rows
     baseline = _identification(setup, base_model, base_resid)
+    notes = _instrument_notes(m, findings)
+    if notes and not findings:
+        # the PIGE model stands: its estimate with the instrument's correlations (honest standard errors)
+        final_result = baseline = identify(m)
+        final_result.method = "diagnosis"
     bf = base_model.fit
     return DiagnosisResult(
         machine=setup.kern.MACHINE_CODE, baseline_rms_um=math.sqrt(bf.rss / bf.n_obs), baseline_bic=base_model.bic,
         baseline_heldout_rms_um=bf.heldout_rms, findings=findings, rejected=rejected, final=final_result,
         baseline=baseline, outlier_rows=outlier_rows,
         clusters=[f"rows {c.rows} ({c.where}) deviate together: structured signal kept as data, not outliers"
-                  for c in clusters],
+                  for c in clusters] + notes,
     )
+
+
+def _instrument_notes(m: Measurement, findings: list[Finding]) -> list[str]:
+    """What the search did not model about an instrument other than the R-test (its rows are correlated)."""
+    kind = instrument(m)
+    if kind == "rtest":
+        return []
+    if not findings:
+        return [f"{kind}: the search treats the poses as independent; the final estimate is the identification "
+                "with the reference pose's correlation (standard errors from it)"]
+    return [f"{kind}: the search and the final fit treat the poses as independent; the reference pose's "
+            "correlation is not in them, so the standard errors of the location errors are understated "
+            "(pige identify gives them honestly for the PIGE model)"]
 
 
 def _residuals(setup: _Setup, model: Model) -> np.ndarray:
