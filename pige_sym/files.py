@@ -83,18 +83,41 @@ def check_output(path: PathLike, *, force: bool = False, inputs: Iterable[PathLi
     return p
 
 
+def new_file_mode() -> int:
+    """Mode of a newly created file under the process's umask (``0o666 & ~umask``).
+
+    Read from ``/proc/self/status`` where it exists (setting the umask to read it would race with
+    other threads creating files); elsewhere by setting it and putting it back.
+    """
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return 0o666 & ~int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def atomic_write_text(path: PathLike, text: str, *, encoding: str = "utf-8", newline: str | None = None) -> Path:
     """Write ``text`` to ``path`` through a temporary file and a rename (same folder).
 
     The caller decides whether replacing is allowed (:func:`check_output`); this function only
     refuses to replace anything that is not a regular file.  Missing parent folders are created.
+    The file gets the mode a plain ``open`` would give it (``0666`` less the umask: ``0644`` under
+    ``022``, so a DNC account or a web server can read a compensated program), and a replaced file
+    keeps its own mode.
     """
     p = Path(path)
     if p.is_symlink() or (p.exists() and not p.is_file()):
         raise InputError(f"{p} is not a regular file: pige never replaces one")
     p.parent.mkdir(parents=True, exist_ok=True)
+    mode = new_file_mode() if not p.exists() else p.stat().st_mode & 0o7777
     fd, tmp_name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
     try:
+        os.fchmod(fd, mode)
         with os.fdopen(fd, "w", encoding=encoding, newline=newline) as fh:
             fh.write(text)
             fh.flush()

@@ -175,3 +175,27 @@ def test_an_unreadable_acquisition_summary_is_kept_aside_not_dropped(tmp_path) -
     _write_summary(AcquisitionSummary(port="p", out=str(out), raw_log=None, program="x", n_poses=3, resumed=True), out)
     assert (tmp_path / "run.acq.json.unreadable").read_text() == "{not json"
     assert len(json.loads(side.read_text())["sessions"]) == 1
+
+
+@pytest.mark.parametrize(("umask", "mode"), [(0o022, 0o644), (0o027, 0o640), (0o077, 0o600)])
+def test_new_files_follow_the_umask_and_replaced_files_keep_their_mode(tmp_path, umask, mode) -> None:
+    """A DNC account or a web server must be able to read what pige writes (0644 under umask 022)."""
+    import os
+    import stat
+
+    from pige_sym.files import atomic_write_text
+
+    old = os.umask(umask)
+    try:
+        new = atomic_write_text(tmp_path / "new.mpf", "G0 X0\n")
+        assert stat.S_IMODE(new.stat().st_mode) == mode
+        kept = tmp_path / "kept.mpf"
+        kept.write_text("old\n")
+        kept.chmod(0o604)
+        atomic_write_text(kept, "G0 X1\n")
+        assert stat.S_IMODE(kept.stat().st_mode) == 0o604 and kept.read_text() == "G0 X1\n"
+        assert main(["simulate", "--seed", "1", "--out", str(tmp_path / "run.csv")]) == 0
+        for written in (tmp_path / "run.csv", tmp_path / "run.truth.json"):
+            assert stat.S_IMODE(written.stat().st_mode) == mode, written
+    finally:
+        os.umask(old)

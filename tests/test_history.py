@@ -263,3 +263,53 @@ def test_runs_fitted_with_different_effects_are_noted() -> None:
     other = compare_runs(run(a, []), run(b, [{"effect": "angular_error_C"}, {"effect": "outliers"}]))
     assert same.notes == [] and compare_runs(a, b).notes == []
     assert len(other.notes) == 1 and "none vs angular_error_C" in other.notes[0]
+
+
+def test_twelve_adds_started_at_once_on_a_new_database_all_succeed(tmp_path) -> None:
+    """The first migration must be safe under concurrency: no 'table schema_version already exists'."""
+    import subprocess
+    import sys
+
+    from pige_sym.simulation.simulator import random_pige, simulate
+    from pige_sym.model.trajectories import cone_frustum
+
+    files = []
+    for i in range(12):
+        sim = simulate(AC, cone_frustum(AC, points=12), pige=random_pige(AC, i), noise_um=0.3, seed=i)
+        files.append(sim.write(tmp_path / f"run{i}.csv")[0])
+    db = tmp_path / "new.db"
+    procs = [subprocess.Popen([sys.executable, "-m", "pige_sym", "history", "add", str(f), "--machine-id", "M-7",
+                               "--db", str(db), "--method", "gauss-newton", "--date", f"2026-01-{i + 1:02d}"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for i, f in enumerate(files)]
+    results = [p.communicate(timeout=300) for p in procs]
+    failed = [(p.returncode, err) for p, (_, err) in zip(procs, results, strict=True) if p.returncode != 0]
+    assert not failed, failed
+    from pige_sym.verdict.history.store import connect, list_runs
+
+    assert len(list_runs(connect(f"sqlite:///{db}"), "M-7")) == 12
+
+
+def _connect_at_once(args: tuple) -> str:
+    barrier, url = args
+    from pige_sym.verdict.history.store import connect
+
+    barrier.wait()
+    try:
+        connect(url)
+    except Exception as exc:  # noqa: BLE001 - reported to the test
+        return f"{type(exc).__name__}: {exc}"
+    return "ok"
+
+
+def test_the_first_migration_is_safe_when_twelve_processes_connect_at_the_same_instant(tmp_path) -> None:
+    import multiprocessing as mp
+
+    ctx = mp.get_context("fork")
+    for trial in range(3):
+        url = f"sqlite:///{tmp_path / f'race{trial}.db'}"
+        with ctx.Manager() as manager:
+            barrier = manager.Barrier(12)
+            with ctx.Pool(12) as pool:
+                outcomes = pool.map(_connect_at_once, [(barrier, url)] * 12)
+        assert outcomes == ["ok"] * 12, [o for o in outcomes if o != "ok"][:2]

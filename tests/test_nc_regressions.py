@@ -279,3 +279,9 @@ def test_a_program_without_rtcp_code_says_what_it_assumed():
     for text, dialect in (("G90 G71\nTRAFOOF\nN10 G1 X120 Y30 Z80 A20 C30\n", "siemens"),
                           ("G90 G21\nG43.4 H1\nN10 G1 X120. Y30. Z80. A20. C30.\n", "fanuc")):
         assert not any("RTCP" in n for n in _comp(text, dialect).report.notes)
+
+
+def test_the_ngc_extension_is_a_hint_and_semicolon_comments_do_not_make_it_siemens() -> None:
+    text = "; probing set-up\n; sphere on the table\nG21 G90 G17\nG0 X10 Y0 Z50\nG38.2 Z-5 F100\nM2\n"
+    assert detect_dialect(text, "probe.ngc") == "linuxcnc"
+    assert detect_dialect("G90 G1 X1 F100\nM30\n" + "; c\n", "part.mpf") == "siemens"

@@ -475,3 +475,44 @@ def test_non_finite_options_are_refused_and_nothing_writes_nan(tmp_path, capsys)
     with MeasurementWriter(tmp_path / "r.csv", template) as w, pytest.raises(InputError, match="never writes"):
         w.write_row(1.0, [0.0, 0.0], [float("nan"), 0.0, 0.0], [0.0, 0.0, 0.0], {"n_samples": 1.0}, {"note": "x"})
     assert "nan" not in (tmp_path / "r.csv").read_text()
+
+
+def test_spreadsheet_exports_are_read_or_named(tmp_path) -> None:
+    """Excel's 'CSV UTF-8' (a byte-order mark) is read; ';' fields, decimal commas and UTF-16 are refused by name."""
+    good = tmp_path / "good.csv"
+    good.write_text(_good_text())
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + good.read_bytes())
+    np.testing.assert_array_equal(read_measurement(bom).deviation_um, read_measurement(good).deviation_um)
+    lines = good.read_text().splitlines()
+    header = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
+    semi = tmp_path / "semi.csv"
+    semi.write_text("\n".join(lines[:header] + [ln.replace(",", ";") for ln in lines[header:]]) + "\n")
+    with pytest.raises(FileFormatError, match=f":{header + 1}: in the column header; the fields are separated by ';'"):
+        read_measurement(semi)
+    comma = tmp_path / "comma.csv"
+    row = lines[header + 2].split(",")
+    comma.write_text("\n".join(lines[:header + 2] + [",".join(v.replace(".", ",") for v in row)]
+                               + lines[header + 3:]) + "\n")
+    with pytest.raises(FileFormatError, match=f":{header + 3}: .*decimal comma"):
+        read_measurement(comma)
+    utf16 = tmp_path / "u16.csv"
+    utf16.write_text(good.read_text(), encoding="utf-16")
+    with pytest.raises(FileFormatError, match=":1: UTF-16"):
+        read_measurement(utf16)
+
+
+def test_a_parameter_given_twice_under_its_two_spellings_is_refused(tmp_path, capsys) -> None:
+    assert main(["simulate", "--pige", "EX0C=5,EXOC=3", "--out", str(tmp_path / "r.csv")]) == 2
+    assert "EX0C is given twice (EX0C, EXOC" in capsys.readouterr().err
+    assert not (tmp_path / "r.csv").exists()
+
+
+def test_pige_alone_prints_usage_and_errors_name_the_command_once(capsys) -> None:
+    assert main([]) == 0
+    assert "usage: pige" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as stop:
+        main(["identify"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pige identify: ") and "pige pige" not in err

@@ -40,3 +40,11 @@ def test_sobol_indices_are_consistent() -> None:
     x = s.projections.index("x")
     # the x projection does not see the A-axis offsets at all
     assert s.total_order[x, 0] < 1e-6 and s.total_order[x, 1] < 1e-6
+
+
+def test_the_projection_table_says_why_it_lists_more_combinations_than_missing_rank(capsys) -> None:
+    from pige_sym.cli.main import main
+
+    assert main(["study", "projection", "--presets", "5"]) == 0
+    out = capsys.readouterr().out
+    assert "why more undetermined combinations than missing rank" in out

@@ -19,14 +19,15 @@ class _Parser(argparse.ArgumentParser):
     """ArgumentParser whose usage errors exit with status 2 and one line."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"pige {self.prog.split(' ', 1)[-1]}: {message}\n")
+        self.exit(2, f"{self.prog}: {message}\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pige`` with every subcommand."""
     parser = _Parser(
         prog="pige",
-        description="Identify and compensate the rotary-axis PIGEs of five-axis machines from R-test data.",
+        description=("Identify and compensate the rotary-axis PIGEs of five-axis machines "
+                     "(R-test, or touch probe and sphere)."),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     from pige_sym.constants import VERSION as __version__
@@ -59,6 +60,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``pige``; returns the exit status."""
     tolerant_console()
     parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv:  # `pige` alone: what it can do
+        parser.print_help()
+        return 0
     args = parser.parse_args(argv)
     try:
         return int(args.handler(args))

@@ -28,6 +28,7 @@ import numpy as np
 
 from pige_sym.constants import DEFAULT_BALL_MM
 from pige_sym.identification.least_squares import identify
+from pige_sym.identification.spectrum import NULL_RTOL, RANK_RTOL
 from pige_sym.kernels import load_kernels
 from pige_sym.model.projection import Projection, direction_sweep, parse_projection
 from pige_sym.model.trajectories import Trajectory
@@ -84,6 +85,13 @@ class ProjectionStudy:
             cond = f"{r.condition:.3g}" if np.isfinite(r.condition) else "inf"
             und = ", ".join(r.unobserved + [c.replace(" is not identifiable", "") for c in r.unidentifiable]) or "-"
             lines.append(f"{r.projection:<16}{r.rank:>3}/{r.n_parameters:<2}{cond:>12}{r.success_rate:>8.0%}   {und}")
+        weak = [r for r in self.rows if len(r.unobserved) + len(r.unidentifiable) > r.n_parameters - r.rank]
+        if weak:
+            lines += ["", "why more undetermined combinations than missing rank: the rank counts singular values above "
+                      f"{RANK_RTOL:g} of the largest (exact rank deficiency); a combination is listed as undetermined "
+                      f"when its singular value is at most {NULL_RTOL:g} of the largest, i.e. the data determine it "
+                      f"more than {1 / NULL_RTOL:.0f} times more weakly than the best-determined direction, so "
+                      f"noise decides its value ({', '.join(r.projection for r in weak)})."]
         lines += ["", self.verdict]
         return "\n".join(lines)
 

@@ -56,7 +56,7 @@ from pige_sym.measurements.measurement import (
     column_limit,
     parse_vec3,
 )
-from pige_sym.measurements.rtest_body import MAX_LINE_BYTES, DataBody, Header, check_numeric_block
+from pige_sym.measurements.rtest_body import MAX_LINE_BYTES, DataBody, Header, check_numeric_block, separator_hint
 
 
 class _Lines:
@@ -74,6 +74,11 @@ class _Lines:
         self.number += 1
         if len(raw) > MAX_LINE_BYTES:
             raise FileFormatError(self.path, self.number, f"line longer than {MAX_LINE_BYTES} bytes")
+        if self.number == 1:
+            if raw.startswith((b"\xff\xfe", b"\xfe\xff")) or b"\x00" in raw:
+                raise FileFormatError(self.path, 1, "UTF-16 text (what 'Unicode text' exports write): save the file "
+                                                    "as UTF-8 (Excel: 'CSV UTF-8')")
+            raw = raw.removeprefix(b"\xef\xbb\xbf")  # the byte-order mark Excel's 'CSV UTF-8' writes
         try:
             return raw.decode("utf-8").rstrip("\r\n")
         except UnicodeDecodeError as exc:
@@ -124,6 +129,8 @@ def _read_header(fh: IO[bytes], p: str) -> Header:
         raise FileFormatError(p, meta_line["machine"], f"machine {meta['machine']!r} has no rotary axis")
     if header is None:
         raise FileFormatError(p, lines.number, "no column header line after the metadata")
+    if "," not in header and separator_hint(header):
+        raise FileFormatError(p, lines.number, "in the column header" + separator_hint(header))
     names = [c.strip() for c in header.split(",")]
     numeric = _check_columns(p, lines.number, names, structure, rotary)
     extras = [j for j in range(len(names)) if j not in numeric]
@@ -280,6 +287,8 @@ def read_angle_file(path: str | os.PathLike[str]) -> tuple[tuple[str, ...], np.n
     if not body:
         raise FileFormatError(p, None, "no header line with <axis>_deg columns")
     hline, header = body[0]
+    if "," not in header and separator_hint(header):
+        raise FileFormatError(p, hline, "in the column header" + separator_hint(header))
     names = [c.strip() for c in header.split(",")]
     bad = [c for c in names if not (c == "t_s" or (c.endswith("_deg") and len(c) > 4))]
     if bad:

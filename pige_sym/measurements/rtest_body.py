@@ -57,6 +57,16 @@ def check_numeric_block(
     return out
 
 
+def separator_hint(line: str) -> str:
+    """What a spreadsheet's regional settings did to a line, if anything (``;`` fields, decimal commas)."""
+    if ";" in line:
+        return ("; the fields are separated by ';' (a spreadsheet's regional setting): pige-rtest separates "
+                "fields by ',' and writes decimals with '.'")
+    if "\t" in line:
+        return "; the fields are separated by tabs: pige-rtest separates fields by ','"
+    return ""
+
+
 @dataclass
 class Header:
     """What the lines before the data say (validated)."""
@@ -199,7 +209,9 @@ class DataBody:
                 raise FileFormatError(p, ln, "metadata line after the column header")
             fields = line.split(",")
             if len(fields) != len(names):
-                raise FileFormatError(p, ln, f"expected {len(names)} fields, got {len(fields)}")
+                hint = separator_hint(line) or ("; a decimal comma ('0,5') splits a number into two fields: write "
+                                                "decimals with '.'" if len(fields) > len(names) else "")
+                raise FileFormatError(p, ln, f"expected {len(names)} fields, got {len(fields)}{hint}")
             rows[n] = check_numeric_block(p, ln, [fields], names, numeric)[0]
             for j in self.h.extras:
                 self.extras[names[j]].append(fields[j])

@@ -5,7 +5,9 @@ comments at the start of a line, ``TRAORI``, ``=AC(``, ``MSG(``, ``CYCLE8…``, 
 ISO/Fanuc/Haas: ``O1234`` program numbers, ``G43.4``/``G43.5``/``G234``, ``G54.1``/``G154``,
 ``G68.2``, ``M98``, ``#100``; LinuxCNC: ``o100 sub``, ``#<name>``, ``(MSG,``, ``G64 P``,
 ``G59.1``, ``G92.1``, ``G38.2``, an ``.ngc`` file name).  The dialect with the most marker
-lines wins; a tie, or a program with none, is refused: give ``--dialect``.
+lines wins; the file name is a hint (``.ngc`` LinuxCNC, whose ``;`` comments then do not count for
+840D; ``.mpf``/``.spf`` Siemens) that also breaks a tie; any other tie, or a program with no marker, is
+refused: give ``--dialect``.
 """
 
 from __future__ import annotations
@@ -28,6 +30,19 @@ _MARKERS = {
 }
 
 
+_SEMICOLON_COMMENT = re.compile(r"^\s*;", re.MULTILINE)
+
+
+def _extension_hint(path: str) -> str | None:
+    """The dialect a file name suggests: ``.ngc`` LinuxCNC, ``.mpf``/``.spf`` Siemens, none otherwise."""
+    low = path.lower()
+    if low.endswith(".ngc"):
+        return "linuxcnc"
+    if low.endswith((".mpf", ".spf")):
+        return "siemens"
+    return None
+
+
 def detect_dialect(text: str, path: str = "<program>") -> str:
     """``siemens``, ``fanuc`` or ``linuxcnc`` (module docstring).
 
@@ -37,12 +52,15 @@ def detect_dialect(text: str, path: str = "<program>") -> str:
         No marker, or two dialects with as many markers.
     """
     scores = {name: len(rx.findall(text)) for name, rx in _MARKERS.items()}
-    if path.lower().endswith(".ngc"):
-        scores["linuxcnc"] += 1
-    if path.lower().endswith((".mpf", ".spf")):
-        scores["siemens"] += 1
-    ranked = sorted(scores.items(), key=lambda kv: -kv[1])
+    hint = _extension_hint(path)
+    if hint == "linuxcnc":  # LinuxCNC reads ';' comments too: in an .ngc file they are not 840D markers
+        scores["siemens"] -= len(_SEMICOLON_COMMENT.findall(text))
+    if hint is not None:
+        scores[hint] += 1
+    ranked = sorted(scores.items(), key=lambda kv: (-kv[1], kv[0] != hint))
     (best, n1), (second, n2) = ranked[0], ranked[1]
+    if n1 == n2 and best == hint:
+        return best  # a tie: the file name decides
     if n1 == 0:
         raise InputError(f"{path}: cannot tell which controller the program is for (no dialect-specific code "
                          "found): give --dialect siemens, fanuc or linuxcnc")

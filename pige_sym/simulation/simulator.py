@@ -75,9 +75,17 @@ def parse_pige(spec: str, machine: str, seed: int | None = None, **ranges: Any) 
         data = load_json(spec, "PIGE file")
         if not isinstance(data, dict) or not isinstance(data.get("pige"), dict):
             raise FileFormatError(spec, None, 'expected a JSON object with a "pige" object of name: value')
-        items = {normalise_parameter_name(k): v for k, v in data["pige"].items()}
+        given: dict[str, Any] = data["pige"]
     else:
-        items = {normalise_parameter_name(k): v for k, v in parse_number_assignments(spec, "--pige").items()}
+        given = parse_number_assignments(spec, "--pige")
+    items: dict[str, Any] = {}
+    for name, value in given.items():
+        key = normalise_parameter_name(name)
+        if key in items:
+            spellings = ", ".join(n for n in given if normalise_parameter_name(n) == key)
+            raise InputError(f"--pige: {key} is given twice ({spellings}; the letter O reads as the digit 0): "
+                             "give it once")
+        items[key] = value
     unknown = [k for k in items if k not in kern.PARAMETERS]
     if unknown:
         raise InputError(f"unknown parameter(s) {', '.join(unknown)} for {kern.MACHINE_CODE}; "

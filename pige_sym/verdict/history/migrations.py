@@ -73,14 +73,36 @@ def _version_table(conn: sa.Connection) -> sa.Table:
     return table
 
 
+#: Attempts of a migration that lost a race with another process creating the same tables.
+MIGRATION_ATTEMPTS = 8
+
+
 def migrate(engine: sa.Engine) -> int:
     """Apply the missing migrations; returns the schema version.
+
+    Safe when several processes connect to a new database at once: on PostgreSQL an advisory lock
+    serialises them; on SQLite (no such lock) a process whose ``CREATE TABLE`` or version row lost the
+    race to another one rolls back and starts again, and then finds the migration applied.
 
     Raises
     ------
     InputError
         The database has a schema version this code does not know (written by a newer pige_sym).
     """
+    import time
+
+    for attempt in range(MIGRATION_ATTEMPTS):
+        try:
+            return _migrate_once(engine)
+        except (sa.exc.OperationalError, sa.exc.ProgrammingError, sa.exc.IntegrityError) as exc:
+            raced = isinstance(exc, sa.exc.IntegrityError) or "already exists" in str(exc) or "locked" in str(exc)
+            if not raced or attempt == MIGRATION_ATTEMPTS - 1:
+                raise
+            time.sleep(0.05 * (attempt + 1))
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _migrate_once(engine: sa.Engine) -> int:
     with engine.begin() as conn:
         if conn.dialect.name == "postgresql":
             conn.execute(sa.text("SELECT pg_advisory_xact_lock(7142030117)"))

@@ -251,20 +251,29 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str], machine_id: str, *,
         "rms_um": float(final.rms_um) if math.isfinite(final.rms_um) else None, "effects_json": _dumps(effects),
         "verdict": None if chk is None else chk.verdict, "check_json": None if chk is None else _dumps(chk.to_dict()),
     }
-    try:
-        with engine.begin() as conn:
-            known = conn.execute(sa.select(T.machines.c.machine_code)
-                                 .where(T.machines.c.machine_id == machine_id)).scalar()
-            if known is None:
-                conn.execute(sa.insert(T.machines).values(machine_id=machine_id, machine_code=code, created_at=now))
-            elif known != code:
-                raise InputError(f"machine id {machine_id!r} is a {known} in the history, {p} measures a {code}: "
-                                 "use the right --machine-id")
-            run_id = conn.execute(sa.insert(T.runs).values(**values)).inserted_primary_key[0]  # type: ignore[index]
-            row = conn.execute(sa.select(T.runs).where(T.runs.c.id == run_id)).one()
-    except sa.exc.IntegrityError:  # another user added the same file in the meantime
-        raise InputError(f"{p}: this file is already in the history: a run is added once") from None
+    for attempt in range(3):
+        try:
+            row = _insert_run(engine, machine_id, code, now, values, p)
+            break
+        except sa.exc.IntegrityError:
+            with engine.connect() as conn:
+                if _existing(conn, sha) is not None or attempt == 2:  # another user added the same file meanwhile
+                    raise InputError(f"{p}: this file is already in the history: a run is added once") from None
+            # else: another process created the machine at the same moment; its row is there now
     return _record(row)
+
+
+def _insert_run(engine: sa.Engine, machine_id: str, code: str, now: str, values: dict[str, Any], p: Path) -> Any:
+    """Insert the machine (when new) and the run in one transaction; the stored row."""
+    with engine.begin() as conn:
+        known = conn.execute(sa.select(T.machines.c.machine_code).where(T.machines.c.machine_id == machine_id)).scalar()
+        if known is None:
+            conn.execute(sa.insert(T.machines).values(machine_id=machine_id, machine_code=code, created_at=now))
+        elif known != code:
+            raise InputError(f"machine id {machine_id!r} is a {known} in the history, {p} measures a {code}: "
+                             "use the right --machine-id")
+        run_id = conn.execute(sa.insert(T.runs).values(**values)).inserted_primary_key[0]  # type: ignore[index]
+        return conn.execute(sa.select(T.runs).where(T.runs.c.id == run_id)).one()
 
 
 def machine_ids(engine: sa.Engine) -> list[str]:
