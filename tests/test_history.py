@@ -270,8 +270,8 @@ def test_twelve_adds_started_at_once_on_a_new_database_all_succeed(tmp_path) -> 
     import subprocess
     import sys
 
-    from pige_sym.simulation.simulator import random_pige, simulate
     from pige_sym.model.trajectories import cone_frustum
+    from pige_sym.simulation.simulator import random_pige, simulate
 
     files = []
     for i in range(12):
