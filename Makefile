@@ -4,14 +4,14 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 MACHINE ?= wC'A'bXYZ(C1)t
-# Machines whose kernels ship in pige_sym/kernels/shipped: the list lives in pige_sym/constants.py.
+# Kernels live in generated/ (the shipped machines are tracked there; the list is in pige_sym/constants.py).
 
 .PHONY: help venv gen gen-all check-generated test test-slow lint demo bench clean
 
 help:  ## list targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' Makefile | sed -E 's/:.*## /\t/' | expand -t 18
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml setup.py
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev]'
@@ -19,10 +19,10 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)  ## create .venv and install pige_sym with dev tools
 
-gen: $(STAMP)  ## generate kernels for MACHINE="..." into the user kernel cache
+gen: $(STAMP)  ## generate kernels for MACHINE="..." into generated/
 	$(PY) -m pige_sym gen "$(MACHINE)"
 
-gen-all: $(STAMP)  ## regenerate every shipped machine's kernels (pige_sym/kernels/shipped)
+gen-all: $(STAMP)  ## regenerate every shipped machine's kernels in generated/
 	$(PY) -m pige_sym gen --shipped --all-shipped
 
 check-generated: $(STAMP)  ## regenerate shipped kernels in memory and fail on any code difference

@@ -12,7 +12,7 @@ VERSION = "0.1.0"
 #: Machine used when no ``--machine`` is given: an AC tilting table (ISO 10791 code).
 DEFAULT_MACHINE = "wC'A'bXYZ(C1)t"
 
-#: Machines whose kernels ship inside the package (``pige_sym/kernels/shipped``) and are
+#: Machines whose kernels are tracked in ``generated/`` (shipped in the wheel as ``pige_sym.generated``) and are
 #: checked by ``make check-generated``.  The Makefile reads this list from here.
 SHIPPED_MACHINES: tuple[str, ...] = (
     "wC'A'bXYZ(C1)t",

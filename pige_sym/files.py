@@ -1,6 +1,6 @@
 """Writing files safely, and JSON out: the one helper for each.
 
-Rules every command follows (README "What it refuses and why"):
+Rules every command follows (docs/formats.md, "What it refuses and why"):
 
 - an existing output is never replaced without ``force``;
 - an output is never one of the command's inputs (same file, also through links);

@@ -90,7 +90,7 @@ def test_wheel_ships_subpackages_and_kernels(installed: dict[str, Path]) -> None
     names = zipfile.ZipFile(installed["wheel"]).namelist()
     for part in ("pige_sym/cli/main.py", "pige_sym/codegen/emit.py", "pige_sym/acquisition/engine.py",
                  "pige_sym/nc/program.py", "pige_sym/report/__init__.py",
-                 "pige_sym/kernels/shipped/kin_wCpApbXYZ_C1_t.py"):
+                 "pige_sym/generated/kin_wCpApbXYZ_C1_t.py"):
         assert part in names, part
 
 

@@ -3,7 +3,7 @@ issue 15 one by one.
 
 Every input either reads into finite numbers or is refused with a PigeError that names the file (and the line
 or field); never a traceback, never a NaN.  ``PIGE_TALLY=path`` writes the outcome counts of the fuzz targets
-to a JSON file (the README's "What it refuses and why" quotes them).
+to a JSON file (docs/formats.md, "What it refuses and why", quotes them).
 """
 
 from __future__ import annotations

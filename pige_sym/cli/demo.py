@@ -39,6 +39,17 @@ from pige_sym.files import atomic_write_text, to_json
 BALL = DEFAULT_BALL_MM
 
 DEFAULT_EFFECT = "angular_error_C:harmonic=2,cos_urad=12,sin_urad=-8"
+#: The acceptance limits the demo judges against: ``examples/tolerances.json`` of the checkout, byte for byte
+#: (``tests/test_demo.py`` checks it), written into ``--out`` so that an installed package needs no checkout.
+DEMO_TOLERANCES = """{
+ "format": "pige-tolerances 1",
+ "machine": "wC'A'bXYZ(C1)t",
+ "description": "example acceptance limits of an AC tilting table: 10 um / 20 urad per PIGE, tighter on the C axis \
+offsets, and the 2nd-order angular error of C",
+ "defaults": {"um": 10, "urad": 20},
+ "limits": {"EX0C": 8, "EY0C": 8, "angular_error_C.cos_urad": 25, "angular_error_C.sin_urad": 25}
+}
+"""
 
 
 def _stage(n: int, text: str) -> None:
@@ -166,8 +177,16 @@ def _compensate_and_report(args: argparse.Namespace, code: str, csv: Path, nc_pa
                       newline="")
     print(f"wrote {comp_path} (parameters from {params.source})")
     print(format_controller(params, "table"))
-    _stage(8, "report")
-    data = gather_report([csv], program=nc_path, method="diagnosis", progress=not args.quiet and sys.stderr.isatty())
+    _stage(8, "report: in tolerance?")
+    tolerances = out / "tolerances.json"
+    generic = to_json({"format": "pige-tolerances 1", "description": "10 um / 20 urad per PIGE",
+                       "defaults": {"um": 10, "urad": 20}}) + "\n"
+    atomic_write_text(tolerances, DEMO_TOLERANCES if code == "wC'A'bXYZ(C1)t" else generic)
+    data = gather_report([csv], program=nc_path, method="diagnosis", progress=not args.quiet and sys.stderr.isatty(),
+                         tolerances=tolerances)
+    check = data.measurements[0].check
+    if check is not None:
+        print(f"in tolerance? {check.verdict} (limits of {tolerances.name}, ISO 14253-1 guard band)")
     row = data.measurements[0].compensation[-1]  # the NC program, run on the true machine (PIGEs + hidden effect)
     print(f"test program run on the true machine, tool-point error RMSE: {row.rmse_before_um:.3f} um as programmed, "
           f"{row.rmse_after_um:.3f} um compensated ({row.reduction:.1%} less)")

@@ -9,14 +9,14 @@ from pathlib import Path
 def _run(args: argparse.Namespace) -> int:
     from pige_sym.codegen.emit import render_module, same_code, write_module
     from pige_sym.codegen.machine_code import parse_machine_code
-    from pige_sym.kernels import cache_dir, shipped_dir
+    from pige_sym.kernels import cache_dir, generated_dir, in_checkout
 
     if args.out:
         out_dir = Path(args.out)
-    elif args.shipped or args.check:
-        out_dir = shipped_dir()
+    elif args.shipped or args.check or in_checkout():
+        out_dir = generated_dir()
     else:
-        out_dir = cache_dir()
+        out_dir = cache_dir()  # an installed package is never written into
     from pige_sym.constants import SHIPPED_MACHINES
     from pige_sym.errors import InputError
 
@@ -67,8 +67,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="generate NumPy kernels for machine codes",
         description=(
             "Derive the error model with SymPy and write a NumPy kernel module per machine code. "
-            "Kernels go to the user cache (PIGE_KERNEL_DIR overrides it), where pige finds them; "
-            "--shipped writes the package's own kernels (developers, make gen-all)."
+            "In a checkout the kernels go to the top-level generated/ folder (what make gen does), "
+            "in an installed package to the user cache (PIGE_KERNEL_DIR overrides it), never into the "
+            "installation; pige finds them in both places. A script imports a generated module "
+            "directly: it needs only NumPy."
         ),
         epilog="example:\n  pige gen \"wC'B'bXYZ(C1)t\"\n  pige gen --check --all-shipped",
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -76,8 +78,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("codes", nargs="*", metavar="CODE", help="ISO 10791 machine structure code")
     p.add_argument("--all-shipped", action="store_true", help="every machine whose kernels ship with the package")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--out", help="output directory (default: the user kernel cache)")
-    where.add_argument("--shipped", action="store_true", help="write into the package's shipped kernels")
+    where.add_argument("--out", help="output directory (default: generated/ in a checkout, else the user cache)")
+    where.add_argument("--shipped", action="store_true", help="write into the generated folder (as in a checkout)")
     p.add_argument("--force", action="store_true", help="replace a file at a kernel's path that pige did not generate")
     p.add_argument(
         "--check", action="store_true",

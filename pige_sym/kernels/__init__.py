@@ -3,11 +3,13 @@
 Where kernel modules live, one per machine, named after the canonical machine code
 (``kin_wCpApbXYZ_C1_t.py`` for ``wC'A'bXYZ(C1)t``):
 
-- ``pige_sym/kernels/shipped/``: the machines of :data:`~pige_sym.constants.SHIPPED_MACHINES`,
-  installed with the package and never written at run time;
+- the generated folder (:func:`generated_dir`): in a checkout the top-level ``generated/``, which
+  holds the machines of :data:`~pige_sym.constants.SHIPPED_MACHINES` (tracked) and whatever
+  ``make gen MACHINE=...`` / ``pige gen`` wrote; in an installed package ``pige_sym/generated``,
+  the shipped machines the wheel carries, never written at run time;
 - the user cache directory (``$PIGE_KERNEL_DIR``, else the platform's cache directory,
-  e.g. ``~/.cache/pige_sym/kernels`` on Linux): kernels of every other machine, generated
-  with SymPy on first use and announced on stderr.
+  e.g. ``~/.cache/pige_sym/kernels`` on Linux): kernels generated with SymPy on first use of a
+  machine found in neither place, announced on stderr.
 
 :func:`load_kernels` looks in that order and regenerates (into the cache, never into the
 installation) a module whose generator fingerprint differs from the current generator's.
@@ -34,16 +36,25 @@ __all__ = [
     "cache_dir",
     "kernel_path",
     "load_kernels",
-    "shipped_dir",
+    "generated_dir",
+    "in_checkout",
 ]
 
 _CACHE: dict[str, KernelModule] = {}
 _HASH_RE = re.compile(r"^# input hash\s*:\s*([0-9a-f]+)", re.MULTILINE)
 
 
-def shipped_dir() -> Path:
-    """Directory of the kernels shipped with the package."""
-    return Path(__file__).resolve().parent / "shipped"
+def in_checkout() -> bool:
+    """True when pige_sym runs from a source checkout (``pyproject.toml`` and ``generated/`` beside the package)."""
+    root = Path(__file__).resolve().parents[2]
+    return (root / "pyproject.toml").is_file() and (root / "generated" / "__init__.py").is_file()
+
+
+def generated_dir() -> Path:
+    """The generated folder: the checkout's top-level ``generated/``, else the installed ``pige_sym/generated``."""
+    if in_checkout():
+        return Path(__file__).resolve().parents[2] / "generated"
+    return Path(__file__).resolve().parents[1] / "generated"
 
 
 def cache_dir() -> Path:
@@ -64,19 +75,19 @@ def _file_hash(path: Path) -> str | None:
 
 
 def _locate(structure: MachineStructure) -> tuple[Path, bool]:
-    """Where the machine's kernels are (shipped if current, else the cache) and whether that file is current."""
+    """Where the machine's kernels are (generated folder if current, else the cache) and whether they are current."""
     from pige_sym.codegen.fingerprint import current_hash
 
     fingerprint = current_hash(structure)
-    shipped = shipped_dir() / f"{structure.module_name}.py"
-    if shipped.is_file() and _file_hash(shipped) == fingerprint:
-        return shipped, True
+    generated = generated_dir() / f"{structure.module_name}.py"
+    if generated.is_file() and _file_hash(generated) == fingerprint:
+        return generated, True
     cached = cache_dir() / f"{structure.module_name}.py"
     return cached, cached.is_file() and _file_hash(cached) == fingerprint
 
 
 def kernel_path(code: str | MachineStructure) -> Path:
-    """Path of the current kernel module of a machine: shipped if current, else in the cache.
+    """Path of the current kernel module of a machine: in the generated folder if current, else in the cache.
 
     The returned file may not exist yet; :func:`load_kernels` generates it there.
     """

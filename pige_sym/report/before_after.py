@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -26,9 +26,6 @@ from pige_sym.measurements.measurement import Measurement
 from pige_sym.model.trajectories import Trajectory, approach_directions
 from pige_sym.nc.compensate import compensate_program
 from pige_sym.nc.program import parse_program, poses_from_program
-
-if TYPE_CHECKING:
-    pass
 from pige_sym.report.data import MeasurementReport, Truth
 
 
@@ -162,7 +159,12 @@ def program_section(rep: MeasurementReport, program: Path, text: str) -> None:
                                description=f"NC program {program.name} ({angles.shape[0]} poses)", pivots_mm=pivots,
                                tool_mm=m.tool_mm, covariance=covariance, truth_extensions=machine_extensions,
                                extensions=rep.extensions)
-    rep.compensation.append(row)
+    if angles.shape == m.angles_deg.shape and np.allclose(angles, m.angles_deg, atol=1e-6) and rep.compensation:
+        # the program is the measured test itself: one row, not the same numbers twice
+        row.trajectory = f"{row.trajectory}, the measured test"
+        rep.compensation[0] = row
+    else:
+        rep.compensation.append(row)
     params = CompensationParameters(
         machine=rep.machine, values=identified, units={k: res.units.get(k, "") for k in identified},
         tool_mm=None if m.tool_mm is None else [float(x) for x in m.tool_mm],

@@ -55,8 +55,8 @@ def summary_html(rep: MeasurementReport) -> str:
     extra = [c for c in m.optional] + list(m.extra_columns)
     if extra:
         items.append(("other columns", esc(", ".join(extra))))
-    items.append(("truth sidecar", esc(rep.truth.path) if rep.truth is not None else "none (real measurement or "
-                                                                                     "truth unknown)"))
+    items.append(("known true errors", f"yes, a simulation: {esc(rep.truth.path)}" if rep.truth is not None
+                  else "none (a real measurement, or the truth is unknown)"))
     return kvs(items)
 
 
@@ -184,7 +184,7 @@ def diagnosis_html(rep: MeasurementReport, base: Path | None) -> str:
                                  f"{num(d.baseline_heldout_rms_um, '.4f')} µm, BIC {num(d.baseline_bic, '.1f')}")),
         ("outlier rows", esc(d.outlier_rows or "none")),
     ])]
-    parts.append("<h4>Verdict</h4>")
+    parts.append("<h4>What the diagnosis concludes</h4>")
     if d.findings:
         parts.append('<ul class="verdict">' + "".join(f"<li>{esc(f.sentence())}</li>" for f in d.findings) + "</ul>")
     else:
@@ -240,7 +240,8 @@ def compensation_html(rep: MeasurementReport, base: Path | None) -> str:
                      f"<code>{esc(rep.truth.path.name)}</code> and is compensated with the {esc(rep.primary_method)} "
                      "estimate.</p>")
     else:
-        parts.append(f'<p class="note">No truth sidecar: the before/after is <b>model-predicted</b>. The machine is '
+        parts.append(f'<p class="note">No known true errors (a real measurement): the before/after is '
+                     f"<b>model-predicted</b>. The machine is "
                      f"assumed to carry exactly the identified errors ({esc(rep.primary_method)}), so what the "
                      "compensation leaves on that model machine says nothing about the real one and is shown only "
                      "as a check of the algorithm. Expected on the real machine: the identification uncertainty "

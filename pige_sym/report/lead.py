@@ -120,7 +120,8 @@ def improvement(rep: MeasurementReport, data: ReportData) -> Improvement:
     if rep.compensation_basis == "truth":
         return Improvement("truth", "simulated on a known truth", row.rmse_before_um, row.rmse_after_um,
                            f"tool-point RMSE {row.rmse_before_um:.3g} → {row.rmse_after_um:.3g} µm "
-                           f"({row.reduction:.0%} less) on the measured trajectory, machine = truth sidecar")
+                           f"({row.reduction:.0%} less) on the measured trajectory, computed on a simulated machine "
+                           "that has the known true errors")
     u = row.predicted_after_um
     r = unexplained_rms_um(rep)
     expected = math.sqrt((u if math.isfinite(u) else 0.0) ** 2 + (r if math.isfinite(r) else 0.0) ** 2)

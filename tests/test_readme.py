@@ -1,0 +1,45 @@
+"""The README runs as written: its "A first session" and touch-probe shell blocks, in order, in a fresh folder.
+
+The blocks are taken from the README itself (so they cannot drift), run by bash with ``set -e`` from a
+folder that holds only links to the checkout's ``.venv`` and ``examples`` (the README says: from the
+checkout's root), and every command must succeed.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _blocks(heading: str) -> list[str]:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    start = text.index(heading)
+    end = text.find("\n## ", start + len(heading))
+    return re.findall(r"```sh\n(.*?)```", text[start:end if end != -1 else len(text)], re.S)
+
+
+def test_the_first_session_and_the_probe_demo_run_as_pasted(tmp_path) -> None:
+    venv = Path(sys.executable).parent.parent
+    if not (venv / "bin" / "pige").exists():
+        pytest.skip("needs the pige console script (make venv)")
+    (tmp_path / ".venv").symlink_to(venv)
+    (tmp_path / "examples").symlink_to(ROOT / "examples")
+    blocks = _blocks("## A first session") + _blocks("## Calibrating with a touch probe")
+    assert len(blocks) >= 4
+    script = "set -e\n" + "\n".join(blocks) + "\n"
+    env = {k: v for k, v in os.environ.items() if k != "PIGE_HISTORY_DB"}
+    done = subprocess.run(["bash", "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    session = tmp_path / "session"
+    for name in ("rtest.mpf", "run.csv", "diagnosis.json", "rtest_comp.mpf", "after.csv", "history.db",
+                 "report/report.html"):
+        assert (session / name).exists(), name
+    assert "measured before/after" in done.stdout
+    assert (tmp_path / "probe-demo" / "probe.csv").exists()
