@@ -4,6 +4,7 @@ compensation and report, with the hidden effect found."""
 from __future__ import annotations
 
 import json
+import re
 import sys
 
 import pytest
@@ -37,6 +38,11 @@ def test_demo_finds_the_hidden_effect_and_writes_everything(tmp_path, capsys):
     assert "angular_error_C" in html and "data:image/png;base64," in html
     assert "Compensated with the PIGEs: angular_error_C" in html
     assert "; compensated extension: angular_error_C harmonic=2" in "\n".join(compensated)
+    # the first screen answers "in tolerance?" against the shipped example limits, in plain words
+    assert "in tolerance? " in text and (out / "tolerances.json").exists()
+    lead = html[:html.index('id="overview"')]
+    assert "verdict" in lead.lower() and "sidecar" not in lead and not re.findall(r"\bu(?:m|rad)\b", lead)
+    assert html.count('data-figure="compensation"') == 1  # the NC program is the measured test: one row, one figure
 
 
 def test_demo_says_when_the_hidden_effect_is_missed(tmp_path, capsys):
@@ -57,3 +63,12 @@ def test_demo_does_not_replace_an_earlier_demo_without_force(tmp_path) -> None:
     (out / "rtest.csv").write_text("kept\n")
     assert main(["demo", "--out", str(out), "--quiet"]) == 2
     assert (out / "rtest.csv").read_text() == "kept\n"
+
+
+def test_the_demo_tolerances_are_the_shipped_example() -> None:
+    """The demo judges against examples/tolerances.json, byte for byte (written into --out, so a wheel needs none)."""
+    from pathlib import Path
+
+    from pige_sym.cli.demo import DEMO_TOLERANCES
+
+    assert (Path(__file__).resolve().parents[1] / "examples" / "tolerances.json").read_text() == DEMO_TOLERANCES

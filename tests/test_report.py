@@ -86,7 +86,7 @@ def test_every_section_is_there(built: tuple[ReportData, Path, str]) -> None:
                 "trend"):
         assert key in figures
     for words in ("Stages of the double-differential scheme", "Unidentifiable combinations", "Rejected candidates",
-                  "observability indices", "condition number", "Verdict", "held-out RMS"):
+                  "observability indices", "condition number", "What the diagnosis concludes", "held-out RMS"):
         assert words in text
 
 

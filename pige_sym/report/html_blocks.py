@@ -20,6 +20,7 @@ body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-se
 background:#f6f7f9;line-height:1.4}
 header,main,footer{max-width:1150px;margin:0 auto;padding:0 18px;box-sizing:border-box}
 table{max-width:100%}
+.tw{max-width:100%;overflow-x:auto}
 td,th{overflow-wrap:break-word}
 code{overflow-wrap:break-word}
 .kv td,.kv td code,code.path,nav a,h1,h2,h3,h4,figcaption,span.file{overflow-wrap:anywhere}
@@ -95,15 +96,17 @@ def num(x: float | None, fmt: str = ".3f", none: str = "—") -> str:
 
 def table(head: Sequence[str], rows: Iterable[Sequence[str]], *, row_classes: Sequence[str] | None = None,
            num_cols: Iterable[int] = ()) -> str:
-    """An HTML table; ``head`` is escaped, cells are already HTML."""
+    """An HTML table in a box that scrolls sideways when it is wider than the page (the page itself never
+    does, at 1000 px either); ``head`` is escaped, cells are already HTML."""
     nums = set(num_cols)
-    out = ["<table>", "<thead><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr></thead>", "<tbody>"]
+    heads = "".join(f"<th>{esc(h)}</th>" for h in head)
+    out = ['<div class="tw"><table>', f"<thead><tr>{heads}</tr></thead>", "<tbody>"]
     for i, row in enumerate(rows):
         cls = row_classes[i] if row_classes and row_classes[i] else ""
         attr = f' class="{esc(cls)}"' if cls else ""
         cells = "".join(f'<td class="num">{c}</td>' if j in nums else f"<td>{c}</td>" for j, c in enumerate(row))
         out.append(f"<tr{attr}>{cells}</tr>")
-    out.append("</tbody></table>")
+    out.append("</tbody></table></div>")
     return "\n".join(out)
 
 
