@@ -47,13 +47,16 @@ def controller_corrections(params: CompensationParameters) -> list[dict[str, Any
 NOT_VERIFIED = "NOT verified on a controller: check every value against the machine's documentation"
 
 
-def format_controller(params: CompensationParameters, style: str = "table", *, carrier: int = 1) -> str:
+def format_controller(params: CompensationParameters, style: str = "table", *, carrier: int = 1,
+                      current: dict[str, float] | None = None) -> str:
     """The corrections as deltas to the machine's current kinematic description.
 
     Styles (units, signs and mappings in docs/controller-corrections.md): ``table`` (corrected
     axis lines, machine frame), ``siemens`` (``$TC_CARR`` *fine offsets* of swivel data record
     ``carrier``), ``heidenhain`` (kinematics-table deltas), ``fanuc`` (rotation-axis centre and
-    direction deltas), ``linuxcnc`` (``trtkins`` rot-point / offset deltas).
+    direction deltas), ``linuxcnc`` (:func:`format_linuxcnc`: trt kinematics HAL pins, absolute with
+    ``current``).  Every style also says what it enters, what it cannot represent and the tool-point
+    error each choice leaves (:mod:`~pige_sym.compensation.controller_scope`).
     """
     rows = controller_corrections(params)
     if style == "table":
@@ -68,17 +71,21 @@ def format_controller(params: CompensationParameters, style: str = "table", *, c
         raise InputError(f"unknown controller style {style!r}: use {', '.join(CONTROLLER_STYLES)}")
     if not isinstance(carrier, int) or carrier < 1:
         raise InputError("--carrier must be a positive integer")
+    if style == "linuxcnc":
+        return format_linuxcnc(params, current)
     kern = load_kernels(params.machine)
     chain = [a.name for a in reversed(kern_axes(params.machine, "workpiece"))] + kern_axes_names(params.machine)
     by = {r["axis"]: r for r in rows}
     first, second = by[chain[0]], by[chain[1]]
     head = [f"corrections for {kern.MACHINE_CODE} as DELTAS to the current kinematic description "
             f"(axis 1 = {chain[0]}, axis 2 = {chain[1]}); parameters from {params.source}", NOT_VERIFIED]
-    body = {"siemens": _siemens_fine, "heidenhain": _heidenhain, "fanuc": _fanuc,
-            "linuxcnc": _linuxcnc}[style](first, second, carrier)
+    body = {"siemens": _siemens_fine, "heidenhain": _heidenhain, "fanuc": _fanuc}[style](first, second, carrier)
     orient = [f"{r['axis']}: direction change ({', '.join(f'{x:+.9f}' for x in r['direction_delta'])})"
               for r in (first, second) if np.abs(r["direction_delta"]).max() > 0]
-    comment = "; " if style == "siemens" else "# " if style == "linuxcnc" else ""
+    comment = "; " if style == "siemens" else ""
+    from pige_sym.compensation.controller_scope import scope_lines
+
+    head += [ln.removeprefix(comment) for ln in scope_lines(params, style, comment)]
     if orient:
         body.append(comment + "axis-direction changes (not expressible as offsets; enter only where the controller "
                     "has an axis-direction entry): " + "; ".join(orient))
@@ -119,14 +126,51 @@ def _fanuc(first: dict, second: dict, carrier: int) -> list[str]:
     return out
 
 
-def _linuxcnc(first: dict, second: dict, carrier: int) -> list[str]:
-    tilt, rot = np.array(first["pivot_delta_mm"]), np.array(second["pivot_delta_mm"])
-    if first["axis"][0] == "C":
-        tilt, rot = rot, tilt
-    off = rot - tilt
-    out = ["# trtkins: add to the HAL parameters (mm, machine frame, + = towards + of the machine axis)"]
-    out += [f"setp trtkins.{c}-rot-point [{tilt[k]:+.6f}]" for k, c in enumerate("xyz")]
-    out += [f"setp trtkins.{c}-offset [{off[k]:+.6f}]" for k, c in enumerate("xyz")]
-    out.append(f"# rotary zero offsets [deg]: {first['axis']} {first['zero_offset_deg']:+.7f}, "
-               f"{second['axis']} {second['zero_offset_deg']:+.7f} (home offsets of the joints)")
-    return out
+#: LinuxCNC trt kinematics module of each tilt axis (src/emc/kinematics/xyzac-trt-kins.c, xyzbc-trt-kins.c).
+TRT_MODULES = {"A": "xyzac-trt-kins", "B": "xyzbc-trt-kins"}
+#: Their HAL input pins (trtfuncs.c, trtKinematicsSetup).
+TRT_PINS = ("x-rot-point", "y-rot-point", "z-rot-point", "x-offset", "y-offset", "z-offset", "tool-offset",
+            "conventional-directions")
+
+
+def linuxcnc_trt_deltas(params: CompensationParameters) -> tuple[str, dict[str, float]]:
+    """The trt kinematics module and the change of each of its HAL pins [mm] (controller_scope docstring).
+
+    Raises
+    ------
+    InputError
+        The machine is not a tilting rotary table with C on an A or B tilt axis.
+    """
+    kern = load_kernels(params.machine)
+    axes = tuple(kern.ROTARY_AXES)
+    tilt = next((a for a in axes if a[0] in "AB"), None)
+    if kern.TOOL_ROTARY or tilt is None or "C" not in axes or len(axes) != 2:
+        raise InputError(f"{kern.MACHINE_CODE}: LinuxCNC's trt kinematics describe a tilting rotary table (C on an "
+                         "A or B tilt axis, xyzac-trt-kins / xyzbc-trt-kins); no mapping for this machine")
+    v = {k: params.values.get(k, 0.0) * 1e-3 for k in kern.LOCATION_PARAMETERS}
+    deltas = {"x-rot-point": v["EX0C"], "y-rot-point": v["EY0C"], "z-rot-point": 0.0}
+    if tilt == "A":
+        deltas |= {"y-offset": v["EY0A"] - v["EY0C"], "z-offset": v["EZ0A"]}
+    else:
+        deltas |= {"x-offset": v["EX0B"] - v["EX0C"], "z-offset": v["EZ0B"]}
+    return TRT_MODULES[tilt], deltas
+
+
+def format_linuxcnc(params: CompensationParameters, current: dict[str, float] | None = None) -> str:
+    """LinuxCNC trt kinematics: ``setp`` lines with absolute values when ``current`` gives today's pin values,
+    otherwise the change of each pin as a comment (HAL has no "add")."""
+    from pige_sym.compensation.controller_scope import scope_lines
+
+    module, deltas = linuxcnc_trt_deltas(params)
+    out = [f"# LinuxCNC {module} (src/emc/kinematics/trtfuncs.c): HAL pins [mm], parameters from {params.source}",
+           *scope_lines(params, "linuxcnc", "# ")]
+    unknown = sorted(set(current or {}) - set(TRT_PINS))
+    if unknown:
+        raise InputError(f"--current {unknown[0]}: not a pin of {module} ({', '.join(TRT_PINS)})")
+    for pin, d in deltas.items():
+        if current is not None and pin in current:
+            out.append(f"setp {module}.{pin} {current[pin] + d:.6f}")
+        else:
+            out.append(f"# {module}.{pin}: add {_signed(d, 6)} (give --current {pin}=VALUE,... or your HAL file "
+                       "for the setp line)")
+    return "\n".join(out)
