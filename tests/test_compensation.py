@@ -407,7 +407,8 @@ def test_controller_styles_print_the_deltas_with_their_signs():
     assert siemens["$TC_CARR64[3]"] == f"$TC_CARR64[3]+{np.degrees(100e-6):.7f}"
     linuxcnc = format_controller(params, "linuxcnc")
     assert "# xyzac-trt-kins.y-rot-point: add +0.010000" in linuxcnc
-    assert "# xyzac-trt-kins.y-offset: add +0.002000" in linuxcnc and "xyzac-trt-kins.z-offset: add -0.009000" in linuxcnc
+    assert "# xyzac-trt-kins.y-offset: add +0.002000" in linuxcnc
+    assert "# xyzac-trt-kins.z-offset: add -0.009000" in linuxcnc
     assert "NOT verified" not in linuxcnc  # checked against LinuxCNC's own formulas (test_controller_linuxcnc.py)
     for style in ("heidenhain", "fanuc", "siemens"):
         assert "NOT verified on a controller" in format_controller(params, style)
