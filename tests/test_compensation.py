@@ -413,6 +413,7 @@ def test_controller_styles_print_the_deltas_with_their_signs():
     for style in ("heidenhain", "fanuc", "siemens"):
         assert "NOT verified on a controller" in format_controller(params, style)
         assert "NOT representable" in format_controller(params, style)
+    assert "the sign of the offset angles $TC_CARR64/65 is NOT verified" in format_controller(params, "siemens")
     with pytest.raises(InputError):
         format_controller(params, "okuma")
 

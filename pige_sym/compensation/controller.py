@@ -45,6 +45,11 @@ def controller_corrections(params: CompensationParameters) -> list[dict[str, Any
 
 
 NOT_VERIFIED = "NOT verified on a controller: check every value against the machine's documentation"
+#: Siemens: the vector chain and the fine offsets are documented (docs/controller-corrections.md), the sign of
+#: the offset angles relative to a zero-position error is not.
+SIEMENS_CAVEAT = ("offset vectors: SINUMERIK swivel-table chain l2, l3, l4 = -(l2 + l3) and fine offsets = basic "
+                  "parameter + 40 (Siemens manuals cited in docs/controller-corrections.md); the sign of the offset "
+                  "angles $TC_CARR64/65 is NOT verified on a controller: check it against the machine")
 
 
 def format_controller(params: CompensationParameters, style: str = "table", *, carrier: int = 1,
@@ -78,7 +83,8 @@ def format_controller(params: CompensationParameters, style: str = "table", *, c
     by = {r["axis"]: r for r in rows}
     first, second = by[chain[0]], by[chain[1]]
     head = [f"corrections for {kern.MACHINE_CODE} as DELTAS to the current kinematic description "
-            f"(axis 1 = {chain[0]}, axis 2 = {chain[1]}); parameters from {params.source}", NOT_VERIFIED]
+            f"(axis 1 = {chain[0]}, axis 2 = {chain[1]}); parameters from {params.source}",
+            SIEMENS_CAVEAT if style == "siemens" else NOT_VERIFIED]
     body = {"siemens": _siemens_fine, "heidenhain": _heidenhain, "fanuc": _fanuc}[style](first, second, carrier)
     orient = [f"{r['axis']}: direction change ({', '.join(f'{x:+.9f}' for x in r['direction_delta'])})"
               for r in (first, second) if np.abs(r["direction_delta"]).max() > 0]

@@ -9,6 +9,7 @@ from __future__ import annotations
 import base64
 import html
 import math
+import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -72,8 +73,12 @@ footer{font-size:.8em;color:#5c6670;padding-bottom:30px}
 """
 
 
+_UNIT_WORD = re.compile(r"(?<![\w./\\-])u(m|rad)(?![\w./\\-])")
+
+
 def esc(text: object) -> str:
-    return html.escape(str(text), quote=True)
+    """HTML-escaped text, with the ASCII units of messages shown as µm / µrad (``cos_urad`` stays a name)."""
+    return html.escape(_UNIT_WORD.sub(r"µ\1", str(text)), quote=True)
 
 
 def units(unit: str) -> str:
