@@ -32,17 +32,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pige_sym.constants import DEFAULT_BALL_MM, DEFAULT_MACHINE
+from pige_sym.errors import InputError
 
 if TYPE_CHECKING:
     from pige_sym.compensation.parameters import CompensationParameters
     from pige_sym.diagnosis.results import DiagnosisResult
+    from pige_sym.identification.joint import JointResult
     from pige_sym.identification.result import IdentificationResult
     from pige_sym.measurements.measurement import Measurement
     from pige_sym.nc.compensate import CompensationResult
     from pige_sym.planning.plan import Plan
     from pige_sym.verdict.check import CheckResult
 
-__all__ = ["check", "compensate", "diagnose", "identify", "plan", "read", "simulate", "write"]
+__all__ = ["check", "compensate", "diagnose", "identify", "identify_files", "plan", "read", "simulate", "write"]
 
 PathLike = str | os.PathLike[str]
 
@@ -203,6 +205,51 @@ def identify(data: Measurement | PathLike, *, method: str = "gauss-newton", proj
     from pige_sym.identification.least_squares import identify as run
 
     return run(_measurement(data), method=method, projection=projection, loss=loss, with_zero=with_zero)
+
+
+def identify_files(paths: Sequence[PathLike], *, with_zero: bool = False) -> JointResult:
+    """Identify the PIGEs jointly from several files of one machine (``pige identify F1 F2 ...``).
+
+    R-test runs, probe imports and ballbar setups (``pige-ballbar 1``) mix freely; each ``zero: relative``
+    ballbar file gets its own free constant; what the set cannot determine is named and gets no value.
+
+    Parameters
+    ----------
+    paths : sequence of path-like
+    with_zero : bool
+        Also estimate the zero-position errors.
+
+    Returns
+    -------
+    JointResult
+        ``result`` (an ``IdentificationResult`` of the PIGEs, method ``joint``) and ``files`` (per file: rows,
+        its own σ [µm], the RMS of its joint residual [µm], its constant).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import pige_sym.api as pige
+    >>> from pige_sym.measurements.ballbar import write_ballbar
+    >>> from pige_sym.simulation.ballbar import ballbar_setup, simulate_ballbar
+    >>> folder = tempfile.mkdtemp()
+    >>> ac, truth = "wC'A'bXYZ(C1)t", {"EX0C": 5.0, "EY0A": -4.0}
+    >>> paths = [write_ballbar(simulate_ballbar(ac, ballbar_setup(ac, kind, axis, tilt_deg=tilt), pige=truth,
+    ...          noise_um=0.01, seed=1), os.path.join(folder, f"{kind}{axis}{tilt}.csv"))
+    ...          for kind in ("radial", "tangential", "axial") for axis, tilt in (("C", 0), ("C", -45), ("A", 0))]
+    >>> one = pige.identify_files(paths[:1]).result
+    >>> one.rank < len(one.parameters), len(one.unidentifiable) > 0
+    (True, True)
+    >>> joint = pige.identify_files(paths).result
+    >>> joint.rank, round(joint.value("EX0C"), 1), round(joint.value("EY0A"), 1)
+    (8, 5.0, -4.0)
+    """
+    from pige_sym.identification.joint import identify_joint
+    from pige_sym.measurements.ballbar import is_ballbar_file, read_ballbar
+
+    items = [(os.fspath(p), read_ballbar(p) if is_ballbar_file(p) else read(p)) for p in paths]
+    if not items:
+        raise InputError("give at least one file")
+    return identify_joint(items, with_zero=with_zero)
 
 
 def diagnose(data: Measurement | PathLike, *, candidates: Sequence[str] | None = None,

@@ -1,4 +1,5 @@
-"""The README runs as written: its "A first session" and touch-probe shell blocks, in order, in a fresh folder.
+"""The README runs as written: its "A first session", touch-probe and ballbar shell blocks, in order, in a fresh
+folder.
 
 The blocks are taken from the README itself (so they cannot drift), run by bash with ``set -e`` from a
 folder that holds only links to the checkout's ``.venv`` and ``examples`` (the README says: from the
@@ -31,7 +32,8 @@ def test_the_first_session_and_the_probe_demo_run_as_pasted(tmp_path) -> None:
         pytest.skip("needs the pige console script (make venv)")
     (tmp_path / ".venv").symlink_to(venv)
     (tmp_path / "examples").symlink_to(ROOT / "examples")
-    blocks = _blocks("## A first session") + _blocks("## Calibrating with a touch probe")
+    blocks = _blocks("## A first session") + _blocks("## Calibrating with a touch probe") + \
+        _blocks("## Calibrating with a ballbar")
     assert len(blocks) >= 4
     script = "set -e\n" + "\n".join(blocks) + "\n"
     env = {k: v for k, v in os.environ.items() if k != "PIGE_HISTORY_DB"}
@@ -43,3 +45,4 @@ def test_the_first_session_and_the_probe_demo_run_as_pasted(tmp_path) -> None:
         assert (session / name).exists(), name
     assert "measured before/after" in done.stdout
     assert (tmp_path / "probe-demo" / "probe.csv").exists()
+    assert "rank 8/8" in done.stdout and (session / "bb_axial_A.csv").exists()

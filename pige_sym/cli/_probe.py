@@ -8,7 +8,7 @@ from typing import Any
 from pige_sym.cli._setup import finite_option, parse_vec3
 from pige_sym.errors import InputError
 
-INSTRUMENT_CHOICES = ("rtest", "sphere-probe")
+INSTRUMENT_CHOICES = ("rtest", "sphere-probe", "ballbar")
 
 
 def add_sphere_arguments(p: argparse.ArgumentParser) -> None:

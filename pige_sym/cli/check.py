@@ -13,8 +13,13 @@ ESTIMATES = ("diagnosis", "gauss-newton", "double-differential")
 def _run(args: argparse.Namespace) -> int:
     from pige_sym import api
     from pige_sym.files import to_json
+    from pige_sym.measurements.ballbar import is_ballbar_file
 
-    result = api.check(args.file, args.tolerances, rule=args.rule, k=args.k, method=args.method)
+    if len(args.files) > 1 or is_ballbar_file(args.files[0]):
+        estimate = api.identify_files(args.files).result  # joint: R-test, probe and ballbar files of one machine
+        result = api.check(estimate, args.tolerances, rule=args.rule, k=args.k)
+    else:
+        result = api.check(args.files[0], args.tolerances, rule=args.rule, k=args.k, method=args.method)
     print(to_json(result.to_dict()) if args.json else result.format())
     return result.exit_status
 
@@ -43,7 +48,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("file", metavar="FILE", help="pige-rtest 1 measurement, or identify/diagnose JSON")
+    p.add_argument("files", nargs="+", metavar="FILE",
+                   help="pige-rtest 1 measurement, or identify/diagnose JSON; several files (or ballbar files) are "
+                        "identified jointly")
     p.add_argument("--tolerances", required=True, metavar="TOL.json", help="tolerance file (format above)")
     p.add_argument("--rule", choices=("guard", "simple"), default="guard",
                    help="decision rule (default %(default)s: with the expanded uncertainty k*u)")

@@ -1,4 +1,5 @@
-"""``pige identify``: PIGEs with uncertainty and identifiability from a measurement file."""
+"""``pige identify``: PIGEs with uncertainty and identifiability from a measurement file, or jointly from several
+(R-test runs, probe imports, ballbar setups: :mod:`pige_sym.identification.joint`)."""
 
 from __future__ import annotations
 
@@ -11,13 +12,31 @@ from pige_sym.files import to_json
 def _run(args: argparse.Namespace) -> int:
     from pige_sym import api
     from pige_sym.identification.result import format_result
+    from pige_sym.measurements.ballbar import is_ballbar_file
 
-    result = api.identify(args.file, method=args.method, projection=args.projection, loss=args.loss,
+    if len(args.files) > 1 or is_ballbar_file(args.files[0]):
+        return _run_joint(args)
+    result = api.identify(args.files[0], method=args.method, projection=args.projection, loss=args.loss,
                           with_zero=args.with_zero)
     if args.json:
         print(to_json(result.to_dict()))
     else:
         print(format_result(result))
+    return 0
+
+
+def _run_joint(args: argparse.Namespace) -> int:
+    """Several files (or a ballbar file): the joint identification with a per-file table."""
+    from pige_sym import api
+    from pige_sym.errors import InputError
+    from pige_sym.identification.joint import format_files
+    from pige_sym.identification.result import format_result
+
+    if args.method != "gauss-newton" or args.projection != "xyz" or args.loss != "linear":
+        raise InputError("several files (or a ballbar file) are identified jointly: gauss-newton, each file with its "
+                         "own projection (no --projection), loss linear")
+    joint = api.identify_files(args.files, with_zero=args.with_zero)
+    print(to_json(joint.to_dict()) if args.json else format_result(joint.result) + "\n" + format_files(joint.files))
     return 0
 
 
@@ -30,11 +49,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "examples:\n"
             "  pige identify run.csv\n"
             "  pige identify run.csv --method double-differential --projection y\n"
-            "  pige identify run.csv --loss soft_l1 --json > result.json"
+            "  pige identify run.csv --loss soft_l1 --json > result.json\n"
+            "  pige identify radial_C.csv tangential_C.csv axial_A.csv      # ballbar setups, jointly"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("file", help="pige-rtest 1 measurement file")
+    p.add_argument("files", nargs="+", metavar="FILE",
+                   help="pige-rtest 1 measurement (R-test, probe import) or pige-ballbar 1 file; several files of "
+                        "one machine are identified jointly")
     p.add_argument("--method", choices=METHODS, default="gauss-newton")
     p.add_argument("--projection", default="xyz", help="x, y, z, xyz, a vector a,b,c or htm:... (default xyz)")
     p.add_argument("--loss", choices=LOSSES, default="linear", help="robust losses flag outlier rows")

@@ -118,9 +118,30 @@ def _format(plan: Any, out: str | None) -> str:
     return "\n".join(lines)
 
 
+def _run_ballbar(args: argparse.Namespace) -> int:
+    """The smallest set of ballbar setups that determines every PIGE within --target."""
+    from pige_sym.files import to_json
+    from pige_sym.kernels import load_kernels
+    from pige_sym.planning.ballbar import format_setups, plan_setups
+
+    code = load_kernels(args.machine).MACHINE_CODE
+    target = 2.0 if args.target is None else args.target
+    chosen, sizes = plan_setups(code, target=target, noise_um=args.noise)
+    if args.json:
+        print(to_json({"chosen": None if chosen is None else chosen.labels, "target": target,
+                       "by_size": [{"setups": s.labels, "determined": s.determined, "worst_std": s.worst_std}
+                                   for s in sizes]}))
+    else:
+        print(format_setups(code, sizes, chosen, target=target, noise_um=args.noise))
+    return 0 if chosen is not None else 1
+
+
 def _run(args: argparse.Namespace) -> int:
     from pige_sym.files import to_json
     from pige_sym.planning import parse_limits
+
+    if args.instrument == "ballbar":
+        return _run_ballbar(args)
 
     setup = _setup(args)
     limits = parse_limits(args.limits, setup.kernels)
@@ -173,6 +194,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--grade", metavar="TRAJECTORY",
                    help="grade this test instead: cone-frustum, figure-eight, steps, an angle CSV or an NC program")
     p.add_argument("--out", help="angle file of the planned test")
+    p.add_argument("--instrument", choices=["rtest", "ballbar"], default="rtest",
+                   help="ballbar: choose the smallest set of ballbar setups instead of R-test poses")
+    p.add_argument("--target", type=float, help="ballbar: largest acceptable predicted std [um or urad] (default 2)")
     p.add_argument("--force", action="store_true", help="replace an existing --out file")
     p.add_argument("--json", action="store_true", help="print the figures as one JSON object")
     p.set_defaults(handler=_run)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 
+from pige_sym.cli._ballbar import add_ballbar_arguments
 from pige_sym.cli._probe import INSTRUMENT_CHOICES, add_probe_program_arguments
 from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
 from pige_sym.constants import DEFAULT_DWELL_S
@@ -56,11 +57,47 @@ def _run_probe(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_ballbar(args: argparse.Namespace) -> int:
+    """One ballbar setup as an RTCP program: the tool ball on the nominal table point table_ball + offset."""
+    import numpy as np
+
+    from pige_sym.cli._ballbar import ballbar_setup_of
+    from pige_sym.errors import InputError
+    from pige_sym.kernels import load_kernels
+    from pige_sym.nc.program import make_rtest_program
+    from pige_sym.simulation.exact_table import nominal_table_point
+
+    if args.dialect not in ("siemens", "fanuc"):
+        raise InputError("a ballbar program needs RTCP (TRAORI / G43.4): --dialect siemens or fanuc")
+    kern = load_kernels(args.machine)
+    setup = ballbar_setup_of(args, kern.MACHINE_CODE)
+    tool_point = setup.table_ball_mm + setup.offset_mm
+    n = setup.angles_deg.shape[0]
+    # read the geometry back: the nominal bar length is L0 at every pose (the bar's travel, ±1 mm, takes the errors)
+    lengths = np.linalg.norm(nominal_table_point(kern.MACHINE_CODE, setup.angles_deg, tool_point)
+                             - nominal_table_point(kern.MACHINE_CODE, setup.angles_deg, setup.table_ball_mm), axis=1)
+    if np.abs(lengths - np.linalg.norm(setup.offset_mm)).max() > 1e-9:  # pragma: no cover - rigid table
+        raise InputError("the nominal bar length varies along the program: refusing it")
+    out = check_output(args.out, force=args.force, what="--out")
+    text = make_rtest_program(setup.angles_deg, np.tile(tool_point, (n, 1)), tuple(kern.ROTARY_AXES), rtcp=True,
+                              dwell_s=args.dwell, feed=args.feed, dialect=args.dialect,
+                              title=f"ballbar {setup.label}, {kern.MACHINE_CODE}, table ball "
+                              f"{', '.join(f'{x:g}' for x in setup.table_ball_mm)} mm, tool ball "
+                              f"{', '.join(f'{x:g}' for x in tool_point)} mm "
+                              f"(L0 {np.linalg.norm(setup.offset_mm):g} mm)")
+    atomic_write_text(out, text)
+    print(f"wrote {out}: {n} poses ({setup.label} sweep), RTCP on; nominal bar length "
+          f"{np.linalg.norm(setup.offset_mm):g} mm at every pose")
+    return 0
+
+
 def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
     if args.instrument == "sphere-probe":
         return _run_probe(args)
+    if args.instrument == "ballbar":
+        return _run_ballbar(args)
     if args.dialect == "heidenhain":
         from pige_sym.errors import InputError
 
@@ -112,6 +149,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="output dialect (heidenhain: sphere-probe only)")
     p.add_argument("--instrument", choices=INSTRUMENT_CHOICES, default="rtest", help="the test's instrument")
     add_probe_program_arguments(p)
+    add_ballbar_arguments(p)
     p.add_argument("--out", required=True, help="program file to write")
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.set_defaults(handler=_run)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 
+from pige_sym.cli._ballbar import add_ballbar_arguments
 from pige_sym.cli._probe import INSTRUMENT_CHOICES, add_probe_program_arguments
 from pige_sym.cli._setup import (
     add_setup_arguments,
@@ -66,11 +67,39 @@ def _run_probe(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_ballbar(args: argparse.Namespace) -> int:
+    from pige_sym.cli._ballbar import ballbar_setup_of
+    from pige_sym.kernels import load_kernels
+    from pige_sym.measurements.ballbar import write_ballbar
+    from pige_sym.simulation.ballbar import simulate_ballbar
+
+    kern = load_kernels(args.machine)
+    if args.effect:
+        raise InputError("--effect: the ballbar simulation is exact for the PIGEs and zero-position errors only")
+    finite_option(args.noise, "--noise", minimum=0.0)
+    setup = ballbar_setup_of(args, kern.MACHINE_CODE)
+    pige = pige_values(args.pige, kern.MACHINE_CODE, args.seed)
+    inputs = [x for x in (args.pige,) if os.path.isfile(x)]
+    out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
+    truth_path = check_output(out.with_name(out.stem + ".truth.json"), force=args.force, inputs=inputs,
+                              what="truth sidecar")
+    run = simulate_ballbar(kern.MACHINE_CODE, setup, pige=pige, noise_um=args.noise, seed=args.seed, zero=args.zero)
+    write_ballbar(run, out)
+    truth = {"machine": kern.MACHINE_CODE, "instrument": "ballbar", "setup": setup.label, "pige": pige,
+             "noise_um": args.noise, "seed": args.seed, "zero": args.zero, "model": "exact |T - P| - L0"}
+    atomic_write_text(truth_path, to_json(truth) + "\n")
+    print(f"wrote {out} ({run.n_rows} rows, {setup.label} setup, bar {run.length_mm:g} mm, zero {args.zero}) "
+          f"and {truth_path}")
+    return 0
+
+
 def _run(args: argparse.Namespace) -> int:
     from pige_sym.kernels import load_kernels
 
     if args.instrument == "sphere-probe":
         return _run_probe(args)
+    if args.instrument == "ballbar":
+        return _run_ballbar(args)
     from pige_sym.measurements.rtest_writer import write_measurement
     from pige_sym.model.effects import parse_effect
     from pige_sym.model.trajectories import make_trajectory
@@ -130,6 +159,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--instrument", choices=INSTRUMENT_CHOICES, default="rtest",
                    help="rtest (a measurement file) or sphere-probe (the probe log of a probing program)")
     add_probe_program_arguments(p)
+    add_ballbar_arguments(p)
     p.add_argument("--dialect", choices=PROBE_DIALECTS, default="linuxcnc", help="probing program and log dialect")
     p.add_argument("--program", help="probing program to run (default: the one pige program would write)")
     p.add_argument("--setup-offset", default="0,0,0", help="true minus nominal sphere centre [um] (default 0,0,0)")

@@ -20,10 +20,29 @@ def _trajectory(args: argparse.Namespace):  # noqa: ANN202
 def _projection(args: argparse.Namespace) -> int:
     from pige_sym.identification.studies import projection_study
 
+    if args.instrument == "ballbar":
+        return _ballbar_projection(args)
     kern, traj = _trajectory(args)
     study = projection_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), sweep=args.sweep,
                              presets=args.presets, noise_um=args.noise, seed=args.seed, progress=not args.json)
     print(to_json(study.to_dict()) if args.json else study.format())
+    return 0
+
+
+def _ballbar_projection(args: argparse.Namespace) -> int:
+    """Each candidate ballbar setup alone: what it determines and what it cannot see."""
+    from pige_sym.kernels import load_kernels
+    from pige_sym.planning.ballbar import candidate_setups, evaluate, format_setups
+
+    code = load_kernels(args.machine).MACHINE_CODE
+    sets = sorted((evaluate(code, [s], args.noise) for s in candidate_setups(code)),
+                  key=lambda s: (-s.determined, -s.rank, s.worst_std))
+    if args.json:
+        print(to_json([{"setups": s.labels, "rank": s.rank, "determined": s.determined, "std": s.std,
+                        "undetermined": s.undetermined} for s in sets]))
+    else:
+        text = format_setups(code, sets, None, target=None, noise_um=args.noise)
+        print(text + "\n\nno single setup determines all PIGEs: pige plan --instrument ballbar picks a set")
     return 0
 
 
@@ -58,6 +77,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--presets", type=int, default=50, help="random presets (default %(default)s)")
     p.add_argument("--sweep", type=int, default=0, help="also N directions over 180 deg in the XY plane")
     p.add_argument("--noise", type=float, default=0.25, help="sensor noise [um]")
+    p.add_argument("--instrument", choices=["rtest", "ballbar"], default="rtest",
+                   help="ballbar: rank the ISO 10791-6 style setups instead of projections")
     p.set_defaults(handler=_projection)
     s = sub.add_parser("sobol", help="Sobol sensitivity indices per projection",
                        epilog="example:\n  pige study sobol --trajectory cone-frustum --samples 4096",

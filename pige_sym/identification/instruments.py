@@ -65,6 +65,13 @@ def whitened_normal(m: Measurement, design: np.ndarray, data: np.ndarray, rotati
         raise InputError(f"not a {INSTRUMENT} measurement")
     if 0 in set(rows.tolist()):
         raise InputError("the reference row of a probe measurement is not an observation (it defines c_nom)")
+    a, y = whitened_rows(m, design, data, rotations, rows)
+    return a.T @ a, a.T @ y, float(y @ y)
+
+
+def whitened_rows(m: Measurement, design: np.ndarray, data: np.ndarray, rotations: np.ndarray,
+                  rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``L⁻¹A`` (3r, P) and ``L⁻¹y`` (3r,) of a probe measurement, ``C = L Lᵀ`` scaled to a mean variance of 1."""
     cov = probe_covariance(m, rotations, rows)
     cov /= float(np.mean(np.diag(cov)))
     chol = np.linalg.cholesky(cov)
@@ -72,4 +79,4 @@ def whitened_normal(m: Measurement, design: np.ndarray, data: np.ndarray, rotati
 
     a = solve_triangular(chol, design[rows].reshape(-1, design.shape[2]), lower=True)
     y = solve_triangular(chol, data[rows].reshape(-1), lower=True)
-    return a.T @ a, a.T @ y, float(y @ y)
+    return a, y
