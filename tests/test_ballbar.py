@@ -98,7 +98,8 @@ def test_the_format_round_trips_and_bad_files_are_refused_with_their_line(tmp_pa
     lines = text.splitlines()
     header = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
     cases = {
-        "first dL_um is not 0": lines[:header + 1] + [lines[header + 1].rsplit(",", 1)[0] + ",0.5"] + lines[header + 2:],
+        "first dL_um is not 0": lines[:header + 1] + [lines[header + 1].rsplit(",", 1)[0] + ",0.5"]
+        + lines[header + 2:],
         "not a finite number": lines[:header + 3] + [lines[header + 3].rsplit(",", 1)[0] + ",nan"] + lines[header + 4:],
         "columns must be": lines[:header] + ["t_s,A_deg,dL_um"] + lines[header + 1:],
         "bar length": [ln.replace("# offset_mm: 100.0, 0.0, 0.0", "# offset_mm: 1.0, 0.0, 0.0") for ln in lines],
