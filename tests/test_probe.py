@@ -243,3 +243,40 @@ def test_the_probe_demo_finds_the_truth(tmp_path, capsys) -> None:
     out = capsys.readouterr().out
     assert "within" in out and "standard errors of its estimate: yes" in out
     assert (tmp_path / "demo" / "part_comp.ngc").read_text() != (tmp_path / "demo" / "part.ngc").read_text()
+
+
+def test_a_direction_dependent_trigger_radius_biases_the_location_errors(tmp_path) -> None:
+    """What the data cannot show (docs/probe.md): a fixed pattern turns lobing or a Z pre-travel into a common
+    shift v of every centre, which enters as (I − R_i)·v, the pattern of an axis-line offset."""
+    traj = make_trajectory(AC, "cone-frustum")
+    text = render_probe_program(plan_probing(SETUP, traj.angles_deg, traj.description), "siemens")
+    fits = {}
+    for name, options in (("clean", {}), ("lobing", {"lobing_um": 1.0}), ("vertical", {"vertical_um": 2.0})):
+        log = _write(tmp_path, run_probe_program(text, "siemens", ProbeMachine(SETUP, {}, noise_um=0.01, seed=1,
+                                                                              **options)), f"{name}.txt")
+        fits[name] = identify(import_probe_log(log, "siemens", SPEC))
+    clean = dict(zip(fits["clean"].parameters, fits["clean"].values, strict=True))
+    lob = dict(zip(fits["lobing"].parameters, fits["lobing"].values, strict=True))
+    vert = dict(zip(fits["vertical"].parameters, fits["vertical"].values, strict=True))
+    assert lob["EX0C"] - clean["EX0C"] == pytest.approx(1.0, abs=0.1)
+    assert vert["EZ0A"] - clean["EZ0A"] < -2.0
+    assert abs(fits["lobing"].rms_um - fits["clean"].rms_um) < 0.01  # the residual cannot tell
+
+
+def test_plan_and_study_for_the_probe(tmp_path, capsys) -> None:
+    from pige_sym.planning.probe import plan_probe, predict_probe
+
+    best, tried = plan_probe(SETUP, budget_s=1200)
+    assert best.seconds <= 1200 and all(p.seconds <= 1200 for p in tried)
+    assert best.worst == min(p.worst for p in tried)
+    # the coupling costs precision: an analysis ignoring it would claim smaller errors for the location PIGEs
+    pred = predict_probe(SETUP, make_trajectory(AC, "cone-frustum", points=12).angles_deg, contact_sigma_um=1.0)
+    assert all(pred.std[n] >= pred.std_ignoring_coupling[n] * 0.999 for n in pred.std)
+    assert max(pred.std[n] / pred.std_ignoring_coupling[n] for n in pred.std) > 1.3
+    out = tmp_path / "plan.csv"
+    common = ["--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius", "1.5"]
+    assert main(["plan", "--instrument", "sphere-probe", *common, "--budget", "1200", "--out", str(out)]) == 0
+    assert main(["program", "--instrument", "sphere-probe", *common, "--contacts", str(best.contacts),
+                 "--trajectory", str(out), "--out", str(tmp_path / "p.ngc"), "--dialect", "linuxcnc"]) == 0
+    assert main(["study", "projection", "--instrument", "sphere-probe"]) == 0
+    assert "ignoring it" in capsys.readouterr().out

@@ -15,6 +15,7 @@ import argparse
 import math
 from typing import Any
 
+from pige_sym.cli._probe import add_probe_program_arguments
 from pige_sym.constants import DEFAULT_DWELL_S, DEFAULT_MACHINE, DEFAULT_MOVE_S
 from pige_sym.errors import InputError
 
@@ -136,12 +137,44 @@ def _run_ballbar(args: argparse.Namespace) -> int:
     return 0 if chosen is not None else 1
 
 
+def _run_probe(args: argparse.Namespace) -> int:
+    """Poses and contacts of a touch-probe test within a probing-time budget."""
+    from pige_sym.cli._probe import probe_setup
+    from pige_sym.files import atomic_write_text, check_output, to_json
+    from pige_sym.kernels import load_kernels
+    from pige_sym.planning.probe import angle_file_text, coupling_study, plan_probe
+
+    kern = load_kernels(args.machine)
+    setup = probe_setup(args, kern.MACHINE_CODE)
+    out = check_output(args.out, force=args.force, what="--out") if args.out else None
+    best, tried = plan_probe(setup, budget_s=args.budget, contact_sigma_um=args.noise, pose_s=args.pose_time,
+                             contact_s=args.contact_time)
+    if out is not None:
+        note = (f"pige plan --instrument sphere-probe: {best.poses} poses, {best.contacts} contacts, "
+                f"{best.seconds:.0f} s, worst predicted std {best.worst:.3g}")
+        atomic_write_text(out, angle_file_text(best, tuple(kern.ROTARY_AXES), note))
+    if args.json:
+        print(to_json({"poses": best.poses, "contacts": best.contacts, "seconds": best.seconds, "std": best.std,
+                       "std_ignoring_coupling": best.std_ignoring_coupling, "candidates": len(tried),
+                       "out": None if out is None else str(out)}))
+        return 0
+    print(f"best of {len(tried)} probe tests within {args.budget:g} s (contact scatter {args.noise:g} um):")
+    print(coupling_study(best))
+    if out is not None:
+        print(f"\nwrote {out}; next: pige program --instrument sphere-probe --contacts {best.contacts} "
+              f"--trajectory {out} --sphere {args.sphere} --sphere-radius {args.sphere_radius:g} "
+              f"--stylus-radius {args.stylus_radius:g} --out probe.ngc --dialect linuxcnc")
+    return 0
+
+
 def _run(args: argparse.Namespace) -> int:
     from pige_sym.files import to_json
     from pige_sym.planning import parse_limits
 
     if args.instrument == "ballbar":
         return _run_ballbar(args)
+    if args.instrument == "sphere-probe":
+        return _run_probe(args)
 
     setup = _setup(args)
     limits = parse_limits(args.limits, setup.kernels)
@@ -194,8 +227,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--grade", metavar="TRAJECTORY",
                    help="grade this test instead: cone-frustum, figure-eight, steps, an angle CSV or an NC program")
     p.add_argument("--out", help="angle file of the planned test")
-    p.add_argument("--instrument", choices=["rtest", "ballbar"], default="rtest",
-                   help="ballbar: choose the smallest set of ballbar setups instead of R-test poses")
+    p.add_argument("--instrument", choices=["rtest", "ballbar", "sphere-probe"], default="rtest",
+                   help="ballbar: the smallest set of setups; sphere-probe: poses and contacts for a time budget")
+    add_probe_program_arguments(p)
+    p.add_argument("--budget", type=float, default=1800.0, help="sphere-probe: probing time budget [s]")
+    p.add_argument("--pose-time", type=float, default=20.0, help="sphere-probe: time per pose (retract, rotate) [s]")
+    p.add_argument("--contact-time", type=float, default=8.0, help="sphere-probe: time per contact [s]")
     p.add_argument("--target", type=float, help="ballbar: largest acceptable predicted std [um or urad] (default 2)")
     p.add_argument("--force", action="store_true", help="replace an existing --out file")
     p.add_argument("--json", action="store_true", help="print the figures as one JSON object")

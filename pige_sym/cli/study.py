@@ -22,6 +22,8 @@ def _projection(args: argparse.Namespace) -> int:
 
     if args.instrument == "ballbar":
         return _ballbar_projection(args)
+    if args.instrument == "sphere-probe":
+        return _probe_projection(args)
     kern, traj = _trajectory(args)
     study = projection_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), sweep=args.sweep,
                              presets=args.presets, noise_um=args.noise, seed=args.seed, progress=not args.json)
@@ -43,6 +45,25 @@ def _ballbar_projection(args: argparse.Namespace) -> int:
     else:
         text = format_setups(code, sets, None, target=None, noise_um=args.noise)
         print(text + "\n\nno single setup determines all PIGEs: pige plan --instrument ballbar picks a set")
+    return 0
+
+
+def _probe_projection(args: argparse.Namespace) -> int:
+    """What a touch-probe test determines, with the reference pose's coupling and ignoring it."""
+    import numpy as np
+
+    from pige_sym.nc.probe_program import ProbeSetup
+    from pige_sym.planning.probe import coupling_study, predict_probe
+
+    kern, traj = _trajectory(args)
+    setup = ProbeSetup(kern.MACHINE_CODE, np.array([100.0, 20.0, 60.0]), np.zeros(3), 12.7, 1.5)
+    pred = predict_probe(setup, traj.angles_deg, contact_sigma_um=args.noise)
+    if args.json:
+        print(to_json({"std": pred.std, "std_ignoring_coupling": pred.std_ignoring_coupling, "poses": pred.poses,
+                       "contacts": pred.contacts}))
+    else:
+        print(f"sphere probe on {kern.MACHINE_CODE}, {traj.description}, sphere 12.7 mm at 100, 20, 60 mm, contact "
+              f"scatter {args.noise:g} um: every PIGE is determined (full 3-D centres)\n" + coupling_study(pred))
     return 0
 
 
@@ -77,8 +98,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--presets", type=int, default=50, help="random presets (default %(default)s)")
     p.add_argument("--sweep", type=int, default=0, help="also N directions over 180 deg in the XY plane")
     p.add_argument("--noise", type=float, default=0.25, help="sensor noise [um]")
-    p.add_argument("--instrument", choices=["rtest", "ballbar"], default="rtest",
-                   help="ballbar: rank the ISO 10791-6 style setups instead of projections")
+    p.add_argument("--instrument", choices=["rtest", "ballbar", "sphere-probe"], default="rtest",
+                   help="ballbar: rank the ISO 10791-6 style setups; sphere-probe: what a probe test determines, "
+                        "with the reference pose's coupling")
     p.set_defaults(handler=_projection)
     s = sub.add_parser("sobol", help="Sobol sensitivity indices per projection",
                        epilog="example:\n  pige study sobol --trajectory cone-frustum --samples 4096",

@@ -458,12 +458,14 @@ def _instrument_notes(m: Measurement, findings: list[Finding]) -> list[str]:
     kind = instrument(m)
     if kind == "rtest":
         return []
+    blind = (" A probe whose trigger radius depends on the direction biases the axis-line offsets without a trace "
+             "in the residuals (docs/probe.md): calibrate it per direction." if kind == "sphere-probe" else "")
     if not findings:
         return [f"{kind}: the search treats the poses as independent; the final estimate is the identification "
-                "with the reference pose's correlation (standard errors from it)"]
+                "with the reference pose's correlation (standard errors from it)." + blind]
     return [f"{kind}: the search and the final fit treat the poses as independent; the reference pose's "
             "correlation is not in them, so the standard errors of the location errors are understated "
-            "(pige identify gives them honestly for the PIGE model)"]
+            "(pige identify gives them honestly for the PIGE model)." + blind]
 
 
 def _residuals(setup: _Setup, model: Model) -> np.ndarray:
