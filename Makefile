@@ -41,7 +41,8 @@ lint: $(STAMP)  ## ruff + mypy on pige_sym/
 demo: $(STAMP)  ## the whole story on the default AC machine
 	$(PY) -m pige_sym demo --force
 
-bench: $(STAMP)  ## run benchmarks/ and write benchmarks/RESULTS.md
+bench: $(STAMP)  ## install the peers (JAX, CasADi: the bench extra), run benchmarks/, write benchmarks/RESULTS.md
+	$(PY) -m pip install --quiet -e '.[bench]' || echo "bench extra not installed: the peer rows will say skipped"
 	$(PY) benchmarks/run.py
 
 clean:  ## remove the virtual environment and caches

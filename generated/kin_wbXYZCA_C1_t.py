@@ -14,7 +14,7 @@
 #    8  EA0A     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 7f65f99bca94964f
+# input hash   : 7499d6d7f8d64367
 """R-test kernels for wbXYZCA(C1)t (generated; do not edit — pige gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -39,7 +39,7 @@ UNITS = {'EY0A': 'um', 'EZ0A': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EB0A': 'urad',
 BASIS = ('1', 'cos(A)', 'sin(A)', 'cos(C)', 'sin(C)', 'cos(A)*cos(C)', 'cos(A)*sin(C)', 'sin(A)*cos(C)', 'sin(A)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '7f65f99bca94964f'
+GENERATOR_HASH = '7499d6d7f8d64367'
 
 
 def _angles(angles_deg: Any) -> np.ndarray:
@@ -179,6 +179,34 @@ def coefficients(ball_mm, pivots_mm=None, tool_mm=None):
     return g
 
 
+_G_CACHE = {}
+
+
+def _geometry_key(ball_mm, pivots_mm, tool_mm):
+    """A hashable key of a geometry (None when it cannot be made: then nothing is cached)."""
+    try:
+        pivots = None if pivots_mm is None else tuple(
+            sorted((str(a), tuple(map(float, np.ravel(v)))) for a, v in pivots_mm.items()))
+        tool = None if tool_mm is None else tuple(map(float, np.ravel(tool_mm)))
+        return tuple(map(float, np.ravel(ball_mm))), pivots, tool
+    except (TypeError, ValueError, AttributeError):
+        return None
+
+
+def _coefficients_cached(ball_mm, pivots_mm, tool_mm):
+    """``coefficients`` of a geometry seen before, not recomputed (the cached tensor is read-only)."""
+    key = _geometry_key(ball_mm, pivots_mm, tool_mm)
+    g = None if key is None else _G_CACHE.get(key)
+    if g is None:
+        g = coefficients(ball_mm, pivots_mm, tool_mm)
+        if key is not None:
+            g.flags.writeable = False
+            if len(_G_CACHE) >= 64:
+                _G_CACHE.clear()
+            _G_CACHE[key] = g
+    return g
+
+
 def jacobian(angles_deg, params=None, ball_mm=None, pivots_mm=None, tool_mm=None, out=None):
     """Jacobian of the deviation, shape=(n, 3, P) [µm per µm or µrad].
 
@@ -189,7 +217,7 @@ def jacobian(angles_deg, params=None, ball_mm=None, pivots_mm=None, tool_mm=None
     if ball_mm is None:
         raise ValueError("jacobian needs ball_mm")
     b = basis(angles_deg)
-    g = coefficients(ball_mm, pivots_mm, tool_mm)
+    g = _coefficients_cached(ball_mm, pivots_mm, tool_mm)
     n = b.shape[0]
     if out is None:
         out = np.empty((n, 3, g.shape[2]))
@@ -214,7 +242,7 @@ def deviation(angles_deg, params, ball_mm, pivots_mm=None, tool_mm=None):
     tool_mm : (3,) [mm], required with tool-side rotary axes
     """
     p = _params(params)
-    g = coefficients(ball_mm, pivots_mm, tool_mm)
+    g = _coefficients_cached(ball_mm, pivots_mm, tool_mm)
     return basis(angles_deg) @ (g @ p)
 
 
