@@ -145,7 +145,7 @@ def identification_rows() -> list[tuple[str, int, float]]:
         for name, build in builders.items():
             fn = build(n)
             fn(ang)
-            rows.append((name, n, _median(lambda f=fn, a=ang: _gauss_newton(f, a, y), 3 if n > 1000 else 20)))
+            rows.append((name, n, _median(lambda f=fn, a=ang, yy=y: _gauss_newton(f, a, yy), 3 if n > 1000 else 20)))
     return rows
 
 
