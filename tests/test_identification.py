@@ -173,3 +173,12 @@ def test_single_projection_gn_and_double_differential_agree(projection) -> None:
     expected = set(gn.unobserved) | {c for c in gn.unidentifiable
                                      if not any(c.startswith(f"{u} [") and c.count("[") == 1 for u in gn.unobserved)}
     assert listed == expected
+
+
+def test_the_student_t_quantile_matches_scipy() -> None:
+    from scipy.special import stdtrit
+
+    from pige_sym.identification.result import student_t_975
+
+    for dof in [*range(1, 300), 999, 1000, 1001, 5000, 10**5, 3 * 10**6]:
+        assert student_t_975(dof) == pytest.approx(float(stdtrit(dof, 0.975)), rel=1e-11), dof

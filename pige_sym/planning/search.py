@@ -169,7 +169,7 @@ def _search_family(ctx: _Context, fam: Family) -> list[_Candidate]:
             return 2 * SINGULAR if angles is None else _score(ctx, angles, _ball(ctx, x[nb:]))
 
         res = optimize.differential_evolution(objective, fam.bounds + region, seed=ctx.req.seed + vi, maxiter=6,
-                                              popsize=5, tol=1e-3, polish=False, init="sobol")
+                                              popsize=5, tol=1e-3, polish=False, init="latinhypercube")
         angles = build(res.x)
         if angles is not None and res.fun < SINGULAR:
             out.append(_Candidate(fam.name, fam.describe(res.x[:nb], variant), angles, _ball(ctx, res.x[nb:]),
