@@ -189,6 +189,32 @@ def test_prediction_holds_over_50_simulated_runs_every_machine(code) -> None:
 # ------------------------------------------------------------------------------------------ limits, ball, criteria
 
 
+@pytest.mark.parametrize("criterion", ["worst", "A", "D"])
+def test_batched_scores_equal_one_by_one_scores(criterion) -> None:
+    """The population is scored at once in the search: same values as scoring each table alone,
+    including tables that leave a linear limit, singular designs and unbuildable ones."""
+    from pige_sym.planning.families import Structure
+    from pige_sym.planning.prediction import SINGULAR
+    from pige_sym.planning.search import _Context, _score, _score_batch, _structural_estimable
+
+    kern = load_kernels(AC)
+    limits = parse_limits(["A=-90:90", "Z=-60:200"], kern)
+    req = PlanRequest(_setup(AC), 12, limits, criterion=criterion)
+    ctx = _Context(req, Structure(), _structural_estimable(req), [], schedule_times(13, 5, 5))
+    rng = np.random.default_rng(4)
+    tables: list = [np.vstack([np.zeros(2), np.column_stack([rng.uniform(-90, 90, 12), rng.uniform(0, 360, 12)])])
+                    for _ in range(6)]
+    tables.append(np.vstack([np.zeros(2), np.column_stack([np.full(12, 30.0), np.linspace(0, 330, 12)])]))
+    tables.append(np.zeros((13, 2)))  # every pose the reference: singular
+    tables.append(None)
+    balls = [np.asarray(BALL, dtype=float)] * len(tables)
+    batch = _score_batch(ctx, tables, balls)
+    single = [2 * SINGULAR if t is None else _score(ctx, t, balls[0]) for t in tables]
+    left_limits = [linear_violation(kern, t, req.setup, limits).max() > 1e-6 for t in tables[:-1]]
+    assert any(left_limits) and not all(left_limits) and single[-2] == SINGULAR
+    np.testing.assert_allclose(batch, single, rtol=1e-9)
+
+
 def test_rotary_and_linear_limits_are_respected() -> None:
     kern = load_kernels(AC)
     limits = parse_limits(["A=-40:100", "C=-90:270", "Z=-60:200"], kern)

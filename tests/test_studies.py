@@ -32,6 +32,35 @@ def test_paper_projection_finding_in_our_model(traj) -> None:
         assert r.success_rate >= 0.8
 
 
+def test_exact_sobol_indices_agree_with_scipy_monte_carlo() -> None:
+    """The closed form against scipy.stats.sobol_indices (an independent estimator) on a large sample."""
+    tr = cone_frustum(AC)
+    exact = sobol_study(AC, tr)
+    mc = sobol_study(AC, tr, n=2**14, seed=3)
+    assert exact.n_samples is None and exact.method.startswith("exact")
+    np.testing.assert_allclose(exact.first_order, mc.first_order, atol=0.02)
+    np.testing.assert_allclose(exact.total_order, mc.total_order, atol=0.02)
+
+
+def test_exact_sobol_of_a_small_quadratic_form_by_brute_force() -> None:
+    """x1² + 3 x1 x2 + 0.5 x2², x ~ U(±1) x U(±2): conditional variances by quadrature on a grid."""
+    from pige_sym.identification.studies import exact_sobol_quadratic
+
+    m = np.array([[1.0, 1.5], [1.5, 0.5]])
+    half = np.array([1.0, 2.0])
+    g = 801  # midpoint grid on each axis
+    x1 = (np.arange(g) + 0.5) / g * 2 * half[0] - half[0]
+    x2 = (np.arange(g) + 0.5) / g * 2 * half[1] - half[1]
+    f = m[0, 0] * x1[:, None] ** 2 + 2 * m[0, 1] * x1[:, None] * x2[None, :] + m[1, 1] * x2[None, :] ** 2
+    v = f.var()
+    s1 = np.array([f.mean(axis=1).var(), f.mean(axis=0).var()]) / v
+    st = np.array([f.var(axis=0).mean(), f.var(axis=1).mean()]) / v
+    first, total = exact_sobol_quadratic(m, half)
+    np.testing.assert_allclose(first, s1, atol=1e-4)
+    np.testing.assert_allclose(total, st, atol=1e-4)
+    assert np.isnan(exact_sobol_quadratic(np.zeros((2, 2)), half)[0]).all()
+
+
 def test_sobol_indices_are_consistent() -> None:
     tr = cone_frustum(AC)
     s = sobol_study(AC, tr, n=1024)

@@ -112,7 +112,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--projection", default="xyz", help="projection of the identification tables (default xyz)")
     p.add_argument("--with-zero", action="store_true", help="also estimate the zero-position errors")
     p.add_argument("--presets", type=int, default=50, help="random presets of the projection study (default 50)")
-    p.add_argument("--samples", type=int, default=2048, help="Sobol base sample size, a power of 2 (default 2048)")
+    p.add_argument("--samples", type=int, default=None,
+                   help="Sobol indices estimated by Monte-Carlo on this base sample size (a power of 2) instead of "
+                        "the exact closed form (default: exact)")
     p.add_argument("--seed", type=int, default=0, help="seed of the studies")
     p.add_argument("--json", action="store_true", help="print one JSON object (the results and the report path)")
     p.set_defaults(handler=_run)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from pige_sym.constants import DEFAULT_MACHINE
+from pige_sym.errors import InputError
 from pige_sym.files import to_json
 
 
@@ -70,6 +71,8 @@ def _probe_projection(args: argparse.Namespace) -> int:
 def _sobol(args: argparse.Namespace) -> int:
     from pige_sym.identification.studies import sobol_study
 
+    if args.samples is not None and (args.samples < 2 or args.samples & (args.samples - 1)):
+        raise InputError(f"--samples must be a power of 2, got {args.samples}")
     kern, traj = _trajectory(args)
     study = sobol_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), n=args.samples,
                         default_range=args.range, seed=args.seed)
@@ -103,10 +106,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "with the reference pose's coupling")
     p.set_defaults(handler=_projection)
     s = sub.add_parser("sobol", help="Sobol sensitivity indices per projection",
-                       epilog="example:\n  pige study sobol --trajectory cone-frustum --samples 4096",
+                       epilog="examples:\n  pige study sobol --trajectory cone-frustum\n"
+                              "  pige study sobol --samples 4096   # Monte-Carlo estimate, to cross-check",
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     _common(s)
-    s.add_argument("--samples", type=int, default=2048, help="base sample size (power of 2)")
+    s.add_argument("--samples", type=int, default=None,
+                   help="estimate with scipy.stats.sobol_indices on this base sample size (a power of 2) "
+                        "instead of the exact closed form (default: exact)")
     s.add_argument("--range", type=float, default=15.0, help="half range of every PIGE [um|urad]")
     s.set_defaults(handler=_sobol)
     try:

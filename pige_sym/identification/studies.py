@@ -14,9 +14,21 @@ stage-by-stage results of the first preset (preset vs identified, error).
 
 Sobol study
 -----------
-First-order and total Sobol indices (``scipy.stats.sobol_indices``) of the
-mean-square projected deviation over the trajectory (µm²) with respect to each
-PIGE, every PIGE uniform on ``[-range, +range]`` (µm or µrad), per projection.
+First-order and total Sobol indices of the mean-square projected deviation over
+the trajectory (µm²) with respect to each PIGE, every PIGE uniform on
+``[-h, +h]`` (µm or µrad), per projection.  The output is a quadratic form
+``f(x) = xᵀ M x`` with ``M = AᵀA / m`` (``A`` the projected Jacobian, ``m`` its
+rows), so the indices are exact in closed form for independent inputs with zero
+mean: with ``s_i = h_i²/3`` and ``Var(x_i²) = 4 h_i⁴/45``,
+
+* ``V_i = M_ii² · 4 h_i⁴/45`` (first order: ``E[f | x_i]`` keeps only ``M_ii x_i²``),
+* ``V_Ti = V_i + 4 s_i Σ_{j≠i} M_ij² s_j`` (the cross terms ``2 M_ij x_i x_j``),
+* ``V = Σ_i V_i + 2 Σ_{i≠j} M_ij² s_i s_j`` (all terms are uncorrelated),
+
+``S1_i = V_i / V`` and ``ST_i = V_Ti / V`` (NaN when ``V = 0``: nothing to
+share).  Given a sample size, ``scipy.stats.sobol_indices`` (Saltelli/Jansen
+Monte-Carlo estimators) computes the same indices instead; the tests check the
+two agree.
 """
 
 from __future__ import annotations
@@ -202,10 +214,18 @@ class SobolStudy:
     projections: list[str]
     first_order: np.ndarray  # (n_proj, P)
     total_order: np.ndarray  # (n_proj, P)
-    n_samples: int
+    n_samples: int | None  # None: exact closed form
+
+    @property
+    def method(self) -> str:
+        """How the indices were computed, in words."""
+        if self.n_samples is None:
+            return "exact (closed form of a quadratic form in independent uniform PIGEs)"
+        return f"Monte-Carlo estimate (scipy.stats.sobol_indices), {self.n_samples} base samples"
 
     def to_dict(self) -> dict[str, Any]:
         return {"machine": self.machine, "trajectory": self.trajectory, "n_samples": self.n_samples,
+                "method": "exact" if self.n_samples is None else "monte-carlo",
                 "output": "mean-square projected deviation over the trajectory [um^2]",
                 "indices": {pr: {"first": dict(zip(self.parameters, self.first_order[i].tolist(), strict=True)),
                                  "total": dict(zip(self.parameters, self.total_order[i].tolist(), strict=True))}
@@ -213,7 +233,8 @@ class SobolStudy:
 
     def format(self) -> str:
         lines = [f"Sobol indices: {self.machine}, {self.trajectory}, output = mean-square projected deviation",
-                 "", f"{'parameter':<10}" + "".join(f"{p + ' S1':>10}{p + ' ST':>10}" for p in self.projections)]
+                 f"method: {self.method}", "",
+                 f"{'parameter':<10}" + "".join(f"{p + ' S1':>10}{p + ' ST':>10}" for p in self.projections)]
         for j, name in enumerate(self.parameters):
             lines.append(f"{name:<10}" + "".join(f"{self.first_order[i, j]:>10.3f}{self.total_order[i, j]:>10.3f}"
                                                  for i in range(len(self.projections))))
@@ -221,15 +242,55 @@ class SobolStudy:
 
 
 def sobol_study(machine: str, trajectory: Trajectory, *, projections: list[str] | None = None,
-                ranges: dict[str, float] | None = None, default_range: float = 15.0, n: int = 2048,
+                ranges: dict[str, float] | None = None, default_range: float = 15.0, n: int | None = None,
                 ball_mm: Any = DEFAULT_BALL_MM, tool_mm: Any = None, seed: int = 0) -> SobolStudy:
-    """Sobol indices of the mean-square projected deviation w.r.t. each PIGE (module docstring)."""
+    """Sobol indices of the mean-square projected deviation w.r.t. each PIGE (module docstring).
+
+    Parameters
+    ----------
+    n : int or None
+        ``None`` (default): the exact closed form.  A power of two: the Monte-Carlo
+        estimate of ``scipy.stats.sobol_indices`` with that base sample size.
+    """
     kern = load_kernels(machine)
     names = list(kern.LOCATION_PARAMETERS)
     projs = [parse_projection(p) for p in (projections or DEFAULT_PROJECTIONS)]
     jac = kern.jacobian(trajectory.angles_deg, None, ball_mm, None, tool_mm)[1:, :, :8]  # (n, 3, 8)
     pj = [p.apply_model(jac).reshape(-1, 8) for p in projs]
-    half = [float((ranges or {}).get(p, default_range)) for p in names]
+    half = np.array([float((ranges or {}).get(p, default_range)) for p in names])
+    if n is None:
+        first, total = np.array([exact_sobol_quadratic(a.T @ a / len(a), half) for a in pj]).transpose(1, 0, 2)
+    else:
+        first, total = _monte_carlo_sobol(pj, half, n, seed)
+    return SobolStudy(kern.MACHINE_CODE, trajectory.description, names, [p.name for p in projs],
+                      first, total, n)
+
+
+def exact_sobol_quadratic(m: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First and total Sobol indices of ``xᵀ M x``, ``x_i`` independent uniform on ``±half_i``.
+
+    Parameters
+    ----------
+    m : (P, P) symmetric matrix
+    half : (P,) half ranges, same units as ``x``
+
+    Returns
+    -------
+    first, total : (P,) each; NaN when the output does not vary at all.
+    """
+    s = half**2 / 3.0
+    v_first = np.diag(m) ** 2 * 4.0 * half**4 / 45.0
+    cross = m**2 * np.outer(s, s)
+    np.fill_diagonal(cross, 0.0)
+    v_total = v_first + 4.0 * cross.sum(axis=1)
+    v = v_first.sum() + 2.0 * cross.sum()
+    if not v > 0.0:
+        return np.full_like(half, np.nan), np.full_like(half, np.nan)
+    return v_first / v, v_total / v
+
+
+def _monte_carlo_sobol(pj: list[np.ndarray], half: np.ndarray, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``scipy.stats.sobol_indices`` of the same outputs, ``n`` base samples."""
     from scipy import stats
 
     dists = [stats.uniform(loc=-h, scale=2 * h) for h in half]
@@ -239,5 +300,4 @@ def sobol_study(machine: str, trajectory: Trajectory, *, projections: list[str] 
         return np.array([((a @ x) ** 2).mean(axis=0) for a in pj])
 
     res = stats.sobol_indices(func=func, n=n, dists=dists, rng=np.random.default_rng(seed))
-    return SobolStudy(kern.MACHINE_CODE, trajectory.description, names, [p.name for p in projs],
-                      np.atleast_2d(res.first_order), np.atleast_2d(res.total_order), n)
+    return np.atleast_2d(res.first_order), np.atleast_2d(res.total_order)

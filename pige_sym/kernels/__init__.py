@@ -122,9 +122,13 @@ def load_kernels(code: str | MachineStructure) -> KernelModule:
     KernelModule
         The generated module (see :class:`~pige_sym.kernels.protocol.KernelModule`).
     """
+    if isinstance(code, str) and code in _CACHE:  # the exact spelling already loaded: no parse
+        return _CACHE[code]
     structure = parse_machine_code(code) if isinstance(code, str) else code
     key = structure.canonical
     if key in _CACHE:
+        if isinstance(code, str):
+            _CACHE[code] = _CACHE[key]
         return _CACHE[key]
     path, current = _locate(structure)
     if not current:
@@ -138,4 +142,6 @@ def load_kernels(code: str | MachineStructure) -> KernelModule:
     if kernels.MACHINE_CODE != key:
         raise KernelError(f"{path} holds kernels for {kernels.MACHINE_CODE!r}, not {key!r}: run pige gen")
     _CACHE[key] = kernels
+    if isinstance(code, str):
+        _CACHE[code] = kernels
     return kernels

@@ -26,6 +26,7 @@ axis the other one.  Times follow a dwell model: each point after the reference 
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from typing import Any
@@ -133,24 +134,38 @@ def cone_frustum(machine: str, *, half_angle: float = 30.0, incl: float = 10.0, 
         raise InputError("points must be >= 3 and turns > 0")
     if not 0 < half_angle < 90:
         raise InputError("half_angle must be between 0 and 90 degrees")
-    iota = np.radians(incl)
-    if ax == "X":
-        a = np.array([0.0, -np.sin(iota), np.cos(iota)])
-    else:
-        a = np.array([np.sin(iota), 0.0, np.cos(iota)])
-    x = np.array([1.0, 0.0, 0.0])
-    e1 = x - (x @ a) * a
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(a, e1)
-    n = int(round(points * turns))
-    phi = 2 * np.pi * np.arange(n) / points
-    alpha = np.radians(half_angle)
-    v = np.cos(alpha) * a + np.sin(alpha) * (np.outer(np.cos(phi), e1) + np.outer(np.sin(phi), e2))
+    v = cone_directions(half_angle, incl, ax, points, int(round(points * turns)))
     angles = kern.angles_for_direction(v, branch=branch)
     angles = np.vstack([np.zeros(len(kern.ROTARY_AXES)), angles])
     desc = f"cone-frustum half_angle={half_angle:g} incl={incl:g} incl_axis={ax} turns={float(turns)!r}"
     return Trajectory("cone-frustum", kern.ROTARY_AXES, angles,
                       dwell_times(angles, move_s=move_s, dwell_s=dwell_s, feed_deg_s=feed_deg_s), desc)
+
+
+def cone_directions(half_angle: float, incl: float, incl_axis: str, points: int, count: int) -> np.ndarray:
+    """Unit tool directions of the cone frustum (module docstring), shape=(count, 3).
+
+    Parameters
+    ----------
+    half_angle, incl : float [deg]
+    incl_axis : {"X", "Y"}
+        Upper case, checked by the caller.
+    points : int
+        Points per turn.
+    count : int
+        Points in all (``points · turns``).
+    """
+    iota = math.radians(incl)
+    if incl_axis == "X":
+        a = np.array([0.0, -math.sin(iota), math.cos(iota)])
+    else:
+        a = np.array([math.sin(iota), 0.0, math.cos(iota)])
+    e1 = np.array([1.0, 0.0, 0.0]) - a[0] * a
+    e1 /= math.sqrt(float(e1 @ e1))
+    e2 = np.array([a[1] * e1[2] - a[2] * e1[1], a[2] * e1[0] - a[0] * e1[2], a[0] * e1[1] - a[1] * e1[0]])
+    phi = 2 * np.pi * np.arange(count) / points
+    alpha = math.radians(half_angle)
+    return math.cos(alpha) * a + math.sin(alpha) * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
 
 
 def figure_eight(machine: str, *, amp_tilt: float = 30.0, amp_rotary: float = 60.0, phase_deg: float = 0.0,

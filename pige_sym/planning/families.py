@@ -39,7 +39,8 @@ from typing import Any
 import numpy as np
 
 from pige_sym.errors import InputError
-from pige_sym.model.trajectories import _roles, cone_frustum, figure_eight
+from pige_sym.kernels import load_kernels
+from pige_sym.model.trajectories import _roles, cone_directions, figure_eight
 
 DEFAULT_TILT_LIMIT_DEG = 90.0
 LINEAR_AXES = ("X", "Y", "Z")
@@ -238,11 +239,13 @@ class Family:
 
 
 def _cone(machine: str, n: int) -> Family:
+    kern = load_kernels(machine)
+
     def make(x: np.ndarray, v: dict[str, Any], count: int) -> np.ndarray:
+        # cone_frustum's poses without its checks and timing (the bounds keep the angles valid)
         per_turn = count // v["turns"]
-        tr = cone_frustum(machine, half_angle=float(x[0]), incl=float(x[1]), incl_axis=v["incl_axis"],
-                          points=per_turn, turns=v["turns"], branch=v["branch"])
-        return tr.angles_deg[1:]
+        directions = cone_directions(float(x[0]), float(x[1]), v["incl_axis"], per_turn, per_turn * v["turns"])
+        return np.asarray(kern.angles_for_direction(directions, branch=v["branch"]))
 
     variants = [{"incl_axis": ax, "branch": br, "turns": t} for ax in ("X", "Y") for br in (1, -1)
                 for t in (1, 2) if n % t == 0 and n // t >= 3]

@@ -290,11 +290,12 @@ class Estimable:
         return cls(np.eye(p), np.ones(p, dtype=bool))
 
 
-def criterion_and_dn(normal: np.ndarray, est: Estimable, criterion: str, noise_um: float
-                     ) -> tuple[float, np.ndarray]:
+def criterion_and_dn(normal: np.ndarray, est: Estimable, criterion: str, noise_um: float, *,
+                     gradient: bool = True) -> tuple[float, np.ndarray]:
     """Smooth criterion value (log scale) and ``F = ∂f/∂N`` (P × P) for a normal matrix.
 
     A design that cannot determine the estimable parameters returns ``SINGULAR`` and ``F = 0``.
+    With ``gradient=False`` only the value is computed (``F`` is returned as zeros).
     """
     t = est.basis
     m = t.T @ normal @ t
@@ -305,28 +306,57 @@ def criterion_and_dn(normal: np.ndarray, est: Estimable, criterion: str, noise_u
         return SINGULAR, np.zeros_like(normal)
     if not np.isfinite(minv).all():
         return SINGULAR, np.zeros_like(normal)
-    c = t @ minv @ t.T
     r = t.shape[1]
     if criterion == "D":
         value = -float(np.log(np.diag(chol)).sum()) / r + math.log(noise_um)
-        return value, -c / (2 * r)
-    d = np.clip(np.diag(c), 1e-300, None)
+        return value, (-(t @ minv @ t.T) / (2 * r) if gradient else np.zeros_like(normal))
+    if criterion not in ("A", "worst"):
+        raise InputError(f"unknown criterion {criterion!r}: use {', '.join(CRITERIA)}")
+    c = t @ minv @ t.T if gradient else None
+    d = np.clip(np.diag(c) if c is not None else np.einsum("ij,jk,ik->i", t, minv, t), 1e-300, None)
     cov_idx = np.flatnonzero(est.covered)
-    w = np.zeros(c.shape[0])
+    w = np.zeros(d.shape[0])
     if criterion == "A":
         total = float(d[cov_idx].sum())
         value = math.log(total * noise_um**2)
         w[cov_idx] = 1.0 / total
-    elif criterion == "worst":
+    else:
         q = SMOOTH_MAX_POWER
         logs = 0.5 * np.log(d[cov_idx]) + math.log(noise_um)
         top = logs.max()
         e = np.exp(q * (logs - top))
         value = top + math.log(e.sum()) / q
         w[cov_idx] = e / e.sum() / (2 * d[cov_idx])
+    return value, (-(c * w) @ c if c is not None else np.zeros_like(normal))
+
+
+def criterion_values(normals: np.ndarray, est: Estimable, criterion: str, noise_um: float) -> np.ndarray:
+    """:func:`criterion_and_dn`'s value for a stack of normal matrices (S, P, P), shape=(S,).
+
+    One batched Cholesky factorisation and inverse; when one of the matrices is not
+    positive definite the stack is evaluated one by one (so the values are the same).
+    """
+    t = est.basis
+    m = t.T @ normals @ t
+    try:
+        chol = np.linalg.cholesky(m)
+        minv = np.linalg.inv(m)
+    except np.linalg.LinAlgError:
+        return np.array([criterion_and_dn(n, est, criterion, noise_um, gradient=False)[0] for n in normals])
+    r = t.shape[1]
+    if criterion == "D":
+        values = -np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1) / r + math.log(noise_um)
+    elif criterion in ("A", "worst"):
+        d = np.clip(np.einsum("ij,sjk,ik->si", t, minv, t), 1e-300, None)[:, est.covered]
+        if criterion == "A":
+            values = np.log(d.sum(axis=1) * noise_um**2)
+        else:
+            logs = 0.5 * np.log(d) + math.log(noise_um)
+            top = logs.max(axis=1)
+            values = top + np.log(np.exp(SMOOTH_MAX_POWER * (logs - top[:, None])).sum(axis=1)) / SMOOTH_MAX_POWER
     else:
         raise InputError(f"unknown criterion {criterion!r}: use {', '.join(CRITERIA)}")
-    return value, -(c * w) @ c
+    return np.where(np.isfinite(minv).all(axis=(1, 2)), values, SINGULAR)
 
 
 def basis_derivatives(setup: Setup, angles_deg: np.ndarray) -> np.ndarray:

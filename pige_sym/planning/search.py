@@ -56,6 +56,7 @@ from pige_sym.planning.prediction import (
     Setup,
     criterion_and_dn,
     criterion_gradient,
+    criterion_values,
     design_rows,
     normal_matrix,
     predict,
@@ -135,10 +136,10 @@ def _score(ctx: _Context, angles: np.ndarray, ball: np.ndarray, *, joint: bool =
         return SINGULAR + viol
     if not joint:
         rows = design_rows(setup, angles[1:], projected_coefficients(setup))
-        return criterion_and_dn(normal_matrix(rows), ctx.est, ctx.req.criterion, setup.noise_um)[0]
+        return criterion_and_dn(normal_matrix(rows), ctx.est, ctx.req.criterion, setup.noise_um, gradient=False)[0]
     rows, extra, names = _joint(ctx, setup, angles)
     est = ctx.est if extra is None else _joint_estimable(ctx, extra.shape[2])
-    value, _ = criterion_and_dn(normal_matrix(rows, extra), est, ctx.req.criterion, setup.noise_um)
+    value, _ = criterion_and_dn(normal_matrix(rows, extra), est, ctx.req.criterion, setup.noise_um, gradient=False)
     return value
 
 
@@ -149,6 +150,38 @@ class _Candidate:
     angles: np.ndarray
     ball: np.ndarray
     score: float
+
+
+def _score_batch(ctx: _Context, tables: list[np.ndarray | None], balls: list[np.ndarray]) -> np.ndarray:
+    """:func:`_score` (PIGE model) of many angle tables at once, shape=(S,); ``None`` = not buildable.
+
+    Tables of one ball and one shape share one basis call, one stacked ``AᵀA`` and one
+    batched criterion; the values equal the one-by-one scores.
+    """
+    out = np.full(len(tables), 2 * SINGULAR)
+    groups: dict[tuple[bytes, tuple[int, ...]], list[tuple[int, np.ndarray]]] = {}
+    for i, (angles, ball) in enumerate(zip(tables, balls, strict=True)):
+        if angles is not None:
+            groups.setdefault((ball.tobytes(), angles.shape), []).append((i, angles))
+    for members in groups.values():
+        idx = [i for i, _ in members]
+        setup = ctx.req.setup.with_ball(balls[idx[0]])
+        stack = np.stack([angles for _, angles in members])  # (S, n + 1, k)
+        s_count, rows, k = stack.shape
+        ok = np.ones(s_count, dtype=bool)
+        if ctx.req.limits.linear:
+            viol = linear_violation(ctx.kern, stack.reshape(-1, k), setup, ctx.req.limits).reshape(s_count, rows)
+            worst = viol.max(axis=1)
+            ok = worst <= 1e-6
+            out[np.asarray(idx)[~ok]] = SINGULAR + worst[~ok]
+        if not ok.any():
+            continue
+        coef = projected_coefficients(setup)  # (K, m, P)
+        basis = np.asarray(setup.kernels.basis(stack[ok, 1:].reshape(-1, k))).reshape(int(ok.sum()), rows - 1, -1)
+        gram = np.einsum("snk,snl->skl", basis, basis)
+        normals = np.einsum("kmp,skl,lmq->spq", coef, gram, coef, optimize=True)
+        out[np.asarray(idx)[ok]] = criterion_values(normals, ctx.est, ctx.req.criterion, setup.noise_um)
+    return out
 
 
 def _search_family(ctx: _Context, fam: Family) -> list[_Candidate]:
@@ -164,12 +197,13 @@ def _search_family(ctx: _Context, fam: Family) -> list[_Candidate]:
             except (InputError, ValueError, FloatingPointError):
                 return None
 
-        def objective(x: np.ndarray, build: Any = build, nb: int = nb) -> float:
-            angles = build(x)
-            return 2 * SINGULAR if angles is None else _score(ctx, angles, _ball(ctx, x[nb:]))
+        def objective(xs: np.ndarray, build: Any = build, nb: int = nb) -> np.ndarray:
+            # the whole population at once: xs (N, S) -> (S,)
+            return _score_batch(ctx, [build(x) for x in xs.T], [_ball(ctx, x[nb:]) for x in xs.T])
 
         res = optimize.differential_evolution(objective, fam.bounds + region, seed=ctx.req.seed + vi, maxiter=6,
-                                              popsize=5, tol=1e-3, polish=False, init="latinhypercube")
+                                              popsize=5, tol=1e-3, polish=False, init="latinhypercube",
+                                              vectorized=True, updating="deferred")
         angles = build(res.x)
         if angles is not None and res.fun < SINGULAR:
             out.append(_Candidate(fam.name, fam.describe(res.x[:nb], variant), angles, _ball(ctx, res.x[nb:]),

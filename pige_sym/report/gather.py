@@ -145,12 +145,12 @@ def _labels(paths: Sequence[Path]) -> list[str]:
     return out
 
 
-def _check_options(method: str, presets: int, sobol_samples: int, paths: list[Path], others: bool) -> None:
+def _check_options(method: str, presets: int, sobol_samples: int | None, paths: list[Path], others: bool) -> None:
     if method not in PRIMARY_METHODS:
         raise InputError(f"unknown method {method!r}: use {', '.join(PRIMARY_METHODS)}")
     if presets < 1:
         raise InputError("--presets must be at least 1")
-    if sobol_samples < 2 or sobol_samples & (sobol_samples - 1):
+    if sobol_samples is not None and (sobol_samples < 2 or sobol_samples & (sobol_samples - 1)):
         raise InputError(f"--samples must be a power of 2, got {sobol_samples}")
     if not paths and not others:
         raise InputError("give at least one measurement file (or --compare BEFORE AFTER, or --history ID)")
@@ -158,7 +158,7 @@ def _check_options(method: str, presets: int, sobol_samples: int, paths: list[Pa
 
 def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studies: Iterable[str] = (),
                   program: str | os.PathLike[str] | None = None, method: str = "diagnosis",
-                  projection: str = "xyz", with_zero: bool = False, presets: int = 50, sobol_samples: int = 2048,
+                  projection: str = "xyz", with_zero: bool = False, presets: int = 50, sobol_samples: int | None = None,
                   seed: int = 0, progress: bool = False, tolerances: str | os.PathLike[str] | None = None,
                   rule: str = "guard", k: float = 2.0,
                   compare: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None,
@@ -182,8 +182,8 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
         Also estimate the zero-position errors.
     presets : int
         Random presets of the projection study.
-    sobol_samples : int
-        Base sample size of the Sobol study (power of 2).
+    sobol_samples : int or None
+        ``None``: exact Sobol indices; a power of 2: Monte-Carlo base sample size.
     seed : int
     progress : bool
         Show a tqdm progress bar on stderr.
@@ -239,7 +239,7 @@ def _settings_shown(o: _Options) -> dict[str, str]:
     if "projection" in o.studies:
         settings["projection-study presets"] = str(o.presets)
     if "sobol" in o.studies:
-        settings["Sobol samples"] = str(o.sobol_samples)
+        settings["Sobol indices"] = "exact" if o.sobol_samples is None else f"{o.sobol_samples} Monte-Carlo samples"
     if o.tolerances is not None:
         rule = f"{o.rule} rule" + (f", k = {o.k:g}" if o.rule == "guard" else "")
         settings["tolerances"] = f"{o.tolerances.path} ({rule})"
@@ -253,7 +253,7 @@ class _Options:
     with_zero: bool
     studies: tuple[str, ...]
     presets: int
-    sobol_samples: int
+    sobol_samples: int | None
     seed: int
     tolerances: Tolerances | None
     rule: str

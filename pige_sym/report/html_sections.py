@@ -311,7 +311,7 @@ def sobol_html(rep: MeasurementReport, base: Path | None) -> str:
                           for v in (st.first_order[i, j], st.total_order[i, j])]
             for j, name in enumerate(st.parameters)]
     return (f"<p>First-order (S1) and total (ST) indices of the mean-square projected deviation over the measured "
-            f"trajectory, {st.n_samples} base samples. The parameters are scaled like the identification's "
+            f"trajectory, {esc(st.method)}. The parameters are scaled like the identification's "
             f"columns: each PIGE is uniform on ±h, h chosen so that its RMS effect on the ball is "
             f"{SOBOL_EFFECT_UM:g} µm ({esc(_ranges_text(rep))}), so position and orientation errors compete on "
             "equal terms.</p>"
