@@ -32,10 +32,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pige_sym.constants import DEFAULT_BALL_MM, DEFAULT_MACHINE
-from pige_sym.errors import InputError
 
 if TYPE_CHECKING:
     from pige_sym.compensation.parameters import CompensationParameters
+    from pige_sym.diagnosis.joint import JointDiagnosis
     from pige_sym.diagnosis.results import DiagnosisResult
     from pige_sym.identification.joint import JointResult
     from pige_sym.identification.result import IdentificationResult
@@ -244,12 +244,50 @@ def identify_files(paths: Sequence[PathLike], *, with_zero: bool = False) -> Joi
     (8, 5.0, -4.0)
     """
     from pige_sym.identification.joint import identify_joint
-    from pige_sym.measurements.ballbar import is_ballbar_file, read_ballbar
+    from pige_sym.measurements.sets import read_files
 
-    items = [(os.fspath(p), read_ballbar(p) if is_ballbar_file(p) else read(p)) for p in paths]
-    if not items:
-        raise InputError("give at least one file")
-    return identify_joint(items, with_zero=with_zero)
+    return identify_joint(read_files(paths), with_zero=with_zero)
+
+
+def diagnose_files(paths: Sequence[PathLike], *, progress: bool = False) -> JointDiagnosis:
+    """Diagnose several files of one machine (``pige diagnose F1 F2 ...``).
+
+    Each R-test or probe file gets its own catalogue diagnosis; ballbar setups are checked for
+    agreement only; an F test says whether the files agree on one set of PIGEs and, with three
+    or more, which file does not.  The final estimate is the joint PIGE fit.
+
+    Parameters
+    ----------
+    paths : sequence of path-like
+    progress : bool
+        Progress bars of the per-file diagnoses on stderr.
+
+    Returns
+    -------
+    JointDiagnosis
+        ``agreement`` (F, dof, p), ``files`` (per file: findings, agreement with the others),
+        ``final`` (the joint PIGE estimate), ``notes``.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import pige_sym.api as pige
+    >>> from pige_sym.measurements.ballbar import write_ballbar
+    >>> from pige_sym.simulation.ballbar import ballbar_setup, simulate_ballbar
+    >>> folder, ac = tempfile.mkdtemp(), "wC'A'bXYZ(C1)t"
+    >>> setups = [(kind, axis, tilt) for kind in ("radial", "tangential", "axial")
+    ...           for axis, tilt in (("C", 0), ("C", -45), ("A", 0))]
+    >>> paths = [write_ballbar(simulate_ballbar(ac, ballbar_setup(ac, kind, axis, tilt_deg=tilt), pige={"EX0C": 5.0},
+    ...          noise_um=0.1, seed=20 + i), os.path.join(folder, f"{kind}{axis}{tilt}.csv"))
+    ...          for i, (kind, axis, tilt) in enumerate(setups)]
+    >>> d = pige.diagnose_files(paths)
+    >>> d.agreement.p_value > 0.01, any(f.disagrees for f in d.files)
+    (True, False)
+    """
+    from pige_sym.diagnosis.joint import diagnose_joint
+    from pige_sym.measurements.sets import read_files
+
+    return diagnose_joint(read_files(paths), progress=progress)
 
 
 def diagnose(data: Measurement | PathLike, *, candidates: Sequence[str] | None = None,

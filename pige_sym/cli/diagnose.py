@@ -20,12 +20,30 @@ def _check_plot_folder(args: argparse.Namespace, rotary_axes: tuple[str, ...]) -
         check_output(folder / f"{name}.png", force=args.force, inputs=[args.file], what="--plots")
 
 
+def _run_several(args: argparse.Namespace) -> int:
+    """Several files (or a ballbar file): each file's own diagnosis and their agreement."""
+    from pige_sym import api
+    from pige_sym.diagnosis.joint import format_joint_diagnosis
+    from pige_sym.errors import InputError
+    from pige_sym.files import to_json
+
+    if args.plots:
+        raise InputError("--plots draws the residuals of one R-test or probe file: diagnose that file alone")
+    result = api.diagnose_files(args.files, progress=not args.json)
+    print(to_json(result.to_dict()) if args.json else format_joint_diagnosis(result))
+    return 0
+
+
 def _run(args: argparse.Namespace) -> int:
     from pige_sym import api
     from pige_sym.diagnosis.residual_plots import residual_plots
     from pige_sym.files import to_json
     from pige_sym.identification.result import format_result
+    from pige_sym.measurements.ballbar import is_ballbar_file
 
+    if len(args.files) > 1 or is_ballbar_file(args.files[0]):
+        return _run_several(args)
+    args.file = args.files[0]
     m = api.read(args.file)
     if args.plots:
         _check_plot_folder(args, m.rotary_axes)
@@ -55,11 +73,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "diagnose",
         help="find and name what the PIGE model misses",
-        description="Residual analysis, candidate extensions, identifiability, BIC/F-test/held-out gain.",
-        epilog="examples:\n  pige diagnose run.csv --plots plots/\n  pige diagnose run.csv --json > diagnosis.json",
+        description="Residual analysis, candidate extensions, identifiability, BIC/F-test/held-out gain. Several "
+                    "files of one machine: each file's own diagnosis, an F test of whether they agree on one set "
+                    "of PIGEs and which file does not, and the joint estimate.",
+        epilog="examples:\n  pige diagnose run.csv --plots plots/\n  pige diagnose run.csv --json > diagnosis.json\n"
+               "  pige diagnose radial_C.csv tangential_C.csv axial_C.csv rtest.csv   # do the setups agree?",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("file", help="pige-rtest 1 measurement file")
+    p.add_argument("files", nargs="+", metavar="FILE",
+                   help="pige-rtest 1 measurement file (R-test or probe import); several files of one machine "
+                        "(with pige-ballbar 1 setups) are diagnosed each alone and tested for agreement")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plots", metavar="DIR", help="write residual plots (PNG) into DIR")
     p.add_argument("--force", action="store_true", help="replace plots already in DIR")

@@ -1,6 +1,7 @@
 """``pige history``: a machine's calibration runs in a database, and what changed between them.
 
-``pige history add FILE --machine-id ID`` identifies and diagnoses the file and stores the run;
+``pige history add FILE --machine-id ID`` identifies and diagnoses the file and stores the run
+(several files of one machine, e.g. ballbar setups, as one joint run);
 ``pige history show ID`` lists the runs and, between consecutive runs, each parameter's change
 with its significance (joint Wald test + Bonferroni follow-up, family-wise false alarm ≤ 1 %).
 """
@@ -19,8 +20,8 @@ def _add(args: argparse.Namespace) -> int:
     from pige_sym.verdict.history import add_run, connect
 
     engine = connect(args.db)
-    run = add_run(engine, args.file, args.machine_id, method=args.method, tolerances=args.tolerances,
-                  rule=args.rule, k=args.k, date=args.date)
+    run = add_run(engine, args.files[0] if len(args.files) == 1 else args.files, args.machine_id,
+                  method=args.method, tolerances=args.tolerances, rule=args.rule, k=args.k, date=args.date)
     if args.json:
         print(to_json(run.to_dict()))
         return 0
@@ -100,7 +101,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sub = p.add_subparsers(dest="history_command", metavar="ACTION", parser_class=type(p))
     sub.required = True
     add = sub.add_parser("add", help="identify/diagnose a measurement file and store the run")
-    add.add_argument("file", metavar="FILE", help="pige-rtest 1 measurement file")
+    add.add_argument("files", nargs="+", metavar="FILE",
+                     help="pige-rtest 1 measurement file; several files of one machine (R-test, probe, "
+                          "pige-ballbar 1 setups) are stored as one joint run")
     add.add_argument("--machine-id", required=True, metavar="ID", help="the shop's name of the machine")
     add.add_argument("--db", metavar="URL", help=DB_HELP)
     add.add_argument("--method", choices=("diagnosis", "gauss-newton", "double-differential"), default="diagnosis",

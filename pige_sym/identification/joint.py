@@ -112,7 +112,8 @@ def ballbar_block(run: BallbarRun, label: str, with_zero: bool) -> Block:
     return Block(label, "ballbar", a, run.dl_um.copy(), np.ones((run.n_rows, 1)), [f"zero[{label}]"])
 
 
-def _own_sigma(b: Block) -> float:
+def own_sigma(b: Block) -> float:
+    """The file's noise σ [µm] from its own fit (its PIGEs and constants), floored at 0.1 nm."""
     full = np.hstack([b.design, b.nuisance])
     sol = solve_scaled(full.T @ full, full.T @ b.data, float(b.data @ b.data))
     dof = b.data.size - sol.rank
@@ -135,14 +136,31 @@ def identify_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *, wit
     -------
     JointResult
     """
+    machine = common_machine(items)
+    names, _ = _pige_names(machine, with_zero)
+    blocks = file_blocks(items, with_zero)
+    sigmas = [own_sigma(b) for b in blocks]
+    a, y = whitened_system(blocks, sigmas)
+    all_names = names + [n for b in blocks for n in b.nuisance_names]
+    return _assemble(machine, names, all_names, blocks, sigmas, a, y, items)
+
+
+def common_machine(items: Sequence[tuple[str, Measurement | BallbarRun]]) -> str:
+    """The canonical code of the one machine every file measures; refused when they differ."""
     machines = {load_kernels(x.machine).MACHINE_CODE for _, x in items}
     if len(machines) != 1:
         raise InputError(f"the files measure different machines ({', '.join(sorted(machines))}): identify them apart")
-    machine = machines.pop()
-    names, _ = _pige_names(machine, with_zero)
-    blocks = [ballbar_block(x, lab, with_zero) if isinstance(x, BallbarRun) else measurement_block(x, lab, with_zero)
-              for lab, x in items]
-    sigmas = [_own_sigma(b) for b in blocks]
+    return machines.pop()
+
+
+def file_blocks(items: Sequence[tuple[str, Measurement | BallbarRun]], with_zero: bool = False) -> list[Block]:
+    """Each file's block, in order."""
+    return [ballbar_block(x, lab, with_zero) if isinstance(x, BallbarRun) else measurement_block(x, lab, with_zero)
+            for lab, x in items]
+
+
+def whitened_system(blocks: Sequence[Block], sigmas: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of every block divided by its σ, shared PIGE columns then each block's constants, (n, P + q), (n,)."""
     q_total = sum(b.nuisance.shape[1] for b in blocks)
     rows, offset = [], 0
     for b, s in zip(blocks, sigmas, strict=True):
@@ -150,10 +168,7 @@ def identify_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *, wit
         nuis[:, offset:offset + b.nuisance.shape[1]] = b.nuisance
         offset += b.nuisance.shape[1]
         rows.append((np.hstack([b.design, nuis]) / s, b.data / s))
-    a = np.vstack([r[0] for r in rows])
-    y = np.concatenate([r[1] for r in rows])
-    all_names = names + [n for b in blocks for n in b.nuisance_names]
-    return _assemble(machine, names, all_names, blocks, sigmas, a, y, items)
+    return np.vstack([r[0] for r in rows]), np.concatenate([r[1] for r in rows])
 
 
 def _assemble(machine: str, names: list[str], all_names: list[str], blocks: list[Block], sigmas: list[float],

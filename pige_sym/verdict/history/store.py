@@ -20,6 +20,7 @@ import hashlib
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -190,6 +191,43 @@ def measurement_time(path: Path, metadata: dict[str, str], given: str | None) ->
     return mtime.isoformat(timespec="seconds"), "file modification time"
 
 
+@dataclass
+class _Read:
+    """What was read: the machine and each file's contents."""
+
+    machine: str
+    items: list[Any]
+
+
+def _sha256(path: Path) -> str:
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+
+
+def _estimate_set(paths: list[Path], method: str) -> tuple[_Read, Any, list[dict[str, Any]], str]:
+    """(what was read, result with parameters/values/covariance/dof, accepted findings, stored method)."""
+    from pige_sym.measurements.ballbar import is_ballbar_file
+
+    if len(paths) == 1 and not is_ballbar_file(paths[0]):
+        m, result, effects = _estimate(paths[0], method)
+        return _Read(m.machine, [m]), result, effects, method
+    from pige_sym.measurements.sets import read_files
+
+    items = read_files(paths)
+    read = _Read(items[0][1].machine, [x for _, x in items])
+    if method == "diagnosis":
+        from pige_sym.diagnosis.joint import diagnose_joint
+
+        diag = diagnose_joint(items)
+        effects = [f.to_dict() | {"file": fd.label} for fd in diag.files for f in fd.findings]
+        return read, diag, effects, "joint-diagnosis"
+    from pige_sym.identification.joint import identify_joint
+
+    return read, identify_joint(items).result, [], "joint"
+
+
 def _estimate(path: Path, method: str) -> tuple[Any, Any, list[dict[str, Any]]]:
     """(measurement, result with parameters/values/covariance/dof, accepted findings) of a file."""
     from pige_sym.measurements.rtest import read_measurement
@@ -210,15 +248,20 @@ def _existing(conn: sa.Connection, sha: str) -> Any:
                         .where(T.runs.c.file_sha256 == sha)).first()
 
 
-def add_run(engine: sa.Engine, path: str | os.PathLike[str], machine_id: str, *, method: str = "diagnosis",
-            tolerances: str | os.PathLike[str] | None = None, rule: str = "guard", k: float = 2.0,
-            date: str | None = None) -> RunRecord:
-    """Identify/diagnose a measurement file and store the run.
+def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], machine_id: str, *,
+            method: str = "diagnosis", tolerances: str | os.PathLike[str] | None = None, rule: str = "guard",
+            k: float = 2.0, date: str | None = None) -> RunRecord:
+    """Identify/diagnose a measurement file (or a set of files of one machine) and store the run.
+
+    A set (several files, or a ``pige-ballbar 1`` file) is stored as one run of method ``joint``
+    (``joint-diagnosis`` with ``method="diagnosis"``): the joint PIGE estimate, each file's findings,
+    the file names joined by ``; ``, the SHA-256 of the sorted files' SHA-256s (the same set is added
+    once, in any order) and the latest of the files' times.
 
     Raises
     ------
     InputError
-        The same file (same SHA-256) is already stored, the machine id holds another machine
+        The same file or set (same SHA-256) is already stored, the machine id holds another machine
         structure, or the machine id is empty.
     """
     from pige_sym.kernels import load_kernels
@@ -226,25 +269,29 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str], machine_id: str, *,
 
     if not machine_id.strip():
         raise InputError("--machine-id must not be empty")
-    p = Path(path)
-    try:
-        sha = hashlib.sha256(p.read_bytes()).hexdigest()
-    except OSError as exc:
-        raise InputError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    paths = [Path(path)] if isinstance(path, (str, os.PathLike)) else [Path(x) for x in path]
+    if not paths:
+        raise InputError("give at least one file")
+    shas = [_sha256(x) for x in paths]
+    sha = shas[0] if len(paths) == 1 else hashlib.sha256("\n".join(sorted(shas)).encode()).hexdigest()
+    p = paths[0] if len(paths) == 1 else Path("; ".join(str(x) for x in paths))
+    what = "file" if len(paths) == 1 else "set of files"
     with engine.connect() as conn:
         dup = _existing(conn, sha)
     if dup is not None:
-        raise InputError(f"{p}: this file is already in the history (run {dup.id} of machine {dup.machine_id}, "
+        raise InputError(f"{p}: this {what} is already in the history (run {dup.id} of machine {dup.machine_id}, "
                          f"added as {dup.file_name}): a run is added once")
     tol = read_tolerances(tolerances) if tolerances is not None else None
-    m, result, effects = _estimate(p, method)
+    m, result, effects, method = _estimate_set(paths, method)
     final = getattr(result, "final", result)
     code = load_kernels(m.machine).MACHINE_CODE
-    measured, source = measurement_time(p, m.metadata, date)
+    times = [measurement_time(x, getattr(item, "metadata", {}), date) for x, item in zip(paths, m.items, strict=True)]
+    measured, source = max(times)
     chk = check(estimates_from_result(result, str(p)), tol, rule=rule, k=k) if tol is not None else None
     now = datetime.now(timezone.utc).isoformat(timespec="seconds")
     values = {
-        "machine_id": machine_id, "file_sha256": sha, "file_name": str(p.resolve()), "measured_at": measured,
+        "machine_id": machine_id, "file_sha256": sha,
+        "file_name": "; ".join(str(x.resolve()) for x in paths), "measured_at": measured,
         "time_source": source, "added_at": now, "machine_code": code, "method": method,
         "parameters": _dumps(final.parameters), "units": _dumps(final.units), "values_json": _dumps(final.values),
         "std_json": _dumps(final.std), "covariance_json": _dumps(final.covariance), "dof": int(final.dof),

@@ -1,0 +1,134 @@
+"""Several files of one machine: each file's diagnosis, whether they agree, which one does not, the commands."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from pige_sym.cli.main import main
+from pige_sym.diagnosis.joint import ALPHA, diagnose_joint, format_joint_diagnosis
+from pige_sym.errors import InputError
+from pige_sym.measurements.ballbar import write_ballbar
+from pige_sym.measurements.rtest_writer import write_measurement
+from pige_sym.measurements.sets import read_files
+from pige_sym.model.trajectories import make_trajectory
+from pige_sym.simulation.ballbar import ballbar_setup, simulate_ballbar
+from pige_sym.simulation.simulator import simulate
+
+AC = "wC'A'bXYZ(C1)t"
+TRUTH = {"EX0C": 5.0, "EY0A": -3.0, "EA0C": 10.0}
+NINE = [(kind, axis, tilt) for kind in ("radial", "tangential", "axial")
+        for axis, tilt in (("C", 0.0), ("C", -45.0), ("A", 0.0))]
+
+
+def _set(seed: int, noise: float = 0.1, moved: int | None = None, shift: dict[str, float] | None = None):
+    return [(f"{k}_{a}{t:g}", simulate_ballbar(AC, ballbar_setup(AC, k, a, tilt_deg=t),
+                                               pige=TRUTH | (shift or {} if i == moved else {}), noise_um=noise,
+                                               seed=seed + i))
+            for i, (k, a, t) in enumerate(NINE)]
+
+
+def test_an_unchanged_machine_agrees_and_the_joint_estimate_is_the_truth() -> None:
+    d = diagnose_joint(_set(40))
+    assert d.agreement is not None and d.agreement.p_value > ALPHA and not any(f.disagrees for f in d.files)
+    assert d.agreement.dof == (10, 252)  # 9 files x (2 PIGE combinations + a constant) - (8 PIGEs + 9 constants)
+    for name, value in TRUTH.items():
+        assert abs(d.final.value(name) - value) < 4 * d.final.std[d.final.parameters.index(name)]
+    assert all(f.checked.startswith("agreement only") for f in d.files)  # ballbar: said, not silently skipped
+    assert "agree on one set of PIGEs" in d.verdict()
+
+
+def test_the_agreement_test_keeps_its_false_alarm_rate() -> None:
+    """200 unchanged sets at alpha = 1 %: binomial mean 2, P(X >= 7) < 0.5 %."""
+    calls = sum(diagnose_joint(_set(1000 * t)).agreement.p_value < ALPHA for t in range(200))  # type: ignore[union-attr]
+    assert calls <= 6
+
+
+def test_noise_free_files_are_not_called_inconsistent() -> None:
+    """The first-order model's own error on exact lengths stays below the sigma floor."""
+    d = diagnose_joint(_set(0, noise=0.0))
+    assert d.agreement is not None and d.agreement.p_value > ALPHA and not any(f.disagrees for f in d.files)
+
+
+@pytest.mark.parametrize(("moved", "shift"), [(0, {"EX0C": 7.0}), (4, {"EX0C": 6.0}), (0, {"EA0C": 25.0})])
+def test_a_setup_measured_after_the_machine_moved_is_named(moved, shift) -> None:
+    d = diagnose_joint(_set(7, moved=moved, shift=shift))
+    assert d.agreement is not None and d.agreement.p_value < 1e-6
+    assert [f.disagrees for f in d.files] == [i == moved for i in range(9)]
+    text = format_joint_diagnosis(d)
+    assert "do NOT agree" in text and d.files[moved].label in text.splitlines()[0]
+
+
+def test_a_shift_the_file_cannot_see_is_no_disagreement() -> None:
+    """The A-axis axial setup does not see the C axis line's X position: moving it there changes nothing."""
+    d = diagnose_joint(_set(7, moved=8, shift={"EX0C": 9.0}))
+    assert not d.files[8].disagrees and d.agreement is not None and d.agreement.p_value > ALPHA
+
+
+def test_rtest_effects_are_found_in_their_file_and_the_joint_estimate_says_it_does_not_model_them() -> None:
+    from pige_sym import api
+
+    rtest = api.simulate(AC, pige=TRUTH, effects=["angular_error_C"], noise_um=0.2, seed=2)
+    d = diagnose_joint([("rtest", rtest), *_set(11)[:4]])
+    assert [f.effect for f in d.files[0].findings] == ["angular_error_C"]
+    assert d.files[0].checked == "catalogue diagnosis"
+    assert any("not modelled" in n for n in d.notes)
+    assert [f.effect for f in d.findings] == ["angular_error_C"]
+
+
+def test_two_files_cannot_say_which_one_moved() -> None:
+    one = simulate(AC, make_trajectory(AC, "cone-frustum"), pige=TRUTH, noise_um=0.2, seed=3).measurement
+    two = simulate(AC, make_trajectory(AC, "cone-frustum"), pige=TRUTH | {"EY0C": 8.0}, noise_um=0.2,
+                   seed=4).measurement
+    d = diagnose_joint([("before", one), ("after", two)])
+    assert d.agreement is not None and d.agreement.p_value < 1e-6 and d.agreement.dof[0] == 8
+    assert not any(f.disagrees for f in d.files) and any("cannot say which" in n for n in d.notes)
+
+
+def test_files_that_see_disjoint_combinations_cannot_be_tested_and_say_so() -> None:
+    d = diagnose_joint(_set(5)[:3])
+    assert d.agreement is None and "cannot be tested" in d.verdict()
+
+
+def test_the_same_file_twice_is_refused(tmp_path) -> None:
+    path = write_ballbar(_set(1)[0][1], tmp_path / "a.csv")
+    with pytest.raises(InputError, match="given twice"):
+        read_files([path, tmp_path / "." / "a.csv"])
+
+
+def _files(tmp_path, moved: int | None = None) -> list[str]:
+    out = []
+    for label, run in _set(21, moved=moved, shift={"EX0C": 7.0}):
+        out.append(str(write_ballbar(run, tmp_path / f"{label}.csv")))
+    return out
+
+
+def test_diagnose_and_history_take_several_files(tmp_path, capsys) -> None:
+    files = _files(tmp_path)
+    rtest = write_measurement(simulate(AC, make_trajectory(AC, "cone-frustum"), pige=TRUTH, noise_um=0.2,
+                                       seed=5).measurement, tmp_path / "rtest.csv")
+    assert main(["diagnose", *files, str(rtest), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["method"] == "joint-diagnosis" and data["agreement"]["p_value"] > ALPHA
+    assert [f["instrument"] for f in data["files"]] == ["ballbar"] * 9 + ["rtest"]
+    assert data["rank"] == 8 and abs(data["pige"]["EX0C"] - 5.0) < 0.2
+    assert main(["diagnose", files[0]]) == 0  # one ballbar setup: its joint diagnosis, nothing to compare
+    assert "nothing to compare" in capsys.readouterr().out
+    assert main(["diagnose", *files[:3], "--plots", str(tmp_path / "plots")]) == 2
+    assert "diagnose that file alone" in capsys.readouterr().err
+    db = f"sqlite:///{tmp_path / 'h.sqlite'}"
+    assert main(["history", "add", *files, "--machine-id", "DMU-7", "--db", db, "--json"]) == 0
+    run = json.loads(capsys.readouterr().out)
+    assert run["method"] == "joint-diagnosis" and run["file"].count("; ") == 8
+    assert main(["history", "add", *reversed(files), "--machine-id", "DMU-7", "--db", db]) == 2
+    assert "set of files is already in the history" in capsys.readouterr().err
+    (tmp_path / "later").mkdir()
+    moved = _files(tmp_path / "later", moved=0)
+    assert main(["history", "add", *moved, "--machine-id", "DMU-7", "--db", db, "--method", "gauss-newton"]) == 0
+    capsys.readouterr()
+    assert main(["history", "show", "DMU-7", "--db", db, "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    runs = shown["runs"]
+    assert [r["method"] for r in runs] == ["joint-diagnosis", "joint"]
+    assert runs[1]["pige"]["EX0C"] is not None
