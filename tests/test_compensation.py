@@ -410,6 +410,12 @@ def test_controller_styles_print_the_deltas_with_their_signs():
     assert "# xyzac-trt-kins.y-offset: add +0.002000" in linuxcnc
     assert "# xyzac-trt-kins.z-offset: add -0.009000" in linuxcnc
     assert "NOT verified" not in linuxcnc  # checked against LinuxCNC's own formulas (test_controller_linuxcnc.py)
+    fanuc = format_controller(params, "fanuc")
+    # rotary table position = shift of a point on A; 19703-5 = shift of the point on C minus it (A-79348E)
+    assert "point on the A axis): X +0.000000  Y +0.012000  Z -0.009000" in fanuc
+    assert "No. 19703 -0.014000   No. 19704 -0.002000   No. 19705 +0.009000" in fanuc
+    assert "No. 19680 = 12" in fanuc and "first (master) rotation axis A, second C" in fanuc
+    assert "KEY = Trans rows" in format_controller(params, "heidenhain")
     for style in ("heidenhain", "fanuc", "siemens"):
         assert "NOT verified on a controller" in format_controller(params, style)
         assert "NOT representable" in format_controller(params, style)

@@ -115,7 +115,10 @@ def _signed(value: float, decimals: int) -> str:
 
 
 def _heidenhain(first: dict, second: dict, carrier: int) -> list[str]:
-    out = ["kinematics table: add to the transformation that places each rotary axis (mm, deg)"]
+    # the description table's KEY = Trans rows (AXIS X/Y/Z, value in COORD) before each MachAxis row
+    # (iTNC 530 HSCI Technical Manual, kinematics description table; docs/controller-corrections.md)
+    out = ["kinematics description table: add to COORD of the KEY = Trans rows (AXIS X, Y, Z) that place each "
+           "rotary axis before its MachAxis row (mm), and to the axis datum (deg)"]
     for r in (first, second):
         d = r["pivot_delta_mm"]
         out.append(f"  {r['axis']}: X {d[0]:+.6f}  Y {d[1]:+.6f}  Z {d[2]:+.6f} mm   "
@@ -124,6 +127,22 @@ def _heidenhain(first: dict, second: dict, carrier: int) -> list[str]:
 
 
 def _fanuc(first: dict, second: dict, carrier: int) -> list[str]:
+    if first["side"] == second["side"] == "workpiece":
+        # FANUC Series 30i-A, Tool center point control for 5-axis machining (A-79348E): No. 19680 = 12
+        # (table rotation type); the rotary table position is the vector from the machine origin to a point
+        # on the first (master) rotation axis, Nos. 19703-19705 the vector from that point to a point on the
+        # second rotation axis, machine coordinates, both axes at 0 deg
+        d1 = np.array(first["pivot_delta_mm"])
+        d12 = np.array(second["pivot_delta_mm"]) - d1
+        return [f"tool centre point, table rotation type (No. 19680 = 12): first (master) rotation axis "
+                f"{first['axis']}, second {second['axis']}; add (mm):",
+                f"  rotary table position (point on the {first['axis']} axis): X {d1[0]:+.6f}  Y {d1[1]:+.6f}  "
+                f"Z {d1[2]:+.6f}",
+                f"  No. 19703 {d12[0]:+.6f}   No. 19704 {d12[1]:+.6f}   No. 19705 {d12[2]:+.6f}   "
+                f"(intersection offset vector {first['axis']} -> {second['axis']})",
+                f"  zero offsets (axis reference positions, not tool centre point parameters): "
+                f"{first['axis']} {first['zero_offset_deg']:+.7f} deg, {second['axis']} "
+                f"{second['zero_offset_deg']:+.7f} deg"]
     out = ["tool centre point parameters: add to the rotation-axis centre / offset entries (mm, deg)"]
     for r in (first, second):
         d = r["pivot_delta_mm"]
