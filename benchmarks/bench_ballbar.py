@@ -78,7 +78,7 @@ def false_alarms(trials: int) -> tuple[float, float]:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--trials", type=int, default=300)
+    ap.add_argument("--trials", type=int, default=1000)
     args = ap.parse_args(argv or [])
     joint_s, floor_s, rows = joint_timing()
     t0 = time.perf_counter()
