@@ -131,3 +131,61 @@ def test_the_commands(tmp_path, capsys) -> None:
     assert "TRAORI" in (tmp_path / "bb.mpf").read_text()
     assert main(["plan", "--instrument", "ballbar", "--noise", "0.2", "--target", "3"]) == 0
     assert "chosen:" in capsys.readouterr().out
+
+
+def _exact_length(machine: str, setup, pige: dict[str, float], angles_true: np.ndarray,
+                  tool_shift_um: np.ndarray | None = None) -> np.ndarray:
+    """Oracle: |T − P| − L0 [µm] with the table at ``angles_true`` and the tool ball moved by a machine-frame shift."""
+    tool = nominal_table_point(machine, setup.angles_deg, setup.table_ball_mm + setup.offset_mm)
+    if tool_shift_um is not None:
+        tool = tool + tool_shift_um * 1e-3
+    ball = table_point(machine, angles_true, setup.table_ball_mm, pige)
+    return (np.linalg.norm(tool - ball, axis=1) - np.linalg.norm(setup.offset_mm)) * 1e3
+
+
+@pytest.mark.parametrize("kind,axis,tilt,seen", [("tangential", "C", -30.0, True), ("tangential", "A", 0.0, True),
+                                                  ("radial", "A", 0.0, False), ("axial", "C", 0.0, False)])
+def test_an_angular_error_in_the_ballbar_simulation_is_the_table_standing_elsewhere(kind, axis, tilt, seen) -> None:
+    """Oracle: the exact chain with the swept axis at θ + c·cos 2θ (CONVENTIONS: the axis stands at θ + e(θ))."""
+    from pige_sym.model.effects import parse_effect
+
+    setup = ballbar_setup(AC, kind, axis, tilt_deg=tilt)
+    truth = {"EX0C": 4.0, "EA0C": -6.0}
+    effect = parse_effect(f"angular_error_{axis}:harmonic=2,cos_urad=40,sin_urad=-25", ("A", "C"))
+    run = simulate_ballbar(AC, setup, pige=truth, noise_um=0.0, effects=[effect])
+    k = ("A", "C").index(axis)
+    theta = np.radians(setup.angles_deg[:, k])
+    true_angles = setup.angles_deg.copy()
+    true_angles[:, k] += np.degrees((40.0 * np.cos(2 * theta) - 25.0 * np.sin(2 * theta)) * 1e-6)
+    oracle = _exact_length(AC, setup, truth, true_angles)
+    oracle -= oracle[0]
+    without = simulate_ballbar(AC, setup, pige=truth, noise_um=0.0).dl_um
+    np.testing.assert_allclose(run.dl_um, oracle, atol=2e-3)
+    # only a tangential bar sees the table turning about the swept axis (first order)
+    assert (np.abs(run.dl_um - without).max() > 0.5) == seen
+
+
+def test_a_thermal_drift_in_the_ballbar_simulation_moves_the_tool_ball(tmp_path) -> None:
+    """Oracle: the tool ball shifted by v·(1 − exp(−t/τ)) in the machine frame, t = 2 s per pose, absolute zero."""
+    from pige_sym.model.effects import parse_effect
+
+    setup = ballbar_setup(AC, "radial", "C", tilt_deg=-20.0)
+    effect = parse_effect("thermal_drift:vx_um=3,vy_um=-2,vz_um=1.5,tau_s=40", ("A", "C"))
+    run = simulate_ballbar(AC, setup, pige={"EY0A": 2.0}, noise_um=0.0, zero="absolute", effects=[effect])
+    f = 1.0 - np.exp(-run.t_s / 40.0)
+    oracle = _exact_length(AC, setup, {"EY0A": 2.0}, setup.angles_deg, np.outer(f, [3.0, -2.0, 1.5]))
+    np.testing.assert_allclose(run.dl_um, oracle, atol=2e-3)
+    out = tmp_path / "drift.csv"
+    assert main(["simulate", "--instrument", "ballbar", "--setup", "radial", "--axis", "C", "--tilt", "-20",
+                 "--pige", "EY0A=2", "--effect", "thermal_drift:vx_um=3,vy_um=-2,vz_um=1.5,tau_s=40",
+                 "--effect", "outliers:size_um=30,count=2", "--noise", "0", "--zero", "absolute",
+                 "--out", str(out)]) == 0
+    import json
+
+    truth = json.loads((tmp_path / "drift.truth.json").read_text())
+    assert [e["effect"] for e in truth["effects"]] == ["thermal_drift", "outliers"]
+    rows = truth["outlier_rows"]
+    assert len(rows) == 2
+    read = read_ballbar(out)
+    jump = np.abs(read.dl_um - oracle)
+    assert set(np.flatnonzero(jump > 1e-2)) <= set(rows)

@@ -71,11 +71,11 @@ def _run_ballbar(args: argparse.Namespace) -> int:
     from pige_sym.cli._ballbar import ballbar_setup_of
     from pige_sym.kernels import load_kernels
     from pige_sym.measurements.ballbar import write_ballbar
-    from pige_sym.simulation.ballbar import simulate_ballbar
+    from pige_sym.model.effects import parse_effect
+    from pige_sym.simulation.ballbar import simulate_ballbar_with_outliers
 
     kern = load_kernels(args.machine)
-    if args.effect:
-        raise InputError("--effect: the ballbar simulation is exact for the PIGEs and zero-position errors only")
+    effects = [parse_effect(e, tuple(kern.ROTARY_AXES)) for e in args.effect or []]
     finite_option(args.noise, "--noise", minimum=0.0)
     setup = ballbar_setup_of(args, kern.MACHINE_CODE)
     pige = pige_values(args.pige, kern.MACHINE_CODE, args.seed)
@@ -83,10 +83,13 @@ def _run_ballbar(args: argparse.Namespace) -> int:
     out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
     truth_path = check_output(out.with_name(out.stem + ".truth.json"), force=args.force, inputs=inputs,
                               what="truth sidecar")
-    run = simulate_ballbar(kern.MACHINE_CODE, setup, pige=pige, noise_um=args.noise, seed=args.seed, zero=args.zero)
+    run, outlier_rows = simulate_ballbar_with_outliers(kern.MACHINE_CODE, setup, pige=pige, noise_um=args.noise,
+                                                       seed=args.seed, zero=args.zero, effects=effects)
     write_ballbar(run, out)
     truth = {"machine": kern.MACHINE_CODE, "instrument": "ballbar", "setup": setup.label, "pige": pige,
-             "noise_um": args.noise, "seed": args.seed, "zero": args.zero, "model": "exact |T - P| - L0"}
+             "effects": [e.to_dict() for e in effects], "outlier_rows": outlier_rows,
+             "noise_um": args.noise, "seed": args.seed, "zero": args.zero,
+             "model": "exact |T - P| - L0; effects first order at the tool ball, projected on the bar"}
     atomic_write_text(truth_path, to_json(truth) + "\n")
     print(f"wrote {out} ({run.n_rows} rows, {setup.label} setup, bar {run.length_mm:g} mm, zero {args.zero}) "
           f"and {truth_path}")
@@ -149,7 +152,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_setup_arguments(p)
     p.add_argument("--pige", default="random", help="'random', NAME=VALUE,... [um|urad], or a JSON file")
-    p.add_argument("--effect", action="append", metavar="NAME[:k=v,...]", help="add an unmodelled effect")
+    p.add_argument("--effect", action="append", metavar="NAME[:k=v,...]",
+                   help="add an unmodelled effect (ballbar: first order at the tool ball, projected on the bar)")
     p.add_argument("--noise", type=float, default=0.25, help="sensor noise sigma [um] (default %(default)s)")
     p.add_argument("--seed", type=int, default=None, help="random seed")
     p.add_argument("--frame", choices=["machine", "table"], default="machine", help="frame of the deviations")

@@ -12,6 +12,15 @@ axis (A or B) sweeps 0 → ``tilt_range`` in 5° steps with C at 0.  :func:`simu
 length exactly, ``|T − P| − L0`` with ``T`` the commanded tool ball (the nominal position of the table point
 ``table_ball + offset``, linear axes perfect) and ``P`` the true table ball
 (:mod:`pige_sym.simulation.exact_table`), plus Gaussian noise; ``zero: relative`` subtracts the first reading.
+
+Effects beyond the PIGEs (:mod:`pige_sym.model.effects`) are added to first order: the R-test deviation
+they cause at the tool ball's table point ``Q = table_ball + offset`` (ball minus table point, zeroed at the
+reference pose as R-test data are), projected on the bar direction ``n_i = R_w(θ_i)·offset/L0``.  To first
+order the bar sees ``n_i·(δT − δP)`` and ``T − P = d(Q) + (Q − P)`` turned by the table, whose length a
+rotation does not change; zeroing at the reference pose removes ``n_i·R_w(θ_i)·d_raw(0) = n_0·d_raw(0)``,
+the same constant at every pose, so a ``relative`` file is exact to first order and an ``absolute`` file
+counts the effects from the reference pose (where the bar was set).  ``outliers`` add their size along a
+random direction, projected.
 """
 
 from __future__ import annotations
@@ -23,7 +32,9 @@ import numpy as np
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.ballbar import SETUPS, BallbarRun
+from pige_sym.model.effects import EffectContext, EffectInstance
 from pige_sym.simulation.exact_table import nominal_table_point, table_point
+from pige_sym.simulation.simulator import add_effects
 
 DEFAULT_TABLE_BALL_MM = (100.0, 0.0, 50.0)
 DEFAULT_LENGTH_MM = 100.0
@@ -80,19 +91,53 @@ def ballbar_setup(machine: str, kind: str, axis: str, *, table_ball_mm: tuple[fl
     return BallbarSetup(kind, axis, p, length_mm * direction, angles, axes)
 
 
+def effect_lengths(machine: str, setup: BallbarSetup, effects: list[EffectInstance], t_s: np.ndarray,
+                   rng: np.random.Generator) -> tuple[np.ndarray, list[int]]:
+    """Length change the effects add at each pose, shape=(n,) [µm], and the rows given an outlier.
+
+    First order (module docstring): the zeroed R-test deviation at ``table_ball + offset`` projected on the
+    bar direction at each pose.
+    """
+    kern = load_kernels(machine)
+    point = setup.table_ball_mm + setup.offset_mm
+    ctx = EffectContext(kern, setup.angles_deg, t_s, point)
+    dev, outlier_rows = add_effects(np.zeros((setup.angles_deg.shape[0], 3)), effects, ctx, rng)
+    direction = np.einsum("nij,j->ni", ctx.rot_w, setup.offset_mm / np.linalg.norm(setup.offset_mm))
+    return np.einsum("ni,ni->n", direction, dev), outlier_rows
+
+
 def simulate_ballbar(machine: str, setup: BallbarSetup, *, pige: dict[str, float], noise_um: float = 0.2,
-                     seed: int | None = None, zero: str = "relative") -> BallbarRun:
-    """The file a setup produces on a machine with errors ``pige`` [µm, µrad] (exact lengths)."""
+                     seed: int | None = None, zero: str = "relative",
+                     effects: list[EffectInstance] | None = None) -> BallbarRun:
+    """The file a setup produces on a machine with errors ``pige`` [µm, µrad] and ``effects``.
+
+    The PIGEs' length is exact (``|T − P| − L0``), the effects' first order (module docstring).
+    """
+    return simulate_ballbar_with_outliers(machine, setup, pige=pige, noise_um=noise_um, seed=seed, zero=zero,
+                                          effects=effects)[0]
+
+
+def simulate_ballbar_with_outliers(machine: str, setup: BallbarSetup, *, pige: dict[str, float],
+                                   noise_um: float = 0.2, seed: int | None = None, zero: str = "relative",
+                                   effects: list[EffectInstance] | None = None) -> tuple[BallbarRun, list[int]]:
+    """:func:`simulate_ballbar` and the rows that received an ``outliers`` effect (for the truth sidecar)."""
     kern = load_kernels(machine)
     rng = np.random.default_rng(seed)
     tool = nominal_table_point(kern.MACHINE_CODE, setup.angles_deg, setup.table_ball_mm + setup.offset_mm)
     ball = table_point(kern.MACHINE_CODE, setup.angles_deg, setup.table_ball_mm, pige)
     length = float(np.linalg.norm(setup.offset_mm))
-    dl = (np.linalg.norm(tool - ball, axis=1) - length) * 1e3 + rng.normal(0.0, noise_um, setup.angles_deg.shape[0])
+    n = setup.angles_deg.shape[0]
+    t = np.arange(n, dtype=float) * 2.0
+    dl = (np.linalg.norm(tool - ball, axis=1) - length) * 1e3
+    outlier_rows: list[int] = []
+    if effects:
+        extra, outlier_rows = effect_lengths(kern.MACHINE_CODE, setup, effects, t, rng)
+        dl = dl + extra
+    dl = dl + rng.normal(0.0, noise_um, n)
     if zero == "relative":
         dl = dl - dl[0]
-    t = np.arange(setup.angles_deg.shape[0], dtype=float) * 2.0
     meta = {"setup": setup.kind, "axis": setup.axis, "source": "pige simulate --instrument ballbar",
-            "trajectory": f"{setup.label} sweep, {setup.angles_deg.shape[0]} poses"}
-    return BallbarRun(kern.MACHINE_CODE, setup.table_ball_mm.copy(), setup.offset_mm.copy(), zero, t,
-                      setup.angles_deg.copy(), setup.rotary_axes, dl, meta)
+            "trajectory": f"{setup.label} sweep, {n} poses"}
+    run = BallbarRun(kern.MACHINE_CODE, setup.table_ball_mm.copy(), setup.offset_mm.copy(), zero, t,
+                     setup.angles_deg.copy(), setup.rotary_axes, dl, meta)
+    return run, outlier_rows

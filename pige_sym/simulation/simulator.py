@@ -132,9 +132,20 @@ def _check_inputs(kern: Any, trajectory: Trajectory, noise_um: float, frame: str
         raise InputError(f"{kern.MACHINE_CODE} has tool-side rotary axes: give the tool (ball) offset --tool x,y,z")
 
 
-def _add_effects(dev: np.ndarray, effects: list[EffectInstance], ctx: EffectContext,
+def add_effects(dev: np.ndarray, effects: list[EffectInstance], ctx: EffectContext,
                  rng: np.random.Generator) -> tuple[np.ndarray, list[int]]:
-    """Deviations (n, 3) [µm] with every effect added, and the rows that received an outlier."""
+    """Deviations (n, 3) [µm] with every effect added, and the rows that received an outlier.
+
+    Parameters
+    ----------
+    dev : ndarray, shape=(n, 3) [µm]
+        Deviations without the effects (machine frame).
+    effects : list of EffectInstance
+    ctx : EffectContext
+        The rows (row 0 the reference pose) and the point the effects act on.
+    rng : numpy.random.Generator
+        Draws the ``outliers`` rows and directions.
+    """
     outlier_rows: set[int] = set()
     n = dev.shape[0]
     for eff in effects:
@@ -189,7 +200,7 @@ def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | N
     angles = trajectory.angles_deg
     dev = kern.deviation(angles, params, ball, pivots or None, tool)
     ctx = EffectContext(kern, angles, trajectory.t_s, ball, pivots or None, tool)
-    dev, outlier_rows = _add_effects(dev, effects or [], ctx, rng)
+    dev, outlier_rows = add_effects(dev, effects or [], ctx, rng)
     effect_records = [eff.to_dict() for eff in effects or []]
     noise = rng.normal(scale=noise_um, size=dev.shape) if noise_um > 0 else np.zeros_like(dev)
     dev = dev + noise
