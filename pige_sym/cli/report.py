@@ -1,4 +1,4 @@
-"""``pige report``: a self-contained HTML calibration report of R-test measurement files."""
+"""``pige report``: a self-contained HTML calibration report of R-test, probe and ballbar files."""
 
 from __future__ import annotations
 
@@ -39,13 +39,24 @@ def _run(args: argparse.Namespace) -> int:
                          projection=args.projection, with_zero=args.with_zero, presets=args.presets,
                          sobol_samples=args.samples, seed=args.seed, progress=not args.json and sys.stderr.isatty(),
                          tolerances=args.tolerances, rule=args.rule, k=args.k,
-                         compare=tuple(args.compare) if args.compare else None, history=args.history, db=args.db)
+                         compare=tuple(args.compare) if args.compare else None, history=args.history, db=args.db,
+                         joint=args.joint)
     if args.plan:
         data.plan = _graded_plan(args, data)
     path = write_report(data, args.out)
     if args.json:
         print(to_json(data.to_dict()))
         return 0
+    from pige_sym.diagnosis.joint import ALPHA
+
+    for jr in data.joints:
+        d = jr.diagnosis
+        p_value = None if d.agreement is None else d.agreement.p_value
+        agree = ("agreement not testable" if p_value is None else
+                 f"{'files DISAGREE' if p_value < ALPHA else 'files agree'} (p = {p_value:.2g})")
+        verdict = f"verdict {jr.check.verdict}; " if jr.check is not None else ""
+        print(f"joint ({len(jr.paths)} files of {jr.machine}): {verdict}{agree}; rank {d.final.rank}/"
+              f"{len(d.final.parameters)}, residual RMS {d.final.rms_um:.3f} um")
     for rep in data.measurements:
         gn = rep.identification["gauss-newton"]
         found = findings_text(rep)
@@ -70,19 +81,23 @@ def _run(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "report",
-        help="write a self-contained HTML report of R-test files",
+        help="write a self-contained HTML report of R-test, probe and ballbar files",
         description=(
             "Identify (Gauss-Newton and double-differential), diagnose and compensate each measurement and write\n"
             "DIR/report.html: one self-contained page (plots embedded as PNG, no external resources); the PNGs\n"
             "are kept in DIR/<file stem>/. A <stem>.truth.json beside a file (from pige simulate) is used as the\n"
             "machine of the before/after and compared with the estimates; without it the before/after is\n"
             "model-predicted. The page leads with the answer: machine, date, verdict (--tolerances), the PIGEs\n"
-            "used for compensation, the main finding and the improvement (measured with --compare)."
+            "used for compensation, the main finding and the improvement (measured with --compare).\n"
+            "Ballbar setups (with --joint: also two R-test/probe files or more of one machine) get a joint\n"
+            "section: one set of PIGEs for all files (as pige identify F1 F2 ...), whether the files agree\n"
+            "(as pige diagnose F1 F2 ...) and, with --tolerances, the verdict of the joint estimate."
         ),
         epilog=(
             "examples:\n"
             "  pige report run.csv --out report/\n"
             "  pige report ac.csv bc.csv --out report/ --study projection,sobol\n"
+            "  pige report radial_C.csv tangential_C.csv axial_A.csv --out report/ --tolerances tol.json\n"
             "  pige report run.csv --out report/ --program rtest.mpf --method double-differential\n"
             "  pige report run.csv --out report/ --json > summary.json\n"
             "  pige report after.csv --out report/ --tolerances tol.json --compare before.csv after.csv\n"
@@ -91,7 +106,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("files", nargs="*", metavar="FILE",
-                   help="pige-rtest 1 measurement file(s) (optional with --compare or --history)")
+                   help="pige-rtest 1 (R-test, probe) or pige-ballbar 1 file(s) (optional with --compare or --history)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (created)")
     p.add_argument("--study", metavar="LIST", help="also run studies on the measured trajectory: projection,sobol")
     p.add_argument("--program", metavar="NC-FILE", help="also compensate this 840D-style program (before/after)")
@@ -100,6 +115,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--k", type=float, default=2.0, help="coverage factor of the guard band (default %(default)s)")
     p.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"),
                    help="two measurements of the same program: the measured before/after section")
+    p.add_argument("--joint", action="store_true",
+                   help="also identify two or more R-test/probe files of one machine jointly (ballbar files always "
+                        "are): one set of PIGEs, whether the files agree")
     p.add_argument("--history", metavar="ID", help="machine id: trend plots of its runs (pige history)")
     p.add_argument("--db", metavar="URL", help="history database (default: as pige history)")
     p.add_argument("--plan", metavar="TRAJECTORY",

@@ -17,6 +17,7 @@ from pige_sym.compensation.parameters import AngleExtension
 from pige_sym.compensation.study import CompensationStudyRow
 from pige_sym.constants import VERSION as __version__
 from pige_sym.diagnosis.diagnose import DiagnosisResult
+from pige_sym.diagnosis.joint import JointDiagnosis
 from pige_sym.files import json_ready
 from pige_sym.identification.least_squares import METHODS
 from pige_sym.identification.result import IdentificationResult
@@ -207,6 +208,36 @@ class MeasurementReport:
 
 
 @dataclass
+class JointReport:
+    """The joint section of one machine.
+
+    Attributes
+    ----------
+    machine : str
+        Canonical machine code.
+    paths : list of Path
+        The files, in the order given.
+    diagnosis : JointDiagnosis
+        Agreement, per-file parts and the joint PIGE estimate (``diagnosis.final``).
+    check : CheckResult or None
+        Verdict of the joint estimate (with ``--tolerances``).
+    truth : dict of str to float or None
+        True PIGEs [µm, µrad] when every file has a truth sidecar and they agree.
+    """
+
+    machine: str
+    paths: list[Path]
+    diagnosis: JointDiagnosis
+    check: CheckResult | None = None
+    truth: dict[str, float] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"machine": self.machine, "files": [str(p) for p in self.paths],
+                "diagnosis": self.diagnosis.to_dict(),
+                "check": None if self.check is None else self.check.to_dict(), "truth": self.truth}
+
+
+@dataclass
 class ReportData:
     """All the content of a report, before rendering.
 
@@ -236,9 +267,11 @@ class ReportData:
     figures: list[ReportFigure] = field(default_factory=list)
     plan: Any = None  # a graded test plan (pige_sym.planning.Plan), shown by report.plan_section
     plan_html: str = ""
+    joints: list[JointReport] = field(default_factory=list)  # joint sections (pige_sym.report.joint_section)
 
     def to_dict(self) -> dict[str, Any]:
         return json_ready({
+            "joint": [j.to_dict() for j in self.joints],
             "report": None if self.html_path is None else str(self.html_path),
             "created": self.created, "version": __version__, "settings": self.settings,
             "studies": list(self.studies), "program": None if self.program is None else str(self.program),

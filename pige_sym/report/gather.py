@@ -40,12 +40,14 @@ import numpy as np
 
 from pige_sym.compensation.parameters import angle_extensions
 from pige_sym.diagnosis.diagnose import DiagnosisResult, diagnose
+from pige_sym.diagnosis.joint import diagnose_joint
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.identification.least_squares import METHODS, IdentificationError, identify
 from pige_sym.identification.studies import projection_study, sobol_study
 from pige_sym.kernels import load_kernels
+from pige_sym.measurements.ballbar import BallbarRun
 from pige_sym.measurements.measurement import Measurement
-from pige_sym.measurements.rtest import read_measurement
+from pige_sym.measurements.sets import read_files
 from pige_sym.nc.program_file import read_program
 from pige_sym.simulation.simulator import normalise_parameter_name
 from pige_sym.verdict.check import Tolerances, check, estimates_from_result, read_tolerances
@@ -58,6 +60,7 @@ from pige_sym.report.data import (
     SOBOL_EFFECT_UM,
     STUDIES,
     HistoryData,
+    JointReport,
     MeasurementReport,
     ReportData,
     Truth,
@@ -162,14 +165,17 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
                   seed: int = 0, progress: bool = False, tolerances: str | os.PathLike[str] | None = None,
                   rule: str = "guard", k: float = 2.0,
                   compare: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None,
-                  history: str | None = None, db: str | None = None) -> ReportData:
+                  history: str | None = None, db: str | None = None, joint: bool = False) -> ReportData:
     """Compute everything a report shows (no files written).
 
     Parameters
     ----------
     measurement_paths : sequence of path-like
-        ``pige-rtest 1`` files; all are read (and their truth sidecars checked) before
-        any computation, so a bad file fails fast.  May be empty with ``compare`` or ``history``.
+        ``pige-rtest 1`` files (R-test runs, probe imports) and ``pige-ballbar 1`` setups; all are
+        read (and their truth sidecars checked) before any computation, so a bad file fails fast, and a
+        file given twice is refused.  Each R-test/probe file gets its own section; the files of a
+        machine with a ballbar file (or, with ``joint``, two files or more) also get a joint section
+        (:mod:`~pige_sym.report.joint_section`).  May be empty with ``compare`` or ``history``.
     studies : iterable of {"projection", "sobol"}
     program : path-like, optional
         An 840D-style NC program compensated with each measurement's estimate.
@@ -193,6 +199,8 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
         Two measurements of the same program: the measured before/after section.
     history, db : str, optional
         Machine id and database URL: the trend section.
+    joint : bool
+        Also identify two or more R-test/probe files of one machine jointly (ballbar files always are).
 
     Returns
     -------
@@ -206,10 +214,7 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     study_set = parse_studies(studies)
     paths = [Path(p) for p in measurement_paths]
     _check_options(method, presets, sobol_samples, paths, compare is not None or history is not None)
-    loaded = []
-    for p in paths:
-        m = read_measurement(p)
-        loaded.append((p, m, read_truth(p, m.machine)))
+    loaded, every = _read_inputs(paths)
     tol = read_tolerances(tolerances) if tolerances is not None else None
     program_text = read_program(program) if program is not None else None
     steps_per_file = 4 + len(study_set) + (program is not None)
@@ -217,12 +222,13 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
                        None if program is None else Path(program), program_text)
     from tqdm import tqdm
 
-    with tqdm(total=steps_per_file * len(paths), desc="report", unit="step", disable=not progress) as bar:
+    with tqdm(total=steps_per_file * len(loaded), desc="report", unit="step", disable=not progress) as bar:
         reports = [_gather_one(p, label, m, truth, options, bar)
-                   for (p, m, truth), label in zip(loaded, _labels(paths), strict=True)]
+                   for (p, m, truth), label in zip(loaded, _labels([x[0] for x in loaded]), strict=True)]
     _share_identical_sobol(reports)
     created = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
     data = ReportData(reports, study_set, options.program, _settings_shown(options), created)
+    data.joints = gather_joints(every, tolerances=tol, rule=rule, k=k, every_group=joint)
     if compare is not None:
         from pige_sym.verdict.compare import compare_measurements
 
@@ -230,6 +236,69 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     if history is not None:
         data.history = gather_history(history, db, tol)
     return data
+
+
+def _common_truth(truths: Sequence[dict[str, float] | None]) -> dict[str, float] | None:
+    if not truths or any(t is None for t in truths):
+        return None
+    first = truths[0]
+    assert first is not None
+    return first if all(t == first for t in truths) else None
+
+
+def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, dict[str, float] | None]], *,
+                  tolerances: Tolerances | None = None, rule: str = "guard", k: float = 2.0,
+                  every_group: bool = False) -> list[JointReport]:
+    """The joint sections of a report's files (module docstring).
+
+    Parameters
+    ----------
+    items : sequence of (path, contents, true PIGEs or None)
+        Every file of the report, R-test, probe and ballbar, in the order given.
+    tolerances : Tolerances, optional
+        Judge each joint estimate.
+    rule, k
+        Decision rule and coverage factor of the check.
+    every_group : bool
+        Also the machines with two R-test/probe files or more (not only those with a ballbar file: a
+        ballbar setup alone determines only some combinations, R-test runs of one machine may be a
+        before and an after).
+
+    Returns
+    -------
+    list of JointReport
+        One per machine with a ballbar file (``every_group``: or with two files or more), in order of
+        first appearance.
+    """
+    groups: dict[str, list[int]] = {}
+    for i, (_, item, _) in enumerate(items):
+        groups.setdefault(load_kernels(item.machine).MACHINE_CODE, []).append(i)
+    out = []
+    for machine, idx in groups.items():
+        has_ballbar = any(isinstance(items[i][1], BallbarRun) for i in idx)
+        if not has_ballbar and not (every_group and len(idx) > 1):
+            continue
+        labelled = [(items[i][0].name, items[i][1]) for i in idx]
+        diag = diagnose_joint(labelled)
+        verdict = None
+        if tolerances is not None:
+            source = " + ".join(items[i][0].name for i in idx)
+            verdict = check(estimates_from_result(diag.final, source), tolerances, rule=rule, k=k)
+        out.append(JointReport(machine, [items[i][0] for i in idx], diag, verdict,
+                               _common_truth([items[i][2] for i in idx])))
+    return out
+
+
+def _read_inputs(paths: list[Path]) -> tuple[list[tuple[Path, Measurement, Truth | None]],
+                                             list[tuple[Path, Measurement | BallbarRun, dict[str, float] | None]]]:
+    """(R-test/probe files with their truth, every file with its true PIGEs), each read and checked once."""
+    loaded, every = [], []
+    for p, item in read_files(paths) if paths else []:
+        truth = read_truth(p, item.machine)
+        every.append((Path(p), item, None if truth is None else truth.values))
+        if isinstance(item, Measurement):
+            loaded.append((Path(p), item, truth))
+    return loaded, every
 
 
 def _settings_shown(o: _Options) -> dict[str, str]:

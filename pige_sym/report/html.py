@@ -27,6 +27,7 @@ from pige_sym.report.html_sections import (
     summary_html,
 )
 from pige_sym.report.html_verdict import answer_html, check_html, compare_html, history_html
+from pige_sym.report.joint_section import answer_joint_html, joint_html
 from pige_sym.report.lead import improvement
 
 
@@ -112,6 +113,16 @@ def _overview_html(data: ReportData) -> str:
     return table(head, rows, num_cols=[3, 5])
 
 
+def _instruments(data: ReportData) -> str:
+    """The instruments of the page's files, for its title."""
+    names = [str(r.measurement.metadata.get("instrument") or "R-test") for r in data.measurements]
+    names += ["ballbar" for j in data.joints for fd in j.diagnosis.files if fd.instrument == "ballbar"]
+    if not names and (data.comparison is not None or data.history is not None):
+        names = ["R-test"]
+    shown = {"rtest": "R-test", "sphere-probe": "touch probe"}
+    return ", ".join(dict.fromkeys(shown.get(n, n) for n in names)) or "R-test"
+
+
 def render_html(data: ReportData, *, base: Path | None = None) -> str:
     """The report page: one self-contained HTML document (inline CSS, PNGs as data URIs, no script).
 
@@ -122,7 +133,8 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
     base : Path, optional
         Figure paths are shown relative to it.
     """
-    nav = " ".join([f'<a href="#m{i + 1}">{esc(r.path.name)}</a>' for i, r in enumerate(data.measurements)]
+    nav = " ".join([f'<a href="#joint-{i + 1}">joint: {len(j.paths)} files</a>' for i, j in enumerate(data.joints)]
+                   + [f'<a href="#m{i + 1}">{esc(r.path.name)}</a>' for i, r in enumerate(data.measurements)]
                    + (['<a href="#compare">measured before/after</a>'] if data.comparison is not None else [])
                    + (['<a href="#history">history</a>'] if data.history is not None else [])
                    + (['<a href="#plan">test plan</a>'] if data.plan_html or data.plan is not None else []))
@@ -133,12 +145,13 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
         '<meta name="viewport" content="width=device-width, initial-scale=1">',
         "<title>pige_sym calibration report</title>",
         f"<style>{CSS}</style></head><body>",
-        "<header><h1>Five-axis calibration report (R-test)</h1>",
+        f"<header><h1>Five-axis calibration report ({esc(_instruments(data))})</h1>",
         f'<p class="meta">pige_sym {esc(__version__)} — {esc(data.created)}</p></header><main>',
-        '<section data-section="answer" id="answer">', answer_html(data), "</section>",
+        '<section data-section="answer" id="answer">',
+        *(answer_joint_html(i, j) for i, j in enumerate(data.joints)), answer_html(data), "</section>",
         (f'<p class="meta">{esc(settings)}'
          + (f" — NC program <code>{esc(data.program)}</code>" if data.program is not None else "") + "</p>"
-         if data.measurements else ""),
+         if data.measurements or data.joints else ""),
         f"<nav>{nav}</nav>",
     ]
     if data.measurements:
@@ -150,6 +163,7 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
     if data.history is not None:
         parts += ['<section data-section="history" id="history"><h2>Machine history</h2>',
                   history_html(data, base), "</section>"]
+    parts += [joint_html(i, j) for i, j in enumerate(data.joints)]
     parts += [_measurement_html(i, rep, base) for i, rep in enumerate(data.measurements)]
     if data.plan_html:
         parts.append(data.plan_html)

@@ -11,6 +11,7 @@ from pathlib import Path
 from pige_sym.report.data import MeasurementReport, ReportData
 from pige_sym.report.html_blocks import esc, img, kvs, num, table, units
 from pige_sym.report.lead import improvement, main_finding, pige_rows
+from pige_sym.verdict.check import CheckResult
 
 _BADGE = {"pass": "PASS", "fail": "FAIL", "undecided": "UNDECIDED"}
 
@@ -103,8 +104,12 @@ def answer_html(data: ReportData) -> str:
 
 
 def check_html(rep: MeasurementReport) -> str:
-    chk = rep.check
-    assert chk is not None
+    assert rep.check is not None
+    return check_table_html(rep.check)
+
+
+def check_table_html(chk: CheckResult) -> str:
+    """A check's items, its rule and what it could not assess."""
     rows = [[f"<b>{esc(i.name)}</b>", num(i.value), num(i.std), num(i.limit, "g"), esc(units(i.unit)),
              f'<span class="st {esc(i.status)}">{esc(i.status)}</span>', esc(i.reason)] for i in chk.items]
     parts = [f"<p>Tolerances <code>{esc(chk.tolerances)}</code>; {esc(chk.method)} estimate; rule "

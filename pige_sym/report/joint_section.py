@@ -1,0 +1,131 @@
+"""The report's joint section: several files of one machine identified and diagnosed together.
+
+``pige report`` gives every R-test run and probe import its own section (it can be identified,
+diagnosed and compensated alone).  A ballbar setup cannot: one projection per pose determines only some
+combinations of the PIGEs.  So, for each machine of the report with a ballbar file (with ``--joint``: also
+with two R-test/probe files or more), the report adds a joint section (computed by
+:func:`pige_sym.report.gather.gather_joints`, rendered here):
+
+- the agreement test of :func:`pige_sym.diagnosis.joint.diagnose_joint` (one set of PIGEs for all files,
+  and which file disagrees), in plain words first;
+- each file's part: instrument, rows, its own σ, the RMS of its joint residual, its free constant
+  (``zero: relative`` ballbar files), its own diagnosis (ballbar: agreement only) and its test against the
+  others;
+- the joint PIGE estimate with standard errors, what the set cannot determine named and given no value;
+  with ``--tolerances`` the verdict of the joint estimate (``pige check F1 F2 …``); with truth sidecars
+  that agree on the PIGEs (``pige simulate``), the true values and the errors in standard errors.
+
+The section leads the page when the report has no single file that stands alone (ballbar files only).
+"""
+
+from __future__ import annotations
+
+import math
+
+from pige_sym.diagnosis.joint import ALPHA, JointDiagnosis
+from pige_sym.report.data import JointReport
+from pige_sym.report.html_blocks import esc, kvs, num, table, units
+from pige_sym.report.html_verdict import check_table_html
+
+
+def _agreement_sentence(d: JointDiagnosis) -> tuple[str, str]:
+    """(badge class, plain sentence) of the agreement test."""
+    if d.agreement is None:
+        if len(d.files) == 1:
+            return "none", "one file: nothing to compare it with"
+        return "none", ("the files see different combinations of the PIGEs, so their agreement cannot be tested; "
+                        "a setup that repeats one would check it")
+    if d.agreement.p_value < ALPHA:
+        bad = [f.label for f in d.files if f.disagrees]
+        who = f" — the file that disagrees: {', '.join(bad)}" if bad else " — no single file stands out"
+        return "fail", (f"the files do not agree on one set of PIGEs (p = {d.agreement.p_value:.2g}){who}; the "
+                        "machine changed between the setups or an effect the model misses shows differently in "
+                        "each: do not use the joint estimate")
+    return "pass", f"the files agree on one set of PIGEs (p = {d.agreement.p_value:.2g})"
+
+
+def answer_joint_html(i: int, jr: JointReport) -> str:
+    """The first-screen answer of a joint section: machine, files, agreement, verdict, largest PIGE."""
+    d = jr.diagnosis
+    kind, sentence = _agreement_sentence(d)
+    if jr.check is None:
+        verdict = ('<span data-verdict="none" class="badge none">not judged</span> <small>no tolerances given '
+                   "(pige report --tolerances TOL.json)</small>")
+    else:
+        odd = [f"{it.name} {it.status}" for it in jr.check.items if it.status != "pass"]
+        verdict = (f'<span data-verdict="{esc(jr.check.verdict)}" class="badge {esc(jr.check.verdict)}">'
+                   f"{esc(jr.check.verdict.upper())}</span> <small>"
+                   + esc(", ".join(odd) if odd else f"all {len(jr.check.items)} items pass") + "</small>")
+    res = d.final
+    known = [(n, float(v), float(s)) for n, v, s in zip(res.parameters, res.values, res.std, strict=True)
+             if math.isfinite(float(v))]
+    facts = [("machine", f"<code>{esc(jr.machine)}</code>"),
+             ("files", esc(f"{len(jr.paths)} identified jointly: " + ", ".join(p.name for p in jr.paths))),
+             ("agreement", f'<span class="badge {esc(kind)}">{esc(kind.upper() if kind != "none" else "—")}'
+                           f"</span> {esc(sentence)}"),
+             ("verdict (joint estimate)", verdict),
+             ("determined", esc(f"{len(known)} of {len(res.parameters)} PIGEs"
+                                + (f"; not determined by these setups: {', '.join(res.unidentifiable)}"
+                                   if res.unidentifiable else "")))]
+    return f'<div class="answer" id="answer-j{i + 1}"><div class="facts">{kvs(facts)}</div></div>'
+
+
+def _files_table(jr: JointReport) -> str:
+    d = jr.diagnosis
+    head = ["file", "instrument", "rows", "own σ [µm]", "joint residual RMS [µm]", "constant [µm]",
+            "own diagnosis", "against the others"]
+    rows, classes = [], []
+    for fd, fs in zip(d.files, d.joint.files, strict=True):
+        const = "—" if fs.constant_um is None else f"{num(fs.constant_um)} ± {num(fs.constant_std_um, '.2g')}"
+        found = ", ".join(f.effect for f in fd.findings) or "nothing beyond the PIGEs"
+        own = f"{fd.checked}: {found}" if not fd.checked.startswith("agreement only") else "agreement only"
+        if fd.agreement is None:
+            test = "—"
+        else:
+            test = f"{'DISAGREES' if fd.disagrees else 'agrees'} (p = {fd.agreement.p_value:.2g})"
+        rows.append([f'<code class="path">{esc(fd.label)}</code>', esc(fd.instrument), esc(fd.rows),
+                     num(fs.sigma_um, ".3g"), num(fs.rms_um, ".3g"), const, esc(own), esc(test)])
+        classes.append("unid" if fd.disagrees else "")
+    return table(head, rows, row_classes=classes, num_cols=[2, 3, 4])
+
+
+def _pige_table(jr: JointReport) -> str:
+    res = jr.diagnosis.final
+    head = ["PIGE", "value", "std", "unit"] + (["true", "error / std"] if jr.truth is not None else [])
+    rows, classes = [], []
+    for name, v, s in zip(res.parameters, res.values, res.std, strict=True):
+        bad = not math.isfinite(float(v))
+        row = [f"<b>{esc(name)}</b>", "not determined" if bad else num(float(v)), "—" if bad else num(float(s)),
+               esc(units(res.units.get(name, "")))]
+        if jr.truth is not None:
+            t = jr.truth.get(name, 0.0)
+            z = None if bad or not float(s) > 0 else (float(v) - t) / float(s)
+            row += [num(t), num(z, "+.2f")]
+        rows.append(row)
+        classes.append("unid" if bad else "")
+    return table(head, rows, row_classes=classes, num_cols=[1, 2] + ([4, 5] if jr.truth is not None else []))
+
+
+def joint_html(i: int, jr: JointReport) -> str:
+    """The joint section (module docstring)."""
+    d = jr.diagnosis
+    kind, sentence = _agreement_sentence(d)
+    parts = [f'<section data-section="joint" id="joint-{i + 1}">',
+             f"<h2>Joint identification — {len(jr.paths)} file(s) of <code>{esc(jr.machine)}</code></h2>",
+             f'<p><span class="badge {esc(kind)}">{esc(kind.upper() if kind != "none" else "—")}</span> '
+             f"{esc(sentence[0].upper() + sentence[1:])}.</p>",
+             "<p>Every file's rows are divided by its own noise σ and fitted with one set of PIGEs (a free "
+             "constant per relative ballbar file, whose zero is unknown). A ballbar file is one projection per "
+             "pose, along the bar: it is checked for agreement only; R-test and probe files also get their own "
+             "catalogue diagnosis.</p>",
+             "<h3>The files</h3>", _files_table(jr)]
+    if jr.check is not None:
+        parts += ["<h3>Conformance of the joint estimate</h3>", check_table_html(jr.check)]
+    parts += ["<h3>Joint PIGE estimate</h3>", _pige_table(jr)]
+    res = d.final
+    parts.append(f"<p><small>Rank {res.rank}/{len(res.parameters)}, joint residual RMS {num(res.rms_um, '.3g')} "
+                 "µm. A combination no file measures gets no value.</small></p>")
+    parts += [f'<p class="note">{esc(n)}</p>' for n in d.notes]
+    parts.append("</section>")
+    return "\n".join(parts)
+
