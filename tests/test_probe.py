@@ -280,3 +280,62 @@ def test_plan_and_study_for_the_probe(tmp_path, capsys) -> None:
                  "--trajectory", str(out), "--out", str(tmp_path / "p.ngc"), "--dialect", "linuxcnc"]) == 0
     assert main(["study", "projection", "--instrument", "sphere-probe"]) == 0
     assert "ignoring it" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------------------------------- what probing gets wrong
+
+
+def _drift_runs(tmp_path: Path, effect: str, seeds: range) -> list:
+    from pige_sym.model.effects import parse_effect
+
+    traj = make_trajectory(AC, "cone-frustum")
+    text = render_probe_program(plan_probing(SETUP, traj.angles_deg, traj.description), "siemens")
+    truth = random_pige(AC, 3)
+    out = []
+    for seed in seeds:
+        machine = ProbeMachine(SETUP, truth, effects=[parse_effect(effect, ("A", "C"))], noise_um=0.5, seed=seed)
+        log = _write(tmp_path, run_probe_program(text, "siemens", machine), f"drift{seed}.txt")
+        out.append((truth, import_probe_log(log, "siemens", SPEC)))
+    return out
+
+
+def test_a_sphere_creeping_on_its_stand_is_named_fitted_and_its_gain_measured(tmp_path) -> None:
+    """The sphere moves v·(1 − exp(−k/τ)) on the table (k: the pose's order, the time of an imported log):
+    the diagnosis names table_drift, estimates v, and the PIGEs fitted with it are better than without."""
+    from pige_sym.diagnosis.diagnose import diagnose
+
+    for truth, m in _drift_runs(tmp_path, "table_drift:vx_um=3,vy_um=-2,vz_um=4,tau_s=10", range(3)):
+        d = diagnose(m)
+        assert [f.effect for f in d.findings] == ["table_drift"]
+        f = d.findings[0]
+        assert f.rms_um_after < 0.6 * f.rms_um_before
+        for name, value in (("vx_um", 3.0), ("vy_um", -2.0), ("vz_um", 4.0)):
+            assert f.params[name] == pytest.approx(value, abs=1.5)
+        assert abs(f.params["tau_s"] - 10.0) < max(4 * f.std["tau_s"], 2.0)  # τ interpolated, with its std
+        plain = identify(m)
+        worst_plain = max(abs(plain.value(k) - v) for k, v in truth.items())
+        worst_fitted = max(abs(d.final.value(k) - v) for k, v in truth.items())
+        assert worst_fitted < 0.5 * worst_plain
+
+
+def test_a_tool_side_drift_in_probe_data_stays_thermal_drift(tmp_path) -> None:
+    """The two drifts differ by the table's turn: a machine-frame drift is not called a creeping sphere."""
+    from pige_sym.diagnosis.diagnose import diagnose
+
+    ((_, m),) = _drift_runs(tmp_path, "thermal_drift:vx_um=3,vy_um=-2,vz_um=4,tau_s=10", range(1))
+    assert [f.effect for f in diagnose(m).findings] == ["thermal_drift"]
+
+
+def test_table_drift_is_the_nest_moving_with_the_table() -> None:
+    """Oracle: a nest that moves v(t) in the table frame is seen at R_w·v(t): d = −R_w·v(t)."""
+    from pige_sym.model.effects import parse_effect
+    from pige_sym.simulation.simulator import simulate
+
+    traj = make_trajectory(AC, "cone-frustum")
+    effect = parse_effect("table_drift:vx_um=1,vy_um=2,vz_um=-3,tau_s=40", ("A", "C"))
+    d = simulate(AC, traj, effects=[effect], noise_um=0.0).measurement.deviation_um
+    from pige_sym.kernels import load_kernels
+
+    rot = load_kernels(AC).workpiece_rotation(traj.angles_deg)
+    f = 1.0 - np.exp(-traj.t_s / 40.0)
+    np.testing.assert_allclose(d, -np.einsum("nij,j->ni", rot, [1.0, 2.0, -3.0]) * f[:, None], atol=1e-12)

@@ -14,7 +14,8 @@ Candidates
 A :class:`Candidate` is one effect with fixed shape options (harmonic or τ) and the
 slice of its columns in the super design.  Harmonics 1–4 of the angular error, wobble
 and radial runout of every rotary axis that moves, backlash of every axis approached
-from both sides, the three squareness pairs, setup offset, thermal drift.
+from both sides, the three squareness pairs, setup offset, thermal drift; for a probed sphere
+(``table_drift=True``) also the sphere creeping on its stand (``table_drift``, on the same τ grid).
 
 Reduction to the identifiable part
 ----------------------------------
@@ -42,6 +43,7 @@ import numpy as np
 from pige_sym.model.effects import EffectContext, EffectSpec
 
 HARMONICS = (1, 2, 3, 4)
+DRIFT_KINDS = ("thermal_drift", "table_drift")  # effects with a time constant τ on the grid
 TAU_GRID_FRACTIONS = tuple(float(x) for x in np.geomspace(0.03, 5.0, 10))
 NULL_LAMBDA = 1e-7  # 1/VIF below which a direction counts as undetermined (std inflated > ~3000x)
 ZERO_COLUMN = 1e-10  # relative column norm below which a candidate column leaves no trace
@@ -100,8 +102,9 @@ class Layout:
     n_columns : int
     tau_grid_s : ndarray, shape=(g,) [s]
         Thermal time constants of the drift candidates (empty when the file has no duration).
-    drift_cols : list of tuple of int
-        Column triples (vx, vy, vz) of each τ grid point.
+    drift_cols : dict of str to list of tuple of int
+        Per drift kind (``thermal_drift``, ``table_drift``), the column triples (vx, vy, vz) of each τ grid
+        point.
     """
 
     pige: list[str]
@@ -109,7 +112,7 @@ class Layout:
     candidates: list[Candidate]
     n_columns: int
     tau_grid_s: np.ndarray
-    drift_cols: list[tuple[int, ...]] = field(default_factory=list)
+    drift_cols: dict[str, list[tuple[int, ...]]] = field(default_factory=dict)
 
 
 def _moves(angles: np.ndarray, k: int) -> bool:
@@ -117,7 +120,7 @@ def _moves(angles: np.ndarray, k: int) -> bool:
 
 
 def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: np.ndarray,
-                 restrict: list[str] | None = None) -> Layout:
+                 restrict: list[str] | None = None, table_drift: bool = False) -> Layout:
     """Every applicable candidate of a measurement, in super-design column order.
 
     Parameters
@@ -129,6 +132,8 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
         Direction of approach per axis (−1, 0, +1).
     restrict : list of str, optional
         Keep only these catalogue ids.
+    table_drift : bool
+        Also the nest/sphere drifting on the table (probe files: a sphere on a stand).
     """
     pige = list(kern.LOCATION_PARAMETERS)
     units = {p: kern.UNITS[p] for p in pige}
@@ -137,6 +142,8 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
     taus = np.array([f * duration for f in TAU_GRID_FRACTIONS]) if duration > 0 else np.zeros(0)
     for tau in taus:
         specs.append((EffectSpec("thermal_drift", {"tau_s": float(tau)}), "thermal_drift", 1))
+    for tau in taus if table_drift else ():
+        specs.append((EffectSpec("table_drift", {"tau_s": float(tau)}), "table_drift", 1))
     for k, ax in enumerate(kern.ROTARY_AXES):
         if not _moves(angles_deg, k):
             continue
@@ -150,13 +157,13 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
     specs.append((EffectSpec("setup_offset"), "setup_offset", 0))
     col = len(pige)
     cands: list[Candidate] = []
-    drift_cols: list[tuple[int, ...]] = []
+    drift_cols: dict[str, list[tuple[int, ...]]] = {}
     for spec, key, extra in specs:
         q = len(spec.param_names)
         cols = tuple(range(col, col + q))
         col += q
-        if spec.kind == "thermal_drift":
-            drift_cols.append(cols)
+        if spec.kind in DRIFT_KINDS:
+            drift_cols.setdefault(spec.kind, []).append(cols)
         if restrict is None or spec.id in restrict:
             cands.append(Candidate(spec, key, cols, extra))
     return Layout(pige, units, cands, col, taus, drift_cols)

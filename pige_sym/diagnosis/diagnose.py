@@ -76,6 +76,8 @@ harmonic h enters as ``cos hθ``, ``sin hθ``.
 - ``setup_offset``: ball/nest set up Δ [µm] away from nominal, ``d = (R_t − R_w)·Δ``;
   on table machines this is entirely location errors (unidentifiable, named).
 - ``thermal_drift``: tool-to-table offset ``v·(1 − exp(−t/τ))`` [µm], machine frame.
+- ``table_drift`` (probe files only): the sphere creeps on its stand, ``v·(1 − exp(−t/τ))`` [µm] in the
+  table frame (t is the pose order in an imported log).
 
 Tool-side (head) axes use the same definitions in their own carrier frame, through
 the generated kernels' error-motion Jacobian, so head and table+head machines are
@@ -148,9 +150,9 @@ class _Setup:
     def _blocks(self, cands: list[Candidate] | None) -> list[tuple[EffectSpec, tuple[int, ...]]]:
         chosen = self.layout.candidates if cands is None else cands
         blocks = {c.cols: c.spec for c in chosen if c.mix is None}
-        if any(c.mix is not None for c in chosen):  # interpolated drift: fill the whole τ grid
-            blocks |= {cols: EffectSpec("thermal_drift", {"tau_s": float(t)})
-                       for cols, t in zip(self.layout.drift_cols, self.layout.tau_grid_s, strict=True)}
+        for kind in {c.spec.kind for c in chosen if c.mix is not None}:  # interpolated drift: its whole τ grid
+            blocks |= {cols: EffectSpec(kind, {"tau_s": float(t)})
+                       for cols, t in zip(self.layout.drift_cols[kind], self.layout.tau_grid_s, strict=True)}
         return [(spec, cols) for cols, spec in blocks.items()]
 
     def design(self, cands: list[Candidate] | None = None) -> Callable[[np.ndarray], np.ndarray]:
@@ -189,7 +191,8 @@ def _setup(m: Measurement, candidates: list[str] | None) -> _Setup:
     if m.n_rows < 3:
         raise InputError(f"{m.path or 'measurement'}: {m.n_rows} rows cannot be diagnosed: measure more points")
     approach = _approach(m.angles_deg)
-    layout = build_layout(kern, m.angles_deg, m.t_s, approach, candidates)
+    layout = build_layout(kern, m.angles_deg, m.t_s, approach, candidates,
+                          table_drift=instrument(m) == "sphere-probe")
     return _Setup(kern, m, approach, layout, fold_of_rows(m.n_rows))
 
 
@@ -281,7 +284,7 @@ def _alternatives(selector: Selector, final: Model, i: int) -> list[str]:
     return [f"{name} fits almost as well (ΔBIC {gap:+.1f})" for name, gap in sorted(best.items(), key=lambda x: x[1])]
 
 
-def _finding(selector: Selector, final: Model, i: int, tau_std: float) -> Finding:
+def _finding(selector: Selector, final: Model, i: int, tau_std: dict[str, float]) -> Finding:
     """The evidence of the i-th effect of the final model against the final model without it."""
     c, red, blk = final.cands[i], final.reductions[i], final.blocks[i]
     small = selector.without(final, i)
@@ -297,8 +300,8 @@ def _finding(selector: Selector, final: Model, i: int, tau_std: float) -> Findin
     params = dict(zip(names, vals.tolist(), strict=True))
     stds = dict(zip(names, std.tolist(), strict=True))
     units = dict(c.spec.units)
-    if c.spec.kind == "thermal_drift":
-        params["tau_s"], stds["tau_s"], units["tau_s"] = float(c.spec.options["tau_s"]), tau_std, "s"
+    if c.spec.kind in tau_std:
+        params["tau_s"], stds["tau_s"], units["tau_s"] = float(c.spec.options["tau_s"]), tau_std[c.spec.kind], "s"
     shift = {n: float(final.fit.values[j] - small.fit.values[j]) for j, n in enumerate(selector.layout.pige)}
     explained = 1.0 - f.rss / small.fit.rss if small.fit.rss > 0 else 0.0
     evidence = EVIDENCE[c.spec.kind].format(axis=c.spec.axis, h=int(c.spec.options.get("harmonic", 1)))

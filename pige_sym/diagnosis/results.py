@@ -20,6 +20,7 @@ from pige_sym.identification.result import IdentificationResult
 
 EVIDENCE = {
     "thermal_drift": "a smooth trend of the residual with time (warm-up), not with the angles",
+    "table_drift": "a smooth trend with time that turns with the table: the sphere (nest) creeps on its stand",
     "angular_error": "a tangential residual about {axis} at harmonic {h} of the {axis} angle",
     "wobble": "a residual from a tilt of the {axis} axis that repeats {h}x per revolution",
     "radial_runout": "a radial residual of the {axis} axis that repeats {h}x per revolution",

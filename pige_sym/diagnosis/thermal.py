@@ -1,8 +1,10 @@
-"""The thermal time constant τ between grid points (step 5 of :mod:`pige_sym.diagnosis.diagnose`).
+"""The time constant τ of a drift between grid points (step 5 of :mod:`pige_sym.diagnosis.diagnose`).
 
-The drift columns at any τ are interpolated from the accumulated sums at the three nearest grid
-points (quadratic Lagrange weights in ln τ, exact linear combinations); τ minimises the RSS and its
-standard error comes from the Gauss–Newton covariance with the ∂/∂ln τ column.
+Drifts: ``thermal_drift`` (machine frame) and ``table_drift`` (the nest or sphere creeping on the
+table), each on the layout's τ grid.  The drift columns at any τ are interpolated from the accumulated
+sums at the three nearest grid points (quadratic Lagrange weights in ln τ, exact linear combinations);
+τ minimises the RSS and its standard error comes from the Gauss–Newton covariance with the ∂/∂ln τ
+column.  Each drift of the model is refined in turn.
 """
 
 from __future__ import annotations
@@ -35,27 +37,35 @@ def _tau_weights(layout: Layout, log_tau: float) -> tuple[list[int], np.ndarray,
     return idx, w, dw
 
 
-def _drift_at(layout: Layout, log_tau: float, derivative: bool = False) -> np.ndarray:
+def _drift_at(layout: Layout, kind: str, log_tau: float, derivative: bool = False) -> np.ndarray:
     idx, w, dw = _tau_weights(layout, log_tau)
     mix = np.zeros((layout.n_columns, 3))
     for i, g in enumerate(idx):
-        for j, col in enumerate(layout.drift_cols[g]):
+        for j, col in enumerate(layout.drift_cols[kind][g]):
             mix[col, j] += dw[i] if derivative else w[i]
     return mix
 
 
-def refine_tau(selector: Selector, model: Model) -> tuple[Model, float]:
-    """Replace a grid drift by the interpolated τ of least RSS; returns the model and the std of τ [s]."""
+def refine_tau(selector: Selector, model: Model) -> tuple[Model, dict[str, float]]:
+    """Replace each grid drift by the interpolated τ of least RSS; returns the model and the std of τ [s] by kind."""
+    stds: dict[str, float] = {}
+    for kind in [c.spec.kind for c in model.cands if c.spec.kind in ("thermal_drift", "table_drift")]:
+        model, stds[kind] = _refine_one(selector, model, kind)
+    return model, stds
+
+
+def _refine_one(selector: Selector, model: Model, kind: str) -> tuple[Model, float]:
+    """:func:`refine_tau` for the drift of one kind."""
     layout = selector.layout
-    i = next((k for k, c in enumerate(model.cands) if c.spec.kind == "thermal_drift"), None)
-    if i is None or len(layout.tau_grid_s) < 3:
+    i = next(k for k, c in enumerate(model.cands) if c.spec.kind == kind)
+    if len(layout.tau_grid_s) < 3:
         return model, float("nan")
     old = model.cands[i]
     s = np.log(layout.tau_grid_s)
 
     def cand(log_tau: float) -> Candidate:
-        spec = EffectSpec("thermal_drift", {"tau_s": float(np.exp(log_tau))})
-        return Candidate(spec, old.key, old.cols, 1, _drift_at(layout, log_tau))
+        spec = EffectSpec(kind, {"tau_s": float(np.exp(log_tau))})
+        return Candidate(spec, old.key, old.cols, 1, _drift_at(layout, kind, log_tau))
 
     def with_tau(log_tau: float) -> Model:
         return selector.model(model.cands[:i] + [cand(log_tau)] + model.cands[i + 1:])
@@ -72,7 +82,7 @@ def refine_tau(selector: Selector, model: Model) -> tuple[Model, float]:
     block = best.blocks[i]
     red = best.reductions[i]
     v = red.basis @ best.fit.values[block]
-    dcol = _drift_at(layout, float(opt.x), derivative=True) @ v
+    dcol = _drift_at(layout, kind, float(opt.x), derivative=True) @ v
     aug = fit(selector.sums, np.concatenate([best.w, dcol[:, None]], axis=1), heldout=False)
     tau = float(np.exp(opt.x))
     std_tau = tau * float(aug.std[-1]) if np.isfinite(aug.vif[-1]) else float("nan")

@@ -12,6 +12,9 @@ Catalogue (ids are stable; ``<AXIS>`` is a rotary axis name):
 id                         physics                                                      parameters
 =========================  ===========================================================  =========================
 ``thermal_drift``          tool-to-table offset ``v·(1 − exp(−t/τ))`` (machine frame)    vx_um, vy_um, vz_um; tau_s
+``table_drift``            the nest or probed sphere creeps on the table (stand warm-up,   vx_um, vy_um, vz_um; tau_s
+                           a loose stand): it moves ``v·(1 − exp(−t/τ))`` in the table
+                           frame, so ``d = −R_w·v·(1 − exp(−t/τ))`` (turns with the table)
 ``angular_error_<AXIS>``   the axis stands at ``θ + e(θ)``, ``e = c·cos hθ + s·sin hθ``    cos_urad, sin_urad; harmonic
 ``wobble_<AXIS>``          tilt error motion of the carried body about the two axes ⟂ u,  r<a>_cos, r<a>_sin,
                            harmonic h (default 2) of θ, carrier frame                     r<b>_cos, r<b>_sin [µrad]
@@ -155,7 +158,7 @@ class EffectSpec:
     def param_names(self) -> tuple[str, ...]:
         """Names of the linear parameters, in column order."""
         kind = self.kind
-        if kind == "thermal_drift":
+        if kind in ("thermal_drift", "table_drift"):
             return ("vx_um", "vy_um", "vz_um")
         if kind == "angular_error":
             return ("cos_urad", "sin_urad")
@@ -173,7 +176,8 @@ class EffectSpec:
 
     @property
     def units(self) -> dict[str, str]:
-        u = "um" if self.kind in ("thermal_drift", "radial_runout", "setup_offset", "pose_cluster") else "urad"
+        u = "um" if self.kind in ("thermal_drift", "table_drift", "radial_runout", "setup_offset",
+                                  "pose_cluster") else "urad"
         return {p: u for p in self.param_names}
 
     def _perp(self) -> tuple[str, str]:
@@ -196,11 +200,13 @@ class EffectSpec:
         """
         kind = self.kind
         n = ctx.n
-        if kind == "thermal_drift":
+        if kind in ("thermal_drift", "table_drift"):
             tau = float(self.options.get("tau_s", 600.0))
             if tau <= 0:
-                raise InputError("thermal_drift: tau_s must be > 0")
+                raise InputError(f"{kind}: tau_s must be > 0")
             f = 1.0 - np.exp(-np.asarray(ctx.t_s, dtype=float) / tau)
+            if kind == "table_drift":  # the nest moves v(t) in the table frame: d = −R_w·v(t)
+                return -ctx.rot_w * f[:, None, None], True
             cols = np.zeros((n, 3, 3))
             for i in range(3):
                 cols[:, i, i] = f
@@ -274,14 +280,14 @@ class EffectSpec:
         return self.columns(ctx) @ vec
 
 
-KINDS = ("thermal_drift", "angular_error", "wobble", "radial_runout", "backlash", "squareness", "setup_offset",
-         "outliers")
+KINDS = ("thermal_drift", "table_drift", "angular_error", "wobble", "radial_runout", "backlash", "squareness",
+         "setup_offset", "outliers")
 OPTION_KEYS = {"harmonic", "tau_s", "size_um", "count"}
 
 
 def catalogue(rotary_axes: tuple[str, ...]) -> list[str]:
     """Every effect id applicable to a machine with these rotary axes."""
-    ids = ["thermal_drift"]
+    ids = ["thermal_drift", "table_drift"]
     for ax in rotary_axes:
         ids += [f"angular_error_{ax}", f"wobble_{ax}", f"radial_runout_{ax}", f"backlash_{ax}"]
     ids += ["squareness_XY", "squareness_YZ", "squareness_ZX", "setup_offset", "outliers"]
@@ -308,6 +314,7 @@ class EffectInstance:
 
 DEFAULTS: dict[str, dict[str, float]] = {
     "thermal_drift": {"vx_um": 1.5, "vy_um": -1.0, "vz_um": 2.0, "tau_s": 150.0},
+    "table_drift": {"vx_um": 1.0, "vy_um": 1.5, "vz_um": -2.0, "tau_s": 150.0},
     "angular_error": {"harmonic": 2, "cos_urad": 15.0, "sin_urad": -10.0},
     "wobble": {"harmonic": 2},
     "radial_runout": {"harmonic": 2},

@@ -25,7 +25,7 @@ Families (poses after the reference pose; n of them)
 Structure (what ``--reveal`` forces)
     ``backlash_<AXIS>``: the core poses are visited in increasing order of the axis and then
     retraced in decreasing order, so positions are approached from both sides;
-    ``thermal_drift``: the reference pose is measured again ``max(2, n // 8)`` times, evenly
+    ``thermal_drift``, ``table_drift``: the reference pose is measured again ``max(2, n // 8)`` times, evenly
     through the test and as the last pose, so a drift shows where every PIGE has no effect.
 """
 
@@ -172,7 +172,7 @@ class Structure:
     @classmethod
     def for_reveal(cls, reveal: tuple[str, ...], axes: tuple[str, ...], points: int) -> Structure:
         back = [axes.index(e.split("_", 1)[1]) for e in reveal if e.startswith("backlash_")]
-        returns = max(2, points // 8) if "thermal_drift" in reveal else 0
+        returns = max(2, points // 8) if {"thermal_drift", "table_drift"} & set(reveal) else 0
         return cls(back[0] if back else None, returns)
 
     def core_count(self, points: int) -> int:

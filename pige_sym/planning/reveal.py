@@ -39,6 +39,7 @@ MAX_LEVERAGE = 0.5
 
 NEEDS = {
     "thermal_drift": "time spread and the reference pose measured again later in the test",
+    "table_drift": "time spread, the table turned, and the reference pose measured again later in the test",
     "backlash": "positions of {axis} approached from both sides (reversals)",
     "angular_error": "{axis} moved over enough of a turn to separate harmonic {h} from the PIGEs",
     "wobble": "{axis} moved over enough of a turn to separate harmonic {h} from the PIGEs",
@@ -120,7 +121,7 @@ def _structural_reason(spec: EffectSpec, kern: Any, setup: Setup, angles: np.nda
         appr = approach_directions(angles)[:, axes.index(spec.axis)]
         if not ((appr > 0).any() and (appr < 0).any()):
             return f"every position of {spec.axis} is approached from the same side: no reversal"
-    if spec.kind == "thermal_drift":
+    if spec.kind in ("thermal_drift", "table_drift"):
         if np.ptp(t_s) <= 0:
             return "no time spread"
         again = [i for i in range(1, angles.shape[0]) if np.any(np.all(np.abs(angles[:i] - angles[i]) < 1e-6, axis=1))]

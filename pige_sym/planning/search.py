@@ -323,7 +323,7 @@ def _check_forced_possible(req: PlanRequest, forced: list[str]) -> None:
     setup, angles = _rich_poses(req)
     t_s = schedule_times(angles.shape[0], req.move_s, req.dwell_s)
     for effect in forced:
-        if effect == "thermal_drift" or effect.startswith("backlash_"):
+        if effect in ("thermal_drift", "table_drift") or effect.startswith("backlash_"):
             continue
         status = reveal_status(setup, effect, angles, t_s)
         if not status.revealable:
