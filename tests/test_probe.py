@@ -339,3 +339,103 @@ def test_table_drift_is_the_nest_moving_with_the_table() -> None:
     rot = load_kernels(AC).workpiece_rotation(traj.angles_deg)
     f = 1.0 - np.exp(-traj.t_s / 40.0)
     np.testing.assert_allclose(d, -np.einsum("nij,j->ni", rot, [1.0, 2.0, -3.0]) * f[:, None], atol=1e-12)
+
+
+def _contacts(centre: np.ndarray, normals: np.ndarray, radius: float, pre_um: np.ndarray) -> np.ndarray:
+    return centre + (radius - pre_um[:, None] * 1e-3) * normals
+
+
+@pytest.mark.parametrize("radius_given", [False, True])
+def test_trigger_sensitivities_agree_with_refitting_perturbed_contacts(radius_given) -> None:
+    """Oracle: contacts placed at R − pre(direction) and fitted again by fit_centres; the centre shift is the
+    predicted S·(L_c, L_s, V) to first order (pre-travels of 0.1 µm, second order below 1e-6 µm)."""
+    from pige_sym.measurements.probe_trigger import trigger_sensitivities
+
+    rng = np.random.default_rng(4)
+    radius = 14.2
+    poses = []
+    for elev in (15.0, 50.0, 15.0, 35.0):
+        e = math.radians(elev)
+        ring = [np.array([math.cos(e) * c, math.cos(e) * s, math.sin(e)])
+                for c, s in ((1, 0), (0, 1), (-1, 0), (0, -1))]
+        poses.append(np.array([[0.0, 0.0, 1.0], *ring]))
+    centres = rng.normal(size=(4, 3)) * 50
+    lobe_c, lobe_s, vert = 0.1, -0.07, 0.12
+    moved = []
+    for c, n in zip(centres, poses, strict=True):
+        phi = np.arctan2(-n[:, 1], -n[:, 0])
+        pre = np.where(n[:, 2] > 0.95, vert, lobe_c * np.cos(3 * phi) + lobe_s * np.sin(3 * phi))
+        moved.append(_contacts(c, n, radius, pre))
+    fitted = fit_centres(moved, radius_mm=radius if radius_given else None)
+    shift_um = (fitted.centres_mm - centres) * 1e3
+    exact = [_contacts(c, n, radius, np.zeros(len(n))) for c, n in zip(centres, poses, strict=True)]
+    sens = trigger_sensitivities(exact, centres, radius_fitted=not radius_given)
+    np.testing.assert_allclose(shift_um, sens @ np.array([lobe_c, lobe_s, vert]), atol=2e-5)
+    assert np.ptp(sens[:, 0, 0]) > 0.3  # the 50 deg ring moves the centre more than the 15 deg ring
+
+
+@pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc", "siemens", "heidenhain"])
+def test_the_alternate_pattern_is_read_back_and_alternates(dialect) -> None:
+    import dataclasses
+
+    setup = dataclasses.replace(SETUP, pattern="alternate")
+    traj = make_trajectory(AC, "cone-frustum")
+    plan = plan_probing(setup, traj.angles_deg, traj.description)
+    heights = [round(float(c[1].target[2] - centre[2]), 3) for c, centre in zip(plan.contacts, plan.centres_mm,
+                                                                               strict=True)]
+    assert len(set(heights[:2])) == 2 and heights[0] == heights[2]  # the ring changes from pose to pose
+    check = verify_probe_program(render_probe_program(plan, dialect), dialect, setup, ("A", "C"))
+    assert check.poses == traj.angles_deg.shape[0] and min(check.contacts) >= 4
+    with pytest.raises(InputError, match="alternate"):
+        plan_probing(dataclasses.replace(setup, elevations_deg=(15.0,)), traj.angles_deg)
+
+
+def _lobing_runs(tmp_path: Path, pattern: str, seeds: range, **options: float) -> list:
+    import dataclasses
+
+    setup = dataclasses.replace(SETUP, pattern=pattern)
+    traj = make_trajectory(AC, "cone-frustum")
+    text = render_probe_program(plan_probing(setup, traj.angles_deg, traj.description), "siemens")
+    truth = random_pige(AC, 3)
+    out = []
+    for seed in seeds:
+        machine = ProbeMachine(setup, truth, noise_um=0.5, seed=seed, **options)
+        log = _write(tmp_path, run_probe_program(text, "siemens", machine), f"{pattern}{seed}.txt")
+        out.append((truth, import_probe_log(log, "siemens", SPEC)))
+    return out
+
+
+def test_lobing_is_fitted_when_the_pattern_alternates_and_named_undetermined_when_it_does_not(tmp_path) -> None:
+    from pige_sym.diagnosis.diagnose import diagnose
+
+    options = {"lobing_um": 1.5, "vertical_um": 2.0}
+    for _, m in _lobing_runs(tmp_path, "fixed", range(1), **options):
+        d = diagnose(m)
+        assert d.findings == []
+        (why,) = [r.reason for r in d.rejected if r.effect == "probe_trigger"]
+        assert why.startswith("unidentifiable with the PIGEs")
+        assert any("--pattern alternate" in note for note in d.clusters)
+    for truth, m in _lobing_runs(tmp_path, "alternate", range(2), **options):
+        d = diagnose(m)
+        assert "probe_trigger" in [f.effect for f in d.findings]
+        f = next(f for f in d.findings if f.effect == "probe_trigger")
+        assert f.params["lobe_cos_um"] == pytest.approx(1.5, abs=0.5)
+        assert f.params["vertical_um"] == pytest.approx(2.0, abs=0.7)
+        plain = identify(m)
+        for name in ("EX0C", "EZ0A"):  # the biases the fixed pattern leaves (1.56 and -2.79 um) are gone
+            assert abs(plain.value(name) - truth[name]) > 1.0 > abs(d.final.value(name) - truth[name])
+
+
+def test_incomplete_trigger_columns_are_refused(tmp_path) -> None:
+    import dataclasses
+
+    from pige_sym.measurements.probe_trigger import read_sensitivities
+
+    ((_, m),) = _lobing_runs(tmp_path, "fixed", range(1))
+    assert read_sensitivities(m) is not None
+    cut = dataclasses.replace(m, extra_columns={k: v for k, v in m.extra_columns.items() if k != "trig_vert_z"})
+    with pytest.raises(FileFormatError, match="trig_vert_z"):
+        read_sensitivities(cut)
+    bad = dataclasses.replace(m, extra_columns=m.extra_columns | {"trig_cos3_x": ["nan"] * m.n_rows})
+    with pytest.raises(FileFormatError, match="row 1, column trig_cos3_x"):
+        read_sensitivities(bad)

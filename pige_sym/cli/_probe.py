@@ -29,6 +29,9 @@ def add_probe_program_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--safe-z", type=float, help="retract height before rotary moves [mm] (default: 20 mm above "
                    "the highest clearance plane)")
     p.add_argument("--probe-feed", type=float, default=100.0, help="probing feed [mm/min] (default %(default)s)")
+    p.add_argument("--pattern", choices=("fixed", "alternate"), default="fixed",
+                   help="contacts: the same pattern at every pose, or the rings (15 and 50 deg) taken in turn so a "
+                        "direction-dependent trigger radius shows in the data (default %(default)s)")
 
 
 def probe_pivot(items: list[str] | None) -> tuple[float, float, float]:
@@ -63,4 +66,5 @@ def probe_setup(args: argparse.Namespace, machine: str) -> Any:
         finite_option(getattr(args, name), "--" + name.replace("_", "-"), positive=True)
     return ProbeSetup(machine, np.array(parse_vec3(args.sphere, "--sphere")), np.array(probe_pivot(args.pivot)),
                       radius, stylus, clearance_mm=args.clearance, overtravel_mm=args.overtravel,
-                      contacts=args.contacts, safe_z_mm=args.safe_z, probe_feed_mm_min=args.probe_feed)
+                      contacts=args.contacts, safe_z_mm=args.safe_z, probe_feed_mm_min=args.probe_feed,
+                      pattern=args.pattern)

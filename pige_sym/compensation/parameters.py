@@ -25,6 +25,7 @@ COMPENSABLE_KINDS = ("angular_error", "backlash")
 
 NOT_COMPENSATED_WHY = {
     "thermal_drift": "time-dependent (depends on when the program runs)",
+    "probe_trigger": "the probe's, not the machine's: calibrate the probe per probing direction",
     "table_drift": "the test's sphere or nest moved on the table: a set-up error of the test, not of the machine",
     "wobble": "an error motion: enter it in the controller's rotary-axis error tables",
     "radial_runout": "an error motion: enter it in the controller's rotary-axis error tables",

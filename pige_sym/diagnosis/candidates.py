@@ -15,7 +15,8 @@ A :class:`Candidate` is one effect with fixed shape options (harmonic or τ) and
 slice of its columns in the super design.  Harmonics 1–4 of the angular error, wobble
 and radial runout of every rotary axis that moves, backlash of every axis approached
 from both sides, the three squareness pairs, setup offset, thermal drift; for a probed sphere
-(``table_drift=True``) also the sphere creeping on its stand (``table_drift``, on the same τ grid).
+(``table_drift=True``) also the sphere creeping on its stand (``table_drift``, on the same τ grid) and,
+from the import's columns, a direction-dependent trigger radius (``probe_trigger``).
 
 Reduction to the identifiable part
 ----------------------------------
@@ -113,6 +114,7 @@ class Layout:
     n_columns: int
     tau_grid_s: np.ndarray
     drift_cols: dict[str, list[tuple[int, ...]]] = field(default_factory=dict)
+    probe_sensitivity: np.ndarray | None = None  # (n, 3, 3) of a probe import: the probe_trigger columns
 
 
 def _moves(angles: np.ndarray, k: int) -> bool:
@@ -120,7 +122,8 @@ def _moves(angles: np.ndarray, k: int) -> bool:
 
 
 def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: np.ndarray,
-                 restrict: list[str] | None = None, table_drift: bool = False) -> Layout:
+                 restrict: list[str] | None = None, table_drift: bool = False,
+                 probe_sensitivity: np.ndarray | None = None) -> Layout:
     """Every applicable candidate of a measurement, in super-design column order.
 
     Parameters
@@ -134,6 +137,8 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
         Keep only these catalogue ids.
     table_drift : bool
         Also the nest/sphere drifting on the table (probe files: a sphere on a stand).
+    probe_sensitivity : ndarray, shape=(n, 3, 3), optional
+        A probe import's trigger sensitivities: adds the ``probe_trigger`` candidate.
     """
     pige = list(kern.LOCATION_PARAMETERS)
     units = {p: kern.UNITS[p] for p in pige}
@@ -155,6 +160,8 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
     for pair in ("XY", "YZ", "ZX"):
         specs.append((EffectSpec(f"squareness_{pair}"), f"squareness_{pair}", 0))
     specs.append((EffectSpec("setup_offset"), "setup_offset", 0))
+    if probe_sensitivity is not None:
+        specs.append((EffectSpec("probe_trigger"), "probe_trigger", 0))
     col = len(pige)
     cands: list[Candidate] = []
     drift_cols: dict[str, list[tuple[int, ...]]] = {}
@@ -166,7 +173,7 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
             drift_cols.setdefault(spec.kind, []).append(cols)
         if restrict is None or spec.id in restrict:
             cands.append(Candidate(spec, key, cols, extra))
-    return Layout(pige, units, cands, col, taus, drift_cols)
+    return Layout(pige, units, cands, col, taus, drift_cols, probe_sensitivity)
 
 
 def add_pose_clusters(layout: Layout, options: list[dict[str, float]]) -> list[Candidate]:
@@ -214,7 +221,9 @@ def evaluate_rows(layout: Layout, blocks: list[tuple[EffectSpec, tuple[int, ...]
         out[:, :, : len(loc)] = jac[1:, :, loc]
         return out
     raw = np.zeros((len(idx), 3, width))
-    ctx = EffectContext(kern, angles, m.t_s[idx], m.ball_mm, pivots, m.tool_mm, approach=approach[idx])
+    sens = None if layout.probe_sensitivity is None else layout.probe_sensitivity[idx]
+    ctx = EffectContext(kern, angles, m.t_s[idx], m.ball_mm, pivots, m.tool_mm, approach=approach[idx],
+                        probe_sensitivity=sens)
     at = len(loc)
     for spec, cols in blocks:
         start = at if compact else cols[0]

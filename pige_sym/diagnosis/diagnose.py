@@ -119,6 +119,7 @@ from pige_sym.identification.result import IdentificationResult
 from pige_sym.identification.spectrum import observability
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import Measurement
+from pige_sym.measurements.probe_trigger import read_sensitivities
 from pige_sym.model.effects import EffectSpec
 
 __all__ = ["DiagnosisResult", "Finding", "Rejected", "diagnose"]
@@ -191,8 +192,9 @@ def _setup(m: Measurement, candidates: list[str] | None) -> _Setup:
     if m.n_rows < 3:
         raise InputError(f"{m.path or 'measurement'}: {m.n_rows} rows cannot be diagnosed: measure more points")
     approach = _approach(m.angles_deg)
-    layout = build_layout(kern, m.angles_deg, m.t_s, approach, candidates,
-                          table_drift=instrument(m) == "sphere-probe")
+    probe = instrument(m) == "sphere-probe"
+    layout = build_layout(kern, m.angles_deg, m.t_s, approach, candidates, table_drift=probe,
+                          probe_sensitivity=read_sensitivities(m) if probe else None)
     return _Setup(kern, m, approach, layout, fold_of_rows(m.n_rows))
 
 
@@ -461,8 +463,10 @@ def _instrument_notes(m: Measurement, findings: list[Finding]) -> list[str]:
     kind = instrument(m)
     if kind == "rtest":
         return []
-    blind = (" A probe whose trigger radius depends on the direction biases the axis-line offsets without a trace "
-             "in the residuals (docs/probe.md): calibrate it per direction." if kind == "sphere-probe" else "")
+    blind = (" A probe whose trigger radius depends on the direction biases the axis-line offsets; with one contact "
+             "pattern at every pose nothing in the residuals shows it (docs/probe.md): calibrate the probe per "
+             "direction, or probe with pige program --pattern alternate so the diagnosis can fit it."
+             if kind == "sphere-probe" and not any(f.effect == "probe_trigger" for f in findings) else "")
     if not findings:
         return [f"{kind}: the search treats the poses as independent; the final estimate is the identification "
                 "with the reference pose's correlation (standard errors from it)." + blind]

@@ -27,6 +27,8 @@ EVIDENCE = {
     "backlash": "a residual that changes sign with the direction of approach of {axis}",
     "squareness": "a residual proportional to the commanded linear travel",
     "setup_offset": "a residual that turns with the table",
+    "probe_trigger": "centres moved by the probe's direction-dependent trigger radius (lobing, vertical "
+                     "pre-travel), seen because the contact pattern changes from pose to pose",
     "pose_cluster": "rows at one pose deviate together: an effect of that pose outside the catalogue, not outliers",
 }
 

@@ -15,7 +15,8 @@ the pose's centre (``cov_xx_um2 … cov_zz_um2``); the identification uses them,
 error of ``c(0)`` enters every pose through ``c_nom`` (:mod:`pige_sym.identification.instruments`).
 Columns: ``t_s`` is the pose's order (a probe log holds no time), the angles, ``dx_um dy_um dz_um``,
 ``n_samples`` (contacts) and ``sd_um`` (RMS radial residual of the pose), the fitted centre ``cx_mm cy_mm
-cz_mm``, the first log line of the pose, and the six covariance entries.
+cz_mm``, the first log line of the pose, the six covariance entries, and the centre's response to a
+direction-dependent trigger radius (``trig_…``, :mod:`~pige_sym.measurements.probe_trigger`).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from pige_sym.errors import FileFormatError, InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import Measurement
 from pige_sym.measurements.probe_log import ProbeLog, group_poses, read_probe_log
+from pige_sym.measurements.probe_trigger import sensitivity_columns, trigger_sensitivities
 from pige_sym.measurements.sphere_fit import MIN_CONTACTS, SphereFit, fit_centres
 
 INSTRUMENT = "sphere-probe"
@@ -117,7 +119,9 @@ def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
     nominal = pivot + np.einsum("nij,j->ni", rot, fit.centres_mm[0] - pivot)
     deviation = -(fit.centres_mm - nominal) * 1e3
     deviation[0] = 0.0
-    return _measurement(kern, log, spec, groups, angles, fit, deviation)
+    m = _measurement(kern, log, spec, groups, angles, fit, deviation)
+    m.extra_columns |= sensitivity_columns(trigger_sensitivities(pts, fit.centres_mm, fit.radius_fitted))
+    return m
 
 
 def _measurement(kern: Any, log: ProbeLog, spec: ProbeImport, groups: list[np.ndarray], angles: np.ndarray,

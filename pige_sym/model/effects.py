@@ -26,6 +26,11 @@ id                         physics                                              
 ``squareness_ZX``          Z travel tilted toward X: ``dx = γ·ΔZ``                         gamma_urad
 ``setup_offset``           ball/nest set up Δ away from the nominal ``ball_mm``:           dx_um, dy_um, dz_um
                            ``d = (R_t − R_w)·Δ``
+``probe_trigger``          diagnosis of probe imports only: a trigger radius that         lobe_cos_um, lobe_sin_um,
+                           depends on the probing direction (``L_c cos 3φ + L_s sin 3φ``    vertical_um
+                           horizontal, ``V`` vertical) moves each fitted centre by
+                           ``S_i·(L_c, L_s, V)`` (the import's ``trig_`` columns):
+                           ``d = −S_i·p`` (:mod:`pige_sym.measurements.probe_trigger`)
 ``pose_cluster``           diagnosis only: an offset of every row at one pose (one angle   dx_um, dy_um, dz_um;
                            value, or a run of rows) — structure outside the catalogue      axis+deg or t_from/to_s
 ``outliers``               gross reading errors on a few rows (simulation only; the       size_um, count
@@ -72,6 +77,8 @@ class EffectContext:
     tool_mm : ndarray or None
     approach : ndarray, shape=(n, k), optional
         Direction of approach per axis; derived from the angle sequence when None.
+    probe_sensitivity : ndarray, shape=(n, 3, 3), optional
+        Probe imports: centre shift per µm of lobing (cos, sin) and vertical pre-travel [µm/µm].
     """
 
     kernels: Any
@@ -81,6 +88,7 @@ class EffectContext:
     pivots_mm: dict[str, np.ndarray] | None = None
     tool_mm: np.ndarray | None = None
     approach: np.ndarray | None = None
+    probe_sensitivity: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.angles_deg = np.asarray(self.angles_deg, dtype=float)
@@ -172,12 +180,14 @@ class EffectSpec:
             return ("gamma_urad",)
         if kind in ("setup_offset", "pose_cluster"):
             return ("dx_um", "dy_um", "dz_um")
+        if kind == "probe_trigger":
+            return ("lobe_cos_um", "lobe_sin_um", "vertical_um")
         raise InputError(f"effect {self.id!r} has no fitted columns")
 
     @property
     def units(self) -> dict[str, str]:
         u = "um" if self.kind in ("thermal_drift", "table_drift", "radial_runout", "setup_offset",
-                                  "pose_cluster") else "urad"
+                                  "pose_cluster", "probe_trigger") else "urad"
         return {p: u for p in self.param_names}
 
     def _perp(self) -> tuple[str, str]:
@@ -215,6 +225,10 @@ class EffectSpec:
             return ctx.rot_t - ctx.rot_w, True
         if kind == "pose_cluster":
             return self._pose_indicator(ctx), False
+        if kind == "probe_trigger":
+            if ctx.probe_sensitivity is None:
+                raise InputError("probe_trigger needs the trig_ columns of a probe import (pige import-probe)")
+            return -np.asarray(ctx.probe_sensitivity, dtype=float), True
         if kind == "squareness":
             pair = self.id.split("_")[1]
             travel = ctx.travel_mm * 1e-3  # µm per µrad

@@ -7,7 +7,11 @@ workpiece-side rotation of the kernels); ``R_eff = R + r`` is the stylus-centre 
 probed along machine axes, what every controller's basic probing cycle does: one from above (−Z onto the
 top) and rings of horizontal probes (±X, ±Y) at elevations ε above the centre (the contact normal is
 ``cos ε·u + sin ε·z``).  A contact whose normal points within ``stand_cone_deg`` of the sphere's stand
-(the table's −z, turned with the table) is left out; a pose needs at least four contacts.
+(the table's −z, turned with the table) is left out; a pose needs at least four contacts.  Pattern
+``fixed`` uses the rings in the order given at every pose; ``alternate`` starts pose ``i`` at ring
+``i mod rings`` (with the default rings: the 15° ring, then the 50° ring, …), so a trigger radius that
+depends on the probing direction shifts the centres by different amounts from pose to pose and the
+diagnosis can see it (docs/probe.md §5); with one pattern it is indistinguishable from axis-line offsets.
 
 Every probing move starts ``clearance`` outside the ``R_eff`` sphere and its target lies ``overtravel``
 inside it (so the probe trips; a probe that does not trip stops LinuxCNC's G38.2 with an error and raises
@@ -66,6 +70,8 @@ class ProbeSetup:
     safe_z_mm : float or None [mm]
         Retract height before rotary moves (default: 20 mm above the highest clearance plane).
     feed_mm_min, probe_feed_mm_min : float [mm/min]
+    pattern : {"fixed", "alternate"}
+        The same contact pattern at every pose, or the rings taken in turn (module docstring).
     """
 
     machine: str
@@ -81,6 +87,7 @@ class ProbeSetup:
     safe_z_mm: float | None = None
     feed_mm_min: float = 2000.0
     probe_feed_mm_min: float = 100.0
+    pattern: str = "fixed"
 
     @property
     def r_eff_mm(self) -> float:
@@ -132,10 +139,17 @@ def nominal_centres(machine: str, angles_deg: np.ndarray, sphere_mm: np.ndarray,
     return pivot_mm + np.einsum("nij,j->ni", rot, np.asarray(sphere_mm, dtype=float) - pivot_mm)
 
 
-def _candidates(setup: ProbeSetup) -> list[tuple[np.ndarray, str, int]]:
-    """(contact normal, move axis, move sign) in contact order."""
+PATTERNS = ("fixed", "alternate")
+
+
+def _candidates(setup: ProbeSetup, pose: int) -> list[tuple[np.ndarray, str, int]]:
+    """(contact normal, move axis, move sign) in contact order at pose number ``pose``."""
     out = [(np.array([0.0, 0.0, 1.0]), "Z", -1)]
-    for elev in setup.elevations_deg:
+    rings = list(setup.elevations_deg)
+    if setup.pattern == "alternate":
+        k = pose % len(rings)
+        rings = rings[k:] + rings[:k]
+    for elev in rings:
         e = np.radians(elev)
         for axis, sign in (("X", 1), ("Y", 1), ("X", -1), ("Y", -1)):
             u = np.zeros(3)
@@ -144,11 +158,11 @@ def _candidates(setup: ProbeSetup) -> list[tuple[np.ndarray, str, int]]:
     return out
 
 
-def _pose_contacts(setup: ProbeSetup, centre: np.ndarray, stand: np.ndarray) -> list[Contact]:
+def _pose_contacts(setup: ProbeSetup, centre: np.ndarray, stand: np.ndarray, pose: int) -> list[Contact]:
     r = setup.r_eff_mm
     limit = np.cos(np.radians(setup.stand_cone_deg))
     out = []
-    for normal, axis, sign in _candidates(setup):
+    for normal, axis, sign in _candidates(setup, pose):
         if normal @ stand > limit:
             continue  # the stand is there
         contact = centre + r * normal
@@ -176,12 +190,14 @@ def plan_probing(setup: ProbeSetup, angles_deg: np.ndarray, description: str = "
         raise InputError("--sphere-radius must be in (0, 100] mm and --stylus-radius in (0, 20] mm")
     if not 4 <= setup.contacts <= 1 + 4 * len(setup.elevations_deg):
         raise InputError(f"--contacts {setup.contacts}: give 4 to {1 + 4 * len(setup.elevations_deg)}")
+    if setup.pattern not in PATTERNS or (setup.pattern == "alternate" and len(setup.elevations_deg) < 2):
+        raise InputError(f"--pattern {setup.pattern}: use fixed, or alternate with two rings of contacts or more")
     if not (0 < setup.clearance_mm <= 50 and 0 < setup.overtravel_mm < setup.r_eff_mm):
         raise InputError("--clearance must be in (0, 50] mm and --overtravel in (0, R + r) mm")
     angles = np.atleast_2d(np.asarray(angles_deg, dtype=float))
     centres = nominal_centres(setup.machine, angles, setup.sphere_mm, setup.pivot_mm)
     stands = np.einsum("nij,j->ni", kern.workpiece_rotation(angles), np.array([0.0, 0.0, -1.0]))
-    contacts = [_pose_contacts(setup, c, s) for c, s in zip(centres, stands, strict=True)]
+    contacts = [_pose_contacts(setup, c, s, i) for i, (c, s) in enumerate(zip(centres, stands, strict=True))]
     for i, cs in enumerate(contacts):
         if len(cs) < 4:
             ang = ", ".join(f"{a}={v:g}" for a, v in zip(kern.ROTARY_AXES, angles[i], strict=True))

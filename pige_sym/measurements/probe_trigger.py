@@ -1,0 +1,116 @@
+"""How a direction-dependent trigger radius moves the fitted sphere centres (CONVENTIONS §7, docs/probe.md §5).
+
+A touch probe trips after a pre-travel that depends on the probing direction: the three lobes of a
+kinematic probe (``L_c·cos 3φ + L_s·sin 3φ`` for a horizontal move of azimuth φ, φ = 0 along +X) and a
+different pre-travel for a vertical move (``V``).  A contact then lies at ``R_eff − pre`` from the centre
+instead of ``R_eff``: a radial perturbation ``Δρ = −pre``.  The import's least-squares fit (every pose's
+centre, one shared ``R_eff`` unless it is given) responds linearly; with the fit's Jacobian ``J`` (rows
+``[n_kᵀ at pose i, 1]``, ``n_k`` the contact's unit normal)::
+
+    [δc_1 … δc_n, δR] = (JᵀJ)⁻¹ Jᵀ Δρ
+
+solved pose by pose with the shared radius eliminated (Schur complement).  :func:`trigger_sensitivities`
+gives, per pose, the centre shift per µm of ``L_c``, ``L_s`` and ``V``: shape ``(n, 3, 3)`` [µm/µm], the
+columns of the diagnosis' ``probe_trigger`` effect.  The move direction is read from the contact: a
+normal within 18° of +Z is a vertical move onto the top, any other a horizontal move towards the centre
+(azimuth of ``−n``), as pige's programs probe; a log of another pattern gets sensitivities of that model.
+
+With the same pattern at every pose the shift is one machine-frame vector and enters the deviation as
+``(I − R_i)·v``, the pattern of axis-line offsets: the diagnosis then finds the effect undetermined.
+Varying the pattern from pose to pose (``pige program --pattern alternate``) makes it visible.
+
+File columns: ``trig_<p>_<x|y|z>`` for ``p`` in ``cos3``, ``sin3``, ``vert`` (9 columns, µm/µm).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pige_sym.errors import FileFormatError
+from pige_sym.measurements.measurement import Measurement
+
+PARTS = ("cos3", "sin3", "vert")
+COLUMNS = tuple(f"trig_{p}_{a}" for p in PARTS for a in "xyz")
+VERTICAL_COS = math.cos(math.radians(18.0))  # a normal within 18 deg of +Z: a vertical move onto the top
+
+
+def _perturbations(normals: np.ndarray) -> np.ndarray:
+    """Radial perturbation of each contact per unit ``L_c``, ``L_s``, ``V``: shape (m, 3) [µm/µm]."""
+    vertical = normals[:, 2] > VERTICAL_COS
+    phi = np.arctan2(-normals[:, 1], -normals[:, 0])  # azimuth of the horizontal move towards the centre
+    pre = np.column_stack([np.where(vertical, 0.0, np.cos(3 * phi)), np.where(vertical, 0.0, np.sin(3 * phi)),
+                           vertical.astype(float)])
+    return -pre
+
+
+def trigger_sensitivities(points_mm: list[np.ndarray], centres_mm: np.ndarray, radius_fitted: bool) -> np.ndarray:
+    """Centre shift per unit lobing (cos, sin) and vertical pre-travel, shape=(n, 3, 3) [µm/µm].
+
+    Parameters
+    ----------
+    points_mm : list of ndarray, shape=(m_i, 3) [mm]
+        Each pose's contacts (stylus centres).
+    centres_mm : ndarray, shape=(n, 3) [mm]
+        The fitted centres.
+    radius_fitted : bool
+        Whether the import fitted the shared effective radius (then it absorbs part of the pre-travel).
+
+    Returns
+    -------
+    ndarray, shape=(n, 3, 3)
+        ``[i, :, j]``: the shift of centre ``i`` per µm of part ``j`` (``cos3``, ``sin3``, ``vert``).
+    """
+    a_inv, b, e, f, m = [], [], [], [], []
+    for pts, c in zip(points_mm, centres_mm, strict=True):
+        normals = (pts - c) / np.linalg.norm(pts - c, axis=1, keepdims=True)
+        rho = _perturbations(normals)
+        a_inv.append(np.linalg.inv(normals.T @ normals))
+        b.append(normals.sum(axis=0))
+        e.append(normals.T @ rho)
+        f.append(rho.sum(axis=0))
+        m.append(len(pts))
+    delta_r = np.zeros(3)
+    if radius_fitted:
+        num = sum(f) - sum(bi @ ai @ ei for ai, bi, ei in zip(a_inv, b, e, strict=True))
+        den = sum(m) - sum(float(bi @ ai @ bi) for ai, bi in zip(a_inv, b, strict=True))
+        delta_r = num / den
+    return np.array([ai @ (ei - np.outer(bi, delta_r)) for ai, bi, ei in zip(a_inv, b, e, strict=True)])
+
+
+def sensitivity_columns(sens: np.ndarray) -> dict[str, list[str]]:
+    """The file columns of :func:`trigger_sensitivities` (``repr`` of each value)."""
+    return {f"trig_{p}_{a}": [repr(float(v)) for v in sens[:, i, j]]
+            for j, p in enumerate(PARTS) for i, a in enumerate("xyz")}
+
+
+def read_sensitivities(m: Measurement) -> np.ndarray | None:
+    """The sensitivities stored in a measurement, shape=(n, 3, 3), or None when it has none.
+
+    Raises
+    ------
+    FileFormatError
+        Some of the columns only, or a value that is not a finite number.
+    """
+    present = [c for c in COLUMNS if c in m.extra_columns]
+    if not present:
+        return None
+    if len(present) != len(COLUMNS):
+        missing = ", ".join(c for c in COLUMNS if c not in m.extra_columns)
+        raise FileFormatError(m.path or "measurement", None, f"trigger sensitivity columns incomplete: add {missing} "
+                              "(pige import-probe writes all nine) or remove them")
+    out = np.zeros((m.n_rows, 3, 3))
+    for j, p in enumerate(PARTS):
+        for i, a in enumerate("xyz"):
+            name = f"trig_{p}_{a}"
+            for r, text in enumerate(m.extra_columns[name]):
+                try:
+                    v = float(text)
+                except ValueError:
+                    v = math.nan
+                if not math.isfinite(v):
+                    raise FileFormatError(m.path or "measurement", None,
+                                          f"row {r + 1}, column {name}: {text!r} is not a finite number")
+                out[r, i, j] = v
+    return out
