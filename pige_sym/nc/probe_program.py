@@ -14,8 +14,9 @@ depends on the probing direction shifts the centres by different amounts from po
 diagnosis can see it (docs/probe.md §5); with one pattern it is indistinguishable from axis-line offsets.
 
 Every probing move starts ``clearance`` outside the ``R_eff`` sphere and its target lies ``overtravel``
-inside it (so the probe trips; a probe that does not trip stops LinuxCNC's G38.2 with an error and raises
-an alarm on Fanuc and Siemens, checked after the move).  Between contacts the probe goes up to the
+(plus ``ROUNDING_MARGIN_MM`` for the written decimals) inside it (so the probe trips; a probe that does
+not trip stops LinuxCNC's G38.2 with an error and raises an alarm on Fanuc and Siemens, checked after the
+move).  Between contacts the probe goes up to the
 pose's clearance plane ``c_z + R_eff + clearance``, horizontally over the next start, then straight
 down to it (a vertical line outside the ``R_eff + clearance`` circle of every height above the contact
 cannot meet the sphere); before the rotary axes move it retracts to ``safe_z``, which must be above every
@@ -140,6 +141,10 @@ def nominal_centres(machine: str, angles_deg: np.ndarray, sphere_mm: np.ndarray,
 
 
 PATTERNS = ("fixed", "alternate")
+#: Extra overtravel so that the program as written (coordinates and angles to 4 decimals) still ends every
+#: probing move the stated overtravel past the surface: on the 50° ring a z rounding moves the crossing by
+#: tan 50° times itself, and an angle rounding moves the centre (up to 3e-4 mm together at 200 poses).
+ROUNDING_MARGIN_MM = 0.002
 
 
 def _candidates(setup: ProbeSetup, pose: int) -> list[tuple[np.ndarray, str, int]]:
@@ -168,7 +173,8 @@ def _pose_contacts(setup: ProbeSetup, centre: np.ndarray, stand: np.ndarray, pos
         contact = centre + r * normal
         move = np.zeros(3)
         move["XYZ".index(axis)] = sign
-        out.append(Contact(contact - move * setup.clearance_mm, contact + move * setup.overtravel_mm, axis, sign))
+        out.append(Contact(contact - move * setup.clearance_mm,
+                           contact + move * (setup.overtravel_mm + ROUNDING_MARGIN_MM), axis, sign))
         if len(out) == setup.contacts:
             break
     return out
