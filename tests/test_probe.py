@@ -445,7 +445,7 @@ def test_incomplete_trigger_columns_are_refused(tmp_path) -> None:
 
 @pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc", "siemens", "heidenhain"])
 def test_nine_contacts_at_200_poses_still_end_past_the_overtravel_as_written(dialect) -> None:
-    """Regression: on the 50° ring the written decimals (coordinates and angles) took up to 1.1e-4 mm off the
+    """Regression: on the 50° ring the written decimals (coordinates and angles) took over 2e-4 mm off the
     overtravel and the read-back refused the program; the planned target now carries a rounding margin."""
     import dataclasses
 
