@@ -28,7 +28,8 @@ def _run(args: argparse.Namespace) -> int:
     r_eff = None if args.radius is None else finite_option(args.radius, "--radius", positive=True)
     offset = finite_option(args.stylus_offset, "--stylus-offset")
     out = check_output(args.out, force=args.force, inputs=[args.log], what="--out")
-    spec = ProbeImport(kern.MACHINE_CODE, probe_pivot(args.pivot), radius, stylus, r_eff, offset, args.units)
+    spec = ProbeImport(kern.MACHINE_CODE, probe_pivot(args.pivot), radius, stylus, r_eff, offset, args.units,
+                       moves=args.moves)
     m = import_probe_log(args.log, args.format, spec)
     write_measurement(m, out)
     print(f"wrote {out}: {m.n_rows} poses, {int(m.optional['n_samples'].sum())} contacts; R_eff "
@@ -62,6 +63,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--stylus-offset", type=float, default=0.0,
                    help="stylus centre above the controlled point along the spindle axis [mm] (default 0)")
     p.add_argument("--units", choices=["mm", "inch"], default="mm", help="units of X Y Z in the log")
+    p.add_argument("--moves", choices=["axes", "normal"], default="axes",
+                   help="how the contacts were probed: along machine axes, vertical onto the top and horizontal "
+                        "elsewhere (pige's programs), or along the surface normal; weighs each contact by the "
+                        "share of the probe's scatter that lands on the radius (default %(default)s)")
     p.add_argument("--out", required=True, help="measurement file to write")
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.set_defaults(handler=_run)

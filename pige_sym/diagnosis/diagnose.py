@@ -107,6 +107,7 @@ from pige_sym.diagnosis.candidates import (
     compact_columns,
     evaluate_rows,
 )
+from pige_sym.diagnosis.instrument_rows import instrument_notes, screen_scale
 from pige_sym.diagnosis.results import EVIDENCE, DiagnosisResult, Finding, Rejected
 from pige_sym.diagnosis.selection import Model, Selector, compare, select
 from pige_sym.diagnosis.thermal import refine_tau
@@ -147,6 +148,7 @@ class _Setup:
     approach: np.ndarray
     layout: Layout
     folds: np.ndarray
+    screen_scale: np.ndarray | None = None  # (n, 3, 3): probe rows to equal precision for the outlier screen
 
     def _blocks(self, cands: list[Candidate] | None) -> list[tuple[EffectSpec, tuple[int, ...]]]:
         chosen = self.layout.candidates if cands is None else cands
@@ -195,7 +197,7 @@ def _setup(m: Measurement, candidates: list[str] | None) -> _Setup:
     probe = instrument(m) == "sphere-probe"
     layout = build_layout(kern, m.angles_deg, m.t_s, approach, candidates, table_drift=probe,
                           probe_sensitivity=read_sensitivities(m) if probe else None)
-    return _Setup(kern, m, approach, layout, fold_of_rows(m.n_rows))
+    return _Setup(kern, m, approach, layout, fold_of_rows(m.n_rows), screen_scale(m) if probe else None)
 
 
 def _move_rows(sums: NormalSums, setup: _Setup, rows: list[int], sign: float) -> None:
@@ -210,6 +212,8 @@ def _screen(setup: _Setup, model: Model, rows: np.ndarray, resid: np.ndarray | N
     """Isolated flagged rows and clusters of ``model``'s residuals (r, 3) [µm] on ``rows`` (computed if not given)."""
     if resid is None:
         resid = setup.residuals(model, rows)
+    if setup.screen_scale is not None:
+        resid = np.einsum("nij,nj->ni", setup.screen_scale[rows], resid)
     flagged = flag_rows(resid, rows)
     return split_clusters(flagged, setup.m.angles_deg, tuple(setup.kern.ROTARY_AXES), setup.m.n_rows, setup.m.t_s)
 
@@ -443,7 +447,7 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
     final_result = _identification(setup, final, final_resid)
     final_result.outlier_rows = outlier_rows
     baseline = _identification(setup, base_model, base_resid)
-    notes = _instrument_notes(m, findings)
+    notes = instrument_notes(m, findings)
     if notes and not findings:
         # the PIGE model stands: its estimate with the instrument's correlations (honest standard errors)
         final_result = baseline = identify(m)
@@ -456,23 +460,6 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
         clusters=[f"rows {c.rows} ({c.where}) deviate together: structured signal kept as data, not outliers"
                   for c in clusters] + notes,
     )
-
-
-def _instrument_notes(m: Measurement, findings: list[Finding]) -> list[str]:
-    """What the search did not model about an instrument other than the R-test (its rows are correlated)."""
-    kind = instrument(m)
-    if kind == "rtest":
-        return []
-    blind = (" A probe whose trigger radius depends on the direction biases the axis-line offsets; with one contact "
-             "pattern at every pose nothing in the residuals shows it (docs/probe.md): calibrate the probe per "
-             "direction, or probe with pige program --pattern alternate so the diagnosis can fit it."
-             if kind == "sphere-probe" and not any(f.effect == "probe_trigger" for f in findings) else "")
-    if not findings:
-        return [f"{kind}: the search treats the poses as independent; the final estimate is the identification "
-                "with the reference pose's correlation (standard errors from it)." + blind]
-    return [f"{kind}: the search and the final fit treat the poses as independent; the reference pose's "
-            "correlation is not in them, so the standard errors of the location errors are understated "
-            "(pige identify gives them honestly for the PIGE model)." + blind]
 
 
 def _residuals(setup: _Setup, model: Model) -> np.ndarray:

@@ -56,6 +56,10 @@ class ProbeImport:
     stylus_offset_mm : float [mm]
         Stylus centre above the controlled point along the spindle axis.
     units : {"mm", "inch"}
+    moves : {"axes", "normal"}
+        How the contacts were probed: along machine axes (pige's programs; the trigger scatter along the
+        move weighs less on an inclined surface) or along the surface normal
+        (:func:`~pige_sym.measurements.sphere_fit.fit_centres`).
     """
 
     machine: str
@@ -65,6 +69,7 @@ class ProbeImport:
     radius_mm: float | None = None
     stylus_offset_mm: float = 0.0
     units: str = "mm"
+    moves: str = "axes"
 
 
 def _pose_points(log: ProbeLog, groups: list[np.ndarray], offset_mm: float) -> list[np.ndarray]:
@@ -78,15 +83,16 @@ def _pose_points(log: ProbeLog, groups: list[np.ndarray], offset_mm: float) -> l
     return pts
 
 
-def _fit(log: ProbeLog, groups: list[np.ndarray], pts: list[np.ndarray], radius: float | None) -> SphereFit:
+def _fit(log: ProbeLog, groups: list[np.ndarray], pts: list[np.ndarray], radius: float | None,
+         moves: str) -> SphereFit:
     try:
-        fit = fit_centres(pts, radius_mm=radius)
+        fit = fit_centres(pts, radius_mm=radius, moves=moves)
     except InputError as exc:
         i = int(str(exc).split(":")[0].split()[-1]) if str(exc).startswith("pose ") else 0
         raise FileFormatError(log.path, int(log.lines[groups[i][0]]), str(exc)) from None
     # each pose against the best sphere through its own contacts (own radius: a fault cannot leak into the
     # other poses through the shared one); the worst contact is named from the shared-radius fit
-    own = [fit_centres([p]).residuals_um[0] if len(p) > MIN_CONTACTS else np.zeros(len(p)) for p in pts]
+    own = [fit_centres([p], moves=moves).residuals_um[0] if len(p) > MIN_CONTACTS else np.zeros(len(p)) for p in pts]
     pooled = np.concatenate(own)
     robust = 1.4826 * float(np.median(np.abs(pooled[pooled != 0]))) if (pooled != 0).any() else 0.0
     limit = max(OUTLIER_SIGMAS * robust, OUTLIER_FLOOR_UM)
@@ -113,14 +119,14 @@ def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
         raise FileFormatError(log.path, int(log.lines[0]), "the first pose must be the reference pose (every rotary "
                                                             "angle 0): c_nom is the motion of its centre")
     pts = _pose_points(log, groups, spec.stylus_offset_mm)
-    fit = _fit(log, groups, pts, spec.radius_mm)
+    fit = _fit(log, groups, pts, spec.radius_mm, spec.moves)
     pivot = np.asarray(spec.pivot_mm, dtype=float)
     rot = kern.workpiece_rotation(angles)
     nominal = pivot + np.einsum("nij,j->ni", rot, fit.centres_mm[0] - pivot)
     deviation = -(fit.centres_mm - nominal) * 1e3
     deviation[0] = 0.0
     m = _measurement(kern, log, spec, groups, angles, fit, deviation)
-    m.extra_columns |= sensitivity_columns(trigger_sensitivities(pts, fit.centres_mm, fit.radius_fitted))
+    m.extra_columns |= sensitivity_columns(trigger_sensitivities(pts, fit.centres_mm, fit.radius_fitted, spec.moves))
     return m
 
 
@@ -140,7 +146,7 @@ def _measurement(kern: Any, log: ProbeLog, spec: ProbeImport, groups: list[np.nd
         "pivot_mm": ", ".join(repr(float(v)) for v in spec.pivot_mm),
         "sphere_radius_mm": repr(spec.sphere_radius_mm), "stylus_radius_mm": repr(spec.stylus_radius_mm),
         "r_eff_mm": f"{float(fit.radius_mm)!r} ({'fitted' if fit.radius_fitted else 'given'})",
-        "contact_sigma_um": repr(float(fit.sigma_um)), "source": "pige import-probe",
+        "contact_sigma_um": repr(float(fit.sigma_um)), "probing_moves": spec.moves, "source": "pige import-probe",
     }
     return Measurement(
         machine=str(kern.MACHINE_CODE), ball_mm=fit.centres_mm[0] - np.asarray(spec.pivot_mm),

@@ -5,9 +5,10 @@ kinematic probe (``L_c·cos 3φ + L_s·sin 3φ`` for a horizontal move of azimut
 different pre-travel for a vertical move (``V``).  A contact then lies at ``R_eff − pre`` from the centre
 instead of ``R_eff``: a radial perturbation ``Δρ = −pre``.  The import's least-squares fit (every pose's
 centre, one shared ``R_eff`` unless it is given) responds linearly; with the fit's Jacobian ``J`` (rows
-``[n_kᵀ at pose i, 1]``, ``n_k`` the contact's unit normal)::
+``[n_kᵀ at pose i, 1]``, ``n_k`` the contact's unit normal) and its contact weights ``W``
+(:mod:`~pige_sym.measurements.sphere_fit`)::
 
-    [δc_1 … δc_n, δR] = (JᵀJ)⁻¹ Jᵀ Δρ
+    [δc_1 … δc_n, δR] = (JᵀWJ)⁻¹ JᵀW Δρ
 
 solved pose by pose with the shared radius eliminated (Schur complement).  :func:`trigger_sensitivities`
 gives, per pose, the centre shift per µm of ``L_c``, ``L_s`` and ``V``: shape ``(n, 3, 3)`` [µm/µm], the
@@ -30,22 +31,23 @@ import numpy as np
 
 from pige_sym.errors import FileFormatError
 from pige_sym.measurements.measurement import Measurement
+from pige_sym.measurements.sphere_fit import move_cosines, vertical_contacts
 
 PARTS = ("cos3", "sin3", "vert")
 COLUMNS = tuple(f"trig_{p}_{a}" for p in PARTS for a in "xyz")
-VERTICAL_COS = math.cos(math.radians(18.0))  # a normal within 18 deg of +Z: a vertical move onto the top
 
 
 def _perturbations(normals: np.ndarray) -> np.ndarray:
     """Radial perturbation of each contact per unit ``L_c``, ``L_s``, ``V``: shape (m, 3) [µm/µm]."""
-    vertical = normals[:, 2] > VERTICAL_COS
+    vertical = vertical_contacts(normals)
     phi = np.arctan2(-normals[:, 1], -normals[:, 0])  # azimuth of the horizontal move towards the centre
     pre = np.column_stack([np.where(vertical, 0.0, np.cos(3 * phi)), np.where(vertical, 0.0, np.sin(3 * phi)),
                            vertical.astype(float)])
     return -pre
 
 
-def trigger_sensitivities(points_mm: list[np.ndarray], centres_mm: np.ndarray, radius_fitted: bool) -> np.ndarray:
+def trigger_sensitivities(points_mm: list[np.ndarray], centres_mm: np.ndarray, radius_fitted: bool,
+                          moves: str = "normal") -> np.ndarray:
     """Centre shift per unit lobing (cos, sin) and vertical pre-travel, shape=(n, 3, 3) [µm/µm].
 
     Parameters
@@ -56,6 +58,8 @@ def trigger_sensitivities(points_mm: list[np.ndarray], centres_mm: np.ndarray, r
         The fitted centres.
     radius_fitted : bool
         Whether the import fitted the shared effective radius (then it absorbs part of the pre-travel).
+    moves : {"normal", "axes"}
+        The fit's contact weights (:func:`~pige_sym.measurements.sphere_fit.fit_centres`).
 
     Returns
     -------
@@ -66,11 +70,12 @@ def trigger_sensitivities(points_mm: list[np.ndarray], centres_mm: np.ndarray, r
     for pts, c in zip(points_mm, centres_mm, strict=True):
         normals = (pts - c) / np.linalg.norm(pts - c, axis=1, keepdims=True)
         rho = _perturbations(normals)
-        a_inv.append(np.linalg.inv(normals.T @ normals))
-        b.append(normals.sum(axis=0))
-        e.append(normals.T @ rho)
-        f.append(rho.sum(axis=0))
-        m.append(len(pts))
+        w = 1.0 / move_cosines(normals, moves) ** 2
+        a_inv.append(np.linalg.inv((normals * w[:, None]).T @ normals))
+        b.append((normals * w[:, None]).sum(axis=0))
+        e.append((normals * w[:, None]).T @ rho)
+        f.append(w @ rho)
+        m.append(float(w.sum()))
     delta_r = np.zeros(3)
     if radius_fitted:
         num = sum(f) - sum(bi @ ai @ ei for ai, bi, ei in zip(a_inv, b, e, strict=True))

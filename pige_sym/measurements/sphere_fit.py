@@ -1,17 +1,22 @@
 """Least-squares sphere centres from touch-probe contacts (CONVENTIONS §7).
 
 Model: contact ``j`` of pose ``i`` (stylus-tip centre ``x_ij`` [mm]) lies at the effective radius
-``R_eff`` from the pose's sphere centre ``c_i``: ``|x_ij − c_i| = R_eff + ε_ij`` with independent contact
-errors ``ε`` of one standard deviation σ (the probe's repeatability, along the surface normal).
+``R_eff`` from the pose's sphere centre ``c_i``: ``|x_ij − c_i| = R_eff + κ_ij·ε_ij`` with independent
+contact errors ``ε`` of one standard deviation σ.  ``moves="normal"``: the probe moves along the surface
+normal, ``κ = 1``.  ``moves="axes"`` (pige's programs): the probe's trigger scatter lies along its move,
+a machine axis — vertical onto the top (a normal within 18° of +Z), horizontal towards the centre
+otherwise — so the radial error is ``κ = |cos(move, normal)|`` times it (0.64 on a 50° ring) and each
+contact is weighted by ``1/κ²``.
 
 :func:`fit_centres` solves every pose's centre and, unless it is given, one ``R_eff`` shared by all poses
 (the same sphere and stylus: a radius per pose would leave a four-contact pose without redundancy),
 by Gauss–Newton from the algebraic (linear) solution of each pose.  σ is pooled over all contacts
-(``RSS / (N − 3n − 1)``); the covariance of each centre is ``σ² (GᵢᵀGᵢ)⁻¹`` with ``Gᵢ`` the unit normals of
-its contacts, the conditional covariance given ``R_eff`` (the radius error moves every centre along the
-mean normal of its pattern; with the same pattern at every pose that is nearly a common offset, which
-the identification's reference coupling absorbs).  A pose whose normals do not span three directions
-(``s_min/s_max`` of ``Gᵢ`` below :data:`MIN_SPREAD`) is *degenerate*: its centre is not determined.
+(``Σ(r/κ)² / (N − 3n − 1)``); the covariance of each centre is ``σ² (GᵢᵀWᵢGᵢ)⁻¹`` with ``Gᵢ`` the unit
+normals of its contacts and ``Wᵢ = diag(1/κ²)``, the conditional covariance given ``R_eff`` (the radius
+error moves every centre along the mean normal of its pattern; with the same pattern at every pose that
+is nearly a common offset, which the identification's reference coupling absorbs).  A pose whose normals
+do not span three directions (``s_min/s_max`` of ``Gᵢ`` below :data:`MIN_SPREAD`) is *degenerate*: its
+centre is not determined.
 """
 
 from __future__ import annotations
@@ -25,6 +30,23 @@ from pige_sym.errors import InputError
 #: Smallest ratio of the smallest to the largest singular value of a pose's contact normals.
 MIN_SPREAD = 0.1
 MIN_CONTACTS = 4
+VERTICAL_COS = float(np.cos(np.radians(18.0)))  # a normal within 18 deg of +Z: a vertical move onto the top
+MOVES = ("axes", "normal")
+
+
+def vertical_contacts(normals: np.ndarray) -> np.ndarray:
+    """Which contacts were probed by a vertical move (pige's programs), shape=(m,) bool."""
+    return np.asarray(normals[:, 2] > VERTICAL_COS)
+
+
+def move_cosines(normals: np.ndarray, moves: str) -> np.ndarray:
+    """``κ``: the radial share of an error along the probing move, shape=(m,) (module docstring)."""
+    if moves == "normal":
+        return np.ones(len(normals))
+    if moves != "axes":
+        raise InputError(f"moves {moves!r}: use {' or '.join(MOVES)}")
+    horizontal = np.sqrt(normals[:, 0] ** 2 + normals[:, 1] ** 2)
+    return np.where(vertical_contacts(normals), normals[:, 2], horizontal)
 
 
 @dataclass
@@ -40,7 +62,8 @@ class SphereFit:
         Effective radius ``R + r − pre-travel`` (fitted, or as given).
     radius_fitted : bool
     sigma_um : float
-        Pooled contact standard deviation (NaN without redundancy).
+        Pooled contact standard deviation [µm], along the probing move (``moves="axes"``) or the normal
+        (NaN without redundancy).
     residuals_um : list of ndarray
         Per pose, the contacts' radial residuals ``|x − c| − R_eff`` [µm].
     dof : int
@@ -92,7 +115,8 @@ def _normals(points: list[np.ndarray], centres: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def fit_centres(points_mm: list[np.ndarray], *, radius_mm: float | None = None, iterations: int = 20) -> SphereFit:
+def fit_centres(points_mm: list[np.ndarray], *, radius_mm: float | None = None, iterations: int = 20,
+                moves: str = "normal") -> SphereFit:
     """Fit every pose's centre (and one shared effective radius unless given).
 
     Parameters
@@ -103,6 +127,8 @@ def fit_centres(points_mm: list[np.ndarray], *, radius_mm: float | None = None, 
         The effective radius when known (calibrated on a ring or sphere); fitted otherwise.
     iterations : int
         Gauss–Newton iterations at most (converges in 2–3 from the algebraic start).
+    moves : {"normal", "axes"}
+        Direction of the probing moves, which sets each contact's weight (module docstring).
 
     Returns
     -------
@@ -127,41 +153,44 @@ def fit_centres(points_mm: list[np.ndarray], *, radius_mm: float | None = None, 
                              "contacts must not lie on one circle or line); probe it from more directions")
     fitted = radius_mm is None
     radius = float(np.median([r for _, r in starts])) if radius_mm is None else float(radius_mm)
+    weights = [1.0 / move_cosines(g, moves) ** 2 for g in _normals(pts, centres)]
     for _ in range(iterations):
-        centres, radius, step = _gauss_newton_step(pts, centres, radius, fitted)
+        centres, radius, step = _gauss_newton_step(pts, centres, radius, fitted, weights)
         if step < 1e-10:
             break
-    return _finish(pts, centres, radius, fitted)
+    return _finish(pts, centres, radius, fitted, weights)
 
 
-def _gauss_newton_step(pts: list[np.ndarray], centres: np.ndarray, radius: float,
-                       fitted: bool) -> tuple[np.ndarray, float, float]:
-    """One Gauss–Newton step; the radius is eliminated per pose (Schur complement) so the cost is O(n)."""
+def _gauss_newton_step(pts: list[np.ndarray], centres: np.ndarray, radius: float, fitted: bool,
+                       weights: list[np.ndarray]) -> tuple[np.ndarray, float, float]:
+    """One weighted Gauss–Newton step; the radius is eliminated per pose (Schur complement): O(n)."""
     normals = _normals(pts, centres)
     h_rr, g_r = 0.0, 0.0
     blocks = []
-    for x, c, g in zip(pts, centres, normals, strict=True):
+    for x, c, g, w in zip(pts, centres, normals, weights, strict=True):
         r = np.linalg.norm(x - c, axis=1) - radius  # residual; ∂r/∂c = −g, ∂r/∂R = −1
-        h_cc = g.T @ g
-        h_cr = g.sum(axis=0)
+        h_cc = (g * w[:, None]).T @ g
+        h_cr = (g * w[:, None]).sum(axis=0)
         inv = np.linalg.inv(h_cc)
-        g_c = g.T @ r  # = −Jᵀr for c: step solves H Δ = −Jᵀ r with J = [−g, −1]
+        g_c = (g * w[:, None]).T @ r  # = −JᵀWr for c: step solves H Δ = −JᵀW r with J = [−g, −1]
         blocks.append((inv, h_cr, g_c))
         if fitted:
-            h_rr += len(r) - h_cr @ inv @ h_cr
-            g_r += r.sum() - h_cr @ inv @ g_c
+            h_rr += w.sum() - h_cr @ inv @ h_cr
+            g_r += (w * r).sum() - h_cr @ inv @ g_c
     d_r = g_r / h_rr if fitted and h_rr > 0 else 0.0
     new = np.array([c + inv @ (g_c - h_cr * d_r) for c, (inv, h_cr, g_c) in zip(centres, blocks, strict=True)])
     step = max(float(np.abs(new - centres).max()), abs(d_r))
     return new, radius + d_r, step
 
 
-def _finish(pts: list[np.ndarray], centres: np.ndarray, radius: float, fitted: bool) -> SphereFit:
+def _finish(pts: list[np.ndarray], centres: np.ndarray, radius: float, fitted: bool,
+            weights: list[np.ndarray]) -> SphereFit:
     normals = _normals(pts, centres)
     residuals = [(np.linalg.norm(x - c, axis=1) - radius) * 1e3 for x, c in zip(pts, centres, strict=True)]
     n_contacts = sum(len(r) for r in residuals)
     dof = n_contacts - 3 * len(pts) - (1 if fitted else 0)
-    rss = float(sum((r**2).sum() for r in residuals))
+    rss = float(sum((w * r**2).sum() for r, w in zip(residuals, weights, strict=True)))
     sigma = float(np.sqrt(rss / dof)) if dof > 0 else float("nan")
-    cov = np.array([np.linalg.inv(g.T @ g) for g in normals]) * (sigma**2 if dof > 0 else np.nan)
+    cov = np.array([np.linalg.inv((g * w[:, None]).T @ g) for g, w in zip(normals, weights, strict=True)]) * (
+        sigma**2 if dof > 0 else np.nan)
     return SphereFit(centres, cov, radius, fitted, sigma, residuals, dof)
