@@ -38,7 +38,7 @@ def four_setups(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Path], d
 
 def _rows(section: str) -> dict[str, list[str]]:
     """PIGE table rows of a joint section: name -> cell texts."""
-    table = section[section.index("Joint PIGE estimate"):]
+    table = section[section.index("<h3>Joint estimate"):]
     out = {}
     for row in re.findall(r"<tr[^>]*>(.*?)</tr>", table, re.DOTALL):
         cells = [re.sub(r"<[^>]+>", "", c) for c in re.findall(r"<td[^>]*>(.*?)</td>", row, re.DOTALL)]

@@ -41,6 +41,7 @@ from pige_sym.identification.joint import (
 )
 from pige_sym.identification.result import IdentificationResult, json_float
 from pige_sym.identification.spectrum import solve_scaled
+from pige_sym.kernels import load_kernels
 from pige_sym.measurements.ballbar import BallbarRun
 from pige_sym.measurements.measurement import Measurement
 
@@ -94,22 +95,25 @@ class JointDiagnosis:
     files: list[FileDiagnosis]
     agreement: Agreement | None
     notes: list[str] = field(default_factory=list)
+    effects: list[Finding] = field(default_factory=list)  # seen jointly in a set of ballbar setups
+    extended: JointResult | None = None  # the joint fit with those effects
 
     @property
     def final(self) -> IdentificationResult:
-        """The joint PIGE estimate."""
-        return self.joint.result
+        """The joint PIGE estimate (with the effects found jointly, when there are)."""
+        return self.joint.result if self.extended is None else self.extended.result
 
     @property
     def findings(self) -> list[Finding]:
-        """Every file's findings (each also listed under its file)."""
-        return [f for fd in self.files for f in fd.findings]
+        """Every file's findings (each also listed under its file) and the effects found jointly."""
+        return [f for fd in self.files for f in fd.findings] + self.effects
 
     def to_dict(self) -> dict[str, Any]:
         final = self.final.to_dict()
         return {"machine": self.machine, "method": "joint-diagnosis",
                 "agreement": None if self.agreement is None else self.agreement.to_dict(),
                 "files": [f.to_dict() for f in self.files], "notes": self.notes,
+                "effects": [f.to_dict() for f in self.effects],
                 "pige": final["pige"], "std": final["std"], "units": final["units"],
                 "unidentifiable": final["unidentifiable"], "rank": final["rank"], "condition": final["condition"],
                 "rms_um": final["rms_um"], "ball_mm": final["ball_mm"], "pivots_mm": final["pivots_mm"],
@@ -132,6 +136,9 @@ class JointDiagnosis:
         for fd in self.files:
             found = ", ".join(f.effect for f in fd.findings) or "nothing beyond the PIGEs"
             lines.append(f"- {fd.label}: {fd.checked}: {found}")
+        if self.effects:
+            lines.append("Seen jointly in the ballbar setups: " + ", ".join(f.effect for f in self.effects)
+                         + " (the PIGEs below are estimated with them).")
         return "\n".join(lines)
 
 
@@ -229,6 +236,10 @@ def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *,
         notes += [f"{label}: {c}" for c in clusters]
         files.append(FileDiagnosis(label, b.instrument, b.data.size, sigmas[i], summary.rms_um, findings, checked,
                                    tests[i], i in flagged))
+    effects, extended = _ballbar_effects(machine, items, blocks)
+    if effects and overall is not None and overall.p_value < ALPHA:
+        notes.append("the agreement test compares PIGE-only models: an effect the setups see differently can "
+                     "make them disagree; judge it with the effects found")
     if any(fd.findings for fd in files):
         notes.append("the joint estimate holds the PIGEs only: an effect found in one file is not modelled in it "
                      "(compensate from that file's own diagnosis, or remove the cause and measure again)")
@@ -236,7 +247,20 @@ def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *,
         notes.append("with two files the test cannot say which one moved")
     if not math.isfinite(joint.result.rms_um):
         notes.append("the joint fit has no residual")
-    return JointDiagnosis(machine, joint, files, overall, notes)
+    return JointDiagnosis(machine, joint, files, overall, notes, effects, extended)
+
+
+def _ballbar_effects(machine: str, items: Sequence[tuple[str, Measurement | BallbarRun]],
+                     blocks: list[Block]) -> tuple[list[Finding], JointResult | None]:
+    """The catalogue effects a set of ballbar setups shows jointly (none for other sets)."""
+    runs = [(label, x) for label, x in items if isinstance(x, BallbarRun)]
+    if len(runs) != len(items):
+        return [], None
+    from pige_sym.diagnosis.joint_effects import diagnose_ballbar_set
+    from pige_sym.identification.joint import own_sigma
+
+    names = list(load_kernels(machine).LOCATION_PARAMETERS)
+    return diagnose_ballbar_set(machine, runs, blocks, [own_sigma(b) for b in blocks], names, SIGMA_FLOOR_UM)
 
 
 def format_joint_diagnosis(d: JointDiagnosis) -> str:
@@ -252,6 +276,7 @@ def format_joint_diagnosis(d: JointDiagnosis) -> str:
                          f"alpha {ALPHA / len(d.files):.2g})")
         for f in fd.findings:
             lines.append(f"  {fd.label}: {f.sentence()}")
+    lines += [f"  jointly: {f.sentence()}" for f in d.effects]
     lines += [f"note: {n}" for n in d.notes]
     lines += ["", "joint estimate (PIGEs):", format_result(d.final), format_files(d.joint.files)]
     return "\n".join(lines)

@@ -145,6 +145,15 @@ def identify_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *, wit
     return _assemble(machine, names, all_names, blocks, sigmas, a, y, items)
 
 
+def identify_blocks(machine: str, names: list[str], blocks: list[Block], sigmas: list[float],
+                    items: Sequence[tuple[str, Any]]) -> JointResult:
+    """The joint fit of prepared blocks whose first ``len(names)`` design columns are shared (``names``):
+    each block whitened by its σ, a constant per relative file (as :func:`identify_joint`)."""
+    a, y = whitened_system(blocks, sigmas)
+    all_names = names + [n for b in blocks for n in b.nuisance_names]
+    return _assemble(machine, names, all_names, blocks, sigmas, a, y, items)
+
+
 def common_machine(items: Sequence[tuple[str, Measurement | BallbarRun]]) -> str:
     """The canonical code of the one machine every file measures; refused when they differ."""
     machines = {load_kernels(x.machine).MACHINE_CODE for _, x in items}

@@ -11,6 +11,7 @@ with two R-test/probe files or more), the report adds a joint section (computed 
 - each file's part: instrument, rows, its own σ, the RMS of its joint residual, its free constant
   (``zero: relative`` ballbar files), its own diagnosis (ballbar: agreement only) and its test against the
   others;
+- the effects a set of ballbar setups shows jointly (:mod:`pige_sym.diagnosis.joint_effects`);
 - the joint PIGE estimate with standard errors, what the set cannot determine named and given no value;
   with ``--tolerances`` the verdict of the joint estimate (``pige check F1 F2 …``); with truth sidecars
   that agree on the PIGEs (``pige simulate``), the true values and the errors in standard errors.
@@ -57,14 +58,15 @@ def answer_joint_html(i: int, jr: JointReport) -> str:
                    f"{esc(jr.check.verdict.upper())}</span> <small>"
                    + esc(", ".join(odd) if odd else f"all {len(jr.check.items)} items pass") + "</small>")
     res = d.final
-    known = [(n, float(v), float(s)) for n, v, s in zip(res.parameters, res.values, res.std, strict=True)
-             if math.isfinite(float(v))]
+    piges = [n for n in res.parameters if "." not in n]  # effect parameters are named <effect>.<parameter>
+    known = [n for n, v in zip(res.parameters, res.values, strict=True) if n in piges and math.isfinite(float(v))]
     facts = [("machine", f"<code>{esc(jr.machine)}</code>"),
              ("files", esc(f"{len(jr.paths)} identified jointly: " + ", ".join(p.name for p in jr.paths))),
              ("agreement", f'<span class="badge {esc(kind)}">{esc(kind.upper() if kind != "none" else "—")}'
                            f"</span> {esc(sentence)}"),
              ("verdict (joint estimate)", verdict),
-             ("determined", esc(f"{len(known)} of {len(res.parameters)} PIGEs"
+             ("seen jointly", esc(", ".join(f.effect for f in d.effects) or "nothing beyond the PIGEs")),
+             ("determined", esc(f"{len(known)} of {len(piges)} PIGEs"
                                 + (f"; not determined by these setups: {', '.join(res.unidentifiable)}"
                                    if res.unidentifiable else "")))]
     return f'<div class="answer" id="answer-j{i + 1}"><div class="facts">{kvs(facts)}</div></div>'
@@ -91,15 +93,15 @@ def _files_table(jr: JointReport) -> str:
 
 def _pige_table(jr: JointReport) -> str:
     res = jr.diagnosis.final
-    head = ["PIGE", "value", "std", "unit"] + (["true", "error / std"] if jr.truth is not None else [])
+    head = ["parameter", "value", "std", "unit"] + (["true", "error / std"] if jr.truth is not None else [])
     rows, classes = [], []
     for name, v, s in zip(res.parameters, res.values, res.std, strict=True):
         bad = not math.isfinite(float(v))
         row = [f"<b>{esc(name)}</b>", "not determined" if bad else num(float(v)), "—" if bad else num(float(s)),
                esc(units(res.units.get(name, "")))]
         if jr.truth is not None:
-            t = jr.truth.get(name, 0.0)
-            z = None if bad or not float(s) > 0 else (float(v) - t) / float(s)
+            t = jr.truth.get(name)
+            z = None if bad or t is None or not float(s) > 0 else (float(v) - t) / float(s)
             row += [num(t), num(z, "+.2f")]
         rows.append(row)
         classes.append("unid" if bad else "")
@@ -121,7 +123,13 @@ def joint_html(i: int, jr: JointReport) -> str:
              "<h3>The files</h3>", _files_table(jr)]
     if jr.check is not None:
         parts += ["<h3>Conformance of the joint estimate</h3>", check_table_html(jr.check)]
-    parts += ["<h3>Joint PIGE estimate</h3>", _pige_table(jr)]
+    if d.effects:
+        parts += ["<h3>Effects seen jointly in the ballbar setups</h3>",
+                  "<p>The catalogue searched on the joint rows of the setups (docs/ballbar.md); the PIGEs below are "
+                  "estimated with these effects.</p><ul>"
+                  + "".join(f"<li>{esc(f.sentence())}" + "".join(f"<br><small>{esc(a)}</small>" for a in f.alternatives)
+                            + "</li>" for f in d.effects) + "</ul>"]
+    parts += ["<h3>Joint estimate</h3>", _pige_table(jr)]
     res = d.final
     parts.append(f"<p><small>Rank {res.rank}/{len(res.parameters)}, joint residual RMS {num(res.rms_um, '.3g')} "
                  "µm. A combination no file measures gets no value.</small></p>")
