@@ -253,8 +253,9 @@ def diagnose_files(paths: Sequence[PathLike], *, progress: bool = False) -> Join
     """Diagnose several files of one machine (``pige diagnose F1 F2 ...``).
 
     Each R-test or probe file gets its own catalogue diagnosis; ballbar setups are checked for
-    agreement only; an F test says whether the files agree on one set of PIGEs and, with three
-    or more, which file does not.  The final estimate is the joint PIGE fit.
+    agreement and, when the set is made of ballbar setups only, searched jointly for catalogue
+    effects; an F test says whether the files agree on one set of PIGEs and, with three or more,
+    which file does not.  The final estimate is the joint fit (with the effects seen jointly).
 
     Parameters
     ----------
@@ -321,14 +322,16 @@ def diagnose(data: Measurement | PathLike, *, candidates: Sequence[str] | None =
     return run(_measurement(data), candidates=None if candidates is None else list(candidates), progress=progress)
 
 
-def check(estimate: IdentificationResult | DiagnosisResult | PathLike, tolerances: Mapping[str, Any] | PathLike, *,
-          rule: str = "guard", k: float = 2.0, method: str = "diagnosis") -> CheckResult:
+def check(estimate: IdentificationResult | DiagnosisResult | JointDiagnosis | PathLike,
+          tolerances: Mapping[str, Any] | PathLike, *, rule: str = "guard", k: float = 2.0,
+          method: str = "diagnosis") -> CheckResult:
     """In tolerance?  pass / fail / undecided per parameter with its uncertainty (ISO 14253-1, ``pige check``).
 
     Parameters
     ----------
-    estimate : IdentificationResult, DiagnosisResult or path-like
-        A result, a saved ``identify/diagnose --json`` (a file whose first character opens a JSON
+    estimate : IdentificationResult, DiagnosisResult, JointDiagnosis or path-like
+        A result (a joint diagnosis of several files: its final estimate with the effects found), a
+        saved ``identify/diagnose --json`` (a file whose first character opens a JSON
         object) or a measurement file (estimated now with ``method``).
     tolerances : mapping or path-like
         A ``pige-tolerances 1`` document (``{"format": ..., "defaults": {"um": 10, "urad": 20}, "limits": {...}}``)

@@ -189,3 +189,19 @@ def test_mixed_sets_leave_effects_to_each_rtest_file() -> None:
     rtest = api.simulate(AC, pige=TRUTH, noise_um=0.2, seed=2)
     d = diagnose_joint([("rtest", rtest), *_effect_set(11, "angular_error_C:harmonic=2,cos_urad=15,sin_urad=0")[:4]])
     assert d.effects == []
+
+
+def test_check_and_history_of_a_ballbar_set_carry_the_effects_seen_jointly(tmp_path, capsys) -> None:
+    from pathlib import Path
+
+    paths = [str(write_ballbar(run, tmp_path / f"{label}.csv"))
+             for label, run in _effect_set(3, "angular_error_C:harmonic=2,cos_urad=15,sin_urad=-10")]
+    tol = Path(__file__).resolve().parents[1] / "examples" / "tolerances.json"
+    capsys.readouterr()
+    assert main(["check", *paths, "--tolerances", str(tol), "--json"]) == 0
+    items = {i["name"]: i for i in json.loads(capsys.readouterr().out)["items"]}
+    assert items["angular_error_C.cos_urad"]["status"] == "pass"
+    assert abs(items["angular_error_C.cos_urad"]["value"] - 15.0) < 4 * items["angular_error_C.cos_urad"]["std"]
+    db = f"sqlite:///{tmp_path / 'h.db'}"
+    assert main(["history", "add", *paths, "--machine-id", "BB", "--db", db, "--date", "2026-11-01"]) == 0
+    assert "effects: angular_error_C" in capsys.readouterr().out

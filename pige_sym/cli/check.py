@@ -16,7 +16,9 @@ def _run(args: argparse.Namespace) -> int:
     from pige_sym.measurements.ballbar import is_ballbar_file
 
     if len(args.files) > 1 or is_ballbar_file(args.files[0]):
-        estimate = api.identify_files(args.files).result  # joint: R-test, probe and ballbar files of one machine
+        # joint: R-test, probe and ballbar files of one machine; diagnosis: with the effects seen jointly
+        estimate = (api.diagnose_files(args.files) if args.method == "diagnosis"
+                    else api.identify_files(args.files).result)
         result = api.check(estimate, args.tolerances, rule=args.rule, k=args.k)
     else:
         result = api.check(args.files[0], args.tolerances, rule=args.rule, k=args.k, method=args.method)

@@ -222,6 +222,7 @@ def _estimate_set(paths: list[Path], method: str) -> tuple[_Read, Any, list[dict
 
         diag = diagnose_joint(items)
         effects = [f.to_dict() | {"file": fd.label} for fd in diag.files for f in fd.findings]
+        effects += [f.to_dict() | {"file": "jointly"} for f in diag.effects]
         return read, diag, effects, "joint-diagnosis"
     from pige_sym.identification.joint import identify_joint
 
