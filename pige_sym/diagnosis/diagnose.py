@@ -107,10 +107,10 @@ from pige_sym.diagnosis.candidates import (
     compact_columns,
     evaluate_rows,
 )
-from pige_sym.diagnosis.instrument_rows import instrument_notes, screen_scale
+from pige_sym.diagnosis.instrument_rows import coupled_estimate, instrument_notes, screen_scale
 from pige_sym.diagnosis.results import EVIDENCE, DiagnosisResult, Finding, Rejected
 from pige_sym.diagnosis.selection import Model, Selector, compare, select
-from pige_sym.diagnosis.thermal import refine_tau
+from pige_sym.diagnosis.thermal import drift_derivative, refine_tau
 from pige_sym.errors import InputError
 from pige_sym.identification.instruments import instrument
 from pige_sym.identification.least_squares import identify
@@ -271,6 +271,26 @@ def _identification(setup: _Setup, model: Model, resid: np.ndarray) -> Identific
         pivots_mm={a: [float(x) for x in v] for a, v in m.pivots_mm.items()},
         tool_mm=None if m.tool_mm is None else [float(x) for x in m.tool_mm], vif=None,
     )
+
+
+def _couple(setup: _Setup, model: Model, result: IdentificationResult, outliers: list[int]) -> None:
+    """Replace a probe file's final estimate by the generalised least squares with its rows' correlation."""
+    skip = set(outliers)
+    rows = np.array([r for r in range(1, setup.m.n_rows) if r not in skip], dtype=int)
+    full = setup.design(model.cands)(rows)
+    # an interpolated drift's τ is estimated too: its column ∂/∂ln τ carries τ's uncertainty into the others'
+    taus = [full @ drift_derivative(setup.layout, model, i) for i, c in enumerate(model.cands) if c.mix is not None]
+    design = np.zeros((setup.m.n_rows, 3, model.w.shape[1] + len(taus)))
+    design[rows] = np.concatenate([full @ model.w, *(t[:, :, None] for t in taus)], axis=2)
+    transform = _catalogue_transform(model, len(setup.layout.pige))
+    transform = np.hstack([transform, np.zeros((transform.shape[0], len(taus)))])
+    values, cov, ident, sigma2 = coupled_estimate(setup.m, design, rows, transform)
+    ident &= result.identifiable
+    result.values = np.where(ident, values, np.nan)
+    result.covariance = cov
+    result.std = np.where(ident, np.sqrt(np.clip(np.diag(cov), 0, None)), np.nan)
+    result.identifiable = ident
+    result.sigma_um = math.sqrt(sigma2)
 
 
 def _alternatives(selector: Selector, final: Model, i: int) -> list[str]:
@@ -452,6 +472,8 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
         # the PIGE model stands: its estimate with the instrument's correlations (honest standard errors)
         final_result = baseline = identify(m)
         final_result.method = "diagnosis"
+    elif notes:
+        _couple(setup, final, final_result, outlier_rows)
     bf = base_model.fit
     return DiagnosisResult(
         machine=setup.kern.MACHINE_CODE, baseline_rms_um=math.sqrt(bf.rss / bf.n_obs), baseline_bic=base_model.bic,

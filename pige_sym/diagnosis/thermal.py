@@ -46,6 +46,13 @@ def _drift_at(layout: Layout, kind: str, log_tau: float, derivative: bool = Fals
     return mix
 
 
+def drift_derivative(layout: Layout, model: Model, i: int) -> np.ndarray:
+    """The super-design combination ``∂(v·drift columns)/∂ln τ`` of the model's i-th (interpolated) drift, (C,)."""
+    c = model.cands[i]
+    v = model.reductions[i].basis @ model.fit.values[model.blocks[i]]
+    return _drift_at(layout, c.spec.kind, math.log(float(c.spec.options["tau_s"])), derivative=True) @ v
+
+
 def refine_tau(selector: Selector, model: Model) -> tuple[Model, dict[str, float]]:
     """Replace each grid drift by the interpolated τ of least RSS; returns the model and the std of τ [s] by kind."""
     stds: dict[str, float] = {}
