@@ -256,7 +256,10 @@ def _scaled(mantissa: np.ndarray, power: np.ndarray) -> tuple[np.ndarray, np.nda
 def _split_mantissa(mantissa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``mantissa`` (uint64) as ``hi + lo``: ``hi`` its nearest double, ``lo`` the exact rest (float64)."""
     m_hi = mantissa.astype(np.float64)
-    m_lo = (mantissa.view(np.int64) - m_hi.astype(np.uint64).view(np.int64)).astype(np.float64)
+    # a field of more than 19 digits (sent to the strict parser, its value here unused) can round to 2**64,
+    # which uint64 cannot hold: its cast is invalid, harmlessly
+    with np.errstate(invalid="ignore"):
+        m_lo = (mantissa.view(np.int64) - m_hi.astype(np.uint64).view(np.int64)).astype(np.float64)
     return m_hi, m_lo
 
 
