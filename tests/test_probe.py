@@ -242,6 +242,12 @@ def test_the_commands_tell_the_whole_story(tmp_path, capsys) -> None:
     assert main(["identify", str(csv), "--json"]) == 0
     assert main(["import-probe", str(log), "--format", "heidenhain", "--machine", AC, "--sphere-radius", "12.7",
                  "--stylus-radius", "1.5", "--out", str(csv)]) == 2  # never over an existing file
+    normal = tmp_path / "normal.csv"
+    assert main(["import-probe", str(log), "--format", "heidenhain", "--machine", AC, "--sphere-radius", "12.7",
+                 "--stylus-radius", "1.5", "--moves", "normal", "--out", str(normal)]) == 0
+    m_normal = read_measurement(normal)
+    assert m.metadata["probing_moves"] == "axes" and m_normal.metadata["probing_moves"] == "normal"
+    assert m_normal.extra_columns["cov_zz_um2"] != m.extra_columns["cov_zz_um2"]  # the weights differ
     with pytest.raises(InputError, match="robust"):
         identify(m, loss="soft_l1")
     with pytest.raises(InputError, match="3-D"):
