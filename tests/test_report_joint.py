@@ -71,6 +71,8 @@ def test_ballbar_setups_get_a_joint_section_that_leads_the_page(four_setups, tmp
         assert z == pytest.approx((value - true) / std, abs=0.02) and abs(z) < 4.5
     assert "Conformance of the joint estimate" in section
     assert "agreement cannot be tested" in section
+    assert (out / "_report" / "joint_1.png").read_bytes().startswith(b"\x89PNG")
+    assert "joint PIGE-only fit" in section and section.count("data:image/png;base64,") >= 1
 
 
 def test_one_setup_names_what_it_cannot_determine_and_json_carries_the_joint(four_setups, tmp_path, capsys) -> None:

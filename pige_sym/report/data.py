@@ -223,6 +223,8 @@ class JointReport:
         Verdict of the joint estimate (with ``--tolerances``).
     truth : dict of str to float or None
         True PIGEs [µm, µrad] when every file has a truth sidecar and they agree.
+    curves : list of (str, ndarray, ndarray)
+        Per ballbar file: label, measured ``dL`` and the joint PIGE-only fit of it, shape=(n,) [µm].
     """
 
     machine: str
@@ -230,6 +232,7 @@ class JointReport:
     diagnosis: JointDiagnosis
     check: CheckResult | None = None
     truth: dict[str, float] | None = None
+    curves: list[tuple[str, np.ndarray, np.ndarray]] = field(default_factory=list)  # ballbar: label, dL, fit [µm]
 
     def to_dict(self) -> dict[str, Any]:
         return {"machine": self.machine, "files": [str(p) for p in self.paths],

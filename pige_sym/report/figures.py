@@ -369,6 +369,37 @@ def trend_figure(history: HistoryData) -> Any:
     return fig
 
 
+def ballbar_figure(curves: list[tuple[str, np.ndarray, np.ndarray]]) -> Any:
+    """Each ballbar setup's measured length change and its joint PIGE-only fit against the pose.
+
+    Parameters
+    ----------
+    curves : list of (label, measured (n,), fitted (n,)) [µm]
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    cols = min(3, len(curves))
+    rows = math.ceil(len(curves) / cols)
+    fig, axs = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.4 * rows), squeeze=False)
+    for ax, (label, measured, fitted) in zip(axs.flat, curves, strict=False):
+        idx = np.arange(measured.size)
+        ax.plot(idx, measured, "k.", ms=3, label="ΔL measured")
+        ax.plot(idx, fitted, "-", lw=1.2, label="joint PIGE fit")
+        rms = float(np.sqrt(np.mean((measured - fitted) ** 2)))
+        ax.set_title(f"{label[-30:]}: rest {rms:.2g} µm", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    for ax in list(axs.flat)[len(curves):]:
+        ax.axis("off")
+    axs.flat[0].legend(fontsize=7)
+    axs.flat[0].set_ylabel("[µm]")
+    fig.tight_layout()
+    return fig
+
+
 def draw_report_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
     """The figures of the whole report (measured before/after, history trends) into ``out_dir``."""
     figs: list[ReportFigure] = []
@@ -383,4 +414,11 @@ def draw_report_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
         figs.append(ReportFigure("trend", _save(trend_figure(data.history), out_dir / "history_trend.png"),
                                  f"History of machine {data.history.machine_id}: each PIGE per run with ± 2 std, "
                                  "the tolerance band and the significant changes."))
+    for i, jr in enumerate(data.joints):
+        if jr.curves:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            figs.append(ReportFigure(f"joint-{i + 1}", _save(ballbar_figure(jr.curves), out_dir / f"joint_{i + 1}.png"),
+                                     "Each ballbar setup's measured length change ΔL per pose [µm] and the joint "
+                                     "PIGE-only fit of it (with the file's constant): the rest is noise, or the "
+                                     "effects named above, or a setup that disagrees."))
     return figs

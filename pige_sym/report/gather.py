@@ -285,7 +285,7 @@ def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, dict[str
             source = " + ".join(items[i][0].name for i in idx)
             verdict = check(estimates_from_result(diag.final, source), tolerances, rule=rule, k=k)
         out.append(JointReport(machine, [items[i][0] for i in idx], diag, verdict,
-                               _common_truth([items[i][2] for i in idx])))
+                               _common_truth([items[i][2] for i in idx]), _ballbar_curves(labelled, diag)))
     return out
 
 
@@ -299,6 +299,21 @@ def _read_inputs(paths: list[Path]) -> tuple[list[tuple[Path, Measurement, Truth
         if isinstance(item, Measurement):
             loaded.append((Path(p), item, truth))
     return loaded, every
+
+
+def _ballbar_curves(items: list[tuple[str, Measurement | BallbarRun]],
+                    diag: Any) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """Each ballbar file's measured ``dL`` and its joint PIGE-only fit (with the file's constant) [µm]."""
+    from pige_sym.identification.joint import file_blocks
+
+    res, out = diag.joint.result, []
+    for (label, item), b, f in zip(items, file_blocks(items), diag.joint.files, strict=True):
+        if isinstance(item, BallbarRun):
+            fit = b.design @ np.nan_to_num(res.values[: b.design.shape[1]])
+            if f.constant_um is not None and math.isfinite(f.constant_um):
+                fit = fit + f.constant_um
+            out.append((label, b.data, fit))
+    return out
 
 
 def _settings_shown(o: _Options) -> dict[str, str]:

@@ -17,7 +17,7 @@ from pige_sym.files import atomic_write_text
 from pige_sym.report.data import MeasurementReport, ReportData
 from pige_sym.report.figures import draw_figures, draw_report_figures
 from pige_sym.report.gather import findings_text, gather_report
-from pige_sym.report.html_blocks import CSS, esc, figs, num, table
+from pige_sym.report.html_blocks import CSS, esc, figs, img, num, table
 from pige_sym.report.html_sections import (
     compensation_html,
     diagnosis_html,
@@ -163,7 +163,8 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
     if data.history is not None:
         parts += ['<section data-section="history" id="history"><h2>Machine history</h2>',
                   history_html(data, base), "</section>"]
-    parts += [joint_html(i, j) for i, j in enumerate(data.joints)]
+    parts += [joint_html(i, j, "".join(img(f, base) for f in data.figures if f.key == f"joint-{i + 1}"))
+              for i, j in enumerate(data.joints)]
     parts += [_measurement_html(i, rep, base) for i, rep in enumerate(data.measurements)]
     if data.plan_html:
         parts.append(data.plan_html)

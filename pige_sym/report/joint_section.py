@@ -108,8 +108,8 @@ def _pige_table(jr: JointReport) -> str:
     return table(head, rows, row_classes=classes, num_cols=[1, 2] + ([4, 5] if jr.truth is not None else []))
 
 
-def joint_html(i: int, jr: JointReport) -> str:
-    """The joint section (module docstring)."""
+def joint_html(i: int, jr: JointReport, figures: str = "") -> str:
+    """The joint section (module docstring); ``figures`` is its figures' HTML."""
     d = jr.diagnosis
     kind, sentence = _agreement_sentence(d)
     parts = [f'<section data-section="joint" id="joint-{i + 1}">',
@@ -120,7 +120,7 @@ def joint_html(i: int, jr: JointReport) -> str:
              "constant per relative ballbar file, whose zero is unknown). A ballbar file is one projection per "
              "pose, along the bar: it is checked for agreement only; R-test and probe files also get their own "
              "catalogue diagnosis.</p>",
-             "<h3>The files</h3>", _files_table(jr)]
+             "<h3>The files</h3>", _files_table(jr), figures]
     if jr.check is not None:
         parts += ["<h3>Conformance of the joint estimate</h3>", check_table_html(jr.check)]
     if d.effects:
