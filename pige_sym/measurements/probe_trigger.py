@@ -5,16 +5,16 @@ kinematic probe (``L_c·cos 3φ + L_s·sin 3φ`` for a horizontal move of azimut
 different pre-travel for a vertical move (``V``).  A contact then lies at ``R_eff − pre`` from the centre
 instead of ``R_eff``: a radial perturbation ``Δρ = −pre``.  The import's least-squares fit (every pose's
 centre, one shared ``R_eff`` unless it is given) responds linearly; with the fit's Jacobian ``J`` (rows
-``[n_kᵀ at pose i, 1]``, ``n_k`` the contact's unit normal) and its contact weights ``W``
-(:mod:`~pige_sym.measurements.sphere_fit`)::
+``[n_kᵀ at pose i, 1]``, ``n_k`` the contact's unit normal) and its contact weights ``W``::
 
     [δc_1 … δc_n, δR] = (JᵀWJ)⁻¹ JᵀW Δρ
 
-solved pose by pose with the shared radius eliminated (Schur complement).  :func:`trigger_sensitivities`
-gives, per pose, the centre shift per µm of ``L_c``, ``L_s`` and ``V``: shape ``(n, 3, 3)`` [µm/µm], the
-columns of the diagnosis' ``probe_trigger`` effect.  The move direction is read from the contact: a
-normal within 18° of +Z is a vertical move onto the top, any other a horizontal move towards the centre
-(azimuth of ``−n``), as pige's programs probe; a log of another pattern gets sensitivities of that model.
+the fit's own Gauss–Newton solve (:func:`pige_sym.measurements.sphere_fit.linear_response`).
+:func:`trigger_sensitivities` gives, per pose, the centre shift per µm of ``L_c``, ``L_s`` and ``V``:
+shape ``(n, 3, 3)`` [µm/µm], the columns of the diagnosis' ``probe_trigger`` effect.  The move direction
+is read from the contact: a normal within 18° of +Z is a vertical move onto the top, any other a
+horizontal move towards the centre (azimuth of ``−n``), as pige's programs probe; a log of another
+pattern gets sensitivities of that model.
 
 With the same pattern at every pose the shift is one machine-frame vector and enters the deviation as
 ``(I − R_i)·v``, the pattern of axis-line offsets: the diagnosis then finds the effect undetermined.
@@ -31,7 +31,7 @@ import numpy as np
 
 from pige_sym.errors import FileFormatError
 from pige_sym.measurements.measurement import Measurement
-from pige_sym.measurements.sphere_fit import move_cosines, vertical_contacts
+from pige_sym.measurements.sphere_fit import linear_response, move_cosines, vertical_contacts
 
 PARTS = ("cos3", "sin3", "vert")
 COLUMNS = tuple(f"trig_{p}_{a}" for p in PARTS for a in "xyz")
@@ -66,22 +66,10 @@ def trigger_sensitivities(points_mm: list[np.ndarray], centres_mm: np.ndarray, r
     ndarray, shape=(n, 3, 3)
         ``[i, :, j]``: the shift of centre ``i`` per µm of part ``j`` (``cos3``, ``sin3``, ``vert``).
     """
-    a_inv, b, e, f, m = [], [], [], [], []
-    for pts, c in zip(points_mm, centres_mm, strict=True):
-        normals = (pts - c) / np.linalg.norm(pts - c, axis=1, keepdims=True)
-        rho = _perturbations(normals)
-        w = 1.0 / move_cosines(normals, moves) ** 2
-        a_inv.append(np.linalg.inv((normals * w[:, None]).T @ normals))
-        b.append((normals * w[:, None]).sum(axis=0))
-        e.append((normals * w[:, None]).T @ rho)
-        f.append(w @ rho)
-        m.append(float(w.sum()))
-    delta_r = np.zeros(3)
-    if radius_fitted:
-        num = sum(f) - sum(bi @ ai @ ei for ai, bi, ei in zip(a_inv, b, e, strict=True))
-        den = sum(m) - sum(float(bi @ ai @ bi) for ai, bi in zip(a_inv, b, strict=True))
-        delta_r = num / den
-    return np.array([ai @ (ei - np.outer(bi, delta_r)) for ai, bi, ei in zip(a_inv, b, e, strict=True)])
+    normals = [(p - c) / np.linalg.norm(p - c, axis=1, keepdims=True) for p, c in zip(points_mm, centres_mm,
+                                                                                         strict=True)]
+    weights = [1.0 / move_cosines(g, moves) ** 2 for g in normals]
+    return linear_response(normals, weights, [_perturbations(g) for g in normals], radius_fitted)[0]
 
 
 def sensitivity_columns(sens: np.ndarray) -> dict[str, list[str]]:

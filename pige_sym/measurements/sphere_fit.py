@@ -161,26 +161,50 @@ def fit_centres(points_mm: list[np.ndarray], *, radius_mm: float | None = None, 
     return _finish(pts, centres, radius, fitted, weights)
 
 
+def linear_response(normals: list[np.ndarray], weights: list[np.ndarray], radial: list[np.ndarray],
+                    radius_fitted: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted least-squares response of the centres (and the shared radius) to radial misfits.
+
+    Solves ``min Σ w (ρ − n·δc_i − δR)²`` pose by pose with the shared radius eliminated (Schur complement),
+    O(n): the Gauss–Newton step of :func:`fit_centres` (``ρ`` its residuals) and the centres' response to
+    any radial perturbation (:mod:`~pige_sym.measurements.probe_trigger`).
+
+    Parameters
+    ----------
+    normals, weights : list of ndarray, shapes (m_i, 3) and (m_i,)
+        Per pose, the contacts' unit normals and weights.
+    radial : list of ndarray, shape=(m_i, k)
+        Per pose, ``k`` radial misfits of each contact.
+    radius_fitted : bool
+        Whether the shared radius moves too (else ``δR = 0``).
+
+    Returns
+    -------
+    centres : ndarray, shape=(n, 3, k)
+    radius : ndarray, shape=(k,)
+    """
+    blocks = []
+    h_rr, g_r = 0.0, np.zeros(radial[0].shape[1])
+    for g, w, rho in zip(normals, weights, radial, strict=True):
+        gw = g * w[:, None]
+        inv = np.linalg.inv(gw.T @ g)
+        h_cr, g_c = gw.sum(axis=0), gw.T @ rho
+        blocks.append((inv, h_cr, g_c))
+        if radius_fitted:
+            h_rr += w.sum() - h_cr @ inv @ h_cr
+            g_r = g_r + w @ rho - h_cr @ inv @ g_c
+    d_r = g_r / h_rr if radius_fitted and h_rr > 0 else np.zeros_like(g_r)
+    return np.array([inv @ (g_c - np.outer(h_cr, d_r)) for inv, h_cr, g_c in blocks]), d_r
+
+
 def _gauss_newton_step(pts: list[np.ndarray], centres: np.ndarray, radius: float, fitted: bool,
                        weights: list[np.ndarray]) -> tuple[np.ndarray, float, float]:
-    """One weighted Gauss–Newton step; the radius is eliminated per pose (Schur complement): O(n)."""
-    normals = _normals(pts, centres)
-    h_rr, g_r = 0.0, 0.0
-    blocks = []
-    for x, c, g, w in zip(pts, centres, normals, weights, strict=True):
-        r = np.linalg.norm(x - c, axis=1) - radius  # residual; ∂r/∂c = −g, ∂r/∂R = −1
-        h_cc = (g * w[:, None]).T @ g
-        h_cr = (g * w[:, None]).sum(axis=0)
-        inv = np.linalg.inv(h_cc)
-        g_c = (g * w[:, None]).T @ r  # = −JᵀWr for c: step solves H Δ = −JᵀW r with J = [−g, −1]
-        blocks.append((inv, h_cr, g_c))
-        if fitted:
-            h_rr += w.sum() - h_cr @ inv @ h_cr
-            g_r += (w * r).sum() - h_cr @ inv @ g_c
-    d_r = g_r / h_rr if fitted and h_rr > 0 else 0.0
-    new = np.array([c + inv @ (g_c - h_cr * d_r) for c, (inv, h_cr, g_c) in zip(centres, blocks, strict=True)])
-    step = max(float(np.abs(new - centres).max()), abs(d_r))
-    return new, radius + d_r, step
+    """One weighted Gauss–Newton step (:func:`linear_response` of the residuals ``|x − c| − R``)."""
+    residuals = [(np.linalg.norm(x - c, axis=1) - radius)[:, None] for x, c in zip(pts, centres, strict=True)]
+    steps, d_r = linear_response(_normals(pts, centres), weights, residuals, fitted)
+    new = centres + steps[:, :, 0]
+    step = max(float(np.abs(steps).max()), abs(float(d_r[0])))
+    return new, radius + float(d_r[0]), step
 
 
 def _finish(pts: list[np.ndarray], centres: np.ndarray, radius: float, fitted: bool,
