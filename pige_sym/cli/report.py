@@ -47,13 +47,11 @@ def _run(args: argparse.Namespace) -> int:
     if args.json:
         print(to_json(data.to_dict()))
         return 0
-    from pige_sym.diagnosis.joint import ALPHA
-
     for jr in data.joints:
         d = jr.diagnosis
-        p_value = None if d.agreement is None else d.agreement.p_value
-        agree = ("agreement not testable" if p_value is None else
-                 f"{'files DISAGREE' if p_value < ALPHA else 'files agree'} (p = {p_value:.2g})")
+        agree = ("agreement not testable" if d.agreement is None else
+                 f"{'files DISAGREE' if d.agreement_status == 'disagree' else 'files agree'} "
+                 f"(p = {d.agreement.p_value:.2g})")
         verdict = f"verdict {jr.check.verdict}; " if jr.check is not None else ""
         print(f"joint ({len(jr.paths)} files of {jr.machine}): {verdict}{agree}; rank {d.final.rank}/"
               f"{len(d.final.parameters)}, residual RMS {d.final.rms_um:.3f} um")

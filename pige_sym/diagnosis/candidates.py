@@ -41,10 +41,9 @@ from typing import Any
 
 import numpy as np
 
-from pige_sym.model.effects import EffectContext, EffectSpec
+from pige_sym.model.effects import DRIFT_KINDS, EffectContext, EffectSpec
 
 HARMONICS = (1, 2, 3, 4)
-DRIFT_KINDS = ("thermal_drift", "table_drift")  # effects with a time constant τ on the grid
 TAU_GRID_FRACTIONS = tuple(float(x) for x in np.geomspace(0.03, 5.0, 10))
 NULL_LAMBDA = 1e-7  # 1/VIF below which a direction counts as undetermined (std inflated > ~3000x)
 ZERO_COLUMN = 1e-10  # relative column norm below which a candidate column leaves no trace
@@ -271,7 +270,8 @@ class Reduction:
 
 
 def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, model_names: list[str],
-                     model_units: dict[str, str], model_pinv: np.ndarray | None = None) -> Reduction:
+                     model_units: dict[str, str], model_pinv: np.ndarray | None = None,
+                     null_lambda: float = NULL_LAMBDA) -> Reduction:
     """Split a candidate into its identifiable part and named null directions (module docstring).
 
     Parameters
@@ -286,6 +286,8 @@ def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, mod
     model_units : dict
     model_pinv : ndarray, shape=(K, K), optional
         ``(WᵀGW)⁺`` when already known (it is the same for every candidate against one model).
+    null_lambda : float
+        ``1/VIF`` at or below which a direction counts as undetermined.
     """
     emb = cand.embedding(gram.shape[0])
     gcc = emb.T @ gram @ emb
@@ -302,7 +304,7 @@ def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, mod
     scaled[dead, :] = 0.0
     scaled[:, dead] = 0.0
     lam, vec = np.linalg.eigh((scaled + scaled.T) / 2)
-    keep = lam > NULL_LAMBDA
+    keep = lam > null_lambda
     basis = vec[:, keep] * s[:, None]
     null = vec[:, ~keep] * s[:, None]
     if null.shape[1] > 1:  # within the null space, separate directions without trace from absorbed ones

@@ -30,7 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from pige_sym.diagnosis.results import Finding
+from pige_sym.diagnosis.results import DiagnosisResult, Finding
 from pige_sym.identification.joint import (
     Block,
     JointResult,
@@ -119,6 +119,13 @@ class JointDiagnosis:
                 "rms_um": final["rms_um"], "ball_mm": final["ball_mm"], "pivots_mm": final["pivots_mm"],
                 "tool_mm": final["tool_mm"]}
 
+    @property
+    def agreement_status(self) -> str:
+        """``untestable`` (one file, or no combination measured twice), ``disagree`` (p < ALPHA) or ``agree``."""
+        if self.agreement is None:
+            return "untestable"
+        return "disagree" if self.agreement.p_value < ALPHA else "agree"
+
     def verdict(self) -> str:
         lines = []
         if self.agreement is None:
@@ -199,17 +206,18 @@ def _pooled_sigmas(blocks: Sequence[Block]) -> list[float]:
             for b in blocks]
 
 
-def _own_findings(item: Measurement | BallbarRun, progress: bool) -> tuple[list[Finding], str, list[str]]:
+def _own_findings(item: Measurement | BallbarRun, progress: bool,
+                  known: DiagnosisResult | None) -> tuple[list[Finding], str, list[str]]:
     if isinstance(item, BallbarRun):
         return [], "agreement only (one projection per pose: the catalogue needs 3-D rows)", []
     from pige_sym.diagnosis.diagnose import diagnose
 
-    diag = diagnose(item, progress=progress)
+    diag = known if known is not None else diagnose(item, progress=progress)
     return diag.findings, "catalogue diagnosis", diag.clusters
 
 
-def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *,
-                   progress: bool = False) -> JointDiagnosis:
+def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *, progress: bool = False,
+                   diagnoses: Sequence[DiagnosisResult | None] | None = None) -> JointDiagnosis:
     """Diagnose several files of one machine (module docstring).
 
     Parameters
@@ -217,6 +225,8 @@ def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *,
     items : sequence of (label, Measurement or BallbarRun)
     progress : bool
         Progress bars of the per-file diagnoses on stderr.
+    diagnoses : sequence of DiagnosisResult or None, optional
+        Each file's own diagnosis when already made (``pige report``); None: made here.
 
     Returns
     -------
@@ -232,11 +242,12 @@ def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *,
     tests, flagged = _attribute(blocks, sigmas, alone)
     files, notes = [], []
     for i, ((label, item), b, summary) in enumerate(zip(items, blocks, joint.files, strict=True)):
-        findings, checked, clusters = _own_findings(item, progress)
+        known = None if diagnoses is None else diagnoses[i]
+        findings, checked, clusters = _own_findings(item, progress, known)
         notes += [f"{label}: {c}" for c in clusters]
         files.append(FileDiagnosis(label, b.instrument, b.data.size, sigmas[i], summary.rms_um, findings, checked,
                                    tests[i], i in flagged))
-    effects, extended = _ballbar_effects(machine, items, blocks)
+    effects, extended = _ballbar_effects(machine, items, blocks, [f.sigma_um for f in joint.files])
     if effects and overall is not None and overall.p_value < ALPHA:
         notes.append("the agreement test compares PIGE-only models: an effect the setups see differently can "
                      "make them disagree; judge it with the effects found")
@@ -250,17 +261,17 @@ def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *,
     return JointDiagnosis(machine, joint, files, overall, notes, effects, extended)
 
 
-def _ballbar_effects(machine: str, items: Sequence[tuple[str, Measurement | BallbarRun]],
-                     blocks: list[Block]) -> tuple[list[Finding], JointResult | None]:
-    """The catalogue effects a set of ballbar setups shows jointly (none for other sets)."""
+def _ballbar_effects(machine: str, items: Sequence[tuple[str, Measurement | BallbarRun]], blocks: list[Block],
+                     sigmas: list[float]) -> tuple[list[Finding], JointResult | None]:
+    """The catalogue effects a set of ballbar setups shows jointly (none for other sets); ``sigmas``: each
+    file's σ from its own fit (as the joint identification weighed it)."""
     runs = [(label, x) for label, x in items if isinstance(x, BallbarRun)]
     if len(runs) != len(items):
         return [], None
     from pige_sym.diagnosis.joint_effects import diagnose_ballbar_set
-    from pige_sym.identification.joint import own_sigma
 
     names = list(load_kernels(machine).LOCATION_PARAMETERS)
-    return diagnose_ballbar_set(machine, runs, blocks, [own_sigma(b) for b in blocks], names, SIGMA_FLOOR_UM)
+    return diagnose_ballbar_set(machine, runs, blocks, sigmas, names, SIGMA_FLOOR_UM)
 
 
 def format_joint_diagnosis(d: JointDiagnosis) -> str:

@@ -34,10 +34,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pige_sym.diagnosis.candidates import Candidate, Reduction, reduce_candidate
 from pige_sym.diagnosis.results import EVIDENCE, Finding
 from pige_sym.identification.joint import Block, JointResult, identify_blocks, whitened_system
 from pige_sym.kernels import load_kernels
-from pige_sym.measurements.ballbar import BallbarRun
+from pige_sym.measurements.ballbar import BallbarRun, bar_directions
 from pige_sym.model.effects import EffectContext, EffectSpec
 
 DELTA_BIC_MAX = -10.0
@@ -53,12 +54,25 @@ AMBIGUOUS_BIC = 10.0  # another candidate this close is listed as an alternative
 
 @dataclass
 class Reduced:
-    """A candidate's columns reduced to their determined part: ``c = basis·θ``, removed ``null`` directions."""
+    """A candidate reduced to its determined part jointly with a model (``c = reduction.basis·θ``)."""
 
     spec: EffectSpec
-    columns: np.ndarray  # (n, q) whitened catalogue columns
-    basis: np.ndarray  # (q, q')
-    null: np.ndarray  # (q, q − q')
+    columns: np.ndarray  # (n, q) whitened catalogue columns, stacked over the setups
+    reduction: Reduction
+    per_run: list[np.ndarray]  # each setup's unwhitened catalogue columns (r, q) [µm per unit]
+
+    @property
+    def basis(self) -> np.ndarray:
+        return self.reduction.basis
+
+    @property
+    def complete(self) -> bool:
+        """Nothing removed: the effect's catalogue parameters are all determined."""
+        return self.reduction.null.size == 0
+
+    def design(self, cols: np.ndarray) -> np.ndarray:
+        """Its fitted columns from catalogue columns: the catalogue ones when complete, else ``cols·basis``."""
+        return cols if self.complete else cols @ self.basis
 
 
 def candidates(runs: Sequence[BallbarRun]) -> list[EffectSpec]:
@@ -73,34 +87,19 @@ def candidates(runs: Sequence[BallbarRun]) -> list[EffectSpec]:
 
 def projected_columns(spec: EffectSpec, run: BallbarRun) -> np.ndarray:
     """The effect's length change per unit parameter in one setup, shape=(n, q) [µm per unit]."""
-    kern = load_kernels(run.machine)
-    ctx = EffectContext(kern, run.angles_deg, run.t_s, run.table_ball_mm + run.offset_mm)
-    direction = np.einsum("nij,j->ni", ctx.rot_w, run.offset_mm / run.length_mm)
-    return np.einsum("ni,niq->nq", direction, spec.columns(ctx))
+    ctx = EffectContext(load_kernels(run.machine), run.angles_deg, run.t_s, run.table_ball_mm + run.offset_mm)
+    return np.einsum("ni,niq->nq", bar_directions(ctx.rot_w, run.offset_mm), spec.columns(ctx))
 
 
-def stacked_columns(spec: EffectSpec, runs: Sequence[BallbarRun], sigmas: Sequence[float]) -> np.ndarray:
-    """:func:`projected_columns` of every setup, each divided by its σ, stacked in file order (n, q)."""
-    return np.vstack([projected_columns(spec, r) / s for r, s in zip(runs, sigmas, strict=True)])
-
-
-def reduce(spec: EffectSpec, model: np.ndarray, cols: np.ndarray) -> Reduced:
-    """The part of ``cols`` the set determines jointly with ``model`` (module docstring)."""
-    norms = np.sqrt((cols**2).sum(axis=0))
-    q = cols.shape[1]
-    if not np.all(norms > 0):
-        return Reduced(spec, cols, np.zeros((q, 0)), np.eye(q))
-    proj, *_ = np.linalg.lstsq(model, cols, rcond=None)
-    resid = cols - model @ proj
-    scale = 1.0 / norms
-    schur = (resid * scale).T @ (resid * scale)
-    lam, vec = np.linalg.eigh(schur)
-    keep = lam > NULL_LAMBDA
-    basis = scale[:, None] * vec[:, keep]
-    null = vec[:, ~keep] * scale[:, None]
-    if null.size:
-        null = null / np.abs(null).max(axis=0)
-    return Reduced(spec, cols, basis, null)
+def reduce(spec: EffectSpec, model: np.ndarray, cols: np.ndarray, names: list[str], units: dict[str, str],
+           per_run: list[np.ndarray]) -> Reduced:
+    """The part of ``cols`` the set determines jointly with the columns ``model`` (named ``names``):
+    :func:`pige_sym.diagnosis.candidates.reduce_candidate` on the joint rows, at this module's ``NULL_LAMBDA``."""
+    z = np.hstack([model, cols])
+    k, q = model.shape[1], cols.shape[1]
+    w = np.vstack([np.eye(k), np.zeros((q, k))])
+    cand = Candidate(spec, spec.id, tuple(range(k, k + q)))
+    return Reduced(spec, cols, reduce_candidate(z.T @ z, w, cand, names, units, null_lambda=NULL_LAMBDA), per_run)
 
 
 def _rss(x: np.ndarray, y: np.ndarray) -> tuple[float, int, np.ndarray]:
@@ -109,12 +108,13 @@ def _rss(x: np.ndarray, y: np.ndarray) -> tuple[float, int, np.ndarray]:
     return float(r @ r), int(rank), sol
 
 
-def _finding(red: Reduced, x: np.ndarray, y: np.ndarray, before: tuple[float, int], names: list[str],
-             n_pige: int) -> Finding:
-    """The evidence of a reduced candidate added to the design ``x`` (whitened units; σ-scaled RMS)."""
+def _finding(red: Reduced, x: np.ndarray, y: np.ndarray, before: tuple[float, int, np.ndarray],
+             names: list[str], n_pige: int) -> Finding:
+    """The evidence of a reduced candidate added to the design ``x`` (whitened units; σ-scaled RMS);
+    ``before`` is ``x``'s own fit (RSS, rank, coefficients)."""
     from scipy.stats import f as f_dist
 
-    rss0, rank0 = before
+    rss0, rank0, base = before
     ext = np.hstack([x, red.columns @ red.basis])
     rss1, rank1, sol = _rss(ext, y)
     n, k = y.size, rank1 - rank0
@@ -124,7 +124,6 @@ def _finding(red: Reduced, x: np.ndarray, y: np.ndarray, before: tuple[float, in
     cov = np.linalg.pinv(ext.T @ ext) * (rss1 / dof)
     theta, cov_t = sol[x.shape[1]:], cov[x.shape[1]:, x.shape[1]:]
     values, std = red.basis @ theta, np.sqrt(np.clip(np.diag(red.basis @ cov_t @ red.basis.T), 0, None))
-    base = _rss(x, y)[2]
     shift = {nm: float(sol[j] - base[j]) for j, nm in enumerate(names[:n_pige])}
     spec = red.spec
     evidence = EVIDENCE[spec.kind].format(axis=spec.axis, h=int(spec.options.get("harmonic", 1)))
@@ -137,21 +136,21 @@ def _finding(red: Reduced, x: np.ndarray, y: np.ndarray, before: tuple[float, in
         heldout_rms_um_after=math.nan, pige_shift=shift,
         evidence=f"{evidence}, seen jointly in the ballbar setups (explains {1 - rss1 / rss0:.0%} of the "
                  "whitened residual)", explained=1 - rss1 / rss0 if rss0 > 0 else 0.0,
-        removed=[] if not red.null.size else [f"{red.null.shape[1]} direction(s) the PIGEs absorb"],
-        basis=red.basis.tolist(), null=red.null.T.tolist(),
+        removed=list(red.reduction.removed), basis=red.basis.tolist(), null=red.reduction.null.T.tolist(),
+        absorbed=[{n: float(v) for n, v in zip(names, red.reduction.absorbed[:, j], strict=False) if abs(v) > 1e-12}
+                  for j in range(red.reduction.null.shape[1])],
     )
 
 
-def search_effects(runs: Sequence[BallbarRun], sigmas: Sequence[float], x: np.ndarray, y: np.ndarray,
-                   names: list[str], n_pige: int) -> tuple[list[Finding], list[Reduced]]:
+def search_effects(pool: list[tuple[EffectSpec, np.ndarray, list[np.ndarray]]], x: np.ndarray, y: np.ndarray,
+                   names: list[str], n_pige: int, units: dict[str, str]) -> tuple[list[Finding], list[Reduced]]:
     """Forward selection of catalogue effects on the joint whitened system (module docstring).
 
     Parameters
     ----------
-    runs : sequence of BallbarRun
-        The setups, in the order of the rows of ``x``.
-    sigmas : sequence of float
-        Each setup's σ [µm] (the rows' whitening).
+    pool : list of (EffectSpec, ndarray, list of ndarray)
+        The candidates, their whitened columns (n, q) stacked like the rows of ``x``, and each setup's
+        unwhitened ones.
     x : ndarray, shape=(n, K)
         Whitened joint design: PIGE columns, then each file's constant.
     y : ndarray, shape=(n,)
@@ -159,6 +158,8 @@ def search_effects(runs: Sequence[BallbarRun], sigmas: Sequence[float], x: np.nd
         Names of the columns of ``x``.
     n_pige : int
         The first ``n_pige`` columns are PIGEs.
+    units : dict of str to str
+        Units of the PIGEs (to name what absorbs a removed direction).
 
     Returns
     -------
@@ -167,49 +168,47 @@ def search_effects(runs: Sequence[BallbarRun], sigmas: Sequence[float], x: np.nd
     list of Reduced
         Their reduced columns (to extend the design).
     """
-    pool = [(spec, stacked_columns(spec, runs, sigmas)) for spec in candidates(runs)]
     accepted: list[Finding] = []
     chosen: list[Reduced] = []
-    current = x
+    current, current_names = x, list(names)
     for _ in range(MAX_EFFECTS):
-        rss0, rank0, _ = _rss(current, y)
+        before = _rss(current, y)
         tried: list[tuple[Finding, Reduced]] = []
-        for spec, cols in pool:
+        for spec, cols, per_run in pool:
             if any(c.spec.id == spec.id for c in chosen):
                 continue
-            red = reduce(spec, current, cols)
+            red = reduce(spec, current, cols, current_names, units, per_run)
             if red.basis.shape[1] == 0:
                 continue
-            tried.append((_finding(red, current, y, (rss0, rank0), names, n_pige), red))
+            tried.append((_finding(red, current, y, before, current_names, n_pige), red))
         best = min(tried, key=lambda fr: fr[0].delta_bic, default=None)
         if best is None or best[0].delta_bic > DELTA_BIC_MAX or best[0].p_value > P_MAX:
             break
-        best[0].alternatives = [f"{f.effect} (harmonic {int(f.options['harmonic'])}) fits almost as well "
-                                f"(ΔBIC {f.delta_bic - best[0].delta_bic:+.1f})" if "harmonic" in f.options else
-                                f"{f.effect} fits almost as well (ΔBIC {f.delta_bic - best[0].delta_bic:+.1f})"
-                                for f, _ in sorted(tried, key=lambda fr: fr[0].delta_bic)[1:]
+        best[0].alternatives = [_alternative(f, best[0]) for f, _ in sorted(tried, key=lambda fr: fr[0].delta_bic)[1:]
                                 if f.delta_bic - best[0].delta_bic < AMBIGUOUS_BIC]
         accepted.append(best[0])
         chosen.append(best[1])
-        current = np.hstack([current, best[1].columns @ best[1].basis])
+        current = np.hstack([current, best[1].design(best[1].columns)])
+        current_names += _names(best[1])
     return accepted, chosen
+
+
+def _alternative(f: Finding, best: Finding) -> str:
+    harmonic = f" (harmonic {int(f.options['harmonic'])})" if "harmonic" in f.options else ""
+    return f"{f.effect}{harmonic} fits almost as well (ΔBIC {f.delta_bic - best.delta_bic:+.1f})"
 
 
 def _names(red: Reduced) -> list[str]:
     """Column names of a reduced effect: its catalogue parameters when nothing was removed."""
-    if red.null.size == 0:
+    if red.complete:
         return [f"{red.spec.id}.{p}" for p in red.spec.param_names]
     return [f"{red.spec.id}.direction{j + 1}" for j in range(red.basis.shape[1])]
 
 
-def _extended_blocks(runs: Sequence[BallbarRun], blocks: list[Block], reduced: list[Reduced]) -> list[Block]:
+def _extended_blocks(blocks: list[Block], reduced: list[Reduced]) -> list[Block]:
     """The blocks with the accepted effects' (unwhitened) columns after the PIGE columns."""
-    out = []
-    for run, b in zip(runs, blocks, strict=True):
-        extra = [projected_columns(red.spec, run) @ (red.basis if red.null.size else np.eye(red.basis.shape[0]))
-                 for red in reduced]
-        out.append(Block(b.label, b.instrument, np.hstack([b.design, *extra]), b.data, b.nuisance, b.nuisance_names))
-    return out
+    return [Block(b.label, b.instrument, np.hstack([b.design, *(red.design(red.per_run[i]) for red in reduced)]),
+                  b.data, b.nuisance, b.nuisance_names) for i, b in enumerate(blocks)]
 
 
 def diagnose_ballbar_set(machine: str, items: Sequence[tuple[str, BallbarRun]], blocks: list[Block],
@@ -240,23 +239,26 @@ def diagnose_ballbar_set(machine: str, items: Sequence[tuple[str, BallbarRun]], 
         ``<id>.direction<j>`` for a partly determined effect), or None without effects.
     """
     runs = [run for _, run in items]
+    raw = [(spec, [projected_columns(spec, run) for run in runs]) for spec in candidates(runs)]  # once
     names = pige_names + [n for b in blocks for n in b.nuisance_names]
+    units = {n: u for n, u in load_kernels(machine).UNITS.items() if n in pige_names}
     found: list[Finding] = []
     sigmas = [max(s, sigma_floor_um) for s in sigmas]
     for _ in range(2):  # σ of each file again from the fit with the effects: a file that sees an effect
         x, y = whitened_system(blocks, sigmas)  # strongly had its σ inflated by it in its PIGE-only fit
-        found, reduced = search_effects(runs, sigmas, x, y, names, len(pige_names))
+        pool = [(spec, np.vstack([c / s for c, s in zip(per_run, sigmas, strict=True)]), per_run)
+                for spec, per_run in raw]
+        found, reduced = search_effects(pool, x, y, names, len(pige_names), units)
         if not found:
             return [], None
-        ext_blocks = _extended_blocks(runs, blocks, reduced)
         ext_names = pige_names + [n for red in reduced for n in _names(red)]
-        result = identify_blocks(machine, ext_names, ext_blocks, sigmas, items)
+        result = identify_blocks(machine, ext_names, _extended_blocks(blocks, reduced), sigmas, items)
         refit = [max(f.rms_um * math.sqrt(result.result.n_obs / max(result.result.dof, 1)), sigma_floor_um)
                  for f in result.files]
         if np.allclose(refit, sigmas, rtol=0.05):
             break
         sigmas = refit
     for red in reduced:
-        if red.null.size == 0:
+        if red.complete:
             result.result.units |= {f"{red.spec.id}.{p}": u for p, u in red.spec.units.items()}
     return found, result

@@ -19,7 +19,7 @@ from pige_sym.diagnosis.candidates import (
 )
 from pige_sym.diagnosis.selection import Model, Selector
 from pige_sym.identification.normal_sums import fit
-from pige_sym.model.effects import EffectSpec
+from pige_sym.model.effects import DRIFT_KINDS, EffectSpec
 
 
 def _tau_weights(layout: Layout, log_tau: float) -> tuple[list[int], np.ndarray, np.ndarray]:
@@ -56,7 +56,7 @@ def drift_derivative(layout: Layout, model: Model, i: int) -> np.ndarray:
 def refine_tau(selector: Selector, model: Model) -> tuple[Model, dict[str, float]]:
     """Replace each grid drift by the interpolated τ of least RSS; returns the model and the std of τ [s] by kind."""
     stds: dict[str, float] = {}
-    for kind in [c.spec.kind for c in model.cands if c.spec.kind in ("thermal_drift", "table_drift")]:
+    for kind in [c.spec.kind for c in model.cands if c.spec.kind in DRIFT_KINDS]:
         model, stds[kind] = _refine_one(selector, model, kind)
     return model, stds
 

@@ -32,7 +32,7 @@ from pige_sym.identification.problem import build_problem
 from pige_sym.identification.result import IdentificationResult, json_float
 from pige_sym.identification.spectrum import combination_text, observability, solve_scaled
 from pige_sym.kernels import load_kernels
-from pige_sym.measurements.ballbar import BallbarRun
+from pige_sym.measurements.ballbar import BallbarRun, bar_directions
 from pige_sym.measurements.measurement import Measurement
 
 
@@ -59,6 +59,7 @@ class FileSummary:
     rms_um: float
     constant_um: float | None = None
     constant_std_um: float | None = None
+    fitted_um: np.ndarray | None = field(default=None, repr=False, compare=False)  # (r,) its joint model [µm]
 
     def to_dict(self) -> dict[str, Any]:
         return {"file": self.label, "instrument": self.instrument, "rows": self.rows,
@@ -104,8 +105,7 @@ def ballbar_block(run: BallbarRun, label: str, with_zero: bool) -> Block:
     unit = run.offset_mm / run.length_mm
     point = run.table_ball_mm + run.offset_mm
     jac = kern.jacobian(run.angles_deg, None, point)[:, :, idx]
-    dirs = np.einsum("nij,j->ni", kern.workpiece_rotation(run.angles_deg), unit)
-    a = np.einsum("ni,nip->np", dirs, jac)
+    a = np.einsum("ni,nip->np", bar_directions(kern.workpiece_rotation(run.angles_deg), run.offset_mm), jac)
     if run.zero == "absolute":
         a = a + unit @ kern.reference_jacobian(point)[:, idx]
         return Block(label, "ballbar", a, run.dl_um.copy(), np.zeros((run.n_rows, 0)), [])
@@ -217,7 +217,7 @@ def _assemble(machine: str, names: list[str], all_names: list[str], blocks: list
         q = b.nuisance.shape[1]
         fitted = b.design @ np.nan_to_num(sol.values[:p]) + b.nuisance @ np.nan_to_num(sol.values[offset:offset + q])
         rms = float(np.sqrt(np.mean((b.data - fitted) ** 2)))
-        summary = FileSummary(b.label, b.instrument, b.data.size, s, rms)
+        summary = FileSummary(b.label, b.instrument, b.data.size, s, rms, fitted_um=fitted)
         if q:
             summary.constant_um, summary.constant_std_um = float(values[offset]), float(std[offset])
         files.append(summary)

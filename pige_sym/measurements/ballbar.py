@@ -76,6 +76,20 @@ class BallbarRun:
         return int(self.dl_um.size)
 
 
+def bar_directions(rotations: np.ndarray, offset_mm: np.ndarray) -> np.ndarray:
+    """The bar's unit direction at each pose, ``n_i = R_w(θ_i)·offset/L0`` (CONVENTIONS §8), shape=(n, 3).
+
+    Parameters
+    ----------
+    rotations : ndarray, shape=(n, 3, 3)
+        Nominal workpiece rotation at each pose.
+    offset_mm : ndarray, shape=(3,) [mm]
+        Tool ball − table ball at the reference pose.
+    """
+    offset = np.asarray(offset_mm, dtype=float)
+    return np.einsum("nij,j->ni", rotations, offset / np.linalg.norm(offset))
+
+
 def is_ballbar_file(path: str | os.PathLike[str]) -> bool:
     """True when the file's first line is the ``pige-ballbar 1`` format line."""
     try:

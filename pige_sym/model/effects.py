@@ -57,6 +57,7 @@ from pige_sym.model.trajectories import approach_directions
 from pige_sym.options import parse_number_assignments
 
 _MOTION_COMPONENTS = ("dx", "dy", "dz", "rx", "ry", "rz")
+DRIFT_KINDS = ("thermal_drift", "table_drift")  # drifts in time with a time constant τ
 _XYZ = "xyz"
 
 
@@ -166,7 +167,7 @@ class EffectSpec:
     def param_names(self) -> tuple[str, ...]:
         """Names of the linear parameters, in column order."""
         kind = self.kind
-        if kind in ("thermal_drift", "table_drift"):
+        if kind in DRIFT_KINDS:
             return ("vx_um", "vy_um", "vz_um")
         if kind == "angular_error":
             return ("cos_urad", "sin_urad")
@@ -186,8 +187,8 @@ class EffectSpec:
 
     @property
     def units(self) -> dict[str, str]:
-        u = "um" if self.kind in ("thermal_drift", "table_drift", "radial_runout", "setup_offset",
-                                  "pose_cluster", "probe_trigger") else "urad"
+        u = "um" if self.kind in (*DRIFT_KINDS, "radial_runout", "setup_offset", "pose_cluster",
+                                  "probe_trigger") else "urad"
         return {p: u for p in self.param_names}
 
     def _perp(self) -> tuple[str, str]:
@@ -210,7 +211,7 @@ class EffectSpec:
         """
         kind = self.kind
         n = ctx.n
-        if kind in ("thermal_drift", "table_drift"):
+        if kind in DRIFT_KINDS:
             tau = float(self.options.get("tau_s", 600.0))
             if tau <= 0:
                 raise InputError(f"{kind}: tau_s must be > 0")
@@ -301,7 +302,7 @@ OPTION_KEYS = {"harmonic", "tau_s", "size_um", "count"}
 
 def catalogue(rotary_axes: tuple[str, ...]) -> list[str]:
     """Every effect id applicable to a machine with these rotary axes."""
-    ids = ["thermal_drift", "table_drift"]
+    ids = list(DRIFT_KINDS)
     for ax in rotary_axes:
         ids += [f"angular_error_{ax}", f"wobble_{ax}", f"radial_runout_{ax}", f"backlash_{ax}"]
     ids += ["squareness_XY", "squareness_YZ", "squareness_ZX", "setup_offset", "outliers"]

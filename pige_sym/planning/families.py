@@ -40,6 +40,7 @@ import numpy as np
 
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
+from pige_sym.model.effects import DRIFT_KINDS
 from pige_sym.model.trajectories import _roles, cone_directions, figure_eight
 
 DEFAULT_TILT_LIMIT_DEG = 90.0
@@ -172,7 +173,7 @@ class Structure:
     @classmethod
     def for_reveal(cls, reveal: tuple[str, ...], axes: tuple[str, ...], points: int) -> Structure:
         back = [axes.index(e.split("_", 1)[1]) for e in reveal if e.startswith("backlash_")]
-        returns = max(2, points // 8) if {"thermal_drift", "table_drift"} & set(reveal) else 0
+        returns = max(2, points // 8) if set(DRIFT_KINDS) & set(reveal) else 0
         return cls(back[0] if back else None, returns)
 
     def core_count(self, points: int) -> int:

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.errors import InputError
-from pige_sym.model.effects import EffectContext, EffectSpec, catalogue, parse_effect
+from pige_sym.model.effects import DRIFT_KINDS, EffectContext, EffectSpec, catalogue, parse_effect
 from pige_sym.model.trajectories import approach_directions
 from pige_sym.planning.prediction import Setup, design_rows, predict
 
@@ -121,7 +121,7 @@ def _structural_reason(spec: EffectSpec, kern: Any, setup: Setup, angles: np.nda
         appr = approach_directions(angles)[:, axes.index(spec.axis)]
         if not ((appr > 0).any() and (appr < 0).any()):
             return f"every position of {spec.axis} is approached from the same side: no reversal"
-    if spec.kind in ("thermal_drift", "table_drift"):
+    if spec.kind in DRIFT_KINDS:
         if np.ptp(t_s) <= 0:
             return "no time spread"
         again = [i for i in range(1, angles.shape[0]) if np.any(np.all(np.abs(angles[:i] - angles[i]) < 1e-6, axis=1))]

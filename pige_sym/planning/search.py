@@ -39,6 +39,7 @@ import numpy as np
 from scipy import optimize
 
 from pige_sym.errors import InputError
+from pige_sym.model.effects import DRIFT_KINDS
 from pige_sym.planning.families import (
     Family,
     Limits,
@@ -323,7 +324,7 @@ def _check_forced_possible(req: PlanRequest, forced: list[str]) -> None:
     setup, angles = _rich_poses(req)
     t_s = schedule_times(angles.shape[0], req.move_s, req.dwell_s)
     for effect in forced:
-        if effect in ("thermal_drift", "table_drift") or effect.startswith("backlash_"):
+        if effect in DRIFT_KINDS or effect.startswith("backlash_"):
             continue
         status = reveal_status(setup, effect, angles, t_s)
         if not status.revealable:

@@ -228,7 +228,8 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     _share_identical_sobol(reports)
     created = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
     data = ReportData(reports, study_set, options.program, _settings_shown(options), created)
-    data.joints = gather_joints(every, tolerances=tol, rule=rule, k=k, every_group=joint)
+    data.joints = gather_joints(every, tolerances=tol, rule=rule, k=k, every_group=joint,
+                                diagnoses={rep.path: rep.diagnosis for rep in reports})
     if compare is not None:
         from pige_sym.verdict.compare import compare_measurements
 
@@ -248,7 +249,8 @@ def _common_truth(truths: Sequence[dict[str, float] | None]) -> dict[str, float]
 
 def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, dict[str, float] | None]], *,
                   tolerances: Tolerances | None = None, rule: str = "guard", k: float = 2.0,
-                  every_group: bool = False) -> list[JointReport]:
+                  every_group: bool = False, diagnoses: dict[Path, DiagnosisResult | None] | None = None
+                  ) -> list[JointReport]:
     """The joint sections of a report's files (module docstring).
 
     Parameters
@@ -263,6 +265,8 @@ def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, dict[str
         Also the machines with two R-test/probe files or more (not only those with a ballbar file: a
         ballbar setup alone determines only some combinations, R-test runs of one machine may be a
         before and an after).
+    diagnoses : dict of Path to DiagnosisResult or None, optional
+        The R-test/probe files' own diagnoses already made for their sections (not made again).
 
     Returns
     -------
@@ -279,7 +283,7 @@ def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, dict[str
         if not has_ballbar and not (every_group and len(idx) > 1):
             continue
         labelled = [(items[i][0].name, items[i][1]) for i in idx]
-        diag = diagnose_joint(labelled)
+        diag = diagnose_joint(labelled, diagnoses=[(diagnoses or {}).get(items[i][0]) for i in idx])
         verdict = None
         if tolerances is not None:
             source = " + ".join(items[i][0].name for i in idx)
@@ -304,16 +308,8 @@ def _read_inputs(paths: list[Path]) -> tuple[list[tuple[Path, Measurement, Truth
 def _ballbar_curves(items: list[tuple[str, Measurement | BallbarRun]],
                     diag: Any) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """Each ballbar file's measured ``dL`` and its joint PIGE-only fit (with the file's constant) [µm]."""
-    from pige_sym.identification.joint import file_blocks
-
-    res, out = diag.joint.result, []
-    for (label, item), b, f in zip(items, file_blocks(items), diag.joint.files, strict=True):
-        if isinstance(item, BallbarRun):
-            fit = b.design @ np.nan_to_num(res.values[: b.design.shape[1]])
-            if f.constant_um is not None and math.isfinite(f.constant_um):
-                fit = fit + f.constant_um
-            out.append((label, b.data, fit))
-    return out
+    return [(label, item.dl_um, f.fitted_um) for (label, item), f in zip(items, diag.joint.files, strict=True)
+            if isinstance(item, BallbarRun) and f.fitted_um is not None]
 
 
 def _settings_shown(o: _Options) -> dict[str, str]:

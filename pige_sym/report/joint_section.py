@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 
-from pige_sym.diagnosis.joint import ALPHA, JointDiagnosis
+from pige_sym.diagnosis.joint import JointDiagnosis
 from pige_sym.report.data import JointReport
 from pige_sym.report.html_blocks import esc, kvs, num, table, units
 from pige_sym.report.html_verdict import check_table_html
@@ -31,18 +31,19 @@ from pige_sym.report.html_verdict import check_table_html
 
 def _agreement_sentence(d: JointDiagnosis) -> tuple[str, str]:
     """(badge class, plain sentence) of the agreement test."""
-    if d.agreement is None:
+    status, a = d.agreement_status, d.agreement
+    if a is None:
         if len(d.files) == 1:
             return "none", "one file: nothing to compare it with"
         return "none", ("the files see different combinations of the PIGEs, so their agreement cannot be tested; "
                         "a setup that repeats one would check it")
-    if d.agreement.p_value < ALPHA:
+    if status == "disagree":
         bad = [f.label for f in d.files if f.disagrees]
         who = f" — the file that disagrees: {', '.join(bad)}" if bad else " — no single file stands out"
-        return "fail", (f"the files do not agree on one set of PIGEs (p = {d.agreement.p_value:.2g}){who}; the "
+        return "fail", (f"the files do not agree on one set of PIGEs (p = {a.p_value:.2g}){who}; the "
                         "machine changed between the setups or an effect the model misses shows differently in "
                         "each: do not use the joint estimate")
-    return "pass", f"the files agree on one set of PIGEs (p = {d.agreement.p_value:.2g})"
+    return "pass", f"the files agree on one set of PIGEs (p = {a.p_value:.2g})"
 
 
 def answer_joint_html(i: int, jr: JointReport) -> str:

@@ -31,7 +31,7 @@ import numpy as np
 
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
-from pige_sym.measurements.ballbar import SETUPS, BallbarRun
+from pige_sym.measurements.ballbar import SETUPS, BallbarRun, bar_directions
 from pige_sym.model.effects import EffectContext, EffectInstance
 from pige_sym.simulation.exact_table import nominal_table_point, table_point
 from pige_sym.simulation.simulator import add_effects
@@ -102,8 +102,7 @@ def effect_lengths(machine: str, setup: BallbarSetup, effects: list[EffectInstan
     point = setup.table_ball_mm + setup.offset_mm
     ctx = EffectContext(kern, setup.angles_deg, t_s, point)
     dev, outlier_rows = add_effects(np.zeros((setup.angles_deg.shape[0], 3)), effects, ctx, rng)
-    direction = np.einsum("nij,j->ni", ctx.rot_w, setup.offset_mm / np.linalg.norm(setup.offset_mm))
-    return np.einsum("ni,ni->n", direction, dev), outlier_rows
+    return np.einsum("ni,ni->n", bar_directions(ctx.rot_w, setup.offset_mm), dev), outlier_rows
 
 
 def simulate_ballbar(machine: str, setup: BallbarSetup, *, pige: dict[str, float], noise_um: float = 0.2,
