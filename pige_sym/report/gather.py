@@ -40,7 +40,7 @@ import numpy as np
 
 from pige_sym.compensation.parameters import angle_extensions
 from pige_sym.diagnosis.diagnose import DiagnosisResult, diagnose
-from pige_sym.diagnosis.joint import diagnose_joint
+from pige_sym.diagnosis.joint import JointDiagnosis, diagnose_joint
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.identification.least_squares import METHODS, IdentificationError, identify
 from pige_sym.identification.studies import projection_study, sobol_study
@@ -240,11 +240,9 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
 
 
 def _common_truth(truths: Sequence[dict[str, float] | None]) -> dict[str, float] | None:
-    if not truths or any(t is None for t in truths):
-        return None
-    first = truths[0]
-    assert first is not None
-    return first if all(t == first for t in truths) else None
+    """The true PIGEs every file's sidecar gives alike, or None."""
+    first = truths[0] if truths else None
+    return first if first is not None and all(t == first for t in truths) else None
 
 
 def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, dict[str, float] | None]], *,
@@ -306,7 +304,7 @@ def _read_inputs(paths: list[Path]) -> tuple[list[tuple[Path, Measurement, Truth
 
 
 def _ballbar_curves(items: list[tuple[str, Measurement | BallbarRun]],
-                    diag: Any) -> list[tuple[str, np.ndarray, np.ndarray]]:
+                    diag: JointDiagnosis) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """Each ballbar file's measured ``dL`` and its joint PIGE-only fit (with the file's constant) [µm]."""
     return [(label, item.dl_um, f.fitted_um) for (label, item), f in zip(items, diag.joint.files, strict=True)
             if isinstance(item, BallbarRun) and f.fitted_um is not None]
