@@ -170,7 +170,7 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
         parts.append(data.plan_html)
     parts += [
         "</main><footer><p>PIGEs: position-independent geometric errors of the rotary axes (ISO 230-7), position "
-        "errors in µm, orientation errors in µrad, definitions in CONVENTIONS.md. Standard errors from "
+        "errors in µm, orientation errors in µrad, as defined in pige_sym's docs/conventions.md. Standard errors from "
         "σ²(AᵀA)⁺ with σ² = RSS/(N − rank); 95 % intervals from Student's t. A parameter with weight in a "
         "near-null direction of the scaled design is not identifiable and gets no value.</p></footer>",
         "</body></html>",
