@@ -37,8 +37,6 @@ METHODS: tuple[str, ...] = ("gauss-newton", "double-differential")
 LOSSES: tuple[str, ...] = ("linear", "soft_l1", "huber")
 #: NC dialects (input and output of pige compensate / pige program).
 DIALECTS: tuple[str, ...] = ("siemens", "fanuc", "linuxcnc")
-#: Styles of the controller corrections of pige compensate --controller.
-CONTROLLER_STYLES: tuple[str, ...] = ("table", "siemens", "heidenhain", "fanuc", "linuxcnc")
 #: Test-program schedule: move time and dwell per pose [s].
 DEFAULT_MOVE_S = 5.0
 DEFAULT_DWELL_S = 7.0

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pige_sym.cli.main import main
-from pige_sym.compensation.controller import controller_corrections
+from pige_sym.compensation.controllers.axis_lines import controller_corrections
 from pige_sym.compensation.kinematics import compensate_poses, tool_point_error
 from pige_sym.compensation.parameters import AngleExtension, CompensationParameters, load_parameters
 from pige_sym.compensation.study import compensation_study
@@ -392,7 +392,7 @@ def test_json_output_of_simulate_and_compensate(tmp_path, capsys):
 
 
 def test_controller_styles_print_the_deltas_with_their_signs():
-    from pige_sym.compensation.controller import format_controller
+    from pige_sym.compensation.controllers import format_controller
 
     values = {"EY0A": 12.0, "EZ0A": -9.0, "EX0C": -14.0, "EY0C": 10.0, "EA0A": 100.0}
     params = _params(AC, values)

@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 
 from pige_sym.cli.main import main
-from pige_sym.compensation.controller import format_controller, linuxcnc_trt_deltas
-from pige_sym.compensation.controller_scope import tool_point_summary
+from pige_sym.compensation.controllers import format_controller
+from pige_sym.compensation.controllers.linuxcnc import linuxcnc_trt_deltas
+from pige_sym.compensation.controllers.scope import tool_point_summary
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels

@@ -6,8 +6,8 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from pige_sym.compensation.controllers import controller_names
 from pige_sym.constants import (
-    CONTROLLER_STYLES,
     DEFAULT_MACHINE,
     DEFAULT_MAX_CHANGE_DEG,
     DEFAULT_MAX_CHANGE_MM,
@@ -71,7 +71,8 @@ def _current(spec: str | None) -> dict[str, float] | None:
 
 def _run(args: argparse.Namespace) -> int:
     from pige_sym import api
-    from pige_sym.compensation.controller import controller_corrections, format_controller
+    from pige_sym.compensation.controllers import format_controller
+    from pige_sym.compensation.controllers.axis_lines import controller_corrections
     from pige_sym.compensation.parameters import load_parameters
     from pige_sym.nc.program_file import read_program
 
@@ -165,7 +166,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--rtcp-off", action="append", metavar="CODE", help="controller-specific RTCP-off code (M429)")
     p.add_argument("--allow-missing", action="store_true",
                    help="set PIGEs without a value (missing, or not identifiable) to 0 and say which")
-    p.add_argument("--controller", choices=list(CONTROLLER_STYLES), help="print the corrected kinematics "
+    p.add_argument("--controller", choices=list(controller_names()), help="print the corrected kinematics "
                    "(see docs/controller-corrections.md)")
     p.add_argument("--carrier", type=int, default=1, help="Siemens swivel data record number (default %(default)s)")
     p.add_argument("--current", help="today's LinuxCNC trt pin values, PIN=VALUE,... or the HAL file that sets them "

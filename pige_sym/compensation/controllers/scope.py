@@ -1,6 +1,6 @@
 """What a controller's kinematic description can hold, what it cannot, and what that leaves at the tool.
 
-Per style, :data:`REPRESENTABLE` names the PIGEs its entries carry (CONVENTIONS §3 definitions):
+Per style, the controller module's ``representable`` names the PIGEs its entries carry (CONVENTIONS §3):
 
 - ``linuxcnc`` (``xyzac-trt-kins`` / ``xyzbc-trt-kins``, ``src/emc/kinematics/trtfuncs.c``): the rotary
   table's C line is at ``(x-rot-point, y-rot-point)``; the tilt axis (A about X, B about Y) turns about the
@@ -10,8 +10,8 @@ Per style, :data:`REPRESENTABLE` names the PIGEs its entries carry (CONVENTIONS 
   not representable (the model has no axis directions), nor are the zero-position errors (joint home
   offsets, whose sign depends on the homing set-up: not printed).
 - ``siemens``, ``heidenhain``, ``fanuc``: the axis-line positions and the zero offsets as printed by
-  :func:`~pige_sym.compensation.controller.format_controller`; the axis directions are printed as a
-  comment only (they live in base data that the calibration should not overwrite).
+  their modules; the axis directions are printed as a comment only (they live in base data that the
+  calibration should not overwrite).
 
 Angle extensions of a diagnosis (``angular_error_*``, ``backlash_*``) depend on the pose: no kinematic
 table holds them; only the NC rewrite compensates them.
@@ -25,10 +25,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from pige_sym.compensation.controllers import get_controller
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.compensation.study import compensation_study
 from pige_sym.constants import DEFAULT_BALL_MM
-from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.model.trajectories import make_trajectory
 
@@ -46,15 +46,14 @@ class ControllerScope:
 
 def representable(params: CompensationParameters, style: str) -> list[str]:
     """The PIGEs a style's entries carry (module docstring)."""
+    return list(get_controller(style).representable(params))
+
+
+def positions_and_zeros(params: CompensationParameters) -> list[str]:
+    """The axis-line positions [µm] and the zero-position errors [µrad] of the machine's rotary axes."""
     kern = load_kernels(params.machine)
-    names = list(kern.PARAMETERS)
     position = [n for n in kern.LOCATION_PARAMETERS if kern.UNITS[n] == "um"]
-    if style == "linuxcnc":
-        return position
-    if style in ("siemens", "heidenhain", "fanuc", "table"):
-        zeros = [n for n in names if n in kern.ZERO_PARAMETERS]
-        return position + zeros + (list(kern.LOCATION_PARAMETERS) if style == "table" else [])
-    raise InputError(f"unknown controller style {style!r}")
+    return position + [n for n in kern.PARAMETERS if n in kern.ZERO_PARAMETERS]
 
 
 def tool_point_summary(params: CompensationParameters, style: str) -> ControllerScope:

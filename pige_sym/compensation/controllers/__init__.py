@@ -1,0 +1,74 @@
+"""Controller corrections, one module per controller, found by name (like pyserial's URL handlers).
+
+``pige compensate --controller NAME`` imports ``pige_sym.compensation.controllers.<NAME>``; each such
+module holds one controller's kinematic chain, its entries and the manuals it follows, and defines::
+
+    TITLE: str                                       one line: controller and kinematic description
+    representable(params) -> list[str]               the parameters its entries carry (CONVENTIONS §3 names)
+    render(params, options) -> str                   the entries as text (ControllerOptions below)
+
+The modules that are not controllers (:data:`NOT_CONTROLLERS`) hold what they share: the corrected axis
+lines (:mod:`.axis_lines`) and what a controller leaves at the tool (:mod:`.scope`).  Units, signs and
+sources of every controller: docs/controller-corrections.md.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+from pige_sym.errors import InputError
+
+#: Modules of this package that are not controllers.
+NOT_CONTROLLERS = frozenset({"axis_lines", "scope"})
+
+
+@dataclass(frozen=True)
+class ControllerOptions:
+    """What a controller's rendering may need besides the parameters.
+
+    Attributes
+    ----------
+    carrier : int
+        Siemens swivel data record number (``$TC_CARR…[carrier]``).
+    current : dict of str to float, optional
+        Today's values of the controller's entries (LinuxCNC HAL pins [mm]), for absolute lines.
+    """
+
+    carrier: int = 1
+    current: dict[str, float] | None = None
+
+
+def controller_names() -> tuple[str, ...]:
+    """The controllers pige can print for, ``table`` first (the modules of this package)."""
+    names = sorted(i.name for i in pkgutil.iter_modules([str(Path(__file__).parent)])
+                   if not i.name.startswith("_") and i.name not in NOT_CONTROLLERS)
+    return tuple(sorted(names, key=lambda n: n != "table"))
+
+
+def get_controller(name: str) -> ModuleType:
+    """The module of controller ``name`` (module docstring).
+
+    Raises
+    ------
+    InputError
+        No controller of that name.
+    """
+    if name not in controller_names():
+        raise InputError(f"unknown controller style {name!r}: use {', '.join(controller_names())}")
+    return importlib.import_module(f"{__name__}.{name}")
+
+
+def format_controller(params: Any, style: str = "table", *, carrier: int = 1,
+                      current: dict[str, float] | None = None) -> str:
+    """The corrections of ``params`` in the words of controller ``style`` (docs/controller-corrections.md).
+
+    Every controller also says what it enters, what it cannot represent and the tool-point error each
+    choice leaves (:mod:`~pige_sym.compensation.controllers.scope`).
+    """
+    module = get_controller(style)
+    return str(module.render(params, ControllerOptions(carrier=carrier, current=current)))

@@ -1,0 +1,66 @@
+"""The corrected rotary axis lines that every controller's entries are made from, and shared text.
+
+:func:`controller_corrections` gives per rotary axis the corrected pivot [mm], unit direction and zero
+offset [deg] in the machine frame (CONVENTIONS §2–3); :func:`delta_chain` orders them as the chain
+deltas of the vector-chain controllers (axis 1 nearest the bed); :func:`signed` writes a signed value.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from pige_sym.compensation.parameters import CompensationParameters, kern_axes, kern_axes_names
+from pige_sym.kernels import load_kernels
+
+NOT_VERIFIED = "NOT verified on a controller: check every value against the machine's documentation"
+
+
+def controller_corrections(params: CompensationParameters) -> list[dict[str, Any]]:
+    """Corrected axis lines: per rotary axis the pivot point [mm] and unit direction, machine frame.
+
+    Each row: ``axis``, ``side`` (``workpiece``/``tool``), ``pivot_mm`` (3,) [mm], ``direction`` (3,),
+    ``zero_offset_deg`` [deg], ``pivot_delta_mm`` (3,) [mm] and ``direction_delta`` (3,) (``u' − u``).
+    """
+    kern = load_kernels(params.machine)
+    out = []
+    pos_idx = {"A": (1, 2), "B": (0, 2), "C": (0, 1)}
+    for ax in kern.ROTARY_AXES:
+        names = [n for n in kern.LOCATION_PARAMETERS if n.endswith("0" + ax)]
+        vals = [params.values.get(n, 0.0) for n in names]
+        d = "ABC".index(ax[0])
+        u = np.eye(3)[d]
+        pivot = np.asarray(params.pivots_mm.get(ax, [0.0, 0.0, 0.0]), dtype=float).copy()
+        i1, i2 = pos_idx[ax[0]]
+        pivot[i1] += vals[0] * 1e-3
+        pivot[i2] += vals[1] * 1e-3
+        eps = np.zeros(3)
+        eps[i1], eps[i2] = vals[2] * 1e-6, vals[3] * 1e-6
+        direction = u + np.cross(eps, u)
+        direction /= np.linalg.norm(direction)
+        zero = params.values.get(f"E{ax[0]}0{ax}", 0.0)
+        side = "workpiece" if ax in kern.WORKPIECE_ROTARY else "tool"
+        nominal = np.asarray(params.pivots_mm.get(ax, [0.0, 0.0, 0.0]), dtype=float)
+        out.append({"axis": ax, "side": side, "pivot_mm": pivot.tolist(), "direction": direction.tolist(),
+                    "zero_offset_deg": float(np.degrees(zero * 1e-6)),
+                    "pivot_delta_mm": (pivot - nominal).tolist(), "direction_delta": (direction - u).tolist()})
+    return out
+
+
+def bed_first(params: CompensationParameters) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The two rotary axes' rows, the one nearest the bed first (workpiece side outward, then tool side)."""
+    by = {r["axis"]: r for r in controller_corrections(params)}
+    chain = [a.name for a in reversed(kern_axes(params.machine, "workpiece"))] + kern_axes_names(params.machine)
+    return by[chain[0]], by[chain[1]]
+
+
+def direction_changes(rows: tuple[dict[str, Any], ...]) -> list[str]:
+    """``C: direction change (+…, …)`` for each row whose direction changed."""
+    return [f"{r['axis']}: direction change ({', '.join(f'{x:+.9f}' for x in r['direction_delta'])})"
+            for r in rows if np.abs(r["direction_delta"]).max() > 0]
+
+
+def signed(value: float, decimals: int) -> str:
+    """``+0.012000`` / ``-0.009000`` (no ``-0.000000``)."""
+    return f"{round(float(value), decimals) + 0.0:+.{decimals}f}"
