@@ -45,6 +45,14 @@ def probe_pivot(items: list[str] | None) -> tuple[float, float, float]:
     return (v[0], v[1], v[2])
 
 
+def probe_tool(text: str | None) -> tuple[float, float, float] | None:
+    """``--tool x,y,z`` of the probe commands: the stylus centre from the last tool-side pivot [mm], or None."""
+    if not text:
+        return None
+    v = parse_vec3(text, "--tool")
+    return (v[0], v[1], v[2])
+
+
 def sphere_radii(args: argparse.Namespace) -> tuple[float, float]:
     """``--sphere-radius`` and ``--stylus-radius``, required and positive."""
     if args.sphere_radius is None or args.stylus_radius is None:

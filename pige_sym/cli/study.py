@@ -18,6 +18,13 @@ def _trajectory(args: argparse.Namespace):  # noqa: ANN202
     return kern, make_trajectory(kern.MACHINE_CODE, args.trajectory, **opts)
 
 
+def _tool(args: argparse.Namespace) -> list[float] | None:
+    """``--tool x,y,z`` [mm] (head machines), None when not given."""
+    from pige_sym.cli._setup import parse_vec3
+
+    return parse_vec3(args.tool, "--tool") if args.tool else None
+
+
 def _projection(args: argparse.Namespace) -> int:
     from pige_sym.identification.studies import projection_study
 
@@ -27,7 +34,8 @@ def _projection(args: argparse.Namespace) -> int:
         return _probe_projection(args)
     kern, traj = _trajectory(args)
     study = projection_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), sweep=args.sweep,
-                             presets=args.presets, noise_um=args.noise, seed=args.seed, progress=not args.json)
+                             presets=args.presets, noise_um=args.noise, seed=args.seed, tool_mm=_tool(args),
+                             progress=not args.json)
     print(to_json(study.to_dict()) if args.json else study.format())
     return 0
 
@@ -75,7 +83,7 @@ def _sobol(args: argparse.Namespace) -> int:
         raise InputError(f"--samples must be a power of 2, got {args.samples}")
     kern, traj = _trajectory(args)
     study = sobol_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), n=args.samples,
-                        default_range=args.range, seed=args.seed)
+                        default_range=args.range, seed=args.seed, tool_mm=_tool(args))
     print(to_json(study.to_dict()) if args.json else study.format())
     return 0
 
@@ -85,6 +93,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--trajectory", default="cone-frustum", help="cone-frustum, figure-eight, steps or an angle CSV")
     p.add_argument("--incl-axis", choices=["X", "Y"], help="cone inclination axis")
     p.add_argument("--projections", default="x,y,z,xyz", help="comma list of projections (default %(default)s)")
+    p.add_argument("--tool", help="ball (stylus) centre from the last tool-side pivot x,y,z [mm] (head machines)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 

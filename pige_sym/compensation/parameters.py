@@ -17,6 +17,7 @@ import numpy as np
 
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.kernels import load_kernels
+from pige_sym.measurements.measurement import missing_tool
 from pige_sym.model.effects import EffectSpec
 from pige_sym.model.trajectories import approach_directions
 
@@ -138,6 +139,9 @@ def _parameters(doc: Any) -> CompensationParameters:
     ignored += [f"{name} (no finding describes it)" for name in doc.effect_values
                 if name.split(".", 1)[0] not in described]
     tool = None if doc.tool_mm is None else list(doc.tool_mm)
+    why = missing_tool(kern.MACHINE_CODE, tool, '"tool_mm": [x, y, z] (pige identify --json writes it)')
+    if why:
+        raise FileFormatError(doc.path, None, why)
     pivots = {a: list(v) for a, v in doc.pivots_mm.items()}
     return CompensationParameters(kern.MACHINE_CODE, dict(doc.pige), dict(doc.units), tool, pivots, doc.path,
                                   ignored, extensions)

@@ -17,7 +17,7 @@ from pige_sym.errors import IdentificationError as IdentificationError
 from pige_sym.errors import InputError
 from pige_sym.identification.instruments import instrument, whitened_normal
 from pige_sym.kernels import load_kernels
-from pige_sym.measurements.measurement import Measurement
+from pige_sym.measurements.measurement import Measurement, missing_tool
 from pige_sym.model.projection import Projection, parse_projection
 
 
@@ -81,6 +81,9 @@ def build_problem(measurement: Measurement, projection: str | Projection = "xyz"
         the problem is small (n·m·P ≤ 5e6).
     """
     kern = load_kernels(measurement.machine)
+    why = missing_tool(kern.MACHINE_CODE, measurement.tool_mm, "tool_mm=(x, y, z) in the measurement")
+    if why:
+        raise InputError(why)
     proj = parse_projection(projection)
     names = list(kern.LOCATION_PARAMETERS) + (list(kern.ZERO_PARAMETERS) if with_zero else [])
     p_idx = [kern.PARAMETERS.index(n) for n in names]

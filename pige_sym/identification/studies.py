@@ -39,9 +39,11 @@ from typing import Any
 import numpy as np
 
 from pige_sym.constants import DEFAULT_BALL_MM
+from pige_sym.errors import InputError
 from pige_sym.identification.least_squares import identify
 from pige_sym.identification.spectrum import NULL_RTOL, RANK_RTOL
 from pige_sym.kernels import load_kernels
+from pige_sym.measurements.measurement import missing_tool
 from pige_sym.model.projection import Projection, direction_sweep, parse_projection
 from pige_sym.model.trajectories import Trajectory
 from pige_sym.simulation.simulator import random_pige, simulate
@@ -253,6 +255,9 @@ def sobol_study(machine: str, trajectory: Trajectory, *, projections: list[str] 
         estimate of ``scipy.stats.sobol_indices`` with that base sample size.
     """
     kern = load_kernels(machine)
+    why = missing_tool(kern.MACHINE_CODE, tool_mm)
+    if why:
+        raise InputError(why)
     names = list(kern.LOCATION_PARAMETERS)
     projs = [parse_projection(p) for p in (projections or DEFAULT_PROJECTIONS)]
     jac = kern.jacobian(trajectory.angles_deg, None, ball_mm, None, tool_mm)[1:, :, :8]  # (n, 3, 8)

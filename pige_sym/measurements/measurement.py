@@ -150,8 +150,26 @@ def column_limit(name: str) -> tuple[float, str]:
     return LIMITS.get(unit, math.inf), unit
 
 
+def missing_tool(machine: str, tool_mm: object, how: str = "--tool x,y,z") -> str | None:
+    """Why ``machine`` cannot be used without ``tool_mm`` (None when it can); ``how`` says how to give it.
+
+    A tool-side rotary axis turns the ball (or stylus) about its pivot: the lever ``tool_mm`` (CONVENTIONS §4,
+    §7) is part of the data, like ``ball_mm``.
+    """
+    if tool_mm is not None:
+        return None
+    heads = [a.name for a in parse_machine_code(machine).tool_axes if a.kind == "rotary"]
+    if not heads:
+        return None
+    return (f"{machine} has tool-side rotary axes ({', '.join(heads)}): give the ball (stylus) centre from the "
+            f"last tool-side pivot at the reference pose, {how}")
+
+
 def validate_measurement(m: Measurement) -> None:
     """Check shapes and the reference row of an in-memory measurement (raises InputError)."""
+    why = missing_tool(m.machine, m.tool_mm, "tool_mm=(x, y, z)")
+    if why:
+        raise InputError(why)
     n = m.t_s.shape[0]
     k = len(m.rotary_axes)
     if n == 0:

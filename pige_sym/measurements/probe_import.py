@@ -10,8 +10,17 @@ probing fault, not data); then the deviation of every pose
     ``d(θ) = −e(θ) = −(c(θ) − c_nom(θ))``, ``c_nom(θ) = pivot + R_w(θ)(c(0) − pivot)``  [µm, machine axes]
 
 which is what an R-test would read with the ball at ``c(0)``: every command then uses the R-test model
-unchanged.  The file is ``pige-rtest 1`` with ``instrument: sphere-probe`` and, per row, the covariance of
-the pose's centre (``cov_xx_um2 … cov_zz_um2``); the identification uses them, and row 0's, since the
+unchanged.  On a head or mixed machine (CONVENTIONS §7, "Head and mixed machines") the log holds the linear
+axes, where the stylus centre would be with the head at its reference pose; the nominal stylus centre at the
+pose is ``X + h(θ)``, ``h = (R_t(θ) − I)·tool`` with ``tool`` the stylus centre from the last tool-side pivot
+(``tool_mm``, the R-test's ``--tool``; the rotary axis lines meet at ``pivot``, so the head's own pivot drops
+out), the sphere is fitted to those, and the deviation is the same expression: ``e = −d`` with ``d`` the R-test
+deviation of a ball at ``c(0)`` and a tool at ``tool`` (exact when the table has no rotary axis, first order
+otherwise).  The probing moves turn with the head: the contact weights and trigger sensitivities are read in
+each pose's stylus frame.
+
+The file is ``pige-rtest 1`` with ``instrument: sphere-probe`` and, per row, the covariance of the pose's
+centre (``cov_xx_um2 … cov_zz_um2``); the identification uses them, and row 0's, since the
 error of ``c(0)`` enters every pose through ``c_nom`` (:mod:`pige_sym.identification.instruments`).
 Columns: ``t_s`` is the pose's order (a probe log holds no time), the angles, ``dx_um dy_um dz_um``,
 ``n_samples`` (contacts) and ``sd_um`` (RMS radial residual of the pose), the fitted centre ``cx_mm cy_mm
@@ -29,7 +38,7 @@ import numpy as np
 
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.kernels import load_kernels
-from pige_sym.measurements.measurement import Measurement
+from pige_sym.measurements.measurement import Measurement, missing_tool
 from pige_sym.measurements.probe_log import ProbeLog, group_poses, read_probe_log
 from pige_sym.measurements.probe_trigger import sensitivity_columns, trigger_sensitivities
 from pige_sym.measurements.sphere_fit import MIN_CONTACTS, SphereFit, fit_centres
@@ -56,6 +65,9 @@ class ProbeImport:
     stylus_offset_mm : float [mm]
         Stylus centre above the controlled point along the spindle axis.
     units : {"mm", "inch"}
+    tool_mm : (3,) [mm] or None
+        Head and mixed machines: the stylus centre from the nominal pivot of the last tool-side axis at the
+        reference pose (CONVENTIONS §7, the R-test's ``--tool``); required there, refused on a table machine.
     moves : {"axes", "normal"}
         How the contacts were probed: along machine axes (pige's programs; the trigger scatter along the
         move weighs less on an inclined surface) or along the surface normal
@@ -70,29 +82,50 @@ class ProbeImport:
     stylus_offset_mm: float = 0.0
     units: str = "mm"
     moves: str = "axes"
+    tool_mm: tuple[float, float, float] | None = None
 
 
-def _pose_points(log: ProbeLog, groups: list[np.ndarray], offset_mm: float) -> list[np.ndarray]:
+def _pose_points(log: ProbeLog, groups: list[np.ndarray], offset_mm: float, head_mm: np.ndarray) -> list[np.ndarray]:
+    """Nominal stylus-tip centres of every pose: the logged point, the stylus offset, the head's turn ``h_i``."""
     pts = []
-    for g in groups:
+    for g, h in zip(groups, head_mm, strict=True):
         if len(g) < MIN_CONTACTS:
             lines = ", ".join(str(x) for x in log.lines[g])
             raise FileFormatError(log.path, int(log.lines[g[0]]), f"a pose with {len(g)} contacts (lines {lines}); "
                                                                    f"a sphere centre needs {MIN_CONTACTS}")
-        pts.append(log.xyz_mm[g] + np.array([0.0, 0.0, offset_mm]))
+        pts.append(log.xyz_mm[g] + (np.array([0.0, 0.0, offset_mm]) + h))
     return pts
 
 
+def head_offsets(kern: Any, angles_deg: np.ndarray, tool_mm: Any) -> tuple[np.ndarray, np.ndarray | None]:
+    """How the head moves the stylus centre, ``h(θ) = (R_t(θ) − I)·tool`` [mm], and the stylus frames.
+
+    Returns
+    -------
+    head_mm : ndarray, shape=(n, 3) [mm]
+        Zero on a table machine.
+    stylus_rotations : ndarray, shape=(n, 3, 3), or None
+        The nominal tool rotation of every pose (None on a table machine: the stylus frame is M).
+    """
+    n = len(angles_deg)
+    if not kern.TOOL_ROTARY:
+        return np.zeros((n, 3)), None
+    rot = kern.tool_rotation(angles_deg)
+    tool = np.asarray(tool_mm, dtype=float)
+    return rot @ tool - tool, rot
+
+
 def _fit(log: ProbeLog, groups: list[np.ndarray], pts: list[np.ndarray], radius: float | None,
-         moves: str) -> SphereFit:
+         moves: str, frames: np.ndarray | None) -> SphereFit:
     try:
-        fit = fit_centres(pts, radius_mm=radius, moves=moves)
+        fit = fit_centres(pts, radius_mm=radius, moves=moves, stylus_rotations=frames)
     except InputError as exc:
         i = int(str(exc).split(":")[0].split()[-1]) if str(exc).startswith("pose ") else 0
         raise FileFormatError(log.path, int(log.lines[groups[i][0]]), str(exc)) from None
     # each pose against the best sphere through its own contacts (own radius: a fault cannot leak into the
     # other poses through the shared one); the worst contact is named from the shared-radius fit
-    own = [fit_centres([p], moves=moves).residuals_um[0] if len(p) > MIN_CONTACTS else np.zeros(len(p)) for p in pts]
+    own = [fit_centres([p], moves=moves, stylus_rotations=None if frames is None else frames[i:i + 1]).residuals_um[0]
+           if len(p) > MIN_CONTACTS else np.zeros(len(p)) for i, p in enumerate(pts)]
     pooled = np.concatenate(own)
     robust = 1.4826 * float(np.median(np.abs(pooled[pooled != 0]))) if (pooled != 0).any() else 0.0
     limit = max(OUTLIER_SIGMAS * robust, OUTLIER_FLOOR_UM)
@@ -110,24 +143,34 @@ def _fit(log: ProbeLog, groups: list[np.ndarray], pts: list[np.ndarray], radius:
 def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
     """The measurement of a probe log (module docstring)."""
     kern = load_kernels(spec.machine)
-    if kern.TOOL_ROTARY:
-        raise InputError(f"{kern.MACHINE_CODE}: probe logs of tool-side rotary axes are not supported (the stylus "
-                         "turns with the head); workpiece-side axes only")
+    check_tool(kern, spec.tool_mm)
     groups = group_poses(log)
     angles = np.array([log.angles_deg[g[0]] for g in groups])
     if np.abs(angles[0]).max() > 1e-9:
         raise FileFormatError(log.path, int(log.lines[0]), "the first pose must be the reference pose (every rotary "
                                                             "angle 0): c_nom is the motion of its centre")
-    pts = _pose_points(log, groups, spec.stylus_offset_mm)
-    fit = _fit(log, groups, pts, spec.radius_mm, spec.moves)
+    head, frames = head_offsets(kern, angles, spec.tool_mm)
+    pts = _pose_points(log, groups, spec.stylus_offset_mm, head)
+    fit = _fit(log, groups, pts, spec.radius_mm, spec.moves, frames)
     pivot = np.asarray(spec.pivot_mm, dtype=float)
     rot = kern.workpiece_rotation(angles)
     nominal = pivot + np.einsum("nij,j->ni", rot, fit.centres_mm[0] - pivot)
     deviation = -(fit.centres_mm - nominal) * 1e3
     deviation[0] = 0.0
     m = _measurement(kern, log, spec, groups, angles, fit, deviation)
-    m.extra_columns |= sensitivity_columns(trigger_sensitivities(pts, fit.centres_mm, fit.radius_fitted, spec.moves))
+    m.extra_columns |= sensitivity_columns(trigger_sensitivities(pts, fit.centres_mm, fit.radius_fitted, spec.moves,
+                                                                 frames))
     return m
+
+
+def check_tool(kern: Any, tool_mm: Any) -> None:
+    """A head machine needs ``--tool``; a table machine must not get one (one-line InputError)."""
+    why = missing_tool(kern.MACHINE_CODE, tool_mm)
+    if why:
+        raise InputError(why + " (CONVENTIONS §7: the stylus turns with the head)")
+    if tool_mm is not None and not kern.TOOL_ROTARY:
+        raise InputError(f"--tool: {kern.MACHINE_CODE} has no tool-side rotary axis, the stylus does not turn; "
+                         "leave --tool out (the stylus centre is the controlled point, --stylus-offset)")
 
 
 def _measurement(kern: Any, log: ProbeLog, spec: ProbeImport, groups: list[np.ndarray], angles: np.ndarray,
@@ -148,8 +191,11 @@ def _measurement(kern: Any, log: ProbeLog, spec: ProbeImport, groups: list[np.nd
         "r_eff_mm": f"{float(fit.radius_mm)!r} ({'fitted' if fit.radius_fitted else 'given'})",
         "contact_sigma_um": repr(float(fit.sigma_um)), "probing_moves": spec.moves, "source": "pige import-probe",
     }
+    if spec.tool_mm is not None:
+        meta["stylus_frame"] = f"turns with the head ({', '.join(kern.TOOL_ROTARY)}): probing moves read in it"
     return Measurement(
         machine=str(kern.MACHINE_CODE), ball_mm=fit.centres_mm[0] - np.asarray(spec.pivot_mm),
+        tool_mm=None if spec.tool_mm is None else np.asarray(spec.tool_mm, dtype=float),
         t_s=np.arange(n, dtype=float), angles_deg=angles, deviation_um=deviation, rotary_axes=log.rotary_axes,
         frame="machine", trajectory=f"sphere probing, {n} poses, {log.format} log",
         optional={"n_samples": np.array([len(g) for g in groups], dtype=float), "sd_um": sd},

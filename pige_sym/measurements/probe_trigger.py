@@ -17,7 +17,10 @@ horizontal move towards the centre (azimuth of ``−n``), as pige's programs pro
 pattern gets sensitivities of that model.
 
 With the same pattern at every pose the shift is one machine-frame vector and enters the deviation as
-``(I − R_i)·v``, the pattern of axis-line offsets: the diagnosis then finds the effect undetermined.
+``(I − R_i)·v``, the pattern of axis-line offsets: the diagnosis then finds the effect undetermined.  On a
+head machine the pattern and the lobes turn with the stylus (``stylus_rotations``): the shift is ``R_t,i·v``
+in the machine frame and enters as ``(R_t,i − R_w,i)·v``, the pattern of a stylus offset (a ``tool`` error),
+which the axis-line offsets of the head absorb in the same way.
 Varying the pattern from pose to pose (``pige program --pattern alternate``) makes it visible.
 
 File columns: ``trig_<p>_<x|y|z>`` for ``p`` in ``cos3``, ``sin3``, ``vert`` (9 columns, µm/µm).
@@ -31,7 +34,7 @@ import numpy as np
 
 from pige_sym.errors import FileFormatError
 from pige_sym.measurements.measurement import Measurement
-from pige_sym.measurements.sphere_fit import linear_response, move_cosines, vertical_contacts
+from pige_sym.measurements.sphere_fit import contact_weights, linear_response, stylus_normals, vertical_contacts
 
 PARTS = ("cos3", "sin3", "vert")
 COLUMNS = tuple(f"trig_{p}_{a}" for p in PARTS for a in "xyz")
@@ -47,7 +50,7 @@ def _perturbations(normals: np.ndarray) -> np.ndarray:
 
 
 def trigger_sensitivities(points_mm: list[np.ndarray], centres_mm: np.ndarray, radius_fitted: bool,
-                          moves: str = "normal") -> np.ndarray:
+                          moves: str = "normal", stylus_rotations: np.ndarray | None = None) -> np.ndarray:
     """Centre shift per unit lobing (cos, sin) and vertical pre-travel, shape=(n, 3, 3) [µm/µm].
 
     Parameters
@@ -60,6 +63,9 @@ def trigger_sensitivities(points_mm: list[np.ndarray], centres_mm: np.ndarray, r
         Whether the import fitted the shared effective radius (then it absorbs part of the pre-travel).
     moves : {"normal", "axes"}
         The fit's contact weights (:func:`~pige_sym.measurements.sphere_fit.fit_centres`).
+    stylus_rotations : ndarray, shape=(n, 3, 3), optional
+        Per pose, the stylus frame in the machine frame: on a head the lobes and the vertical pre-travel turn with
+        the stylus (φ is measured about the stylus axis from the stylus frame's x, "vertical" is along its axis).
 
     Returns
     -------
@@ -68,8 +74,9 @@ def trigger_sensitivities(points_mm: list[np.ndarray], centres_mm: np.ndarray, r
     """
     normals = [(p - c) / np.linalg.norm(p - c, axis=1, keepdims=True) for p, c in zip(points_mm, centres_mm,
                                                                                          strict=True)]
-    weights = [1.0 / move_cosines(g, moves) ** 2 for g in normals]
-    return linear_response(normals, weights, [_perturbations(g) for g in normals], radius_fitted)[0]
+    weights = contact_weights(normals, moves, stylus_rotations)
+    local = stylus_normals(normals, stylus_rotations)
+    return linear_response(normals, weights, [_perturbations(g) for g in local], radius_fitted)[0]
 
 
 def sensitivity_columns(sens: np.ndarray) -> dict[str, list[str]]:

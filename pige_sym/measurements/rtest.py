@@ -12,8 +12,8 @@ Grammar::
                                              unknown columns, which are kept as text)
 
 Required metadata: ``machine`` (ISO 10791 code) and ``ball_mm`` (three numbers).
-Optional: ``frame`` (``machine`` or ``table``), ``tool_mm``, ``pivot_<axis>_mm``,
-``trajectory``, ``units``, ``source``; any other key is kept.  The first data row is
+Optional: ``frame`` (``machine`` or ``table``), ``tool_mm`` (required with a tool-side rotary
+axis), ``pivot_<axis>_mm``, ``trajectory``, ``units``, ``source``; any other key is kept.  The first data row is
 the reference pose (all angles 0, deviation 0); ``t_s`` never decreases.
 
 Numbers are ASCII decimals (``[+-]digits[.digits][e[+-]digits]``): ``1_000``,
@@ -54,6 +54,7 @@ from pige_sym.measurements.measurement import (
     REFERENCE_TOLERANCE,
     Measurement,
     column_limit,
+    missing_tool,
     parse_vec3,
 )
 from pige_sym.measurements.rtest_body import MAX_LINE_BYTES, DataBody, Header, check_numeric_block, separator_hint
@@ -231,6 +232,9 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
     if frame not in FRAMES:
         raise FileFormatError(p, meta_line.get("frame"), f"frame must be 'machine' or 'table', got {frame!r}")
     tool = parse_vec3(meta["tool_mm"], p, meta_line["tool_mm"], "tool_mm") if "tool_mm" in meta else None
+    why = missing_tool(meta["machine"], tool, "'# tool_mm: x, y, z' (pige writes it when given --tool)")
+    if why:
+        raise FileFormatError(p, meta_line["machine"], why)
     pivots = _read_pivots(p, h)
     body.require_rows()
     angle_cols = [f"{a}_deg" for a in h.rotary]

@@ -6,7 +6,8 @@ contact errors ``ε`` of one standard deviation σ.  ``moves="normal"``: the pro
 normal, ``κ = 1``.  ``moves="axes"`` (pige's programs): the probe's trigger scatter lies along its move,
 a machine axis — vertical onto the top (a normal within 18° of +Z), horizontal towards the centre
 otherwise — so the radial error is ``κ = |cos(move, normal)|`` times it (0.64 on a 50° ring) and each
-contact is weighted by ``1/κ²``.
+contact is weighted by ``1/κ²``.  On a head machine the moves turn with the head: "vertical" is along the
+stylus axis and "horizontal" across it, read in each pose's stylus frame (``stylus_rotations``).
 
 :func:`fit_centres` solves every pose's centre and, unless it is given, one ``R_eff`` shared by all poses
 (the same sphere and stylus: a radius per pose would leave a four-contact pose without redundancy),
@@ -40,13 +41,38 @@ def vertical_contacts(normals: np.ndarray) -> np.ndarray:
 
 
 def move_cosines(normals: np.ndarray, moves: str) -> np.ndarray:
-    """``κ``: the radial share of an error along the probing move, shape=(m,) (module docstring)."""
+    """``κ``: the radial share of an error along the probing move, shape=(m,) (module docstring).
+
+    ``normals`` are in the stylus frame (the machine frame on a table machine; turned with the head on a
+    head machine: :func:`stylus_normals`).
+    """
     if moves == "normal":
         return np.ones(len(normals))
     if moves != "axes":
         raise InputError(f"moves {moves!r}: use {' or '.join(MOVES)}")
     horizontal = np.sqrt(normals[:, 0] ** 2 + normals[:, 1] ** 2)
     return np.where(vertical_contacts(normals), normals[:, 2], horizontal)
+
+
+def stylus_normals(normals: list[np.ndarray], stylus_rotations: np.ndarray | None) -> list[np.ndarray]:
+    """The contact normals of every pose in its stylus frame, ``R_tᵀ n`` (unchanged without rotations).
+
+    Parameters
+    ----------
+    normals : list of ndarray, shape=(m_i, 3)
+        Machine frame.
+    stylus_rotations : ndarray, shape=(n, 3, 3), or None
+        The nominal tool rotation of every pose (the stylus frame into M); None: the stylus does not turn.
+    """
+    if stylus_rotations is None:
+        return normals
+    return [g @ r for g, r in zip(normals, stylus_rotations, strict=True)]
+
+
+def contact_weights(normals: list[np.ndarray], moves: str, stylus_rotations: np.ndarray | None = None
+                    ) -> list[np.ndarray]:
+    """``1/κ²`` of every contact of every pose (module docstring), moves read in the stylus frame."""
+    return [1.0 / move_cosines(g, moves) ** 2 for g in stylus_normals(normals, stylus_rotations)]
 
 
 @dataclass
@@ -116,7 +142,7 @@ def _normals(points: list[np.ndarray], centres: np.ndarray) -> list[np.ndarray]:
 
 
 def fit_centres(points_mm: list[np.ndarray], *, radius_mm: float | None = None, iterations: int = 20,
-                moves: str = "normal") -> SphereFit:
+                moves: str = "normal", stylus_rotations: np.ndarray | None = None) -> SphereFit:
     """Fit every pose's centre (and one shared effective radius unless given).
 
     Parameters
@@ -129,6 +155,9 @@ def fit_centres(points_mm: list[np.ndarray], *, radius_mm: float | None = None, 
         Gauss–Newton iterations at most (converges in 2–3 from the algebraic start).
     moves : {"normal", "axes"}
         Direction of the probing moves, which sets each contact's weight (module docstring).
+    stylus_rotations : ndarray, shape=(n, 3, 3), optional
+        Per pose, the stylus frame in the machine frame (a head turns it): ``moves="axes"`` then means along
+        the stylus axis onto its pole and across it elsewhere.  Default: the machine frame.
 
     Returns
     -------
@@ -153,7 +182,7 @@ def fit_centres(points_mm: list[np.ndarray], *, radius_mm: float | None = None, 
                              "contacts must not lie on one circle or line); probe it from more directions")
     fitted = radius_mm is None
     radius = float(np.median([r for _, r in starts])) if radius_mm is None else float(radius_mm)
-    weights = [1.0 / move_cosines(g, moves) ** 2 for g in _normals(pts, centres)]
+    weights = contact_weights(_normals(pts, centres), moves, stylus_rotations)
     for _ in range(iterations):
         centres, radius, step = _gauss_newton_step(pts, centres, radius, fitted, weights)
         if step < 1e-10:

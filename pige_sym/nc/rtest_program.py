@@ -33,6 +33,7 @@ from pige_sym.constants import DEFAULT_DWELL_S as DEFAULT_DWELL_S
 from pige_sym.constants import DEFAULT_MOVE_S as DEFAULT_MOVE_S
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
+from pige_sym.measurements.measurement import missing_tool
 from pige_sym.model.trajectories import NAMES, Trajectory, make_trajectory
 from pige_sym.nc.program import parse_program, poses_from_program
 
@@ -160,8 +161,9 @@ def load_test_program(machine: str, spec: str, *, ball_mm: Any = DEFAULT_BALL_MM
         if axis not in kern.ROTARY_AXES:
             raise InputError(f"pivot {axis}: not a rotary axis of {kern.MACHINE_CODE} ({', '.join(kern.ROTARY_AXES)})")
     tool = None if tool_mm is None else np.asarray(tool_mm, dtype=float)
-    if kern.TOOL_ROTARY and tool is None:
-        raise InputError(f"{kern.MACHINE_CODE} has tool-side rotary axes: give the tool (ball) offset --tool x,y,z")
+    why = missing_tool(kern.MACHINE_CODE, tool)
+    if why:
+        raise InputError(why)
     lines = None
     if spec not in NAMES and os.path.isfile(spec) and _is_nc_file(spec):
         angles, dwell, lines = _nc_program(kern, spec, dwell_s)

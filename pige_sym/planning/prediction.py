@@ -48,6 +48,7 @@ import numpy as np
 from pige_sym.errors import InputError
 from pige_sym.identification.spectrum import NULL_RTOL, NULL_WEIGHT, scaled_spectrum
 from pige_sym.kernels import load_kernels
+from pige_sym.measurements.measurement import missing_tool
 from pige_sym.model.projection import Projection, parse_projection
 
 CRITERIA = ("worst", "A", "D")
@@ -93,8 +94,9 @@ class Setup:
             raise InputError(f"ball position must be three finite numbers, got {self.ball_mm!r}")
         if self.tool_mm is not None:
             self.tool_mm = np.asarray(self.tool_mm, dtype=float)
-        if kern.TOOL_ROTARY and self.tool_mm is None:
-            raise InputError(f"{kern.MACHINE_CODE} has tool-side rotary axes: give the tool (ball) offset --tool x,y,z")
+        why = missing_tool(kern.MACHINE_CODE, self.tool_mm)
+        if why:
+            raise InputError(why)
         if not (math.isfinite(self.noise_um) and self.noise_um > 0):
             raise InputError(f"noise must be a finite number > 0 um, got {self.noise_um!r}")
         if self.projection is None:

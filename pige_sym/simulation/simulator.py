@@ -27,7 +27,7 @@ from pige_sym.constants import DEFAULT_BALL_MM
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.files import to_json
 from pige_sym.kernels import load_kernels
-from pige_sym.measurements.measurement import Measurement
+from pige_sym.measurements.measurement import Measurement, missing_tool
 from pige_sym.measurements.rtest_writer import write_measurement
 from pige_sym.model.effects import EffectContext, EffectInstance
 from pige_sym.model.trajectories import Trajectory
@@ -128,8 +128,9 @@ def _check_inputs(kern: Any, trajectory: Trajectory, noise_um: float, frame: str
         raise InputError("noise must be >= 0 µm")
     if frame not in ("machine", "table"):
         raise InputError("frame must be 'machine' or 'table'")
-    if kern.TOOL_ROTARY and tool_mm is None:
-        raise InputError(f"{kern.MACHINE_CODE} has tool-side rotary axes: give the tool (ball) offset --tool x,y,z")
+    why = missing_tool(kern.MACHINE_CODE, tool_mm)
+    if why:
+        raise InputError(why)
 
 
 def add_effects(dev: np.ndarray, effects: list[EffectInstance], ctx: EffectContext,
