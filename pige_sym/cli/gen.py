@@ -1,4 +1,10 @@
-"""``pige gen``: derive the error model with SymPy and write the NumPy kernels of machine codes."""
+"""``pige gen``: derive the error model with SymPy and write what a target renders from it.
+
+``--target numpy`` (default): the NumPy kernels of machine codes (``generated/`` in a checkout, else the
+user cache; ``--check`` compares). Other targets (:mod:`pige_sym.codegen.targets`, e.g. ``linuxcnc``)
+write their files into ``--out`` (default: the current folder), never over an existing file without
+``--force``.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +13,51 @@ from pathlib import Path
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.target != "numpy":
+        return _run_target(args)
+    if args.name:
+        from pige_sym.errors import InputError
+
+        raise InputError("--name: the numpy kernels' module name is fixed (pige loads it by name)")
+    return _run_numpy(args)
+
+
+def _run_target(args: argparse.Namespace) -> int:
+    """Render every machine's files in memory, check every output path, then write."""
+    from pige_sym.codegen.machine_code import parse_machine_code
+    from pige_sym.codegen.targets import load_target
+    from pige_sym.errors import InputError
+    from pige_sym.files import atomic_write_text, check_output
+
+    target = load_target(args.target)
+    if args.check or args.shipped:
+        option = "--check" if args.check else "--shipped"
+        raise InputError(f"{option} is for the numpy kernels, not --target {args.target}")
+    from pige_sym.constants import SHIPPED_MACHINES
+
+    codes = list(args.codes) + (list(SHIPPED_MACHINES) if args.all_shipped else [])
+    if not codes:
+        raise InputError("give at least one machine code, or --all-shipped")
+    if args.name and len(codes) > 1:
+        raise InputError("--name names one machine's files: give one machine code with it")
+    out_dir = Path(args.out or ".")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError(f"--out {out_dir} is not a directory: give the folder the files go into")
+    rendered = {}
+    for code in codes:
+        for fname, text in target.render(parse_machine_code(code), args.name).items():
+            path = out_dir / fname
+            if path in rendered:
+                raise InputError(f"two machines write {path}: generate them one at a time with --name")
+            rendered[path] = text
+    for path in rendered:
+        check_output(path, force=args.force, what="--out file")
+    for path, text in rendered.items():
+        print(f"wrote {atomic_write_text(path, text)}")
+    return 0
+
+
+def _run_numpy(args: argparse.Namespace) -> int:
     from pige_sym.codegen.emit import render_module, same_code, write_module
     from pige_sym.codegen.machine_code import parse_machine_code
     from pige_sym.kernels import cache_dir, generated_dir, in_checkout
@@ -62,25 +113,36 @@ def _refuse_foreign(path: Path, force: bool) -> None:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``pige gen``."""
+    from pige_sym.codegen.targets import TARGETS
+
     p = sub.add_parser(
         "gen",
-        help="generate NumPy kernels for machine codes",
+        help="generate NumPy kernels (or a LinuxCNC kinematics component) for machine codes",
         description=(
             "Derive the error model with SymPy and write a NumPy kernel module per machine code. "
             "In a checkout the kernels go to the top-level generated/ folder (what make gen does), "
             "in an installed package to the user cache (PIGE_KERNEL_DIR overrides it), never into the "
             "installation; pige finds them in both places. A script imports a generated module "
-            "directly: it needs only NumPy."
+            "directly: it needs only NumPy. --target linuxcnc writes a LinuxCNC kinematics component "
+            "with every PIGE as a HAL pin (<name>.comp for halcompile --install) and the pure C99 model it "
+            "inlines (<name>_model.h) into --out (default: the current folder); docs/linuxcnc-kinematics.md."
         ),
-        epilog="example:\n  pige gen \"wC'B'bXYZ(C1)t\"\n  pige gen --check --all-shipped",
+        epilog="example:\n  pige gen \"wC'B'bXYZ(C1)t\"\n  pige gen --check --all-shipped\n"
+               "  pige gen --target linuxcnc \"wC'A'bXYZ(C1)t\" --out kins   # kins/pige_xyzac_trt.comp\n"
+               "  halcompile --install kins/pige_xyzac_trt.comp",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("codes", nargs="*", metavar="CODE", help="ISO 10791 machine structure code")
+    p.add_argument("--target", choices=TARGETS, default=TARGETS[0],
+                   help="what to emit: numpy kernels (default) or a linuxcnc kinematics component")
+    p.add_argument("--name", help="--target linuxcnc: component name (default pige_xyz<rotary>_<trt|head|mixed>)")
     p.add_argument("--all-shipped", action="store_true", help="every machine whose kernels ship with the package")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--out", help="output directory (default: generated/ in a checkout, else the user cache)")
+    where.add_argument("--out", help="output directory (numpy: default generated/ in a checkout, else the user "
+                       "cache; other targets: default the current folder)")
     where.add_argument("--shipped", action="store_true", help="write into the generated folder (as in a checkout)")
-    p.add_argument("--force", action="store_true", help="replace a file at a kernel's path that pige did not generate")
+    p.add_argument("--force", action="store_true", help="numpy: replace a file at a kernel's path that pige did not "
+                   "generate; other targets: replace existing files")
     p.add_argument(
         "--check", action="store_true",
         help="regenerate in memory and fail on any code difference (the SymPy version line is not compared)",

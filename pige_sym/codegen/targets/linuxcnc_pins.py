@@ -1,0 +1,107 @@
+"""Names of pige's LinuxCNC kinematics component and of its HAL pins (no SymPy: the runtime uses them too).
+
+The emitter (:mod:`pige_sym.codegen.targets.linuxcnc`) creates exactly these pins, and
+``pige compensate --controller linuxcnc`` prints ``setp`` lines for them from the kernels'
+metadata (``ROTARY_AXES``, ``PARAMETERS``, ``UNITS``, ``TOOL_ROTARY``).
+
+Pins (all ``in``), for a component ``<name>``:
+
+* ``<name>.pivot-<axis>-x|y|z`` [mm]: nominal pivot of each rotary axis, machine frame at the
+  reference pose (CONVENTIONS §2);
+* ``<name>.tool-x|y|z`` [mm]: only with a tool-side rotary axis, the tool tip without tool length
+  relative to the last head pivot at the reference pose (CONVENTIONS §4 ``tool_mm``);
+* ``<name>.tool-offset`` [mm]: the tool length along the spindle (net ``motion.tooloffset.z``);
+* ``<name>.sense-<axis>`` (s32): the commanded sense σ, θ = σ·θ_cmd (CONVENTIONS §9), +1 at load;
+* ``<name>.<pige>`` in lower case: each location error [µm, µrad] and zero-position error [µrad]
+  (``<name>.ex0c``, ``<name>.eb0a``, ``<name>.ec0c``).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+
+from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
+from pige_sym.errors import InputError, UnsupportedMachineError
+
+_VALID_NAME = re.compile(r"[a-z][a-z0-9_]{0,47}")
+
+
+def check_machine(structure: MachineStructure) -> None:
+    """Refuse, with the reason, a machine LinuxCNC's joints cannot hold this way.
+
+    Raises
+    ------
+    UnsupportedMachineError
+    """
+    linear = [a.name for a in structure.linear_axes]
+    rotary = [a.name for a in structure.rotary_axes]
+    if sorted(linear) != ["X", "Y", "Z"]:
+        raise UnsupportedMachineError(f"machine {structure.canonical!r}: the LinuxCNC component needs exactly the "
+                                      f"linear axes X, Y, Z (has {', '.join(linear)})")
+    if any(len(r) != 1 for r in rotary) or len(set(rotary)) != len(rotary):
+        raise UnsupportedMachineError(f"machine {structure.canonical!r}: LinuxCNC has one A, B and C coordinate; "
+                                      f"rotary axes {', '.join(rotary)} cannot be mapped")
+    if structure.spindle is not None and structure.spindle[0] != "C":
+        raise UnsupportedMachineError(f"machine {structure.canonical!r}: LinuxCNC applies the tool length along Z "
+                                      f"(motion.tooloffset.z) but the spindle {structure.spindle} is not along Z")
+
+
+def default_name(code: str | MachineStructure) -> str:
+    """``pige_xyz<rotary letters>_<trt|head|mixed>``, e.g. ``pige_xyzac_trt``, ``pige_xyzbc_mixed``."""
+    structure = parse_machine_code(code) if isinstance(code, str) else code
+    sides = {a.side for a in structure.rotary_axes}
+    kind = "trt" if sides == {"workpiece"} else "head" if sides == {"tool"} else "mixed"
+    return "pige_xyz" + "".join(a.name.lower() for a in structure.rotary_axes) + "_" + kind
+
+
+def check_name(name: str) -> str:
+    """A component name halcompile and HAL accept (lower case letters, digits, ``_``); returns it.
+
+    Raises
+    ------
+    InputError
+    """
+    if not _VALID_NAME.fullmatch(name):
+        raise InputError(f"--name {name!r}: a LinuxCNC component name is a lower-case letter followed by up to 47 "
+                         "lower-case letters, digits or '_' (it is the .comp file name and a C identifier)")
+    return name
+
+
+def pin_names(name: str, rotary_axes: Sequence[str], parameters: Sequence[str], units: Mapping[str, str],
+              tool_rotary: bool) -> dict[str, str]:
+    """HAL pin → what it holds [unit], in the order the component creates them.
+
+    Parameters
+    ----------
+    name : str
+        Component name (the pin prefix).
+    rotary_axes : sequence of str
+        The kernels' ``ROTARY_AXES``.
+    parameters : sequence of str
+        The kernels' ``PARAMETERS`` (location errors, then zero-position errors).
+    units : mapping
+        The kernels' ``UNITS`` (``"um"`` or ``"urad"`` per parameter).
+    tool_rotary : bool
+        Whether a tool-side rotary axis exists (then the ``tool-x|y|z`` pins exist).
+    """
+    pins: dict[str, str] = {}
+    for axis in rotary_axes:
+        for c in "xyz":
+            pins[f"{name}.pivot-{axis.lower()}-{c}"] = f"nominal pivot of {axis}, machine {c.upper()} [mm]"
+    if tool_rotary:
+        for c in "xyz":
+            pins[f"{name}.tool-{c}"] = (f"tool tip without tool length, relative to the last head pivot, "
+                                        f"{c.upper()} at the reference pose [mm]")
+    pins[f"{name}.tool-offset"] = "tool length along the spindle [mm]; net motion.tooloffset.z to it"
+    for axis in rotary_axes:
+        pins[f"{name}.sense-{axis.lower()}"] = f"commanded sense of {axis} (s32): +1 CONVENTIONS, -1 reversed"
+    for p in parameters:
+        zero = p[1:2] == p[3:4]
+        pins[error_pin(name, p)] = f"{p} [{units[p]}]" + (" zero-position error" if zero else "")
+    return pins
+
+
+def error_pin(name: str, parameter: str) -> str:
+    """The pin of one PIGE or zero-position error, e.g. ``pige_xyzac_trt.ex0c``."""
+    return f"{name}.{parameter.lower()}"
