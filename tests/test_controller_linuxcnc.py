@@ -127,7 +127,7 @@ def test_trt_kinematics_agree_with_the_model_and_the_printed_pins_remove_the_err
     text = format_controller(params, "linuxcnc", current=nominal)
     module = "xyzac-trt-kins" if machine == AC else "xyzbc-trt-kins"
     entered = {ln.split()[1].removeprefix(module + "."): float(ln.split()[2]) for ln in text.splitlines()
-               if ln.startswith("setp ")}
+               if ln.startswith(f"setp {module}.")}
     assert set(entered) == set(linuxcnc_trt_deltas(params)[1])
     after = _errors_um(machine, nominal | entered, true)
     assert np.abs(after).max() < 1e-3, np.abs(after).max()
@@ -146,10 +146,13 @@ def test_what_linuxcnc_cannot_hold_is_named_with_the_error_it_leaves() -> None:
                                                      rel=1e-6)
     assert scope.rmse_nc_rewrite_um < 0.05 < scope.rmse_table_only_um < scope.rmse_before_um
     text = format_controller(params, "linuxcnc")
-    assert "NOT representable" in text and "EB0A +30 urad" in text and "\nsetp" not in text
+    assert "NOT representable" in text and "EB0A +30 urad" in text and "\nsetp xyzac-trt-kins" not in text
     assert "# xyzac-trt-kins.y-offset: add +0.003000" in text
-    with pytest.raises(InputError, match="no mapping"):
-        format_controller(CompensationParameters("wbXYZCA(C1)t", {}, {}, None, {}, "t", []), "linuxcnc")
+    assert "setp pige_xyzac_trt.eb0a 30.0000" in text  # beside them, pige's component holds every PIGE
+    head = format_controller(CompensationParameters("wbXYZCA(C1)t", {}, {}, None, {}, "t", []), "linuxcnc")
+    assert "stock trt kinematics" in head and "no mapping" in head and "setp pige_xyzac_head.ex0c 0.0000" in head
+    with pytest.raises(InputError, match="no mapping.*pige's kinematics component"):
+        format_controller(CompensationParameters("wbXYZWCA(C1)t", {}, {}, None, {}, "t", []), "linuxcnc")
 
 
 def test_cli_prints_setp_lines_from_a_hal_file(tmp_path, capsys) -> None:

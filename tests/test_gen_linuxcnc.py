@@ -379,3 +379,38 @@ def test_the_component_switches_between_identity_and_the_model(tmp_path, models,
     assert np.abs(joints[:3] - numpy_joints(m.kin, geo, world, angles)[0]).max() < TOL_MM
     assert np.array_equal(joints[3:], angles[0]) and np.abs(back - pose).max() < TOL_MM
 
+
+@needs_cc
+@pytest.mark.parametrize("code", MACHINES[:4])
+def test_the_pins_pige_compensate_prints_correct_the_exact_machine(models, code: str) -> None:
+    """``pige compensate --controller linuxcnc``: its setp lines, entered into the model, put the tool point of
+    the exact machine on target (second order apart); an undetermined PIGE gets no line."""
+    from pige_sym.codegen.targets import linuxcnc_pins
+    from pige_sym.compensation.controllers import format_controller
+    from pige_sym.compensation.parameters import CompensationParameters
+
+    m = models[code]
+    kin, n = m.kin, 100
+    rng = np.random.default_rng(8)
+    values = {p: float(rng.uniform(-20, 20)) for p in kin.PARAMETERS}
+    pivots = {a: [float(x) for x in rng.uniform(-100, 100, 3)] for a in kin.ROTARY_AXES}
+    params = CompensationParameters(kin.MACHINE_CODE, values, dict(kin.UNITS), None, pivots, "test", [])
+    name = linuxcnc_pins.default_name(code)
+    text = format_controller(params, "linuxcnc")
+    setp = {ln.split()[1]: float(ln.split()[2]) for ln in text.splitlines() if ln.startswith(f"setp {name}.")}
+    axes = kin.ROTARY_AXES
+    geo = {"pivots": {a: np.tile([setp[f"{name}.pivot-{a.lower()}-{c}"] for c in "xyz"], (n, 1)) for a in axes},
+           "tool": np.tile([3.0, -2.0, -180.0], (n, 1)), "tool_offset": rng.uniform(0, 100, n),
+           "sense": np.tile([setp[f"{name}.sense-{a.lower()}"] for a in axes], (n, 1)),
+           "errors": np.tile([setp[linuxcnc_pins.error_pin(name, p)] for p in kin.PARAMETERS], (n, 1))}
+    world, angles = rng.uniform(-150, 150, (n, 3)), rng.uniform(-100, 100, (n, len(axes)))
+    truth = dict(geo, errors=np.tile([values[p] for p in kin.PARAMETERS], (n, 1)))
+    exact = exact_joints(kin, parse_machine_code(code), truth, world, angles)
+    nominal = m.inverse(dict(geo, errors=np.zeros_like(geo["errors"])), world, angles)
+    assert np.abs(nominal - exact).max() > 5e-3
+    assert np.abs(m.inverse(geo, world, angles) - exact).max() < 1e-5
+    missing = CompensationParameters(kin.MACHINE_CODE, values, dict(kin.UNITS), None, pivots, "test",
+                                     [f"{kin.PARAMETERS[0]} (no value in the file: set to 0 by --allow-missing)"])
+    text = format_controller(missing, "linuxcnc")
+    pin = linuxcnc_pins.error_pin(name, kin.PARAMETERS[0])
+    assert f"setp {pin} " not in text and f"# {pin}: no value in the parameter file" in text
