@@ -187,3 +187,11 @@ def test_a_hal_session_loads_the_component_and_switches_it(compiled, tmp_path, r
     values = [ln.strip() for ln in log.splitlines() if ln.strip() in ("TRUE", "FALSE")]
     assert values == ["TRUE", "TRUE", "FALSE", "TRUE"], log  # identity first; switched to 1; 2 refused: still 1
     assert "switchkins-type 2 refused" in log
+
+
+def test_render_model_c_takes_a_c_identifier_as_prefix() -> None:
+    from pige_sym.codegen.c_model import render_model_c
+
+    with pytest.raises(InputError, match="C identifier"):
+        render_model_c(SHIPPED_MACHINES[0], "my-kins")
+    assert "my_kins_inverse(const my_kins_params *p" in render_model_c(SHIPPED_MACHINES[0], "my_kins")

@@ -63,7 +63,7 @@ from sympy.printing.c import C99CodePrinter
 from pige_sym.codegen.fingerprint import current_hash
 from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
 from pige_sym.codegen.symbolic import SymbolicModel, build_model, reduce_trig
-from pige_sym.errors import UnsupportedMachineError
+from pige_sym.errors import InputError, UnsupportedMachineError
 
 #: Newton steps at most in ``P_forward`` (one is exact for this affine model; see the module docstring).
 NEWTON_MAX_STEPS = 3
@@ -385,7 +385,16 @@ def render_model_c(code: str | MachineStructure, prefix: str, *, include_math: b
     -------
     str
         A header-only C99 model, guarded by ``<PREFIX>_MODEL_H``.
+
+    Raises
+    ------
+    InputError
+        ``prefix`` is not a C identifier.
+    UnsupportedMachineError
+        :func:`check_supported`.
     """
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,63}", prefix):
+        raise InputError(f"C prefix {prefix!r}: use a C identifier (letters, digits, '_'; not starting with a digit)")
     kin = kinematics_expressions(code)
     structure = kin.model.structure
     guard = f"{prefix.upper()}_MODEL_H"

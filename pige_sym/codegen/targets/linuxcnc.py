@@ -120,7 +120,8 @@ def _setup(structure: MachineStructure, name: str, parameters: tuple[str, ...], 
         f"    {name}_identity_type = (sparm && strstr(sparm, \"identityfirst\")) ? 0 : 1;",
         "    hal_ready(comp_id);",
         f'    rtapi_print("{name}: switchkins-type 0 is %s\\n", {name}_identity_type ? "{name}" : "identity");',
-        "    return 0;", "error:", f'    rtapi_print_msg(RTAPI_MSG_ERR, "{name}: setup failed (res=%d)\\n", res);',
+        "    return 0;", "error:", f"    {h} = 0;  /* the kinematics functions then return -1 */",
+        f'    rtapi_print_msg(RTAPI_MSG_ERR, "{name}: setup failed (res=%d)\\n", res);',
         "    return -1;", "}"])
 
 
@@ -190,6 +191,7 @@ int kinematicsSwitchable(void) {{ return 1; }}
 int kinematicsSwitch(int new_switchkins_type)
 {{
     int i;
+    if (!{N}_hal) return -1;  /* setup failed: no pins */
     if (new_switchkins_type < 0 || new_switchkins_type > 1) {{
         rtapi_print_msg(RTAPI_MSG_ERR, "{N}: switchkins-type %d refused (0 and 1 only)\\n", new_switchkins_type);
         return -1;
@@ -215,6 +217,7 @@ int kinematicsForward(const double *j, EmcPose *pos, const KINEMATICS_FORWARD_FL
     {N}_params p;
     (void)fflags;
     (void)iflags;
+    if (!{N}_hal) return -1;  /* setup failed: no pins */
     {N}_read_pins(&p);
     return {N}_pose_forward(&p, {N}_type != {N}_identity_type, j, pos);
 }}
@@ -225,6 +228,7 @@ int kinematicsInverse(const EmcPose *pos, double *j, const KINEMATICS_INVERSE_FL
     {N}_params p;
     (void)iflags;
     (void)fflags;
+    if (!{N}_hal) return -1;  /* setup failed: no pins */
     {N}_read_pins(&p);
     {N}_pose_inverse(&p, {N}_type != {N}_identity_type, pos, j);
     return 0;
