@@ -395,8 +395,11 @@ def test_the_pins_pige_compensate_prints_correct_the_exact_machine(models, code:
     values = {p: float(rng.uniform(-20, 20)) for p in kin.PARAMETERS}
     pivots = {a: [float(x) for x in rng.uniform(-100, 100, 3)] for a in kin.ROTARY_AXES}
     params = CompensationParameters(kin.MACHINE_CODE, values, dict(kin.UNITS), None, pivots, "test", [])
+    params.axis_sense = {kin.ROTARY_AXES[0]: -1}  # as a parameter file records it (CONVENTIONS §9)
     name = linuxcnc_pins.default_name(code)
     text = format_controller(params, "linuxcnc")
+    assert f"setp {name}.sense-{kin.ROTARY_AXES[0].lower()} -1" in text
+    assert f"setp {name}.sense-{kin.ROTARY_AXES[1].lower()} 1" in text
     setp = {ln.split()[1]: float(ln.split()[2]) for ln in text.splitlines() if ln.startswith(f"setp {name}.")}
     axes = kin.ROTARY_AXES
     geo = {"pivots": {a: np.tile([setp[f"{name}.pivot-{a.lower()}-{c}"] for c in "xyz"], (n, 1)) for a in axes},
