@@ -26,12 +26,15 @@ from pige_sym.model.trajectories import make_trajectory
 from pige_sym.nc.probe_program import ProbeSetup, plan_probing
 from pige_sym.nc.probe_readback import verify_probe_program
 from pige_sym.nc.probe_render import render_probe_program
+from pige_sym.nc.probe_safety import ProbeController
 from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
 from pige_sym.simulation.simulator import random_pige
 
 AC = "wC'A'bXYZ(C1)t"
 LOGS = Path(__file__).parent / "probe_logs"
-SETUP = ProbeSetup(AC, np.array([100.0, 20.0, 60.0]), np.zeros(3), 12.7, 1.5)
+#: The shipped LinuxCNC trt sims' kinematics switch (M429 identity, M428 TCP) and a stylus tool.
+CONTROLLER = ProbeController(rtcp_off="M429", rtcp_on="M428", stylus_tool=99, stylus_length_mm=120.0)
+SETUP = ProbeSetup(AC, np.array([100.0, 20.0, 60.0]), np.zeros(3), 12.7, 1.5, controller=CONTROLLER)
 SPEC = ProbeImport(AC, (0.0, 0.0, 0.0), 12.7, 1.5)
 
 
@@ -230,7 +233,7 @@ def test_the_commands_tell_the_whole_story(tmp_path, capsys) -> None:
     prog, log, csv = tmp_path / "probe.h", tmp_path / "probe.txt", tmp_path / "probe.csv"
     common = ["--machine", AC, "--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius", "1.5"]
     assert main(["program", "--instrument", "sphere-probe", "--dialect", "heidenhain", *common,
-                 "--trajectory", "steps", "--out", str(prog)]) == 0
+                 "--stylus-tool", "5", "--stylus-length", "150", "--trajectory", "steps", "--out", str(prog)]) == 0
     assert prog.with_suffix(".A").read_text().startswith('"PIGE P%5.0LF')
     assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "heidenhain", "--program", str(prog),
                  *common, "--pige", "EX0C=8,EB0A=-12", "--seed", "2", "--out", str(log)]) == 0
@@ -293,7 +296,8 @@ def test_plan_and_study_for_the_probe(tmp_path, capsys) -> None:
     common = ["--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius", "1.5"]
     assert main(["plan", "--instrument", "sphere-probe", *common, "--budget", "1200", "--out", str(out)]) == 0
     assert main(["program", "--instrument", "sphere-probe", *common, "--contacts", str(best.contacts),
-                 "--trajectory", str(out), "--out", str(tmp_path / "p.ngc"), "--dialect", "linuxcnc"]) == 0
+                 "--trajectory", str(out), "--out", str(tmp_path / "p.ngc"), "--dialect", "linuxcnc",
+                 "--rtcp-off", "M429", "--rtcp-on", "M428", "--stylus-tool", "99", "--stylus-length", "120"]) == 0
     assert main(["study", "projection", "--instrument", "sphere-probe"]) == 0
     assert "ignoring it" in capsys.readouterr().out
 

@@ -75,6 +75,7 @@ def row_template(program: TestProgram, nest: NestGeometry, opts: AcquisitionOpti
         deviation_um=np.zeros((0, 3)), rotary_axes=program.rotary_axes, frame=opts.frame, tool_mm=program.tool_mm,
         pivots_mm=dict(program.pivots_mm), trajectory=program.description, linear_mm=np.zeros((0, 3)),
         optional={"n_samples": empty, "sd_um": empty}, extra_columns={c: [] for c in EXTRA_COLUMNS}, metadata=meta,
+        axis_sense=dict(program.axis_sense),
     )
 
 

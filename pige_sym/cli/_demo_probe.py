@@ -21,9 +21,12 @@ from pathlib import Path
 from typing import Any
 
 from pige_sym.files import atomic_write_text, to_json
+from pige_sym.nc.probe_safety import ProbeController
 
 SPHERE = (100.0, 20.0, 60.0)
 RADII = (12.7, 1.5)
+#: The demo's LinuxCNC: the shipped trt sims' kinematics switch (M429 identity, M428 TCP), stylus tool 99.
+CONTROLLER = ProbeController(rtcp_off="M429", rtcp_on="M428", stylus_tool=99, stylus_length_mm=120.0)
 PART = """(a small 5-axis finishing pass in machine coordinates, RTCP off)
 G21 G90 G17 G40 G49 G80 G94
 G0 Z150
@@ -51,7 +54,7 @@ def _program_and_log(args: argparse.Namespace, code: str, out: Path) -> tuple[Pa
     from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
     from pige_sym.simulation.simulator import random_pige
 
-    setup = ProbeSetup(code, np.array(SPHERE), np.zeros(3), *RADII)
+    setup = ProbeSetup(code, np.array(SPHERE), np.zeros(3), *RADII, controller=CONTROLLER)
     traj = make_trajectory(code, args.trajectory)
     _stage(1, "probing program (LinuxCNC), read back against the sphere")
     plan = plan_probing(setup, traj.angles_deg, traj.description)

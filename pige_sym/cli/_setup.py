@@ -2,7 +2,8 @@
 
 ``--machine``, the test program (``--trajectory`` or ``--program``), ``--ball``,
 ``--pivot AXIS=x,y,z`` (repeatable), ``--tool``, and the trajectory shape options
-``--points``, ``--turns`` and ``--incl-axis`` (the last two only for the cone frustum).
+``--points``, ``--turns`` and ``--incl-axis`` (the last two only for the cone frustum), and the commanded
+sense of the rotary axes ``--axis-sense`` (CONVENTIONS §9).
 Not a subcommand: the leading underscore keeps it out of the registry.
 """
 
@@ -50,6 +51,7 @@ def add_setup_arguments(p: argparse.ArgumentParser, *, program_flag: str = "--tr
     p.add_argument("--points", type=int, help="points per turn (cone, figure-eight)")
     p.add_argument("--turns", type=float, help="turns of the cone")
     p.add_argument("--incl-axis", choices=["X", "Y", "x", "y"], help="cone inclination axis (default X)")
+    add_axis_sense_argument(p)
 
 
 def trajectory_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -89,6 +91,21 @@ def pige_values(spec: str, machine: str, seed: int | None) -> dict[str, float]:
         raise InputError(f"--pige {spec}: effect parameters ({', '.join(params.effect_values)}) are not PIGEs; "
                          "give effects with --effect")
     return dict(params.pige)
+
+
+def add_axis_sense_argument(p: argparse.ArgumentParser) -> None:
+    """``--axis-sense AXIS=-1,...``: the sense in which the controller commands each rotary axis (CONVENTIONS §9)."""
+    p.add_argument("--axis-sense", metavar="AXIS=-1,...",
+                   help="rotary axes the controller commands in the reverse of CONVENTIONS' sense, e.g. A=-1,C=-1 "
+                        "(LinuxCNC 2.9's xyzac-trt-kins; docs/linuxcnc.md); default: every axis +1")
+
+
+def axis_sense_option(args: argparse.Namespace, rotary_axes: tuple[str, ...]) -> dict[str, int] | None:
+    """``--axis-sense`` as axis -> -1 for the reversed axes; None when the option was not given."""
+    from pige_sym.measurements.axis_sense import parse_axis_sense
+
+    text = getattr(args, "axis_sense", None)
+    return None if text is None else parse_axis_sense(text, rotary_axes)
 
 
 def finite_option(value: float, name: str, *, minimum: float | None = None, positive: bool = False) -> float:

@@ -8,7 +8,13 @@ import re
 import signal
 from typing import Any
 
-from pige_sym.cli._setup import add_setup_arguments, finite_option, setup_geometry, trajectory_options
+from pige_sym.cli._setup import (
+    add_setup_arguments,
+    axis_sense_option,
+    finite_option,
+    setup_geometry,
+    trajectory_options,
+)
 from pige_sym.constants import DEFAULT_DWELL_S, DEFAULT_MOVE_S, DEVICE_PROTOCOLS, TRIGGERS
 from pige_sym.errors import InputError
 from pige_sym.files import to_json
@@ -44,7 +50,8 @@ def _run(args: argparse.Namespace) -> int:
     ball, pivots, tool = setup_geometry(args)
     program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=ball, pivots_mm=pivots, tool_mm=tool,
                                 move_s=finite_option(args.move, "--move", minimum=0.0),
-                                dwell_s=finite_option(args.dwell, "--dwell", positive=True), **trajectory_options(args))
+                                dwell_s=finite_option(args.dwell, "--dwell", positive=True),
+                                axis_sense=axis_sense_option(args, tuple(kern.ROTARY_AXES)), **trajectory_options(args))
     settings = PortSettings(baudrate=args.baud, bytesize=args.bytesize, parity=args.parity, stopbits=args.stopbits,
                             timeout_s=args.timeout)
     options = AcquisitionOptions(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from pige_sym.compensation.controllers import controller_names
 from pige_sym.constants import (
@@ -69,6 +69,16 @@ def _current(spec: str | None) -> dict[str, float] | None:
     return out
 
 
+def _axis_sense(args: argparse.Namespace, params: Any) -> dict[str, int]:
+    """The commanded axis sense: the parameter file's, checked against ``--axis-sense`` (CONVENTIONS §9)."""
+    from pige_sym.cli._setup import axis_sense_option
+    from pige_sym.kernels import load_kernels
+    from pige_sym.measurements.axis_sense import reconcile
+
+    axes = tuple(load_kernels(params.machine).ROTARY_AXES)
+    return reconcile(params.axis_sense, axis_sense_option(args, axes), str(args.params), axes)
+
+
 def _run(args: argparse.Namespace) -> int:
     from pige_sym import api
     from pige_sym.compensation.controllers import format_controller
@@ -79,6 +89,7 @@ def _run(args: argparse.Namespace) -> int:
     text = read_program(args.program) if args.program else None
     machine = _machine(args, text)
     params = load_parameters(args.params, machine, allow_missing=args.allow_missing)
+    params.axis_sense = _axis_sense(args, params)
     for name in params.ignored:
         if "--allow-missing" in name:
             print(f"warning: {name}")
@@ -164,6 +175,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    metavar="MM[,DEG]", help="refuse corrections larger than this (default %(default)s)")
     p.add_argument("--rtcp-on", action="append", metavar="CODE", help="controller-specific RTCP-on code (M428)")
     p.add_argument("--rtcp-off", action="append", metavar="CODE", help="controller-specific RTCP-off code (M429)")
+    from pige_sym.cli._setup import add_axis_sense_argument
+
+    add_axis_sense_argument(p)
     p.add_argument("--allow-missing", action="store_true",
                    help="set PIGEs without a value (missing, or not identifiable) to 0 and say which")
     p.add_argument("--controller", choices=list(controller_names()), help="print the corrected kinematics "

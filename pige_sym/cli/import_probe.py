@@ -12,6 +12,7 @@ report, history, compare, plan --grade.
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from pige_sym.cli._probe import add_sphere_arguments, probe_pivot, probe_tool, sphere_radii
 from pige_sym.constants import DEFAULT_MACHINE
@@ -19,25 +20,81 @@ from pige_sym.files import check_output
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pige_sym.cli._setup import finite_option
-    from pige_sym.kernels import load_kernels
-    from pige_sym.measurements.probe_import import ProbeImport, import_probe_log
+    from pige_sym.measurements.probe_import import import_probe_log
     from pige_sym.measurements.rtest_writer import write_measurement
 
-    kern = load_kernels(args.machine)
-    radius, stylus = sphere_radii(args)
-    r_eff = None if args.radius is None else finite_option(args.radius, "--radius", positive=True)
-    offset = finite_option(args.stylus_offset, "--stylus-offset")
-    out = check_output(args.out, force=args.force, inputs=[args.log], what="--out")
-    tool = probe_tool(args.tool)
-    spec = ProbeImport(kern.MACHINE_CODE, probe_pivot(args.pivot), radius, stylus, r_eff, offset, args.units,
-                       moves=args.moves, tool_mm=tool)
+    spec = _spec(args)
+    out = check_output(args.out, force=args.force, inputs=[x for x in (args.log, args.program) if x], what="--out")
     m = import_probe_log(args.log, args.format, spec)
     write_measurement(m, out)
     print(f"wrote {out}: {m.n_rows} poses, {int(m.optional['n_samples'].sum())} contacts; R_eff "
           f"{m.metadata['r_eff_mm']} mm, contact sigma {float(m.metadata['contact_sigma_um']):.3f} um; largest "
           f"deviation {abs(m.deviation_um).max():.2f} um")
     return 0
+
+
+def _spec(args: argparse.Namespace) -> Any:
+    """The import's :class:`~pige_sym.measurements.probe_import.ProbeImport`: the options, or the program's header
+    checked against them (``--program``)."""
+    from pige_sym.cli._probe import probe_pivots
+    from pige_sym.cli._setup import axis_sense_option, finite_option
+    from pige_sym.kernels import load_kernels
+    from pige_sym.measurements.probe_import import ProbeImport
+
+    if args.program:
+        return _spec_from_program(args)
+    kern = load_kernels(args.machine or DEFAULT_MACHINE)
+    axes = tuple(kern.ROTARY_AXES)
+    radius, stylus = sphere_radii(args)
+    r_eff = None if args.radius is None else finite_option(args.radius, "--radius", positive=True)
+    per_axis = probe_pivots(args.pivot, axes)
+    pivots = None if per_axis is None else {a: (v[0], v[1], v[2]) for a, v in per_axis.items()}
+    return ProbeImport(kern.MACHINE_CODE, (0.0, 0.0, 0.0) if pivots else probe_pivot(args.pivot), radius, stylus,
+                       r_eff, finite_option(args.stylus_offset, "--stylus-offset"), args.units, moves=args.moves,
+                       pivots_mm=pivots, axis_sense=axis_sense_option(args, axes) or {},
+                       kinematics=args.kinematics or "identity", tool_mm=probe_tool(args.tool))
+
+
+def _spec_from_program(args: argparse.Namespace) -> Any:
+    """What the probing program's header states; every option given must agree with it."""
+    from pige_sym.cli._setup import axis_sense_option, finite_option
+    from pige_sym.errors import InputError
+    from pige_sym.measurements.axis_sense import reconcile
+    from pige_sym.measurements.probe_import import ProbeImport
+    from pige_sym.nc.probe_header import header_setup
+    from pige_sym.nc.program_file import read_program
+    from pige_sym.nc.program_header import read_header
+
+    text = read_program(args.program)
+    h = header_setup(text, args.program)
+    axes = tuple(h.pivots_mm)
+    given = {"--machine": (args.machine, h.machine), "--format": (args.format, h.dialect),
+             "--kinematics": (args.kinematics, h.controller.kinematics),
+             "--sphere-radius": (args.sphere_radius, h.sphere_radius_mm),
+             "--stylus-radius": (args.stylus_radius, h.stylus_radius_mm)}
+    for flag, (value, stated) in given.items():
+        if value is not None and not _same(value, stated, flag):
+            raise InputError(f"{flag} {value}: the program {args.program} states {stated}; leave the option out "
+                             "(the program's header gives it) or import the log of the right program")
+    if args.pivot:
+        raise InputError(f"--pivot: the program {args.program} states the pivots; leave --pivot out")
+    sense = reconcile(h.axis_sense, axis_sense_option(args, axes), args.program, axes)
+    r_eff = None if args.radius is None else finite_option(args.radius, "--radius", positive=True)
+    pivots = {a: (float(v[0]), float(v[1]), float(v[2])) for a, v in h.pivots_mm.items()}
+    return ProbeImport(h.machine, (0.0, 0.0, 0.0), h.sphere_radius_mm, h.stylus_radius_mm, r_eff,
+                       finite_option(args.stylus_offset, "--stylus-offset"), args.units, moves=args.moves,
+                       pivots_mm=pivots, axis_sense=sense, kinematics=h.controller.kinematics,
+                       program=read_header(text, args.program), tool_mm=probe_tool(args.tool))
+
+
+def _same(value: object, stated: object, flag: str) -> bool:
+    if flag == "--machine":
+        from pige_sym.kernels import load_kernels
+
+        return bool(load_kernels(str(value)).MACHINE_CODE == stated)
+    if isinstance(stated, float):
+        return abs(float(value) - stated) <= 1e-6 * max(1.0, abs(stated))  # type: ignore[arg-type]
+    return value == stated
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -59,9 +116,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("log", help="probe log (LinuxCNC PROBEOPEN file, or the log a pige probing program wrote)")
     p.add_argument("--format", choices=PROBE_FORMATS, required=True, help="the controller that wrote the log")
-    p.add_argument("--machine", default=DEFAULT_MACHINE, help="ISO 10791 machine code (default %(default)s)")
+    p.add_argument("--program", help="the probing program that wrote the log: its header gives the machine, axis "
+                   "sense, pivots, radii and kinematics (options given must agree)")
+    p.add_argument("--machine", help=f"ISO 10791 machine code (default {DEFAULT_MACHINE})")
     p.add_argument("--pivot", action="append", metavar="x,y,z",
-                   help="nominal intersection of the rotary axis lines in the log's coordinates [mm] (default 0,0,0)")
+                   help="nominal intersection of the rotary axis lines in the log's coordinates [mm] (default "
+                        "0,0,0), or AXIS=x,y,z once per rotary axis")
+    p.add_argument("--axis-sense", metavar="AXIS=-1,...", help="rotary axes the controller commands in the reverse "
+                   "of CONVENTIONS' sense (e.g. A=-1,C=-1 for LinuxCNC 2.9's trt kinematics)")
+    p.add_argument("--kinematics", choices=("identity", "tcp"), help="the kinematics the log was probed in "
+                   "(tcp: work coordinates, mapped back through --pivot and --axis-sense; default identity)")
     add_sphere_arguments(p)
     p.add_argument("--tool", metavar="x,y,z",
                    help="head and mixed machines: the stylus centre from the last tool-side pivot at the reference "

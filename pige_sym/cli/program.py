@@ -22,7 +22,7 @@ import argparse
 
 from pige_sym.cli._ballbar import add_ballbar_arguments
 from pige_sym.cli._probe import INSTRUMENT_CHOICES, add_probe_program_arguments
-from pige_sym.cli._setup import add_setup_arguments, setup_geometry, trajectory_options
+from pige_sym.cli._setup import add_setup_arguments, axis_sense_option, setup_geometry, trajectory_options
 from pige_sym.constants import DEFAULT_DWELL_S
 from pige_sym.files import atomic_write_text, check_output
 
@@ -36,7 +36,7 @@ def _run_probe(args: argparse.Namespace) -> int:
     from pige_sym.nc.probe_render import heidenhain_format_file, render_probe_program
 
     kern = load_kernels(args.machine)
-    setup = probe_setup(args, kern.MACHINE_CODE)
+    setup = probe_setup(args, kern.MACHINE_CODE, dialect=args.dialect)
     traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
     plan = plan_probing(setup, traj.angles_deg, traj.description)
     text = render_probe_program(plan, args.dialect)
@@ -53,7 +53,8 @@ def _run_probe(args: argparse.Namespace) -> int:
           + (f", format file {fmt}" if fmt is not None else ""))
     print(f"read back: rapid moves at least {check.min_rapid_clearance_mm:.2f} mm from the sphere, rotary moves "
           f"{check.min_rotary_clearance_mm:.1f} mm above it, every probing move {check.min_overtravel_mm:.2f} mm past "
-          f"its surface; safe Z {plan.safe_z_mm:.3f} mm")
+          f"its surface; safe Z {plan.safe_z_mm:.3f} mm; the sphere confirmed by {check.confirmations} contacts "
+          f"within {setup.controller.window_mm:g} mm before the log opens")
     return 0
 
 
@@ -81,6 +82,7 @@ def _run_ballbar(args: argparse.Namespace) -> int:
     out = check_output(args.out, force=args.force, what="--out")
     text = make_rtest_program(setup.angles_deg, np.tile(tool_point, (n, 1)), tuple(kern.ROTARY_AXES), rtcp=True,
                               dwell_s=args.dwell, feed=args.feed, dialect=args.dialect,
+                              axis_sense=axis_sense_option(args, tuple(kern.ROTARY_AXES)),
                               title=f"ballbar {setup.label}, {kern.MACHINE_CODE}, table ball "
                               f"{', '.join(f'{x:g}' for x in setup.table_ball_mm)} mm, tool ball "
                               f"{', '.join(f'{x:g}' for x in tool_point)} mm "
@@ -111,14 +113,16 @@ def _run(args: argparse.Namespace) -> int:
     kern = load_kernels(args.machine)
     ball, pivots, tool = setup_geometry(args)
     program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=ball, pivots_mm=pivots, tool_mm=tool,
-                                dwell_s=args.dwell, **trajectory_options(args))
+                                dwell_s=args.dwell, axis_sense=axis_sense_option(args, tuple(kern.ROTARY_AXES)),
+                                **trajectory_options(args))
     if args.rtcp:
         xyz = np.tile(program.ball_mm, (program.n_poses, 1))
     else:
         xyz = program.linear_mm()
     text = make_rtest_program(program.angles_deg, xyz, tuple(kern.ROTARY_AXES), rtcp=args.rtcp, dwell_s=args.dwell,
                               feed=args.feed, title=f"R-test {program.description}, {kern.MACHINE_CODE}, "
-                              f"ball {', '.join(f'{x:g}' for x in program.ball_mm)} mm", dialect=args.dialect)
+                              f"ball {', '.join(f'{x:g}' for x in program.ball_mm)} mm", dialect=args.dialect,
+                              axis_sense=program.axis_sense)
     atomic_write_text(out, text)
     print(f"wrote {out}: {program.n_poses} poses ({program.description}), {'TRAORI' if args.rtcp else 'TRAFOOF'}, "
           f"{args.dwell:g} s dwell per pose, {args.dialect}")

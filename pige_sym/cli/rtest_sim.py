@@ -11,6 +11,7 @@ from typing import Any
 
 from pige_sym.cli._setup import (
     add_setup_arguments,
+    axis_sense_option,
     finite_option,
     pige_values,
     setup_geometry,
@@ -39,7 +40,8 @@ def _run(args: argparse.Namespace) -> int:
     ball, pivots, tool = setup_geometry(args)
     program = load_test_program(kern.MACHINE_CODE, args.trajectory, ball_mm=ball, pivots_mm=pivots, tool_mm=tool,
                                 move_s=finite_option(args.move, "--move", minimum=0.0),
-                                dwell_s=finite_option(args.dwell, "--dwell", positive=True), **trajectory_options(args))
+                                dwell_s=finite_option(args.dwell, "--dwell", positive=True),
+                                axis_sense=axis_sense_option(args, tuple(kern.ROTARY_AXES)), **trajectory_options(args))
     seed = args.seed if args.seed is not None else secrets.randbits(31)
     cfg = DeviceConfig(
         program=program, pige=pige_values(args.pige, kern.MACHINE_CODE, seed),

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import argparse
 import os
+from typing import Any
 
 from pige_sym.cli._ballbar import add_ballbar_arguments
 from pige_sym.cli._probe import INSTRUMENT_CHOICES, add_probe_program_arguments
 from pige_sym.cli._setup import (
     add_setup_arguments,
+    axis_sense_option,
     finite_option,
     pige_values,
     setup_geometry,
@@ -37,11 +39,12 @@ def _run_probe(args: argparse.Namespace) -> int:
     from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
 
     kern = load_kernels(args.machine)
-    setup = probe_setup(args, kern.MACHINE_CODE)
+    setup = probe_setup(args, kern.MACHINE_CODE, dialect=args.dialect, controller_required=False)
     for name in ("noise", "pretravel", "lobing", "vertical_pretravel"):
         finite_option(getattr(args, name), "--" + name.replace("_", "-"), minimum=0.0 if name == "noise" else None)
     if args.program:
         text = read_program(args.program)
+        setup = _stated(setup, args, text)
     else:
         traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
         text = render_probe_program(plan_probing(setup, traj.angles_deg, traj.description), args.dialect)
@@ -67,6 +70,21 @@ def _run_probe(args: argparse.Namespace) -> int:
     return 0
 
 
+def _stated(setup: Any, args: argparse.Namespace, text: str) -> Any:
+    """The set-up with what the program's header states where no option says it (the read-back then checks
+    that every option given agrees)."""
+    import dataclasses
+
+    from pige_sym.nc.probe_header import header_setup
+
+    h = header_setup(text, args.program)
+    given = any(getattr(args, k) is not None for k in ("kinematics", "rtcp_off", "rtcp_on", "stylus_tool",
+                                                        "stylus_length"))
+    return dataclasses.replace(setup, controller=setup.controller if given else h.controller,
+                               axis_sense=setup.axis_sense if args.axis_sense is not None else h.axis_sense,
+                               pivots_mm=setup.pivots_mm if args.pivot else h.pivots_mm)
+
+
 def _run_ballbar(args: argparse.Namespace) -> int:
     from pige_sym.cli._ballbar import ballbar_setup_of
     from pige_sym.kernels import load_kernels
@@ -85,11 +103,13 @@ def _run_ballbar(args: argparse.Namespace) -> int:
                               what="truth sidecar")
     run, outlier_rows = simulate_ballbar_with_outliers(kern.MACHINE_CODE, setup, pige=pige, noise_um=args.noise,
                                                        seed=args.seed, zero=args.zero, effects=effects)
+    run.axis_sense = axis_sense_option(args, tuple(kern.ROTARY_AXES)) or {}
     write_ballbar(run, out)
     truth = {"machine": kern.MACHINE_CODE, "instrument": "ballbar", "setup": setup.label, "pige": pige,
              "effects": [e.to_dict() for e in effects], "outlier_rows": outlier_rows,
              "noise_um": args.noise, "seed": args.seed, "zero": args.zero,
-             "model": "exact |T - P| - L0; effects first order at the tool ball, projected on the bar"}
+             "model": "exact |T - P| - L0; effects first order at the tool ball, projected on the bar",
+             **({"axis_sense": run.axis_sense} if run.axis_sense else {})}
     atomic_write_text(truth_path, to_json(truth) + "\n")
     print(f"wrote {out} ({run.n_rows} rows, {setup.label} setup, bar {run.length_mm:g} mm, zero {args.zero}) "
           f"and {truth_path}")
@@ -125,6 +145,7 @@ def _run(args: argparse.Namespace) -> int:
     result = simulate(
         kern.MACHINE_CODE, traj, pige=pige, ball_mm=ball, pivots_mm=pivots, tool_mm=tool, effects=effects,
         noise_um=args.noise, seed=args.seed, frame=args.frame,
+        axis_sense=axis_sense_option(args, tuple(kern.ROTARY_AXES)),
     )
     csv = write_measurement(result.measurement, out)
     truth = atomic_write_text(truth_path, to_json(result.truth) + "\n")

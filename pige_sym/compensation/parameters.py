@@ -2,7 +2,8 @@
 
 A parameter file is the JSON that ``pige identify --json`` (optionally with the accepted findings of
 ``pige diagnose --json``) writes: ``machine``, ``parameters`` (name → value [µm, µrad]), ``ball_mm``,
-``pivots_mm``, ``tool_mm``.  Angle extensions (``angular_error_<AXIS>``, ``backlash_<AXIS>``) become a
+``pivots_mm``, ``tool_mm`` and, where the controller commands an axis in the reverse sense,
+``axis_sense`` (CONVENTIONS §9).  Angle extensions (``angular_error_<AXIS>``, ``backlash_<AXIS>``) become a
 pose-dependent zero-position error :math:`E_{a0a}` (CONVENTIONS §3); the other findings are listed with
 the reason they are not compensated.
 """
@@ -87,6 +88,9 @@ class CompensationParameters:
         Names (and reasons) of what is not compensated.
     extensions : list of AngleExtension
         Accepted extensions that are compensated (module docstring).
+    axis_sense : dict of str to int
+        Axes the controller commands in the reverse of CONVENTIONS' sense (axis → −1, CONVENTIONS §9), as
+        the parameter file records it: NC angles and controller angle entries are written in that sense.
     """
 
     machine: str
@@ -97,6 +101,7 @@ class CompensationParameters:
     source: str
     ignored: list[str]
     extensions: list[AngleExtension] = field(default_factory=list)
+    axis_sense: dict[str, int] = field(default_factory=dict)
 
 
 def load_parameters(path: str | os.PathLike[str], machine: str | None = None, *,
@@ -144,7 +149,7 @@ def _parameters(doc: Any) -> CompensationParameters:
         raise FileFormatError(doc.path, None, why)
     pivots = {a: list(v) for a, v in doc.pivots_mm.items()}
     return CompensationParameters(kern.MACHINE_CODE, dict(doc.pige), dict(doc.units), tool, pivots, doc.path,
-                                  ignored, extensions)
+                                  ignored, extensions, dict(doc.axis_sense))
 
 
 def _extensions(data: dict[str, Any], path: str,

@@ -270,6 +270,7 @@ def _identification(setup: _Setup, model: Model, resid: np.ndarray) -> Identific
         outlier_rows=[], residuals_um=resid, ball_mm=[float(x) for x in m.ball_mm],
         pivots_mm={a: [float(x) for x in v] for a, v in m.pivots_mm.items()},
         tool_mm=None if m.tool_mm is None else [float(x) for x in m.tool_mm], vif=None,
+        axis_sense=dict(m.axis_sense),
     )
 
 

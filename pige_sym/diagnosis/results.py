@@ -162,7 +162,8 @@ class DiagnosisResult:
             "unidentifiable": final["unidentifiable"], "rank": final["rank"], "condition": final["condition"],
             "rms_um": final["rms_um"], "outlier_rows": self.outlier_rows, "method": "diagnosis",
             "ball_mm": final["ball_mm"], "pivots_mm": final["pivots_mm"], "tool_mm": final["tool_mm"],
-            "plots": self.plots, "clusters": self.clusters,
+            "plots": self.plots, "clusters": self.clusters, **({"axis_sense": final["axis_sense"]}
+                                                               if "axis_sense" in final else {}),
         }
 
     def verdict(self) -> str:

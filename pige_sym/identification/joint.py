@@ -32,6 +32,7 @@ from pige_sym.identification.problem import build_problem
 from pige_sym.identification.result import IdentificationResult, json_float
 from pige_sym.identification.spectrum import combination_text, observability, solve_scaled
 from pige_sym.kernels import load_kernels
+from pige_sym.measurements.axis_sense import describe_axis_sense
 from pige_sym.measurements.ballbar import BallbarRun, bar_directions
 from pige_sym.measurements.measurement import Measurement
 
@@ -159,7 +160,18 @@ def common_machine(items: Sequence[tuple[str, Measurement | BallbarRun]]) -> str
     machines = {load_kernels(x.machine).MACHINE_CODE for _, x in items}
     if len(machines) != 1:
         raise InputError(f"the files measure different machines ({', '.join(sorted(machines))}): identify them apart")
+    common_axis_sense(items)
     return machines.pop()
+
+
+def common_axis_sense(items: Sequence[tuple[str, Measurement | BallbarRun]]) -> dict[str, int]:
+    """The commanded axis sense every file records (CONVENTIONS §9); refused when they differ."""
+    senses = {tuple(sorted(x.axis_sense.items())) for _, x in items}
+    if len(senses) > 1:
+        said = "; ".join(f"{lab}: {describe_axis_sense(x.axis_sense, x.rotary_axes)}" for lab, x in items)
+        raise InputError(f"the files record different commanded axis senses ({said}): one machine's controller "
+                         "commands its axes one way; re-make the files with the same --axis-sense")
+    return dict(senses.pop()) if senses else {}
 
 
 def file_blocks(items: Sequence[tuple[str, Measurement | BallbarRun]], with_zero: bool = False) -> list[Block]:
@@ -211,6 +223,7 @@ def _assemble(machine: str, names: list[str], all_names: list[str], blocks: list
         singular_values=sol.svals, observability=observability(sol.svals, n_obs), unidentifiable=combos,
         outlier_rows=[], residuals_um=np.zeros((0, 1)), stages=[], ball_mm=[float(x) for x in ball], pivots_mm={},
         tool_mm=None, vif=sol.vif[:p], unobserved=[all_names[j] for j in sol.unobserved if j < p],
+        axis_sense=common_axis_sense(items),
     )
     files, offset = [], p
     for b, s in zip(blocks, sigmas, strict=True):

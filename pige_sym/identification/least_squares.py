@@ -98,7 +98,7 @@ def _result(problem: Problem, sol: Solution, *, method: str, projection: str, lo
         residuals_um=resid, stages=stages or [], ball_mm=[float(x) for x in measurement.ball_mm],
         pivots_mm={k: [float(x) for x in v] for k, v in measurement.pivots_mm.items()},
         tool_mm=None if measurement.tool_mm is None else [float(x) for x in measurement.tool_mm],
-        vif=sol.vif, unobserved=[names[j] for j in sol.unobserved],
+        vif=sol.vif, unobserved=[names[j] for j in sol.unobserved], axis_sense=dict(measurement.axis_sense),
     )
 
 

@@ -92,6 +92,9 @@ class IdentificationResult:
     covariance : ndarray, shape=(P, P)
     residuals_um : ndarray, shape=(n, m)
         Observed minus model for every row (reference row included), projected.
+    axis_sense : dict of str to int
+        Axes the measurement's controller commands in the reverse of CONVENTIONS' sense (CONVENTIONS §9);
+        the values keep CONVENTIONS' meaning, the sense says how a later command turns them into commanded angles.
     """
 
     machine: str
@@ -122,6 +125,7 @@ class IdentificationResult:
     tool_mm: list[float] | None = None
     vif: np.ndarray | None = None
     unobserved: list[str] = field(default_factory=list)
+    axis_sense: dict[str, int] = field(default_factory=dict)
 
     def value(self, name: str) -> float:
         return float(self.values[self.parameters.index(name)])
@@ -159,6 +163,8 @@ class IdentificationResult:
             "pivots_mm": self.pivots_mm,
             "tool_mm": self.tool_mm,
         }
+        if self.axis_sense:
+            out["axis_sense"] = dict(self.axis_sense)
         if self.vif is not None:
             out["vif"] = {p: json_float(v) for p, v in zip(self.parameters, self.vif, strict=True)}
         if self.method == "double-differential":
@@ -181,6 +187,7 @@ class IdentificationResult:
             singular_values=np.array([]), observability={}, unidentifiable=list(d.get("unidentifiable", [])),
             outlier_rows=list(d.get("outlier_rows", [])), residuals_um=np.zeros((0, 0)),
             ball_mm=list(d.get("ball_mm", [])), pivots_mm=dict(d.get("pivots_mm", {})), tool_mm=d.get("tool_mm"),
+            axis_sense=dict(d.get("axis_sense", {})),
         )
 
 

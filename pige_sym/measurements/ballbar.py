@@ -13,7 +13,8 @@ pose, machine frame, three numbers), ``offset_mm`` (tool ball minus table ball a
 its length is the nominal bar length ``L0``, 10–1000 mm), ``zero`` (``relative``: ``dL_um`` is the change of
 length since the first row, which must be 0, and carries an unknown constant; ``absolute``: the bar was
 zeroed on its calibrator, ``dL_um = |T − P| − L0``).  Optional: ``setup`` (``radial``, ``tangential``,
-``axial``), ``axis``, ``source``, ``trajectory``; any other key is kept.  During the test the controller
+``axial``), ``axis``, ``source``, ``trajectory``, ``axis_sense`` (commanded senses, CONVENTIONS §9: the angle
+columns hold θ_cmd, read as θ = σ·θ_cmd); any other key is kept.  During the test the controller
 (RTCP on) keeps the nominal tool ball on the nominal position of the table point
 ``table_ball + offset``.  ``t_s`` never decreases; ``|dL_um|`` is at most 1e5.  Every refusal is a
 :class:`~pige_sym.errors.FileFormatError` naming the file and the 1-based line.
@@ -30,6 +31,8 @@ import numpy as np
 from pige_sym.codegen.machine_code import parse_machine_code
 from pige_sym.errors import FileFormatError, PigeError
 from pige_sym.files import atomic_write_text, open_regular_file
+from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
+from pige_sym.measurements.axis_sense import format_axis_sense, read_axis_sense, to_commanded, to_conventions
 from pige_sym.measurements.measurement import LIMITS
 from pige_sym.options import strict_float
 
@@ -54,6 +57,8 @@ class BallbarRun:
     dl_um : ndarray, shape=(n,) [µm]
     metadata : dict of str to str
     path : str
+    axis_sense : dict of str to int
+        Axes commanded in the reverse of CONVENTIONS' sense (``angles_deg`` are θ; the file holds σ·θ).
     """
 
     machine: str
@@ -66,6 +71,7 @@ class BallbarRun:
     dl_um: np.ndarray
     metadata: dict[str, str] = field(default_factory=dict)
     path: str = "<ballbar>"
+    axis_sense: dict[str, int] = field(default_factory=dict)
 
     @property
     def length_mm(self) -> float:
@@ -187,18 +193,22 @@ def read_ballbar(path: str | os.PathLike[str]) -> BallbarRun:
         raise FileFormatError(p, first + int(np.argmax(np.diff(data[:, 0]) < 0)) + 1, "t_s decreases")
     if meta["zero"] == "relative" and data[0, -1] != 0.0:
         raise FileFormatError(p, first, "zero: relative, but the first dL_um is not 0")
-    return BallbarRun(st.canonical, table_ball, offset, meta["zero"], data[:, 0], data[:, 1:-1], axes, data[:, -1],
-                      meta, p)
+    sense = read_axis_sense(meta.get(SENSE_KEY, ""), axes, p, where.get(SENSE_KEY))
+    return BallbarRun(st.canonical, table_ball, offset, meta["zero"], data[:, 0],
+                      to_conventions(data[:, 1:-1], sense, axes), axes, data[:, -1], meta, p, axis_sense=sense)
 
 
 def format_ballbar(run: BallbarRun) -> str:
     """The file text of a run (numbers with ``repr``: a write → read round trip is lossless)."""
     meta = {"machine": run.machine, "table_ball_mm": ", ".join(repr(float(x)) for x in run.table_ball_mm),
             "offset_mm": ", ".join(repr(float(x)) for x in run.offset_mm), "zero": run.zero}
-    meta |= {k: v for k, v in run.metadata.items() if k not in meta}
+    meta |= {k: v for k, v in run.metadata.items() if k not in meta and k != SENSE_KEY}
+    if format_axis_sense(run.axis_sense, run.rotary_axes):
+        meta[SENSE_KEY] = format_axis_sense(run.axis_sense, run.rotary_axes)
     lines = [FORMAT_LINE, *(f"# {k}: {v}" for k, v in meta.items()),
              ",".join(["t_s", *(f"{a}_deg" for a in run.rotary_axes), "dL_um"])]
-    for t, ang, dl in zip(run.t_s, run.angles_deg, run.dl_um, strict=True):
+    commanded = to_commanded(run.angles_deg, run.axis_sense, run.rotary_axes)
+    for t, ang, dl in zip(run.t_s, commanded, run.dl_um, strict=True):
         lines.append(",".join(repr(float(x)) for x in (t, *ang, dl)))
     return "\n".join(lines) + "\n"
 

@@ -57,7 +57,9 @@ class Measurement:
     t_s : ndarray, shape=(n,) [s]
         Time since the reference.
     angles_deg : ndarray, shape=(n, k) [deg]
-        Commanded rotary angles, columns in ``rotary_axes`` order.
+        Rotary angles θ in CONVENTIONS' sense, columns in ``rotary_axes`` order.  A file holds the
+        commanded angles θ_cmd = σ·θ (``axis_sense``): the reader and the writer convert
+        (:mod:`~pige_sym.measurements.axis_sense`).
     deviation_um : ndarray, shape=(n, 3) [µm]
         Ball minus nest in ``frame``.
     rotary_axes : tuple of str
@@ -75,6 +77,8 @@ class Measurement:
     metadata : dict of str to str
         Every metadata entry as text, in file order (known and unknown keys).
     path : str or None
+    axis_sense : dict of str to int
+        The axes the controller commands in the reverse of CONVENTIONS' sense (axis → −1; CONVENTIONS §9).
     """
 
     machine: str
@@ -92,6 +96,7 @@ class Measurement:
     extra_columns: dict[str, list[str]] = field(default_factory=dict)
     metadata: dict[str, str] = field(default_factory=dict)
     path: str | None = None
+    axis_sense: dict[str, int] = field(default_factory=dict)
 
     @property
     def n_rows(self) -> int:

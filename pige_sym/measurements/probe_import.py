@@ -31,13 +31,14 @@ direction-dependent trigger radius (``trig_…``, :mod:`~pige_sym.measurements.p
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.kernels import load_kernels
+from pige_sym.measurements.axis_sense import to_conventions
 from pige_sym.measurements.measurement import Measurement, missing_tool
 from pige_sym.measurements.probe_log import ProbeLog, group_poses, read_probe_log
 from pige_sym.measurements.probe_trigger import sensitivity_columns, trigger_sensitivities
@@ -48,6 +49,8 @@ COV_COLUMNS = ("cov_xx_um2", "cov_xy_um2", "cov_xz_um2", "cov_yy_um2", "cov_yz_u
 CENTRE_COLUMNS = ("cx_mm", "cy_mm", "cz_mm")
 OUTLIER_SIGMAS = 8.0
 OUTLIER_FLOOR_UM = 20.0
+#: Header items of the probing program kept in the measurement's metadata (as ``program_<key>``).
+PROGRAM_KEYS = ("dialect", "kinematics_codes", "stylus_tool", "stylus_length_mm", "work_offset", "window_mm")
 
 
 @dataclass(frozen=True)
@@ -72,6 +75,16 @@ class ProbeImport:
         How the contacts were probed: along machine axes (pige's programs; the trigger scatter along the
         move weighs less on an inclined surface) or along the surface normal
         (:func:`~pige_sym.measurements.sphere_fit.fit_centres`).
+    pivots_mm : dict of str to (3,) [mm] or None
+        Table machines: the nominal pivot of each rotary axis (lines that need not meet, as in LinuxCNC's trt
+        configurations); None: every line through ``pivot_mm``.
+    axis_sense : dict of str to int
+        Axes the controller commands in the reverse of CONVENTIONS' sense: the log's angles are θ_cmd.
+    kinematics : {"identity", "tcp"}
+        The controller's kinematics during probing: ``identity`` logs the linear axes; ``tcp`` logs work
+        coordinates, mapped back through the nominal kinematics the controller held (pivots, ``axis_sense``).
+    program : dict of str to str
+        What the probing program's header stated (kept in the measurement's metadata).
     """
 
     machine: str
@@ -83,6 +96,16 @@ class ProbeImport:
     units: str = "mm"
     moves: str = "axes"
     tool_mm: tuple[float, float, float] | None = None
+    pivots_mm: dict[str, tuple[float, float, float]] | None = None
+    axis_sense: dict[str, int] = field(default_factory=dict)
+    kinematics: str = "identity"
+    program: dict[str, str] = field(default_factory=dict)
+
+    def pivots(self) -> dict[str, np.ndarray] | np.ndarray:
+        """Per-axis pivots (a dict) or the one intersection (an array) [mm]."""
+        if self.pivots_mm is None:
+            return np.asarray(self.pivot_mm, dtype=float)
+        return {a: np.asarray(v, dtype=float) for a, v in self.pivots_mm.items()}
 
 
 def _pose_points(log: ProbeLog, groups: list[np.ndarray], offset_mm: float, head_mm: np.ndarray) -> list[np.ndarray]:
@@ -144,23 +167,39 @@ def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
     """The measurement of a probe log (module docstring)."""
     kern = load_kernels(spec.machine)
     check_tool(kern, spec.tool_mm)
+    if (spec.pivots_mm is not None or spec.kinematics == "tcp") and kern.TOOL_ROTARY:
+        raise InputError(f"{kern.MACHINE_CODE}: a pivot per axis and logs in TCP kinematics are read for table "
+                         "machines; give one --pivot x,y,z and a log probed with RTCP off")
     groups = group_poses(log)
-    angles = np.array([log.angles_deg[g[0]] for g in groups])
+    angles = to_conventions(np.array([log.angles_deg[g[0]] for g in groups]), spec.axis_sense, kern.ROTARY_AXES)
     if np.abs(angles[0]).max() > 1e-9:
         raise FileFormatError(log.path, int(log.lines[0]), "the first pose must be the reference pose (every rotary "
                                                             "angle 0): c_nom is the motion of its centre")
     head, frames = head_offsets(kern, angles, spec.tool_mm)
     pts = _pose_points(log, groups, spec.stylus_offset_mm, head)
+    if spec.kinematics == "tcp":
+        pts = [_machine_points(kern, p, theta, spec) for p, theta in zip(pts, angles, strict=True)]
     fit = _fit(log, groups, pts, spec.radius_mm, spec.moves, frames)
-    pivot = np.asarray(spec.pivot_mm, dtype=float)
-    rot = kern.workpiece_rotation(angles)
-    nominal = pivot + np.einsum("nij,j->ni", rot, fit.centres_mm[0] - pivot)
+    nominal = _nominal_centres(kern, angles, fit.centres_mm[0], spec.pivots())
     deviation = -(fit.centres_mm - nominal) * 1e3
     deviation[0] = 0.0
     m = _measurement(kern, log, spec, groups, angles, fit, deviation)
     m.extra_columns |= sensitivity_columns(trigger_sensitivities(pts, fit.centres_mm, fit.radius_fitted, spec.moves,
                                                                  frames))
     return m
+
+
+def _nominal_centres(kern: Any, angles: np.ndarray, centre0: np.ndarray,
+                     pivots: dict[str, np.ndarray] | np.ndarray) -> np.ndarray:
+    """``c_nom(θ)``: the nominal motion of ``c(0)``, shape=(n, 3) [mm] (one pivot, or one per axis on a table)."""
+    if isinstance(pivots, dict):
+        return np.asarray(kern.linear_commands(angles, centre0, pivots, None))
+    return pivots + np.einsum("nij,j->ni", kern.workpiece_rotation(angles), centre0 - pivots)
+
+
+def _machine_points(kern: Any, work_mm: np.ndarray, theta: np.ndarray, spec: ProbeImport) -> np.ndarray:
+    """Contacts logged in TCP kinematics (work coordinates) as the controller's nominal machine positions [mm]."""
+    return np.array([_nominal_centres(kern, theta[None], p, spec.pivots())[0] for p in work_mm])
 
 
 def check_tool(kern: Any, tool_mm: Any) -> None:
@@ -186,15 +225,21 @@ def _measurement(kern: Any, log: ProbeLog, spec: ProbeImport, groups: list[np.nd
         "instrument": INSTRUMENT,
         "measurand": "d = -(c - c_nom): sphere centre c(theta) against the nominal motion of c(0) (CONVENTIONS 7)",
         "probe_log": os.path.basename(log.path), "probe_format": log.format,
-        "pivot_mm": ", ".join(repr(float(v)) for v in spec.pivot_mm),
+        **({"pivot_mm": ", ".join(repr(float(v)) for v in spec.pivot_mm)} if spec.pivots_mm is None else {}),
         "sphere_radius_mm": repr(spec.sphere_radius_mm), "stylus_radius_mm": repr(spec.stylus_radius_mm),
         "r_eff_mm": f"{float(fit.radius_mm)!r} ({'fitted' if fit.radius_fitted else 'given'})",
         "contact_sigma_um": repr(float(fit.sigma_um)), "probing_moves": spec.moves, "source": "pige import-probe",
+        "probe_kinematics": spec.kinematics,
+        **{f"program_{k}": v for k, v in spec.program.items() if k in PROGRAM_KEYS},
     }
     if spec.tool_mm is not None:
         meta["stylus_frame"] = f"turns with the head ({', '.join(kern.TOOL_ROTARY)}): probing moves read in it"
+    if spec.pivots_mm is None:
+        ball, pivots = fit.centres_mm[0] - np.asarray(spec.pivot_mm), {}
+    else:
+        ball, pivots = fit.centres_mm[0], {a: np.asarray(v, dtype=float) for a, v in spec.pivots_mm.items()}
     return Measurement(
-        machine=str(kern.MACHINE_CODE), ball_mm=fit.centres_mm[0] - np.asarray(spec.pivot_mm),
+        machine=str(kern.MACHINE_CODE), ball_mm=ball, pivots_mm=pivots, axis_sense=dict(spec.axis_sense),
         tool_mm=None if spec.tool_mm is None else np.asarray(spec.tool_mm, dtype=float),
         t_s=np.arange(n, dtype=float), angles_deg=angles, deviation_um=deviation, rotary_axes=log.rotary_axes,
         frame="machine", trajectory=f"sphere probing, {n} poses, {log.format} log",

@@ -13,7 +13,9 @@ Grammar::
 
 Required metadata: ``machine`` (ISO 10791 code) and ``ball_mm`` (three numbers).
 Optional: ``frame`` (``machine`` or ``table``), ``tool_mm`` (required with a tool-side rotary
-axis), ``pivot_<axis>_mm``, ``trajectory``, ``units``, ``source``; any other key is kept.  The first data row is
+axis), ``pivot_<axis>_mm``, ``trajectory``, ``units``, ``source``, ``axis_sense`` (the axes commanded
+in the reverse of CONVENTIONS' sense, ``A=-1, C=-1``: the angle columns hold θ_cmd and are read as
+θ = σ·θ_cmd, CONVENTIONS §9); any other key is kept.  The first data row is
 the reference pose (all angles 0, deviation 0); ``t_s`` never decreases.
 
 Numbers are ASCII decimals (``[+-]digits[.digits][e[+-]digits]``): ``1_000``,
@@ -42,6 +44,7 @@ import numpy as np
 from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
 from pige_sym.errors import FileFormatError, PigeError
 from pige_sym.files import open_regular_file
+from pige_sym.measurements.axis_sense import METADATA_KEY, read_axis_sense, to_conventions
 
 if TYPE_CHECKING:
     pass
@@ -236,6 +239,7 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
     if why:
         raise FileFormatError(p, meta_line["machine"], why)
     pivots = _read_pivots(p, h)
+    sense = read_axis_sense(meta.get(METADATA_KEY, ""), h.rotary, p, meta_line.get(METADATA_KEY))
     body.require_rows()
     angle_cols = [f"{a}_deg" for a in h.rotary]
     groups = {"t_s": body.gather(["t_s"]), "angles": body.gather(angle_cols),
@@ -249,7 +253,8 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
     col = {c: groups[g][:, i] for g, cs in names.items() for i, c in enumerate(cs)}
     _check_values(p, body.first_line, col, body.extras, angle_cols)
     return Measurement(
-        machine=meta["machine"], ball_mm=ball, t_s=groups["t_s"][:, 0], angles_deg=groups["angles"],
+        machine=meta["machine"], ball_mm=ball, t_s=groups["t_s"][:, 0],
+        angles_deg=to_conventions(groups["angles"], sense, h.rotary), axis_sense=sense,
         deviation_um=groups["deviation"], rotary_axes=h.rotary, frame=frame, tool_mm=tool, pivots_mm=pivots,
         trajectory=meta.get("trajectory"), linear_mm=groups.get("linear"),
         optional={c: groups[c][:, 0] for c in OPTIONAL_COLUMNS if c in groups},

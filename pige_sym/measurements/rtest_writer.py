@@ -16,6 +16,8 @@ import numpy as np
 
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.files import atomic_write_text
+from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
+from pige_sym.measurements.axis_sense import format_axis_sense, to_commanded
 
 if TYPE_CHECKING:
     pass
@@ -63,7 +65,10 @@ def metadata_for(m: Measurement) -> dict[str, str]:
         known[f"pivot_{ax}_mm"] = vec_text(f"pivot_{ax}_mm", pv)
     if m.trajectory is not None:
         known["trajectory"] = m.trajectory
-    is_known = {"machine", "ball_mm", "frame", "tool_mm", "trajectory"}
+    sense = format_axis_sense(m.axis_sense, m.rotary_axes)
+    if sense:
+        known[SENSE_KEY] = sense
+    is_known = {"machine", "ball_mm", "frame", "tool_mm", "trajectory", SENSE_KEY}
     out: dict[str, str] = {}
     for k, v in m.metadata.items():
         if k in known:
@@ -87,7 +92,8 @@ def header_text(m: Measurement) -> str:
 
 
 def row_text(m: Measurement, i: int) -> str:
-    vals = [format_number(m.t_s[i]), *(format_number(a) for a in m.angles_deg[i]),
+    commanded = to_commanded(m.angles_deg[i], m.axis_sense, m.rotary_axes)
+    vals = [format_number(m.t_s[i]), *(format_number(a) for a in commanded),
             *(format_number(d) for d in m.deviation_um[i])]
     if m.linear_mm is not None:
         vals += [format_number(x) for x in m.linear_mm[i]]
@@ -145,8 +151,10 @@ class MeasurementWriter:
         optional: dict[str, float] | None = None,
         extra: dict[str, str] | None = None,
     ) -> None:
-        """Append one row and flush it to disk."""
-        vals = [format_number(t_s), *(format_number(a) for a in angles_deg), *(format_number(d) for d in deviation_um)]
+        """Append one row and flush it to disk (``angles_deg`` θ in CONVENTIONS' sense: written as θ_cmd)."""
+        t = self.template
+        commanded = to_commanded(np.asarray(list(angles_deg), dtype=float), t.axis_sense, t.rotary_axes)
+        vals = [format_number(t_s), *(format_number(a) for a in commanded), *(format_number(d) for d in deviation_um)]
         if self.template.linear_mm is not None:
             if linear_mm is None:
                 raise InputError("this file has X_mm, Y_mm, Z_mm columns: give linear_mm")

@@ -242,6 +242,7 @@ class ParamsDocument:
     pivots_mm: dict[str, list[float]] | None = field(default=None, metadata={"length": 3,
                                                                               "max_abs": MAX_POSITION_MM})
     findings: list[Any] | None = None
+    axis_sense: dict[str, int] | None = None
 
     #: Keys ``pige identify/diagnose --json`` write that a parameter file does not use.
     IGNORED_KEYS: ClassVar[frozenset[str]] = frozenset({
@@ -272,6 +273,8 @@ class ParamsFile:
     pivots_mm : dict of str to tuple of 3 float [mm]
     findings : list
         ``findings`` of a diagnosis (unvalidated structure beyond strict JSON).
+    axis_sense : dict of str to int
+        Axes the measured controller commands in the reverse of CONVENTIONS' sense (axis → −1, CONVENTIONS §9).
     """
 
     path: str
@@ -283,6 +286,7 @@ class ParamsFile:
     tool_mm: tuple[float, float, float] | None
     pivots_mm: dict[str, tuple[float, float, float]]
     findings: list[Any]
+    axis_sense: dict[str, int] = field(default_factory=dict)
 
 
 def read_params_file(path: PathLike, *, machine: str | None = None, allow_missing: bool = False) -> ParamsFile:
@@ -335,6 +339,7 @@ def params_document(data: Any, path: PathLike, *, machine: str | None = None,
                               f"({', '.join(missing)}); pass --allow-missing to set them to 0")
     for k in missing:
         values[k] = 0.0
+    sense = _axis_sense(p, doc.axis_sense, kern.ROTARY_AXES)
     effects = {k: v for k, v in doc.pige.items() if "." in k}
     bad_effect = [k for k, v in effects.items() if v is None]
     if bad_effect:
@@ -344,7 +349,22 @@ def params_document(data: Any, path: PathLike, *, machine: str | None = None,
         set_to_zero=tuple(missing), units=dict(doc.units or kern.UNITS),
         tool_mm=None if doc.tool_mm is None else (doc.tool_mm[0], doc.tool_mm[1], doc.tool_mm[2]),
         pivots_mm={a: (v[0], v[1], v[2]) for a, v in (doc.pivots_mm or {}).items()}, findings=list(doc.findings or []),
+        axis_sense=sense,
     )
+
+
+def _axis_sense(path: str, given: dict[str, int] | None, rotary_axes: tuple[str, ...]) -> dict[str, int]:
+    """``axis_sense`` of a parameter file: rotary axes of the machine mapped to -1 or +1 (CONVENTIONS §9)."""
+    out: dict[str, int] = {}
+    for axis, sign in (given or {}).items():
+        if axis not in rotary_axes:
+            raise FileFormatError(path, None, f"axis_sense.{axis}: not a rotary axis of this machine "
+                                  f"(axes: {', '.join(rotary_axes)})")
+        if isinstance(sign, bool) or sign not in (-1, 1):
+            raise FileFormatError(path, None, f"axis_sense.{axis}: {sign!r}; the sense is -1 or 1")
+        if sign == -1:
+            out[axis] = -1
+    return out
 
 
 def _agreed_machine(path: str, in_file: str | None, given: str | None, parse: Any) -> str:

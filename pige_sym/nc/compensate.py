@@ -31,10 +31,13 @@ from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.constants import DEFAULT_MAX_CHANGE_DEG as DEFAULT_MAX_CHANGE_DEG
 from pige_sym.constants import DEFAULT_MAX_CHANGE_MM as DEFAULT_MAX_CHANGE_MM
 from pige_sym.errors import InputError
+from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
+from pige_sym.measurements.axis_sense import format_axis_sense, to_commanded, to_conventions
 from pige_sym.nc.detect import detect_dialect
 from pige_sym.nc.dialects import Dialect, get_dialect
 from pige_sym.nc.interpreter import Program, interpret
 from pige_sym.nc.lexer import LexError, tokenize
+from pige_sym.nc.program_header import program_axis_sense
 from pige_sym.nc.rewrite import Rewrite, header_position, rewrite_program
 from pige_sym.nc.state import Block
 from pige_sym.nc.verify import verify
@@ -187,12 +190,15 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
     if not (max_change_mm > 0 and max_change_deg > 0 and np.isfinite([max_change_mm, max_change_deg]).all()):
         raise InputError("--max-change: both limits must be positive finite numbers")
     kern = load_kernels(params.machine)
+    axes = tuple(kern.ROTARY_AXES)
+    program_axis_sense(text, axes, path, params.axis_sense)  # a pige program's header must agree
     d = with_rtcp_codes(get_dialect(dialect or detect_dialect(text, path)), rtcp_on, rtcp_off)
-    program = interpret(text, d, tuple(kern.ROTARY_AXES), path=path, pass_through=pass_through)
+    program = interpret(text, d, axes, path=path, pass_through=pass_through)
     chosen, passed = plan(program)
     poses = _compensated_poses(params, chosen, max_change_deg)
     _guard(chosen, poses, max_change_mm, max_change_deg, path, CompensationError)
-    new_poses = np.hstack([poses.new_xyz_mm, poses.new_angles_deg]).tolist() if chosen else []
+    new_commanded = to_commanded(poses.new_angles_deg, params.axis_sense, axes)
+    new_poses = np.hstack([poses.new_xyz_mm, new_commanded]).tolist() if chosen else []
     targets = dict(zip([b.line_no for b in chosen], map(tuple, new_poses), strict=True))
     rw = rewrite_program(program, targets, header=_header(params) if header else None)
     check = verify(program, rw.text, {c.line_in for c in rw.changed}, rw.header_lines, header_position(program),
@@ -244,6 +250,9 @@ def _arc_start_notes(program: Program, out: Program | None, header_lines: int) -
 
 def _header(params: Any) -> list[str]:
     head = [f"compensated by pige_sym for {params.machine}, parameters {params.source}"]
+    sense = format_axis_sense(params.axis_sense)
+    if sense:
+        head.append(f"pige {SENSE_KEY}: {sense}")
     for ext in params.extensions:
         opts = "".join(f" {k}={v:g}" for k, v in ext.spec.options.items())
         head.append(f"compensated extension: {ext.spec.id}{opts}: "
@@ -258,9 +267,9 @@ def _compensated_poses(params: Any, chosen: list[Block], max_change_deg: float) 
     from pige_sym.kernels import load_kernels
     from pige_sym.model.trajectories import approach_directions
 
-    k = len(load_kernels(params.machine).ROTARY_AXES)
-    after = np.array([b.after for b in chosen], dtype=float).reshape(-1, 3 + k)
-    angles, xyz = after[:, 3:], after[:, :3]
+    axes = tuple(load_kernels(params.machine).ROTARY_AXES)
+    after = np.array([b.after for b in chosen], dtype=float).reshape(-1, 3 + len(axes))
+    angles, xyz = to_conventions(after[:, 3:], params.axis_sense, axes), after[:, :3]
     rtcp = np.array([b.rtcp for b in chosen], dtype=bool)
     pivots = {a: np.asarray(v, dtype=float) for a, v in params.pivots_mm.items()} or None
     # directions of approach matter only to a compensated reversal error (backlash)
@@ -291,6 +300,7 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
     index = {b.line_no: i for i, b in enumerate(chosen)}
     rows = [index[c.line_in] for c in rw.changed]
     new = out_prog.after_array()[[c.line_out - 1 for c in rw.changed]]  # line numbers count from 1
+    new[:, 3:] = to_conventions(new[:, 3:], params.axis_sense, out_prog.rotary_axes)
     a, xyz, rtcp = poses.angles_deg[rows], poses.xyz_mm[rows], np.asarray(poses.rtcp, dtype=bool)[rows]
     from pige_sym.model.trajectories import approach_directions
 

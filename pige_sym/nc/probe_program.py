@@ -34,14 +34,18 @@ beside the program (:func:`heidenhain_format_file`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
+from pige_sym.nc.probe_safety import ProbeController
 
 PROBE_DIALECTS = ("linuxcnc", "fanuc", "siemens", "heidenhain")
+#: A nominal pivot: one intersection of the axis lines (3,) [mm], or one per axis.
+Pivots = np.ndarray | Mapping[str, np.ndarray]
 HEIDENHAIN_LOG = "TNC:\\PIGE\\PROBE.TXT"
 HEIDENHAIN_FORMAT = "TNC:\\PIGE\\PROBE.A"
 
@@ -73,6 +77,15 @@ class ProbeSetup:
     feed_mm_min, probe_feed_mm_min : float [mm/min]
     pattern : {"fixed", "alternate"}
         The same contact pattern at every pose, or the rings taken in turn (module docstring).
+    pivots_mm : dict of str to ndarray, shape=(3,) [mm], optional
+        Nominal pivot of each rotary axis, program coordinates (the lines of a LinuxCNC trt configuration do
+        not meet); None: every axis line through ``pivot_mm``.
+    axis_sense : dict of str to int
+        Axes the controller commands in the reverse of CONVENTIONS' sense (CONVENTIONS §9): the plan is in
+        θ, the program and its log hold θ_cmd = σ·θ.
+    controller : ProbeController
+        What the program sets and checks on the controller: kinematics, stylus tool, work offset and the
+        window of the confirming first contacts (:mod:`pige_sym.nc.probe_safety`).
     """
 
     machine: str
@@ -89,10 +102,20 @@ class ProbeSetup:
     feed_mm_min: float = 2000.0
     probe_feed_mm_min: float = 100.0
     pattern: str = "fixed"
+    pivots_mm: Mapping[str, np.ndarray] | None = None
+    axis_sense: Mapping[str, int] = field(default_factory=dict)
+    controller: ProbeController = field(default_factory=ProbeController)
 
     @property
     def r_eff_mm(self) -> float:
         return self.sphere_radius_mm + self.stylus_radius_mm
+
+    @property
+    def pivots(self) -> Pivots:
+        """The nominal pivots: per axis (``pivots_mm``) or the one intersection ``pivot_mm``."""
+        if self.pivots_mm is None:
+            return np.asarray(self.pivot_mm, dtype=float)
+        return {a: np.asarray(v, dtype=float) for a, v in self.pivots_mm.items()}
 
 
 @dataclass
@@ -133,11 +156,20 @@ class ProbePlan:
     description: str
 
 
-def nominal_centres(machine: str, angles_deg: np.ndarray, sphere_mm: np.ndarray, pivot_mm: np.ndarray) -> np.ndarray:
-    """Nominal sphere centre at each pose, ``pivot + R_w(θ)(sphere − pivot)``, shape=(n, 3) [mm]."""
+def nominal_centres(machine: str, angles_deg: np.ndarray, sphere_mm: np.ndarray, pivot_mm: Pivots) -> np.ndarray:
+    """Nominal sphere centre at each pose, shape=(n, 3) [mm].
+
+    ``pivot + R_w(θ)(sphere − pivot)`` for one pivot (an array); with a pivot per axis (a dict) each
+    workpiece-side axis turns the point about its own line, which is the kernels' RTCP command of a
+    tool point at the sphere (``linear_commands``, table machines).  ``angles_deg`` are θ (CONVENTIONS).
+    """
     kern = load_kernels(machine)
-    rot = kern.workpiece_rotation(np.atleast_2d(angles_deg))
-    return pivot_mm + np.einsum("nij,j->ni", rot, np.asarray(sphere_mm, dtype=float) - pivot_mm)
+    angles = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    sphere = np.asarray(sphere_mm, dtype=float)
+    if isinstance(pivot_mm, Mapping):
+        return np.asarray(kern.linear_commands(angles, sphere, dict(pivot_mm) or None, None))
+    rot = kern.workpiece_rotation(angles)
+    return pivot_mm + np.einsum("nij,j->ni", rot, sphere - pivot_mm)
 
 
 PATTERNS = ("fixed", "alternate")
@@ -201,7 +233,7 @@ def plan_probing(setup: ProbeSetup, angles_deg: np.ndarray, description: str = "
     if not (0 < setup.clearance_mm <= 50 and 0 < setup.overtravel_mm < setup.r_eff_mm):
         raise InputError("--clearance must be in (0, 50] mm and --overtravel in (0, R + r) mm")
     angles = np.atleast_2d(np.asarray(angles_deg, dtype=float))
-    centres = nominal_centres(setup.machine, angles, setup.sphere_mm, setup.pivot_mm)
+    centres = nominal_centres(setup.machine, angles, setup.sphere_mm, setup.pivots)
     stands = np.einsum("nij,j->ni", kern.workpiece_rotation(angles), np.array([0.0, 0.0, -1.0]))
     contacts = [_pose_contacts(setup, c, s, i) for i, (c, s) in enumerate(zip(centres, stands, strict=True))]
     for i, cs in enumerate(contacts):

@@ -9,11 +9,26 @@ decimals (0.1 µm).  The log line of every dialect but LinuxCNC is
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from pige_sym.errors import InputError
+from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
+from pige_sym.measurements.axis_sense import format_axis_sense, to_commanded
+from pige_sym.nc.probe_header import PROBE_FORMAT
 from pige_sym.nc.probe_program import HEIDENHAIN_FORMAT, HEIDENHAIN_LOG, PROBE_DIALECTS, Contact, ProbePlan
+from pige_sym.nc.probe_safety import (
+    Confirm,
+    confirm_lines,
+    confirmation_moves,
+    epilogue,
+    guard_lines,
+    heidenhain_error_block,
+    prologue,
+)
 from pige_sym.nc.program import format_number
+from pige_sym.nc.program_header import header_lines
 
 LINUXCNC_LOG = "pige_probe.txt"
 SIEMENS_LOG = "PIGE_PROBE"
@@ -36,25 +51,77 @@ def _rapid(words: str, dialect: str) -> str:
     return f"G0 {words}"
 
 
+def header_items(plan: ProbePlan, dialect: str) -> dict[str, str]:
+    """What the program states in its header (:mod:`pige_sym.nc.program_header`; read by ``import-probe``)."""
+    s = plan.setup
+    pivots = s.pivots
+    per_axis: dict[str, np.ndarray] = dict(pivots) if isinstance(pivots, Mapping) else \
+        {a: pivots for a in plan.rotary_axes}
+    items = {"format": PROBE_FORMAT, "machine": s.machine, "dialect": dialect}
+    sense = format_axis_sense(s.axis_sense, plan.rotary_axes)
+    if sense:
+        items[SENSE_KEY] = sense
+    items |= {f"pivot_{a}_mm": _vec(per_axis[a]) for a in plan.rotary_axes}
+    items |= {"sphere_mm": _vec(s.sphere_mm), "sphere_radius_mm": f"{s.sphere_radius_mm:g}",
+              "stylus_radius_mm": f"{s.stylus_radius_mm:g}"}
+    return items | s.controller.header_items()
+
+
+def _vec(v: np.ndarray) -> str:
+    return ", ".join(f"{float(x):.6g}" for x in v)
+
+
 def _header(plan: ProbePlan, dialect: str) -> list[str]:
     s = plan.setup
     title = (f"pige_sym sphere probing: {s.machine}, sphere R{s.sphere_radius_mm:g} at "
-             f"{', '.join(f'{v:g}' for v in s.sphere_mm)}, stylus r{s.stylus_radius_mm:g}, pivot "
-             f"{', '.join(f'{v:g}' for v in s.pivot_mm)}, {len(plan.angles_deg)} poses, {plan.description}")
-    rtcp = "RTCP off; tool length = stylus centre; coordinates = those of --sphere and --pivot"
+             f"{', '.join(f'{v:g}' for v in s.sphere_mm)}, stylus r{s.stylus_radius_mm:g}, "
+             f"{len(plan.angles_deg)} poses, {plan.description}")
+    ctrl = s.controller
+    state = (f"{ctrl.kinematics} kinematics; tool {ctrl.stylus_tool}, length {ctrl.stylus_length_mm:g} mm = "
+             f"stylus centre; coordinates in {ctrl.work_offset} = those of --sphere and --pivot")
+    stated = header_lines(header_items(plan, dialect), dialect)
+    pro = prologue(ctrl, dialect, plan.rotary_axes)
     if dialect == "linuxcnc":
         clean = title.replace("(", "[").replace(")", "]")
-        return [f"({clean})", f"({rtcp})", "G21 G90 G17 G40 G49 G80 G94",
-                f"(PROBEOPEN {LINUXCNC_LOG})"]
+        return [f"({clean})", f"({state})", *stated, "G21 G90 G17 G40 G49 G80 G94", *pro]
     if dialect == "fanuc":
         clean = title.replace("(", "[").replace(")", "]")
-        return ["%", "O1001", f"({clean})", f"({rtcp})",
-                "G21 G90 G17 G40 G49 G80 G94", "POPEN"]
+        return ["%", "O1001", f"({clean})", f"({state})", *stated, "G21 G90 G17 G40 G49 G80 G94",
+                f"G43 H{ctrl.stylus_tool}", *pro]
     if dialect == "siemens":
-        return ["DEF INT PIGE_ERR", f"; {title}", f"; machine: {s.machine}", f"; {rtcp}", "G90 G17 G71 G40",
-                "TRAFOOF"]
-    return ["0 BEGIN PGM PIGEPROBE MM", f"; {title}", f"; machine: {s.machine}", f"; {rtcp}",
-            f"; log: FN 16 with the format file {HEIDENHAIN_FORMAT}"]
+        return ["DEF INT PIGE_ERR", f"; {title}", f"; machine: {s.machine}", f"; {state}", *stated,
+                "G90 G17 G71 G40", "TRAFOOF", *pro]
+    return ["0 BEGIN PGM PIGEPROBE MM", f"; {title}", f"; machine: {s.machine}", f"; {state}", *stated,
+            f"; log: FN 16 with the format file {HEIDENHAIN_FORMAT}", *pro]
+
+
+def _log_open(dialect: str) -> list[str]:
+    return {"linuxcnc": [f"(PROBEOPEN {LINUXCNC_LOG})"], "fanuc": ["POPEN"]}.get(dialect, [])
+
+
+def _confirmation(plan: ProbePlan, dialect: str) -> list[str]:
+    """The reference-pose confirmation (:func:`~pige_sym.nc.probe_safety.confirmation_moves`), before the log."""
+    s = plan.setup
+    zero = np.zeros(len(plan.rotary_axes))
+    out = [_rapid(f"Z{_num(plan.safe_z_mm, dialect)}", dialect),
+           _rapid(" ".join(f"{a}{_num(v, dialect)}" for a, v in zip(plan.rotary_axes, zero, strict=True)), dialect)]
+    label = 910
+
+    def fmt(v: float) -> str:
+        return _num(v, dialect)
+
+    for move in confirmation_moves(plan.centres_mm[0], s.r_eff_mm, s.clearance_mm, s.controller.window_mm,
+                                   plan.safe_z_mm):
+        if isinstance(move, Confirm):
+            out += confirm_lines(move, dialect, fmt, s.probe_feed_mm_min, s.controller.window_mm, label)
+            out.append(_rapid(_xyz(move.start, dialect), dialect))
+            label += 2
+        elif move[0] == "guard":
+            out += guard_lines(move[1], dialect, fmt, label)
+            label += 1
+        else:
+            out.append(_rapid(_xyz(move[1], dialect), dialect))
+    return out
 
 
 def _log_line(dialect: str, pose: int, k: int, angles: str) -> list[str]:
@@ -87,17 +154,17 @@ def _probe(c: Contact, dialect: str, feed: float) -> list[str]:
 
 def _pose_lines(plan: ProbePlan, i: int, dialect: str) -> list[str]:
     s = plan.setup
-    rot = " ".join(f"{a}{_num(v, dialect)}" for a, v in zip(plan.rotary_axes, plan.angles_deg[i], strict=True))
+    commanded = to_commanded(plan.angles_deg[i], s.axis_sense, plan.rotary_axes)
+    rot = " ".join(f"{a}{_num(v, dialect)}" for a, v in zip(plan.rotary_axes, commanded, strict=True))
     out = [_rapid(f"Z{_num(plan.safe_z_mm, dialect)}", dialect), _rapid(rot, dialect)]
     if dialect == "fanuc":
-        out += [f"#101={i}"] + [f"#{103 + k}={_num(v, dialect)}" for k, v in enumerate(plan.angles_deg[i])]
+        out += [f"#101={i}"] + [f"#{103 + k}={_num(v, dialect)}" for k, v in enumerate(commanded)]
         angles = "*".join(f"{a}#{103 + k}[34]" for k, a in enumerate(plan.rotary_axes))
     elif dialect == "heidenhain":
-        out += [f"FN 0: Q1 = +{i}"] + [f"FN 0: Q{14 + k} = {_num(v, dialect)}"
-                                       for k, v in enumerate(plan.angles_deg[i])]
+        out += [f"FN 0: Q1 = +{i}"] + [f"FN 0: Q{14 + k} = {_num(v, dialect)}" for k, v in enumerate(commanded)]
         angles = ""
     else:
-        angles = " ".join(f"{a}{v:.6f}" for a, v in zip(plan.rotary_axes, plan.angles_deg[i], strict=True))
+        angles = " ".join(f"{a}{v:.6f}" for a, v in zip(plan.rotary_axes, commanded, strict=True))
     clear = _num(plan.clear_z_mm[i], dialect)
     for k, c in enumerate(plan.contacts[i]):
         if dialect == "fanuc":
@@ -115,18 +182,20 @@ def render_probe_program(plan: ProbePlan, dialect: str) -> str:
     """The probing program of a plan in one dialect (module docstring)."""
     if dialect not in PROBE_DIALECTS:
         raise InputError(f"--dialect {dialect!r}: use one of {', '.join(PROBE_DIALECTS)}")
-    lines = _header(plan, dialect)
+    plan.setup.controller.check(dialect)
+    lines = _header(plan, dialect) + _confirmation(plan, dialect) + _log_open(dialect)
     for i in range(len(plan.angles_deg)):
         lines += _pose_lines(plan, i, dialect)
     lines.append(_rapid(f"Z{_num(plan.safe_z_mm, dialect)}", dialect))
+    end = epilogue(plan.setup.controller, dialect)
     if dialect == "linuxcnc":
-        lines += ["(PROBECLOSE)", "M2"]
+        lines += ["(PROBECLOSE)", *end, "M2"]
     elif dialect == "fanuc":
         lines += ["PCLOS", "M30", "%"]
     elif dialect == "siemens":
         lines += ["M30"]
     else:
-        lines += ["END PGM PIGEPROBE MM"]
+        lines += [*heidenhain_error_block(), "END PGM PIGEPROBE MM"]
         start = int(lines[0].split()[0])
         lines = [lines[0]] + [f"{start + n} {ln}" for n, ln in enumerate(lines[1:], 1)]
     return "\n".join(lines) + "\n"

@@ -50,7 +50,8 @@ class TestProgram:
         Canonical machine code.
     rotary_axes : tuple of str
     angles_deg : ndarray, shape=(n, k) [deg]
-        Commanded rotary angles per pose; row 0 is the reference pose.
+        Rotary angles θ per pose (CONVENTIONS' sense; an NC program's commanded angles turned with its
+        ``axis_sense``); row 0 is the reference pose.
     dwell_s : ndarray, shape=(n,) [s]
     move_s : float [s]
         Move time before every pose but the first.
@@ -61,6 +62,8 @@ class TestProgram:
     tool_mm : ndarray, shape=(3,) [mm] or None
     lines : list of int or None
         NC line number of each pose (NC programs).
+    axis_sense : dict of str to int
+        Axes the controller commands in the reverse sense (CONVENTIONS §9).
     """
 
     __test__ = False  # not a pytest class
@@ -75,6 +78,7 @@ class TestProgram:
     pivots_mm: dict[str, np.ndarray] = field(default_factory=dict)
     tool_mm: np.ndarray | None = None
     lines: list[int] | None = None
+    axis_sense: dict[str, int] = field(default_factory=dict)
 
     @property
     def n_poses(self) -> int:
@@ -114,10 +118,17 @@ def _is_nc_file(path: str) -> bool:
     return not first.strip().endswith("_deg") and "_deg," not in first and "t_s," not in first
 
 
-def _nc_program(kern: Any, path: str, dwell_s: float) -> tuple[np.ndarray, np.ndarray, list[int]]:
+def _nc_program(kern: Any, path: str, dwell_s: float,
+                sense: dict[str, int] | None) -> tuple[np.ndarray, np.ndarray, list[int], dict[str, int]]:
+    from pige_sym.measurements.axis_sense import to_conventions
+    from pige_sym.nc.program_header import program_axis_sense
+
     text = Path(path).read_text(encoding="utf-8")
-    prog = parse_program(text, path=path, rotary_axes=tuple(kern.ROTARY_AXES))
-    angles, _, _, lines = poses_from_program(prog)
+    axes = tuple(kern.ROTARY_AXES)
+    recorded = program_axis_sense(text, axes, path, sense)
+    prog = parse_program(text, path=path, rotary_axes=axes)
+    commanded, _, _, lines = poses_from_program(prog)
+    angles = to_conventions(commanded, recorded, axes)
     if angles.shape[0] == 0:
         raise InputError(f"{path}: no measurement pose (a positioning block followed by G4 F<s> or M00)")
     blocks = {b.line_no: b for b in prog.blocks}
@@ -129,13 +140,13 @@ def _nc_program(kern: Any, path: str, dwell_s: float) -> tuple[np.ndarray, np.nd
         got = ", ".join(f"{a}={v:g}" for a, v in zip(kern.ROTARY_AXES, angles[0], strict=True))
         raise InputError(f"{path}:{lines[0]}: the first measurement pose must be the reference pose "
                          f"(all rotary axes at 0), got {got}")
-    return angles, np.array(dwell), lines
+    return angles, np.array(dwell), lines, recorded
 
 
 def load_test_program(machine: str, spec: str, *, ball_mm: Any = DEFAULT_BALL_MM,
                       pivots_mm: dict[str, Any] | None = None, tool_mm: Any = None,
                       move_s: float = DEFAULT_MOVE_S, dwell_s: float = DEFAULT_DWELL_S,
-                      **trajectory_options: Any) -> TestProgram:
+                      axis_sense: dict[str, int] | None = None, **trajectory_options: Any) -> TestProgram:
     """Test program from a trajectory name, an angle CSV or an NC program file.
 
     Parameters
@@ -147,6 +158,9 @@ def load_test_program(machine: str, spec: str, *, ball_mm: Any = DEFAULT_BALL_MM
         Set-up (CONVENTIONS §4).
     move_s, dwell_s : float [s]
         Schedule (module docstring).
+    axis_sense : dict of str to int, optional
+        ``--axis-sense``: an NC program's commanded angles are read with it (a program whose header records
+        another sense is refused); a trajectory's angles are θ and the sense goes to the files written.
     **trajectory_options
         Passed to :func:`~pige_sym.model.trajectories.make_trajectory` (``points``, ``turns`` …).
     """
@@ -165,8 +179,9 @@ def load_test_program(machine: str, spec: str, *, ball_mm: Any = DEFAULT_BALL_MM
     if why:
         raise InputError(why)
     lines = None
+    sense = {a: -1 for a in kern.ROTARY_AXES if (axis_sense or {}).get(a, 1) == -1}
     if spec not in NAMES and os.path.isfile(spec) and _is_nc_file(spec):
-        angles, dwell, lines = _nc_program(kern, spec, dwell_s)
+        angles, dwell, lines, sense = _nc_program(kern, spec, dwell_s, axis_sense)
         desc = f"nc {Path(spec).name} ({len(lines)} poses)"
     else:
         traj = make_trajectory(kern.MACHINE_CODE, spec, **trajectory_options)
@@ -174,4 +189,4 @@ def load_test_program(machine: str, spec: str, *, ball_mm: Any = DEFAULT_BALL_MM
         dwell = np.full(angles.shape[0], float(dwell_s))
         desc = traj.description
     return TestProgram(kern.MACHINE_CODE, tuple(kern.ROTARY_AXES), np.asarray(angles, dtype=float), dwell,
-                       float(move_s), desc, ball, pivots, tool, lines)
+                       float(move_s), desc, ball, pivots, tool, lines, sense)

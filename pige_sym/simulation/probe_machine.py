@@ -28,6 +28,7 @@ import numpy as np
 
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
+from pige_sym.measurements.axis_sense import to_conventions
 from pige_sym.model.trajectories import Trajectory
 from pige_sym.nc.probe_program import ProbeSetup, nominal_centres
 from pige_sym.nc.probe_readback import probe_operations
@@ -68,15 +69,22 @@ class ProbeMachine:
 
 
 def true_centres(machine: ProbeMachine, angles_deg: np.ndarray) -> np.ndarray:
-    """True sphere centre at each pose, shape=(n, 3) [mm] (module docstring); row 0 must be the reference."""
+    """True sphere centre at each pose, shape=(n, 3) [mm] (module docstring); row 0 must be the reference.
+
+    ``angles_deg`` are θ (CONVENTIONS' sense), shape=(n, k) [deg].
+    """
     s = machine.setup
     kern = load_kernels(s.machine)
     a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
     traj = Trajectory("probe", tuple(kern.ROTARY_AXES), a, np.arange(len(a), dtype=float), "probe poses")
-    ball = machine.centre0_mm - s.pivot_mm
-    sim = simulate(kern.MACHINE_CODE, traj, pige=machine.pige, ball_mm=ball, effects=machine.effects, noise_um=0.0,
-                   seed=0)
-    nominal = nominal_centres(s.machine, a, machine.centre0_mm, s.pivot_mm)
+    pivots = s.pivots
+    if isinstance(pivots, dict):
+        ball, per_axis = machine.centre0_mm, pivots
+    else:
+        ball, per_axis = machine.centre0_mm - pivots, None
+    sim = simulate(kern.MACHINE_CODE, traj, pige=machine.pige, ball_mm=ball, pivots_mm=per_axis,
+                   effects=machine.effects, noise_um=0.0, seed=0)
+    nominal = nominal_centres(s.machine, a, machine.centre0_mm, pivots)
     return nominal - sim.measurement.deviation_um * 1e-3
 
 
@@ -116,34 +124,100 @@ def _format_line(dialect: str, pose: int, k: int, xyz: np.ndarray, axes: tuple[s
 
 
 def run_probe_program(text: str, dialect: str, machine: ProbeMachine, *, path: str = "<program>") -> str:
-    """The log the program writes on the virtual machine (module docstring)."""
-    kern = load_kernels(machine.setup.machine)
-    axes = tuple(kern.ROTARY_AXES)
-    ops = probe_operations(text, dialect, path)
-    poses = [np.array([op.words.get(a, np.nan) for a in axes]) for op in ops
-             if op.kind == "rapid" and any(a in op.words for a in axes)]
-    angles = np.array(poses, dtype=float)
-    if len(angles) == 0 or np.abs(angles[0]).max() > 0:
-        raise InputError("a probing program starts at the reference pose (all rotary angles 0)")
-    centres = true_centres(machine, angles)
-    rng = np.random.default_rng(machine.seed)
-    pos = np.zeros(3)
-    pose, k = -1, 0
-    out: list[str] = []
-    contact = np.zeros(3)
+    """The log the program writes on the virtual machine (module docstring).
+
+    Guarded approaches and confirming contacts (:mod:`pige_sym.nc.probe_safety`) behave as on the
+    controller: a guarded approach that touches the true sphere, or a confirming contact outside its
+    window, stops the run with the program's reason (:class:`~pige_sym.errors.InputError`); neither is
+    logged.  The logged angles are the commanded ones; the sphere moves by θ = σ·θ_cmd.
+    """
+    axes = tuple(load_kernels(machine.setup.machine).ROTARY_AXES)
+    ops = probe_operations(text, dialect, path, axes)
+    run = _VirtualRun(machine, dialect, axes, _pose_centres(machine, ops, axes))
+    for op in ops:
+        run.step(op)
+    if not run.out:
+        raise InputError("the probing program logged no contact")
+    return "\n".join(run.out) + "\n"
+
+
+def _pose_centres(machine: ProbeMachine, ops: list[Any], axes: tuple[str, ...]) -> list[np.ndarray]:
+    """The true centre at every rotary positioning of the program, in order.
+
+    The logged poses are simulated together (their order is the time of the drift effects, as the import
+    counts it); a positioning without a logged contact (the confirmation at the reference pose) gets the
+    centre of its angles alone.
+    """
+    stops: list[tuple[np.ndarray, bool]] = []
+    commanded = np.zeros(len(axes))
     for op in ops:
         if op.kind == "rapid" and any(a in op.words for a in axes):
-            pose, k = pose + 1, 0
-            continue
-        new = np.array([op.words.get(a, pos[i]) for i, a in enumerate("XYZ")])
-        if op.kind == "probe":
-            move = (new - pos) / np.linalg.norm(new - pos)
-            stop = _touch(pos, new, centres[pose], _trigger_radius(machine, move), op.line)
-            contact = stop + move * rng.normal(0.0, machine.noise_um * 1e-3)
-            new = contact
-        elif op.kind == "log":
-            out.append(_format_line(dialect, pose, k, contact, axes, angles[pose]))
-            k += 1
-            continue
-        pos = new
-    return "\n".join(out) + "\n"
+            commanded = np.array([op.words.get(a, commanded[k]) for k, a in enumerate(axes)])
+            stops.append((to_conventions(commanded, machine.setup.axis_sense, axes), False))
+        elif op.kind == "log" and stops:
+            stops[-1] = (stops[-1][0], True)
+    logged = [theta for theta, has_log in stops if has_log]
+    if not logged or np.abs(logged[0]).max() > 0:
+        raise InputError("a probing program starts at the reference pose (all rotary angles 0)")
+    centres = iter(true_centres(machine, np.array(logged)))
+    zero = np.zeros((1, len(axes)))
+    return [next(centres) if has_log else true_centres(machine, np.vstack([zero, theta[None]]))[-1]
+            for theta, has_log in stops]
+
+
+class _VirtualRun:
+    """The axes, the true sphere and the log of one run of a probing program on the virtual machine."""
+
+    def __init__(self, machine: ProbeMachine, dialect: str, axes: tuple[str, ...], centres: list[np.ndarray]) -> None:
+        self.m, self.dialect, self.axes = machine, dialect, axes
+        self.rng = np.random.default_rng(machine.seed)
+        # the confirming contacts scatter too, from their own stream: the logged contacts' noise does not
+        # depend on whether the program confirms the sphere first
+        self.confirm_rng = np.random.default_rng(None if machine.seed is None else [machine.seed, 17])
+        self.pos = np.zeros(3)
+        self.commanded = np.zeros(len(axes))
+        self.centres = iter(centres)
+        self.centre = centres[0] if centres else np.full(3, np.nan)
+        self.pose, self.k, self.logged_pose = -1, 0, False
+        self.contact = np.zeros(3)
+        self.out: list[str] = []
+
+    def step(self, op: Any) -> None:
+        if op.kind == "rapid" and any(a in op.words for a in self.axes):
+            self.commanded = np.array([op.words.get(a, self.commanded[k]) for k, a in enumerate(self.axes)])
+            self.centre = next(self.centres)
+            self.logged_pose = False
+            return
+        new = np.array([op.words.get(a, self.pos[i]) for i, a in enumerate("XYZ")])
+        if op.kind == "log":
+            if not self.logged_pose:
+                self.pose, self.k, self.logged_pose = self.pose + 1, 0, True
+            self.out.append(_format_line(self.dialect, self.pose, self.k, self.contact, self.axes, self.commanded))
+            self.k += 1
+            return
+        if op.kind in ("probe", "confirm"):
+            move = (new - self.pos) / np.linalg.norm(new - self.pos)
+            stop = _touch(self.pos, new, self.centre, _trigger_radius(self.m, move), op.line)
+            rng = self.confirm_rng if op.kind == "confirm" else self.rng
+            self.contact = stop + move * rng.normal(0.0, self.m.noise_um * 1e-3)
+            if op.kind == "confirm":
+                self._window(op)
+            new = self.contact
+        elif op.kind == "guard" and _hits(self.pos, new, self.centre, self.m.setup.r_eff_mm):
+            raise InputError(f"program line {op.line}: contact during the guarded approach: the program stops "
+                             "(the sphere is not where the program expects it)")
+        self.pos = new
+
+    def _window(self, op: Any) -> None:
+        k = "XYZ".index(op.axis)
+        if abs(self.contact[k] - op.expected) > op.window:
+            raise InputError(f"program line {op.line}: the confirming contact is at {op.axis}{self.contact[k]:.4f}, "
+                             f"expected {op.expected:g} +- {op.window:g} mm: the program stops (check --sphere, "
+                             "--pivot, the work offset and the stylus length)")
+
+
+def _hits(a: np.ndarray, b: np.ndarray, centre: np.ndarray, radius: float) -> bool:
+    """Whether the segment a-b comes within ``radius`` of ``centre``."""
+    d = b - a
+    t = 0.0 if not d.any() else float(np.clip((centre - a) @ d / (d @ d), 0.0, 1.0))
+    return bool(np.linalg.norm(a + t * d - centre) < radius)

@@ -168,7 +168,7 @@ def add_effects(dev: np.ndarray, effects: list[EffectInstance], ctx: EffectConte
 def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | None = None,
              ball_mm: Any = DEFAULT_BALL_MM, pivots_mm: dict[str, Any] | None = None, tool_mm: Any = None,
              effects: list[EffectInstance] | None = None, noise_um: float = 0.25, seed: int | None = None,
-             frame: str = "machine") -> SimulationResult:
+             frame: str = "machine", axis_sense: dict[str, int] | None = None) -> SimulationResult:
     """Simulate an R-test measurement.
 
     Parameters
@@ -185,6 +185,9 @@ def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | N
         Standard deviation of the Gaussian sensor noise per component [µm].
     seed : int
     frame : {"machine", "table"}
+    axis_sense : dict of str to int, optional
+        Axes the controller commands in the reverse sense (CONVENTIONS §9): the trajectory's angles are θ,
+        the file written from the result holds θ_cmd = σ·θ and records the sense.
 
     Returns
     -------
@@ -213,7 +216,7 @@ def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | N
     m = Measurement(
         machine=kern.MACHINE_CODE, ball_mm=ball, t_s=trajectory.t_s.copy(), angles_deg=angles.copy(),
         deviation_um=dev, rotary_axes=tuple(kern.ROTARY_AXES), frame=frame, tool_mm=tool, pivots_mm=pivots,
-        trajectory=trajectory.description, linear_mm=linear, metadata=meta,
+        trajectory=trajectory.description, linear_mm=linear, metadata=meta, axis_sense=dict(axis_sense or {}),
     )
     truth = {
         "machine": kern.MACHINE_CODE,
@@ -228,5 +231,6 @@ def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | N
         "tool_mm": None if tool is None else tool.tolist(),
         "trajectory": trajectory.description,
         "frame": frame,
+        **({"axis_sense": dict(axis_sense)} if axis_sense else {}),
     }
     return SimulationResult(m, truth)

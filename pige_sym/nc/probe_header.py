@@ -1,0 +1,128 @@
+"""What a probing program's header states, read back: the set-up and controller state it was written for.
+
+A pige probing program (``pige format: pige-probe 1``, :mod:`pige_sym.nc.program_header`) states its
+machine, dialect, commanded axis sense, the nominal pivot of every rotary axis, the sphere and the radii,
+and the controller state (:class:`~pige_sym.nc.probe_safety.ProbeController`).  :func:`header_setup` turns
+that into the items a command needs (``import-probe --program``, ``simulate --program``) and
+:func:`header_agrees` refuses a program whose header disagrees with the options a command was given, so a
+program, its log and its import cannot be mixed up.  Numbers are compared to the header's six significant
+digits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from pige_sym.errors import InputError, NCProgramError
+from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
+from pige_sym.measurements.axis_sense import describe_axis_sense, parse_axis_sense
+from pige_sym.nc.probe_program import ProbeSetup
+from pige_sym.nc.probe_safety import ProbeController, controller_from_header
+from pige_sym.nc.program_header import read_header
+
+PROBE_FORMAT = "pige-probe 1"
+
+
+@dataclass(frozen=True)
+class HeaderSetup:
+    """The set-up a probing program states (module docstring).
+
+    Attributes
+    ----------
+    machine, dialect : str
+    axis_sense : dict of str to int
+    pivots_mm : dict of str to ndarray, shape=(3,) [mm]
+    sphere_mm : ndarray, shape=(3,) [mm]
+    sphere_radius_mm, stylus_radius_mm : float [mm]
+    controller : ProbeController
+    """
+
+    machine: str
+    dialect: str
+    axis_sense: dict[str, int]
+    pivots_mm: dict[str, np.ndarray]
+    sphere_mm: np.ndarray
+    sphere_radius_mm: float
+    stylus_radius_mm: float
+    controller: ProbeController
+
+
+def header_setup(text: str, path: str) -> HeaderSetup:
+    """The set-up a probing program's header states.
+
+    Raises
+    ------
+    NCProgramError
+        Not a pige probing program (no ``pige format: pige-probe 1``), or an item missing or malformed.
+    """
+    from pige_sym.kernels import load_kernels
+
+    items = read_header(text, path)
+    if items.get("format") != PROBE_FORMAT:
+        raise NCProgramError(path, None, f"not a pige probing program (no 'pige format: {PROBE_FORMAT}' header "
+                                         "line): the program must be the one pige program wrote")
+    try:
+        kern = load_kernels(items["machine"])
+        axes = tuple(kern.ROTARY_AXES)
+        pivots = {a: _vec(items[f"pivot_{a}_mm"]) for a in axes}
+        return HeaderSetup(kern.MACHINE_CODE, items["dialect"], parse_axis_sense(items.get(SENSE_KEY, ""), axes),
+                           pivots, _vec(items["sphere_mm"]), float(items["sphere_radius_mm"]),
+                           float(items["stylus_radius_mm"]), controller_from_header(items, path))
+    except (KeyError, ValueError, InputError) as exc:
+        raise NCProgramError(path, None, f"the probing program's header is incomplete or malformed ({exc}): write "
+                                         "it again with pige program") from None
+
+
+def _vec(text: str) -> np.ndarray:
+    v = np.array([float(x) for x in text.split(",")])
+    if v.shape != (3,):
+        raise ValueError(f"{text!r} is not three numbers")
+    return v
+
+
+def _close(a: np.ndarray | float, b: np.ndarray | float) -> bool:
+    return bool(np.allclose(a, b, rtol=2e-6, atol=2e-6))
+
+
+def header_agrees(text: str, setup: ProbeSetup, rotary_axes: tuple[str, ...], path: str) -> HeaderSetup:
+    """The program's header, refused unless it states ``setup`` exactly.
+
+    Raises
+    ------
+    NCProgramError
+        Naming the first item that differs, with both values.
+    """
+    h = header_setup(text, path)
+    pivots = setup.pivots
+    per_axis = dict(pivots) if isinstance(pivots, Mapping) else {a: pivots for a in rotary_axes}
+    sense = {a: -1 for a in rotary_axes if setup.axis_sense.get(a, 1) == -1}
+    checks = [("machine", h.machine, setup.machine, h.machine == _canonical(setup.machine)),
+              (SENSE_KEY, describe_axis_sense(h.axis_sense), describe_axis_sense(sense), h.axis_sense == sense),
+              ("sphere_mm", h.sphere_mm, setup.sphere_mm, _close(h.sphere_mm, setup.sphere_mm)),
+              ("sphere_radius_mm", h.sphere_radius_mm, setup.sphere_radius_mm,
+               _close(h.sphere_radius_mm, setup.sphere_radius_mm)),
+              ("stylus_radius_mm", h.stylus_radius_mm, setup.stylus_radius_mm,
+               _close(h.stylus_radius_mm, setup.stylus_radius_mm)),
+              ("controller state", h.controller, setup.controller, _same_controller(h.controller, setup.controller))]
+    checks += [(f"pivot_{a}_mm", h.pivots_mm[a], per_axis[a], _close(h.pivots_mm[a], per_axis[a])) for a in rotary_axes]
+    for name, stated, given, ok in checks:
+        if not ok:
+            raise NCProgramError(path, None, f"the program states {name} {stated}, but this run has {given}: give "
+                                             "the options the program was written with (or write it again)")
+    return h
+
+
+def _canonical(code: str) -> str:
+    from pige_sym.kernels import load_kernels
+
+    return str(load_kernels(code).MACHINE_CODE)
+
+
+def _same_controller(a: ProbeController, b: ProbeController) -> bool:
+    same = (a.kinematics, a.rtcp_off, a.rtcp_on, a.stylus_tool, a.work_offset) == \
+        (b.kinematics, b.rtcp_off, b.rtcp_on, b.stylus_tool, b.work_offset)
+    numbers = np.array([a.stylus_length_mm, a.window_mm, *a.work_offset_mm])
+    return same and _close(numbers, np.array([b.stylus_length_mm, b.window_mm, *b.work_offset_mm]))
