@@ -172,6 +172,15 @@ def nominal_centres(machine: str, angles_deg: np.ndarray, sphere_mm: np.ndarray,
     return pivot_mm + np.einsum("nij,j->ni", rot, sphere - pivot_mm)
 
 
+def table_frames(machine: str, angles_deg: np.ndarray, pivots: Pivots) -> tuple[np.ndarray, np.ndarray]:
+    """The nominal table motion ``x ↦ R x + t`` of every pose: where the controller's TCP kinematics put a
+    work-coordinate point, R shape=(n, 3, 3), t shape=(n, 3) [mm]; ``angles_deg`` θ, shape=(n, k) [deg]."""
+    angles = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    t = nominal_centres(machine, angles, np.zeros(3), pivots)
+    cols = [nominal_centres(machine, angles, np.eye(3)[k], pivots) - t for k in range(3)]
+    return np.stack(cols, axis=2), t
+
+
 PATTERNS = ("fixed", "alternate")
 #: Extra overtravel so that the program as written (coordinates and angles to 4 decimals) still ends every
 #: probing move the stated overtravel past the surface: on the 50° ring a z rounding moves the crossing by

@@ -28,7 +28,7 @@ import numpy as np
 from pige_sym.errors import NCProgramError
 from pige_sym.measurements.axis_sense import to_commanded, to_conventions
 from pige_sym.nc.probe_header import header_agrees
-from pige_sym.nc.probe_program import ProbeSetup, nominal_centres
+from pige_sym.nc.probe_program import ProbeSetup, nominal_centres, table_frames
 
 _WORD = re.compile(r"([A-Z])([-+]?(?:\d+(?:\.\d*)?|\.\d+))")
 _SKIP = {
@@ -276,6 +276,9 @@ class _Replay:
         self.probe_start: np.ndarray | None = None
         self.confirmed: set[str] = set()
         self.last_confirm_line = 0
+        self.tcp = setup.controller.kinematics == "tcp"
+        self.work = np.full(3, np.nan)  # program coordinates (the machine's, but in TCP kinematics)
+        self.frame = (np.eye(3), np.zeros(3))
 
     def step(self, op: Operation) -> None:
         if self.pending_log and op.kind != "log":
@@ -283,10 +286,14 @@ class _Replay:
         if op.kind == "log":
             self.pending_log = False
             return
-        new = np.array([op.words.get(a, self.pos[k]) for k, a in enumerate("XYZ")])
         if op.kind == "rapid" and any(a in op.words for a in self.axes):
             self._rotary(op)
             return
+        work = np.array([op.words.get(a, self.work[k]) for k, a in enumerate("XYZ")])
+        if self.tcp and np.abs(self.angles).max() > 0 and not all(a in op.words for a in "XYZ"):
+            raise NCProgramError(self.path, op.line, "in TCP kinematics every move away from the reference pose "
+                                                     "gives X, Y and Z (work coordinates)")
+        new = self._machine(work)
         if op.kind in ("probe", "confirm", "guard") and (np.isnan(new).any() or np.isnan(self.pos).any()):
             raise NCProgramError(self.path, op.line, "a probing or guarded move from or to an unknown position")
         if op.kind == "rapid" and np.isnan(self.pos[2]) and ("X" in op.words or "Y" in op.words):
@@ -300,16 +307,28 @@ class _Replay:
             self._clear(new, op)
         else:
             self._probe(new, op)
-        self.pos = new
+        self.pos, self.work = new, work
+
+    def _machine(self, work: np.ndarray) -> np.ndarray:
+        """Machine position of program coordinates (TCP kinematics: the nominal table motion of the pose)."""
+        if np.array_equal(self.frame[0], np.eye(3)) and not self.frame[1].any():
+            return work.copy()  # keeps a coordinate not yet programmed unknown, and only that one
+        return self.frame[0] @ work + self.frame[1]
 
     def _rotary(self, op: Operation) -> None:
         held = to_commanded(self.angles, self.s.axis_sense, self.axes)  # the program's words are θ_cmd
         target = to_conventions(np.array([op.words.get(a, held[k]) for k, a in enumerate(self.axes)]),
                                 self.s.axis_sense, self.axes)
         self.rot_min = min(self.rot_min, _rotary_clearance(self.s, self.angles, target, self.pos, self.path,
-                                                           op.line, self.margin))
+                                                           op.line, self.margin, self.work if self.tcp else None))
         self.angles = target
         self.centre = nominal_centres(self.s.machine, self.angles[None], self.s.sphere_mm, self.s.pivots)[0]
+        if self.tcp:
+            rot, t = table_frames(self.s.machine, self.angles[None], self.s.pivots)
+            self.frame = (rot[0], t[0])
+            self.pos = self._machine(self.work)
+        if self.poses and self.poses[-1] == [0, 0]:
+            self.poses.pop()  # a step of a positioning (TCP kinematics turn in steps)
         self.poses.append([0, 0])
 
     def _clear(self, new: np.ndarray, op: Operation) -> None:
@@ -377,14 +396,21 @@ def _log_opened_after(text: str, dialect: str, line: int, path: str) -> None:
 
 
 def _rotary_clearance(setup: ProbeSetup, a0: np.ndarray, a1: np.ndarray, pos: np.ndarray, path: str, line: int,
-                      margin: float) -> float:
-    """Height of the stylus above the sphere's top along a rotary sweep (refused when below ``margin``)."""
+                      margin: float, work: np.ndarray | None = None) -> float:
+    """Height of the stylus above the sphere's top along a rotary sweep (refused when below ``margin``).
+
+    ``work``: in TCP kinematics the stylus keeps its work coordinates and turns with the table.
+    """
     if np.isnan(pos[2]):
         raise NCProgramError(path, line, "the rotary axes move before Z is programmed (retract first)")
     steps = max(int(np.ceil(np.abs(a1 - a0).max() / 0.5)), 1)
     sweep = a0 + np.linspace(0.0, 1.0, steps + 1)[:, None] * (a1 - a0)
     tops = nominal_centres(setup.machine, sweep, setup.sphere_mm, setup.pivots)[:, 2] + setup.r_eff_mm
-    gap = float(pos[2] - tops.max())
+    if work is not None:
+        stylus = nominal_centres(setup.machine, sweep, work, setup.pivots)[:, 2]
+        gap = float((stylus - tops).min())
+    else:
+        gap = float(pos[2] - tops.max())
     if gap < margin:
         raise NCProgramError(path, line, f"the rotary axes move with the stylus {gap:.3f} mm above the sphere's top "
                                          "during the sweep: retract Z first")

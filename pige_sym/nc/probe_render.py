@@ -17,7 +17,14 @@ from pige_sym.errors import InputError
 from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
 from pige_sym.measurements.axis_sense import format_axis_sense, to_commanded
 from pige_sym.nc.probe_header import PROBE_FORMAT
-from pige_sym.nc.probe_program import HEIDENHAIN_FORMAT, HEIDENHAIN_LOG, PROBE_DIALECTS, Contact, ProbePlan
+from pige_sym.nc.probe_program import (
+    HEIDENHAIN_FORMAT,
+    HEIDENHAIN_LOG,
+    PROBE_DIALECTS,
+    Contact,
+    ProbePlan,
+    table_frames,
+)
 from pige_sym.nc.probe_safety import (
     Confirm,
     confirm_lines,
@@ -152,10 +159,36 @@ def _probe(c: Contact, dialect: str, feed: float) -> list[str]:
             f"TCH PROBE 0.1 {_xyz(c.target, dialect)}"]
 
 
+def _rotary_words(plan: ProbePlan, theta: np.ndarray, dialect: str) -> str:
+    commanded = to_commanded(theta, plan.setup.axis_sense, plan.rotary_axes)
+    return " ".join(f"{a}{_num(v, dialect)}" for a, v in zip(plan.rotary_axes, commanded, strict=True))
+
+
+#: Largest rotary step of one positioning in TCP kinematics [deg]: the probe waits above the sphere, along
+#: the machine's vertical at the middle of the step, so it stays high above the sphere's top all along.
+TCP_STEP_DEG = 45.0
+
+
+def _tcp_retracts(plan: ProbePlan, theta_from: np.ndarray, theta_to: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """TCP kinematics: per rotary step, the work point the probe waits at, and the angles it turns to."""
+    s = plan.setup
+    steps = max(int(np.ceil(np.abs(theta_to - theta_from).max() / TCP_STEP_DEG)), 1)
+    height = plan.safe_z_mm - float(plan.centres_mm[:, 2].max())
+    out = []
+    for k in range(1, steps + 1):
+        mid = theta_from + (theta_to - theta_from) * (k - 0.5) / steps
+        rot, _ = table_frames(s.machine, mid[None], s.pivots)
+        out.append((np.asarray(s.sphere_mm, dtype=float) + height * rot[0].T @ np.array([0.0, 0.0, 1.0]),
+                    theta_from + (theta_to - theta_from) * k / steps))
+    return out
+
+
 def _pose_lines(plan: ProbePlan, i: int, dialect: str) -> list[str]:
+    if plan.setup.controller.kinematics == "tcp":
+        return _pose_lines_tcp(plan, i, dialect)
     s = plan.setup
     commanded = to_commanded(plan.angles_deg[i], s.axis_sense, plan.rotary_axes)
-    rot = " ".join(f"{a}{_num(v, dialect)}" for a, v in zip(plan.rotary_axes, commanded, strict=True))
+    rot = _rotary_words(plan, plan.angles_deg[i], dialect)
     out = [_rapid(f"Z{_num(plan.safe_z_mm, dialect)}", dialect), _rapid(rot, dialect)]
     if dialect == "fanuc":
         out += [f"#101={i}"] + [f"#{103 + k}={_num(v, dialect)}" for k, v in enumerate(commanded)]
@@ -178,6 +211,33 @@ def _pose_lines(plan: ProbePlan, i: int, dialect: str) -> list[str]:
     return out
 
 
+def _pose_lines_tcp(plan: ProbePlan, i: int, dialect: str) -> list[str]:
+    """A pose in LinuxCNC's TCP kinematics: every point in work coordinates (the nominal table motion of the
+    pose undone), every move with X, Y and Z, the rotary axes turned in steps above the sphere."""
+    s = plan.setup
+    before = plan.angles_deg[i - 1] if i else np.zeros(len(plan.rotary_axes))
+    out = []
+    for wait, theta in _tcp_retracts(plan, before, plan.angles_deg[i]):
+        out += [_rapid(_xyz(wait, dialect), dialect), _rapid(_rotary_words(plan, theta, dialect), dialect)]
+    rot, t = table_frames(s.machine, plan.angles_deg[i][None], s.pivots)
+
+    def work(p: np.ndarray) -> str:
+        return _xyz(rot[0].T @ (p - t[0]), dialect)
+
+    for c in plan.contacts[i]:
+        above = np.array([c.start[0], c.start[1], plan.clear_z_mm[i]])
+        out += [_rapid(work(above), dialect), _rapid(work(c.start), dialect),
+                f"G38.2 {work(c.target)} F{_num(s.probe_feed_mm_min, dialect)}",
+                _rapid(work(c.start), dialect), _rapid(work(above), dialect)]
+    return out
+
+
+def _end_tcp(plan: ProbePlan, dialect: str) -> list[str]:
+    """TCP kinematics: the last retract, straight above the sphere at the safe height."""
+    last = plan.angles_deg[-1]
+    return [_rapid(_xyz(_tcp_retracts(plan, last, last)[0][0], dialect), dialect)]
+
+
 def render_probe_program(plan: ProbePlan, dialect: str) -> str:
     """The probing program of a plan in one dialect (module docstring)."""
     if dialect not in PROBE_DIALECTS:
@@ -186,7 +246,10 @@ def render_probe_program(plan: ProbePlan, dialect: str) -> str:
     lines = _header(plan, dialect) + _confirmation(plan, dialect) + _log_open(dialect)
     for i in range(len(plan.angles_deg)):
         lines += _pose_lines(plan, i, dialect)
-    lines.append(_rapid(f"Z{_num(plan.safe_z_mm, dialect)}", dialect))
+    if plan.setup.controller.kinematics == "tcp":
+        lines += _end_tcp(plan, dialect)
+    else:
+        lines.append(_rapid(f"Z{_num(plan.safe_z_mm, dialect)}", dialect))
     end = epilogue(plan.setup.controller, dialect)
     if dialect == "linuxcnc":
         lines += ["(PROBECLOSE)", *end, "M2"]

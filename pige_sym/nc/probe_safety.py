@@ -175,6 +175,11 @@ def linuxcnc_prologue(ctrl: ProbeController, rotary_axes: tuple[str, ...]) -> li
     rot = " OR ".join(f"[#{base + 3 + 'ABC'.index(a[0])} NE 0]" for a in rotary_axes)
     g92 = " OR ".join(f"[#{5211 + k} NE 0]" for k in (0, 1, 2, *('ABC'.index(a[0]) + 3 for a in rotary_axes)))
     want = ", ".join(_g(v) for v in ctrl.work_offset_mm)
+    if ctrl.kinematics == "tcp":
+        at_zero = " OR ".join(f"[ABS[#{5423 + 'ABC'.index(a[0])}] GT {tol}]" for a in rotary_axes)
+        out += [f"o905 if [{at_zero}]",
+                "(abort, PIGE: in TCP kinematics the program starts with the rotary axes at 0 [its first move is up "
+                "along Z]: position them first)", "o905 endif"]
     out += [f"o902 if [{xyz}]",
             f"(abort, PIGE: {ctrl.work_offset} is X#{base} Y#{base + 1} Z#{base + 2}; the program assumes "
             f"{want}: --sphere and --pivot are in that system [--work-offset])",

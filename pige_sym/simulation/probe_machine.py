@@ -30,7 +30,7 @@ from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.axis_sense import to_conventions
 from pige_sym.model.trajectories import Trajectory
-from pige_sym.nc.probe_program import ProbeSetup, nominal_centres
+from pige_sym.nc.probe_program import ProbeSetup, nominal_centres, table_frames
 from pige_sym.nc.probe_readback import probe_operations
 from pige_sym.simulation.simulator import simulate
 
@@ -181,23 +181,43 @@ class _VirtualRun:
         self.pose, self.k, self.logged_pose = -1, 0, False
         self.contact = np.zeros(3)
         self.out: list[str] = []
+        # TCP kinematics: the program's coordinates are work coordinates, the controller's nominal table motion
+        # (R, t) of the commanded pose puts them in the machine; identity: R = I, t = 0
+        self.tcp = machine.setup.controller.kinematics == "tcp"
+        self.frame = (np.eye(3), np.zeros(3))
+        self.work = np.zeros(3)
 
     def step(self, op: Any) -> None:
         if op.kind == "rapid" and any(a in op.words for a in self.axes):
             self.commanded = np.array([op.words.get(a, self.commanded[k]) for k, a in enumerate(self.axes)])
             self.centre = next(self.centres)
             self.logged_pose = False
+            if self.tcp:
+                s = self.m.setup
+                rot, t = table_frames(s.machine, to_conventions(self.commanded[None], s.axis_sense, self.axes),
+                                      s.pivots)
+                self.frame = (rot[0], t[0])
+                self.pos = self.frame[0] @ self.work + self.frame[1]
             return
-        new = np.array([op.words.get(a, self.pos[i]) for i, a in enumerate("XYZ")])
+        self.work = np.array([op.words.get(a, self.work[i]) for i, a in enumerate("XYZ")])
+        new = self.frame[0] @ self.work + self.frame[1]
         if op.kind == "log":
             if not self.logged_pose:
                 self.pose, self.k, self.logged_pose = self.pose + 1, 0, True
-            self.out.append(_format_line(self.dialect, self.pose, self.k, self.contact, self.axes, self.commanded))
+            logged = self.frame[0].T @ (self.contact - self.frame[1])  # the controller's coordinates
+            self.out.append(_format_line(self.dialect, self.pose, self.k, logged, self.axes, self.commanded))
             self.k += 1
             return
         if op.kind in ("probe", "confirm"):
             move = (new - self.pos) / np.linalg.norm(new - self.pos)
-            stop = _touch(self.pos, new, self.centre, _trigger_radius(self.m, move), op.line)
+            try:
+                stop = _touch(self.pos, new, self.centre, _trigger_radius(self.m, move), op.line)
+            except InputError:
+                if op.kind != "confirm":
+                    raise
+                raise InputError(f"program line {op.line}: no contact at the confirming move: the program stops "
+                                 "(the sphere is not where it expects it; check --sphere, --pivot, the work offset "
+                                 "and the stylus length)") from None
             rng = self.confirm_rng if op.kind == "confirm" else self.rng
             self.contact = stop + move * rng.normal(0.0, self.m.noise_um * 1e-3)
             if op.kind == "confirm":
@@ -207,6 +227,7 @@ class _VirtualRun:
             raise InputError(f"program line {op.line}: contact during the guarded approach: the program stops "
                              "(the sphere is not where the program expects it)")
         self.pos = new
+        self.work = self.frame[0].T @ (new - self.frame[1])
 
     def _window(self, op: Any) -> None:
         k = "XYZ".index(op.axis)
