@@ -17,12 +17,16 @@ floats become ``null``, never ``NaN``).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import shutil
+import signal
 import stat
 import tempfile
-from collections.abc import Iterable
+import threading
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
@@ -83,22 +87,179 @@ def check_output(path: PathLike, *, force: bool = False, inputs: Iterable[PathLi
     return p
 
 
-def new_file_mode() -> int:
-    """Mode of a newly created file under the process's umask (``0o666 & ~umask``).
+def check_output_folder(path: PathLike, *, force: bool = False, inputs: Iterable[PathLike] = (),
+                        names: Iterable[str] = (), what: str = "--out") -> Path:
+    """Refuse an output folder that cannot be written, or whose ``names`` would be replaced without ``force``.
 
-    Read from ``/proc/self/status`` where it exists (setting the umask to read it would race with
-    other threads creating files); elsewhere by setting it and putting it back.
+    Called before long work (the folder itself is written by :func:`staged_folder`, which checks again).
+    An input inside an entry that would be replaced is refused even with ``force``.
+
+    Raises
+    ------
+    InputError
+        With one line that says what to change.
     """
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{what} {out} exists and is not a folder: give a folder name")
+    existing = out
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"{what} {out}: {existing} is not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise InputError(f"{what} {out}: the folder {existing} is not writable")
+    if out.is_dir():
+        _check_replaced(out, list(names), force, inputs, what)
+    return out
+
+
+def _check_replaced(out: Path, names: list[str], force: bool, inputs: Iterable[PathLike], what: str) -> None:
+    taken = [n for n in names if (out / n).exists() or (out / n).is_symlink()]
+    if taken and not force:
+        raise InputError(f"{what} {out} already holds {taken[0]}: pass --force to replace what pige writes there, "
+                         "or choose another folder")
+    for n in taken:
+        target = out / n
+        if target.is_symlink() or not (target.is_dir() or target.is_file()):
+            raise InputError(f"{what}: {target} is a symbolic link or not a regular file: pige never replaces one")
+        for source in inputs:
+            src = Path(source).resolve()
+            if src == target.resolve() or target.resolve() in src.parents:
+                raise InputError(f"{what}: {target} holds the input {source}: choose another folder")
+
+
+@contextlib.contextmanager
+def staged_folder(path: PathLike, *, force: bool = False, inputs: Iterable[PathLike] = (),
+                  what: str = "--out") -> Iterator[Path]:
+    """Write a folder of outputs all at once; yields the temporary folder to write into.
+
+    Everything is written into a hidden temporary folder (beside ``path`` when it does not exist, inside it
+    when it does).  On success the temporary folder is renamed to ``path``, or, when ``path`` exists, each of
+    its entries is moved into it (entries already there are replaced only with ``force``; other files in
+    the folder are left alone).  SIGINT and SIGTERM wait while the folder is created and while the entries
+    move, so an interrupt leaves the old outputs or the new ones, never a mixture; an error or interrupt in
+    between removes the temporary folder (SIGTERM raises ``KeyboardInterrupt`` meanwhile, so ``kill`` cleans
+    up too).
+    """
+    out = Path(path)
+    check_output_folder(out, force=force, inputs=inputs, what=what)
+    host = out if out.is_dir() else out.parent
+    tmp: Path | None = None
+    with _terminate_as_interrupt():
+        try:
+            with _deferred_interrupts():
+                tmp = _make_stage(host, out, what)
+            yield tmp
+            with _deferred_interrupts():
+                _commit(tmp, out, force, list(inputs), what)
+        except BaseException:
+            if tmp is not None:
+                shutil.rmtree(tmp, ignore_errors=True)
+            raise
+
+
+def _make_stage(host: Path, out: Path, what: str) -> Path:
+    try:
+        host.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}.pige-partial-", dir=host))
+        os.chmod(tmp, 0o777 & ~_umask())  # what mkdir would give (mkdtemp gives 0700)
+    except OSError as exc:
+        raise InputError(f"{what} {out}: cannot write there ({exc.strerror or exc})") from None
+    return tmp
+
+
+def _in_main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM raises KeyboardInterrupt in the main thread while the block runs (elsewhere: nothing changes)."""
+    if not _in_main_thread() or not hasattr(signal, "SIGTERM"):
+        yield
+        return
+
+    def _raise(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGTERM, _raise)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+@contextlib.contextmanager
+def _deferred_interrupts() -> Iterator[None]:
+    """SIGINT and SIGTERM are noted while the block runs and raise KeyboardInterrupt after it.
+
+    Python runs signal handlers in the main thread whichever thread the signal reached, so noting them
+    there holds them back reliably (a thread's signal mask would not: BLAS threads take the signal).
+    """
+    if not _in_main_thread():
+        yield
+        return
+    got: list[int] = []
+
+    def _note(signum: int, frame: object) -> None:
+        got.append(signum)
+
+    kinds = [signal.SIGINT] + ([signal.SIGTERM] if hasattr(signal, "SIGTERM") else [])
+    old = {k: signal.signal(k, _note) for k in kinds}
+    try:
+        yield
+    finally:
+        for k, handler in old.items():
+            signal.signal(k, handler)
+    if got:
+        raise KeyboardInterrupt
+
+
+def _commit(tmp: Path, out: Path, force: bool, inputs: list[PathLike], what: str) -> None:
+    """Move the staged entries into place (:func:`staged_folder`)."""
+    entries = sorted(tmp.iterdir(), key=lambda e: (e.is_file(), e.name))  # files (the page) last
+    try:
+        if tmp.parent != out:  # the folder did not exist: one rename
+            try:
+                os.rename(tmp, out)
+                return
+            except OSError:  # created meanwhile: move the entries into it
+                out.mkdir(exist_ok=True)
+        _check_replaced(out, [e.name for e in entries], force, inputs, what)
+        clash = [e.name for e in entries if (out / e.name).exists() and (out / e.name).is_dir() != e.is_dir()]
+        if clash:
+            raise InputError(f"{what}: {out / clash[0]} is a {'folder' if (out / clash[0]).is_dir() else 'file'} "
+                             "where the report writes the other kind: move it away")
+        trash = Path(tempfile.mkdtemp(prefix=".pige-replaced-", dir=tmp))
+        for e in entries:
+            target = out / e.name
+            if e.is_dir() and target.exists():
+                os.rename(target, trash / e.name)
+            os.replace(e, target)
+        shutil.rmtree(tmp, ignore_errors=True)
+    except OSError as exc:
+        raise InputError(f"{what} {out}: cannot write there ({exc.strerror or exc})") from None
+
+
+def _umask() -> int:
+    """The process's umask, read from ``/proc/self/status`` where it exists (setting the umask to read it would
+    race with other threads creating files); elsewhere by setting it and putting it back."""
     try:
         with open("/proc/self/status", encoding="ascii") as fh:
             for line in fh:
                 if line.startswith("Umask:"):
-                    return 0o666 & ~int(line.split()[1], 8)
+                    return int(line.split()[1], 8)
     except (OSError, ValueError):
         pass
     mask = os.umask(0o022)
     os.umask(mask)
-    return 0o666 & ~mask
+    return mask
+
+
+def new_file_mode() -> int:
+    """Mode of a newly created file under the process's umask (``0o666 & ~umask``)."""
+    return 0o666 & ~_umask()
 
 
 def atomic_write_text(path: PathLike, text: str, *, encoding: str = "utf-8", newline: str | None = None) -> Path:
@@ -158,6 +319,60 @@ def open_regular_file(path: PathLike) -> IO[bytes]:
     if hasattr(os, "set_blocking"):
         os.set_blocking(fd, True)
     return os.fdopen(fd, "rb")
+
+
+def read_input_bytes(path: PathLike, *, limit: int | None = None, what: str = "file") -> bytes:
+    """The bytes of an input file (at most ``limit + 1`` when given), through :func:`open_regular_file`.
+
+    The one way pige reads a whole input: a FIFO, socket, device or folder is refused before anything
+    is read (no hang), and an unreadable file is a located refusal, not an ``OSError``.
+
+    Raises
+    ------
+    FileFormatError
+        Naming the file and the problem (``what`` names the kind of file in the message).
+    """
+    with open_regular_file(path) as fh:
+        try:
+            return fh.read() if limit is None else fh.read(limit + 1)
+        except OSError as exc:
+            raise FileFormatError(str(path), None, f"cannot read this {what}: {exc.strerror or exc}") from None
+
+
+def read_input_text(path: PathLike, *, what: str = "file") -> str:
+    """The UTF-8 text of an input file, exactly (line endings and a BOM kept; :func:`read_input_bytes`).
+
+    Raises
+    ------
+    FileFormatError
+        Not a regular readable file, or not UTF-8 (with the line of the first bad byte).
+    """
+    raw = read_input_bytes(path, what=what)
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise FileFormatError(str(path), line, f"not a UTF-8 text {what} ({exc.reason}): save it as UTF-8") from None
+
+
+def peek_input(path: PathLike, size: int = 4096) -> bytes:
+    """The first ``size`` bytes of a regular file, or ``b""`` for anything else (missing, unreadable, FIFO, folder).
+
+    For sniffing a file's kind (its format line): it never blocks and never raises; the reader that
+    follows refuses what is not a readable regular file, with its message.
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError:
+        return b""
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return b""
+        return os.read(fd, size)
+    except OSError:
+        return b""
+    finally:
+        os.close(fd)
 
 
 def json_ready(x: Any) -> Any:

@@ -200,11 +200,14 @@ def _study(args: argparse.Namespace) -> int:
     code = kern.MACHINE_CODE
     incl = "X" if kern.ROTARY_AXES[0] == "A" else "Y"
     trajs = [cone_frustum(code, incl_axis=incl), figure_eight(code)]
+    from pige_sym.cli._setup import parse_vec3
+
+    tool = parse_vec3(args.tool, "--tool") if args.tool else None
     truth = random_pige(code, args.seed)
-    sim = simulate(code, trajs[0], pige=truth, noise_um=args.noise, seed=args.seed)
+    sim = simulate(code, trajs[0], pige=truth, noise_um=args.noise, seed=args.seed, tool_mm=tool)
     res = identify(sim.measurement)
     ident = {p: v for p, v in zip(res.parameters, res.values, strict=True)}
-    rows = compensation_study(code, trajs, truth=truth, identified=ident, covariance=res.covariance)
+    rows = compensation_study(code, trajs, truth=truth, identified=ident, covariance=res.covariance, tool_mm=tool)
     paths = plot_compensation(rows, args.plots) if args.plots else []
     if args.json:
         print(to_json({"machine": code, "truth": truth, "identified": ident, "rows": [r.to_dict() for r in rows],
@@ -228,6 +231,7 @@ def register_study_compensation(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--machine", default=DEFAULT_MACHINE, help="ISO 10791 machine code (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the true errors and the noise (default %(default)s)")
     p.add_argument("--noise", type=float, default=0.25, help="sensor noise sigma [um] (default %(default)s)")
+    p.add_argument("--tool", help="ball offset from the last tool-side pivot x,y,z [mm] (head machines)")
     p.add_argument("--plots", metavar="DIR", help="write before/after plots (PNG) into DIR")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_study)

@@ -190,7 +190,7 @@ def _compensate_and_report(args: argparse.Namespace, code: str, csv: Path, nc_pa
     row = data.measurements[0].compensation[-1]  # the NC program, run on the true machine (PIGEs + hidden effect)
     print(f"test program run on the true machine, tool-point error RMSE: {row.rmse_before_um:.3f} um as programmed, "
           f"{row.rmse_after_um:.3f} um compensated ({row.reduction:.1%} less)")
-    report = write_report(data, out / "report")
+    report = write_report(data, out / "report", force=args.force)
     print(f"\nreport: {report.resolve()}")
 
 

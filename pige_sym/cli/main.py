@@ -56,6 +56,35 @@ def tolerant_console() -> None:
                 pass
 
 
+class _Interrupts:
+    """While a command runs, SIGINT raises KeyboardInterrupt as usual and is remembered: a C extension
+    (matplotlib's renderer, a module being imported) may turn the KeyboardInterrupt into another exception,
+    which is then an interrupt too.  The previous handler is put back afterwards."""
+
+    def __init__(self) -> None:
+        self.seen = False
+        self.old: object = None
+
+    def __enter__(self) -> _Interrupts:
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread() and \
+                signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self.old = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.old is not None:
+            import signal
+
+            signal.signal(signal.SIGINT, self.old)  # type: ignore[arg-type]
+
+    def _handle(self, signum: int, frame: object) -> None:
+        self.seen = True
+        raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``pige``; returns the exit status."""
     tolerant_console()
@@ -65,6 +94,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 0
     args = parser.parse_args(argv)
+    with _Interrupts() as interrupts:
+        return _run(args, interrupts)
+
+
+def _run(args: argparse.Namespace, interrupts: _Interrupts) -> int:
+    """The command's handler, its errors turned into exit statuses (module docstring)."""
     try:
         return int(args.handler(args))
     except PigeError as exc:
@@ -76,3 +111,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"pige {args.command}: interrupted", file=sys.stderr)
         return 130
+    except Exception:
+        if interrupts.seen:  # a KeyboardInterrupt that a C extension turned into another exception
+            print(f"pige {args.command}: interrupted", file=sys.stderr)
+            return 130
+        raise

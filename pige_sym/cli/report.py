@@ -33,8 +33,11 @@ def _graded_plan(args: argparse.Namespace, data: Any) -> Any:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from pige_sym.files import check_output_folder
     from pige_sym.report import findings_text, gather_report, write_report
 
+    inputs = [*args.files, *(args.compare or []), *(x for x in (args.program, args.tolerances, args.plan) if x)]
+    check_output_folder(args.out, force=args.force, inputs=inputs, names=("report.html",))  # before the long work
     data = gather_report(args.files, studies=args.study or "", program=args.program, method=args.method,
                          projection=args.projection, with_zero=args.with_zero, presets=args.presets,
                          sobol_samples=args.samples, seed=args.seed, progress=not args.json and sys.stderr.isatty(),
@@ -43,7 +46,7 @@ def _run(args: argparse.Namespace) -> int:
                          joint=args.joint)
     if args.plan:
         data.plan = _graded_plan(args, data)
-    path = write_report(data, args.out)
+    path = write_report(data, args.out, force=args.force, inputs=inputs)
     if args.json:
         print(to_json(data.to_dict()))
         return 0
@@ -106,6 +109,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("files", nargs="*", metavar="FILE",
                    help="pige-rtest 1 (R-test, probe) or pige-ballbar 1 file(s) (optional with --compare or --history)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (created)")
+    p.add_argument("--force", action="store_true",
+                   help="replace the report already in --out (report.html and its folders; nothing else is touched)")
     p.add_argument("--study", metavar="LIST", help="also run studies on the measured trajectory: projection,sobol")
     p.add_argument("--program", metavar="NC-FILE", help="also compensate this 840D-style program (before/after)")
     p.add_argument("--tolerances", metavar="TOL.json", help="judge every measurement (pige check) and lead with it")

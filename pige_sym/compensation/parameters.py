@@ -19,6 +19,7 @@ import numpy as np
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import missing_tool
+from pige_sym.measurements.schema import MAX_PIGE
 from pige_sym.model.effects import EffectSpec
 from pige_sym.model.trajectories import approach_directions
 
@@ -195,6 +196,8 @@ def angle_extensions(records: Any, rotary_axes: tuple[str, ...]) -> tuple[list[A
     skipped: dict[str, str] = {}
     for rec in records:
         if "params" in rec:
+            if not isinstance(rec["params"], dict) or not isinstance(rec.get("options") or {}, dict):
+                raise InputError(f"effect {rec['effect']}: params and options must be objects of name: value")
             options, values = dict(rec.get("options") or {}), dict(rec["params"])
         else:
             options = {k: v for k, v in rec.items() if k in OPTION_KEYS}
@@ -208,8 +211,9 @@ def angle_extensions(records: Any, rotary_axes: tuple[str, ...]) -> tuple[list[A
         params = {}
         for name in spec.param_names:
             v = values.get(name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
-                raise InputError(f"effect {spec.id}: {name} must be a finite number")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or abs(v) > MAX_PIGE:
+                raise InputError(f"effect {spec.id}: {name} {v!r:.40} must be a finite number within "
+                                 f"±{MAX_PIGE:g} {spec.units[name]}")
             params[name] = float(v)
         out.append(AngleExtension(spec, params))
     return out, skipped

@@ -30,7 +30,7 @@ import numpy as np
 
 from pige_sym.codegen.machine_code import parse_machine_code
 from pige_sym.errors import FileFormatError, PigeError
-from pige_sym.files import atomic_write_text, open_regular_file
+from pige_sym.files import atomic_write_text, open_regular_file, peek_input
 from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
 from pige_sym.measurements.axis_sense import format_axis_sense, read_axis_sense, to_commanded, to_conventions
 from pige_sym.measurements.measurement import LIMITS
@@ -98,11 +98,7 @@ def bar_directions(rotations: np.ndarray, offset_mm: np.ndarray) -> np.ndarray:
 
 def is_ballbar_file(path: str | os.PathLike[str]) -> bool:
     """True when the file's first line is the ``pige-ballbar 1`` format line."""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.readline(64)
-    except OSError:
-        return False
+    head = peek_input(path, 80).split(b"\n", 1)[0]
     return head.removeprefix(b"\xef\xbb\xbf").strip() == FORMAT_LINE.encode()
 
 
@@ -173,6 +169,11 @@ def read_ballbar(path: str | os.PathLike[str]) -> BallbarRun:
     except PigeError as exc:
         raise FileFormatError(p, where["machine"], f"machine: {exc}") from None
     axes = tuple(a.name for a in st.rotary_axes)
+    head = [a.name for a in st.rotary_axes if a.side == "tool"]
+    if head:
+        raise FileFormatError(p, where["machine"], f"machine {st.canonical} has tool-side rotary axes "
+                              f"({', '.join(head)}): {FORMAT_LINE[2:]} holds setups of table machines only (no tool "
+                              "offset); measure a head with the R-test or the probe")
     table_ball = _vec3(meta["table_ball_mm"], p, where["table_ball_mm"], "table_ball_mm")
     offset = _vec3(meta["offset_mm"], p, where["offset_mm"], "offset_mm")
     if not MIN_LENGTH_MM <= np.linalg.norm(offset) <= MAX_LENGTH_MM:

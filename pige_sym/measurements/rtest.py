@@ -36,14 +36,13 @@ write → read round trip is lossless.
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 import numpy as np
 
 from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
 from pige_sym.errors import FileFormatError, PigeError
-from pige_sym.files import open_regular_file
+from pige_sym.files import open_regular_file, read_input_text
 from pige_sym.measurements.axis_sense import METADATA_KEY, read_axis_sense, to_conventions
 
 if TYPE_CHECKING:
@@ -288,10 +287,7 @@ def read_angle_file(path: str | os.PathLike[str]) -> tuple[tuple[str, ...], np.n
     t_s : ndarray, shape=(n,) [s] or None
     """
     p = str(path)
-    try:
-        lines = Path(path).read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
-        raise FileFormatError(p, None, "file not found") from None
+    lines = read_input_text(path, what="angle file").removeprefix("\ufeff").splitlines()
     body = [(n + 1, ln) for n, ln in enumerate(lines) if ln.strip() and not ln.startswith("#")]
     if not body:
         raise FileFormatError(p, None, "no header line with <axis>_deg columns")

@@ -328,6 +328,10 @@ def params_document(data: Any, path: PathLike, *, machine: str | None = None,
     if unknown:
         raise FileFormatError(p, None, f"pige.{unknown[0]}: not a parameter of {kern.MACHINE_CODE} "
                               f"(known: {', '.join(kern.PARAMETERS)})")
+    for axis in doc.pivots_mm or {}:
+        if axis not in kern.ROTARY_AXES:
+            raise FileFormatError(p, None, f"pivots_mm.{axis}: not a rotary axis of {kern.MACHINE_CODE} (axes: "
+                                  f"{', '.join(kern.ROTARY_AXES)})")
     for name, unit in (doc.units or {}).items():
         if name in kern.UNITS and unit != kern.UNITS[name]:
             raise FileFormatError(p, None, f"units.{name}: {unit!r}, but {name} is in {kern.UNITS[name]}")

@@ -46,6 +46,7 @@ checks every candidate's identifiability jointly with the PIGEs anyway.  ΔX, Δ
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -151,6 +152,9 @@ class EffectSpec:
 
     id: str
     options: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_options(self.id, self.options)
 
     @property
     def kind(self) -> str:
@@ -298,6 +302,32 @@ class EffectSpec:
 KINDS = ("thermal_drift", "table_drift", "angular_error", "wobble", "radial_runout", "backlash", "squareness",
          "setup_offset", "outliers")
 OPTION_KEYS = {"harmonic", "tau_s", "size_um", "count"}
+#: Highest harmonic of an angle an effect may have: a test resolves a few (the diagnosis tries 1-4).
+MAX_HARMONIC = 64
+#: Each option: (smallest, largest, whole numbers only).
+OPTION_RANGES: dict[str, tuple[float, float, bool]] = {
+    "harmonic": (1, MAX_HARMONIC, True), "tau_s": (1e-6, 1e9, False), "size_um": (0.0, 1e5, False),
+    "count": (0, 1e6, True)}
+
+
+def check_options(effect_id: str, options: Any) -> None:
+    """Refuse option values that no effect can have (:data:`OPTION_RANGES`; other keys are internal settings).
+
+    Raises
+    ------
+    InputError
+        Naming the effect, the option and the allowed range.
+    """
+    if not isinstance(options, dict):
+        raise InputError(f"effect {effect_id}: options must be an object of name: value, got {options!r:.40}")
+    for key, value in options.items():
+        if key not in OPTION_RANGES:
+            continue
+        lo, hi, whole = OPTION_RANGES[key]
+        ok = not isinstance(value, (bool, np.bool_)) and isinstance(value, numbers.Real) and math.isfinite(value)
+        if not (ok and lo <= value <= hi and (not whole or float(value).is_integer())):
+            kind = "a whole number" if whole else "a number"
+            raise InputError(f"effect {effect_id}: {key} {value!r:.40} must be {kind} from {lo:g} to {hi:g}")
 
 
 def catalogue(rotary_axes: tuple[str, ...]) -> list[str]:
@@ -365,6 +395,4 @@ def parse_effect(text: str, rotary_axes: tuple[str, ...]) -> EffectInstance:
         unknown = set(given) - set(names) - OPTION_KEYS
     if unknown:
         raise InputError(f"effect {name}: unknown parameter(s) {', '.join(sorted(unknown))}")
-    if "harmonic" in options and (options["harmonic"] < 1 or not math.isclose(options["harmonic"] % 1, 0)):
-        raise InputError(f"effect {name}: harmonic must be a positive integer")
     return EffectInstance(spec, params)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import re
 
-from pige_sym.errors import FileFormatError
+from pige_sym.files import read_input_text
 
 _HEADER_MACHINE = re.compile(r"machine\s*[:=]\s*(\S+)", re.IGNORECASE)
 _GENERATED_TITLE = re.compile(r",\s*(\S+\(\w+\)\w*),\s*ball\b")
@@ -29,10 +29,4 @@ def program_machine(text: str) -> str | None:
 
 def read_program(path: str | os.PathLike[str]) -> str:
     """Read a program keeping its line endings exactly."""
-    try:
-        with open(path, encoding="utf-8", newline="") as fh:
-            return fh.read()
-    except FileNotFoundError:
-        raise FileFormatError(str(path), None, "program not found") from None
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(str(path), None, f"not a UTF-8 text file ({exc.reason})") from None
+    return read_input_text(path, what="program")

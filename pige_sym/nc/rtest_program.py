@@ -32,6 +32,7 @@ from pige_sym.constants import DEFAULT_BALL_MM
 from pige_sym.constants import DEFAULT_DWELL_S as DEFAULT_DWELL_S
 from pige_sym.constants import DEFAULT_MOVE_S as DEFAULT_MOVE_S
 from pige_sym.errors import InputError
+from pige_sym.files import peek_input, read_input_text
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import missing_tool
 from pige_sym.model.trajectories import NAMES, Trajectory, make_trajectory
@@ -110,10 +111,7 @@ class TestProgram:
 def _is_nc_file(path: str) -> bool:
     if path.lower().endswith(NC_SUFFIXES):
         return True
-    try:
-        lines = Path(path).read_text(encoding="utf-8", errors="replace").splitlines()
-    except OSError:
-        return False
+    lines = peek_input(path, 1 << 16).decode("utf-8", errors="replace").splitlines()
     first = next((ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")), "")
     return not first.strip().endswith("_deg") and "_deg," not in first and "t_s," not in first
 
@@ -123,7 +121,7 @@ def _nc_program(kern: Any, path: str, dwell_s: float,
     from pige_sym.measurements.axis_sense import to_conventions
     from pige_sym.nc.program_header import program_axis_sense
 
-    text = Path(path).read_text(encoding="utf-8")
+    text = read_input_text(path, what="program")
     axes = tuple(kern.ROTARY_AXES)
     recorded = program_axis_sense(text, axes, path, sense)
     prog = parse_program(text, path=path, rotary_axes=axes)

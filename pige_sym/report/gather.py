@@ -26,7 +26,6 @@ Choices made here
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import re
@@ -99,12 +98,9 @@ def read_truth(csv_path: str | os.PathLike[str], machine: str) -> Truth | None:
     tp = p.with_name(p.stem + ".truth.json")
     if not tp.is_file():
         return None
-    try:
-        data = json.loads(tp.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(str(tp), exc.lineno, f"not valid JSON: {exc.msg}") from None
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(str(tp), None, f"not a UTF-8 text file ({exc.reason})") from None
+    from pige_sym.measurements.schema import load_json
+
+    data = load_json(tp, "truth sidecar")
     if not isinstance(data, dict) or not isinstance(data.get("pige"), dict):
         raise FileFormatError(str(tp), None, 'expected a JSON object with a "pige" object of name: value')
     kern = load_kernels(machine)

@@ -12,8 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from pige_sym.constants import VERSION as __version__
-from pige_sym.errors import InputError
-from pige_sym.files import atomic_write_text
+from pige_sym.files import atomic_write_text, staged_folder
 from pige_sym.report.data import MeasurementReport, ReportData
 from pige_sym.report.figures import draw_figures, draw_report_figures
 from pige_sym.report.gather import findings_text, gather_report
@@ -31,30 +30,50 @@ from pige_sym.report.joint_section import answer_joint_html, joint_html
 from pige_sym.report.lead import improvement
 
 
-def write_report(data: ReportData, out_dir: str | os.PathLike[str]) -> Path:
-    """Draw the figures, write the compensated programs and ``out_dir/report.html``; returns the HTML path."""
+def write_report(data: ReportData, out_dir: str | os.PathLike[str], *, force: bool = False,
+                 inputs: Sequence[str | os.PathLike[str]] = ()) -> Path:
+    """Draw the figures, write the compensated programs and ``out_dir/report.html``; returns the HTML path.
+
+    The folder is written all at once (:func:`pige_sym.files.staged_folder`): an interrupt leaves nothing
+    partial, and what an earlier report wrote there is replaced only with ``force``.
+    """
     out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a directory")
-    out.mkdir(parents=True, exist_ok=True)
+    with staged_folder(out, force=force, inputs=inputs) as stage:
+        _write_into(data, stage)
+    _relocate(data, stage, out)
+    return out / "report.html"
+
+
+def _write_into(data: ReportData, out: Path) -> None:
     for rep in data.measurements:
         sub = out / rep.label
         rep.figures = draw_figures(rep, sub)
         text = rep.compensated_program_text
         if text is not None and data.program is not None:
             target = sub / f"{data.program.stem}_compensated{data.program.suffix or '.mpf'}"
-            with open(target, "w", encoding="utf-8", newline="") as fh:
-                fh.write(text)
+            atomic_write_text(target, text, newline="")
             rep.compensated_program = target
     data.figures = draw_report_figures(data, out / "_report")
     if data.plan is not None:
         from pige_sym.report.plan_section import plan_section
 
         data.plan_html, _ = plan_section(data.plan, out / "_report")
-    html_path = out / "report.html"
-    atomic_write_text(html_path, render_html(data, base=out))
-    data.html_path = html_path
-    return html_path
+    atomic_write_text(out / "report.html", render_html(data, base=out))
+
+
+def _relocate(data: ReportData, stage: Path, out: Path) -> None:
+    """The paths recorded while writing into the staged folder, moved to where the folder now is."""
+    def moved(p: Path) -> Path:
+        return out / p.relative_to(stage)
+
+    for rep in data.measurements:
+        for f in rep.figures:
+            f.path = moved(f.path)
+        if rep.compensated_program is not None:
+            rep.compensated_program = moved(rep.compensated_program)
+    for f in data.figures:
+        f.path = moved(f.path)
+    data.html_path = out / "report.html"
 
 
 def build_report(measurement_paths: Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[str],

@@ -124,12 +124,9 @@ class Tolerances:
 
 def looks_like_json(path: str | os.PathLike[str]) -> bool:
     """True when the file's first non-blank character opens a JSON object (a saved result, not a measurement)."""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(4096).lstrip()
-    except OSError:
-        return False
-    return head.startswith(b"{")
+    from pige_sym.files import peek_input
+
+    return peek_input(path).lstrip().startswith(b"{")
 
 
 def strict_json(path: str | os.PathLike[str]) -> Any:

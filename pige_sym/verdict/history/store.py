@@ -200,10 +200,9 @@ class _Read:
 
 
 def _sha256(path: Path) -> str:
-    try:
-        return hashlib.sha256(path.read_bytes()).hexdigest()
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    from pige_sym.files import read_input_bytes
+
+    return hashlib.sha256(read_input_bytes(path)).hexdigest()
 
 
 def _estimate_set(paths: list[Path], method: str) -> tuple[_Read, Any, list[dict[str, Any]], str]:

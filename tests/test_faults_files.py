@@ -1,0 +1,228 @@
+"""Issue 33, files: hangs, clobbers and the operating system's refusals.
+
+- every input slot of every command refuses a FIFO, a folder and an unreadable file before reading (one helper,
+  :func:`pige_sym.files.open_regular_file`; sniffing a file's kind with :func:`pige_sym.files.peek_input` never
+  blocks);
+- an output folder that is read-only is refused before the long work;
+- ``pige report --out DIR`` replaces an earlier report only with ``--force`` and leaves other files alone;
+- an interrupt during ``pige report`` leaves the old folder or the new one, never part of one.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from pige_sym.cli.main import main
+from pige_sym.errors import FileFormatError
+from pige_sym.files import peek_input, read_input_bytes, staged_folder
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+PNG_END = b"IEND\xaeB`\x82"
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str]:
+    code = main(list(argv))
+    return code, capsys.readouterr().err
+
+
+def refused(code: int, err: str, *fragments: str) -> None:
+    assert code == 2, err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    for f in fragments:
+        assert f in err, (f, err)
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder with a measurement, a parameter file and an NC program (valid), for the slots not under test."""
+    d = tmp_path_factory.mktemp("inputs")
+    assert main(["simulate", "--out", str(d / "run.csv"), "--seed", "1", "--points", "12"]) == 0
+    assert main(["program", "--trajectory", "cone-frustum", "--out", str(d / "prog.mpf")]) == 0
+    (d / "params.json").write_text('{"machine": "wC\'A\'bXYZ(C1)t", "pige": {"EY0A": 1, "EZ0A": 1, "EB0A": 1, '
+                                   '"EC0A": 1, "EX0C": 1, "EY0C": 1, "EA0C": 1, "EB0C": 1}}')
+    return d
+
+
+def _slots(d: Path, bad: str, out: Path) -> list[list[str]]:
+    """Every input slot of every command, with ``bad`` in it."""
+    run_csv, prog, params, tol = str(d / "run.csv"), str(d / "prog.mpf"), str(d / "params.json"), \
+        str(EXAMPLES / "tolerances.json")
+    probe = ["--format", "linuxcnc", "--sphere-radius", "12.7", "--stylus-radius", "1.5"]
+    return [
+        ["identify", bad], ["identify", run_csv, bad], ["diagnose", bad], ["diagnose", run_csv, bad],
+        ["check", bad, "--tolerances", tol], ["check", run_csv, "--tolerances", bad],
+        ["report", bad, "--out", str(out / "r1")], ["report", run_csv, "--out", str(out / "r2"), "--program", bad],
+        ["report", run_csv, "--out", str(out / "r3"), "--tolerances", bad],
+        ["report", run_csv, "--out", str(out / "r4"), "--compare", bad, run_csv],
+        ["compensate", bad, "--params", params, "--out", str(out / "o.mpf")],
+        ["compensate", prog, "--params", bad, "--out", str(out / "o.mpf")],
+        ["history", "add", bad, "--machine-id", "M", "--db", str(out / "h.db")],
+        ["plan", "--grade", bad], ["compare", bad, run_csv], ["compare", run_csv, bad],
+        ["program", "--trajectory", bad, "--out", str(out / "p.mpf")],
+        ["simulate", "--trajectory", bad, "--out", str(out / "s.csv")],
+        ["simulate", "--pige", bad, "--out", str(out / "s2.csv")],
+        ["import-probe", bad, *probe, "--out", str(out / "i.csv")],
+        ["acquire", "--port", "socket://127.0.0.1:9", "--program", bad, "--out", str(out / "a.csv")],
+        ["acquire", "--port", "socket://127.0.0.1:9", "--nest", bad, "--out", str(out / "a2.csv")],
+    ]
+
+
+class _Rescuer:
+    """Opens a FIFO for writing after ``after`` seconds if it is still needed: a reader that blocked on the FIFO
+    then reads end-of-file and the test fails instead of hanging."""
+
+    def __init__(self, fifo: Path, after: float = 20.0) -> None:
+        self.fifo, self.after, self.rescued, self.done = fifo, after, False, threading.Event()
+        self.thread = threading.Thread(target=self._watch, daemon=True)
+
+    def _watch(self) -> None:
+        if not self.done.wait(self.after):
+            self.rescued = True
+            os.close(os.open(self.fifo, os.O_WRONLY))
+
+    def __enter__(self) -> _Rescuer:
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.done.set()
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this platform")
+def test_a_fifo_or_a_folder_in_any_input_slot_is_refused_without_reading(inputs, tmp_path, capsys) -> None:
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    for bad, said in ((fifo, "not a regular file"), (folder, "a directory")):
+        for argv in _slots(inputs, str(bad), tmp_path):
+            with _Rescuer(fifo) as rescuer:
+                code, err = run(capsys, *argv)
+            assert not rescuer.rescued, f"{argv} blocked on the FIFO"
+            refused(code, err, said)
+    assert peek_input(fifo) == b"" and peek_input(folder) == b"" and peek_input(tmp_path / "missing") == b""
+
+
+def test_an_unreadable_input_is_a_located_refusal(inputs, tmp_path, monkeypatch, capsys) -> None:
+    """``os.open`` refused (what a file without read permission gives a user who is not root)."""
+    real = os.open
+    victim = str(tmp_path / "secret.csv")
+    shutil.copy(inputs / "run.csv", victim)
+
+    def deny(path, *a, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
+        if str(path) == victim:
+            raise PermissionError(13, "Permission denied")
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(os, "open", deny)
+    with pytest.raises(FileFormatError, match="secret.csv: cannot read: Permission denied"):
+        read_input_bytes(victim)
+    for argv in (["identify", victim], ["compensate", victim, "--params", str(inputs / "params.json"), "--out",
+                                        str(tmp_path / "o.mpf")], ["history", "add", victim, "--db",
+                                                                   str(tmp_path / "h.db"), "--machine-id", "M"]):
+        refused(*run(capsys, *argv), "Permission denied")
+
+
+def _unprivileged() -> list[str] | None:
+    """A prefix that runs a command as a user without root's rights, [] when we are one, None when impossible."""
+    if os.geteuid() != 0:
+        return []
+    tool = shutil.which("setpriv")
+    return [tool, "--reuid=65534", "--regid=65534", "--clear-groups"] if tool else None
+
+
+def test_read_only_output_folders_and_unreadable_inputs_for_a_real_user(inputs) -> None:
+    prefix = _unprivileged()
+    if prefix is None:
+        pytest.skip("running as root without setpriv: permissions cannot be tested")
+    base = Path(tempfile.mkdtemp())
+    try:
+        os.chmod(base, 0o777)
+        for name in ("run.csv", "prog.mpf", "params.json"):
+            shutil.copy(inputs / name, base / name)
+            os.chmod(base / name, 0o644)
+        (base / "ro").mkdir()
+        os.chmod(base / "ro", 0o555)
+        shutil.copy(inputs / "prog.mpf", base / "unreadable.mpf")
+        os.chmod(base / "unreadable.mpf", 0)
+        cases = [(["report", "run.csv", "--out", "ro/rep"], "not writable"),
+                 (["compensate", "prog.mpf", "--params", "params.json", "--out", "ro/o.mpf"], "not writable"),
+                 (["simulate", "--out", "ro/sub/x.csv"], "not writable"),
+                 (["compensate", "unreadable.mpf", "--params", "params.json", "--out", "o.mpf"], "Permission denied")]
+        env = os.environ | {"PYTHONPATH": str(Path(__file__).parents[1])}
+        for argv, said in cases:
+            proc = subprocess.run([*prefix, sys.executable, "-m", "pige_sym", *argv], capture_output=True, text=True,
+                                  timeout=120, cwd=base, env=env)
+            assert proc.returncode == 2 and said in proc.stderr and "Traceback" not in proc.stderr, (argv, proc.stderr)
+        assert list((base / "ro").iterdir()) == []
+    finally:
+        os.chmod(base / "ro", 0o755)
+        shutil.rmtree(base)
+
+
+# ---------------------------------------------------------------------------------------------- report folder
+
+
+def test_report_replaces_an_earlier_report_only_with_force(inputs, tmp_path, capsys) -> None:
+    out = tmp_path / "rep"
+    assert main(["report", str(inputs / "run.csv"), "--out", str(out)]) == 0
+    first = (out / "report.html").read_bytes()
+    (out / "notes.txt").write_text("mine")
+    (out / "report.html").write_text("an earlier report")
+    refused(*run(capsys, "report", str(inputs / "run.csv"), "--out", str(out)), "already holds report.html",
+            "--force")
+    assert (out / "report.html").read_text() == "an earlier report"
+    assert main(["report", str(inputs / "run.csv"), "--out", str(out), "--force"]) == 0
+    assert (out / "report.html").read_bytes()[:200] == first[:200]
+    assert (out / "notes.txt").read_text() == "mine"  # what pige did not write stays
+    assert not [p for p in out.iterdir() if "pige-partial" in p.name]
+    not_a_folder = tmp_path / "file"
+    not_a_folder.write_text("x")
+    refused(*run(capsys, "report", str(inputs / "run.csv"), "--out", str(not_a_folder)), "is not a folder")
+
+
+def test_an_error_while_writing_the_folder_leaves_nothing(tmp_path) -> None:
+    out = tmp_path / "new"
+    with pytest.raises(KeyboardInterrupt), staged_folder(out) as stage:
+        (stage / "half.png").write_bytes(b"\x89PNG\r\n")
+        raise KeyboardInterrupt
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+    out.mkdir()
+    (out / "report.html").write_text("old")
+    with pytest.raises(RuntimeError), staged_folder(out, force=True) as stage:
+        (stage / "report.html").write_text("new, but half")
+        raise RuntimeError("drawing failed")
+    assert [p.name for p in out.iterdir()] == ["report.html"] and (out / "report.html").read_text() == "old"
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupt_while_the_report_is_written_leaves_nothing_partial(inputs, tmp_path, sig) -> None:
+    """The signal is sent once the staged folder exists (the figures are being drawn): the run ends with status
+    130, no folder, no hidden leftovers, no traceback."""
+    out = tmp_path / "rep"
+    proc = subprocess.Popen([sys.executable, "-m", "pige_sym", "report", str(inputs / "run.csv"), "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not any("pige-partial" in p.name for p in tmp_path.iterdir()) and proc.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.005)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=120)
+    leftovers = [p.name for p in tmp_path.iterdir() if "pige-partial" in p.name]
+    assert not leftovers and "Traceback" not in err, err
+    if out.exists():  # the signal came after the last rename: the report is whole
+        assert (out / "report.html").is_file()
+        assert all(p.read_bytes().endswith(PNG_END) for p in out.rglob("*.png"))
+    else:
+        assert proc.returncode == 130 and "interrupted" in err, (proc.returncode, err)
