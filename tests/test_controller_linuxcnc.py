@@ -150,7 +150,7 @@ def test_what_linuxcnc_cannot_hold_is_named_with_the_error_it_leaves() -> None:
     assert "# xyzac-trt-kins.y-offset: add +0.003000" in text
     assert "setp pige_xyzac_trt.eb0a 30.0000" in text  # beside them, pige's component holds every PIGE
     head = format_controller(CompensationParameters("wbXYZCA(C1)t", {}, {}, None, {}, "t", []), "linuxcnc")
-    assert "stock trt kinematics" in head and "no mapping" in head and "setp pige_xyzac_head.ex0c 0.0000" in head
+    assert "stock trt kinematics" in head and "no mapping" in head and "# pige_xyzac_head.ex0c: not estimated" in head
     with pytest.raises(InputError, match="no mapping.*pige's kinematics component"):
         format_controller(CompensationParameters("wbXYZWCA(C1)t", {}, {}, None, {}, "t", []), "linuxcnc")
 

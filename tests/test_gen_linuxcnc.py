@@ -394,8 +394,8 @@ def test_the_pins_pige_compensate_prints_correct_the_exact_machine(models, code:
     rng = np.random.default_rng(8)
     values = {p: float(rng.uniform(-20, 20)) for p in kin.PARAMETERS}
     pivots = {a: [float(x) for x in rng.uniform(-100, 100, 3)] for a in kin.ROTARY_AXES}
-    params = CompensationParameters(kin.MACHINE_CODE, values, dict(kin.UNITS), None, pivots, "test", [])
-    params.axis_sense = {kin.ROTARY_AXES[0]: -1}  # as a parameter file records it (CONVENTIONS §9)
+    params = CompensationParameters(kin.MACHINE_CODE, values, dict(kin.UNITS), None, pivots, "test", [],
+                                    axis_sense={kin.ROTARY_AXES[0]: -1})  # as the parameter file records it
     name = linuxcnc_pins.default_name(code)
     text = format_controller(params, "linuxcnc")
     assert f"setp {name}.sense-{kin.ROTARY_AXES[0].lower()} -1" in text
@@ -417,3 +417,9 @@ def test_the_pins_pige_compensate_prints_correct_the_exact_machine(models, code:
     text = format_controller(missing, "linuxcnc")
     pin = linuxcnc_pins.error_pin(name, kin.PARAMETERS[0])
     assert f"setp {pin} " not in text and f"# {pin}: no value in the parameter file" in text
+    located = {p: v for p, v in values.items() if p in kin.LOCATION_PARAMETERS}  # as pige identify writes them
+    text = format_controller(CompensationParameters(kin.MACHINE_CODE, located, dict(kin.UNITS), None, pivots, "t",
+                                                    []), "linuxcnc")
+    for p in kin.ZERO_PARAMETERS:
+        pin = linuxcnc_pins.error_pin(name, p)
+        assert f"setp {pin} " not in text and f"# {pin}: not estimated" in text

@@ -106,8 +106,7 @@ def _render_trt(params: CompensationParameters, options: ControllerOptions) -> s
 
 def _senses(params: CompensationParameters, axes: tuple[str, ...]) -> dict[str, int]:
     """σ per rotary axis (CONVENTIONS §9): −1 where the parameter file records a reversed sense, else +1."""
-    recorded = getattr(params, "axis_sense", None) or {}
-    return {a: -1 if recorded.get(a, 1) < 0 else 1 for a in axes}
+    return {a: -1 if params.axis_sense.get(a, 1) < 0 else 1 for a in axes}
 
 
 def pige_kinematics_lines(params: CompensationParameters) -> list[str]:
@@ -131,7 +130,7 @@ def pige_kinematics_lines(params: CompensationParameters) -> list[str]:
     axes = tuple(kern.ROTARY_AXES)
     unset = {s.split()[0] for s in params.ignored}
     angles = make_trajectory(kern.MACHINE_CODE, "cone-frustum").angles_deg
-    vector = np.array([0.0 if n in unset else params.values.get(n, 0.0) for n in kern.PARAMETERS])
+    vector = np.array([0.0 if n in unset else params.values.get(n, 0.0) for n in kern.PARAMETERS])  # µm, µrad
     tilt = float(np.linalg.norm(kern.orientation_jacobian(angles) @ vector, axis=1).max())
     out = [f"# the complete correction: pige's kinematics component {name} carries every PIGE and zero-position "
            "error (docs/linuxcnc-kinematics.md):",
@@ -153,6 +152,8 @@ def pige_kinematics_lines(params: CompensationParameters) -> list[str]:
         pin = pins.error_pin(name, n)
         if n in unset:
             out.append(f"# {pin}: no value in the parameter file (left as it is)")
+        elif n not in params.values:
+            out.append(f"# {pin}: not estimated (the parameter file has no {n}; left as it is)")
         else:
             out.append(f"setp {pin} {params.values.get(n, 0.0):.4f}")
     return out
