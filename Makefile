@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 MACHINE ?= wC'A'bXYZ(C1)t
 # Kernels live in generated/ (the shipped machines are tracked there; the list is in pige_sym/constants.py).
 
-.PHONY: help venv gen gen-all check-generated test test-slow lint demo bench clean
+.PHONY: help venv gen gen-all check-generated test test-slow test-linuxcnc lint demo bench clean
 
 help:  ## list targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' Makefile | sed -E 's/:.*## /\t/' | expand -t 18
@@ -33,6 +33,9 @@ test: $(STAMP)  ## run the default test suite (slow studies excluded)
 
 test-slow: $(STAMP)  ## run the slow studies too
 	$(PY) -m pytest -q -m ''
+
+test-linuxcnc: $(STAMP)  ## the loop on real LinuxCNC 2.9 simulations (tests/linuxcnc; skips without linuxcnc-uspace)
+	$(PY) -m pytest -q -rsP -m linuxcnc tests/linuxcnc
 
 lint: $(STAMP)  ## ruff + mypy on pige_sym/
 	$(VENV)/bin/ruff check pige_sym tests benchmarks

@@ -1,0 +1,210 @@
+"""Run LinuxCNC 2.9's shipped trt simulations headless, each in its own namespaces (tests/linuxcnc).
+
+What it takes (each found by trying it on Debian's linuxcnc-uspace 2.9.0~pre1, commit f1270d6ed7):
+
+- **Root.**  ``rtapi_app`` refuses to run as root unless ``RTAPI_UID`` names a fallback user (65534 here);
+  it then reads files and binds its socket as that user.  ``RTAPI_FIFO_PATH`` names that socket: its folder
+  must be writable by the fallback user (a mode-1777 folder), and the module and configuration folders
+  readable by it (``mkdtemp`` makes mode-0700 folders: they are opened up to 0755).
+- **Isolation.**  HAL and NML live in System V shared memory with fixed keys, ``linuxcnc`` keeps a lock
+  file at ``/tmp/linuxcnc.lock`` and, when it finds one, "cleans up the other instance" by killing
+  ``milltask``, ``linuxcncsvr`` … *by name*.  So every run gets its own IPC, PID and mount namespaces
+  (``unshare --ipc --pid --mount --fork --mount-proc --kill-child``) and a private ``/tmp`` (tmpfs, mode
+  1777, the run folder bound back into it): concurrent runs (of this suite or of anyone else on the machine)
+  cannot see or kill each other, and killing ``unshare`` ends every process of the run.
+- **Modules.**  ``loadrt NAME`` loads ``/usr/lib/linuxcnc/modules/NAME.so`` and nothing else (halcmd waits
+  for a component named NAME, so a path does not work).  ``halcompile --compile`` builds the component in
+  the run's folder and an overlay mount, private to the run's mount namespace, adds it to the module
+  folder: nothing is installed into the system.
+- **Output.**  ``linuxcnc`` sends its output to ``/tmp/linuxcnc.print.*`` unless ``RUNTESTS`` is set, and
+  copies its debug file to ``$HOME/linuxcnc_debug.txt`` on failure: ``RUNTESTS=1`` and ``HOME`` = the run
+  folder.  ``PATH`` starts with ``/usr/bin`` so that LinuxCNC's Python programs run under the Python that
+  has the ``linuxcnc`` module.
+- **The INI** (:data:`INI_CHANGES`, each applied exactly once or the run is refused): ``DISPLAY`` = the
+  driver (:mod:`lcnc_driver`), no PyVCP panel and no post-GUI HAL file (they need a screen), basic_sim
+  without ``hal_manualtoolchange`` (a Tk window), the vismach model (``xyz?c-trt-gui``) and its nets left
+  out, and one more HAL file: the true machine (:mod:`true_table`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+SAMPLES = Path("/usr/share/doc/linuxcnc/examples/sample-configs/sim/axis/vismach/5axis/table-rotary-tilting")
+MODULES = Path("/usr/lib/linuxcnc/modules")
+FALLBACK_UID = "65534"
+SYSTEM_PATH = "/usr/bin:/bin:/usr/sbin:/sbin"
+#: run inside the namespaces: private /tmp with the run folder bound back, the component added to the
+#: module folder, then linuxcnc; its exit status is the wrapper's
+WRAPPER = f"""#!/bin/sh
+set -e
+RUN="$1"; INI="$2"; MODS="$3"
+mount --bind "$RUN" /mnt
+mount -t tmpfs -o mode=1777 tmpfs /tmp
+mkdir -p "$RUN"
+mount --bind /mnt "$RUN"
+umount /mnt
+mount -t overlay overlay -o "lowerdir=$MODS:{MODULES}" {MODULES}
+export RTAPI_UID={FALLBACK_UID} RTAPI_FIFO_PATH=/tmp/rtapi_fifo PATH={SYSTEM_PATH} RUNTESTS=1 HOME="$RUN"
+unset DISPLAY
+set +e
+linuxcnc "$INI"
+"""
+
+
+def unavailable() -> str | None:
+    """Why LinuxCNC cannot run here, or None."""
+    for tool in ("linuxcnc", "halcompile", "halcmd", "unshare"):
+        if shutil.which(tool, path=SYSTEM_PATH) is None:
+            return f"{tool} is not installed (apt-get install linuxcnc-uspace linuxcnc-uspace-dev)"
+    if not (SAMPLES / "xyzac-trt.ini").is_file():
+        return f"LinuxCNC's sample configurations are not at {SAMPLES}"
+    if os.geteuid() != 0:
+        return "the LinuxCNC runs need root (private IPC/PID/mount namespaces for each simulation)"
+    probe = subprocess.run(["unshare", "--ipc", "--pid", "--mount", "--fork", "--mount-proc", "true"],
+                           capture_output=True, text=True)
+    if probe.returncode != 0:
+        return f"unshare cannot make namespaces here: {probe.stderr.strip()}"
+    return None
+
+
+@dataclass(frozen=True)
+class IniChange:
+    """One edit of the shipped INI: ``pattern`` (a regex on one line) replaced by ``new`` (None: dropped)."""
+
+    why: str
+    pattern: str
+    new: str | None
+    count: int = 1  # how many lines it must match
+
+
+def ini_changes(kind: str, driver: str, hal_file: str) -> list[IniChange]:
+    """The explicit edits that make the shipped ``{kind}-trt.ini`` run headless with the true machine."""
+    gui = f"{kind}-trt-gui"
+    return [
+        IniChange("the driver instead of AXIS", r"^\s*DISPLAY = axis\s*$", f"DISPLAY = {driver}"),
+        IniChange("PyVCP needs a screen", r"^\s*PYVCP = .*$", None),
+        IniChange("the post-GUI HAL file nets PyVCP pins", r"^POSTGUI_HALFILE = .*$", None),
+        IniChange("hal_manualtoolchange is a Tk window", r"^(\s*HALFILE = LIB:basic_sim\.tcl)\s*$",
+                  r"\1 -no_use_hal_manualtoolchange"),
+        IniChange("the vismach model needs a screen", rf"^HALCMD = loadusr -W {gui}\s*$", None),
+        IniChange("nets to the vismach model only", rf"^HALCMD = net\s+:\S+\s+joint\.\d\.pos-fb\s+{gui}\.\S+\s*$",
+                  None, count=5),
+        IniChange("nets that also feed the vismach model keep their other pins",
+                  rf"^(HALCMD = net\s+:\S+\s+{kind}-trt-kins\.\S+)\s+{gui}\.\S+\s*$", r"\1", count=3),
+        IniChange("the true machine", r"^(\s*HALFILE = LIB:basic_sim\.tcl.*)$", rf"\1\nHALFILE = {hal_file}"),
+    ]
+
+
+def apply_changes(text: str, changes: list[IniChange]) -> str:
+    """Apply each change to its lines; a change that matches another number of lines is refused."""
+    for ch in changes:
+        rx = re.compile(ch.pattern, flags=re.M)
+        found = len(rx.findall(text))
+        if found != ch.count:
+            raise AssertionError(f"shipped INI changed? {ch.why}: {ch.pattern!r} matches {found} lines, "
+                                 f"expected {ch.count}")
+        text = rx.sub("" if ch.new is None else ch.new, text)
+        if ch.new is None:
+            text = re.sub(r"\n{3,}", "\n\n", text)
+    return text
+
+
+@dataclass
+class Sim:
+    """A run folder with a copy of the shipped configuration, ready to start."""
+
+    root: Path
+    kind: str  # "xyzac" or "xyzbc"
+    hal_lines: list[str] = field(default_factory=list)
+
+    @property
+    def cfg(self) -> Path:
+        return self.root / "cfg"
+
+    @property
+    def ini(self) -> Path:
+        return self.cfg / f"{self.kind}-trt.ini"
+
+    @property
+    def modules(self) -> Path:
+        return self.root / "modules"
+
+
+def make_sim(root: Path, kind: str, hal_lines: list[str]) -> Sim:
+    """Copy the shipped ``{kind}-trt`` configuration into ``root/cfg`` and change it (:func:`ini_changes`)."""
+    sim = Sim(root, kind, hal_lines)
+    shutil.copytree(SAMPLES, sim.cfg)
+    driver = sim.cfg / "pige_driver.py"
+    shutil.copy(HERE / "lcnc_driver.py", driver)
+    driver.chmod(0o755)
+    (sim.cfg / "pige_true_machine.hal").write_text("\n".join(hal_lines) + "\n")
+    text = (SAMPLES / f"{kind}-trt.ini").read_text()
+    sim.ini.write_text(apply_changes(text, ini_changes(kind, str(driver), "pige_true_machine.hal")))
+    sim.modules.mkdir(exist_ok=True)
+    for d in (root, sim.cfg, sim.modules):
+        d.chmod(0o755)  # the fallback user reads the modules and the configuration
+    return sim
+
+
+def compile_component(sim: Sim, source: str, name: str) -> Path:
+    """``halcompile --compile`` a realtime component into the run's module folder."""
+    src = sim.modules / f"{name}.comp"
+    src.write_text(source)
+    proc = subprocess.run(["halcompile", "--compile", src.name], cwd=sim.modules, capture_output=True, text=True,
+                          env=os.environ | {"PATH": SYSTEM_PATH}, timeout=300)
+    so = sim.modules / f"{name}.so"
+    if proc.returncode != 0 or not so.is_file():
+        raise AssertionError(f"halcompile failed:\n{proc.stdout}\n{proc.stderr}")
+    so.chmod(0o755)
+    return so
+
+
+@dataclass
+class RunResult:
+    """What one LinuxCNC run left: the driver's result, LinuxCNC's output, the wall time."""
+
+    result: dict
+    output: str
+    returncode: int
+    wall_s: float
+
+    def summary(self) -> str:
+        msgs = "\n".join(f"  {k}: {t}" for k, t in self.result.get("messages", []))
+        return (f"returncode {self.returncode}, {self.wall_s:.1f} s, ok={self.result.get('ok')}\n"
+                f"{self.result.get('exception', '')}\nmessages:\n{msgs}\n--- LinuxCNC output (tail) ---\n"
+                + "\n".join(self.output.splitlines()[-60:]))
+
+
+def run_sim(sim: Sim, steps: list[dict], timeout_s: float = 1800.0) -> RunResult:
+    """Start LinuxCNC on the configuration, let the driver run ``steps``, wait until it has shut down."""
+    wrapper = sim.root / "run_linuxcnc.sh"
+    wrapper.write_text(WRAPPER)
+    result_path = sim.root / "result.json"
+    result_path.unlink(missing_ok=True)
+    job = sim.root / "job.json"
+    job.write_text(json.dumps({"result": str(result_path), "steps": steps}, indent=1))
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "PYTHONPATH", "VIRTUAL_ENV")}
+    env |= {"PIGE_LCNC_JOB": str(job), "PATH": SYSTEM_PATH}
+    t0 = time.monotonic()
+    cmd = ["unshare", "--ipc", "--pid", "--mount", "--fork", "--mount-proc", "--kill-child",
+           "sh", str(wrapper), str(sim.root), str(sim.ini), str(sim.modules)]
+    try:
+        proc = subprocess.run(cmd, cwd=sim.cfg, env=env, capture_output=True, text=True, timeout=timeout_s,
+                              stdin=subprocess.DEVNULL)
+        output, code = proc.stdout + proc.stderr, proc.returncode
+    except subprocess.TimeoutExpired as exc:
+        parts = [p.decode(errors="replace") if isinstance(p, bytes) else (p or "") for p in (exc.stdout, exc.stderr)]
+        output, code = "".join(parts) + f"\nTIMEOUT after {timeout_s:g} s", -1
+    wall = time.monotonic() - t0
+    (sim.root / "linuxcnc_output.txt").write_text(output)
+    result = json.loads(result_path.read_text()) if result_path.is_file() else {"ok": False}
+    return RunResult(result, output, code, wall)
