@@ -114,7 +114,9 @@ class Driver:
         self.stat.poll()
         return {"joint": list(self.stat.joint_actual_position[: self.stat.joints]),
                 "axis": list(self.stat.actual_position), "g5x_offset": list(self.stat.g5x_offset),
-                "tool_offset": list(self.stat.tool_offset)}
+                "tool_offset": list(self.stat.tool_offset), "tool_in_spindle": self.stat.tool_in_spindle,
+                "read_line": self.stat.read_line, "motion_line": self.stat.motion_line,
+                "current_line": self.stat.current_line}
 
 
 def run(job: dict) -> dict:

@@ -20,10 +20,18 @@ What it takes (each found by trying it on Debian's linuxcnc-uspace 2.9.0~pre1, c
   copies its debug file to ``$HOME/linuxcnc_debug.txt`` on failure: ``RUNTESTS=1`` and ``HOME`` = the run
   folder.  ``PATH`` starts with ``/usr/bin`` so that LinuxCNC's Python programs run under the Python that
   has the ``linuxcnc`` module.
-- **The INI** (:data:`INI_CHANGES`, each applied exactly once or the run is refused): ``DISPLAY`` = the
-  driver (:mod:`lcnc_driver`), no PyVCP panel and no post-GUI HAL file (they need a screen), basic_sim
-  without ``hal_manualtoolchange`` (a Tk window), the vismach model (``xyz?c-trt-gui``) and its nets left
-  out, and one more HAL file: the true machine (:mod:`true_table`).
+- **The INI** (:func:`ini_changes`, each matching exactly the lines it expects or the run is refused):
+  ``DISPLAY`` = the driver (:mod:`lcnc_driver`), no PyVCP panel and no post-GUI HAL file (they need a
+  screen), basic_sim without ``hal_manualtoolchange`` (a Tk window), the vismach model (``xyz?c-trt-gui``)
+  and its nets left out, one more HAL file (the true machine, :mod:`true_table`), ``[EMCMOT]COMM_TIMEOUT``
+  1 -> 30 s (task aborts a program *without any message* when motion has not taken a command within it, and
+  the non-realtime servo thread of a loaded shared machine stalled longer: measured at load 21 on 2
+  cores, a run stopped after 34 of 65 contacts), and the linear axes' 20 mm/s (1.2 m/min) raised to
+  100 mm/s with 1000 mm/s² (a machine's rapids; probing feeds are the program's).
+- **Time.**  The servo thread is paced by the wall clock (1 ms), so simulated time is wall time when the
+  machine keeps up; the true machine counts the servo periods (``clock`` pin) and the figures quoted are
+  those.  The kinematics the shipped sims hold (xyz?c-trt-kins, ``sparm=identityfirst``) and the tool
+  table are untouched.
 """
 
 from __future__ import annotations
@@ -41,6 +49,8 @@ HERE = Path(__file__).resolve().parent
 SAMPLES = Path("/usr/share/doc/linuxcnc/examples/sample-configs/sim/axis/vismach/5axis/table-rotary-tilting")
 MODULES = Path("/usr/lib/linuxcnc/modules")
 FALLBACK_UID = "65534"
+RAPID_MM_S = 100
+ACCELERATION = 1000
 SYSTEM_PATH = "/usr/bin:/bin:/usr/sbin:/sbin"
 #: run inside the namespaces: private /tmp with the run folder bound back, the component added to the
 #: module folder, then linuxcnc; its exit status is the wrapper's
@@ -101,6 +111,17 @@ def ini_changes(kind: str, driver: str, hal_file: str) -> list[IniChange]:
         IniChange("nets that also feed the vismach model keep their other pins",
                   rf"^(HALCMD = net\s+:\S+\s+{kind}-trt-kins\.\S+)\s+{gui}\.\S+\s*$", r"\1", count=3),
         IniChange("the true machine", r"^(\s*HALFILE = LIB:basic_sim\.tcl.*)$", rf"\1\nHALFILE = {hal_file}"),
+        IniChange("task gives motion 1 s to take a command, and aborts the program silently when it does not; the "
+                  "non-realtime servo thread of a loaded shared machine can stall longer",
+                  r"^(COMM_TIMEOUT =)\s*1\s*$", r"\1 30"),
+        # speed: the sims' 20 mm/s (1.2 m/min) rapids would make a 13-pose probing run last 3.5 min; a machine's
+        # rapids are 10-60 m/min.  The probing feed is the program's, and sets the contacts' resolution.
+        IniChange("linear axes and joints at 100 mm/s", r"^(\s*MAX_VELOCITY =)\s*20\s*$", rf"\1 {RAPID_MM_S}",
+                  count=6),
+        IniChange("the trajectory planner's limit too", r"^(\s*MAX_LINEAR_VELOCITY =)\s*35\s*$",
+                  rf"\1 {RAPID_MM_S}"),
+        IniChange("accelerations 1000 mm/s^2 (deg/s^2)", r"^(\s*MAX_(?:LINEAR_)?ACCELERATION =)\s*(?:300|400)\s*$",
+                  rf"\1 {ACCELERATION}", count=11),
     ]
 
 
