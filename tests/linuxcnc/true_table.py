@@ -19,8 +19,24 @@ from pathlib import Path
 
 import numpy as np
 
-COMPONENT = (Path(__file__).resolve().parent / "true_table.comp").read_text()
+TEMPLATE = (Path(__file__).resolve().parent / "true_table.comp").read_text()
 COMPONENT_NAME = "pige_true_table"
+MODEL_PREFIX = "ptm"
+
+
+def component_source(code: str) -> str:
+    """The true machine's component for machine ``code``: the template with pige's emitted C model inlined."""
+    from pige_sym.codegen.c_model import render_model_c
+    from pige_sym.kernels import load_kernels
+
+    kern = load_kernels(code)
+    if tuple(kern.ROTARY_AXES)[1:] != ("C",) or len(kern.ROTARY_AXES) != 2:
+        raise AssertionError(f"{code}: the true table is an A/B tilt with C on it")
+    model = render_model_c(code, MODEL_PREFIX, include_math=False, header=True)
+    return (TEMPLATE.replace("@MODEL@", model).replace("@PREFIX@", MODEL_PREFIX)
+            .replace("@N_ERRORS@", str(len(kern.PARAMETERS))))
+
+
 #: per outer axis: its direction and the PIGE names (position errors along the two other machine axes, then the
 #: orientation errors about them, then the zero-position error); the inner axis is C
 AXES = {
@@ -57,6 +73,8 @@ class TrueTable:
 
     Attributes
     ----------
+    code : str
+        ISO 10791 code (the emitted model's machine).
     outer : {"A", "B"}
     pivot_mm : dict of str to (3,) [mm]
         Nominal point of each axis line ("A"/"B" and "C"), machine frame (joint coordinates).
@@ -66,6 +84,7 @@ class TrueTable:
     tool_length_mm, sphere_mm (table coordinates), trip_radius_mm
     """
 
+    code: str
     outer: str
     pivot_mm: dict[str, np.ndarray]
     pige: dict[str, float] = field(default_factory=dict)
@@ -95,10 +114,20 @@ class TrueTable:
         return out + [f"setp {name}.{pin} {value!r}" for pin, value in self.pin_values().items()]
 
     def pin_values(self) -> dict[str, float]:
+        """Every input pin: the emitted model's (pivots, senses, errors) and the twin's (lines)."""
+        from pige_sym.kernels import load_kernels
+
         vals: dict[str, float] = {}
-        for r, (ax, q, u, zero) in zip(("r1", "r2"), self.lines(), strict=True):
+        for k, ax in enumerate((self.outer, "C"), start=1):
+            vals |= {f"pivot{k}-{c}": float(v) for c, v in zip("xyz", self.pivot_mm[ax], strict=True)}
+            vals[f"sense{k}"] = float(self.sense[ax])
+        unknown = set(self.pige) - set(load_kernels(self.code).PARAMETERS)
+        if unknown:
+            raise AssertionError(f"not parameters of {self.code}: {sorted(unknown)}")
+        vals |= {f"err-{i}": float(self.pige.get(n, 0.0)) for i, n in enumerate(load_kernels(self.code).PARAMETERS)}
+        for r, (_, q, u, zero) in zip(("r1", "r2"), self.lines(), strict=True):
             vals |= {f"{r}-p{c}": float(v) for c, v in zip("xyz", q, strict=True)}
             vals |= {f"{r}-u{c}": float(v) for c, v in zip("xyz", u, strict=True)}
-            vals |= {f"{r}-sense": float(self.sense[ax]), f"{r}-zero": float(zero)}
+            vals[f"{r}-zero"] = float(zero)
         vals |= {f"sphere-{c}": float(v) for c, v in zip("xyz", self.sphere_mm, strict=True)}
         return vals | {"tool-length": float(self.tool_length_mm), "trip-radius": float(self.trip_radius_mm)}
