@@ -367,10 +367,10 @@ def check(estimate: IdentificationResult | DiagnosisResult | JointDiagnosis | Pa
         tolerances_from_dict,
     )
 
-    tol = tolerances_from_dict(dict(tolerances), "<tolerances>") if isinstance(tolerances, Mapping) \
+    tol = tolerances_from_dict(dict(tolerances), "tolerances") if isinstance(tolerances, Mapping) \
         else read_tolerances(tolerances)
     if not isinstance(estimate, (str, os.PathLike)):
-        est = estimates_from_result(estimate, "<diagnosis>" if hasattr(estimate, "final") else "<identification>")
+        est = estimates_from_result(estimate, "")  # in memory: no file to name
     elif looks_like_json(estimate):
         est = estimates_from_json(strict_json(estimate), str(estimate))
     elif method == "diagnosis":

@@ -21,6 +21,24 @@ def add_ballbar_arguments(p: argparse.ArgumentParser) -> None:
                    help="relative: dL from the first reading (unknown constant); absolute: calibrated length")
 
 
+def plan_pointer(result: Any, files: list[Any]) -> str:
+    """What to do when ballbar setups alone leave PIGEs undetermined: the planner names the setups that do not.
+
+    ``result`` is the joint :class:`~pige_sym.identification.result.IdentificationResult`, ``files`` its
+    per-file summaries (with ``instrument``).  Empty when a PIGE-only set is determined or a file is no ballbar.
+    """
+    import numpy as np
+
+    undetermined = [n for n, v in zip(result.parameters, result.values, strict=True) if not np.isfinite(v)]
+    if not undetermined or any(f.instrument != "ballbar" for f in files):
+        return ""
+    count = "this ballbar setup determines" if len(files) == 1 else f"these {len(files)} ballbar setups determine"
+    return (f"\nnext: {count} {len(result.parameters) - len(undetermined)} of {len(result.parameters)} PIGEs "
+            f"(rank {result.rank}/{len(result.parameters)}); "
+            f"pige plan --instrument ballbar --machine \"{result.machine}\" names the smallest set of setups that "
+            "determines them all")
+
+
 def ballbar_setup_of(args: argparse.Namespace, machine: str) -> Any:
     """The :class:`~pige_sym.simulation.ballbar.BallbarSetup` of the options."""
     from pige_sym.kernels import load_kernels

@@ -8,7 +8,8 @@ Stages (every file lands in ``--out``):
 3. ``import-probe``: sphere centres, deviations, covariances (``probe.csv``);
 4. identification with the reference-pose coupling, compared with the truth (error / std);
 5. verdict against ±15 µm / ±30 µrad;
-6. compensation of a small 5-axis part program (``part.ngc`` → ``part_comp.ngc``).
+6. compensation of a small 5-axis part program (``part.ngc`` → ``part_comp.ngc``);
+7. the HTML report of ``probe.csv`` against the same tolerances (``report/report.html``).
 
 Exit status 1 when a true PIGE lies more than 4 standard errors from its estimate (the demo is also a check).
 """
@@ -20,6 +21,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from pige_sym.cli._setup import show_progress
 from pige_sym.files import atomic_write_text, to_json
 from pige_sym.nc.probe_safety import ProbeController
 
@@ -85,7 +87,9 @@ def run_probe_demo(args: argparse.Namespace, kern: Any, out: Path) -> int:
     m = import_probe_log(log, "linuxcnc", ProbeImport(code, (0.0, 0.0, 0.0), *RADII))
     csv = api.write(m, out / "probe.csv", force=True)
     sigma = float(m.metadata["contact_sigma_um"])
-    print(f"wrote {csv}: R_eff {m.metadata['r_eff_mm']} mm, contact sigma {sigma:.3f} um")
+    r_eff, _, how = m.metadata["r_eff_mm"].partition(" ")
+    atomic_write_text(out / "probe.truth.json", to_json({"machine": code, "pige": pige}) + "\n")  # for the report
+    print(f"wrote {csv}: R_eff {float(r_eff):.4f} mm {how}, contact sigma {sigma:.3f} um")
     _stage(4, "identification with the reference-pose coupling, against the truth")
     result = api.identify(csv)
     worst = 0.0
@@ -96,7 +100,8 @@ def run_probe_demo(args: argparse.Namespace, kern: Any, out: Path) -> int:
         print(f"{name:10s} {result.values[i]:10.3f} {result.std[i]:7.3f} {pige[name]:9.3f} {z:9.2f}  "
               f"{kern.UNITS[name]}")
     _stage(5, "verdict")
-    print(api.check(result, {"format": "pige-tolerances 1", "defaults": {"um": 15, "urad": 30}}).format())
+    tolerances = {"format": "pige-tolerances 1", "defaults": {"um": 15, "urad": 30}}
+    print(api.check(result, tolerances).format())
     _stage(6, "compensation of a part program")
     part = out / "part.ngc"
     atomic_write_text(part, PART)
@@ -104,6 +109,12 @@ def run_probe_demo(args: argparse.Namespace, kern: Any, out: Path) -> int:
     atomic_write_text(out / "part_comp.ngc", comp.text, newline="")
     print(f"wrote {out / 'part_comp.ngc'}: {comp.report.compensated} of {comp.report.moves} moves changed, "
           f"largest change {comp.report.max_change_mm:.4f} mm; read back and verified")
+    _stage(7, "report")
+    from pige_sym.report import gather_report, write_report
+
+    tol = atomic_write_text(out / "tolerances.json", to_json(tolerances) + "\n")
+    data = gather_report([csv], method="gauss-newton", tolerances=tol, progress=show_progress(args.quiet))
+    print(f"report: {write_report(data, out / 'report')}")
     ok = worst <= 4.0
     print(f"\nevery true PIGE within {worst:.2f} standard errors of its estimate: {'yes' if ok else 'NO'}")
     return 0 if ok else 1

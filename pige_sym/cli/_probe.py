@@ -11,10 +11,10 @@ from pige_sym.errors import InputError
 INSTRUMENT_CHOICES = ("rtest", "sphere-probe", "ballbar")
 
 
-def add_sphere_arguments(p: argparse.ArgumentParser) -> None:
-    """Sphere and stylus: what every probe command needs."""
-    p.add_argument("--sphere-radius", type=float, help="calibration sphere radius R [mm] (sphere-probe)")
-    p.add_argument("--stylus-radius", type=float, help="stylus tip radius r [mm] (sphere-probe)")
+def add_sphere_arguments(p: argparse.ArgumentParser, *, when: str = "with --instrument sphere-probe") -> None:
+    """Sphere and stylus: what every probe command needs; ``when`` says when they are required."""
+    p.add_argument("--sphere-radius", type=float, help=f"calibration sphere radius R [mm] (required {when})")
+    p.add_argument("--stylus-radius", type=float, help=f"stylus tip radius r [mm] (required {when})")
 
 
 def add_probe_program_arguments(p: argparse.ArgumentParser) -> None:

@@ -4,6 +4,7 @@
 ``--pivot AXIS=x,y,z`` (repeatable), ``--tool``, and the trajectory shape options
 ``--points``, ``--turns`` and ``--incl-axis`` (the last two only for the cone frustum), and the commanded
 sense of the rotary axes ``--axis-sense`` (CONVENTIONS §9).
+Also :func:`show_progress`, the one rule for progress bars of every command.
 Not a subcommand: the leading underscore keeps it out of the registry.
 """
 
@@ -14,6 +15,14 @@ from typing import Any
 
 from pige_sym.constants import DEFAULT_MACHINE
 from pige_sym.errors import InputError
+
+
+def show_progress(*suppressed: bool) -> bool:
+    """Progress bars only on a terminal: never into a redirected stderr (a log file would fill with ``\\r``
+    frames), and not when any of ``suppressed`` (``--json``, ``--quiet``, ``--no-progress``) is set."""
+    import sys
+
+    return not any(suppressed) and sys.stderr.isatty()
 
 
 def parse_vec3(text: str, what: str) -> list[float]:

@@ -13,6 +13,7 @@ from pige_sym.cli._setup import (
     axis_sense_option,
     finite_option,
     setup_geometry,
+    show_progress,
     trajectory_options,
 )
 from pige_sym.constants import DEFAULT_DWELL_S, DEFAULT_MOVE_S, DEVICE_PROTOCOLS, TRIGGERS
@@ -66,7 +67,7 @@ def _run(args: argparse.Namespace) -> int:
         args.port, program, args.out, options=options, settings=settings, nest=parse_nest(args.nest),
         adapter=make_adapter(args.protocol), resume=args.resume, force=args.force, inputs=inputs,
         raw_log=args.raw_log if args.raw_log else (None if args.no_raw_log else True),
-        progress=not (args.no_progress or args.json),
+        progress=show_progress(args.no_progress, args.json),
     )
     if args.json:
         print(to_json({**summary.to_dict(), "summary_file": str(summary_path(args.out))}))

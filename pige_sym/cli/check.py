@@ -29,7 +29,7 @@ def _run(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "check",
-        help="verdict pass/fail/undecided of the PIGEs against tolerances (ISO 14253-1)",
+        help="in tolerance? pass/fail/undecided per PIGE (ISO 14253-1) from R-test, probe or ballbar files",
         description=(
             "Judge every parameter that has a limit: pass when |value| + k*u <= limit, fail when\n"
             "|value| - k*u > limit, undecided otherwise (guard rule, ISO 14253-1); a parameter that is not\n"

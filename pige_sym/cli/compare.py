@@ -17,7 +17,7 @@ def _run(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "compare",
-        help="measured before/after of two runs of the same R-test program",
+        help="measured before/after of two runs of the same test program (R-test or probe files)",
         description=(
             "Two measurements of the same program (before and after compensation, or two dates): |d| per pose,\n"
             "RMS and max before and after, the improvement, and what is left: each file is diagnosed and its\n"

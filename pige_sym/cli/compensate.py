@@ -137,7 +137,8 @@ def _print_report(rep: CompensationReport, out: str) -> None:
     if len(rep.passed_through) > 20:
         print(f"  ... {len(rep.passed_through) - 20} more blocks passed through (--json lists all)")
     if rep.orientation_limited_lines:
-        print(f"orientation correction limited near the pole at {len(rep.orientation_limited_lines)} block(s), "
+        print(f"orientation correction limited near the pole at {len(rep.orientation_limited_lines)} "
+              f"block{'' if len(rep.orientation_limited_lines) == 1 else 's'}, "
               f"first at line {rep.orientation_limited_lines[0]} (position still corrected)")
     for note in rep.notes:
         print(f"note: {note}")

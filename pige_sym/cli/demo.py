@@ -28,11 +28,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
+from pige_sym.cli._setup import show_progress
 from pige_sym.constants import DEFAULT_BALL_MM, DEFAULT_MACHINE
 from pige_sym.files import atomic_write_text, to_json
 
@@ -107,7 +107,7 @@ def _measure(args: argparse.Namespace, code: str, program: Any, nc_path: Path, o
     from pige_sym.acquisition.engine import acquire
     from pige_sym.acquisition.virtual_run import start_virtual_device
 
-    progress = not args.quiet and sys.stderr.isatty()
+    progress = show_progress(args.quiet)
     device_truth = out / "device.truth.json"
     print(f"hidden in the machine: random PIGEs (seed {args.seed}) and an effect the demo does not tell the "
           f"diagnosis about; device time runs {args.time_scale:g}x faster than real time")
@@ -144,7 +144,7 @@ def _analyse(args: argparse.Namespace, kern: Any, csv: Path, out: Path, pige: di
         atomic_write_text(out / f"identify_{method}.json", to_json(res.to_dict()) + "\n")
         print(format_result(res) + "\n")
     _stage(6, "diagnosis: what does the PIGE model miss?")
-    diag = diagnose(m, progress=not args.quiet and sys.stderr.isatty())
+    diag = diagnose(m, progress=show_progress(args.quiet))
     diag_json = atomic_write_text(out / "diagnosis.json", to_json(diag.to_dict()) + "\n")
     print(diag.verdict())
     effect_id = args.effect.partition(":")[0]
@@ -182,7 +182,7 @@ def _compensate_and_report(args: argparse.Namespace, code: str, csv: Path, nc_pa
     generic = to_json({"format": "pige-tolerances 1", "description": "10 um / 20 urad per PIGE",
                        "defaults": {"um": 10, "urad": 20}}) + "\n"
     atomic_write_text(tolerances, DEMO_TOLERANCES if code == "wC'A'bXYZ(C1)t" else generic)
-    data = gather_report([csv], program=nc_path, method="diagnosis", progress=not args.quiet and sys.stderr.isatty(),
+    data = gather_report([csv], program=nc_path, method="diagnosis", progress=show_progress(args.quiet),
                          tolerances=tolerances)
     check = data.measurements[0].check
     if check is not None:
@@ -231,7 +231,7 @@ def _num(x: float | None) -> str:
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "demo",
-        help="run the whole story on the default machine",
+        help="the whole story on a virtual machine, with an R-test or a touch probe (--instrument sphere-probe)",
         description=("Virtual R-test device with a hidden effect -> acquisition over a pseudo-terminal -> "
                      "identification -> diagnosis -> compensated program -> HTML report."),
         epilog=("examples:\n  pige demo\n  pige demo --out /tmp/demo --effect thermal_drift --seed 3\n"

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from pige_sym.cli._setup import show_progress
+
 
 def _check_plot_folder(args: argparse.Namespace, rotary_axes: tuple[str, ...]) -> None:
     """Before the long diagnosis: the plot folder must be a folder, and its PNGs are replaced only with --force."""
@@ -23,14 +25,18 @@ def _check_plot_folder(args: argparse.Namespace, rotary_axes: tuple[str, ...]) -
 def _run_several(args: argparse.Namespace) -> int:
     """Several files (or a ballbar file): each file's own diagnosis and their agreement."""
     from pige_sym import api
+    from pige_sym.cli._ballbar import plan_pointer
     from pige_sym.diagnosis.joint import format_joint_diagnosis
     from pige_sym.errors import InputError
     from pige_sym.files import to_json
 
     if args.plots:
         raise InputError("--plots draws the residuals of one R-test or probe file: diagnose that file alone")
-    result = api.diagnose_files(args.files, progress=not args.json)
-    print(to_json(result.to_dict()) if args.json else format_joint_diagnosis(result))
+    result = api.diagnose_files(args.files, progress=show_progress(args.json))
+    if args.json:
+        print(to_json(result.to_dict()))
+    else:
+        print(format_joint_diagnosis(result) + plan_pointer(result.final, result.joint.files))
     return 0
 
 
@@ -47,7 +53,7 @@ def _run(args: argparse.Namespace) -> int:
     m = api.read(args.file)
     if args.plots:
         _check_plot_folder(args, m.rotary_axes)
-    result = api.diagnose(m, progress=not args.json)
+    result = api.diagnose(m, progress=show_progress(args.json))
     if args.plots:
         residual_plots(m, result, args.plots)
     if args.json:
@@ -72,7 +78,7 @@ def _run(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "diagnose",
-        help="find and name what the PIGE model misses",
+        help="what the PIGE model misses in R-test or probe files; do several files (ballbar setups too) agree?",
         description="Residual analysis, candidate extensions, identifiability, BIC/F-test/held-out gain. Several "
                     "files of one machine: each file's own diagnosis, an F test of whether they agree on one set "
                     "of PIGEs and which file does not, and the joint estimate.",

@@ -46,7 +46,7 @@ def _num(x: float | None, fmt: str = ".3f") -> str:
 
 
 def _show_text(runs: list[Any], comparisons: list[Any]) -> None:
-    print(f"machine {runs[0].machine_id} ({runs[0].machine_code}): {len(runs)} run(s)")
+    print(f"machine {runs[0].machine_id} ({runs[0].machine_code}): {len(runs)} run{'' if len(runs) == 1 else 's'}")
     print(f"{'run':>4s}  {'measured (UTC)':25s} {'method':10s} {'verdict':10s} {'RMS um':>7s}  file")
     for r in runs:
         print(f"{r.id:4d}  {r.measured_at:25s} {r.method:10s} {r.verdict or '—':10s} {_num(r.rms_um):>7s}  "
@@ -73,7 +73,7 @@ def _show(args: argparse.Namespace) -> int:
         from pige_sym.errors import InputError
 
         raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
-    runs = list_runs(connect(args.db), args.machine_id)
+    runs = list_runs(connect(args.db, create=False), args.machine_id)
     comparisons = history_comparisons(runs, args.alpha)
     if args.json:
         print(to_json({"machine_id": args.machine_id, "runs": [r.to_dict() for r in runs],
@@ -87,7 +87,7 @@ def _show(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "history",
-        help="store calibration runs per machine and show what changed (with significance)",
+        help="store R-test, probe or ballbar runs per machine and show what changed (with significance)",
         description=__doc__,
         epilog=(
             "examples:\n"
@@ -100,7 +100,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     sub = p.add_subparsers(dest="history_command", metavar="ACTION", parser_class=type(p))
     sub.required = True
-    add = sub.add_parser("add", help="identify/diagnose a measurement file and store the run")
+    add = sub.add_parser(
+        "add", help="diagnose a measurement file (or several of one machine, jointly) and store the run",
+        description="Diagnose the file(s) and store the estimate used for compensation with its covariance, the\n"
+                    "accepted effects, the files' SHA-256 (the same set is stored once), the date and the verdict.",
+        epilog="examples:\n"
+               "  pige history add run.csv --machine-id DMU50-2 --db history.db\n"
+               "  pige history add run.csv --machine-id DMU50-2 --tolerances tolerances.json --date 2026-11-23T14:05\n"
+               "  pige history add radial_C.csv tangential_C.csv axial_A.csv --machine-id DMU50-2   # ballbar set",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     add.add_argument("files", nargs="+", metavar="FILE",
                      help="pige-rtest 1 measurement file; several files of one machine (R-test, probe, "
                           "pige-ballbar 1 setups) are stored as one joint run")
@@ -115,7 +123,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                                    "else its modification time)")
     add.add_argument("--json", action="store_true", help="print the stored run as JSON")
     add.set_defaults(handler=_add)
-    show = sub.add_parser("show", help="list a machine's runs and the changes between consecutive runs")
+    show = sub.add_parser(
+        "show", help="list a machine's runs and the changes between consecutive runs",
+        description="The runs of a machine and, between consecutive runs, each parameter's change with its\n"
+                    "standard error and whether it is significant (a joint Wald test, then Bonferroni t tests).",
+        epilog="examples:\n"
+               "  pige history show DMU50-2 --db history.db\n"
+               "  pige history show DMU50-2 --json --db postgresql://pige@dbhost/calibration",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     show.add_argument("machine_id", metavar="ID", help="machine id")
     show.add_argument("--db", metavar="URL", help=DB_HELP)
     show.add_argument("--alpha", type=float, default=0.01,

@@ -28,6 +28,7 @@ def _run(args: argparse.Namespace) -> int:
 def _run_joint(args: argparse.Namespace) -> int:
     """Several files (or a ballbar file): the joint identification with a per-file table."""
     from pige_sym import api
+    from pige_sym.cli._ballbar import plan_pointer
     from pige_sym.errors import InputError
     from pige_sym.identification.joint import format_files
     from pige_sym.identification.result import format_result
@@ -36,15 +37,20 @@ def _run_joint(args: argparse.Namespace) -> int:
         raise InputError("several files (or a ballbar file) are identified jointly: gauss-newton, each file with its "
                          "own projection (no --projection), loss linear")
     joint = api.identify_files(args.files, with_zero=args.with_zero)
-    print(to_json(joint.to_dict()) if args.json else format_result(joint.result) + "\n" + format_files(joint.files))
+    if args.json:
+        print(to_json(joint.to_dict()))
+    else:
+        print(format_result(joint.result) + "\n" + format_files(joint.files) + plan_pointer(joint.result, joint.files))
     return 0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "identify",
-        help="identify the PIGEs from an R-test file",
-        description="Least-squares identification of the rotary-axis PIGEs with uncertainty and identifiability.",
+        help="identify the PIGEs from R-test, probe or ballbar files (several of one machine jointly)",
+        description=("Least-squares identification of the rotary-axis PIGEs with uncertainty and identifiability,\n"
+                     "from one file or jointly from several of one machine: R-test runs, probe imports, ballbar\n"
+                     "setups."),
         epilog=(
             "examples:\n"
             "  pige identify run.csv\n"

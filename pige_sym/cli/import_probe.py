@@ -27,8 +27,9 @@ def _run(args: argparse.Namespace) -> int:
     out = check_output(args.out, force=args.force, inputs=[x for x in (args.log, args.program) if x], what="--out")
     m = import_probe_log(args.log, args.format, spec)
     write_measurement(m, out)
+    r_eff_text, _, how = m.metadata["r_eff_mm"].partition(" ")
     print(f"wrote {out}: {m.n_rows} poses, {int(m.optional['n_samples'].sum())} contacts; R_eff "
-          f"{m.metadata['r_eff_mm']} mm, contact sigma {float(m.metadata['contact_sigma_um']):.3f} um; largest "
+          f"{float(r_eff_text):.4f} mm {how}, contact sigma {float(m.metadata['contact_sigma_um']):.3f} um; largest "
           f"deviation {abs(m.deviation_um).max():.2f} um")
     return 0
 
@@ -126,7 +127,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "of CONVENTIONS' sense (e.g. A=-1,C=-1 for LinuxCNC 2.9's trt kinematics)")
     p.add_argument("--kinematics", choices=("identity", "tcp"), help="the kinematics the log was probed in "
                    "(tcp: work coordinates, mapped back through --pivot and --axis-sense; default identity)")
-    add_sphere_arguments(p)
+    add_sphere_arguments(p, when="without --program, whose header states them")
     p.add_argument("--tool", metavar="x,y,z",
                    help="head and mixed machines: the stylus centre from the last tool-side pivot at the reference "
                         "pose [mm] (CONVENTIONS 7; required there)")

@@ -7,8 +7,10 @@ difference), 2 bad input (one line on stderr, no traceback).
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from collections.abc import Callable, Sequence
+from typing import Any
 
 from pige_sym.errors import PigeError
 
@@ -16,7 +18,16 @@ Handler = Callable[[argparse.Namespace], int]
 
 
 class _Parser(argparse.ArgumentParser):
-    """ArgumentParser whose usage errors exit with status 2 and one line."""
+    """ArgumentParser whose usage errors exit with status 2 and one line.
+
+    A value that starts with a minus and a digit is a value, also a vector (``--pivot -12,3,4``,
+    ``--ball -1.5e1,0,80``): argparse alone reads only plain negative numbers so, and takes the rest for an
+    unknown option.  No option of pige looks like a number, so nothing else changes.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(2, f"{self.prog}: {message}\n")
@@ -26,8 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pige`` with every subcommand."""
     parser = _Parser(
         prog="pige",
-        description=("Identify and compensate the rotary-axis PIGEs of five-axis machines "
-                     "(R-test, or touch probe and sphere)."),
+        description=("Identify and compensate the rotary-axis PIGEs of five-axis machines from an R-test, "
+                     "a touch probe on a calibration sphere, or a double ballbar."),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     from pige_sym.constants import VERSION as __version__

@@ -120,20 +120,30 @@ def _format(plan: Any, out: str | None) -> str:
 
 
 def _run_ballbar(args: argparse.Namespace) -> int:
-    """The smallest set of ballbar setups that determines every PIGE within --target."""
-    from pige_sym.files import to_json
+    """The smallest set of ballbar setups that determines every PIGE within --target (--out: as JSON)."""
+    from pige_sym.files import atomic_write_text, check_output, to_json
     from pige_sym.kernels import load_kernels
     from pige_sym.planning.ballbar import format_setups, plan_setups
 
     code = load_kernels(args.machine).MACHINE_CODE
+    out = check_output(args.out, force=args.force, what="--out") if args.out else None
     target = 2.0 if args.target is None else args.target
     chosen, sizes = plan_setups(code, target=target, noise_um=args.noise)
+    result = {"machine": code, "noise_um": args.noise, "target": target,
+              "chosen": None if chosen is None else chosen.labels,
+              "programs": [] if chosen is None else chosen.program_commands(code),
+              "by_size": [{"setups": s.labels, "determined": s.determined, "worst_std": s.worst_std}
+                          for s in sizes]}
+    if out is not None:
+        atomic_write_text(out, to_json(result) + "\n")
     if args.json:
-        print(to_json({"chosen": None if chosen is None else chosen.labels, "target": target,
-                       "by_size": [{"setups": s.labels, "determined": s.determined, "worst_std": s.worst_std}
-                                   for s in sizes]}))
-    else:
-        print(format_setups(code, sizes, chosen, target=target, noise_um=args.noise))
+        print(to_json({**result, "out": None if out is None else str(out)}))
+        return 0 if chosen is not None else 1
+    print(format_setups(code, sizes, chosen, target=target, noise_um=args.noise))
+    if chosen is not None:
+        print("\nnext, one program per setup:\n" + "\n".join("  " + c for c in result["programs"]))
+    if out is not None:
+        print(f"\nwrote {out} (the plan as JSON)")
     return 0 if chosen is not None else 1
 
 
@@ -194,7 +204,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "plan", help="plan the R-test (trajectory, ball) for the best predicted precision, or grade one",
+        "plan", help="plan a test: R-test trajectory, probe poses and contacts, or ballbar setups; or grade one",
         description=__doc__.split("\n\n", 1)[1] if __doc__ else None,
         epilog=(
             "examples:\n"
@@ -226,7 +236,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the search (default %(default)s: reproducible)")
     p.add_argument("--grade", metavar="TRAJECTORY",
                    help="grade this test instead: cone-frustum, figure-eight, steps, an angle CSV or an NC program")
-    p.add_argument("--out", help="angle file of the planned test")
+    p.add_argument("--out", help="angle file of the planned test (ballbar: the chosen setups as JSON)")
     p.add_argument("--instrument", choices=["rtest", "ballbar", "sphere-probe"], default="rtest",
                    help="ballbar: the smallest set of setups; sphere-probe: poses and contacts for a time budget")
     add_probe_program_arguments(p)

@@ -1,4 +1,4 @@
-"""``pige program``: write the R-test NC program of a test trajectory (to run on the machine).
+"""``pige program``: write the NC program of a test (R-test, sphere probing or ballbar), to run on the machine.
 
 One positioning block per pose followed by a dwell, written natively in the chosen
 dialect (Siemens 840D, ISO/Fanuc/Haas with decimal points and ``G04 X``, or LinuxCNC with
@@ -14,6 +14,9 @@ With ``--instrument sphere-probe`` it writes the sphere-probing program instead
 probed along machine axes (G38.2 / G31 / MEAS / TCH PROBE) and logged; the program is read back and
 replayed against the nominal sphere before it is written (:mod:`pige_sym.nc.probe_readback`).
 Heidenhain programs print with FN 16: the format file is written beside the program (``.A``).
+
+With ``--instrument ballbar`` it writes one ballbar setup (``--setup``, ``--axis``, ``--tilt``) as an RTCP
+program (Siemens ``TRAORI`` or Fanuc ``G43.4``), checked to keep the nominal bar length at every pose.
 """
 
 from __future__ import annotations
@@ -132,7 +135,7 @@ def _run(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "program",
-        help="write the R-test NC program of a test trajectory",
+        help="write the NC program of a test: R-test trajectory, touch-probe cycles on the sphere, or ballbar setup",
         description=__doc__.split("\n\n", 1)[1] if __doc__ else None,
         epilog=(
             "examples:\n"
@@ -140,7 +143,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "  pige program --machine \"wC'B'bXYZ(C1)t\" --trajectory figure-eight --rtcp --out fig8.mpf\n"
             "  pige program --trajectory steps --dialect fanuc --out steps.nc\n"
             "  pige program --instrument sphere-probe --dialect linuxcnc --sphere 100,20,60 --sphere-radius 12.7 \\\n"
-            "      --stylus-radius 1.5 --trajectory plan.csv --out probe.ngc"
+            "      --stylus-radius 1.5 --trajectory plan.csv --out probe.ngc\n"
+            "  pige program --instrument ballbar --setup tangential --axis C --tilt -45 --dialect siemens \\\n"
+            "      --out tangential_C45.mpf"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import Any
 
+from pige_sym.cli._setup import show_progress
 from pige_sym.files import to_json
 
 #: estimates a report can compensate with (pige_sym.report.PRIMARY_METHODS, kept here so --help stays light)
@@ -40,13 +40,13 @@ def _run(args: argparse.Namespace) -> int:
     check_output_folder(args.out, force=args.force, inputs=inputs, names=("report.html",))  # before the long work
     data = gather_report(args.files, studies=args.study or "", program=args.program, method=args.method,
                          projection=args.projection, with_zero=args.with_zero, presets=args.presets,
-                         sobol_samples=args.samples, seed=args.seed, progress=not args.json and sys.stderr.isatty(),
+                         sobol_samples=args.samples, seed=args.seed, progress=show_progress(args.json),
                          tolerances=args.tolerances, rule=args.rule, k=args.k,
                          compare=tuple(args.compare) if args.compare else None, history=args.history, db=args.db,
                          joint=args.joint)
     if args.plan:
         data.plan = _graded_plan(args, data)
-    path = write_report(data, args.out, force=args.force, inputs=inputs)
+    path = write_report(data, args.out, force=args.force, inputs=inputs, figures=not args.no_figures)
     if args.json:
         print(to_json(data.to_dict()))
         return 0
@@ -74,7 +74,8 @@ def _run(args: argparse.Namespace) -> int:
         print(f"measured before/after: RMS {c.rms_before_um:.3f} -> {c.rms_after_um:.3f} um ({c.improvement:.1%} less)")
     if data.history is not None:
         n_sig = sum(ch.significant is True for comp in data.history.comparisons for ch in comp.changes)
-        print(f"history of {data.history.machine_id}: {len(data.history.runs)} runs, {n_sig} significant change(s)")
+        changes = "change" if n_sig == 1 else "changes"
+        print(f"history of {data.history.machine_id}: {len(data.history.runs)} runs, {n_sig} significant {changes}")
     print(f"wrote {path}")
     return 0
 
@@ -86,10 +87,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Identify (Gauss-Newton and double-differential), diagnose and compensate each measurement and write\n"
             "DIR/report.html: one self-contained page (plots embedded as PNG, no external resources); the PNGs\n"
-            "are kept in DIR/<file stem>/. A <stem>.truth.json beside a file (from pige simulate) is used as the\n"
-            "machine of the before/after and compared with the estimates; without it the before/after is\n"
-            "model-predicted. The page leads with the answer: machine, date, verdict (--tolerances), the PIGEs\n"
-            "used for compensation, the main finding and the improvement (measured with --compare).\n"
+            "are also kept in DIR/<file stem>/ (not with --no-figures). A <stem>.truth.json beside a file (from\n"
+            "pige simulate) is used as the machine of the before/after and compared with the estimates; without\n"
+            "it the before/after is model-predicted. The page leads with the answer: machine, date, verdict\n"
+            "(--tolerances), the PIGEs used for compensation, the main finding and the improvement (measured\n"
+            "with --compare).\n"
             "Ballbar setups (with --joint: also two R-test/probe files or more of one machine) get a joint\n"
             "section: one set of PIGEs for all files (as pige identify F1 F2 ...), whether the files agree\n"
             "(as pige diagnose F1 F2 ...) and, with --tolerances, the verdict of the joint estimate."
@@ -137,5 +139,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="Sobol indices estimated by Monte-Carlo on this base sample size (a power of 2) instead of "
                         "the exact closed form (default: exact)")
     p.add_argument("--seed", type=int, default=0, help="seed of the studies")
+    p.add_argument("--no-figures", action="store_true",
+                   help="write the page only: its figures are embedded in it, no PNG files beside it")
     p.add_argument("--json", action="store_true", help="print one JSON object (the results and the report path)")
     p.set_defaults(handler=_run)

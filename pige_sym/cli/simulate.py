@@ -1,4 +1,4 @@
-"""``pige simulate``: write a synthetic R-test file and its truth sidecar.
+"""``pige simulate``: write a synthetic R-test file, probe log or ballbar file, and its truth sidecar.
 
 With ``--instrument sphere-probe`` it writes the probe log a probing program produces on the virtual
 probing machine (:mod:`pige_sym.simulation.probe_machine`): the program given with ``--program``, or the
@@ -85,7 +85,15 @@ def _stated(setup: Any, args: argparse.Namespace, text: str) -> Any:
                                pivots_mm=setup.pivots_mm if args.pivot else h.pivots_mm)
 
 
+#: Decimals of the simulated length changes written [µm].
+BALLBAR_DECIMALS = 4
+
+
 def _run_ballbar(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    import numpy as np
+
     from pige_sym.cli._ballbar import ballbar_setup_of
     from pige_sym.kernels import load_kernels
     from pige_sym.measurements.ballbar import write_ballbar
@@ -104,10 +112,13 @@ def _run_ballbar(args: argparse.Namespace) -> int:
     run, outlier_rows = simulate_ballbar_with_outliers(kern.MACHINE_CODE, setup, pige=pige, noise_um=args.noise,
                                                        seed=args.seed, zero=args.zero, effects=effects)
     run.axis_sense = axis_sense_option(args, tuple(kern.ROTARY_AXES)) or {}
+    # a ballbar reads to 0.1 um at best: written to 0.1 nm, the file shows no 17-digit noise of the simulation
+    run = replace(run, dl_um=np.round(run.dl_um, BALLBAR_DECIMALS) + 0.0)
     write_ballbar(run, out)
     truth = {"machine": kern.MACHINE_CODE, "instrument": "ballbar", "setup": setup.label, "pige": pige,
              "effects": [e.to_dict() for e in effects], "outlier_rows": outlier_rows,
              "noise_um": args.noise, "seed": args.seed, "zero": args.zero,
+             "written_resolution_um": 10.0**-BALLBAR_DECIMALS,
              "model": "exact |T - P| - L0; effects first order at the tool ball, projected on the bar",
              **({"axis_sense": run.axis_sense} if run.axis_sense else {})}
     atomic_write_text(truth_path, to_json(truth) + "\n")
@@ -160,14 +171,20 @@ def _run(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "simulate",
-        help="simulate an R-test measurement file",
-        description="Simulate R-test data: machine, trajectory, PIGEs, effects and sensor noise.",
+        help="simulate an R-test file, a probe log or a ballbar setup on a machine with known errors",
+        description=("Simulate a test on a machine with known errors (PIGEs, effects, sensor noise) and write its\n"
+                     "truth sidecar: an R-test measurement file, the log a probing program writes on a virtual\n"
+                     "probing machine (--instrument sphere-probe), or one ballbar setup (--instrument ballbar)."),
         epilog=(
             "examples:\n"
             "  pige simulate --machine \"wC'A'bXYZ(C1)t\" --trajectory cone-frustum --pige random \\\n"
             "      --seed 1 --out run.csv\n"
             "  pige simulate --machine \"wC'B'bXYZ(C1)t\" --trajectory figure-eight --pige EX0B=5,EA0C=-8 \\\n"
-            "      --effect angular_error_C:harmonic=2,cos_urad=15 --noise 0.2 --out bc.csv"
+            "      --effect angular_error_C:harmonic=2,cos_urad=15 --noise 0.2 --out bc.csv\n"
+            "  pige simulate --instrument sphere-probe --dialect linuxcnc --program probe.ngc --sphere 100,20,60 \\\n"
+            "      --sphere-radius 12.7 --stylus-radius 1.5 --pivot 0,0,0 --pige random --out pige_probe.txt\n"
+            "  pige simulate --instrument ballbar --setup tangential --axis C --tilt -45 --pige random --seed 4 \\\n"
+            "      --out tangential_C45.csv"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from pige_sym.cli._setup import show_progress
 from pige_sym.constants import DEFAULT_MACHINE
 from pige_sym.errors import InputError
 from pige_sym.files import to_json
@@ -35,7 +36,7 @@ def _projection(args: argparse.Namespace) -> int:
     kern, traj = _trajectory(args)
     study = projection_study(kern.MACHINE_CODE, traj, projections=args.projections.split(","), sweep=args.sweep,
                              presets=args.presets, noise_um=args.noise, seed=args.seed, tool_mm=_tool(args),
-                             progress=not args.json)
+                             progress=show_progress(args.json))
     print(to_json(study.to_dict()) if args.json else study.format())
     return 0
 
@@ -99,12 +100,21 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    study = subparsers.add_parser("study", help="projection, sobol and compensation studies",
-                                  description="Studies of identifiability, sensitivity and compensation.")
+    study = subparsers.add_parser(
+        "study", help="projection, sobol and compensation studies (R-test; projection also for probe and ballbar)",
+        description="Studies of identifiability, sensitivity and compensation.",
+        epilog="examples:\n"
+               "  pige study projection --machine \"wC'A'bXYZ(C1)t\" --presets 100\n"
+               "  pige study projection --instrument ballbar\n"
+               "  pige study sobol --trajectory figure-eight\n"
+               "  pige study compensation --seed 3 --plots plots/",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = study.add_subparsers(dest="study", metavar="STUDY", parser_class=type(study))
     sub.required = True
     p = sub.add_parser("projection", help="identifiability per excitation projection (paper Tables 3-6)",
-                       epilog="example:\n  pige study projection --machine \"wC'B'bXYZ(C1)t\" --presets 100",
+                       epilog="examples:\n  pige study projection --machine \"wC'B'bXYZ(C1)t\" --presets 100\n"
+                              "  pige study projection --instrument sphere-probe --sphere 100,20,60 "
+                              "--sphere-radius 12.7 --stylus-radius 1.5",
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     _common(p)
     p.add_argument("--presets", type=int, default=50, help="random presets (default %(default)s)")

@@ -130,7 +130,7 @@ def parameters_from_result(result: Any, machine: str | None = None, *,
     from pige_sym.files import to_json
     from pige_sym.measurements.schema import params_document
 
-    source = "<diagnosis>" if hasattr(result, "final") else "<identification>"
+    source = "the diagnosis" if hasattr(result, "final") else "the identification"
     data = json.loads(to_json(result.to_dict()))
     return _parameters(params_document(data, source, machine=machine, allow_missing=allow_missing))
 

@@ -457,6 +457,9 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
     final, tau_std = refine_tau(selector, final)
     findings = sorted((_finding(selector, final, i, tau_std) for i in range(len(final.cands))),
                       key=lambda f: f.delta_bic)
+    if instrument(m) == "sphere-probe":  # a probe log has no clock: t is the pose's order (conventions §7)
+        for f in findings:
+            f.units |= {"tau_s": "poses"} if "tau_s" in f.units else {}
     outlier_rows: list[int] = []
     if out_finding is not None:
         findings.append(out_finding)

@@ -289,6 +289,8 @@ def format_joint_diagnosis(d: JointDiagnosis) -> str:
             lines.append(f"  {fd.label}: {f.sentence()}")
     lines += [f"  jointly: {f.sentence()}" for f in d.effects]
     lines += [f"note: {n}" for n in d.notes]
-    lines += ["", "joint estimate (PIGEs):", format_result(d.final), format_files(d.joint.files)]
+    final = d.joint if d.extended is None else d.extended  # each file's σ and residual in the fit shown
+    what = "PIGEs" if d.extended is None else "PIGEs and the effects seen jointly; σ per file estimated with them"
+    lines += ["", f"joint estimate ({what}):", format_result(d.final), format_files(final.files)]
     return "\n".join(lines)
 

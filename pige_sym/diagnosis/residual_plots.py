@@ -66,6 +66,11 @@ def save_figure(fig: Any, path: Path) -> str:
     return str(path)
 
 
+def _legend_outside(ax: Any) -> None:
+    """The legend right of the axes, where it covers no point."""
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+
+
 def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path) -> list[str]:
     """Write the residual-signature plots (PNG) of the baseline PIGE fit; returns their paths."""
     import matplotlib
@@ -81,13 +86,14 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
         raise InputError("no residuals to plot")
     paths = []
     t = m.t_s
+    probe = m.metadata.get("instrument") == "sphere-probe"  # a probe log has no clock: t is the pose's order
     fig, ax = plt.subplots(figsize=(7, 3.5))
     for i, c in enumerate("xyz"):
         ax.plot(t, resid[:, i], ".-", label=f"d{c}")
-    ax.set_xlabel("t [s]")
+    ax.set_xlabel("pose (its order in the log)" if probe else "t [s]")
     ax.set_ylabel("residual [µm]")
-    ax.set_title("PIGE-fit residual vs time")
-    ax.legend()
+    ax.set_title("PIGE-fit residual vs pose order" if probe else "PIGE-fit residual vs time")
+    _legend_outside(ax)
     paths.append(save_figure(fig, out / "residual_time.png"))
     frames = axis_frames(m, kern)
     for k, axis in enumerate(kern.ROTARY_AXES):
@@ -100,7 +106,7 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
         ax.set_xlabel(f"{axis} [deg]")
         ax.set_ylabel("residual [µm]")
         ax.set_title(f"residual in the frame of axis {axis}")
-        ax.legend()
+        _legend_outside(ax)
         paths.append(save_figure(fig, out / f"residual_{axis}.png"))
     appr = EffectContext(kern, m.angles_deg, m.t_s, m.ball_mm).approach
     assert appr is not None
@@ -129,7 +135,7 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
         ax.set_xlabel("angle [deg]")
         ax.set_ylabel("tangential residual [µm]")
         ax.set_title("residual by direction of approach")
-        ax.legend()
+        _legend_outside(ax)
         paths.append(save_figure(fig, out / "residual_approach.png"))
     result.plots = paths
     return paths

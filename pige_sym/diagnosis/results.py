@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from pige_sym.identification.result import IdentificationResult
+from pige_sym.identification.result import IdentificationResult, value_std
 
 EVIDENCE = {
     "thermal_drift": "a smooth trend of the residual with time (warm-up), not with the angles",
@@ -103,8 +103,9 @@ class Finding:
 
     def sentence(self) -> str:
         """One-line verdict."""
-        vals = ", ".join(f"{k}={v:.3g}±{self.std[k]:.2g} {self.units[k]}" for k, v in self.params.items())
-        opts = "".join(f" {k}={v:g}" for k, v in self.options.items())
+        vals = ", ".join(f"{'τ' if k == 'tau_s' else k}={value_std(v, self.std[k], '±')} {self.units[k]}"
+                         for k, v in self.params.items())
+        opts = "".join(f" {k}={v:.3g}" for k, v in self.options.items() if k != "tau_s")  # τ: with the values
         big = max(self.pige_shift.items(), key=lambda kv: abs(kv[1]), default=None)
         # E<direction>0<axis>: a linear direction (X, Y, Z) is a position error in µm, else µrad
         unit = "um" if big and big[0][1:2] in ("X", "Y", "Z") else "urad"
@@ -115,8 +116,12 @@ class Finding:
         worst = max(self.vif.values(), default=1.0)
         if worst > 10:
             reduced += f"; VIF up to {worst:.3g} (its standard errors are inflated up to {math.sqrt(worst):.3g}x)"
-        return (f"{self.effect}{opts}: {self.evidence}; {vals}; held-out RMS {self.heldout_rms_um_before:.3g} → "
-                f"{self.heldout_rms_um_after:.3g} um (ΔBIC {self.delta_bic:.1f}){moved}{reduced}")
+        if math.isfinite(self.heldout_rms_um_before) and math.isfinite(self.heldout_rms_um_after):
+            gain = f"held-out RMS {self.heldout_rms_um_before:.3g} → {self.heldout_rms_um_after:.3g} um"
+        else:  # no cross-validation (the joint search of ballbar setups): the fitted residual
+            gain = (f"residual RMS {self.rms_um_before:.3g} → {self.rms_um_after:.3g} in units of each file's noise "
+                    "σ")
+        return f"{self.effect}{opts}: {self.evidence}; {vals}; {gain} (ΔBIC {self.delta_bic:.1f}){moved}{reduced}"
 
 
 @dataclass

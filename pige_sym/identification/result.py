@@ -191,6 +191,17 @@ class IdentificationResult:
         )
 
 
+def value_std(value: float, std: float, sep: str = " ± ") -> str:
+    """``value ± std`` for a reader: the std to two significant digits, the value to the same decimal place
+    (``11.95 ± 0.42``, never ``12 ± 0.42``); without a usable std the value to four significant digits."""
+    if not math.isfinite(value):
+        return "—"
+    if not (math.isfinite(std) and std > 0):
+        return f"{value:.4g}"
+    decimals = max(0, 1 - int(math.floor(math.log10(std))))
+    return f"{value:.{decimals}f}{sep}{std:.{decimals}f}"
+
+
 def json_float(x: float) -> float | None:
     x = float(x)
     return None if not math.isfinite(x) else x

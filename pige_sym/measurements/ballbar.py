@@ -34,6 +34,7 @@ from pige_sym.files import atomic_write_text, open_regular_file, peek_input
 from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
 from pige_sym.measurements.axis_sense import format_axis_sense, read_axis_sense, to_commanded, to_conventions
 from pige_sym.measurements.measurement import LIMITS
+from pige_sym.measurements.rtest_body import separator_hint
 from pige_sym.options import strict_float
 
 FORMAT_LINE = "# pige-ballbar 1"
@@ -183,6 +184,9 @@ def read_ballbar(path: str | os.PathLike[str]) -> BallbarRun:
         raise FileFormatError(p, where["zero"], f"zero: {meta['zero']!r}; use relative or absolute")
     if header_at >= len(lines):
         raise FileFormatError(p, header_at, "no column header line after the metadata")
+    if "," not in lines[header_at] and separator_hint(lines[header_at], "pige-ballbar"):
+        raise FileFormatError(p, header_at + 1, "in the column header" + separator_hint(lines[header_at],
+                                                                                         "pige-ballbar"))
     names = [c.strip() for c in lines[header_at].split(",")]
     want = ["t_s", *(f"{a}_deg" for a in axes), "dL_um"]
     if names != want:

@@ -57,13 +57,13 @@ def check_numeric_block(
     return out
 
 
-def separator_hint(line: str) -> str:
-    """What a spreadsheet's regional settings did to a line, if anything (``;`` fields, decimal commas)."""
+def separator_hint(line: str, fmt: str = "pige-rtest") -> str:
+    """What a spreadsheet's regional settings did to a line of a ``fmt`` file, if anything (``;`` fields, tabs)."""
     if ";" in line:
-        return ("; the fields are separated by ';' (a spreadsheet's regional setting): pige-rtest separates "
+        return (f"; the fields are separated by ';' (a spreadsheet's regional setting): {fmt} separates "
                 "fields by ',' and writes decimals with '.'")
     if "\t" in line:
-        return "; the fields are separated by tabs: pige-rtest separates fields by ','"
+        return f"; the fields are separated by tabs: {fmt} separates fields by ','"
     return ""
 
 

@@ -346,6 +346,10 @@ class _Replay:
         start_gap = float(np.linalg.norm(self.pos - self.centre)) - r
         over = _overtravel(self.pos, new, self.centre, r)
         need = self.s.overtravel_mm if op.kind == "probe" else float(op.window or 0.0)
+        if start_gap > 0 and not np.isfinite(over):
+            raise NCProgramError(self.path, op.line, f"probing move starts {start_gap:.3f} mm outside the sphere "
+                                                     "and never reaches it: is the sphere (--sphere, --pivot) where "
+                                                     "the program probes?")
         if start_gap <= 0 or over < need - 2e-4:  # 4-decimal coordinates
             raise NCProgramError(self.path, op.line, f"probing move starts {start_gap:.3f} mm outside the sphere "
                                                      f"and ends {over:.3f} mm past its surface (needs > 0 and "

@@ -13,7 +13,7 @@ size).
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -36,6 +36,18 @@ class SetupSet:
     worst_std: float
     std: dict[str, float]
     undetermined: list[str]
+    setups: list[BallbarSetup] = field(default_factory=list)
+
+    def program_commands(self, machine: str) -> list[str]:
+        """The ``pige program --instrument ballbar`` command of each setup, in order."""
+        out = []
+        for s in self.setups:
+            held = [f" --tilt {v:g}" for a, v in zip(s.rotary_axes, s.angles_deg[0], strict=True)
+                    if a != s.axis and s.axis[0] == "C" and v != 0]
+            out.append(f"pige program --instrument ballbar --machine \"{machine}\" --setup {s.kind} --axis {s.axis}"
+                       + "".join(held) + f" --dialect siemens --out {s.kind}_{s.axis}"
+                       + "".join(h.replace(" --tilt ", "") for h in held) + ".mpf")
+        return out
 
 
 def candidate_setups(machine: str, tilt_deg: float = -45.0) -> list[BallbarSetup]:
@@ -78,7 +90,7 @@ def evaluate(machine: str, setups: list[BallbarSetup], noise_um: float = 1.0) ->
     units = dict(kern.UNITS) | {n: "um" for n in all_names[p:]}
     combos = [combination_text(sol.null_vectors[:, j], all_names, units) for j in range(sol.null_vectors.shape[1])]
     rank = sol.rank - int(np.isfinite(sol.vif[p:]).sum())
-    return SetupSet([b.label for b in blocks], rank, int(ok.sum()), p, max(std.values()), std, combos)
+    return SetupSet([b.label for b in blocks], rank, int(ok.sum()), p, max(std.values()), std, combos, list(setups))
 
 
 def plan_setups(machine: str, *, target: float, noise_um: float = 1.0, max_setups: int = 6,
@@ -99,11 +111,11 @@ def format_setups(machine: str, sets: list[SetupSet], chosen: SetupSet | None, *
                   noise_um: float) -> str:
     """Text of a ranking (single setups) or a plan (best set per size, the chosen one)."""
     lines = [f"ballbar setups for {machine}, noise {noise_um:g} um per reading (zero: relative, one constant each)",
-             "", f"{'setups':<72}{'rank':>6}{'determined':>12}{'worst std':>11}"]
+             "", f"{'rank':>6}{'determined':>12}{'worst std':>11}  setups"]
     for s in sets:
-        worst = f"{s.worst_std:.3g}" if np.isfinite(s.worst_std) else "inf"
-        lines.append(f"{' + '.join(s.labels)[:71]:<72}{s.rank:>4}/{s.n_parameters}{s.determined:>10}/"
-                     f"{s.n_parameters}{worst:>11}")
+        worst = f"{s.worst_std:.3g}" if np.isfinite(s.worst_std) else "—"
+        lines.append(f"{s.rank:>4}/{s.n_parameters}{s.determined:>10}/{s.n_parameters}{worst:>11}  "
+                     + " + ".join(s.labels))
     if target is not None:
         lines.append("")
         if chosen is None:

@@ -77,12 +77,15 @@ class Truth:
     extensions : list of AngleExtension
         Angle errors of the sidecar's effects (angular positioning, backlash) that the
         before/after simulates on the true machine.
+    effects : list of dict
+        The sidecar's effect records as written (``effect``, options, parameters).
     """
 
     path: Path
     values: dict[str, float]
     notes: list[str] = field(default_factory=list)
     extensions: list[AngleExtension] = field(default_factory=list)
+    effects: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -222,9 +225,11 @@ class JointReport:
     check : CheckResult or None
         Verdict of the joint estimate (with ``--tolerances``).
     truth : dict of str to float or None
-        True PIGEs [µm, µrad] when every file has a truth sidecar and they agree.
+        True values [µm, µrad] when every file has a truth sidecar and they agree: the PIGEs and the
+        parameters of the effects seen jointly (``<effect>.<parameter>``).
     curves : list of (str, ndarray, ndarray)
-        Per ballbar file: label, measured ``dL`` and the joint PIGE-only fit of it, shape=(n,) [µm].
+        Per ballbar file: label, measured ``dL`` and the final joint fit of it (with the effects seen
+        jointly), shape=(n,) [µm].
     """
 
     machine: str

@@ -23,6 +23,7 @@ from pige_sym.identification.result import IdentificationResult
 from pige_sym.identification.studies import SobolStudy
 from pige_sym.measurements.measurement import Measurement
 from pige_sym.report.data import UNIT_TEXT, HistoryData, MeasurementReport, ReportData, ReportFigure, Truth
+from pige_sym.report.words import small_um, vocabulary
 
 
 def _pyplot() -> Any:
@@ -54,28 +55,34 @@ def deviation_figure(m: Measurement, model_um: np.ndarray | None) -> Any:
     matplotlib.figure.Figure
     """
     plt = _pyplot()
+    words = vocabulary(m)
     dev = m.deviation_machine_um()
     idx = np.arange(m.n_rows)
-    fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(9, 5.6), sharex=True, gridspec_kw={"height_ratios": [3, 2]})
+    fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(10, 5.6), sharex=True, gridspec_kw={"height_ratios": [3, 2]})
     colors = ("tab:blue", "tab:orange", "tab:green")
     for k, c in enumerate("xyz"):
         ax0.plot(idx, dev[:, k], "o-", ms=3.5, lw=1, color=colors[k], label=f"d{c} measured")
         if model_um is not None:
             ax0.plot(idx, model_um[:, k], "--", lw=1, color=colors[k], alpha=0.8, label=f"d{c} PIGE model")
     ax0.axhline(0, color="k", lw=0.6)
-    ax0.set_ylabel("deviation ball − nest [µm]")
-    ax0.set_title("R-test deviation, machine frame" + (" (converted from the table frame)" if m.frame == "table"
-                                                       else ""), fontsize=10)
-    ax0.legend(fontsize=7, ncol=3 if model_um is None else 2, loc="best")
+    ax0.set_ylabel(words.deviation_axis)
+    ax0.set_title(f"{words.measurand}, machine frame" + (" (converted from the table frame)" if m.frame == "table"
+                                                         else ""), fontsize=10)
+    _legend_outside(ax0)
     ax0.grid(alpha=0.3)
     for k, a in enumerate(m.rotary_axes):
         ax1.plot(idx, m.angles_deg[:, k], ".-", lw=1, label=f"{a}")
-    ax1.set_xlabel("measurement point (0 = reference pose)")
+    ax1.set_xlabel(f"{words.row} (0 = reference pose)")
     ax1.set_ylabel("commanded angle [deg]")
-    ax1.legend(fontsize=8)
+    _legend_outside(ax1)
     ax1.grid(alpha=0.3)
     fig.tight_layout()
     return fig
+
+
+def _legend_outside(ax: Any, **kwargs: Any) -> None:
+    """The legend right of the axes, never over a curve (tight_layout makes room for it)."""
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kwargs)
 
 
 def polar_axis(m: Measurement) -> int | None:
@@ -116,14 +123,26 @@ def polar_figure(m: Measurement, model_um: np.ndarray | None, axis_index: int) -
             ax.plot(theta, r0 + model_um[:, k], "-", lw=0.8, color="0.3", alpha=0.8, label="PIGE model")
         ax.set_rlim(0, r0 + r0 / 2 + step / 2)
         ax.set_rticks(r0 + ticks)
-        ax.set_yticklabels([f"{t:+g}" for t in ticks], fontsize=7)
+        shown = ticks[::2] if ticks.size > 4 else ticks  # every other ring labelled: room for each label
+        ax.set_yticklabels([f"{t:+g}" if t in shown else "" for t in ticks], fontsize=8)
+        ax.set_rlabel_position(_emptiest_direction(theta))
+        for label in ax.get_yticklabels():
+            label.set_bbox({"facecolor": "white", "edgecolor": "none", "alpha": 0.85, "pad": 1.0})
         ax.set_title(f"d{c} [µm] vs {m.rotary_axes[axis_index]} [deg]", fontsize=10)
         ax.tick_params(axis="x", labelsize=7)
-        if k == 0:
-            ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(-0.25, -0.15))
+    handles, labels = axs[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=2, frameon=False)
     fig.suptitle(f"deviation about the nominal circle (dashed = 0 µm, ring step {step:g} µm)", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.06, 1, 0.93))
     return fig
+
+
+def _emptiest_direction(theta: np.ndarray) -> float:
+    """The direction [deg] farthest from every measured angle: where the radial labels cover no point."""
+    grid = np.radians(np.arange(0.0, 360.0, 7.5))
+    gap = np.abs((grid[:, None] - np.asarray(theta)[None, :] + np.pi) % (2 * np.pi) - np.pi).min(axis=1) \
+        if np.size(theta) else np.zeros(grid.size)
+    return float(np.degrees(grid[int(np.argmax(gap))]))
 
 
 def _nice_step(x: float) -> float:
@@ -178,10 +197,10 @@ def identification_figure(results: dict[str, IdentificationResult], truth: Truth
         ax.set_ylabel(f"value [{UNIT_TEXT.get(unit, unit)}]")
         ax.set_title(f"{title} (95 % intervals)", fontsize=10)
         ax.grid(alpha=0.3)
-        handles, labels = ax.get_legend_handles_labels()
-        if handles:
-            ax.legend(fontsize=7)
-    fig.tight_layout()
+    handles, labels = axs[0].get_legend_handles_labels()
+    if handles:  # one legend for both panels, below them: it covers no interval
+        fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=len(handles), frameon=False)
+    fig.tight_layout(rect=(0, 0.07 if handles else 0, 1, 1))
     return fig
 
 
@@ -203,7 +222,7 @@ def sobol_figure(study: SobolStudy) -> Any:
     ax.set_xticklabels(study.parameters)
     ax.set_ylabel("total Sobol index [-]")
     ax.set_title("sensitivity of the mean-square projected deviation to each PIGE", fontsize=10)
-    ax.legend(fontsize=7, ncol=n_proj)
+    _legend_outside(ax)
     ax.grid(alpha=0.3, axis="y")
     fig.tight_layout()
     return fig
@@ -216,9 +235,10 @@ def draw_figures(rep: MeasurementReport, out_dir: Path) -> list[ReportFigure]:
     figs: list[ReportFigure] = []
     overlay = "; dashed: PIGE model of the " + rep.primary_method + " estimate" if rep.model_um is not None else (
         "; no model overlay: a parameter is undetermined")
+    words = vocabulary(m)
     figs.append(ReportFigure("deviation", _save(deviation_figure(m, rep.model_um), out_dir / "deviation.png"),
-                             f"Deviation ball − nest per measurement point [µm], machine frame, with the commanded "
-                             f"rotary angles [deg]{overlay}."))
+                             f"{words.measurand[0].upper() + words.measurand[1:]} per {words.row} [µm], machine "
+                             f"frame, with the commanded rotary angles [deg]{overlay}."))
     k = polar_axis(m)
     if k is not None:
         figs.append(ReportFigure("polar", _save(polar_figure(m, rep.model_um, k), out_dir / "deviation_polar.png"),
@@ -234,7 +254,8 @@ def draw_figures(rep: MeasurementReport, out_dir: Path) -> list[ReportFigure]:
             paths = residual_plots(m, rep.diagnosis, out_dir)
         except InputError:
             paths = []
-    captions = {"residual_time": "Residual of the PIGE fit against time [µm] (thermal drift shows as a trend).",
+    against = "the pose's order" if words.time_unit == "poses" else "time"
+    captions = {"residual_time": f"Residual of the PIGE fit against {against} [µm] (a drift shows as a trend).",
                 "residual_rows": "Residual norm per row (red: outliers) and its autocorrelation in time.",
                 "residual_approach": "Tangential residual by direction of approach (backlash shows as a split)."}
     for path in paths:
@@ -284,11 +305,11 @@ def before_after_figure(row: CompensationStudyRow, label: str) -> Any:
             ax.plot(idx, err[:, k], "-", lw=0.9, color=colors[k], label=f"{c}")
         ax.plot(idx, np.linalg.norm(err, axis=1), "k.-", lw=1, ms=3, label="|error|")
         ax.axhline(0, color="k", lw=0.5)
-        ax.set_ylabel("[µm]")
-        ax.set_title(f"{when} compensation ({label}): RMSE {rms:.3g} µm", fontsize=9)
+        ax.set_ylabel("tool-point error [µm]")
+        ax.set_title(f"{when} compensation ({label}): RMSE {small_um(rms)} µm", fontsize=9)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=4, loc="upper right")
-    axs[1].set_xlabel("point")
+        _legend_outside(ax)
+    axs[1].set_xlabel("pose of the test")
     fig.tight_layout()
     return fig
 
@@ -314,10 +335,10 @@ def compare_figure(result: Any) -> Any:
         for part in (dec.parts if dec is not None else []):
             if part.values_um is not None:
                 ax.plot(idx, np.linalg.norm(part.values_um, axis=1), "--", lw=0.9, label=f"|{part.name} part|")
-        ax.set_ylabel("[µm]")
-        ax.set_title(f"{when} (measured): RMS {rms:.3g} µm", fontsize=9)
+        ax.set_ylabel("|d| [µm]")
+        ax.set_title(f"{when} (measured): RMS {small_um(rms)} µm", fontsize=9)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=4, loc="upper right")
+        _legend_outside(ax)
     axs[1].set_xlabel("pose")
     fig.tight_layout()
     return fig
@@ -387,16 +408,18 @@ def ballbar_figure(curves: list[tuple[str, np.ndarray, np.ndarray]]) -> Any:
     for ax, (label, measured, fitted) in zip(axs.flat, curves, strict=False):
         idx = np.arange(measured.size)
         ax.plot(idx, measured, "k.", ms=3, label="ΔL measured")
-        ax.plot(idx, fitted, "-", lw=1.2, label="joint PIGE fit")
+        ax.plot(idx, fitted, "-", lw=1.2, label="joint fit")
         rms = float(np.sqrt(np.mean((measured - fitted) ** 2)))
-        ax.set_title(f"{label[-30:]}: rest {rms:.2g} µm", fontsize=8)
+        ax.set_title(f"{label[-30:]}: rest {small_um(rms, '.2g')} µm", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
+        ax.set_xlabel("pose", fontsize=7)
+        ax.set_ylabel("ΔL [µm]", fontsize=7)
     for ax in list(axs.flat)[len(curves):]:
         ax.axis("off")
-    axs.flat[0].legend(fontsize=7)
-    axs.flat[0].set_ylabel("[µm]")
-    fig.tight_layout()
+    handles, labels = axs.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=2, frameon=False)
+    fig.tight_layout(rect=(0, 0.04 if rows > 1 else 0.1, 1, 1))
     return fig
 
 
@@ -419,6 +442,6 @@ def draw_report_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
             out_dir.mkdir(parents=True, exist_ok=True)
             figs.append(ReportFigure(f"joint-{i + 1}", _save(ballbar_figure(jr.curves), out_dir / f"joint_{i + 1}.png"),
                                      "Each ballbar setup's measured length change ΔL per pose [µm] and the joint "
-                                     "PIGE-only fit of it (with the file's constant): the rest is noise, or the "
-                                     "effects named above, or a setup that disagrees."))
+                                     "fit of it (the PIGEs, the effects seen jointly and the file's constant): the "
+                                     "rest is noise, or a setup that disagrees."))
     return figs

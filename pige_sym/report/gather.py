@@ -128,9 +128,10 @@ def read_truth(csv_path: str | os.PathLike[str], machine: str) -> Truth | None:
         names.append(data["effect"])
     if names:
         simulated = "true PIGEs" + (" and angle errors" if extensions else "")
-        notes.append(f"the truth sidecar also lists effect(s) {', '.join(names)}: the before/after simulates the "
+        effects = "effect" if len(names) == 1 else "effects"
+        notes.append(f"the truth sidecar also lists the {effects} {', '.join(names)}: the before/after simulates the "
                      f"{simulated} only")
-    return Truth(tp, values, notes, extensions)
+    return Truth(tp, values, notes, extensions, records)
 
 
 def _labels(paths: Sequence[Path]) -> list[str]:
@@ -235,13 +236,26 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     return data
 
 
-def _common_truth(truths: Sequence[dict[str, float] | None]) -> dict[str, float] | None:
-    """The true PIGEs every file's sidecar gives alike, or None."""
-    first = truths[0] if truths else None
-    return first if first is not None and all(t == first for t in truths) else None
+def _common_truth(truths: Sequence[Truth | None], diag: JointDiagnosis) -> dict[str, float] | None:
+    """The true values every file's sidecar gives alike, or None: the PIGEs, and the parameters
+    (``<effect>.<parameter>``) of each effect seen jointly whose whole is determined (nothing removed) when
+    every sidecar lists the same effect with the same harmonic."""
+    if not truths or any(t is None for t in truths):
+        return None
+    first = truths[0]
+    assert first is not None
+    if any(t is None or t.values != first.values or t.effects != first.effects for t in truths):
+        return None
+    out = dict(first.values)
+    for f in diag.effects:
+        match = [e for e in first.effects if e.get("effect") == f.effect
+                 and all(float(e.get(k, 1.0)) == float(v) for k, v in f.options.items() if k == "harmonic")]
+        if len(match) == 1 and not f.removed:
+            out |= {f"{f.effect}.{p}": float(match[0].get(p, 0.0)) for p in f.params}
+    return out
 
 
-def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, dict[str, float] | None]], *,
+def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, Truth | None]], *,
                   tolerances: Tolerances | None = None, rule: str = "guard", k: float = 2.0,
                   every_group: bool = False, diagnoses: dict[Path, DiagnosisResult | None] | None = None
                   ) -> list[JointReport]:
@@ -249,7 +263,7 @@ def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, dict[str
 
     Parameters
     ----------
-    items : sequence of (path, contents, true PIGEs or None)
+    items : sequence of (path, contents, truth sidecar or None)
         Every file of the report, R-test, probe and ballbar, in the order given.
     tolerances : Tolerances, optional
         Judge each joint estimate.
@@ -279,21 +293,21 @@ def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, dict[str
         labelled = [(items[i][0].name, items[i][1]) for i in idx]
         diag = diagnose_joint(labelled, diagnoses=[(diagnoses or {}).get(items[i][0]) for i in idx])
         verdict = None
-        if tolerances is not None:
+        if tolerances is not None:  # the joint diagnosis, effects included: what `pige check F1 F2 …` judges
             source = " + ".join(items[i][0].name for i in idx)
-            verdict = check(estimates_from_result(diag.final, source), tolerances, rule=rule, k=k)
+            verdict = check(estimates_from_result(diag, source), tolerances, rule=rule, k=k)
         out.append(JointReport(machine, [items[i][0] for i in idx], diag, verdict,
-                               _common_truth([items[i][2] for i in idx]), _ballbar_curves(labelled, diag)))
+                               _common_truth([items[i][2] for i in idx], diag), _ballbar_curves(labelled, diag)))
     return out
 
 
 def _read_inputs(paths: list[Path]) -> tuple[list[tuple[Path, Measurement, Truth | None]],
-                                             list[tuple[Path, Measurement | BallbarRun, dict[str, float] | None]]]:
-    """(R-test/probe files with their truth, every file with its true PIGEs), each read and checked once."""
+                                             list[tuple[Path, Measurement | BallbarRun, Truth | None]]]:
+    """(R-test/probe files with their truth, every file with its truth), each read and checked once."""
     loaded, every = [], []
     for p, item in read_files(paths) if paths else []:
         truth = read_truth(p, item.machine)
-        every.append((Path(p), item, None if truth is None else truth.values))
+        every.append((Path(p), item, truth))
         if isinstance(item, Measurement):
             loaded.append((Path(p), item, truth))
     return loaded, every
@@ -301,14 +315,17 @@ def _read_inputs(paths: list[Path]) -> tuple[list[tuple[Path, Measurement, Truth
 
 def _ballbar_curves(items: list[tuple[str, Measurement | BallbarRun]],
                     diag: JointDiagnosis) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    """Each ballbar file's measured ``dL`` and its joint PIGE-only fit (with the file's constant) [µm]."""
-    return [(label, item.dl_um, f.fitted_um) for (label, item), f in zip(items, diag.joint.files, strict=True)
+    """Each ballbar file's measured ``dL`` and its joint fit (the final one: with the effects seen jointly,
+    and the file's constant) [µm]."""
+    final = diag.joint if diag.extended is None else diag.extended
+    return [(label, item.dl_um, f.fitted_um) for (label, item), f in zip(items, final.files, strict=True)
             if isinstance(item, BallbarRun) and f.fitted_um is not None]
 
 
 def _settings_shown(o: _Options) -> dict[str, str]:
     """The options a report was built with, as shown in its header."""
-    settings = {"primary method": o.method, "projection": o.projection, "zero-position errors": str(o.with_zero),
+    settings = {"primary method": o.method, "projection": o.projection,
+                "zero-position errors": "estimated" if o.with_zero else "not estimated",
                 "studies": ", ".join(o.studies) or "none"}
     if "projection" in o.studies:
         settings["projection-study presets"] = str(o.presets)
@@ -426,7 +443,7 @@ def gather_history(machine_id: str, db: str | None, tol: Tolerances | None) -> H
     """Runs and consecutive comparisons of a machine; tolerance band from ``tol`` or the last stored check."""
     from pige_sym.verdict.history import compare_runs, connect, list_runs
 
-    engine = connect(db)
+    engine = connect(db, create=False)
     runs = list_runs(engine, machine_id)
     comps = [compare_runs(a, b, from_run=a.id, to_run=b.id) for a, b in zip(runs, runs[1:], strict=False)]
     if tol is not None:

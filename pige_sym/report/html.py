@@ -16,7 +16,7 @@ from pige_sym.files import atomic_write_text, staged_folder
 from pige_sym.report.data import MeasurementReport, ReportData
 from pige_sym.report.figures import draw_figures, draw_report_figures
 from pige_sym.report.gather import findings_text, gather_report
-from pige_sym.report.html_blocks import CSS, esc, figs, img, num, table
+from pige_sym.report.html_blocks import CSS, esc, figs, img, num, path_html, table
 from pige_sym.report.html_sections import (
     compensation_html,
     diagnosis_html,
@@ -28,43 +28,55 @@ from pige_sym.report.html_sections import (
 from pige_sym.report.html_verdict import answer_html, check_html, compare_html, history_html
 from pige_sym.report.joint_section import answer_joint_html, joint_html
 from pige_sym.report.lead import improvement
+from pige_sym.report.words import count
 
 
 def write_report(data: ReportData, out_dir: str | os.PathLike[str], *, force: bool = False,
-                 inputs: Sequence[str | os.PathLike[str]] = ()) -> Path:
+                 inputs: Sequence[str | os.PathLike[str]] = (), figures: bool = True) -> Path:
     """Draw the figures, write the compensated programs and ``out_dir/report.html``; returns the HTML path.
 
     The folder is written all at once (:func:`pige_sym.files.staged_folder`): an interrupt leaves nothing
-    partial, and what an earlier report wrote there is replaced only with ``force``.
+    partial, and what an earlier report wrote there is replaced only with ``force``.  The page embeds every
+    figure; ``figures=False`` (``pige report --no-figures``) keeps them only there: they are drawn into a
+    temporary folder, not written beside the page.
     """
+    import tempfile
+
     out = Path(out_dir)
-    with staged_folder(out, force=force, inputs=inputs) as stage:
-        _write_into(data, stage)
+    with staged_folder(out, force=force, inputs=inputs) as stage, \
+            tempfile.TemporaryDirectory(prefix="pige-figures-") as scratch:
+        _write_into(data, stage, stage if figures else Path(scratch))
+        if not figures:  # the PNGs are gone with the scratch folder: none is listed
+            for rep in data.measurements:
+                rep.figures = []
+            data.figures = []
     _relocate(data, stage, out)
     return out / "report.html"
 
 
-def _write_into(data: ReportData, out: Path) -> None:
+def _write_into(data: ReportData, out: Path, drawn: Path) -> None:
+    """``write_report`` into the staged folder ``out``, the figures drawn under ``drawn`` (``out`` or scratch)."""
     for rep in data.measurements:
         sub = out / rep.label
-        rep.figures = draw_figures(rep, sub)
+        rep.figures = draw_figures(rep, drawn / rep.label)
         text = rep.compensated_program_text
         if text is not None and data.program is not None:
+            sub.mkdir(parents=True, exist_ok=True)
             target = sub / f"{data.program.stem}_compensated{data.program.suffix or '.mpf'}"
             atomic_write_text(target, text, newline="")
             rep.compensated_program = target
-    data.figures = draw_report_figures(data, out / "_report")
+    data.figures = draw_report_figures(data, drawn / "_report")
     if data.plan is not None:
         from pige_sym.report.plan_section import plan_section
 
-        data.plan_html, _ = plan_section(data.plan, out / "_report")
+        data.plan_html, _ = plan_section(data.plan, drawn / "_report")
     atomic_write_text(out / "report.html", render_html(data, base=out))
 
 
 def _relocate(data: ReportData, stage: Path, out: Path) -> None:
     """The paths recorded while writing into the staged folder, moved to where the folder now is."""
     def moved(p: Path) -> Path:
-        return out / p.relative_to(stage)
+        return out / p.relative_to(stage) if p.is_relative_to(stage) else p
 
     for rep in data.measurements:
         for f in rep.figures:
@@ -115,7 +127,7 @@ def _measurement_html(i: int, rep: MeasurementReport, base: Path | None) -> str:
 
 
 def _overview_html(data: ReportData) -> str:
-    head = ["#", "file", "machine", "points", "rank", "residual RMS [µm]", "diagnosis", "RMSE before → after [µm]",
+    head = ["#", "file", "machine", "rows", "rank", "residual RMS [µm]", "diagnosis", "RMSE before → after [µm]",
             "basis"]
     rows = []
     for i, rep in enumerate(data.measurements):
@@ -126,8 +138,8 @@ def _overview_html(data: ReportData) -> str:
         rank = esc(f"{gn.rank}/{len(gn.parameters)}")
         if gn.rank < len(gn.parameters):
             rank = f'<span class="unid">{rank}</span>'
-        rows.append([f'<a href="#m{i + 1}">{i + 1}</a>', f'<code class="path">{esc(rep.path.name)}</code>',
-                     f"<code>{esc(rep.machine)}</code>", esc(rep.measurement.n_rows), rank, num(gn.rms_um, ".4f"),
+        rows.append([f'<a href="#m{i + 1}">{i + 1}</a>', f'<code class="path">{path_html(rep.path.name)}</code>',
+                     f"<code>{esc(rep.machine)}</code>", esc(rep.measurement.n_rows), rank, num(gn.rms_um, ".3g"),
                      esc(findings), f"{num(imp.before_um)} {arrow} {num(imp.after_um, '.3g')}", esc(imp.label)])
     return table(head, rows, num_cols=[3, 5])
 
@@ -152,7 +164,8 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
     base : Path, optional
         Figure paths are shown relative to it.
     """
-    nav = " ".join([f'<a href="#joint-{i + 1}">joint: {len(j.paths)} files</a>' for i, j in enumerate(data.joints)]
+    nav = " ".join([f'<a href="#joint-{i + 1}">joint: {count(len(j.paths), "file")}</a>'
+                    for i, j in enumerate(data.joints)]
                    + [f'<a href="#m{i + 1}">{esc(r.path.name)}</a>' for i, r in enumerate(data.measurements)]
                    + (['<a href="#compare">measured before/after</a>'] if data.comparison is not None else [])
                    + (['<a href="#history">history</a>'] if data.history is not None else [])
@@ -189,9 +202,11 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
         parts.append(data.plan_html)
     parts += [
         "</main><footer><p>PIGEs: position-independent geometric errors of the rotary axes (ISO 230-7), position "
-        "errors in µm, orientation errors in µrad, as defined in pige_sym's docs/conventions.md. Standard errors from "
-        "σ²(AᵀA)⁺ with σ² = RSS/(N − rank); 95 % intervals from Student's t. A parameter with weight in a "
-        "near-null direction of the scaled design is not identifiable and gets no value.</p></footer>",
+        "errors in µm, orientation errors in µrad, as defined in pige_sym's docs/conventions.md (frames, senses, "
+        "what each instrument measures). Standard errors from the weighted least squares of each fit, σ² = "
+        "RSS/(N − rank) (probe files: generalised least squares with the reference pose's correlation; several "
+        "files: each file's rows divided by its own σ); 95 % intervals from Student's t. A parameter with weight "
+        "in a near-null direction of the scaled design is not identifiable and gets no value.</p></footer>",
         "</body></html>",
     ]
     return "\n".join(parts) + "\n"

@@ -24,7 +24,8 @@ table{max-width:100%}
 .tw{max-width:100%;overflow-x:auto}
 td,th{overflow-wrap:break-word}
 code{overflow-wrap:break-word}
-.kv td,.kv td code,code.path,nav a,h1,h2,h3,h4,figcaption,span.file{overflow-wrap:anywhere}
+.kv td,.kv td code,nav a,h1,h2,h3,h4,figcaption{overflow-wrap:anywhere}
+code.path,span.file{overflow-wrap:break-word;word-break:normal}
 .meta{margin:.2em 0;color:#4a5563;font-size:.85em}
 .answer{display:flex;flex-wrap:wrap;gap:6px 18px;background:#fff;border:2px solid #2b6cb0;border-radius:6px;
 padding:8px 14px;margin:8px 0}
@@ -70,6 +71,28 @@ nav a{margin-right:12px}
 code{background:#eef2f7;padding:0 3px;border-radius:3px}
 ul.verdict li{margin:.25em 0}
 footer{font-size:.8em;color:#5c6670;padding-bottom:30px}
+td.stack{white-space:nowrap;font-variant-numeric:tabular-nums}
+@media print{
+@page{size:A4;margin:12mm}
+body{background:#fff;font-size:10pt}
+header,main,footer{max-width:none;padding:0}
+.tw{overflow:visible}
+table{width:auto;max-width:100%;table-layout:auto;font-size:8.5pt}
+td,th{white-space:normal !important;overflow-wrap:break-word;word-break:normal}
+td.num,td.stack{white-space:nowrap !important}
+tr,figure,img,.answer,.note,li{break-inside:avoid;page-break-inside:avoid}
+thead{display:table-header-group}
+h1,h2,h3,h4,p.cap{break-after:avoid;page-break-after:avoid}
+h2,h3,h4{break-inside:avoid}
+section.measurement{border:none;padding:0;margin:0}
+section.measurement>h2{break-before:page;page-break-before:always}
+figure img{max-height:230mm;border:none}
+.figrow{display:block}
+nav{display:none}
+details::details-content{content-visibility:visible;display:block}
+details summary{display:none}
+a{color:inherit;text-decoration:none}
+}
 """
 
 
@@ -79,6 +102,11 @@ _UNIT_WORD = re.compile(r"(?<![\w./\\-])u(m|rad)(?![\w./\\-])")
 def esc(text: object) -> str:
     """HTML-escaped text, with the ASCII units of messages shown as µm / µrad (``cos_urad`` stays a name)."""
     return html.escape(_UNIT_WORD.sub(r"µ\1", str(text)), quote=True)
+
+
+def path_html(name: object) -> str:
+    """A file name, escaped, that may wrap only after ``_ - /`` (``rtest_<wbr>C45.csv``), never inside a word."""
+    return re.sub(r"([_\-/\\])", r"\1<wbr>", esc(name))
 
 
 def units(unit: str) -> str:
@@ -121,11 +149,12 @@ def kvs(items: Iterable[tuple[str, str]]) -> str:
 
 
 def img(fig: ReportFigure, base: Path | None) -> str:
+    """The figure embedded; its caption names the PNG beside the page when there is one (under ``base``)."""
     data = base64.b64encode(fig.path.read_bytes()).decode("ascii")
-    shown = fig.path.relative_to(base) if base is not None and fig.path.is_relative_to(base) else fig.path
+    beside = base is not None and fig.path.is_relative_to(base)
+    shown = f' <span class="file">({path_html(fig.path.relative_to(base))})</span>' if beside and base else ""
     return (f'<figure data-figure="{esc(fig.key)}"><img src="data:image/png;base64,{data}" '
-            f'alt="{esc(fig.caption)}"><figcaption>{esc(fig.caption)} <span class="file">({esc(shown)})</span>'
-            "</figcaption></figure>")
+            f'alt="{esc(fig.caption)}"><figcaption>{esc(fig.caption)}{shown}</figcaption></figure>')
 
 
 def figs(rep: MeasurementReport, key: str, base: Path | None) -> str:

@@ -15,11 +15,13 @@ import numpy as np
 from pige_sym.identification.result import IdentificationResult
 from pige_sym.kernels import load_kernels
 from pige_sym.report.data import SOBOL_EFFECT_UM, MeasurementReport
-from pige_sym.report.html_blocks import badge, esc, figs, kvs, num, table, units
+from pige_sym.report.html_blocks import badge, esc, figs, kvs, num, path_html, table, units
+from pige_sym.report.words import PROBE, Vocabulary, count, value_std, vocabulary
 
 
 def summary_html(rep: MeasurementReport) -> str:
     m = rep.measurement
+    words = vocabulary(m)
     kern = load_kernels(m.machine)
     dev = m.deviation_machine_um()
     norms = np.linalg.norm(dev, axis=1)
@@ -28,11 +30,11 @@ def summary_html(rep: MeasurementReport) -> str:
                      f"{num(m.angles_deg[:, k].max(), '.1f')}°)"
                      for k, a in enumerate(m.rotary_axes))
     items = [
-        ("file", f"<code>{esc(rep.path)}</code>"),
+        ("file", f'<code class="path">{path_html(rep.path)}</code>'),
         ("machine", f"<code>{esc(rep.machine)}</code>" + (f" (written as <code>{esc(m.machine)}</code>)"
                                                          if m.machine != rep.machine else "")),
         ("rotary axes", esc(axes)),
-        ("ball at the reference pose", esc(", ".join(num(x, "g") for x in m.ball_mm) + " mm")),
+        (words.reference_point, esc(", ".join(num(x, "g") for x in m.ball_mm) + " mm")),
     ]
     if m.tool_mm is not None:
         items.append(("tool (ball from the last tool-side pivot)", esc(", ".join(num(x, "g") for x in m.tool_mm)
@@ -41,8 +43,7 @@ def summary_html(rep: MeasurementReport) -> str:
         items.append((f"nominal pivot of {ax}", esc(", ".join(num(x, "g") for x in pv) + " mm")))
     items += [
         ("trajectory", esc(m.trajectory or "not stated in the file")),
-        ("points", esc(f"{m.n_rows} rows (the reference pose and {m.n_rows - 1} measured points) over "
-                      f"{num(m.t_s[-1] - m.t_s[0], '.0f')} s")),
+        (words.rows, esc(_rows_text(m, words))),
         ("frame of the deviations", esc(m.frame)),
         ("largest deviation", esc(f"|d| max {num(norms.max())} µm; per component max |dx| "
                                   f"{num(np.abs(dev[:, 0]).max())}"
@@ -58,6 +59,17 @@ def summary_html(rep: MeasurementReport) -> str:
     items.append(("known true errors", f"yes, a simulation: {esc(rep.truth.path)}" if rep.truth is not None
                   else "none (a real measurement, or the truth is unknown)"))
     return kvs(items)
+
+
+def _rows_text(m: Any, words: Vocabulary) -> str:
+    """How many rows, and over what: seconds for an R-test, contacts for a probe import (its log has no clock)."""
+    if words is PROBE:
+        contacts = m.optional.get("n_samples")
+        touched = f", {int(contacts.sum())} contacts ({int(contacts.min())}–{int(contacts.max())} per pose)" \
+            if contacts is not None else ""
+        return f"{count(m.n_rows, 'pose')}: the reference pose and {count(m.n_rows - 1, 'more pose')}{touched}"
+    return (f"{count(m.n_rows, 'row')}: the reference pose and {count(m.n_rows - 1, 'measured point')} over "
+            f"{num(m.t_s[-1] - m.t_s[0], '.0f')} s")
 
 
 def _gn_rows(rep: MeasurementReport) -> tuple[list[str], list[list[str]], list[str]]:
@@ -111,8 +123,9 @@ def identification_html(rep: MeasurementReport) -> str:
              "<h4>Double-differential scheme</h4>", _dd_table(dd)]
     n_bad = int((~gn.identifiable).sum())
     if n_bad:
-        parts.append(f'<p class="note"><span class="unid">{n_bad} parameter(s) are not identifiable from these data'
-                     "</span>: no value is reported for them and they are compensated as 0.</p>")
+        are = "is" if n_bad == 1 else "are"
+        parts.append(f'<p class="note"><span class="unid">{count(n_bad, "parameter")} {are} not identifiable from '
+                     "these data</span>: no value is reported for them and they are compensated as 0.</p>")
     obs = ", ".join(f"{k} = {num(v, '.3g')}" for k, v in gn.observability.items())
     facts = [
         ("projection / loss", esc(f"{gn.projection} / {gn.loss}")),
@@ -179,11 +192,20 @@ def diagnosis_html(rep: MeasurementReport, base: Path | None) -> str:
     if d is None:
         return (f'<p class="note"><span class="bad">The diagnosis failed on these data: {esc(rep.diagnosis_error)}'
                 "</span>. The identification above does not depend on it.</p>")
+    words = vocabulary(rep.measurement)
     parts = [kvs([
-        ("baseline PIGE fit", esc(f"residual RMS {num(d.baseline_rms_um, '.4f')} µm, held-out RMS "
-                                 f"{num(d.baseline_heldout_rms_um, '.4f')} µm, BIC {num(d.baseline_bic, '.1f')}")),
-        ("outlier rows", esc(d.outlier_rows or "none")),
+        ("baseline PIGE fit", esc(f"residual RMS {num(d.baseline_rms_um, '.3g')} µm, held-out RMS "
+                                 f"{num(d.baseline_heldout_rms_um, '.3g')} µm, BIC {num(d.baseline_bic, '.1f')}")),
+        (f"outlier {words.rows}", esc(", ".join(map(str, d.outlier_rows)) or "none")),
     ])]
+    if words is PROBE:
+        gn = rep.identification["gauss-newton"]
+        parts.append(f'<p class="note">Why two residuals: the identification (Overview, {num(gn.rms_um, ".3g")} µm) '
+                     "weighs the poses with the reference pose's correlation (generalised least squares), so it "
+                     "does not minimise the plain residual; the diagnosis searches with every pose independent "
+                     f"(ordinary least squares, baseline {num(d.baseline_rms_um, '.3g')} µm), which does. Its final "
+                     "estimate is solved again with the correlation.</p>")
+    parts += [f'<p class="note">{esc(n)}</p>' for n in d.clusters]
     parts.append("<h4>What the diagnosis concludes</h4>")
     if d.findings:
         parts.append('<ul class="verdict">' + "".join(f"<li>{esc(f.sentence())}</li>" for f in d.findings) + "</ul>")
@@ -191,24 +213,26 @@ def diagnosis_html(rep: MeasurementReport, base: Path | None) -> str:
         parts.append(f"<p>{esc(d.verdict())}</p>")
     parts.append("<h4>Findings</h4>")
     if d.findings:
-        head = ["effect", "parameters ± std", "ΔBIC", "F / p", "RMS before → after [µm]",
-                "held-out RMS before → after [µm]", "explained", "PIGE shifts", "evidence"]
+        head = ["effect", "parameters ± std", "evidence", "moves the PIGEs"]
         rows = []
         for f in d.findings:
-            opts = "".join(f" {k}={v:g}" for k, v in f.options.items())
-            params = "<br>".join(f"{esc(k)} = {num(v, '.4g')} ± {num(f.std.get(k), '.2g')} "
-                                 f"{esc(units(f.units.get(k, '')))}"
+            params = "<br>".join(f'<span class="nw">{esc("τ" if k == "tau_s" else k)} = '
+                                 f"{esc(value_std(v, f.std.get(k, math.nan)))} "
+                                 f"{esc(units(words.time_unit if k == 'tau_s' else f.units.get(k, '')))}</span>"
                                  for k, v in f.params.items())
             shifts = sorted(f.pige_shift.items(), key=lambda kv: -abs(kv[1]))
             shift_txt = "<br>".join(f'<span class="nw">{esc(k)} {num(v, "+.3g")} {esc(units(d.final.units.get(k, "")))}'
                                     "</span>" for k, v in shifts[:4] if abs(v) > 0) or "—"
-            rows.append([f"<b>{esc(f.effect)}</b>{esc(opts)}", params, num(f.delta_bic, ".1f"),
-                         f"{num(f.f_statistic, '.3g')} / {num(f.p_value, '.2g')}",
-                         f"{num(f.rms_um_before, '.4f')} → {num(f.rms_um_after, '.4f')}",
-                         f"{num(f.heldout_rms_um_before, '.4f')} → {num(f.heldout_rms_um_after, '.4f')}",
-                         num(f.explained * 100 if math.isfinite(f.explained) else float("nan"), ".0f") + " %",
-                         shift_txt, esc(f.evidence)])
-        parts.append(table(head, rows, num_cols=[2, 3, 4, 5, 6]))
+            held = (f"held-out RMS {num(f.heldout_rms_um_before, '.3g')} → {num(f.heldout_rms_um_after, '.3g')} µm<br>"
+                    if math.isfinite(f.heldout_rms_um_before) else "")
+            stats = (f"ΔBIC {num(f.delta_bic, '.1f')}, p {num(f.p_value, '.2g')}<br>"
+                     f"RMS {num(f.rms_um_before, '.3g')} → {num(f.rms_um_after, '.3g')} µm<br>{held}"
+                     + num(f.explained * 100 if math.isfinite(f.explained) else float("nan"), ".0f")
+                     + " % of the residual explained")
+            opts = {k: v for k, v in f.options.items() if k != "tau_s"}  # τ is among the fitted values
+            rows.append([f"<b>{esc(f.effect)}</b> {esc(options_text(opts, words.time_unit))}", params,
+                         f'<span class="stack">{stats}</span>', shift_txt])
+        parts.append(table(head, rows))
         parts.append("<h4>Final estimates with the accepted extensions</h4>")
         parts.append(final_html(d.final))
         if rep.extensions:
@@ -223,7 +247,8 @@ def diagnosis_html(rep: MeasurementReport, base: Path | None) -> str:
         parts.append("<p>No finding: the PIGE model explains the data down to the noise.</p>")
     parts.append("<h4>Rejected candidates</h4>")
     if d.rejected:
-        parts.append('<ul class="rejected">' + "".join(_rejected_item(r) for r in d.rejected) + "</ul>")
+        parts.append('<ul class="rejected">' + "".join(_rejected_item(r, words.time_unit) for r in d.rejected)
+                     + "</ul>")
     else:
         parts.append("<p>None.</p>")
     parts.append("<h4>Residual plots</h4>")
@@ -332,11 +357,19 @@ _REJECTION_SENTENCES = (
 )
 
 
-def _rejected_item(r: Any) -> str:
+def options_text(options: dict[str, float], time_unit: str = "s") -> str:
+    """A candidate's settings for a reader: ``harmonic 2``, ``τ 19.1 s`` (probe files: ``τ 19.1 poses``)."""
+    return ", ".join(f"τ {v:.3g} {time_unit}" if k == "tau_s" else f"{k} {v:.3g}" for k, v in options.items())
+
+
+def _rejected_item(r: Any, time_unit: str = "s") -> str:
     """One plain sentence per rejected candidate; the statistics folded in a <details>."""
-    opts = ", ".join(f"{k} {v:g}" for k, v in r.options.items())
+    opts = options_text(r.options, time_unit)
     name = f"{r.effect}" + (f" ({opts})" if opts else "")
+    numbers = f"{r.reason}; ΔBIC {num(r.delta_bic, '.1f')}, p {num(r.p_value, '.2g')}"
+    if r.effect == "outliers":
+        return (f"<li>{esc('No row was dropped as an outlier.')} <details><summary>why</summary><small>"
+                f"{esc(numbers)}</small></details></li>")
     sentence = next((t.format(name=name) for key, t in _REJECTION_SENTENCES if r.reason.startswith(key)
                      or key in r.reason[:40]), f"{name} was not accepted.")
-    numbers = f"{r.reason}; ΔBIC {num(r.delta_bic, '.1f')}, p {num(r.p_value, '.2g')}"
     return f"<li>{esc(sentence)} <details><summary>why</summary><small>{esc(numbers)}</small></details></li>"

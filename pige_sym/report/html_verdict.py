@@ -11,6 +11,7 @@ from pathlib import Path
 from pige_sym.report.data import MeasurementReport, ReportData
 from pige_sym.report.html_blocks import esc, img, kvs, num, table, units
 from pige_sym.report.lead import improvement, main_finding, pige_rows
+from pige_sym.report.words import value_std
 from pige_sym.verdict.check import CheckResult
 
 _BADGE = {"pass": "PASS", "fail": "FAIL", "undecided": "UNDECIDED"}
@@ -31,7 +32,8 @@ def verdict_html(rep: MeasurementReport) -> str:
 def pige_used_html(rep: MeasurementReport) -> str:
     rows, classes = [], []
     for r in pige_rows(rep):
-        val = "not identifiable" if r.value is None else f"{num(r.value)} ± {num(r.std, '.2g')}"
+        val = "not identifiable" if r.value is None else esc(value_std(r.value, r.std if r.std is not None
+                                                                       else float("nan")))
         row = [f"<b>{esc(r.name)}</b>", val, esc(r.unit)]
         if rep.check is not None:
             row += [num(r.limit, "g"), f'<span class="st {esc(r.status or "")}">{esc(r.status or "no limit")}</span>']

@@ -25,8 +25,9 @@ import math
 
 from pige_sym.diagnosis.joint import JointDiagnosis
 from pige_sym.report.data import JointReport
-from pige_sym.report.html_blocks import esc, kvs, num, table, units
+from pige_sym.report.html_blocks import esc, kvs, num, path_html, table, units
 from pige_sym.report.html_verdict import check_table_html
+from pige_sym.report.words import count, value_std
 
 
 def _agreement_sentence(d: JointDiagnosis) -> tuple[str, str]:
@@ -61,24 +62,50 @@ def answer_joint_html(i: int, jr: JointReport) -> str:
     res = d.final
     piges = [n for n in res.parameters if "." not in n]  # effect parameters are named <effect>.<parameter>
     known = [n for n, v in zip(res.parameters, res.values, strict=True) if n in piges and math.isfinite(float(v))]
+    seen = "; ".join(f.effect + "".join(f" {k}={v:.3g}" for k, v in f.options.items()) + ": "
+                     + ", ".join(f"{p} = {value_std(v, f.std[p])} {units(f.units[p])}" for p, v in f.params.items())
+                     for f in d.effects)
     facts = [("machine", f"<code>{esc(jr.machine)}</code>"),
-             ("files", esc(f"{len(jr.paths)} identified jointly: " + ", ".join(p.name for p in jr.paths))),
+             ("files", esc(f"{count(len(jr.paths), 'file')} identified jointly: ")
+              + ", ".join(f'<span class="file">{path_html(p.name)}</span>' for p in jr.paths)),
              ("agreement", f'<span class="badge {esc(kind)}">{esc(kind.upper() if kind != "none" else "—")}'
                            f"</span> {esc(sentence)}"),
              ("verdict (joint estimate)", verdict),
-             ("seen jointly", esc(", ".join(f.effect for f in d.effects) or "nothing beyond the PIGEs")),
+             ("seen jointly", esc(seen or "nothing beyond the PIGEs")),
              ("determined", esc(f"{len(known)} of {len(piges)} PIGEs"
                                 + (f"; not determined by these setups: {', '.join(res.unidentifiable)}"
-                                   if res.unidentifiable else "")))]
-    return f'<div class="answer" id="answer-j{i + 1}"><div class="facts">{kvs(facts)}</div></div>'
+                                   if res.unidentifiable else ""))),
+             ("next", esc(_next_step(jr)))]
+    return (f'<div class="answer" id="answer-j{i + 1}"><div class="facts">{kvs(facts)}</div>'
+            f'<div class="used"><p class="cap">PIGEs of the joint estimate</p>{_pige_table(jr, compact=True)}'
+            "</div></div>")
+
+
+def _next_step(jr: JointReport) -> str:
+    """What to do with this result, in one sentence."""
+    d, res = jr.diagnosis, jr.diagnosis.final
+    undetermined = [n for n, v in zip(res.parameters, res.values, strict=True) if not math.isfinite(float(v))]
+    if d.agreement_status == "disagree":
+        return ("measure the disagreeing setup again (after the machine has settled), or find what changed "
+                "between the setups; do not compensate with this estimate")
+    if undetermined:
+        return (f"add setups: pige plan --instrument ballbar --machine \"{jr.machine}\" names the smallest set "
+                "that determines every PIGE")
+    if jr.check is not None and jr.check.verdict == "pass":
+        return "in tolerance: nothing to correct; keep the run (pige history add) to see drift later"
+    return ("correct the machine: pige compensate PROGRAM --params joint.json (with pige diagnose FILES --json > "
+            "joint.json), or --controller STYLE for the kinematic description; then measure again")
 
 
 def _files_table(jr: JointReport) -> str:
+    """Each file's part of the final joint fit: with effects seen jointly, σ, residual and constant are those
+    of the fit with the effects (σ re-estimated with them), the fit whose estimate the section shows."""
     d = jr.diagnosis
+    final = d.joint if d.extended is None else d.extended
     head = ["file", "instrument", "rows", "own σ [µm]", "joint residual RMS [µm]", "constant [µm]",
             "own diagnosis", "against the others"]
     rows, classes = [], []
-    for fd, fs in zip(d.files, d.joint.files, strict=True):
+    for fd, fs in zip(d.files, final.files, strict=True):
         const = "—" if fs.constant_um is None else f"{num(fs.constant_um)} ± {num(fs.constant_std_um, '.2g')}"
         found = ", ".join(f.effect for f in fd.findings) or "nothing beyond the PIGEs"
         own = f"{fd.checked}: {found}" if not fd.checked.startswith("agreement only") else "agreement only"
@@ -86,27 +113,42 @@ def _files_table(jr: JointReport) -> str:
             test = "—"
         else:
             test = f"{'DISAGREES' if fd.disagrees else 'agrees'} (p = {fd.agreement.p_value:.2g})"
-        rows.append([f'<code class="path">{esc(fd.label)}</code>', esc(fd.instrument), esc(fd.rows),
+        rows.append([f'<code class="path">{path_html(fd.label)}</code>', esc(fd.instrument), esc(fd.rows),
                      num(fs.sigma_um, ".3g"), num(fs.rms_um, ".3g"), const, esc(own), esc(test)])
         classes.append("unid" if fd.disagrees else "")
-    return table(head, rows, row_classes=classes, num_cols=[2, 3, 4])
+    return table(head, rows, row_classes=classes, num_cols=[2, 3, 4, 5])
 
 
-def _pige_table(jr: JointReport) -> str:
+def _pige_table(jr: JointReport, *, compact: bool = False) -> str:
+    """The joint estimate (PIGEs, then the effects' parameters); ``compact``: value ± std, unit and verdict
+    (the first screen), else value, std, unit and, with truth sidecars, the true value and the error in σ."""
     res = jr.diagnosis.final
-    head = ["parameter", "value", "std", "unit"] + (["true", "error / std"] if jr.truth is not None else [])
+    items = {it.name: it for it in jr.check.items} if jr.check is not None else {}
+    if compact:
+        head = ["parameter", "value ± std", "unit"] + (["status"] if items else [])
+    else:
+        head = ["parameter", "value", "std", "unit"] + (["true", "error / std"] if jr.truth is not None else [])
     rows, classes = [], []
     for name, v, s in zip(res.parameters, res.values, res.std, strict=True):
         bad = not math.isfinite(float(v))
-        row = [f"<b>{esc(name)}</b>", "not determined" if bad else num(float(v)), "—" if bad else num(float(s)),
-               esc(units(res.units.get(name, "")))]
-        if jr.truth is not None:
-            t = jr.truth.get(name)
-            z = None if bad or t is None or not float(s) > 0 else (float(v) - t) / float(s)
-            row += [num(t), num(z, "+.2f")]
+        unit = esc(units(res.units.get(name, "")))
+        if compact:
+            shown = esc(name).replace(".", ".<wbr>")  # angular_error_C.<wbr>cos_urad wraps at its dot
+            row = [f"<b>{shown}</b>", "not determined" if bad else esc(value_std(float(v), float(s))), unit]
+            if items:
+                st = items[name].status if name in items else "—"
+                row.append(f'<span class="st {esc(st)}">{esc(st)}</span>')
+        else:
+            row = [f"<b>{esc(name)}</b>", "not determined" if bad else num(float(v)), "—" if bad else num(float(s)),
+                   unit]
+            if jr.truth is not None:
+                t = jr.truth.get(name)
+                z = None if bad or t is None or not float(s) > 0 else (float(v) - t) / float(s)
+                row += [num(t), num(z, "+.2f")]
         rows.append(row)
         classes.append("unid" if bad else "")
-    return table(head, rows, row_classes=classes, num_cols=[1, 2] + ([4, 5] if jr.truth is not None else []))
+    nums = [1] if compact else [1, 2] + ([4, 5] if jr.truth is not None else [])
+    return table(head, rows, row_classes=classes, num_cols=nums)
 
 
 def joint_html(i: int, jr: JointReport, figures: str = "") -> str:
@@ -114,13 +156,15 @@ def joint_html(i: int, jr: JointReport, figures: str = "") -> str:
     d = jr.diagnosis
     kind, sentence = _agreement_sentence(d)
     parts = [f'<section data-section="joint" id="joint-{i + 1}">',
-             f"<h2>Joint identification — {len(jr.paths)} file(s) of <code>{esc(jr.machine)}</code></h2>",
+             f"<h2>Joint identification — {count(len(jr.paths), 'file')} of <code>{esc(jr.machine)}</code></h2>",
              f'<p><span class="badge {esc(kind)}">{esc(kind.upper() if kind != "none" else "—")}</span> '
              f"{esc(sentence[0].upper() + sentence[1:])}.</p>",
              "<p>Every file's rows are divided by its own noise σ and fitted with one set of PIGEs (a free "
              "constant per relative ballbar file, whose zero is unknown). A ballbar file is one projection per "
              "pose, along the bar: it is checked for agreement only; R-test and probe files also get their own "
-             "catalogue diagnosis.</p>",
+             "catalogue diagnosis."
+             + (" With effects seen jointly, each file's σ, residual and constant below are those of the fit with "
+                "the effects (σ estimated again with them)." if d.extended is not None else "") + "</p>",
              "<h3>The files</h3>", _files_table(jr), figures]
     if jr.check is not None:
         parts += ["<h3>Conformance of the joint estimate</h3>", check_table_html(jr.check)]

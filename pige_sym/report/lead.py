@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pige_sym.diagnosis.results import Finding
 from pige_sym.kernels import load_kernels
 from pige_sym.report.data import UNIT_TEXT, MeasurementReport, ReportData
 from pige_sym.report.gather import sobol_half_ranges
@@ -68,6 +69,13 @@ def pige_rows(rep: MeasurementReport) -> list[PigeRow]:
     return out
 
 
+#: Effects of the test set-up, not of the machine: what the first screen calls them.
+SETUP_EFFECTS = {"table_drift": "the sphere or nest creeping on its stand",
+                 "probe_trigger": "the probe's direction-dependent trigger radius",
+                 "setup_offset": "the instrument set up off its nominal place",
+                 "pose_cluster": "the rows of one pose deviating together"}
+
+
 def _effects_clause(rep: MeasurementReport) -> str:
     d = rep.diagnosis
     if d is None:
@@ -76,9 +84,14 @@ def _effects_clause(rep: MeasurementReport) -> str:
     if not found:
         return (f"The PIGE model explains the measurement down to the noise (residual RMS "
                 f"{d.final.rms_um:.2g} µm)")
-    names = ", ".join(f.effect + ("" if "harmonic" not in f.options else f" ({int(f.options['harmonic'])} per rev)")
-                      for f in found)
-    return f"Beyond the PIGEs the machine shows {names}"
+    def name(f: Finding) -> str:
+        return f.effect + ("" if "harmonic" not in f.options else f" ({int(f.options['harmonic'])} per rev)")
+
+    machine = [name(f) for f in found if f.effect not in SETUP_EFFECTS]
+    setup = [f"{name(f)} ({SETUP_EFFECTS[f.effect]})" for f in found if f.effect in SETUP_EFFECTS]
+    parts = ([f"the machine shows {', '.join(machine)}"] if machine else []) + \
+        ([f"the test set-up shows {', '.join(setup)}, fitted and kept out of the PIGEs"] if setup else [])
+    return "Beyond the PIGEs " + "; ".join(parts)
 
 
 def main_finding(rep: MeasurementReport) -> str:

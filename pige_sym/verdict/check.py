@@ -309,7 +309,10 @@ class CheckResult:
         """Plain-text table and verdict line."""
         rule = (f"guard band U = {self.k:g}u (ISO 14253-1)" if self.rule == "guard"
                 else "simple acceptance (uncertainty not used)")
-        lines = [f"{self.source}: {self.method} estimate of {self.machine}, tolerances {self.tolerances}, {rule}",
+        source = f"{self.source}: " if self.source else ""
+        given = self.tolerances in ("", "tolerances")  # a dict in a script: no file to name
+        limits = "the tolerances given" if given else f"tolerances {self.tolerances}"
+        lines = [f"{source}{self.method} estimate of {self.machine}, {limits}, {rule}",
                  f"{'parameter':28s} {'value':>9s} {'std':>7s} {'limit':>8s} unit  status     why"]
         for it in self.items:
             v = "—" if it.value is None else f"{it.value:.3f}"

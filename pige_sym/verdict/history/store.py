@@ -64,17 +64,24 @@ def normalise_url(text: str | None) -> str:
     raise InputError(f"--db {text}: use a file path, sqlite:///PATH or postgresql://user@host/dbname")
 
 
-def connect(url: str | None = None) -> sa.Engine:
+def connect(url: str | None = None, *, create: bool = True) -> sa.Engine:
     """Engine of the history database, schema migrated.
+
+    ``create=False`` (reading: ``history show``, ``report --history``) refuses an SQLite file that does not
+    exist instead of creating an empty database there.
 
     Raises
     ------
     InputError
-        The database cannot be opened or reached (message with the URL, password hidden).
+        The database cannot be opened or reached (message with the URL, password hidden), or (``create=False``)
+        the SQLite file does not exist.
     """
     full = normalise_url(url)
     if full.startswith("sqlite:///"):
         path = Path(full.removeprefix("sqlite:///"))
+        if not create and str(path) not in ("", ":memory:") and not path.is_file():
+            raise InputError(f"no history database at {path} (pige history add creates one; --db or "
+                             f"$PIGE_HISTORY_DB name another)")
         if str(path) not in ("", ":memory:"):
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
