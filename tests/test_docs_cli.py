@@ -141,15 +141,16 @@ def test_one_ballbar_file_points_to_the_planner(tmp_path, capsys) -> None:
 
 def test_a_probe_program_that_misses_the_sphere_says_so(tmp_path, capsys) -> None:
     sphere = ["--sphere-radius", "12.7", "--stylus-radius", "1.5"]
+    kins = ["--rtcp-off", "M429", "--rtcp-on", "M428", "--stylus-tool", "99", "--stylus-length", "120"]
     prog = tmp_path / "probe.ngc"
-    assert main(["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--sphere", "100,20,60",
+    assert main(["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, "--sphere", "100,20,60",
                  *sphere, "--out", str(prog)]) == 0
-    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--sphere", "300,20,60",
+    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, "--sphere", "300,20,60",
                  *sphere, "--program", str(prog), "--out", str(tmp_path / "log.txt")]) == 2
     err = capsys.readouterr().err
-    assert "never reaches it" in err and "inf" not in err
+    assert ("never reaches it" in err or "the program states sphere_mm" in err) and "inf mm" not in err
     log = tmp_path / "log2.txt"
-    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--sphere", "100,20,60",
+    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, "--sphere", "100,20,60",
                  *sphere, "--program", str(prog), "--seed", "1", "--out", str(log)]) == 0
     capsys.readouterr()
     assert main(["import-probe", str(log), "--format", "linuxcnc", *sphere, "--out", str(tmp_path / "p.csv")]) == 0

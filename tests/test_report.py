@@ -412,9 +412,10 @@ def test_no_figures_keeps_them_only_in_the_page(tmp_path: Path) -> None:
 def test_a_probe_report_speaks_of_contacts_and_poses(tmp_path: Path) -> None:
     """Issue 34 item 5: a probe import's report in the probe's words: poses and contacts, no seconds, no nest."""
     sphere = ["--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius", "1.5"]
-    assert main(["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *sphere,
+    kins = ["--rtcp-off", "M429", "--rtcp-on", "M428", "--stylus-tool", "99", "--stylus-length", "120"]
+    assert main(["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, *sphere,
                  "--out", str(tmp_path / "probe.ngc")]) == 0
-    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *sphere, "--program",
+    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, *sphere, "--program",
                  str(tmp_path / "probe.ngc"), "--seed", "3", "--noise", "0.3",
                  "--effect", "table_drift:vx_um=6,vy_um=-4,vz_um=8,tau_s=10", "--out", str(tmp_path / "log.txt")]) == 0
     assert main(["import-probe", str(tmp_path / "log.txt"), "--format", "linuxcnc", *sphere[2:],

@@ -82,9 +82,10 @@ def reports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
                  "--tolerances", str(TOLERANCES)]) == 0
     out["rtest"] = root / "rtest" / "report.html"
     sphere = ["--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius", "1.5"]
-    assert main(["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *sphere,
+    kins = ["--rtcp-off", "M429", "--rtcp-on", "M428", "--stylus-tool", "99", "--stylus-length", "120"]
+    assert main(["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, *sphere,
                  "--out", str(root / "probe.ngc")]) == 0
-    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *sphere, "--program",
+    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, *sphere, "--program",
                  str(root / "probe.ngc"), "--seed", "2", "--effect", "table_drift:vx_um=3,vy_um=-2,vz_um=4,tau_s=10",
                  "--out", str(root / "probe_log.txt")]) == 0
     assert main(["import-probe", str(root / "probe_log.txt"), "--format", "linuxcnc", *sphere[2:],
