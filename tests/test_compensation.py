@@ -392,6 +392,7 @@ def test_json_output_of_simulate_and_compensate(tmp_path, capsys):
 
 
 def test_controller_styles_print_the_deltas_with_their_signs():
+    """Hand-checked values; every style's chain is rebuilt from its manual in tests/test_controller_<name>.py."""
     from pige_sym.compensation.controllers import format_controller
 
     values = {"EY0A": 12.0, "EZ0A": -9.0, "EX0C": -14.0, "EY0C": 10.0, "EA0A": 100.0}
@@ -399,27 +400,28 @@ def test_controller_styles_print_the_deltas_with_their_signs():
     siemens = dict(line.split("=", 1) for line in format_controller(params, "siemens", carrier=3).splitlines()
                    if line.startswith("$"))
     # l2 fine offset = shift of axis 1 (A), l3 = shift of C minus shift of A, l4 = minus shift of C
-    assert siemens["$TC_CARR45[3]"] == "$TC_CARR45[3]+0.012000"
-    assert siemens["$TC_CARR46[3]"] == "$TC_CARR46[3]-0.009000"
-    assert siemens["$TC_CARR55[3]"] == "$TC_CARR55[3]-0.014000"
-    assert siemens["$TC_CARR56[3]"] == "$TC_CARR56[3]-0.002000"
-    assert siemens["$TC_CARR58[3]"] == "$TC_CARR58[3]+0.014000"
-    assert siemens["$TC_CARR64[3]"] == f"$TC_CARR64[3]+{np.degrees(100e-6):.7f}"
+    assert siemens["$TC_CARR45[3]"] == "$TC_CARR45[3]+0.0120000"
+    assert siemens["$TC_CARR46[3]"] == "$TC_CARR46[3]-0.0090000"
+    assert siemens["$TC_CARR55[3]"] == "$TC_CARR55[3]-0.0140000"
+    assert siemens["$TC_CARR56[3]"] == "$TC_CARR56[3]-0.0020000"
+    assert siemens["$TC_CARR58[3]"] == "$TC_CARR58[3]+0.0140000"
+    # the offset angle is the axis position of the initial setting: minus the zero-position error
+    assert siemens["$TC_CARR64[3]"] == f"$TC_CARR64[3]-{np.degrees(100e-6):.8f}"
     linuxcnc = format_controller(params, "linuxcnc")
-    assert "# xyzac-trt-kins.y-rot-point: add +0.010000" in linuxcnc
-    assert "# xyzac-trt-kins.y-offset: add +0.002000" in linuxcnc
-    assert "# xyzac-trt-kins.z-offset: add -0.009000" in linuxcnc
-    assert "NOT verified" not in linuxcnc  # checked against LinuxCNC's own formulas (test_controller_linuxcnc.py)
+    assert "# xyzac-trt-kins.y-rot-point: add +0.0100000" in linuxcnc
+    assert "# xyzac-trt-kins.y-offset: add +0.0020000" in linuxcnc
+    assert "# xyzac-trt-kins.z-offset: add -0.0090000" in linuxcnc
     fanuc = format_controller(params, "fanuc")
     # rotary table position = shift of a point on A; 19703-5 = shift of the point on C minus it (A-79348E)
-    assert "point on the A axis): X +0.000000  Y +0.012000  Z -0.009000" in fanuc
-    assert "No. 19703 -0.014000   No. 19704 -0.002000   No. 19705 +0.009000" in fanuc
-    assert "No. 19680 = 12" in fanuc and "first (master) rotation axis A, second C" in fanuc
-    assert "KEY = Trans rows" in format_controller(params, "heidenhain")
-    for style in ("heidenhain", "fanuc", "siemens"):
-        assert "NOT verified on a controller" in format_controller(params, style)
-        assert "NOT representable" in format_controller(params, style)
-    assert "the sign of the offset angles $TC_CARR64/65 is NOT verified" in format_controller(params, "siemens")
+    assert "point A on A, A-79348E sheet 59/88): X +0.0000000  Y +0.0120000  Z -0.0090000" in fanuc
+    assert "No. 19703 -0.0140000   No. 19704 -0.0020000   No. 19705 +0.0090000" in fanuc
+    assert "No. 19680 = 12" in fanuc and "first (master) rotation axis A, second (slave) C" in fanuc
+    heidenhain = format_controller(params, "heidenhain", heidenhain_trans="position")
+    assert "Trans rows between MachAxis A and MachAxis C (A -> C): X -0.0140000  Y -0.0020000  Z +0.0090000" \
+        in heidenhain
+    for style, options in (("heidenhain", {"heidenhain_trans": "shift"}), ("fanuc", {}), ("siemens", {})):
+        text = format_controller(params, style, **options)
+        assert "not run on a" in text and "NOT representable" in text
     with pytest.raises(InputError):
         format_controller(params, "okuma")
 

@@ -46,29 +46,6 @@ def _machine(args: argparse.Namespace, text: str | None) -> str | None:
     return args.machine or named
 
 
-def _current(spec: str | None) -> dict[str, float] | None:
-    """``--current``: ``pin=value,...`` or a HAL file whose ``setp <module>.<pin> <value>`` lines give them."""
-    import os
-    import re
-
-    from pige_sym.options import parse_number, parse_number_assignments
-
-    if spec is None:
-        return None
-    if not os.path.isfile(spec):
-        return {k.lower(): float(v) for k, v in parse_number_assignments(spec, "--current").items()}
-    from pige_sym.nc.program_file import read_program
-
-    out = {}
-    for line in read_program(spec).splitlines():
-        m = re.match(r"\s*setp\s+xyz[ab]c-trt-kins\.([a-z-]+)\s+(\S+)", line)
-        if m:
-            out[m.group(1)] = parse_number(m.group(2), f"--current {spec}: {m.group(1)}")
-    if not out:
-        raise InputError(f"--current {spec}: no 'setp xyzac-trt-kins.<pin> <value>' line (or xyzbc-trt-kins)")
-    return out
-
-
 def _axis_sense(args: argparse.Namespace, params: Any) -> dict[str, int]:
     """The commanded axis sense: the parameter file's, checked against ``--axis-sense`` (CONVENTIONS §9)."""
     from pige_sym.cli._setup import axis_sense_option
@@ -94,7 +71,11 @@ def _run(args: argparse.Namespace) -> int:
         if "--allow-missing" in name:
             print(f"warning: {name}")
     if args.controller and not args.json:
-        print(format_controller(params, args.controller, carrier=args.carrier, current=_current(args.current)))
+        from pige_sym.compensation.controllers.hal_config import read_current
+
+        current = read_current(args.current) if args.current else None
+        print(format_controller(params, args.controller, carrier=args.carrier, current=current,
+                                heidenhain_trans=args.heidenhain_trans))
     if args.controller and not args.program:
         if args.json:
             print(to_json({"machine": params.machine, "parameters_from": params.source,
@@ -184,8 +165,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--controller", choices=list(controller_names()), help="print the corrected kinematics "
                    "(see docs/controller-corrections.md)")
     p.add_argument("--carrier", type=int, default=1, help="Siemens swivel data record number (default %(default)s)")
-    p.add_argument("--current", help="today's LinuxCNC trt pin values, PIN=VALUE,... or the HAL file that sets them "
-                   "(then absolute setp lines are printed)")
+    p.add_argument("--current", help="today's LinuxCNC trt pin values: PIN=VALUE,... or the machine's INI or HAL "
+                   "file (then absolute setp/sets lines are printed)")
+    p.add_argument("--heidenhain-trans", choices=["position", "shift"],
+                   help="what a HEIDENHAIN Trans row holds: the next element's position relative to the previous one, "
+                        "or the shift of the previous ones (the negative); required with --controller heidenhain")
     p.add_argument("--json", action="store_true", help="print the change report as one JSON object")
     p.set_defaults(handler=_run)
 

@@ -24,7 +24,7 @@ from typing import Any
 from pige_sym.errors import InputError
 
 #: Modules of this package that are not controllers.
-NOT_CONTROLLERS = frozenset({"axis_lines", "scope"})
+NOT_CONTROLLERS = frozenset({"axis_lines", "hal_config", "scope"})
 
 
 @dataclass(frozen=True)
@@ -35,12 +35,16 @@ class ControllerOptions:
     ----------
     carrier : int
         Siemens swivel data record number (``$TC_CARR…[carrier]``).
-    current : dict of str to float, optional
-        Today's values of the controller's entries (LinuxCNC HAL pins [mm]), for absolute lines.
+    current : dict of str to float or HalConfig, optional
+        Today's values of the controller's entries (LinuxCNC HAL pins [mm], or the configuration read by
+        :func:`.hal_config.read_current`), for absolute lines.
+    heidenhain_trans : str, optional
+        What a HEIDENHAIN ``Trans`` row holds: ``position`` or ``shift`` (:mod:`.heidenhain`).
     """
 
     carrier: int = 1
-    current: dict[str, float] | None = None
+    current: Any = None
+    heidenhain_trans: str | None = None
 
 
 def controller_names() -> tuple[str, ...]:
@@ -64,11 +68,12 @@ def get_controller(name: str) -> ModuleType:
 
 
 def format_controller(params: Any, style: str = "table", *, carrier: int = 1,
-                      current: dict[str, float] | None = None) -> str:
+                      current: Any = None, heidenhain_trans: str | None = None) -> str:
     """The corrections of ``params`` in the words of controller ``style`` (docs/controller-corrections.md).
 
     Every controller also says what it enters, what it cannot represent and the tool-point error each
     choice leaves (:mod:`~pige_sym.compensation.controllers.scope`).
     """
     module = get_controller(style)
-    return str(module.render(params, ControllerOptions(carrier=carrier, current=current)))
+    options = ControllerOptions(carrier=carrier, current=current, heidenhain_trans=heidenhain_trans)
+    return str(module.render(params, options))

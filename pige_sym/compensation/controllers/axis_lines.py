@@ -1,17 +1,20 @@
 """The corrected rotary axis lines that every controller's entries are made from, and shared text.
 
 :func:`controller_corrections` gives per rotary axis the corrected pivot [mm], unit direction and zero
-offset [deg] in the machine frame (CONVENTIONS §2–3); :func:`delta_chain` orders them as the chain
-deltas of the vector-chain controllers (axis 1 nearest the bed); :func:`signed` writes a signed value.
+offset [deg] in the machine frame (CONVENTIONS §2–3); :func:`structure` sorts a machine's two rotary axes
+into table and head axes (each bed first), which is what every controller's chain is written in;
+:func:`signed` writes a signed value.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from pige_sym.compensation.parameters import CompensationParameters, kern_axes, kern_axes_names
+from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 
 NOT_VERIFIED = "NOT verified on a controller: check every value against the machine's documentation"
@@ -48,6 +51,59 @@ def controller_corrections(params: CompensationParameters) -> list[dict[str, Any
     return out
 
 
+@dataclass(frozen=True)
+class Structure:
+    """The two rotary axes of a machine as the controllers' chains see them.
+
+    Attributes
+    ----------
+    kind : str
+        ``table`` (both axes move the workpiece), ``head`` (both move the tool) or ``mixed``.
+    table : list of dict
+        The workpiece-side rows of :func:`controller_corrections`, the axis nearest the bed first.
+    head : list of dict
+        The tool-side rows, the axis nearest the bed first (the last one nearest the tool).
+    """
+
+    kind: str
+    table: list[dict[str, Any]]
+    head: list[dict[str, Any]]
+
+
+def structure(params: CompensationParameters, controller: str) -> Structure:
+    """The machine's rotary axes sorted for a controller chain (:class:`Structure`).
+
+    Raises
+    ------
+    InputError
+        Not two rotary axes, or linear axes that move the workpiece or sit between the tool-side rotary
+        axes (every chain written here has the linear axes carry the tool, before its rotary axes).
+    """
+    from pige_sym.codegen.machine_code import parse_machine_code
+
+    st = parse_machine_code(params.machine)
+    rotary = [a for a in st.workpiece_axes + st.tool_axes if a.kind == "rotary"]
+    tool_kinds = [a.kind for a in st.tool_axes]
+    if len(rotary) != 2:
+        raise InputError(f"{params.machine}: {controller} entries are written for machines with two rotary axes, "
+                         f"this one has {len(rotary)}")
+    if any(a.kind == "linear" for a in st.workpiece_axes) or "rotary" in tool_kinds and (
+            "linear" in tool_kinds[tool_kinds.index("rotary"):]):
+        raise InputError(f"{params.machine}: {controller} entries assume that the linear axes carry the tool ahead "
+                         "of its rotary axes; this machine moves a rotary axis with a linear axis")
+    by = {r["axis"]: r for r in controller_corrections(params)}
+    table = [by[a.name] for a in reversed(st.workpiece_axes) if a.kind == "rotary"]
+    head = [by[a.name] for a in st.tool_axes if a.kind == "rotary"]
+    kind = "table" if not head else "head" if not table else "mixed"
+    return Structure(kind, table, head)
+
+
+def axis_sense(params: CompensationParameters, axis: str) -> int:
+    """σ of a rotary axis (CONVENTIONS §9): +1 unless the parameters state the controller's reverse sense."""
+    senses = getattr(params, "axis_senses", None) or {}
+    return int(senses.get(axis, 1))
+
+
 def bed_first(params: CompensationParameters) -> tuple[dict[str, Any], dict[str, Any]]:
     """The two rotary axes' rows, the one nearest the bed first (workpiece side outward, then tool side)."""
     by = {r["axis"]: r for r in controller_corrections(params)}
@@ -59,6 +115,11 @@ def direction_changes(rows: tuple[dict[str, Any], ...]) -> list[str]:
     """``C: direction change (+…, …)`` for each row whose direction changed."""
     return [f"{r['axis']}: direction change ({', '.join(f'{x:+.9f}' for x in r['direction_delta'])})"
             for r in rows if np.abs(r["direction_delta"]).max() > 0]
+
+
+#: Decimals printed: 0.1 nm, 1e-8 deg (1.7e-10 rad) and 1e-10 of a direction vector, so that rounding the
+#: printed entries moves a tool point 500 mm from a pivot by less than 1e-4 µm per entry.
+MM_DECIMALS, DEG_DECIMALS, DIRECTION_DECIMALS = 7, 8, 10
 
 
 def signed(value: float, decimals: int) -> str:

@@ -1,12 +1,21 @@
 """``linuxcnc``: the trt kinematics ``xyzac-trt-kins`` / ``xyzbc-trt-kins``, HAL input pins [mm].
 
-``src/emc/kinematics/trtfuncs.c`` (LinuxCNC master, commit 5c41560ebbc3a40f84a5547bc6f7c5cd9278ba6b):
-the C line is at ``(x-rot-point, y-rot-point)``; the A line (xyzac) passes through ``(y-rot-point +
-y-offset, z-rot-point + z-offset)``, the B line (xyzbc) through ``(x-rot-point + x-offset, z-rot-point +
-z-offset)``.  So the four axis-line positions are entered; the axis tilts are not representable (the model
-has no axis directions), nor are the zero-position errors (joint home offsets, whose sign depends on the
-homing set-up: not printed).  HAL has no "add": with today's pin values (``current``) absolute ``setp``
-lines are printed, otherwise the change of each pin as a comment.
+``src/emc/kinematics/trtfuncs.c`` (LinuxCNC 2.9.0~pre1, commit f1270d6ed7, as Debian ships it; master
+5c41560ebbc3 reads the same): the C line is at ``(x-rot-point, y-rot-point)``; the A line (xyzac) passes
+through ``(y-rot-point + y-offset, z-rot-point + z-offset)``, the B line (xyzbc) through ``(x-rot-point +
+x-offset, z-rot-point + z-offset)``.  So the four axis-line positions are entered; the axis tilts are not
+representable (the model has no axis directions), nor are the zero-position errors (joint home offsets,
+whose sign depends on the homing set-up: not printed).  The pin positions do not depend on the axes'
+commanded senses (CONVENTIONS §9: 2.9's trt kinematics turn both axes against CONVENTIONS' sense).
+
+The rot-point pins came with commit 135b0ce522 ("switchable kinematics", 2021-06-19), first in v2.9.0-pre1;
+2.8's trt modules have ``y-offset``/``x-offset``, ``z-offset`` and ``tool-offset`` only and turn C about
+the machine origin: LinuxCNC ≥ 2.9 is required.
+
+HAL has no "add": with today's values (``--current``: :mod:`.hal_config`) absolute lines are printed —
+``setp <module>.<pin> <value>``, or ``sets <signal> <value>`` for a pin connected to a signal (halcmd
+refuses ``setp`` on it); a pin a configuration file does not mention is at 0 (a new HAL pin starts at 0,
+``src/hal/hal_lib.c``); otherwise the change of each pin is printed as a comment.
 
 Beside them, the complete correction: pige's own kinematics component (``pige gen --target linuxcnc``,
 docs/linuxcnc-kinematics.md) carries every PIGE and zero-position error as a HAL pin, for any machine it
@@ -18,18 +27,21 @@ names come from the kernels' metadata (:mod:`pige_sym.codegen.targets.linuxcnc_p
 from __future__ import annotations
 
 from pige_sym.compensation.controllers import ControllerOptions
-from pige_sym.compensation.controllers.axis_lines import signed
+from pige_sym.compensation.controllers.axis_lines import MM_DECIMALS, signed
+from pige_sym.compensation.controllers.hal_config import HalConfig
 from pige_sym.compensation.controllers.scope import scope_lines
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError, UnsupportedMachineError
 from pige_sym.kernels import load_kernels
 
-TITLE = "LinuxCNC trt kinematics (xyzac-trt-kins, xyzbc-trt-kins), HAL pins"
+TITLE = "LinuxCNC >= 2.9 trt kinematics (xyzac-trt-kins, xyzbc-trt-kins) and pige's kinematics component, HAL pins"
 #: LinuxCNC trt kinematics module of each tilt axis (src/emc/kinematics/xyzac-trt-kins.c, xyzbc-trt-kins.c).
 TRT_MODULES = {"A": "xyzac-trt-kins", "B": "xyzbc-trt-kins"}
 #: Their HAL input pins (trtfuncs.c, trtKinematicsSetup).
 TRT_PINS = ("x-rot-point", "y-rot-point", "z-rot-point", "x-offset", "y-offset", "z-offset", "tool-offset",
             "conventional-directions")
+VERSION = ("# requires LinuxCNC >= 2.9: the rot-point pins came with commit 135b0ce522 (switchable kinematics, "
+           "first in 2.9.0-pre1); 2.8's trt modules turn C about the machine origin")
 
 
 def representable(params: CompensationParameters) -> list[str]:
@@ -70,10 +82,12 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
         Neither the stock trt kinematics nor pige's component can describe the machine.
     """
     try:
-        trt = _render_trt(params, options)
+        linuxcnc_trt_deltas(params)
     except InputError as exc:
         trt_refusal = str(exc)
         trt = ""
+    else:  # refusals of --current (another machine's configuration, unknown pins) are the user's to fix
+        trt = _render_trt(params, options)
     try:
         pige = pige_kinematics_lines(params)
     except (InputError, UnsupportedMachineError) as exc:
@@ -86,22 +100,53 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
 
 
 def _render_trt(params: CompensationParameters, options: ControllerOptions) -> str:
-    """``setp`` lines with absolute values when ``options.current`` gives today's pin values, otherwise the
-    change of each pin as a comment (HAL has no "add")."""
-    current = options.current
+    """Absolute ``setp``/``sets`` lines from today's values (``options.current``), else each change as a comment."""
     module, deltas = linuxcnc_trt_deltas(params)
-    out = [f"# LinuxCNC {module} (src/emc/kinematics/trtfuncs.c): HAL pins [mm], parameters from {params.source}",
-           *scope_lines(params, "linuxcnc", "# ")]
-    unknown = sorted(set(current or {}) - set(TRT_PINS))
+    config = _config(options.current)
+    if config is not None and config.module is not None and config.module != module:
+        raise InputError(f"--current {config.source}: its kinematics are {config.module} ({config.module_where}), "
+                         f"but {params.machine} needs {module}: give this machine's configuration")
+    unknown = sorted(set(config.pins if config else {}) - set(TRT_PINS))
     if unknown:
         raise InputError(f"--current {unknown[0]}: not a pin of {module} ({', '.join(TRT_PINS)})")
+    out = [f"# LinuxCNC {module} (src/emc/kinematics/trtfuncs.c): HAL pins [mm], parameters from {params.source}",
+           VERSION, *scope_lines(params, "linuxcnc", "# ")]
+    if config is not None and config.unread:
+        out.append(f"# --current {config.source}: not read: {', '.join(config.unread)} (pins set there are unknown)")
     for pin, d in deltas.items():
-        if current is not None and pin in current:
-            out.append(f"setp {module}.{pin} {current[pin] + d:.6f}")
-        else:
-            out.append(f"# {module}.{pin}: add {signed(d, 6)} (give --current {pin}=VALUE,... or your HAL file "
-                       "for the setp line)")
+        out += _pin_lines(module, pin, d, config)
     return "\n".join(out)
+
+
+def _config(current: object) -> HalConfig | None:
+    if current is None or isinstance(current, HalConfig):
+        return current
+    if isinstance(current, dict):
+        return HalConfig(None, pins={str(k): float(v) for k, v in current.items()})
+    raise InputError(f"--current: expected PIN=VALUE,... or a configuration file, not {type(current).__name__}")
+
+
+def _pin_lines(module: str, pin: str, d: float, config: HalConfig | None) -> list[str]:
+    """The line(s) for one pin: ``sets``/``setp`` with the new value, or the change as a comment."""
+    add = f"add {signed(d, MM_DECIMALS)}"
+    if config is None:
+        return [f"# {module}.{pin}: {add} (give --current PIN=VALUE,... or the machine's INI or HAL file for the "
+                "absolute line)"]
+    if pin in config.nets:
+        signal = config.nets[pin]
+        if signal in config.signals:
+            return [f"# {module}.{pin} is connected to signal {signal}: set the signal (setp is refused on it)",
+                    f"sets {signal} {config.signals[signal] + d:.{MM_DECIMALS}f}"]
+        return [f"# {module}.{pin} is connected to signal {signal}, which {config.source} does not set: {add} to "
+                "what drives it"]
+    if pin in config.pins:
+        return [f"setp {module}.{pin} {config.pins[pin] + d:.{MM_DECIMALS}f}"]
+    if config.source is None:
+        return [f"# {module}.{pin}: {add} (not in --current: give its value as {pin}=VALUE)"]
+    if config.unread:
+        return [f"# {module}.{pin}: {add} (not set in {config.source}; it may be set in the files not read)"]
+    return [f"# {module}.{pin} is not set in {config.source}: a HAL pin starts at 0 (src/hal/hal_lib.c)",
+            f"setp {module}.{pin} {d:.{MM_DECIMALS}f}"]
 
 
 def _senses(params: CompensationParameters, axes: tuple[str, ...]) -> dict[str, int]:

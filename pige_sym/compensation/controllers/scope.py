@@ -79,7 +79,11 @@ def tool_point_summary(params: CompensationParameters, style: str) -> Controller
 def scope_lines(params: CompensationParameters, style: str, comment: str) -> list[str]:
     """The scope as text lines, each starting with the style's comment marker."""
     s = tool_point_summary(params, style)
-    return [
+    base = getattr(get_controller(style), "base_data", None)
+    extra = [n for n in (base(params) if base else []) if params.values.get(n, 0.0) != 0.0]
+    note = ([f"{comment}printed below as changes of base data, not entered above (the RMSE after entering leaves "
+             f"them out): {', '.join(extra)}"] if extra else [])
+    return note + [
         f"{comment}entered: {', '.join(s.entered) or 'nothing'}",
         f"{comment}NOT representable in this controller's kinematics (only the NC rewrite compensates them): "
         f"{'; '.join(s.not_representable) or 'none'}",

@@ -1,0 +1,170 @@
+"""Today's LinuxCNC trt kinematics values, read from ``--current``: ``PIN=VALUE,...``, a HAL file or an INI.
+
+Read from HAL files and from the INI's ``[HAL] HALCMD`` lines (halcmd's own words, one command per line,
+``#`` starts a comment)::
+
+    setp <module>.<pin> <value>            the pin's value
+    net <signal> [<=|=>|<=>] <pin> ...     the pins connected to a signal (arrows are optional)
+    sets <signal> <value>                  the signal's value (what a connected input pin reads)
+    loadrt <module> [args]                 the kinematics module loaded
+
+and from the INI: ``[KINS] KINEMATICS = <module> [args]`` and ``[HAL] HALFILE`` / ``POSTGUI_HALFILE``, whose
+files are read when they are ``.hal`` files beside the INI (``[SECTION]KEY`` references substituted);
+library (``LIB:``) and Tcl files are not read and are named as unread.  Only the pins of the trt kinematics
+(``xyzac-trt-kins.*``, ``xyzbc-trt-kins.*``) are kept.  A pin connected to a signal refuses ``setp``
+("pin '…' is connected to a signal"): its value is the signal's.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from pige_sym.errors import InputError
+
+TRT_PIN = re.compile(r"^(xyz[ab]c-trt-kins)\.([a-z-]+)$")
+TRT_MODULE = re.compile(r"^xyz[ab]c-trt-kins$")
+
+
+@dataclass
+class HalConfig:
+    """What a configuration holds for the trt kinematics.
+
+    Attributes
+    ----------
+    source : str or None
+        The file read (None for ``PIN=VALUE,...``).
+    module : str or None
+        The trt kinematics module it loads or whose pins it names, with ``module_where`` (file:line).
+    pins : dict of str to float
+        ``setp`` values by pin name (without the module prefix) [mm].
+    nets : dict of str to str
+        The signal each connected pin is on.
+    signals : dict of str to float
+        ``sets`` values by signal.
+    unread : list of str
+        HAL files the configuration loads that were not read.
+    """
+
+    source: str | None
+    module: str | None = None
+    module_where: str = ""
+    pins: dict[str, float] = field(default_factory=dict)
+    nets: dict[str, str] = field(default_factory=dict)
+    signals: dict[str, float] = field(default_factory=dict)
+    unread: list[str] = field(default_factory=list)
+
+    def name_module(self, module: str, where: str) -> None:
+        """Record the kinematics module; a second, different one is refused."""
+        if self.module is not None and module != self.module:
+            raise InputError(f"--current {self.source}: {where} names {module} but {self.module_where} names "
+                             f"{self.module}: give the configuration of one machine")
+        if self.module is None:
+            self.module, self.module_where = module, where
+
+
+def read_current(spec: str) -> HalConfig:
+    """``--current``: ``PIN=VALUE,...`` or the path of a HAL or INI file (module docstring)."""
+    from pige_sym.options import parse_number_assignments
+
+    if not os.path.isfile(spec):
+        return HalConfig(None, pins={k.lower(): float(v)
+                                     for k, v in parse_number_assignments(spec, "--current").items()})
+    config = HalConfig(spec)
+    text = _read_text(spec)
+    if Path(spec).suffix.lower() == ".ini" or re.search(r"^\s*\[(KINS|HAL|EMC)\]", text, re.M):
+        _read_ini(config, Path(spec), text)
+    else:
+        _read_hal(config, spec, text.splitlines(), {})
+    if config.module is None:
+        raise InputError(f"--current {spec}: no trt kinematics in it (no 'loadrt xyzac-trt-kins', KINEMATICS = "
+                         "xyzac-trt-kins, xyzbc-trt-kins or their pins): give the configuration of the machine")
+    return config
+
+
+def _read_text(path: str) -> str:
+    """A configuration file's text (a regular UTF-8 file, else refused naming it)."""
+    from pige_sym.errors import FileFormatError
+    from pige_sym.files import open_regular_file
+
+    with open_regular_file(path) as fh:
+        data = fh.read()
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(path, None, f"not a UTF-8 text file ({exc.reason})") from None
+
+
+def _number(text: str, where: str) -> float:
+    from pige_sym.options import parse_number
+
+    return parse_number(text, where)
+
+
+def _read_hal(config: HalConfig, name: str, lines: list[str], ini: dict[tuple[str, str], str],
+              first: int = 1) -> None:
+    for number, raw in enumerate(lines, start=first):
+        where = f"{name}:{number}"
+        line = re.sub(r"\[(\w+)\](\w+)", lambda m: ini.get((m.group(1), m.group(2)), m.group(0)), raw)
+        try:
+            words = shlex.split(line, comments=True)
+        except ValueError as exc:
+            raise InputError(f"--current {where}: {exc}") from None
+        if words:
+            _command(config, words, where)
+
+
+def _command(config: HalConfig, words: list[str], where: str) -> None:
+    verb, args = words[0], words[1:]
+    if verb == "loadrt" and args and TRT_MODULE.match(args[0]):
+        config.name_module(args[0], where)
+    elif verb == "setp" and len(args) >= 2 and TRT_PIN.match(args[0]):
+        module, pin = TRT_PIN.match(args[0]).groups()  # type: ignore[union-attr]
+        config.name_module(module, where)
+        config.pins[pin] = _number(args[1], f"--current {where}: {args[0]}")
+    elif verb == "sets" and len(args) >= 2:
+        config.signals[args[0]] = _number(args[1], f"--current {where}: signal {args[0]}")
+    elif verb == "net" and args:
+        for word in args[1:]:
+            m = TRT_PIN.match(word)
+            if m:
+                config.name_module(m.group(1), where)
+                config.nets[m.group(2)] = args[0]
+
+
+def _read_ini(config: HalConfig, path: Path, text: str) -> None:
+    """The INI's [KINS] KINEMATICS, [HAL] HALCMD lines and the HAL files it loads (module docstring)."""
+    section = ""
+    values: dict[tuple[str, str], str] = {}
+    halcmd: list[tuple[int, str]] = []
+    files: list[str] = []
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line or line[0] in "#;":
+            continue
+        m = re.match(r"^\[(\w+)\]$", line)
+        if m:
+            section = m.group(1)
+            continue
+        key, sep, value = line.partition("=")
+        if not sep:
+            continue
+        key, value = key.strip(), value.strip()
+        values.setdefault((section, key), value)
+        if section == "KINS" and key == "KINEMATICS" and value.split() and TRT_MODULE.match(value.split()[0]):
+            config.name_module(value.split()[0], f"{path}:{number}")
+        elif section == "HAL" and key == "HALCMD":
+            halcmd.append((number, value))
+        elif section == "HAL" and key in ("HALFILE", "POSTGUI_HALFILE", "SHUTDOWN"):
+            files.append(value.split()[0] if value.split() else value)
+    for name in files:
+        target = path.parent / name
+        if name.startswith("LIB:") or target.suffix != ".hal" or not target.is_file():
+            config.unread.append(name)
+            continue
+        _read_hal(config, str(target), _read_text(str(target)).splitlines(), values)
+    for number, value in halcmd:
+        _read_hal(config, str(path), [value], values, first=number)
