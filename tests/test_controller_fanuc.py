@@ -30,11 +30,10 @@ from test_controller_truth import (
     SHIPPED,
     UNIT,
     Machine,
+    assert_follows_model,
     poses,
     random_machine,
-    raw_run,
     rotation,
-    rtest_run,
 )
 
 from pige_sym.compensation.controllers import format_controller
@@ -94,30 +93,19 @@ class ToolCentrePoint:
         return np.asarray(point, dtype=float) - tip
 
 
-def _check(machine: Machine, tcp: ToolCentrePoint, angles: np.ndarray, names: list[str] | None) -> float:
-    worst = 0.0
-    for point in (machine.ball, machine.ball + np.array([-70.0, 40.0, 30.0])):
-        got = raw_run(machine, angles, tcp.command, point)
-        np.testing.assert_allclose(got, machine.model_um(angles, names, point, raw=True), atol=1e-3, rtol=0)
-        worst = max(worst, float(np.abs(got).max()))
-    zeroed = rtest_run(machine, angles, lambda pose: tcp.command(pose, machine.ball))
-    np.testing.assert_allclose(zeroed, machine.model_um(angles, names), atol=1e-3, rtol=0)
-    return worst
-
-
 @pytest.mark.parametrize("code", [c for c in SHIPPED if c != MIXED])
 @pytest.mark.parametrize("seed", [7, 8])
 def test_the_printed_parameters_put_the_tool_where_pige_says(code: str, seed: int) -> None:
     machine = random_machine(code, seed)
     angles = poses(machine, seed, n=12)
     tcp = ToolCentrePoint(machine, seed)
-    assert _check(machine, tcp, angles, None) > 5.0
+    assert assert_follows_model(machine, tcp.command, angles, None) > 5.0
     text = format_controller(machine.params(), "fanuc")
     assert tcp.enter(text) == 6
     assert ("No. 19680 = 2 " if code == HEAD else "No. 19680 = 12 ") in text
     held = representable(machine.params(), "fanuc")
     left = [n for n in machine.kern.PARAMETERS if n not in held]
-    assert _check(machine, tcp, angles, left) > 0.5
+    assert assert_follows_model(machine, tcp.command, angles, left) > 0.5
     if code == HEAD:  # the master (bed-side) axis' positions stay: they would move the controlled point
         assert sorted(set(machine.kern.LOCATION_PARAMETERS) - set(held)) == sorted(
             n for n in machine.kern.LOCATION_PARAMETERS if machine.kern.UNITS[n] == "urad" or n.endswith("0C"))

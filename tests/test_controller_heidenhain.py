@@ -24,7 +24,7 @@ import re
 
 import numpy as np
 import pytest
-from test_controller_truth import SHIPPED, UNIT, Machine, poses, random_machine, raw_run, rotation, rtest_run
+from test_controller_truth import SHIPPED, UNIT, Machine, assert_follows_model, poses, random_machine, rotation
 
 from pige_sym.compensation.controllers import format_controller
 from pige_sym.errors import InputError
@@ -126,17 +126,6 @@ class DescriptionTable:
         return linear - self.tool_reference
 
 
-def _check(machine: Machine, table: DescriptionTable, angles: np.ndarray, names: list[str] | None) -> float:
-    worst = 0.0
-    for point in (machine.ball, machine.ball + np.array([-70.0, 40.0, 30.0])):
-        got = raw_run(machine, angles, table.command, point)
-        np.testing.assert_allclose(got, machine.model_um(angles, names, point, raw=True), atol=1e-3, rtol=0)
-        worst = max(worst, float(np.abs(got).max()))
-    zeroed = rtest_run(machine, angles, lambda pose: table.command(pose, machine.ball))
-    np.testing.assert_allclose(zeroed, machine.model_um(angles, names), atol=1e-3, rtol=0)
-    return worst
-
-
 @pytest.mark.parametrize("code", SHIPPED)
 @pytest.mark.parametrize("sense", ["position", "shift"])
 @pytest.mark.parametrize("layout", ["chained", "per-axis"])
@@ -144,17 +133,17 @@ def test_the_printed_rows_put_the_tool_where_pige_says(code: str, sense: str, la
     machine = random_machine(code, 21)
     angles = poses(machine, 21, n=12)
     table = DescriptionTable(machine, sense, layout)
-    assert _check(machine, table, angles, None) > 5.0
+    assert assert_follows_model(machine, table.command, angles, None) > 5.0
     text = format_controller(machine.params(), "heidenhain", heidenhain_trans=sense)
     # two axes on one side: out, between, back (chained) or out and back per axis; mixed: out and back twice
     assert table.enter(text) == (4 if code == SHIPPED[3] else 3 if layout == "chained" else 4)
     tilts = [n for n in machine.kern.LOCATION_PARAMETERS if machine.kern.UNITS[n] == "urad"]
-    assert _check(machine, table, angles, tilts) > 0.5
+    assert assert_follows_model(machine, table.command, angles, tilts) > 0.5
     without_tilts = Machine(code, {k: v for k, v in machine.values.items() if k not in tilts}, machine.pivots,
                             machine.ball, machine.tool)
     table_only = DescriptionTable(without_tilts, sense, layout)
     table_only.enter(format_controller(without_tilts.params(), "heidenhain", heidenhain_trans=sense))
-    assert _check(without_tilts, table_only, angles, []) < 1e-3
+    assert assert_follows_model(without_tilts, table_only.command, angles, []) < 1e-3
 
 
 def test_heidenhain_refuses_without_the_trans_sense() -> None:

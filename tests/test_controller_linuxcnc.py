@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_controller_truth import AC, BC, Machine, poses, random_machine, raw_run, rtest_run
+from test_controller_truth import AC, BC, Machine, assert_follows_model, poses, random_machine
 
 from pige_sym.cli.main import main
 from pige_sym.compensation.controllers import format_controller
@@ -88,15 +88,7 @@ def _controller(machine: Machine, pins: dict[str, float], con: float):
 
 
 def _check(machine: Machine, pins: dict[str, float], con: float, angles: np.ndarray, names: list[str] | None) -> float:
-    worst = 0.0
-    command = _controller(machine, pins, con)
-    for point in (machine.ball, machine.ball + np.array([-70.0, 40.0, 30.0])):
-        got = raw_run(machine, angles, command, point)
-        np.testing.assert_allclose(got, machine.model_um(angles, names, point, raw=True), atol=1e-3, rtol=0)
-        worst = max(worst, float(np.abs(got).max()))
-    zeroed = rtest_run(machine, angles, lambda pose: command(pose, machine.ball))
-    np.testing.assert_allclose(zeroed, machine.model_um(angles, names), atol=1e-3, rtol=0)
-    return worst
+    return assert_follows_model(machine, _controller(machine, pins, con), angles, names)
 
 
 def _setp(text: str, module: str) -> dict[str, float]:

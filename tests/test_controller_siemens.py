@@ -29,11 +29,10 @@ from test_controller_truth import (
     SHIPPED,
     UNIT,
     Machine,
+    assert_follows_model,
     poses,
     random_machine,
-    raw_run,
     rotation,
-    rtest_run,
 )
 
 from pige_sym.compensation.controllers import format_controller
@@ -118,18 +117,6 @@ def _kind(machine: Machine) -> str:
     return "T" if not machine.workpiece_axes else "P" if not machine.tool_axes else "M"
 
 
-def _check(machine: Machine, carrier: Toolcarrier, angles: np.ndarray, names: list[str] | None) -> float:
-    """The tool point on ``machine`` driven by ``carrier`` equals pige's model of ``names``; the largest error."""
-    worst = 0.0
-    for point in (machine.ball, machine.ball + np.array([-70.0, 40.0, 30.0])):
-        got = raw_run(machine, angles, carrier.command, point)
-        np.testing.assert_allclose(got, machine.model_um(angles, names, point, raw=True), atol=1e-3, rtol=0)
-        worst = max(worst, float(np.abs(got).max()))
-    zeroed = rtest_run(machine, angles, lambda pose: carrier.command(pose, machine.ball))
-    np.testing.assert_allclose(zeroed, machine.model_um(angles, names), atol=1e-3, rtol=0)
-    return worst
-
-
 @pytest.mark.parametrize("code", SHIPPED)
 @pytest.mark.parametrize("seed", [5, 6])
 def test_the_printed_fine_offsets_put_the_tool_where_pige_says(code: str, seed: int) -> None:
@@ -137,7 +124,7 @@ def test_the_printed_fine_offsets_put_the_tool_where_pige_says(code: str, seed: 
     angles = poses(machine, seed)
     carrier = Toolcarrier(machine, _kind(machine))
     # the rebuilt chain with the nominal record: the tool deviates exactly as pige's model says
-    assert _check(machine, carrier, angles, None) > 5.0
+    assert assert_follows_model(machine, carrier.command, angles, None) > 5.0
     text = format_controller(machine.params(), "siemens", carrier=2)
     assert f"$TC_CARR23[2]=\"{carrier.kind}\"" in text and "MD24582 $MC_TRAFO5_TCARR_NO_1 = 2" in text
     assert "SD42974 $SC_TOCARR_FINE_CORRECTION = 1" in text and "MD20190 $MC_TOCARR_FINE_LIM_ROT" in text
@@ -146,10 +133,10 @@ def test_the_printed_fine_offsets_put_the_tool_where_pige_says(code: str, seed: 
     held = representable(machine.params(), "siemens")
     left = [n for n in machine.kern.PARAMETERS if n not in held]
     assert sorted(left) == sorted(n for n in machine.kern.LOCATION_PARAMETERS if machine.kern.UNITS[n] == "urad")
-    assert _check(machine, carrier, angles, left) > 0.5
+    assert assert_follows_model(machine, carrier.command, angles, left) > 0.5
     # and the commented base-data direction lines as well: nothing is left
     assert carrier.enter(text, 2, base_data=True) == 6
-    assert _check(machine, carrier, angles, []) < 1e-3
+    assert assert_follows_model(machine, carrier.command, angles, []) < 1e-3
 
 
 def test_the_axes_are_named_the_siemens_way() -> None:

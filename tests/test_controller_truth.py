@@ -167,6 +167,21 @@ def rtest_run(machine: Machine, angles: np.ndarray, controller: Controller) -> n
                      for di, row in zip(d, np.atleast_2d(angles), strict=True)])
 
 
+def assert_follows_model(machine: Machine, command: Callable[[dict[str, float], np.ndarray], np.ndarray],
+                         angles: np.ndarray, names: list[str] | None) -> float:
+    """The tool point of ``machine`` driven by a controller's ``command`` lands where pige's model of the
+    parameters ``names`` says, pose by pose as vectors to 1e-3 µm: un-zeroed at two workpiece points and as
+    the zeroed R-test deviation.  Returns the largest tool-point error [µm]."""
+    worst = 0.0
+    for point in (machine.ball, machine.ball + np.array([-70.0, 40.0, 30.0])):
+        got = raw_run(machine, angles, command, point)
+        np.testing.assert_allclose(got, machine.model_um(angles, names, point, raw=True), atol=1e-3, rtol=0)
+        worst = max(worst, float(np.abs(got).max()))
+    zeroed = rtest_run(machine, angles, lambda pose: command(pose, machine.ball))
+    np.testing.assert_allclose(zeroed, machine.model_um(angles, names), atol=1e-3, rtol=0)
+    return worst
+
+
 def random_machine(code: str, seed: int, size: float = 15.0, senses: dict[str, int] | None = None) -> Machine:
     """Random PIGEs and zero-position errors (±size µm, µrad), random pivots, tool and ball."""
     rng = np.random.default_rng(seed)
