@@ -51,7 +51,7 @@ class ToolCentrePoint:
         rng = np.random.default_rng(seed)
         self.machine = machine
         self.table = bool(machine.workpiece_axes)
-        self.first, self.second = machine.workpiece_axes[::-1] if self.table else machine.tool_axes
+        self.first, self.second = self.axes(machine.code)
 
         def on_line(axis: str) -> np.ndarray:  # any point of the nominal axis line
             return np.asarray(machine.pivots[axis], dtype=float) + rng.uniform(-80, 80) * UNIT[axis[0]]
@@ -64,6 +64,17 @@ class ToolCentrePoint:
             self.d = machine.tool_ball() + self.length * self.k
             e, self.f = on_line(self.second), on_line(self.first)
             self.p = {19709: e - self.d, 19712: self.f - e}
+
+    @staticmethod
+    def axes(code: str) -> tuple[str, str]:
+        """The first (master) and second rotation axis: the bed-side axis first."""
+        from pige_sym.codegen.machine_code import parse_machine_code
+
+        st = parse_machine_code(code)
+        table = [a.name for a in reversed(st.workpiece_axes) if a.kind == "rotary"]
+        head = [a.name for a in st.tool_axes if a.kind == "rotary"]
+        first, second = table if table else head
+        return first, second
 
     def enter(self, text: str) -> int:
         """Add the printed changes; the number of parameters entered."""
@@ -79,9 +90,14 @@ class ToolCentrePoint:
                 count += 3
         return count
 
+    def set_directions(self, text: str) -> None:
+        """The rotation directions No. 19684 (first axis) and No. 19689 (second) as printed: 0 right-handed."""
+        m = re.search(r"No\. 19684 = ([01]), No\. 19689 = ([01])", text)
+        assert m, text
+        self.hand = {self.first: 1.0 - 2 * int(m.group(1)), self.second: 1.0 - 2 * int(m.group(2))}
+
     def _r(self, axis: str, pose: dict[str, float]) -> np.ndarray:
-        hand = -1.0 if axis in self.machine.workpiece_axes else 1.0  # No. 19684 = 1 on the table, 0 on the tool
-        return rotation(UNIT[axis[0]], hand * math.radians(pose[axis]))
+        return rotation(UNIT[axis[0]], self.hand[axis] * math.radians(pose[axis]))
 
     def command(self, pose: dict[str, float], point: np.ndarray) -> np.ndarray:
         r1, r2 = self._r(self.first, pose), self._r(self.second, pose)
@@ -94,13 +110,17 @@ class ToolCentrePoint:
 
 
 @pytest.mark.parametrize("code", [c for c in SHIPPED if c != MIXED])
-@pytest.mark.parametrize("seed", [7, 8])
-def test_the_printed_parameters_put_the_tool_where_pige_says(code: str, seed: int) -> None:
-    machine = random_machine(code, seed)
+@pytest.mark.parametrize(("seed", "reverse"), [(7, False), (8, True)])
+def test_the_printed_parameters_put_the_tool_where_pige_says(code: str, seed: int, reverse: bool) -> None:
+    """The chain turns its axes as the printed Nos. 19684/19689 say; ``reverse``: the bed-side axis commanded
+    against CONVENTIONS' sense (σ = −1)."""
+    senses = {ToolCentrePoint.axes(code)[0]: -1} if reverse else {}
+    machine = random_machine(code, seed, senses=senses)
     angles = poses(machine, seed, n=12)
     tcp = ToolCentrePoint(machine, seed)
-    assert assert_follows_model(machine, tcp.command, angles, None) > 5.0
     text = format_controller(machine.params(), "fanuc")
+    tcp.set_directions(text)
+    assert assert_follows_model(machine, tcp.command, angles, None) > 5.0
     assert tcp.enter(text) == 6
     assert ("No. 19680 = 2 " if code == HEAD else "No. 19680 = 12 ") in text
     held = representable(machine.params(), "fanuc")

@@ -146,6 +146,9 @@ def test_the_printed_rows_put_the_tool_where_pige_says(code: str, sense: str, la
     assert assert_follows_model(without_tilts, table_only.command, angles, []) < 1e-3
 
 
-def test_heidenhain_refuses_without_the_trans_sense() -> None:
+def test_heidenhain_refuses_without_the_trans_sense_or_with_a_reversed_axis() -> None:
     with pytest.raises(InputError, match="--heidenhain-trans"):
         format_controller(random_machine(SHIPPED[0], 1).params(), "heidenhain")
+    reversed_c = random_machine(SHIPPED[0], 1, senses={"C": -1}).params()
+    with pytest.raises(InputError, match="axis C is commanded in the reverse sense"):
+        format_controller(reversed_c, "heidenhain", heidenhain_trans="position")

@@ -37,6 +37,7 @@ from test_controller_truth import (
 
 from pige_sym.compensation.controllers import format_controller
 from pige_sym.compensation.controllers.scope import representable
+from pige_sym.kernels import load_kernels
 
 #: Basic parameters of the offset vectors (x component) and of v1, v2; fine offset = basic + 40.
 VECTORS = {1: "l1", 4: "l2", 15: "l3", 18: "l4", 7: "v1", 10: "v2"}
@@ -118,9 +119,12 @@ def _kind(machine: Machine) -> str:
 
 
 @pytest.mark.parametrize("code", SHIPPED)
-@pytest.mark.parametrize("seed", [5, 6])
-def test_the_printed_fine_offsets_put_the_tool_where_pige_says(code: str, seed: int) -> None:
-    machine = random_machine(code, seed)
+@pytest.mark.parametrize(("seed", "reverse"), [(5, False), (6, True)])
+def test_the_printed_fine_offsets_put_the_tool_where_pige_says(code: str, seed: int, reverse: bool) -> None:
+    """``reverse``: both axes commanded against CONVENTIONS' sense (σ = −1, CONVENTIONS §9): the chain's v
+    flip, the offset angles become +E; the printed lines follow the parameter file's axis_sense."""
+    senses = dict.fromkeys(load_kernels(code).ROTARY_AXES, -1) if reverse else {}
+    machine = random_machine(code, seed, senses=senses)
     angles = poses(machine, seed)
     carrier = Toolcarrier(machine, _kind(machine))
     # the rebuilt chain with the nominal record: the tool deviates exactly as pige's model says

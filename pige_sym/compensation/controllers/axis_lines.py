@@ -100,8 +100,7 @@ def structure(params: CompensationParameters, controller: str) -> Structure:
 
 def axis_sense(params: CompensationParameters, axis: str) -> int:
     """σ of a rotary axis (CONVENTIONS §9): +1 unless the parameters state the controller's reverse sense."""
-    senses = getattr(params, "axis_senses", None) or {}
-    return int(senses.get(axis, 1))
+    return -1 if params.axis_sense.get(axis, 1) == -1 else 1
 
 
 def bed_first(params: CompensationParameters) -> tuple[dict[str, Any], dict[str, Any]]:

@@ -115,7 +115,8 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
              f"\"{letter}\": DELTAS as fine offsets; parameters from {params.source}",
              f"; rotary axis 1 = {one['axis']} (v1 $TC_CARR7..9, offset $TC_CARR24/64), rotary axis 2 = "
              f"{two['axis']} (v2 $TC_CARR10..12, offset $TC_CARR25/65); " + _chain_text(st.kind),
-             "; offset angle = the axis position of the initial setting: minus the zero-position error",
+             "; offset angle = the axis position of the initial setting: -sigma*E for a zero-position error E; "
+             f"commanded senses (CONVENTIONS §9): {_senses_text(params, (one, two))}",
              *_requirements(carrier, vectors, offsets),
              *scope_lines(params, "siemens", "; "),
              "; chain rebuilt from the manuals in pige's tests (tests/test_controller_siemens.py), not run on a "
@@ -126,6 +127,10 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
                   for k in range(3)]
     lines += [f"$TC_CARR{k}[{carrier}]=$TC_CARR{k}[{carrier}]{signed(v, DEG_DECIMALS)}" for k, v in offsets.items()]
     return "\n".join(lines + _base_and_machine_data(params, st, carrier, vectors))
+
+
+def _senses_text(params: CompensationParameters, rows: tuple[dict[str, Any], ...]) -> str:
+    return ", ".join(f"{r['axis']} sigma={axis_sense(params, r['axis']):+d}" for r in rows)
 
 
 def _chain_text(kind: str) -> str:
