@@ -215,7 +215,7 @@ def _halrun(script: str) -> str | None:
     """Run a HAL script in real (non-realtime) HAL; None when LinuxCNC cannot run here or is running already."""
     if shutil.which("halrun") is None:
         return None
-    for _ in range(20):  # a session that just ended may still be stopping
+    for _ in range(6):  # a session that just ended may still be stopping
         if subprocess.run(["pgrep", "-x", "rtapi_app"], capture_output=True).returncode != 0:
             break
         time.sleep(0.5)

@@ -141,7 +141,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "  pige compensate part.mpf --params result.json --out part_comp.mpf\n"
             "  pige compensate part.nc --params result.json --max-change 0.1,0.05 --json --out part_comp.nc\n"
             "  pige compensate part.ngc --params result.json --rtcp-on M428 --rtcp-off M429 --out comp.ngc\n"
-            "  pige compensate --params result.json --controller siemens"
+            "  pige compensate --params result.json --controller siemens --carrier 1\n"
+            "  pige compensate --params result.json --controller heidenhain --heidenhain-trans position\n"
+            "  pige compensate --params result.json --controller linuxcnc --current xyzac-trt.ini"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

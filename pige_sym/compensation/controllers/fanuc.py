@@ -77,7 +77,8 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
             f"from {params.source}",
             f"No. 19680 = {12 if side == 'table' else 2} ({side} rotation type): first (master) rotation axis "
             f"{first['axis']}, second (slave) {second['axis']}; rotation direction No. 19684 = "
-            f"{rotation[first['axis']]}, No. 19689 = {rotation[second['axis']]} (the senses pige assumes)",
+            f"{rotation[first['axis']]}, No. 19689 = {rotation[second['axis']]} (the senses pige assumes; ordinary "
+            "rotation axes, No. 19696 IA1 = IA2 = 0)",
             *scope_lines(params, "fanuc", "")]
     body = _table_type(first, second) if side == "table" else _tool_type(first, second)
     body.append("chain rebuilt from A-79348E in pige's tests (tests/test_controller_fanuc.py), not run on a FANUC "
@@ -105,6 +106,6 @@ def _tool_type(first: dict[str, Any], second: dict[str, Any]) -> list[str]:
     a, b, c = _xyz(d2)
     na, nb, nc = _xyz(-d2)
     return [f"  No. 19709 {a}   No. 19710 {b}   No. 19711 {c}   (D on the tool axis -> E on {second['axis']}, "
-            "sheet 83/88)",
+            "sheet 83/88; D stays where the tool length and the tool holder offset No. 19666 put it)",
             f"  No. 19712 {na}   No. 19713 {nb}   No. 19714 {nc}   (E on {second['axis']} -> F on "
             f"{first['axis']}, the controlled point, sheet 84/88)"]
