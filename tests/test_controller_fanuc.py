@@ -139,3 +139,17 @@ def test_fanuc_refuses_the_mixed_type_and_names_the_axes() -> None:
     assert "No. 19684 = 0, No. 19689 = 0" in text
     table = format_controller(random_machine(SHIPPED[0], 1).params(), "fanuc")
     assert "first (master) rotation axis A, second (slave) C" in table and "No. 19684 = 1, No. 19689 = 1" in table
+
+
+def test_entries_that_would_make_the_tool_point_worse_are_flagged() -> None:
+    """On a fork head the master axis' positions stay: entering the slave's alone can raise the error."""
+    from pige_sym.compensation.controllers.scope import tool_point_summary
+
+    values = {"EY0A": 12.0, "EZ0A": -9.0, "EX0C": -14.0, "EY0C": 10.0, "EA0A": 100.0, "EC0C": -50.0}
+    worse = Machine(HEAD, values, {}, np.zeros(3), np.array([0.0, 0.0, -250.0])).params()
+    scope = tool_point_summary(worse, "fanuc")
+    assert scope.rmse_table_only_um > scope.rmse_before_um
+    assert "WARNING: entering only these values makes the predicted tool-point error LARGER" in \
+        format_controller(worse, "fanuc")
+    better = Machine(HEAD, {"EY0A": 12.0, "EZ0A": -9.0}, {}, np.zeros(3), np.array([0.0, 0.0, -250.0])).params()
+    assert "WARNING" not in format_controller(better, "fanuc")

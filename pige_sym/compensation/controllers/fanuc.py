@@ -75,7 +75,8 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
                 (1 if r["side"] == "tool" else 0) for r in (first, second)}
     head = [f"FANUC tool centre point for 5-axis machining of {params.machine}: DELTAS to add (mm); parameters "
             f"from {params.source}",
-            f"No. 19680 = {12 if side == 'table' else 2} ({side} rotation type): first (master) rotation axis "
+            f"No. 19680 = {12 if side == 'table' else 2} ({'table' if side == 'table' else 'tool'} rotation type): "
+            "first (master) rotation axis "
             f"{first['axis']}, second (slave) {second['axis']}; rotation direction No. 19684 = "
             f"{rotation[first['axis']]}, No. 19689 = {rotation[second['axis']]} (the senses pige assumes; ordinary "
             "rotation axes, No. 19696 IA1 = IA2 = 0)",

@@ -83,6 +83,10 @@ def scope_lines(params: CompensationParameters, style: str, comment: str) -> lis
     extra = [n for n in (base(params) if base else []) if params.values.get(n, 0.0) != 0.0]
     note = ([f"{comment}printed below as changes of base data, not entered above (the RMSE after entering leaves "
              f"them out): {', '.join(extra)}"] if extra else [])
+    if s.rmse_table_only_um > s.rmse_before_um:
+        note.append(f"{comment}WARNING: entering only these values makes the predicted tool-point error LARGER "
+                    f"({s.rmse_table_only_um:.3f} > {s.rmse_before_um:.3f} um on the default cone): what they cannot "
+                    "hold outweighs them; do not enter them alone (use the NC rewrite)")
     return note + [
         f"{comment}entered: {', '.join(s.entered) or 'nothing'}",
         f"{comment}NOT representable in this controller's kinematics (only the NC rewrite compensates them): "
