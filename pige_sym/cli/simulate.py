@@ -38,14 +38,15 @@ def _run_probe(args: argparse.Namespace) -> int:
     from pige_sym.nc.program_file import read_program
     from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
 
-    kern = load_kernels(args.machine)
-    setup = probe_setup(args, kern.MACHINE_CODE, dialect=args.dialect, controller_required=False)
     for name in ("noise", "pretravel", "lobing", "vertical_pretravel"):
         finite_option(getattr(args, name), "--" + name.replace("_", "-"), minimum=0.0 if name == "noise" else None)
     if args.program:
         text = read_program(args.program)
-        setup = _stated(setup, args, text)
+        setup = _program_setup(args, text)
+        kern = load_kernels(setup.machine)
     else:
+        kern = load_kernels(args.machine)
+        setup = probe_setup(args, kern.MACHINE_CODE, dialect=args.dialect, controller_required=False)
         traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
         text = render_probe_program(plan_probing(setup, traj.angles_deg, traj.description), args.dialect)
     verify_probe_program(text, args.dialect, setup, tuple(kern.ROTARY_AXES), path=args.program or "<program>")
@@ -68,6 +69,24 @@ def _run_probe(args: argparse.Namespace) -> int:
     atomic_write_text(truth_path, to_json(truth) + "\n")
     print(f"wrote {out} ({log.count(chr(10))} contacts, {args.dialect} log) and {truth_path}")
     return 0
+
+
+def _program_setup(args: argparse.Namespace, text: str) -> Any:
+    """The set-up of ``--program``: its header's (with ``--sphere`` etc. given, those options, which must agree)."""
+    import numpy as np
+
+    from pige_sym.cli._probe import probe_setup
+    from pige_sym.nc.probe_header import header_setup
+    from pige_sym.nc.probe_program import ProbeSetup
+
+    if args.sphere:
+        return _stated(probe_setup(args, args.machine, dialect=args.dialect, controller_required=False), args, text)
+    h = header_setup(text, args.program)
+    if h.dialect != args.dialect:
+        raise InputError(f"--dialect {args.dialect}: the program {args.program} is a {h.dialect} program")
+    return ProbeSetup(h.machine, h.sphere_mm, np.zeros(3), h.sphere_radius_mm, h.stylus_radius_mm,
+                      clearance_mm=args.clearance, overtravel_mm=args.overtravel, contacts=args.contacts,
+                      pivots_mm=h.pivots_mm, axis_sense=h.axis_sense, controller=h.controller)
 
 
 def _stated(setup: Any, args: argparse.Namespace, text: str) -> Any:
