@@ -48,8 +48,8 @@ def summary_html(rep: MeasurementReport) -> str:
         ("largest deviation", esc(f"|d| max {num(norms.max())} µm; per component max |dx| "
                                   f"{num(np.abs(dev[:, 0]).max())}"
                                   f", |dy| {num(np.abs(dev[:, 1]).max())}, |dz| {num(np.abs(dev[:, 2]).max())} µm")),
-        ("RMS of |d| over the points", esc(f"{num(math.sqrt(float((norms[1:] ** 2).mean())) if m.n_rows > 1 else 0.0)}"
-                                          " µm")),
+        (f"RMS of |d| over the {words.rows}",
+         esc(f"{num(math.sqrt(float((norms[1:] ** 2).mean())) if m.n_rows > 1 else 0.0)} µm")),
     ]
     if "source" in m.metadata:
         items.append(("source", esc(m.metadata["source"])))
