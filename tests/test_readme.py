@@ -44,5 +44,6 @@ def test_the_first_session_and_the_probe_demo_run_as_pasted(tmp_path) -> None:
                  "report/report.html"):
         assert (session / name).exists(), name
     assert "measured before/after" in done.stdout
-    assert (tmp_path / "probe-demo" / "probe.csv").exists()
+    demo = tmp_path / "probe-demo"
+    assert (demo / "probe.csv").exists() and (demo / "report" / "report.html").exists()
     assert "rank 8/8" in done.stdout and (session / "bb_axial_A.csv").exists()
