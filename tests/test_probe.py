@@ -197,8 +197,8 @@ def test_a_pose_the_stand_hides_is_refused() -> None:
                      np.array([[0.0, 0.0], [-90.0, 0.0]]))
 
 
-def test_head_machines_are_refused_clearly() -> None:
-    with pytest.raises(InputError, match="tool-side"):
+def test_a_head_machine_without_its_tool_is_refused_clearly() -> None:
+    with pytest.raises(InputError, match=r"tool-side rotary axes \(C, A\).*--tool x,y,z"):
         plan_probing(ProbeSetup("wbXYZCA(C1)t", np.zeros(3), np.zeros(3), 12.7, 1.5), np.zeros((1, 2)))
 
 

@@ -433,7 +433,7 @@ def test_a_probe_report_speaks_of_contacts_and_poses(tmp_path: Path) -> None:
     assert "31 poses: the reference pose and 30 more poses, 155 contacts" in text
     assert "τ " in text and " poses" in text and "sphere centre at the reference pose" in text
     assert "the test set-up shows table_drift" in _answer(text)
-    assert "sphere-probe: the search treats the poses as independent" in text  # the note `pige diagnose` prints
-    assert "Why two residuals" in text  # Overview (GLS) and diagnosis baseline (OLS) explained
+    assert "sphere-probe: the search fits every row at its own precision" in text  # the note `pige diagnose` prints
+    assert "Why two residuals" in text  # Overview (GLS, plain residual) and diagnosis baseline (whitened) explained
     sentence = rep.diagnosis.findings[0].sentence()
     assert "poses" in sentence and " s," not in sentence

@@ -4,7 +4,8 @@ Stages (every file lands in ``--out``):
 
 1. the probing program for LinuxCNC (``probe.ngc``), read back and replayed against the sphere;
 2. the virtual probing machine (random PIGEs, a 40 µm set-up offset of the sphere, 0.5 µm contact
-   noise) runs it and writes the log LinuxCNC would write (``pige_probe.txt``, truth beside it);
+   noise; on a head or mixed machine the stylus centre 150 mm below the head's pivot, :data:`HEAD_TOOL`) runs
+   it and writes the log LinuxCNC would write (``pige_probe.txt``, truth beside it);
 3. ``import-probe``: sphere centres, deviations, covariances (``probe.csv``);
 4. identification with the reference-pose coupling, compared with the truth (error / std);
 5. verdict against ±15 µm / ±30 µrad;
@@ -29,17 +30,23 @@ SPHERE = (100.0, 20.0, 60.0)
 RADII = (12.7, 1.5)
 #: The demo's LinuxCNC: the shipped trt sims' kinematics switch (M429 identity, M428 TCP), stylus tool 99.
 CONTROLLER = ProbeController(rtcp_off="M429", rtcp_on="M428", stylus_tool=99, stylus_length_mm=120.0)
+#: On a head or mixed machine the virtual head carries the stylus centre 150 mm below its pivot (``--tool``).
+HEAD_TOOL = (0.0, 0.0, -150.0)
 PART = """(a small 5-axis finishing pass in machine coordinates, RTCP off)
 G21 G90 G17 G40 G49 G80 G94
 G0 Z150
-G0 A0 C0
+G0 {a}0 {c}0
 G0 X90 Y10 Z80
 G1 X110 Y10 Z80 F800
-G1 A-15 C30 X105 Y25 Z82
-G1 A-30 C60 X95 Y35 Z85
+G1 {a}-15 {c}30 X105 Y25 Z82
+G1 {a}-30 {c}60 X95 Y35 Z85
 G0 Z150
 M2
 """
+
+
+def _tool(kern: Any) -> tuple[float, float, float] | None:
+    return HEAD_TOOL if kern.TOOL_ROTARY else None
 
 
 def _stage(n: int, text: str) -> None:
@@ -49,6 +56,7 @@ def _stage(n: int, text: str) -> None:
 def _program_and_log(args: argparse.Namespace, code: str, out: Path) -> tuple[Path, dict[str, float]]:
     import numpy as np
 
+    from pige_sym.kernels import load_kernels
     from pige_sym.model.trajectories import make_trajectory
     from pige_sym.nc.probe_program import ProbeSetup, plan_probing
     from pige_sym.nc.probe_readback import verify_probe_program
@@ -56,7 +64,9 @@ def _program_and_log(args: argparse.Namespace, code: str, out: Path) -> tuple[Pa
     from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
     from pige_sym.simulation.simulator import random_pige
 
-    setup = ProbeSetup(code, np.array(SPHERE), np.zeros(3), *RADII, controller=CONTROLLER)
+    tool = _tool(load_kernels(code))
+    setup = ProbeSetup(code, np.array(SPHERE), np.zeros(3), *RADII, controller=CONTROLLER,
+                       tool_mm=None if tool is None else np.array(tool))
     traj = make_trajectory(code, args.trajectory)
     _stage(1, "probing program (LinuxCNC), read back against the sphere")
     plan = plan_probing(setup, traj.angles_deg, traj.description)
@@ -84,7 +94,7 @@ def run_probe_demo(args: argparse.Namespace, kern: Any, out: Path) -> int:
     code = kern.MACHINE_CODE
     log, pige = _program_and_log(args, code, out)
     _stage(3, "import-probe: sphere centres and deviations")
-    m = import_probe_log(log, "linuxcnc", ProbeImport(code, (0.0, 0.0, 0.0), *RADII))
+    m = import_probe_log(log, "linuxcnc", ProbeImport(code, (0.0, 0.0, 0.0), *RADII, tool_mm=_tool(kern)))
     csv = api.write(m, out / "probe.csv", force=True)
     sigma = float(m.metadata["contact_sigma_um"])
     r_eff, _, how = m.metadata["r_eff_mm"].partition(" ")
@@ -104,7 +114,7 @@ def run_probe_demo(args: argparse.Namespace, kern: Any, out: Path) -> int:
     print(api.check(result, tolerances).format())
     _stage(6, "compensation of a part program")
     part = out / "part.ngc"
-    atomic_write_text(part, PART)
+    atomic_write_text(part, PART.format(a=kern.ROTARY_AXES[0], c=kern.ROTARY_AXES[1]))
     comp = api.compensate(part, result, machine=code)
     atomic_write_text(out / "part_comp.ngc", comp.text, newline="")
     print(f"wrote {out / 'part_comp.ngc'}: {comp.report.compensated} of {comp.report.moves} moves changed, "

@@ -32,6 +32,16 @@ def add_probe_program_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pattern", choices=("fixed", "alternate"), default="fixed",
                    help="contacts: the same pattern at every pose, or the rings (15 and 50 deg) taken in turn so a "
                         "direction-dependent trigger radius shows in the data (default %(default)s)")
+    p.add_argument("--stem", default="0,0,-1", metavar="x,y,z",
+                   help="sphere-probe: direction of the sphere's stem from its centre, table frame (default "
+                        "%(default)s: below the sphere); no probing move comes from that side")
+    p.add_argument("--stem-radius", type=float, default=5.0, help="sphere-probe: stem radius [mm] (default "
+                   "%(default)s)")
+    p.add_argument("--stem-length", type=float, default=100.0,
+                   help="sphere-probe: sphere centre to the table along the stem [mm] (default %(default)s)")
+    p.add_argument("--shank", type=float, default=30.0,
+                   help="sphere-probe: stylus shank checked against stem and table, from the ball centre [mm] "
+                        "(default %(default)s)")
     add_controller_arguments(p)
 
 
@@ -129,6 +139,7 @@ def probe_setup(args: argparse.Namespace, machine: str, *, dialect: str | None =
     from pige_sym.cli._setup import axis_sense_option
     from pige_sym.kernels import load_kernels
     from pige_sym.nc.probe_program import ProbeSetup
+    from pige_sym.nc.probe_reach import Stem
     from pige_sym.nc.probe_safety import ProbeController
 
     if not args.sphere:
@@ -139,6 +150,9 @@ def probe_setup(args: argparse.Namespace, machine: str, *, dialect: str | None =
     axes = tuple(load_kernels(machine).ROTARY_AXES)
     per_axis = probe_pivots(args.pivot, axes)
     single = np.zeros(3) if per_axis is not None else np.array(probe_pivot(args.pivot))
+    tool = probe_tool(getattr(args, "tool", None))
+    v = parse_vec3(args.stem, "--stem")
+    stem = (v[0], v[1], v[2])
     return ProbeSetup(machine, np.array(parse_vec3(args.sphere, "--sphere")), single,
                       radius, stylus, clearance_mm=args.clearance, overtravel_mm=args.overtravel,
                       contacts=args.contacts, safe_z_mm=args.safe_z, probe_feed_mm_min=args.probe_feed,
@@ -146,4 +160,8 @@ def probe_setup(args: argparse.Namespace, machine: str, *, dialect: str | None =
                       pivots_mm=None if per_axis is None else {a: np.array(v) for a, v in per_axis.items()},
                       axis_sense=axis_sense_option(args, axes) or {},
                       controller=ProbeController() if dialect is None else
-                      probe_controller(args, dialect, required=controller_required))
+                      probe_controller(args, dialect, required=controller_required),
+                      tool_mm=None if tool is None else np.array(tool),
+                      stem=Stem(stem, finite_option(args.stem_radius, "--stem-radius", positive=True),
+                                finite_option(args.stem_length, "--stem-length", positive=True),
+                                finite_option(args.shank, "--shank", positive=True)))

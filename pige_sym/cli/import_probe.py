@@ -81,11 +81,24 @@ def _spec_from_program(args: argparse.Namespace) -> Any:
         raise InputError(f"--pivot: the program {args.program} states the pivots; leave --pivot out")
     sense = reconcile(h.axis_sense, axis_sense_option(args, axes), args.program, axes)
     r_eff = None if args.radius is None else finite_option(args.radius, "--radius", positive=True)
-    pivots = {a: (float(v[0]), float(v[1]), float(v[2])) for a, v in h.pivots_mm.items()}
-    return ProbeImport(h.machine, (0.0, 0.0, 0.0), h.sphere_radius_mm, h.stylus_radius_mm, r_eff,
+    pivots: dict[str, tuple[float, float, float]] | None = {a: (float(v[0]), float(v[1]), float(v[2]))
+                                                             for a, v in h.pivots_mm.items()}
+    tool = probe_tool(args.tool)
+    import numpy as np
+
+    if tool is not None and (h.tool_mm is None or not np.allclose(h.tool_mm, tool, rtol=2e-6, atol=2e-6)):
+        raise InputError(f"--tool {args.tool}: the program {args.program} states "
+                         f"{'no tool' if h.tool_mm is None else ', '.join(f'{v:g}' for v in h.tool_mm)}; leave "
+                         "--tool out (the program's header gives it)")
+    single: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    if h.tool_mm is not None:  # a head is probed about one pivot (the axis lines meet)
+        first = next(iter(h.pivots_mm.values()))
+        single, pivots = (float(first[0]), float(first[1]), float(first[2])), None
+    return ProbeImport(h.machine, single, h.sphere_radius_mm, h.stylus_radius_mm, r_eff,
                        finite_option(args.stylus_offset, "--stylus-offset"), args.units, moves=args.moves,
                        pivots_mm=pivots, axis_sense=sense, kinematics=h.controller.kinematics,
-                       program=read_header(text, args.program), tool_mm=probe_tool(args.tool))
+                       program=read_header(text, args.program),
+                       tool_mm=None if h.tool_mm is None else (h.tool_mm[0], h.tool_mm[1], h.tool_mm[2]))
 
 
 def _same(value: object, stated: object, flag: str) -> bool:

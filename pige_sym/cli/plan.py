@@ -173,7 +173,8 @@ def _run_probe(args: argparse.Namespace) -> int:
     if out is not None:
         print(f"\nwrote {out}; next: pige program --instrument sphere-probe --contacts {best.contacts} "
               f"--trajectory {out} --sphere {args.sphere} --sphere-radius {args.sphere_radius:g} "
-              f"--stylus-radius {args.stylus_radius:g} --out probe.ngc --dialect linuxcnc")
+              f"--stylus-radius {args.stylus_radius:g}{f' --tool {args.tool}' if args.tool else ''} --out probe.ngc "
+              "--dialect linuxcnc")
     return 0
 
 

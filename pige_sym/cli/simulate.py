@@ -51,10 +51,13 @@ def _run_probe(args: argparse.Namespace) -> int:
         text = render_probe_program(plan_probing(setup, traj.angles_deg, traj.description), args.dialect)
     verify_probe_program(text, args.dialect, setup, tuple(kern.ROTARY_AXES), path=args.program or "<program>")
     offset = parse_vec3(args.setup_offset, "--setup-offset")
+    bent = parse_vec3(args.stylus_error, "--stylus-error")
+    if any(bent) and setup.tool_mm is None:
+        raise InputError("--stylus-error: a stylus off its tool vector matters on a head machine (give --tool)")
     machine = ProbeMachine(setup, pige_values(args.pige, kern.MACHINE_CODE, args.seed),
                            [parse_effect(e, tuple(kern.ROTARY_AXES)) for e in args.effect or []],
                            (offset[0], offset[1], offset[2]), args.noise, args.pretravel, args.lobing,
-                           args.vertical_pretravel, args.seed)
+                           args.vertical_pretravel, args.seed, (bent[0], bent[1], bent[2]))
     inputs = [x for x in (args.trajectory, args.pige, args.program) if x and os.path.isfile(x)]
     out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
     truth_path = check_output(out.with_name(out.stem + ".truth.json"), force=args.force, inputs=inputs,
@@ -65,7 +68,9 @@ def _run_probe(args: argparse.Namespace) -> int:
              "pige": machine.pige, "effects": args.effect or [], "sphere_mm": list(setup.sphere_mm),
              "setup_offset_um": list(machine.setup_offset_um), "pivot_mm": list(setup.pivot_mm),
              "contact_noise_um": args.noise, "pretravel_um": args.pretravel, "lobing_um": args.lobing,
-             "vertical_pretravel_um": args.vertical_pretravel, "seed": args.seed}
+             "vertical_pretravel_um": args.vertical_pretravel, "seed": args.seed,
+             **({} if setup.tool_mm is None else {"tool_mm": [float(v) for v in setup.tool_mm],
+                                                  "stylus_error_um": list(machine.tool_error_um)})}
     atomic_write_text(truth_path, to_json(truth) + "\n")
     print(f"wrote {out} ({log.count(chr(10))} contacts, {args.dialect} log) and {truth_path}")
     return 0
@@ -99,9 +104,13 @@ def _stated(setup: Any, args: argparse.Namespace, text: str) -> Any:
     h = header_setup(text, args.program)
     given = any(getattr(args, k) is not None for k in ("kinematics", "rtcp_off", "rtcp_on", "stylus_tool",
                                                         "stylus_length"))
+    tool = setup.tool_mm if setup.tool_mm is not None else h.tool_mm
+    single = tool is not None and not args.pivot  # a head is probed about one pivot (the axis lines meet)
     return dataclasses.replace(setup, controller=setup.controller if given else h.controller,
                                axis_sense=setup.axis_sense if args.axis_sense is not None else h.axis_sense,
-                               pivots_mm=setup.pivots_mm if args.pivot else h.pivots_mm)
+                               pivots_mm=None if single else setup.pivots_mm if args.pivot else h.pivots_mm,
+                               pivot_mm=next(iter(h.pivots_mm.values())) if single else setup.pivot_mm,
+                               tool_mm=tool)
 
 
 #: Decimals of the simulated length changes written [µm].
@@ -226,5 +235,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--setup-offset", default="0,0,0", help="true minus nominal sphere centre [um] (default 0,0,0)")
     p.add_argument("--pretravel", type=float, default=0.0, help="constant probe pre-travel [um]")
     p.add_argument("--lobing", type=float, default=0.0, help="three-lobed pre-travel amplitude [um]")
-    p.add_argument("--vertical-pretravel", type=float, default=0.0, help="extra pre-travel of Z probing moves [um]")
+    p.add_argument("--vertical-pretravel", type=float, default=0.0,
+                   help="extra pre-travel of Z probing moves (along the stylus axis on a head) [um]")
+    p.add_argument("--stylus-error", default="0,0,0", metavar="dx,dy,dz",
+                   help="head machines: the true stylus centre minus --tool [um] (a bent stylus, a wrong tool length)")
     p.set_defaults(handler=_run)

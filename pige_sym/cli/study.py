@@ -63,17 +63,24 @@ def _probe_projection(args: argparse.Namespace) -> int:
     import numpy as np
 
     from pige_sym.nc.probe_program import ProbeSetup
-    from pige_sym.planning.probe import coupling_study, predict_probe
+    from pige_sym.planning.probe import coupling_study, format_tilt_study, predict_probe, tilt_study
 
     kern, traj = _trajectory(args)
-    setup = ProbeSetup(kern.MACHINE_CODE, np.array([100.0, 20.0, 60.0]), np.zeros(3), 12.7, 1.5)
+    tool = _tool(args)
+    setup = ProbeSetup(kern.MACHINE_CODE, np.array([100.0, 20.0, 60.0]), np.zeros(3), 12.7, 1.5,
+                       tool_mm=None if tool is None else np.array(tool))
     pred = predict_probe(setup, traj.angles_deg, contact_sigma_um=args.noise)
+    tilts = tilt_study(setup, contact_sigma_um=args.noise)
     if args.json:
         print(to_json({"std": pred.std, "std_ignoring_coupling": pred.std_ignoring_coupling, "poses": pred.poses,
-                       "contacts": pred.contacts}))
+                       "contacts": pred.contacts,
+                       "tilt_study": [{"tilt_deg": t, "std": p.std if not isinstance(p, str) else None,
+                                       "refused": p if isinstance(p, str) else None} for t, p in tilts]}))
     else:
-        print(f"sphere probe on {kern.MACHINE_CODE}, {traj.description}, sphere 12.7 mm at 100, 20, 60 mm, contact "
-              f"scatter {args.noise:g} um: every PIGE is determined (full 3-D centres)\n" + coupling_study(pred))
+        on = f", stylus at {', '.join(f'{v:g}' for v in tool)} mm from the head's pivot" if tool else ""
+        print(f"sphere probe on {kern.MACHINE_CODE}, {traj.description}, sphere 12.7 mm at 100, 20, 60 mm{on}, "
+              f"contact scatter {args.noise:g} um (full 3-D centres)\n" + coupling_study(pred) + "\n\n"
+              + format_tilt_study(setup, tilts, args.noise))
     return 0
 
 

@@ -105,6 +105,10 @@ class Layout:
     drift_cols : dict of str to list of tuple of int
         Per drift kind (``thermal_drift``, ``table_drift``), the column triples (vx, vy, vz) of each τ grid
         point.
+    probe_sensitivity : ndarray, shape=(n, 3, 3), or None
+    nuisance : tuple of str
+        Columns right after the PIGEs that every model holds and no result reports: a probe file's reference
+        centre error ``u`` (``d_i`` gains ``R_w,i·u``, :data:`REFERENCE_NUISANCE`).
     """
 
     pige: list[str]
@@ -114,6 +118,17 @@ class Layout:
     tau_grid_s: np.ndarray
     drift_cols: dict[str, list[tuple[int, ...]]] = field(default_factory=dict)
     probe_sensitivity: np.ndarray | None = None  # (n, 3, 3) of a probe import: the probe_trigger columns
+    nuisance: tuple[str, ...] = ()
+
+    @property
+    def base(self) -> int:
+        """Columns every model holds: the PIGEs and the nuisance."""
+        return len(self.pige) + len(self.nuisance)
+
+
+#: The reference centre's error of a probe file (CONVENTIONS §7): ``c_nom`` is built from the measured ``c(0)``,
+#: so its error ``u`` enters every row turned by the table, ``R_w,i·u`` [µm].
+REFERENCE_NUISANCE = ("reference_x_um", "reference_y_um", "reference_z_um")
 
 
 def _moves(angles: np.ndarray, k: int) -> bool:
@@ -122,7 +137,7 @@ def _moves(angles: np.ndarray, k: int) -> bool:
 
 def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: np.ndarray,
                  restrict: list[str] | None = None, table_drift: bool = False,
-                 probe_sensitivity: np.ndarray | None = None) -> Layout:
+                 probe_sensitivity: np.ndarray | None = None, reference_centre: bool = False) -> Layout:
     """Every applicable candidate of a measurement, in super-design column order.
 
     Parameters
@@ -138,9 +153,12 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
         Also the nest/sphere drifting on the table (probe files: a sphere on a stand).
     probe_sensitivity : ndarray, shape=(n, 3, 3), optional
         A probe import's trigger sensitivities: adds the ``probe_trigger`` candidate.
+    reference_centre : bool
+        A probe file: the reference centre's error is a nuisance of every model (:data:`REFERENCE_NUISANCE`).
     """
     pige = list(kern.LOCATION_PARAMETERS)
-    units = {p: kern.UNITS[p] for p in pige}
+    nuisance = REFERENCE_NUISANCE if reference_centre else ()
+    units = {p: kern.UNITS[p] for p in pige} | {q: "um" for q in nuisance}
     specs: list[tuple[EffectSpec, str, int]] = []
     duration = float(t_s[-1] - t_s[0]) if len(t_s) > 1 else 0.0
     taus = np.array([f * duration for f in TAU_GRID_FRACTIONS]) if duration > 0 else np.zeros(0)
@@ -161,7 +179,7 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
     specs.append((EffectSpec("setup_offset"), "setup_offset", 0))
     if probe_sensitivity is not None:
         specs.append((EffectSpec("probe_trigger"), "probe_trigger", 0))
-    col = len(pige)
+    col = len(pige) + len(nuisance)
     cands: list[Candidate] = []
     drift_cols: dict[str, list[tuple[int, ...]]] = {}
     for spec, key, extra in specs:
@@ -172,7 +190,7 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
             drift_cols.setdefault(spec.kind, []).append(cols)
         if restrict is None or spec.id in restrict:
             cands.append(Candidate(spec, key, cols, extra))
-    return Layout(pige, units, cands, col, taus, drift_cols, probe_sensitivity)
+    return Layout(pige, units, cands, col, taus, drift_cols, probe_sensitivity, nuisance)
 
 
 def add_pose_clusters(layout: Layout, options: list[dict[str, float]]) -> list[Candidate]:
@@ -197,7 +215,7 @@ def evaluate_rows(layout: Layout, blocks: list[tuple[EffectSpec, tuple[int, ...]
                   approach: np.ndarray, rows: np.ndarray, compact: bool = False) -> np.ndarray:
     """Super-design rows, shape=(r, 3, C) [µm per parameter unit].
 
-    With ``compact`` only the PIGE columns and the given blocks, in that order, are
+    With ``compact`` only the base columns (PIGEs and nuisance) and the given blocks, in that order, are
     returned, shape=(r, 3, P + Σq) (see :func:`compact_columns`).
 
     Parameters
@@ -215,30 +233,34 @@ def evaluate_rows(layout: Layout, blocks: list[tuple[EffectSpec, tuple[int, ...]
     jac = kern.jacobian(angles, None, m.ball_mm, pivots, m.tool_mm)
     loc = [kern.PARAMETERS.index(p) for p in layout.pige]
     width = len(compact_columns(layout, blocks)) if compact else layout.n_columns
+    p, q = len(loc), len(layout.nuisance)
     if not blocks:
         out = np.zeros((len(rows), 3, width))
-        out[:, :, : len(loc)] = jac[1:, :, loc]
+        out[:, :, :p] = jac[1:, :, loc]
+        if q:
+            out[:, :, p:p + q] = kern.workpiece_rotation(angles[1:])
         return out
     raw = np.zeros((len(idx), 3, width))
     sens = None if layout.probe_sensitivity is None else layout.probe_sensitivity[idx]
     ctx = EffectContext(kern, angles, m.t_s[idx], m.ball_mm, pivots, m.tool_mm, approach=approach[idx],
                         probe_sensitivity=sens)
-    at = len(loc)
+    at = layout.base
     for spec, cols in blocks:
         start = at if compact else cols[0]
         raw[:, :, start: start + len(cols)] = spec.raw_columns(ctx)[0]
         at += len(cols)
     # zero all effect columns at once: raw − R_w · raw(reference row); the columns that need no
     # zeroing (squareness: travel from the reference; drift: t = 0) are zero at the reference anyway
-    p = len(loc)
     raw[:, :, p:] -= ctx.rot_w @ raw[0][:, p:]
     raw[:, :, :p] = jac[:, :, loc]
+    if q:
+        raw[:, :, p:p + q] = ctx.rot_w  # the reference centre's error, turned with the table (not zeroed)
     return raw[1:]
 
 
 def compact_columns(layout: Layout, blocks: list[tuple[EffectSpec, tuple[int, ...]]]) -> list[int]:
     """Super-design indices of the columns of a compact evaluation (PIGEs, then the blocks in order)."""
-    return list(range(len(layout.pige))) + [c for _, cols in blocks for c in cols]
+    return list(range(layout.base)) + [c for _, cols in blocks for c in cols]
 
 
 @dataclass

@@ -107,10 +107,10 @@ from pige_sym.diagnosis.candidates import (
     compact_columns,
     evaluate_rows,
 )
-from pige_sym.diagnosis.instrument_rows import coupled_estimate, instrument_notes, screen_scale
+from pige_sym.diagnosis.instrument_rows import couple_final, instrument_notes, reference_prior, screen_scale
 from pige_sym.diagnosis.results import EVIDENCE, DiagnosisResult, Finding, Rejected
 from pige_sym.diagnosis.selection import Model, Selector, compare, select
-from pige_sym.diagnosis.thermal import drift_derivative, refine_tau
+from pige_sym.diagnosis.thermal import refine_tau
 from pige_sym.errors import InputError
 from pige_sym.identification.instruments import instrument
 from pige_sym.identification.least_squares import identify
@@ -148,7 +148,13 @@ class _Setup:
     approach: np.ndarray
     layout: Layout
     folds: np.ndarray
-    screen_scale: np.ndarray | None = None  # (n, 3, 3): probe rows to equal precision for the outlier screen
+    screen_scale: np.ndarray | None = None  # (n, 3, 3): probe rows to equal precision (search and outlier screen)
+
+    @property
+    def data(self) -> np.ndarray:
+        """The deviations the search fits, shape=(n, 3): probe rows brought to one precision (``screen_scale``)."""
+        dev = self.m.deviation_um
+        return dev if self.screen_scale is None else np.einsum("nij,nj->ni", self.screen_scale, dev)
 
     def _blocks(self, cands: list[Candidate] | None) -> list[tuple[EffectSpec, tuple[int, ...]]]:
         chosen = self.layout.candidates if cands is None else cands
@@ -158,10 +164,18 @@ class _Setup:
                        for cols, t in zip(self.layout.drift_cols[kind], self.layout.tau_grid_s, strict=True)}
         return [(spec, cols) for cols, spec in blocks.items()]
 
-    def design(self, cands: list[Candidate] | None = None) -> Callable[[np.ndarray], np.ndarray]:
+    def raw_design(self, cands: list[Candidate] | None = None) -> Callable[[np.ndarray], np.ndarray]:
         """``rows -> (r, 3, C)`` super-design rows filling the given candidates (default all)."""
         items = self._blocks(cands)
         return lambda rows: evaluate_rows(self.layout, items, self.kern, self.m, self.approach, rows)
+
+    def design(self, cands: list[Candidate] | None = None) -> Callable[[np.ndarray], np.ndarray]:
+        """:meth:`raw_design` with probe rows brought to one precision, as the search fits them (:attr:`data`)."""
+        raw = self.raw_design(cands)
+        if self.screen_scale is None:
+            return raw
+        scale = self.screen_scale
+        return lambda rows: np.einsum("nij,njc->nic", scale[rows], raw(rows))
 
     def residuals(self, model: Model, rows: np.ndarray) -> np.ndarray:
         """Residuals of a fitted model on ``rows``, shape=(r, 3) [µm], from a compact design."""
@@ -196,7 +210,7 @@ def _setup(m: Measurement, candidates: list[str] | None) -> _Setup:
     approach = _approach(m.angles_deg)
     probe = instrument(m) == "sphere-probe"
     layout = build_layout(kern, m.angles_deg, m.t_s, approach, candidates, table_drift=probe,
-                          probe_sensitivity=read_sensitivities(m) if probe else None)
+                          probe_sensitivity=read_sensitivities(m) if probe else None, reference_centre=probe)
     return _Setup(kern, m, approach, layout, fold_of_rows(m.n_rows), screen_scale(m) if probe else None)
 
 
@@ -204,7 +218,7 @@ def _move_rows(sums: NormalSums, setup: _Setup, rows: list[int], sign: float) ->
     """Add (+1) or remove (−1) rows from the normal equations."""
     if rows:
         r = np.array(sorted(rows), dtype=int)
-        sums.add_rows(setup.design()(r), setup.m.deviation_um[r], setup.folds[r], sign)
+        sums.add_rows(setup.design()(r), setup.data[r], setup.folds[r], sign)
 
 
 def _screen(setup: _Setup, model: Model, rows: np.ndarray, resid: np.ndarray | None = None
@@ -276,22 +290,8 @@ def _identification(setup: _Setup, model: Model, resid: np.ndarray) -> Identific
 
 def _couple(setup: _Setup, model: Model, result: IdentificationResult, outliers: list[int]) -> None:
     """Replace a probe file's final estimate by the generalised least squares with its rows' correlation."""
-    skip = set(outliers)
-    rows = np.array([r for r in range(1, setup.m.n_rows) if r not in skip], dtype=int)
-    full = setup.design(model.cands)(rows)
-    # an interpolated drift's τ is estimated too: its column ∂/∂ln τ carries τ's uncertainty into the others'
-    taus = [full @ drift_derivative(setup.layout, model, i) for i, c in enumerate(model.cands) if c.mix is not None]
-    design = np.zeros((setup.m.n_rows, 3, model.w.shape[1] + len(taus)))
-    design[rows] = np.concatenate([full @ model.w, *(t[:, :, None] for t in taus)], axis=2)
     transform = _catalogue_transform(model, len(setup.layout.pige))
-    transform = np.hstack([transform, np.zeros((transform.shape[0], len(taus)))])
-    values, cov, ident, sigma2 = coupled_estimate(setup.m, design, rows, transform)
-    ident &= result.identifiable
-    result.values = np.where(ident, values, np.nan)
-    result.covariance = cov
-    result.std = np.where(ident, np.sqrt(np.clip(np.diag(cov), 0, None)), np.nan)
-    result.identifiable = ident
-    result.sigma_um = math.sqrt(sigma2)
+    couple_final(setup.m, setup.layout, model, setup.raw_design(model.cands), transform, result, outliers)
 
 
 def _alternatives(selector: Selector, final: Model, i: int) -> list[str]:
@@ -388,7 +388,7 @@ def _add_clusters(setup: _Setup, sums: NormalSums, clusters: list[Cluster]) -> N
     new = add_pose_clusters(setup.layout, [c.options for c in chosen])
     rows = np.array(sorted(set().union(*(c.pose_rows for c in chosen))), dtype=int)
     x = setup.design()(rows)
-    return extend(sums, 3 * len(new), x, setup.m.deviation_um[rows], setup.folds[rows])
+    return extend(sums, 3 * len(new), x, setup.data[rows], setup.folds[rows])
 
 
 def _rejections(reasons: dict[str, str], layout: Layout, final: Model) -> list[Rejected]:
@@ -436,9 +436,11 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
     DiagnosisResult
     """
     setup = _setup(m, candidates)
-    lay, dev = setup.layout, setup.m.deviation_um
+    lay, dev = setup.layout, setup.data
     all_rows = np.arange(1, setup.m.n_rows)
     sums = accumulate(setup.design(), dev, all_rows, setup.folds, lay.n_columns)
+    if lay.nuisance and setup.screen_scale is not None:
+        reference_prior(sums, len(lay.pige), setup.screen_scale[0])
     base_model = Selector(sums, lay).model([])
     base_resid = _residuals(setup, base_model)
     suspects, clusters0 = _screen(setup, base_model, all_rows, base_resid[1:])

@@ -151,9 +151,10 @@ class Selector:
         if not heldout and key in self.quick_cache:
             return self.quick_cache[key]
         if not cands:
-            p = len(self.layout.pige)
+            p = self.layout.base  # the PIGEs and the nuisance every model holds
             w = np.eye(self.layout.n_columns)[:, :p]
-            model = Model([], [], w, list(self.layout.pige), [], fit(self.sums, w, heldout=heldout))
+            model = Model([], [], w, list(self.layout.pige) + list(self.layout.nuisance), [],
+                          fit(self.sums, w, heldout=heldout))
         else:
             base = self.model(cands[:-1], heldout=False)  # prefixes are cached: one reduction per new model
             c = cands[-1]

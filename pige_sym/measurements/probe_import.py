@@ -40,6 +40,7 @@ from pige_sym.errors import FileFormatError, InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.axis_sense import to_conventions
 from pige_sym.measurements.measurement import Measurement, missing_tool
+from pige_sym.measurements.probe_head import head_offsets
 from pige_sym.measurements.probe_log import ProbeLog, group_poses, read_probe_log
 from pige_sym.measurements.probe_trigger import sensitivity_columns, trigger_sensitivities
 from pige_sym.measurements.sphere_fit import MIN_CONTACTS, SphereFit, fit_centres
@@ -118,24 +119,6 @@ def _pose_points(log: ProbeLog, groups: list[np.ndarray], offset_mm: float, head
                                                                    f"a sphere centre needs {MIN_CONTACTS}")
         pts.append(log.xyz_mm[g] + (np.array([0.0, 0.0, offset_mm]) + h))
     return pts
-
-
-def head_offsets(kern: Any, angles_deg: np.ndarray, tool_mm: Any) -> tuple[np.ndarray, np.ndarray | None]:
-    """How the head moves the stylus centre, ``h(θ) = (R_t(θ) − I)·tool`` [mm], and the stylus frames.
-
-    Returns
-    -------
-    head_mm : ndarray, shape=(n, 3) [mm]
-        Zero on a table machine.
-    stylus_rotations : ndarray, shape=(n, 3, 3), or None
-        The nominal tool rotation of every pose (None on a table machine: the stylus frame is M).
-    """
-    n = len(angles_deg)
-    if not kern.TOOL_ROTARY:
-        return np.zeros((n, 3)), None
-    rot = kern.tool_rotation(angles_deg)
-    tool = np.asarray(tool_mm, dtype=float)
-    return rot @ tool - tool, rot
 
 
 def _fit(log: ProbeLog, groups: list[np.ndarray], pts: list[np.ndarray], radius: float | None,

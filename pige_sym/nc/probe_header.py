@@ -2,11 +2,11 @@
 
 A pige probing program (``pige format: pige-probe 1``, :mod:`pige_sym.nc.program_header`) states its
 machine, dialect, commanded axis sense, the nominal pivot of every rotary axis, the sphere and the radii,
-and the controller state (:class:`~pige_sym.nc.probe_safety.ProbeController`).  :func:`header_setup` turns
-that into the items a command needs (``import-probe --program``, ``simulate --program``) and
-:func:`header_agrees` refuses a program whose header disagrees with the options a command was given, so a
-program, its log and its import cannot be mixed up.  Numbers are compared to the header's six significant
-digits.
+the stylus centre from the head's pivot on a head machine (``tool_mm``), and the controller state
+(:class:`~pige_sym.nc.probe_safety.ProbeController`).  :func:`header_setup` turns that into the items a
+command needs (``import-probe --program``, ``simulate --program``) and :func:`header_agrees` refuses a
+program whose header disagrees with the options a command was given, so a program, its log and its import
+cannot be mixed up.  Numbers are compared to the header's six significant digits.
 """
 
 from __future__ import annotations
@@ -38,6 +38,8 @@ class HeaderSetup:
     sphere_mm : ndarray, shape=(3,) [mm]
     sphere_radius_mm, stylus_radius_mm : float [mm]
     controller : ProbeController
+    tool_mm : ndarray, shape=(3,) [mm], or None
+        Head machines: the stylus centre from the last tool-side pivot (CONVENTIONS §7).
     """
 
     machine: str
@@ -48,6 +50,7 @@ class HeaderSetup:
     sphere_radius_mm: float
     stylus_radius_mm: float
     controller: ProbeController
+    tool_mm: np.ndarray | None = None
 
 
 def header_setup(text: str, path: str) -> HeaderSetup:
@@ -70,7 +73,8 @@ def header_setup(text: str, path: str) -> HeaderSetup:
         pivots = {a: _vec(items[f"pivot_{a}_mm"]) for a in axes}
         return HeaderSetup(kern.MACHINE_CODE, items["dialect"], parse_axis_sense(items.get(SENSE_KEY, ""), axes),
                            pivots, _vec(items["sphere_mm"]), float(items["sphere_radius_mm"]),
-                           float(items["stylus_radius_mm"]), controller_from_header(items, path))
+                           float(items["stylus_radius_mm"]), controller_from_header(items, path),
+                           _vec(items["tool_mm"]) if "tool_mm" in items else None)
     except (KeyError, ValueError, InputError) as exc:
         raise NCProgramError(path, None, f"the probing program's header is incomplete or malformed ({exc}): write "
                                          "it again with pige program") from None
@@ -108,6 +112,9 @@ def header_agrees(text: str, setup: ProbeSetup, rotary_axes: tuple[str, ...], pa
                _close(h.stylus_radius_mm, setup.stylus_radius_mm)),
               ("controller state", h.controller, setup.controller, _same_controller(h.controller, setup.controller))]
     checks += [(f"pivot_{a}_mm", h.pivots_mm[a], per_axis[a], _close(h.pivots_mm[a], per_axis[a])) for a in rotary_axes]
+    same_tool = h.tool_mm is None if setup.tool_mm is None else (h.tool_mm is not None
+                                                                  and _close(h.tool_mm, setup.tool_mm))
+    checks.append(("tool_mm", h.tool_mm, setup.tool_mm, same_tool))
     for name, stated, given, ok in checks:
         if not ok:
             raise NCProgramError(path, None, f"the program states {name} {stated}, but this run has {given}: give "

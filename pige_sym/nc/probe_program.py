@@ -23,6 +23,16 @@ cannot meet the sphere); before the rotary axes move it retracts to ``safe_z``, 
 pose's clearance plane.  RTCP is off: X Y Z are machine-axis coordinates (work offset such that the
 coordinates are those of ``--sphere`` and ``--pivot``), the tool length set to the stylus centre.
 
+Head and mixed machines (CONVENTIONS §7): the contacts turn with the head.  Every direction above is read
+in the pose's stylus frame ``R_t(θ)`` (:mod:`pige_sym.measurements.probe_head`): one contact along the stylus
+axis from the spindle side, the rings around it, each probing move along the stylus axis or across it; the
+clearance plane is normal to the stylus axis, ``R_eff + clearance`` from the centre, and the probe comes to
+every start along the stylus axis from the point over it on that plane (:attr:`Contact.above`).  The program
+writes the linear axes, every stylus-centre point minus ``h(θ) = (R_t − I)·tool``.  The sphere's stem and
+the table are checked against the stylus (:mod:`pige_sym.nc.probe_reach`): a contact the stylus cannot
+reach is left out with the reason, a pose whose stylus points below the table plane or with fewer than four
+reachable contacts is refused.  ``safe_z`` allows for the stylus' swing about the head's pivot.
+
 Dialects and their logs (read by :mod:`pige_sym.measurements.probe_log`)
 -----------------------------------------------------------------------
 ``linuxcnc``: ``G38.2``, log by ``(PROBEOPEN pige_probe.txt)`` … ``(PROBECLOSE)``;
@@ -36,11 +46,15 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
+from pige_sym.measurements.measurement import missing_tool
+from pige_sym.measurements.probe_head import head_offsets
+from pige_sym.nc.probe_reach import Stem, blocked, refusal, stylus_elevation_deg
 from pige_sym.nc.probe_safety import ProbeController
 
 PROBE_DIALECTS = ("linuxcnc", "fanuc", "siemens", "heidenhain")
@@ -86,6 +100,11 @@ class ProbeSetup:
     controller : ProbeController
         What the program sets and checks on the controller: kinematics, stylus tool, work offset and the
         window of the confirming first contacts (:mod:`pige_sym.nc.probe_safety`).
+    tool_mm : ndarray, shape=(3,) [mm], or None
+        Head and mixed machines: the stylus centre from the last tool-side pivot at the reference pose
+        (CONVENTIONS §7); the contacts turn with the head.
+    stem : Stem
+        The sphere's stem and the stylus shank checked against it (:mod:`pige_sym.nc.probe_reach`).
     """
 
     machine: str
@@ -105,6 +124,8 @@ class ProbeSetup:
     pivots_mm: Mapping[str, np.ndarray] | None = None
     axis_sense: Mapping[str, int] = field(default_factory=dict)
     controller: ProbeController = field(default_factory=ProbeController)
+    tool_mm: np.ndarray | None = None
+    stem: Stem = field(default_factory=Stem)
 
     @property
     def r_eff_mm(self) -> float:
@@ -120,12 +141,24 @@ class ProbeSetup:
 
 @dataclass
 class Contact:
-    """One probing move, machine frame [mm]: from ``start`` along ``direction`` to ``target``."""
+    """One probing move of the stylus centre, machine frame [mm]: from ``start`` to ``target``.
+
+    ``above`` is the point over the start on the pose's clearance plane (normal to the stylus axis), where the
+    probe comes from and returns to.  ``axis`` and ``sign``: the stylus-frame axis the move runs along (the
+    machine axis on a table machine).
+    """
 
     start: np.ndarray
     target: np.ndarray
-    axis: str  # "X", "Y" or "Z": the machine axis the move runs along
+    axis: str  # "X", "Y" or "Z"
     sign: int  # direction of the move along it
+    above: np.ndarray | None = None
+
+    @property
+    def direction(self) -> np.ndarray:
+        """Unit vector of the probing move."""
+        d = self.target - self.start
+        return np.asarray(d / np.linalg.norm(d))
 
 
 @dataclass
@@ -141,9 +174,15 @@ class ProbePlan:
         Nominal sphere centre at each pose.
     contacts : list of list of Contact
     clear_z_mm : ndarray, shape=(n,) [mm]
-        Clearance plane of each pose.
+        Clearance plane of each pose (on a head: the height of its sphere's top plus the clearance).
     safe_z_mm : float [mm]
+        Retract height before rotary moves, in the program's coordinates (the linear axes).
     description : str
+    head_mm : ndarray, shape=(n, 3) [mm]
+        How the head moves the stylus centre, ``(R_t − I)·tool`` (zero on a table machine): the program
+        writes every point minus it (:mod:`pige_sym.measurements.probe_head`).
+    frames : ndarray, shape=(n, 3, 3), or None
+        The stylus frame of every pose on a head machine.
     """
 
     setup: ProbeSetup
@@ -154,6 +193,8 @@ class ProbePlan:
     clear_z_mm: np.ndarray
     safe_z_mm: float
     description: str
+    head_mm: np.ndarray | None = None
+    frames: np.ndarray | None = None
 
 
 def nominal_centres(machine: str, angles_deg: np.ndarray, sphere_mm: np.ndarray, pivot_mm: Pivots) -> np.ndarray:
@@ -204,21 +245,32 @@ def _candidates(setup: ProbeSetup, pose: int) -> list[tuple[np.ndarray, str, int
     return out
 
 
-def _pose_contacts(setup: ProbeSetup, centre: np.ndarray, stand: np.ndarray, pose: int) -> list[Contact]:
+def _pose_contacts(setup: ProbeSetup, centre: np.ndarray, stand: np.ndarray, frame: np.ndarray,
+                   pose: int) -> tuple[list[Contact], dict[str, int]]:
+    """The reachable contacts of a pose (stylus frame ``frame``) and how many candidates were left out why."""
     r = setup.r_eff_mm
     limit = np.cos(np.radians(setup.stand_cone_deg))
-    out = []
-    for normal, axis, sign in _candidates(setup, pose):
+    k = frame[:, 2]
+    out, hidden = [], {"stand": 0, "stem": 0, "table": 0}
+    for local, axis, sign in _candidates(setup, pose):
+        normal = frame @ local
         if normal @ stand > limit:
-            continue  # the stand is there
+            hidden["stand"] += 1
+            continue
         contact = centre + r * normal
-        move = np.zeros(3)
-        move["XYZ".index(axis)] = sign
-        out.append(Contact(contact - move * setup.clearance_mm,
-                           contact + move * (setup.overtravel_mm + ROUNDING_MARGIN_MM), axis, sign))
+        move = frame[:, "XYZ".index(axis)] * sign
+        start = contact - move * setup.clearance_mm
+        target = contact + move * (setup.overtravel_mm + ROUNDING_MARGIN_MM)
+        above = start + k * (k @ (centre - start) + r + setup.clearance_mm)
+        why = blocked([above, start, target], k, centre, stand, setup.stem, setup.sphere_radius_mm,
+                      setup.stylus_radius_mm)
+        if why:
+            hidden[why] += 1
+            continue
+        out.append(Contact(start, target, axis, sign, above))
         if len(out) == setup.contacts:
             break
-    return out
+    return out, hidden
 
 
 def plan_probing(setup: ProbeSetup, angles_deg: np.ndarray, description: str = "") -> ProbePlan:
@@ -230,9 +282,15 @@ def plan_probing(setup: ProbeSetup, angles_deg: np.ndarray, description: str = "
         Bad geometry, fewer than four reachable contacts at a pose, or ``safe_z`` too low.
     """
     kern = load_kernels(setup.machine)
-    if kern.TOOL_ROTARY:
-        raise InputError(f"{kern.MACHINE_CODE} turns the probe (tool-side rotary axes "
-                         f"{', '.join(kern.TOOL_ROTARY)}): sphere probing is supported on workpiece-side axes only")
+    why = missing_tool(kern.MACHINE_CODE, setup.tool_mm)
+    if why:
+        raise InputError(why + " (the stylus turns with the head)")
+    if setup.tool_mm is not None and not kern.TOOL_ROTARY:
+        raise InputError(f"--tool: {kern.MACHINE_CODE} has no tool-side rotary axis; leave --tool out")
+    if kern.TOOL_ROTARY and (setup.pivots_mm is not None or setup.controller.kinematics == "tcp"):
+        raise InputError(f"{kern.MACHINE_CODE}: a head is probed with one --pivot x,y,z (the axis lines meet) and "
+                         "RTCP off (identity kinematics)")
+    setup.stem.check(setup.sphere_radius_mm)
     if not (0 < setup.sphere_radius_mm <= 100 and 0 < setup.stylus_radius_mm <= 20):
         raise InputError("--sphere-radius must be in (0, 100] mm and --stylus-radius in (0, 20] mm")
     if not 4 <= setup.contacts <= 1 + 4 * len(setup.elevations_deg):
@@ -243,16 +301,38 @@ def plan_probing(setup: ProbeSetup, angles_deg: np.ndarray, description: str = "
         raise InputError("--clearance must be in (0, 50] mm and --overtravel in (0, R + r) mm")
     angles = np.atleast_2d(np.asarray(angles_deg, dtype=float))
     centres = nominal_centres(setup.machine, angles, setup.sphere_mm, setup.pivots)
-    stands = np.einsum("nij,j->ni", kern.workpiece_rotation(angles), np.array([0.0, 0.0, -1.0]))
-    contacts = [_pose_contacts(setup, c, s, i) for i, (c, s) in enumerate(zip(centres, stands, strict=True))]
-    for i, cs in enumerate(contacts):
+    stands = np.einsum("nij,j->ni", kern.workpiece_rotation(angles), setup.stem.unit())
+    head, frames = head_offsets(kern, angles, setup.tool_mm)
+    axes = np.tile(np.eye(3), (len(angles), 1, 1)) if frames is None else frames
+    contacts = []
+    for i, (c, s, frame) in enumerate(zip(centres, stands, axes, strict=True)):
+        ang = ", ".join(f"{a}={v:g}" for a, v in zip(kern.ROTARY_AXES, angles[i], strict=True))
+        elevation = stylus_elevation_deg(frame[:, 2], s)
+        if elevation < -1e-6:
+            raise InputError(f"pose {i} ({ang} deg): the stylus axis points {-elevation:.1f} deg towards the "
+                             "sphere's stem side (past the plane the stem stands on, the table): the probe would come "
+                             "from below the sphere and meet the stem or the table; leave this pose out (or tilt "
+                             "less)")
+        cs, hidden = _pose_contacts(setup, c, s, frame, i)
         if len(cs) < 4:
-            ang = ", ".join(f"{a}={v:g}" for a, v in zip(kern.ROTARY_AXES, angles[i], strict=True))
             raise InputError(f"pose {i} ({ang} deg): only {len(cs)} contacts can be reached away from the sphere's "
-                             "stand; a sphere centre needs 4 (leave this pose out, or lower --stand-cone)")
+                             f"stand and stem ({refusal(hidden)}); a sphere centre needs 4 (leave this pose out, or "
+                             "lower --stand-cone)")
+        contacts.append(cs)
+    return _finish_plan(setup, kern, angles, centres, contacts, head, frames, description)
+
+
+def _finish_plan(setup: ProbeSetup, kern: Any, angles: np.ndarray, centres: np.ndarray, contacts: list[list[Contact]],
+                 head: np.ndarray, frames: np.ndarray | None, description: str) -> ProbePlan:
+    """Clearance planes and the safe height of the plan (module docstring)."""
     clear = centres[:, 2] + setup.r_eff_mm + setup.clearance_mm
-    safe = float(clear.max() + 20.0) if setup.safe_z_mm is None else float(setup.safe_z_mm)
-    if safe < clear.max():
-        raise InputError(f"--safe-z {safe:g} mm is below the clearance plane {clear.max():.3f} mm of a pose: "
-                         "the rotary axes would turn the sphere into the probe")
-    return ProbePlan(setup, tuple(kern.ROTARY_AXES), angles, centres, contacts, clear, safe, description)
+    highest = max(float(clear.max()), max(float(c.above[2]) for cs in contacts for c in cs if c.above is not None))
+    # a head swings the stylus centre about its pivot: at the program's Z the centre is at least this much lower
+    slack = 0.0 if setup.tool_mm is None else max(0.0, float(np.linalg.norm(setup.tool_mm) + setup.tool_mm[2]))
+    needed = highest + slack
+    safe = needed + 20.0 if setup.safe_z_mm is None else float(setup.safe_z_mm)
+    if safe < needed:
+        raise InputError(f"--safe-z {safe:g} mm is below {needed:.3f} mm, the clearance plane of a pose (with the "
+                         "stylus' swing on a head): the rotary axes would turn the sphere into the probe")
+    return ProbePlan(setup, tuple(kern.ROTARY_AXES), angles, centres, contacts, clear, safe, description,
+                     head, frames)

@@ -8,11 +8,16 @@ sphere (centre turned by the rotary axes, radius ``R + r``) and refuses, naming 
 - a rapid move whose straight segment comes within ``margin`` of the sphere, or that starts from an
   unknown position;
 - a rotary move while the stylus is below the top of the sphere plus ``margin`` anywhere along the sweep
-  (sampled every 0.5°);
+  (sampled every 0.5°; on a head the stylus swings with the head about its pivot);
 - a probing move that does not start outside the sphere, or whose target is not at least ``overtravel``
   past the surface along the move, or that is not followed by its log statement and then by a retract
   along its own path to its start (where the probe stopped is not known in advance);
 - a pose with fewer than four contacts.
+
+On a head or mixed machine (``setup.tool_mm``) the program commands the linear axes and the stylus centre is
+the program's point plus the head's offset ``h(θ) = (R_t(θ) − I)·tool`` (CONVENTIONS §7): every check is made
+on the stylus centre.  Heidenhain programs probe a head's inclined moves with touch-probe cycle 4 (measuring
+in 3-D), read as a logged probing move.
 
 G-code dialects are also read by the modal interpreter (:mod:`pige_sym.nc.interpreter`, pass-through for the
 probing and macro statements): a program it refuses is refused.
@@ -26,7 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from pige_sym.errors import NCProgramError
+from pige_sym.kernels import load_kernels
 from pige_sym.measurements.axis_sense import to_commanded, to_conventions
+from pige_sym.measurements.probe_head import head_offsets
 from pige_sym.nc.probe_header import header_agrees
 from pige_sym.nc.probe_program import ProbeSetup, nominal_centres, table_frames
 
@@ -104,7 +111,8 @@ def probe_operations(text: str, dialect: str, path: str = "<program>",
         if i in fixed or not line or _SKIP[dialect].fullmatch(line):
             i += 1
             continue
-        special = _guarded(lines, i, dialect, pos, path)
+        special = _guarded(lines, i, dialect, pos, path) if not line.startswith("TCH PROBE 4.") else \
+            _measure_3d(lines, i, pos, path)
         if special is not None:
             ops.append(special[0])
             i = special[1]
@@ -224,6 +232,27 @@ def _guarded(lines: list[str], i: int, dialect: str, pos: np.ndarray, path: str)
     return Operation("confirm", words, i + 1, axis, value, w), _checked(lines, start, block, path)
 
 
+_CYCLE4 = re.compile(r"TCH PROBE 4\.3 ABST\+(\d+\.\d+) F(\d+(?:\.\d+)?) MB(\d+\.\d+) REFERENCE SYSTEM:0")
+
+
+def _measure_3d(lines: list[str], i: int, pos: np.ndarray, path: str) -> tuple[Operation, int]:
+    """Heidenhain touch-probe cycle 4 (measuring in 3-D) as pige writes it: a logged probing move from the
+    current position along ``IX IY IZ`` (a unit vector) at most ``ABST``, retracting ``MB = ABST`` (to the start)."""
+    block = lines[i:i + 4]
+    direction = re.fullmatch(r"TCH PROBE 4\.2 IX([-+]\d+\.\d+) IY([-+]\d+\.\d+) IZ([-+]\d+\.\d+)",
+                             block[2] if len(block) > 2 else "")
+    tail = _CYCLE4.fullmatch(block[3] if len(block) > 3 else "")
+    if block[:2] != ["TCH PROBE 4.0 MEASURING IN 3-D", "TCH PROBE 4.1 Q11"] or not direction or not tail \
+            or tail.group(1) != tail.group(3):
+        raise NCProgramError(path, i + 1, "a touch-probe cycle 4 that is not as pige writes it (4.0 MEASURING IN 3-D, "
+                                          "4.1 Q11, 4.2 IX IY IZ unit vector, 4.3 ABST F MB = ABST REFERENCE SYSTEM:0)")
+    u = np.array([float(v) for v in direction.groups()])
+    if abs(float(np.linalg.norm(u)) - 1.0) > 1e-3 or np.isnan(pos).any():
+        raise NCProgramError(path, i + 3, "cycle 4: the direction must be a unit vector and the start known")
+    target = pos + u * float(tail.group(1))
+    return Operation("probe", dict(zip("XYZ", target.tolist(), strict=True)), i + 4), i + 4
+
+
 def _guard_follows(lines: list[str], i: int, dialect: str) -> bool:
     nxt = lines[i + 1:i + 3]
     if dialect == "fanuc":
@@ -279,6 +308,7 @@ class _Replay:
         self.tcp = setup.controller.kinematics == "tcp"
         self.work = np.full(3, np.nan)  # program coordinates (the machine's, but in TCP kinematics)
         self.frame = (np.eye(3), np.zeros(3))
+        self.head = np.zeros(3)  # a head's offset of the stylus centre from the program's point (CONVENTIONS §7)
 
     def step(self, op: Operation) -> None:
         if self.pending_log and op.kind != "log":
@@ -312,7 +342,7 @@ class _Replay:
     def _machine(self, work: np.ndarray) -> np.ndarray:
         """Machine position of program coordinates (TCP kinematics: the nominal table motion of the pose)."""
         if np.array_equal(self.frame[0], np.eye(3)) and not self.frame[1].any():
-            return work.copy()  # keeps a coordinate not yet programmed unknown, and only that one
+            return work + self.head  # keeps a coordinate not yet programmed unknown, and only that one
         return self.frame[0] @ work + self.frame[1]
 
     def _rotary(self, op: Operation) -> None:
@@ -322,6 +352,9 @@ class _Replay:
         self.rot_min = min(self.rot_min, _rotary_clearance(self.s, self.angles, target, self.pos, self.path,
                                                            op.line, self.margin, self.work if self.tcp else None))
         self.angles = target
+        if self.s.tool_mm is not None:
+            self.head = head_offsets(load_kernels(self.s.machine), target[None], self.s.tool_mm)[0][0]
+            self.pos = self._machine(self.work)
         self.centre = nominal_centres(self.s.machine, self.angles[None], self.s.sphere_mm, self.s.pivots)[0]
         if self.tcp:
             rot, t = table_frames(self.s.machine, self.angles[None], self.s.pivots)
@@ -403,14 +436,18 @@ def _rotary_clearance(setup: ProbeSetup, a0: np.ndarray, a1: np.ndarray, pos: np
                       margin: float, work: np.ndarray | None = None) -> float:
     """Height of the stylus above the sphere's top along a rotary sweep (refused when below ``margin``).
 
-    ``work``: in TCP kinematics the stylus keeps its work coordinates and turns with the table.
+    ``work``: in TCP kinematics the stylus keeps its work coordinates and turns with the table.  On a head
+    the stylus centre swings with the head about its pivot: ``pos − h(a0) + h(θ)`` along the sweep.
     """
     if np.isnan(pos[2]):
         raise NCProgramError(path, line, "the rotary axes move before Z is programmed (retract first)")
     steps = max(int(np.ceil(np.abs(a1 - a0).max() / 0.5)), 1)
     sweep = a0 + np.linspace(0.0, 1.0, steps + 1)[:, None] * (a1 - a0)
     tops = nominal_centres(setup.machine, sweep, setup.sphere_mm, setup.pivots)[:, 2] + setup.r_eff_mm
-    if work is not None:
+    if setup.tool_mm is not None:
+        head = head_offsets(load_kernels(setup.machine), np.vstack([a0, sweep]), setup.tool_mm)[0]
+        gap = float((pos[2] - head[0, 2] + head[1:, 2] - tops).min())
+    elif work is not None:
         stylus = nominal_centres(setup.machine, sweep, work, setup.pivots)[:, 2]
         gap = float((stylus - tops).min())
     else:

@@ -71,6 +71,8 @@ def header_items(plan: ProbePlan, dialect: str) -> dict[str, str]:
     items |= {f"pivot_{a}_mm": _vec(per_axis[a]) for a in plan.rotary_axes}
     items |= {"sphere_mm": _vec(s.sphere_mm), "sphere_radius_mm": f"{s.sphere_radius_mm:g}",
               "stylus_radius_mm": f"{s.stylus_radius_mm:g}"}
+    if s.tool_mm is not None:
+        items["tool_mm"] = _vec(s.tool_mm)
     return items | s.controller.header_items()
 
 
@@ -183,32 +185,77 @@ def _tcp_retracts(plan: ProbePlan, theta_from: np.ndarray, theta_to: np.ndarray)
     return out
 
 
-def _pose_lines(plan: ProbePlan, i: int, dialect: str) -> list[str]:
-    if plan.setup.controller.kinematics == "tcp":
-        return _pose_lines_tcp(plan, i, dialect)
+def _pose_start(plan: ProbePlan, i: int, dialect: str) -> tuple[list[str], str]:
+    """Retract, rotary positioning and the pose's log parameters; and the angles of its log line."""
     s = plan.setup
     commanded = to_commanded(plan.angles_deg[i], s.axis_sense, plan.rotary_axes)
     rot = _rotary_words(plan, plan.angles_deg[i], dialect)
     out = [_rapid(f"Z{_num(plan.safe_z_mm, dialect)}", dialect), _rapid(rot, dialect)]
     if dialect == "fanuc":
         out += [f"#101={i}"] + [f"#{103 + k}={_num(v, dialect)}" for k, v in enumerate(commanded)]
-        angles = "*".join(f"{a}#{103 + k}[34]" for k, a in enumerate(plan.rotary_axes))
-    elif dialect == "heidenhain":
+        return out, "*".join(f"{a}#{103 + k}[34]" for k, a in enumerate(plan.rotary_axes))
+    if dialect == "heidenhain":
         out += [f"FN 0: Q1 = +{i}"] + [f"FN 0: Q{14 + k} = {_num(v, dialect)}" for k, v in enumerate(commanded)]
-        angles = ""
-    else:
-        angles = " ".join(f"{a}{v:.6f}" for a, v in zip(plan.rotary_axes, commanded, strict=True))
+        return out, ""
+    return out, " ".join(f"{a}{v:.6f}" for a, v in zip(plan.rotary_axes, commanded, strict=True))
+
+
+def _contact_number(k: int, dialect: str) -> list[str]:
+    return [f"#102={k}"] if dialect == "fanuc" else [f"FN 0: Q2 = +{k}"] if dialect == "heidenhain" else []
+
+
+def _pose_lines(plan: ProbePlan, i: int, dialect: str) -> list[str]:
+    if plan.setup.controller.kinematics == "tcp":
+        return _pose_lines_tcp(plan, i, dialect)
+    if plan.frames is not None:
+        return _pose_lines_head(plan, i, dialect)
+    s = plan.setup
+    out, angles = _pose_start(plan, i, dialect)
     clear = _num(plan.clear_z_mm[i], dialect)
     for k, c in enumerate(plan.contacts[i]):
-        if dialect == "fanuc":
-            out.append(f"#102={k}")
-        elif dialect == "heidenhain":
-            out.append(f"FN 0: Q2 = +{k}")
+        out += _contact_number(k, dialect)
         out += [_rapid(_xyz(c.start, dialect, "XY"), dialect), _rapid(_xyz(c.start, dialect, "Z"), dialect)]
         out += _probe(c, dialect, s.probe_feed_mm_min)
         out += _log_line(dialect, i, k, angles)
         out += [_rapid(_xyz(c.start, dialect), dialect), _rapid(f"Z{clear}", dialect)]
     return out
+
+
+def _pose_lines_head(plan: ProbePlan, i: int, dialect: str) -> list[str]:
+    """A pose of a head machine (:mod:`pige_sym.nc.probe_program`): every point is the stylus centre minus the
+    head's offset ``h`` (the program commands the linear axes); the probe comes over the first start at the safe
+    height, down to the clearance plane normal to the stylus axis, and to every start along the stylus axis;
+    the probing moves run along or across the stylus axis (``G38.2``/``G31``/``MEAS`` with X, Y and Z; on a TNC
+    touch-probe cycle 4, measuring in 3-D); the retract goes back along the move and up to the clearance plane."""
+    s = plan.setup
+    assert plan.head_mm is not None
+    h = plan.head_mm[i]
+    out, angles = _pose_start(plan, i, dialect)
+    for k, c in enumerate(plan.contacts[i]):
+        assert c.above is not None
+        above, start = c.above - h, c.start - h
+        out += _contact_number(k, dialect)
+        out += [_rapid(_xyz(above, dialect, "XY"), dialect), _rapid(_xyz(above, dialect, "Z"), dialect)] if k == 0 \
+            else [_rapid(_xyz(above, dialect), dialect)]
+        down = [] if np.allclose(start, above, atol=1e-9) else [_rapid(_xyz(start, dialect), dialect)]
+        shifted = Contact(start, c.target - h, c.axis, c.sign, above)
+        out += down + (_probe_3d(shifted, s.probe_feed_mm_min) if dialect == "heidenhain" else
+                       _probe(shifted, dialect, s.probe_feed_mm_min))
+        out += _log_line(dialect, i, k, angles)
+        out += [_rapid(_xyz(start, dialect), dialect), *([_rapid(_xyz(above, dialect), dialect)] if down else [])]
+    return out
+
+
+def _probe_3d(c: Contact, feed: float) -> list[str]:
+    """Heidenhain touch-probe cycle 4 (measuring in 3-D): from the current position (the start) along the unit
+    vector ``IX IY IZ`` at most ``ABST``; the stylus centre lands in Q11–Q13 (the log's parameters); after the
+    trigger the probe retracts ``MB`` (the whole path: no farther than the start)."""
+    path = c.target - c.start
+    dist = float(np.linalg.norm(path))
+    u = path / dist
+    return ["TCH PROBE 4.0 MEASURING IN 3-D", "TCH PROBE 4.1 Q11",
+            "TCH PROBE 4.2 " + " ".join(f"I{a}{_num(v, 'heidenhain')}" for a, v in zip("XYZ", u, strict=True)),
+            f"TCH PROBE 4.3 ABST{_num(dist, 'heidenhain')} F{feed:g} MB{dist:.4f} REFERENCE SYSTEM:0"]
 
 
 def _pose_lines_tcp(plan: ProbePlan, i: int, dialect: str) -> list[str]:

@@ -201,10 +201,11 @@ def diagnosis_html(rep: MeasurementReport, base: Path | None) -> str:
     if words is PROBE:
         gn = rep.identification["gauss-newton"]
         parts.append(f'<p class="note">Why two residuals: the identification (Overview, {num(gn.rms_um, ".3g")} µm) '
-                     "weighs the poses with the reference pose's correlation (generalised least squares), so it "
-                     "does not minimise the plain residual; the diagnosis searches with every pose independent "
-                     f"(ordinary least squares, baseline {num(d.baseline_rms_um, '.3g')} µm), which does. Its final "
-                     "estimate is solved again with the correlation.</p>")
+                     "weighs the poses with the reference pose's correlation (generalised least squares) and "
+                     "reports the plain residual; the diagnosis searches with every pose brought to one precision "
+                     "and the reference centre's error fitted with its known uncertainty (baseline "
+                     f"{num(d.baseline_rms_um, '.3g')} µm, at the median pose's precision). Its final estimate is "
+                     "solved again with the correlation.</p>")
     parts += [f'<p class="note">{esc(n)}</p>' for n in d.clusters]
     parts.append("<h4>What the diagnosis concludes</h4>")
     if d.findings:

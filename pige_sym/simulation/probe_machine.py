@@ -13,6 +13,14 @@ offset.  A probing move stops where the stylus centre reaches the *trigger radiu
   azimuth φ (φ = 0 along +X), and ``vertical_um`` more for a move along Z;
 - ``noise_um``: trigger scatter along the move (Gaussian, seeded).
 
+On a head or mixed machine (CONVENTIONS §7) the program commands the linear axes: the stylus centre is at
+``X + h_true(θ)``.  The machine works in the program's coordinates, where the sphere appears at
+``c_nom(θ) − d(θ) − (R_t − I)·Δ − h(θ)`` (``h = (R_t − I)·tool`` the nominal offset of the head, ``d`` the R-test
+deviation of a ball at ``c₀`` and a tool at ``tool + Δ``, first order): ``tool_error_um`` Δ is a stylus centre
+that is not where ``--tool`` says (a bent stylus, a wrong tool length; the controller's position at the
+reference pose is right).  Lobing and the axial pre-travel turn with the stylus: φ is measured in the stylus
+frame ``R_t(θ)`` and "vertical" is along its axis.
+
 The position the controller records is the stop position in its own coordinates, written in the
 dialect's log layout with the dialect's digits (LinuxCNC ``%f``; Fanuc DPRNT ``[44]``; Siemens six
 decimals; Heidenhain ``%+10.4LF``).  A probing move that reaches its target without touching stops the
@@ -29,6 +37,7 @@ import numpy as np
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.axis_sense import to_conventions
+from pige_sym.measurements.probe_head import head_offsets, stylus_frames
 from pige_sym.model.trajectories import Trajectory
 from pige_sym.nc.probe_program import ProbeSetup, nominal_centres, table_frames
 from pige_sym.nc.probe_readback import probe_operations
@@ -51,6 +60,8 @@ class ProbeMachine:
         True sphere centre minus the nominal one at the reference pose.
     noise_um, pretravel_um, lobing_um, vertical_um : float [µm]
     seed : int or None
+    tool_error_um : (3,) [µm]
+        Head machines: the true stylus centre minus ``setup.tool_mm`` (module docstring).
     """
 
     setup: ProbeSetup
@@ -62,6 +73,7 @@ class ProbeMachine:
     lobing_um: float = 0.0
     vertical_um: float = 0.0
     seed: int | None = None
+    tool_error_um: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def centre0_mm(self) -> np.ndarray:
@@ -71,7 +83,8 @@ class ProbeMachine:
 def true_centres(machine: ProbeMachine, angles_deg: np.ndarray) -> np.ndarray:
     """True sphere centre at each pose, shape=(n, 3) [mm] (module docstring); row 0 must be the reference.
 
-    ``angles_deg`` are θ (CONVENTIONS' sense), shape=(n, k) [deg].
+    ``angles_deg`` are θ (CONVENTIONS' sense), shape=(n, k) [deg].  On a head machine: where the program's
+    coordinates (the linear axes) see it, ``c − h_true``.
     """
     s = machine.setup
     kern = load_kernels(s.machine)
@@ -82,14 +95,27 @@ def true_centres(machine: ProbeMachine, angles_deg: np.ndarray) -> np.ndarray:
         ball, per_axis = machine.centre0_mm, pivots
     else:
         ball, per_axis = machine.centre0_mm - pivots, None
-    sim = simulate(kern.MACHINE_CODE, traj, pige=machine.pige, ball_mm=ball, pivots_mm=per_axis,
+    delta = np.asarray(machine.tool_error_um, dtype=float) * 1e-3
+    tool = None if s.tool_mm is None else np.asarray(s.tool_mm, dtype=float) + delta
+    sim = simulate(kern.MACHINE_CODE, traj, pige=machine.pige, ball_mm=ball, pivots_mm=per_axis, tool_mm=tool,
                    effects=machine.effects, noise_um=0.0, seed=0)
-    nominal = nominal_centres(s.machine, a, machine.centre0_mm, pivots)
-    return nominal - sim.measurement.deviation_um * 1e-3
+    centres = nominal_centres(s.machine, a, machine.centre0_mm, pivots) - sim.measurement.deviation_um * 1e-3
+    if s.tool_mm is None:
+        return centres
+    head, frames = head_offsets(kern, a, s.tool_mm)
+    assert frames is not None
+    return centres - (frames @ delta - delta) - head
 
 
-def _trigger_radius(machine: ProbeMachine, move: np.ndarray) -> float:
+def _stylus_frame(machine: ProbeMachine, theta: np.ndarray) -> np.ndarray | None:
+    """The nominal stylus frame at θ (None on a table machine)."""
+    frames = stylus_frames(load_kernels(machine.setup.machine), theta[None])
+    return None if frames is None else frames[0]
+
+
+def _trigger_radius(machine: ProbeMachine, move: np.ndarray, frame: np.ndarray | None = None) -> float:
     s = machine.setup
+    move = move if frame is None else frame.T @ move  # in the stylus frame on a head
     pre = machine.pretravel_um
     if abs(move[2]) > 0.5:
         pre += machine.vertical_um
@@ -186,12 +212,15 @@ class _VirtualRun:
         self.tcp = machine.setup.controller.kinematics == "tcp"
         self.frame = (np.eye(3), np.zeros(3))
         self.work = np.zeros(3)
+        self.stylus: np.ndarray | None = None  # the stylus frame on a head (the lobes and the axial pre-travel)
 
     def step(self, op: Any) -> None:
         if op.kind == "rapid" and any(a in op.words for a in self.axes):
             self.commanded = np.array([op.words.get(a, self.commanded[k]) for k, a in enumerate(self.axes)])
             self.centre = next(self.centres)
             self.logged_pose = False
+            s = self.m.setup
+            self.stylus = _stylus_frame(self.m, to_conventions(self.commanded, s.axis_sense, self.axes))
             if self.tcp:
                 s = self.m.setup
                 rot, t = table_frames(s.machine, to_conventions(self.commanded[None], s.axis_sense, self.axes),
@@ -211,7 +240,7 @@ class _VirtualRun:
         if op.kind in ("probe", "confirm"):
             move = (new - self.pos) / np.linalg.norm(new - self.pos)
             try:
-                stop = _touch(self.pos, new, self.centre, _trigger_radius(self.m, move), op.line)
+                stop = _touch(self.pos, new, self.centre, _trigger_radius(self.m, move, self.stylus), op.line)
             except InputError:
                 if op.kind != "confirm":
                     raise
