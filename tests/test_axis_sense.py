@@ -198,3 +198,14 @@ def test_an_rtest_program_records_its_sense_and_is_read_with_it(tmp_path) -> Non
     assert np.allclose(read.angles_deg, plain.angles_deg, atol=1e-4)
     with pytest.raises(InputError, match="records the commanded axis sense"):
         load_test_program(AC, str(prog), axis_sense={"A": -1, "C": -1})
+
+
+def test_the_report_shows_the_angles_as_commanded(tmp_path) -> None:
+    run = tmp_path / "run.csv"
+    assert main(["simulate", "--seed", "2", "--axis-sense", "A=-1,C=-1", "--out", str(run)]) == 0
+    assert main(["report", str(run), "--out", str(tmp_path / "rep"), "--no-figures"]) == 0
+    html = (tmp_path / "rep" / "report.html").read_text(encoding="utf-8")
+    m = read_measurement(run)
+    assert np.array_equal(m.commanded_deg, -m.angles_deg + 0.0)
+    low = f"{m.commanded_deg[:, 0].min():.1f}"
+    assert f"A (workpiece side, {low} … 0.0° commanded, sense -1)" in html

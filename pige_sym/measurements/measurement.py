@@ -104,6 +104,13 @@ class Measurement:
         return int(self.t_s.shape[0])
 
     @property
+    def commanded_deg(self) -> np.ndarray:
+        """The commanded angles θ_cmd = σ·θ, as the file and the controller hold them, shape=(n, k) [deg]."""
+        from pige_sym.measurements.axis_sense import to_commanded
+
+        return to_commanded(self.angles_deg, self.axis_sense, self.rotary_axes)
+
+    @property
     def structure(self) -> MachineStructure:
         """Parsed machine structure."""
         return parse_machine_code(self.machine)

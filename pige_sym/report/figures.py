@@ -70,8 +70,10 @@ def deviation_figure(m: Measurement, model_um: np.ndarray | None) -> Any:
                                                          else ""), fontsize=10)
     _legend_outside(ax0)
     ax0.grid(alpha=0.3)
+    commanded = m.commanded_deg  # as the program and the controller hold them (axis_sense)
     for k, a in enumerate(m.rotary_axes):
-        ax1.plot(idx, m.angles_deg[:, k], ".-", lw=1, label=f"{a}")
+        ax1.plot(idx, commanded[:, k], ".-", lw=1, label=f"{a}" + (" (sense -1)" if m.axis_sense.get(a, 1) == -1
+                                                                     else ""))
     ax1.set_xlabel(f"{words.row} (0 = reference pose)")
     ax1.set_ylabel("commanded angle [deg]")
     _legend_outside(ax1)

@@ -26,8 +26,9 @@ def summary_html(rep: MeasurementReport) -> str:
     dev = m.deviation_machine_um()
     norms = np.linalg.norm(dev, axis=1)
     side = {a: ("workpiece side" if a in kern.WORKPIECE_ROTARY else "tool side") for a in kern.ROTARY_AXES}
-    axes = ", ".join(f"{a} ({side[a]}, {num(m.angles_deg[:, k].min(), '.1f')} … "
-                     f"{num(m.angles_deg[:, k].max(), '.1f')}°)"
+    cmd = m.commanded_deg
+    axes = ", ".join(f"{a} ({side[a]}, {num(cmd[:, k].min(), '.1f')} … {num(cmd[:, k].max(), '.1f')}° commanded"
+                     + (", sense -1" if m.axis_sense.get(a, 1) == -1 else "") + ")"
                      for k, a in enumerate(m.rotary_axes))
     items = [
         ("file", f'<code class="path">{path_html(rep.path)}</code>'),
