@@ -26,7 +26,7 @@ import signal
 import stat
 import tempfile
 import threading
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
@@ -262,8 +262,12 @@ def new_file_mode() -> int:
     return 0o666 & ~_umask()
 
 
-def atomic_write_text(path: PathLike, text: str, *, encoding: str = "utf-8", newline: str | None = None) -> Path:
-    """Write ``text`` to ``path`` through a temporary file and a rename (same folder).
+def atomic_write_text(path: PathLike, text: str | Iterable[str], *, encoding: str = "utf-8",
+                      newline: str | None = None, verify: Callable[[Path], None] | None = None) -> Path:
+    """Write ``text`` (a string, or pieces of one) to ``path`` through a temporary file and a rename (same folder).
+
+    ``verify``, when given, is called with the temporary file once it is written; if it raises, the temporary
+    file is removed and nothing replaces ``path`` (a writer that reads its output back before publishing it).
 
     The caller decides whether replacing is allowed (:func:`check_output`); this function only
     refuses to replace anything that is not a regular file.  Missing parent folders are created.
@@ -280,9 +284,12 @@ def atomic_write_text(path: PathLike, text: str, *, encoding: str = "utf-8", new
     try:
         os.fchmod(fd, mode)
         with os.fdopen(fd, "w", encoding=encoding, newline=newline) as fh:
-            fh.write(text)
+            for piece in [text] if isinstance(text, str) else text:
+                fh.write(piece)
             fh.flush()
             os.fsync(fh.fileno())
+        if verify is not None:
+            verify(Path(tmp_name))
         os.replace(tmp_name, p)
     except OSError as exc:
         Path(tmp_name).unlink(missing_ok=True)

@@ -66,7 +66,7 @@ def test_round_trip_is_lossless_with_extras(tmp_path) -> None:
 @pytest.mark.parametrize(
     ("edit", "line", "fragment"),
     [
-        (lambda t: t.replace("# pige-rtest 1", "# pige-rtest 2"), 1, "first line must be"),
+        (lambda t: t.replace("# pige-rtest 1", "# pige-rtest 2"), 1, "format pige-rtest version 2: this pige reads"),
         (lambda t: t.replace("# machine: wC'A'bXYZ(C1)t\n", ""), 5, "missing required metadata '# machine"),
         (lambda t: t.replace("# ball_mm: 120.0, 0.0, 80.0\n", ""), 5, "missing required metadata '# ball_mm"),
         (lambda t: t.replace("120.0, 0.0, 80.0", "120.0, 0.0"), 3, "ball_mm: expected 3"),

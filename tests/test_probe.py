@@ -105,7 +105,7 @@ def test_linuxcnc_fixture_gives_the_known_deviation() -> None:
     # independent sense check (CONVENTIONS §3): the table turns the sphere by R_x(−A)·R_z(−C)
     a, c = np.radians(m.angles_deg[1])
     np.testing.assert_allclose(_rot_x(-a) @ _rot_z(-c) @ np.array([80.0, -15.0, 45.0]),
-                               [float(m.extra_columns[k][1]) for k in ("cx_mm", "cy_mm", "cz_mm")], atol=2e-6)
+                               [float(m.optional[k][1]) for k in ("cx_mm", "cy_mm", "cz_mm")], atol=2e-6)
     np.testing.assert_allclose(m.deviation_um, [[0, 0, 0], [0, 0, 0], [-5.0, 0, 2.0], [0, 0, 0]], atol=0.01)
     np.testing.assert_allclose(m.ball_mm, [80.0, -15.0, 45.0], atol=1e-6)
 
@@ -250,7 +250,7 @@ def test_the_commands_tell_the_whole_story(tmp_path, capsys) -> None:
                  "--stylus-radius", "1.5", "--moves", "normal", "--out", str(normal)]) == 0
     m_normal = read_measurement(normal)
     assert m.metadata["probing_moves"] == "axes" and m_normal.metadata["probing_moves"] == "normal"
-    assert m_normal.extra_columns["cov_zz_um2"] != m.extra_columns["cov_zz_um2"]  # the weights differ
+    assert not np.array_equal(m_normal.optional["cov_zz_um2"], m.optional["cov_zz_um2"])  # the weights differ
     with pytest.raises(InputError, match="robust"):
         identify(m, loss="soft_l1")
     with pytest.raises(InputError, match="3-D"):
@@ -453,10 +453,11 @@ def test_incomplete_trigger_columns_are_refused(tmp_path) -> None:
 
     ((_, m),) = _lobing_runs(tmp_path, "fixed", range(1))
     assert read_sensitivities(m) is not None
-    cut = dataclasses.replace(m, extra_columns={k: v for k, v in m.extra_columns.items() if k != "trig_vert_z"})
+    cut = dataclasses.replace(m, optional={k: v for k, v in m.optional.items() if k != "trig_vert_z"})
     with pytest.raises(FileFormatError, match="trig_vert_z"):
         read_sensitivities(cut)
-    bad = dataclasses.replace(m, extra_columns=m.extra_columns | {"trig_cos3_x": ["nan"] * m.n_rows})
+    bad = dataclasses.replace(m, optional={k: v for k, v in m.optional.items() if k != "trig_cos3_x"},
+                              extra_columns=m.extra_columns | {"trig_cos3_x": ["nan"] * m.n_rows})
     with pytest.raises(FileFormatError, match="row 1, column trig_cos3_x"):
         read_sensitivities(bad)
 

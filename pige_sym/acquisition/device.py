@@ -23,7 +23,8 @@ detects every error burst up to 16 bits, so any single corrupted byte is caught.
 Validation, in this order, each failure a rejection reason: ``format`` (no
 ``*`` + 4 hex digits, non-ASCII), ``checksum`` (CRC mismatch), ``type`` (unknown
 record type), ``fields`` (not exactly 6 fields in a sample), ``number`` (a field is
-not a finite number, or seq is not a non-negative integer).  The framer adds
+not a finite number, a reading beyond ±1e5 µm as the measurement readers refuse it, or seq is not a
+non-negative integer).  The framer adds
 ``truncated`` and ``overlong``; the acquisition adds ``duplicate`` (a sequence
 number already seen).  Nothing is repaired or guessed.
 
@@ -119,6 +120,15 @@ def _number(text: bytes) -> float:
     return v
 
 
+def _reading(value: float, text: bytes | str) -> float:
+    """A sensor reading [µm] within the physical bound the measurement readers apply (``LIMITS["um"]``)."""
+    from pige_sym.measurements.measurement import LIMITS
+
+    if abs(value) > LIMITS["um"]:
+        raise RecordError("number", f"{text!r} is beyond ±{LIMITS['um']:g} um: not a physical reading")
+    return value
+
+
 def parse_record(body: bytes) -> Sample | Info:
     """Parse one frame body of the default protocol (without ``$`` and line end).
 
@@ -144,7 +154,8 @@ def parse_record(body: bytes) -> Sample | Info:
     if not fields[1].isdigit() or len(fields[1]) > 10:
         raise RecordError("number", f"sequence number {fields[1]!r}")
     t = _number(fields[2])
-    r = (_number(fields[3]), _number(fields[4]), _number(fields[5]))
+    r = (_reading(_number(fields[3]), fields[3]), _reading(_number(fields[4]), fields[4]),
+         _reading(_number(fields[5]), fields[5]))
     return Sample(int(fields[1]), t, r)
 
 
@@ -232,7 +243,7 @@ class GaugeQueryAdapter(DeviceAdapter):
         parts = [p for p in re.split(r"[\s,;]+", text.strip()) if p]
         if len(parts) != 3:
             raise RecordError("fields", f"{len(parts)} values, expected 3")
-        vals = tuple(_number(p.encode()) * self.unit_um for p in parts)
+        vals = tuple(_reading(_number(p.encode()) * self.unit_um, p) for p in parts)
         s = Sample(self._seq, time.monotonic() - self._t0, (vals[0], vals[1], vals[2]))
         self._seq += 1
         return s

@@ -20,13 +20,13 @@ from pige_sym.files import check_output
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pige_sym.measurements.probe_import import import_probe_log
+    from pige_sym.measurements.probe_import import import_probe_log, verify_written
     from pige_sym.measurements.rtest_writer import write_measurement
 
     spec = _spec(args)
     out = check_output(args.out, force=args.force, inputs=[x for x in (args.log, args.program) if x], what="--out")
     m = import_probe_log(args.log, args.format, spec)
-    write_measurement(m, out)
+    write_measurement(m, out, verify=verify_written(out))  # read back before it replaces anything
     r_eff_text, _, how = m.metadata["r_eff_mm"].partition(" ")
     print(f"wrote {out}: {m.n_rows} poses, {int(m.optional['n_samples'].sum())} contacts; R_eff "
           f"{float(r_eff_text):.4f} mm {how}, contact sigma {float(m.metadata['contact_sigma_um']):.3f} um; largest "
@@ -53,7 +53,8 @@ def _spec(args: argparse.Namespace) -> Any:
     return ProbeImport(kern.MACHINE_CODE, (0.0, 0.0, 0.0) if pivots else probe_pivot(args.pivot), radius, stylus,
                        r_eff, finite_option(args.stylus_offset, "--stylus-offset"), args.units, moves=args.moves,
                        pivots_mm=pivots, axis_sense=axis_sense_option(args, axes) or {},
-                       kinematics=args.kinematics or "identity", tool_mm=probe_tool(args.tool))
+                       kinematics=args.kinematics or "identity", tool_mm=probe_tool(args.tool),
+                       sphere_mm=_sphere(args))
 
 
 def _spec_from_program(args: argparse.Namespace) -> Any:
@@ -98,7 +99,24 @@ def _spec_from_program(args: argparse.Namespace) -> Any:
                        finite_option(args.stylus_offset, "--stylus-offset"), args.units, moves=args.moves,
                        pivots_mm=pivots, axis_sense=sense, kinematics=h.controller.kinematics,
                        program=read_header(text, args.program),
-                       tool_mm=None if h.tool_mm is None else (h.tool_mm[0], h.tool_mm[1], h.tool_mm[2]))
+                       tool_mm=None if h.tool_mm is None else (h.tool_mm[0], h.tool_mm[1], h.tool_mm[2]),
+                       sphere_mm=_sphere(args, h.sphere_mm, args.program))
+
+
+def _sphere(args: argparse.Namespace, stated: Any = None, program: str | None = None
+            ) -> tuple[float, float, float] | None:
+    """``--sphere`` [mm], or the program's sphere (which ``--sphere`` must then agree with)."""
+    from pige_sym.cli._setup import parse_vec3
+    from pige_sym.errors import InputError
+
+    given = parse_vec3(args.sphere, "--sphere") if args.sphere else None
+    if given is not None and stated is not None and max(abs(a - float(b)) for a, b in zip(given, stated,
+                                                                                          strict=True)) > 1e-6:
+        said = ", ".join(f"{float(v):g}" for v in stated)
+        raise InputError(f"--sphere {args.sphere}: the program {program} states {said}; leave the option out (the "
+                         "program's header gives it)")
+    v = given if given is not None else stated
+    return None if v is None else (float(v[0]), float(v[1]), float(v[2]))
 
 
 def _same(value: object, stated: object, flag: str) -> bool:
@@ -141,6 +159,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--kinematics", choices=("identity", "tcp"), help="the kinematics the log was probed in "
                    "(tcp: work coordinates, mapped back through --pivot and --axis-sense; default identity)")
     add_sphere_arguments(p, when="without --program, whose header states them")
+    p.add_argument("--sphere", metavar="x,y,z", help="where the probing program put the sphere centre at the reference "
+                   "pose [mm]: the fitted reference centre must be within 0.5 mm of it (default: the program's header "
+                   "with --program, else not checked)")
     p.add_argument("--tool", metavar="x,y,z",
                    help="head and mixed machines: the stylus centre from the last tool-side pivot at the reference "
                         "pose [mm] (CONVENTIONS 7; required there)")

@@ -35,6 +35,7 @@ from pige_sym.kernels import load_kernels
 from pige_sym.measurements.axis_sense import describe_axis_sense
 from pige_sym.measurements.ballbar import BallbarRun, bar_directions
 from pige_sym.measurements.measurement import Measurement
+from pige_sym.measurements.schema import refuse_unphysical
 
 
 @dataclass
@@ -225,6 +226,7 @@ def _assemble(machine: str, names: list[str], all_names: list[str], blocks: list
         tool_mm=None, vif=sol.vif[:p], unobserved=[all_names[j] for j in sol.unobserved if j < p],
         axis_sense=common_axis_sense(items),
     )
+    refuse_unphysical(list(names), values[:p], std[:p], units, "the joint fit")
     files, offset = [], p
     for b, s in zip(blocks, sigmas, strict=True):
         q = b.nuisance.shape[1]

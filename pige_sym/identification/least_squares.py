@@ -61,6 +61,7 @@ from pige_sym.identification.problem import ExtraColumns, Problem, build_problem
 from pige_sym.identification.result import IdentificationResult, Stage
 from pige_sym.identification.spectrum import Solution, combination_text, observability, solve_scaled
 from pige_sym.measurements.measurement import Measurement
+from pige_sym.measurements.schema import refuse_unphysical
 from pige_sym.model.projection import Projection, parse_projection
 
 
@@ -191,9 +192,14 @@ def identify(measurement: Measurement, *, method: str = "gauss-newton", projecti
         determined = np.isfinite(sol.vif)
         if np.abs(step[determined]).max(initial=0) > 1e-6 * max(1.0, np.abs(sol.values[determined]).max(initial=0)):
             raise IdentificationError("Gauss–Newton did not converge")  # pragma: no cover - linear model
-        return _result(problem, sol, method=method, projection=proj.name, loss=loss, machine=measurement.machine,
-                       measurement=measurement, outliers=outliers)
-    return _double_differential(problem, sol, proj.name, loss, measurement, outliers, vif_max)
+        result = _result(problem, sol, method=method, projection=proj.name, loss=loss, machine=measurement.machine,
+                         measurement=measurement, outliers=outliers)
+    else:
+        result = _double_differential(problem, sol, proj.name, loss, measurement, outliers, vif_max)
+    if extra is None:  # a fit of the PIGEs alone (the diagnosis' trial fits carry extension columns)
+        refuse_unphysical(result.parameters, result.values, result.std, result.units,
+                          measurement.path or "the measurement")
+    return result
 
 
 def _double_differential(problem: Problem, joint: Solution, projection: str, loss: str, measurement: Measurement,

@@ -33,7 +33,7 @@ from pige_sym.errors import FileFormatError, PigeError
 from pige_sym.files import atomic_write_text, open_regular_file, peek_input
 from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
 from pige_sym.measurements.axis_sense import format_axis_sense, read_axis_sense, to_commanded, to_conventions
-from pige_sym.measurements.measurement import LIMITS
+from pige_sym.measurements.measurement import LIMITS, format_line_problem
 from pige_sym.measurements.rtest_body import separator_hint
 from pige_sym.options import strict_float
 
@@ -112,7 +112,7 @@ def _vec3(text: str, p: str, line: int, key: str) -> np.ndarray:
 
 def _metadata(lines: list[str], p: str) -> tuple[dict[str, str], dict[str, int], int]:
     if not lines or lines[0].removeprefix("\ufeff").strip() != FORMAT_LINE:
-        raise FileFormatError(p, 1, f"first line must be {FORMAT_LINE!r}")
+        raise FileFormatError(p, 1, format_line_problem(lines[0] if lines else None, FORMAT_LINE))
     meta: dict[str, str] = {}
     where: dict[str, int] = {}
     i = 1

@@ -22,6 +22,8 @@ if TYPE_CHECKING:
 
 
 FORMAT_LINE = "# pige-rtest 1"
+#: The measurement formats this pige reads (the first line of the file, after ``# ``).
+MEASUREMENT_FORMATS = ("pige-rtest 1", "pige-ballbar 1")
 
 
 DEVIATION_COLUMNS = ("dx_um", "dy_um", "dz_um")
@@ -30,7 +32,15 @@ DEVIATION_COLUMNS = ("dx_um", "dy_um", "dz_um")
 LINEAR_COLUMNS = ("X_mm", "Y_mm", "Z_mm")
 
 
-OPTIONAL_COLUMNS = ("temp_C", "n_samples", "sd_um")
+#: A probe import's numbers per pose (:mod:`~pige_sym.measurements.probe_import`): the fitted centre, its covariance
+#: and its response to a direction-dependent trigger radius (:mod:`~pige_sym.measurements.probe_trigger`).
+PROBE_COLUMNS = ("cx_mm", "cy_mm", "cz_mm",
+                 "cov_xx_um2", "cov_xy_um2", "cov_xz_um2", "cov_yy_um2", "cov_yz_um2", "cov_zz_um2",
+                 *(f"trig_{p}_{a}" for p in ("cos3", "sin3", "vert") for a in "xyz"))
+
+
+#: Known numeric columns besides the required ones, read as numbers (strictly, vectorised) into ``optional``.
+OPTIONAL_COLUMNS = ("temp_C", "n_samples", "sd_um", *PROBE_COLUMNS)
 
 
 FRAMES = ("machine", "table")
@@ -137,6 +147,45 @@ class Measurement:
         kern: Any = kernels if kernels is not None else load_kernels(self.machine)
         rot = kern.workpiece_rotation(self.angles_deg)
         return np.einsum("nij,nj->ni", rot, self.deviation_um)
+
+
+def format_line_problem(first: str | None, expected: str) -> str:
+    """Why ``first`` is not the format line ``expected``: naming the format and version found and those this pige
+    reads (a newer ``# pige-ballbar 2`` is not an R-test file with a bad first line)."""
+    import re
+
+    got = "an empty file" if first is None else repr(first.strip()[:80])
+    found = re.fullmatch(r"#\s*(pige-[A-Za-z]+)\s+(\S+)", (first or "").strip().removeprefix("\ufeff"))
+    if found:
+        name, version = found.groups()
+        same = [f.split()[1] for f in MEASUREMENT_FORMATS if f.split()[0] == name]
+        reads = f"{name} version {' or '.join(same)} only" if same else f"no {name} files"
+        return (f"format {name} version {version}: this pige reads {reads} (supported: "
+                f"{', '.join(MEASUREMENT_FORMATS)}); write the file in a supported version or update pige")
+    return f"first line must be {expected!r}, got {got}"
+
+
+def numeric_column(m: Measurement, name: str) -> np.ndarray | None:
+    """A known numeric column, shape=(n,): from ``optional`` (as the reader gives it) or, for a measurement
+    built in memory with text columns, parsed strictly from ``extra_columns``; None when absent.
+
+    Raises
+    ------
+    FileFormatError
+        A value that is not a finite ASCII decimal number (names the row and the column).
+    """
+    if name in m.optional:
+        return np.asarray(m.optional[name], dtype=float)
+    if name not in m.extra_columns:
+        return None
+    out = np.empty(m.n_rows)
+    for r, text in enumerate(m.extra_columns[name]):
+        v = strict_float(str(text))
+        if v is None:
+            raise FileFormatError(m.path or "<measurement>", None, f"row {r + 1}, column {name}: {text!r} is not a "
+                                  "finite number")
+        out[r] = v
+    return out
 
 
 def parse_vec3(text: str, path: str, line: int, key: str) -> np.ndarray:

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -39,15 +40,33 @@ import numpy as np
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.axis_sense import to_conventions
-from pige_sym.measurements.measurement import Measurement, missing_tool
+from pige_sym.measurements.measurement import PROBE_COLUMNS, Measurement, missing_tool, numeric_column
+from pige_sym.measurements.probe_checks import (
+    SETUP_FLAGS,
+    check_contact_sigma,
+    check_deviations,
+    check_options,
+    check_pose_count,
+    check_radius,
+    check_reference,
+    check_repeated_contacts,
+)
 from pige_sym.measurements.probe_head import head_offsets
-from pige_sym.measurements.probe_log import ProbeLog, group_poses, read_probe_log
+from pige_sym.measurements.probe_log import ProbeLog, pose_starts, read_probe_log
 from pige_sym.measurements.probe_trigger import sensitivity_columns, trigger_sensitivities
-from pige_sym.measurements.sphere_fit import MIN_CONTACTS, SphereFit, fit_centres
+from pige_sym.measurements.sphere_fit import (
+    MIN_CONTACTS,
+    SphereFit,
+    contact_weights,
+    fit_centres,
+    fit_own_radius,
+    linear_response,
+)
 
 INSTRUMENT = "sphere-probe"
-COV_COLUMNS = ("cov_xx_um2", "cov_xy_um2", "cov_xz_um2", "cov_yy_um2", "cov_yz_um2", "cov_zz_um2")
-CENTRE_COLUMNS = ("cx_mm", "cy_mm", "cz_mm")
+CENTRE_COLUMNS = PROBE_COLUMNS[:3]
+COV_COLUMNS = PROBE_COLUMNS[3:9]
+_UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # the entries COV_COLUMNS hold
 OUTLIER_SIGMAS = 8.0
 OUTLIER_FLOOR_UM = 20.0
 #: Header items of the probing program kept in the measurement's metadata (as ``program_<key>``).
@@ -86,6 +105,9 @@ class ProbeImport:
         coordinates, mapped back through the nominal kinematics the controller held (pivots, ``axis_sense``).
     program : dict of str to str
         What the probing program's header stated (kept in the measurement's metadata).
+    sphere_mm : (3,) [mm] or None
+        Where the program put the sphere at the reference pose (``--sphere`` or the program's header): the
+        fitted reference centre must be near it (:mod:`~pige_sym.measurements.probe_checks`).
     """
 
     machine: str
@@ -101,6 +123,7 @@ class ProbeImport:
     axis_sense: dict[str, int] = field(default_factory=dict)
     kinematics: str = "identity"
     program: dict[str, str] = field(default_factory=dict)
+    sphere_mm: tuple[float, float, float] | None = None
 
     def pivots(self) -> dict[str, np.ndarray] | np.ndarray:
         """Per-axis pivots (a dict) or the one intersection (an array) [mm]."""
@@ -109,41 +132,59 @@ class ProbeImport:
         return {a: np.asarray(v, dtype=float) for a, v in self.pivots_mm.items()}
 
 
-def _pose_points(log: ProbeLog, groups: list[np.ndarray], offset_mm: float, head_mm: np.ndarray) -> list[np.ndarray]:
-    """Nominal stylus-tip centres of every pose: the logged point, the stylus offset, the head's turn ``h_i``."""
-    pts = []
-    for g, h in zip(groups, head_mm, strict=True):
-        if len(g) < MIN_CONTACTS:
-            lines = ", ".join(str(x) for x in log.lines[g])
-            raise FileFormatError(log.path, int(log.lines[g[0]]), f"a pose with {len(g)} contacts (lines {lines}); "
-                                                                   f"a sphere centre needs {MIN_CONTACTS}")
-        pts.append(log.xyz_mm[g] + (np.array([0.0, 0.0, offset_mm]) + h))
-    return pts
+def _pose_points(log: ProbeLog, starts: np.ndarray, offset_mm: float, head_mm: np.ndarray) -> np.ndarray:
+    """Nominal stylus-tip centres of every contact (N, 3) [mm]: the logged point, the stylus offset, the head's turn
+    ``h_i`` of its pose."""
+    counts = np.diff(starts)
+    few = np.flatnonzero(counts < MIN_CONTACTS)
+    if few.size:
+        i = int(few[0])
+        lines = ", ".join(str(x) for x in log.lines[starts[i]:starts[i + 1]])
+        raise FileFormatError(log.path, int(log.lines[starts[i]]), f"a pose with {counts[i]} contacts (lines "
+                                                                    f"{lines}); a sphere centre needs {MIN_CONTACTS}")
+    return log.xyz_mm + np.array([0.0, 0.0, offset_mm]) + np.repeat(head_mm, counts, axis=0)
 
 
-def _fit(log: ProbeLog, groups: list[np.ndarray], pts: list[np.ndarray], radius: float | None,
-         moves: str, frames: np.ndarray | None) -> SphereFit:
+def _fit(log: ProbeLog, starts: np.ndarray, pts: np.ndarray, spec: ProbeImport, frames: np.ndarray | None) -> SphereFit:
     try:
-        fit = fit_centres(pts, radius_mm=radius, moves=moves, stylus_rotations=frames)
+        fit = fit_centres((pts, starts), radius_mm=spec.radius_mm, moves=spec.moves, stylus_rotations=frames)
     except InputError as exc:
         i = int(str(exc).split(":")[0].split()[-1]) if str(exc).startswith("pose ") else 0
-        raise FileFormatError(log.path, int(log.lines[groups[i][0]]), str(exc)) from None
+        raise FileFormatError(log.path, int(log.lines[starts[i]]), str(exc)) from None
     # each pose against the best sphere through its own contacts (own radius: a fault cannot leak into the
     # other poses through the shared one); the worst contact is named from the shared-radius fit
-    own = [fit_centres([p], moves=moves, stylus_rotations=None if frames is None else frames[i:i + 1]).residuals_um[0]
-           if len(p) > MIN_CONTACTS else np.zeros(len(p)) for i, p in enumerate(pts)]
-    pooled = np.concatenate(own)
-    robust = 1.4826 * float(np.median(np.abs(pooled[pooled != 0]))) if (pooled != 0).any() else 0.0
+    own = fit_own_radius((pts, starts), moves=spec.moves, stylus_rotations=frames, start=fit)
+    robust = 1.4826 * float(np.median(np.abs(own[own != 0]))) if (own != 0).any() else 0.0
     limit = max(OUTLIER_SIGMAS * robust, OUTLIER_FLOOR_UM)
-    for g, res, shared in zip(groups, own, fit.residuals_um, strict=True):
-        if np.abs(res).max() > limit or np.abs(shared).max() > 3 * limit:
-            worst = np.argsort(-np.abs(shared))[:2]
-            which = ", ".join(f"line {log.lines[g[j]]} {shared[j]:+.1f} um" for j in worst)
-            raise FileFormatError(log.path, int(log.lines[g[0]]), f"the pose at lines {log.lines[g[0]]}-"
-                                  f"{log.lines[g[-1]]} is {np.abs(res).max():.1f} um off the best sphere through its "
-                                  f"own contacts (limit {limit:.1f} um; largest off the fitted sphere: {which}): a "
-                                  "probing fault (chip, missed trigger) or a wrong pose; re-probe the pose")
+    check_contact_sigma(log.path, robust)
+    check_radius(log.path, int(log.lines[0]), fit, _free_radius_shift(fit, pts, spec, frames),
+                 spec.sphere_radius_mm + spec.stylus_radius_mm, spec.radius_mm is not None, limit)
+    own_max = np.maximum.reduceat(np.abs(own), starts[:-1])
+    shared_max = np.maximum.reduceat(np.abs(fit.residual_flat_um), starts[:-1])
+    bad = np.flatnonzero((own_max > limit) | (shared_max > 3 * limit))
+    if bad.size:
+        i = int(bad[0])
+        first, last = int(starts[i]), int(starts[i + 1])
+        shared = fit.residual_flat_um[first:last]
+        worst = np.argsort(-np.abs(shared))[:2]
+        which = ", ".join(f"line {log.lines[first + j]} {shared[j]:+.1f} um" for j in worst)
+        raise FileFormatError(log.path, int(log.lines[first]), f"the pose at lines {log.lines[first]}-"
+                              f"{log.lines[last - 1]} is {own_max[i]:.1f} um off the best sphere through its "
+                              f"own contacts (limit {limit:.1f} um; largest off the fitted sphere: {which}): a "
+                              "probing fault (chip, missed trigger) or a wrong pose; re-probe the pose")
     return fit
+
+
+def _free_radius_shift(fit: SphereFit, pts: np.ndarray, spec: ProbeImport, frames: np.ndarray | None) -> float:
+    """How far the shared radius would move if it were fitted [mm] (0 when it was): one step of the fit's own
+    least squares from the given radius."""
+    if fit.radius_fitted:
+        return 0.0
+    v = pts - np.repeat(fit.centres_mm, np.diff(fit.starts), axis=0)
+    normals = v / np.linalg.norm(v, axis=1, keepdims=True)
+    weights = np.asarray(contact_weights(normals, spec.moves, frames, fit.starts))
+    shift = linear_response(normals, weights, fit.residual_flat_um[:, None] * 1e-3, True, fit.starts)[1]
+    return float(shift[0])
 
 
 def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
@@ -153,22 +194,28 @@ def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
     if (spec.pivots_mm is not None or spec.kinematics == "tcp") and kern.TOOL_ROTARY:
         raise InputError(f"{kern.MACHINE_CODE}: a pivot per axis and logs in TCP kinematics are read for table "
                          "machines; give one --pivot x,y,z and a log probed with RTCP off")
-    groups = group_poses(log)
-    angles = to_conventions(np.array([log.angles_deg[g[0]] for g in groups]), spec.axis_sense, kern.ROTARY_AXES)
+    check_options(spec.stylus_offset_mm)
+    check_repeated_contacts(log.path, log.xyz_mm, log.angles_deg, log.lines, log.pose_index)
+    starts = pose_starts(log)
+    check_pose_count(log.path, len(starts) - 1, len(kern.LOCATION_PARAMETERS), int(log.lines[-1]))
+    angles = to_conventions(log.angles_deg[starts[:-1]], spec.axis_sense, kern.ROTARY_AXES)
     if np.abs(angles[0]).max() > 1e-9:
         raise FileFormatError(log.path, int(log.lines[0]), "the first pose must be the reference pose (every rotary "
                                                             "angle 0): c_nom is the motion of its centre")
     head, frames = head_offsets(kern, angles, spec.tool_mm)
-    pts = _pose_points(log, groups, spec.stylus_offset_mm, head)
+    pts = _pose_points(log, starts, spec.stylus_offset_mm, head)
     if spec.kinematics == "tcp":
-        pts = [_machine_points(kern, p, theta, spec) for p, theta in zip(pts, angles, strict=True)]
-    fit = _fit(log, groups, pts, spec.radius_mm, spec.moves, frames)
+        pts = _machine_points(kern, pts, starts, angles, spec)
+    fit = _fit(log, starts, pts, spec, frames)
+    check_reference(log.path, int(log.lines[0]), fit.centres_mm[0], spec.sphere_mm,
+                    "the program's header (sphere_mm)" if spec.program else "--sphere")
     nominal = _nominal_centres(kern, angles, fit.centres_mm[0], spec.pivots())
     deviation = -(fit.centres_mm - nominal) * 1e3
     deviation[0] = 0.0
-    m = _measurement(kern, log, spec, groups, angles, fit, deviation)
-    m.extra_columns |= sensitivity_columns(trigger_sensitivities(pts, fit.centres_mm, fit.radius_fitted, spec.moves,
-                                                                 frames))
+    check_deviations(log.path, deviation, log.lines[starts[:-1]])
+    m = _measurement(kern, log, spec, starts, angles, fit, deviation)
+    m.optional |= sensitivity_columns(trigger_sensitivities((pts, starts), fit.centres_mm, fit.radius_fitted,
+                                                            spec.moves, frames))
     return m
 
 
@@ -180,9 +227,18 @@ def _nominal_centres(kern: Any, angles: np.ndarray, centre0: np.ndarray,
     return pivots + np.einsum("nij,j->ni", kern.workpiece_rotation(angles), centre0 - pivots)
 
 
-def _machine_points(kern: Any, work_mm: np.ndarray, theta: np.ndarray, spec: ProbeImport) -> np.ndarray:
-    """Contacts logged in TCP kinematics (work coordinates) as the controller's nominal machine positions [mm]."""
-    return np.array([_nominal_centres(kern, theta[None], p, spec.pivots())[0] for p in work_mm])
+def _machine_points(kern: Any, work_mm: np.ndarray, starts: np.ndarray, angles: np.ndarray,
+                    spec: ProbeImport) -> np.ndarray:
+    """Contacts logged in TCP kinematics (work coordinates) as the controller's nominal machine positions [mm].
+
+    The nominal motion of a point is affine in the point: it is evaluated at the origin and the three unit
+    points once per pose and applied to every contact of the pose.
+    """
+    pivots = spec.pivots()
+    origin = _nominal_centres(kern, angles, np.zeros(3), pivots)
+    columns = np.stack([_nominal_centres(kern, angles, e, pivots) - origin for e in np.eye(3)], axis=2)  # (n, 3, 3)
+    pose = np.repeat(np.arange(len(angles)), np.diff(starts))
+    return np.einsum("nij,nj->ni", columns[pose], work_mm) + origin[pose]
 
 
 def check_tool(kern: Any, tool_mm: Any) -> None:
@@ -195,15 +251,13 @@ def check_tool(kern: Any, tool_mm: Any) -> None:
                          "leave --tool out (the stylus centre is the controlled point, --stylus-offset)")
 
 
-def _measurement(kern: Any, log: ProbeLog, spec: ProbeImport, groups: list[np.ndarray], angles: np.ndarray,
+def _measurement(kern: Any, log: ProbeLog, spec: ProbeImport, starts: np.ndarray, angles: np.ndarray,
                  fit: SphereFit, deviation: np.ndarray) -> Measurement:
-    n = len(groups)
+    n = len(starts) - 1
     cov = fit.covariance_um2
-    iu = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
-    extra = {c: [repr(float(v)) for v in fit.centres_mm[:, k]] for k, c in enumerate(CENTRE_COLUMNS)}
-    extra["log_line"] = [str(int(log.lines[g[0]])) for g in groups]
-    extra |= {c: [repr(float(v)) for v in cov[:, i, j]] for c, (i, j) in zip(COV_COLUMNS, iu, strict=True)}
-    sd = np.array([float(np.sqrt(np.mean(r**2))) for r in fit.residuals_um])
+    numbers = {c: np.array(fit.centres_mm[:, k]) for k, c in enumerate(CENTRE_COLUMNS)}
+    numbers |= {c: np.array(cov[:, i, j]) for c, (i, j) in zip(COV_COLUMNS, _UPPER, strict=True)}
+    extra = {"log_line": list(map(str, log.lines[starts[:-1]].tolist()))}
     meta = {
         "instrument": INSTRUMENT,
         "measurand": "d = -(c - c_nom): sphere centre c(theta) against the nominal motion of c(0) (CONVENTIONS 7)",
@@ -226,7 +280,7 @@ def _measurement(kern: Any, log: ProbeLog, spec: ProbeImport, groups: list[np.nd
         tool_mm=None if spec.tool_mm is None else np.asarray(spec.tool_mm, dtype=float),
         t_s=np.arange(n, dtype=float), angles_deg=angles, deviation_um=deviation, rotary_axes=log.rotary_axes,
         frame="machine", trajectory=f"sphere probing, {n} poses, {log.format} log",
-        optional={"n_samples": np.array([len(g) for g in groups], dtype=float), "sd_um": sd},
+        optional={"n_samples": np.diff(starts).astype(float), "sd_um": fit.pose_rms_um, **numbers},
         extra_columns=extra, metadata=meta,
     )
 
@@ -245,22 +299,33 @@ def row_covariances(m: Measurement) -> np.ndarray:
     FileFormatError
         A missing, non-numeric or non-positive-definite covariance (names the row).
     """
-    missing = [c for c in COV_COLUMNS if c not in m.extra_columns]
-    if missing:
-        raise FileFormatError(m.metadata.get("probe_log", "<measurement>"), None,
-                              f"instrument {INSTRUMENT} needs the columns {', '.join(COV_COLUMNS)} "
+    where = m.path or m.metadata.get("probe_log", "<measurement>")
+    columns = [numeric_column(m, c) for c in COV_COLUMNS]
+    if any(c is None for c in columns):
+        raise FileFormatError(where, None, f"instrument {INSTRUMENT} needs the columns {', '.join(COV_COLUMNS)} "
                               "(written by pige import-probe)")
-    from pige_sym.options import strict_float
-
     cov = np.zeros((m.n_rows, 3, 3))
-    iu = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
-    for c, (i, j) in zip(COV_COLUMNS, iu, strict=True):
-        for r, text in enumerate(m.extra_columns[c]):
-            v = strict_float(str(text))
-            if v is None:
-                raise FileFormatError("<measurement>", None, f"row {r}: {c} {text!r} is not a number")
-            cov[r, i, j] = cov[r, j, i] = v
-    bad = [r for r in range(m.n_rows) if np.linalg.eigvalsh(cov[r]).min() <= 0]
-    if bad:
-        raise FileFormatError("<measurement>", None, f"row {bad[0]}: the centre covariance is not positive definite")
+    for values, (i, j) in zip(columns, _UPPER, strict=True):
+        cov[:, i, j] = cov[:, j, i] = values
+    bad = np.flatnonzero(~(np.linalg.eigvalsh(cov)[:, 0] > 0))
+    if bad.size:
+        raise FileFormatError(where, None, f"row {int(bad[0]) + 1}: the centre covariance is not positive definite")
     return cov
+
+
+def verify_written(out: Path | str) -> Any:
+    """A check for :func:`~pige_sym.measurements.rtest_writer.write_measurement`: the temporary file must be read
+    by pige's reader, covariances included, as identify reads it; the import is refused with the reader's reason
+    otherwise, and nothing is written."""
+    def verify(tmp: Path) -> None:
+        from pige_sym.measurements.rtest import read_measurement
+
+        try:
+            m = read_measurement(tmp)
+            row_covariances(m)
+        except FileFormatError as exc:
+            where = f"line {exc.line}: " if exc.line is not None else ""
+            raise InputError(f"{out}: not written: pige's reader refuses what import-probe would write ({where}"
+                             f"{exc.problem}); check {SETUP_FLAGS}") from None
+
+    return verify

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pige_sym.errors import FileFormatError, InputError
-from pige_sym.files import open_regular_file
+from pige_sym.files import read_input_bytes
+from pige_sym.measurements.decimal_fields import parse_decimal_fields
 from pige_sym.measurements.measurement import LIMITS
 from pige_sym.options import strict_float
 
@@ -78,9 +79,9 @@ def _number(text: str, path: str, line: int, field: str, limit: float) -> float:
     return value
 
 
-def _read_lines(path: str | os.PathLike[str]) -> list[str]:
-    with open_regular_file(path) as fh:
-        raw = fh.read()
+def _read_lines(path: str | os.PathLike[str], raw: bytes | None = None) -> list[str]:
+    if raw is None:
+        raw = read_input_bytes(path, what="probe log")
     try:
         return raw.decode("ascii").splitlines()
     except UnicodeDecodeError as exc:
@@ -169,15 +170,105 @@ def read_probe_log(path: str | os.PathLike[str], fmt: str, rotary_axes: tuple[st
         raise InputError(f"--format {fmt!r}: use one of {', '.join(PROBE_FORMATS)}")
     if units not in ("mm", "inch"):
         raise InputError(f"--units {units!r}: use mm or inch")
+    return parse_probe_log(str(path), read_input_bytes(path, what="probe log"), fmt, rotary_axes, units=units)
+
+
+def parse_probe_log(path: str, raw: bytes, fmt: str, rotary_axes: tuple[str, ...], *, units: str = "mm") -> ProbeLog:
+    """A probe log from its bytes (:func:`read_probe_log`; ``path`` names it in messages)."""
     scale = INCH_MM if units == "inch" else 1.0
-    lines = _read_lines(path)
     if fmt == "linuxcnc":
-        return _read_linuxcnc(str(path), lines, rotary_axes, scale)
-    return _read_pige(str(path), fmt, lines, rotary_axes, scale)
+        fast = _linuxcnc_fast(str(path), raw, rotary_axes, scale)
+        return fast if fast is not None else _read_linuxcnc(str(path), _read_lines(path, raw), rotary_axes, scale)
+    return _read_pige(str(path), fmt, _read_lines(path, raw), rotary_axes, scale)
+
+
+#: Bytes a LinuxCNC log written with ``%f`` holds: digits, sign, point, space, line ends.
+_LINUXCNC_BYTES = b"0123456789.-+ \n\r"
+_CHUNK_LINES = 16384
+
+
+def _linuxcnc_fast(path: str, raw: bytes, rotary_axes: tuple[str, ...], scale: float) -> ProbeLog | None:
+    """The LinuxCNC log read vectorised (the same values, bit for bit, as :func:`_read_linuxcnc`), or None when
+    a line needs the strict path: a byte other than digits, sign, point, space and line ends, a lone ``\\r``,
+    a line that is not nine fields separated by single spaces, or a field that is not a number.  Physical
+    limits and axes of another machine are refused here with the strict path's messages."""
+    if raw.translate(None, _LINUXCNC_BYTES):
+        return None  # a byte other than digits, sign, point, space and line ends
+    buf = np.frombuffer(raw, dtype=np.uint8)
+    step = 1 << 23  # newlines found 8 MiB at a time: no file-sized temporary
+    newline = np.concatenate([np.flatnonzero(buf[i:i + step] == 10) + i for i in range(0, max(buf.size, 1), step)])
+    begin = np.concatenate([[0], newline + 1])
+    end = np.concatenate([newline, [buf.size]])
+    carriages = raw.count(b"\r")
+    if carriages:
+        at_end = (end > begin) & (buf[np.maximum(end - 1, 0)] == 13)
+        if carriages != int(at_end.sum()):
+            return None  # a carriage return inside a line
+        end = end - at_end
+    used = np.flatnonzero(end > begin)  # empty lines are skipped
+    values = np.empty((used.size, 9))
+    for first in range(0, used.size, _CHUNK_LINES):
+        block = used[first:first + _CHUNK_LINES]
+        parsed = _fields(buf, begin[block], end[block])
+        if parsed is None:
+            return None
+        values[first:first + block.size] = parsed
+    lines = used + 1
+    _check_linuxcnc(path, values, lines, rotary_axes)
+    idx = [LINUXCNC_AXES.index(a) for a in rotary_axes]
+    return ProbeLog(path, "linuxcnc", rotary_axes, values[:, :3] * scale if scale != 1.0 else values[:, :3].copy(),
+                    values[:, idx].reshape(used.size, -1), lines.astype(int), None) if used.size else None
+
+
+def _fields(buf: np.ndarray, begin: np.ndarray, end: np.ndarray) -> np.ndarray | None:
+    """The nine numbers of each line ``buf[begin:end]`` (L, 9); None when a line is not nine single-spaced numbers.
+
+    Works on the lines' own bytes (a slice of ``buf``), so a chunk costs its size, not the file's.
+    """
+    lo, hi = int(begin[0]), int(end[-1])
+    part = buf[lo:hi]
+    begin, end = begin - lo, end - lo
+    space = np.flatnonzero(part == 32)
+    line = np.searchsorted(begin, space, side="right") - 1
+    inside = space < end[line]  # spaces between lines (none: lines are contiguous up to their end) are refused
+    if not inside.all() or not np.array_equal(np.bincount(line, minlength=begin.size), np.full(begin.size, 8)):
+        return None
+    if (space == begin[line]).any() or (space + 1 == end[line]).any() or (part[space + 1] == 32).any():
+        return None  # an empty field
+    ends = np.sort(np.concatenate([space, end]))
+    starts = np.sort(np.concatenate([begin, space + 1]))
+    parsed = parse_decimal_fields(part, ends, starts)
+    return None if parsed is None else parsed.reshape(-1, 9)
+
+
+def _check_linuxcnc(path: str, values: np.ndarray, lines: np.ndarray, rotary_axes: tuple[str, ...]) -> None:
+    """Physical limits and the machine's axes, as the strict path refuses them (first offence, located)."""
+    limits = np.array([LIMITS["mm"]] * 3 + [LIMITS["deg"]] * 3 + [LIMITS["mm"]] * 3)
+    beyond = np.abs(values) > limits
+    others = [k for k in (3, 4, 5) if LINUXCNC_AXES[k] not in rotary_axes]
+    moved = values[:, others] != 0.0
+    first_beyond = int(np.argmax(beyond.any(axis=1))) if beyond.any() else values.shape[0]
+    first_moved = int(np.argmax(moved.any(axis=1))) if moved.any() else values.shape[0]
+    if first_beyond <= first_moved and first_beyond < values.shape[0]:
+        r, k = first_beyond, int(np.argmax(beyond[first_beyond]))
+        raise FileFormatError(path, int(lines[r]), f"{LINUXCNC_AXES[k]}: {values[r, k]:g} is beyond ±{limits[k]:g}: "
+                              "not a physical value")
+    if first_moved < values.shape[0]:
+        r, j = first_moved, int(np.argmax(moved[first_moved]))
+        raise FileFormatError(path, int(lines[r]), f"axis {LINUXCNC_AXES[others[j]]} = {values[r, others[j]]:g} moved, "
+                              f"but the machine's rotary axes are {', '.join(rotary_axes)}: a log of another machine?")
 
 
 def group_poses(log: ProbeLog, *, angle_tol_deg: float = 1e-4) -> list[np.ndarray]:
-    """Contacts grouped by pose, in the order the poses were probed: a list of row-index arrays.
+    """Contacts grouped by pose, in probing order: a list of row-index arrays (:func:`pose_starts`)."""
+    starts = pose_starts(log, angle_tol_deg=angle_tol_deg)
+    return [np.arange(s, e) for s, e in zip(starts[:-1], starts[1:], strict=True)]
+
+
+def pose_starts(log: ProbeLog, *, angle_tol_deg: float = 1e-4) -> np.ndarray:
+    """Where each pose begins among the contacts, in the order the poses were probed, shape=(n + 1,).
+
+    Pose ``i`` is contacts ``starts[i]`` to ``starts[i + 1] - 1``.
 
     A pose is a run of consecutive contacts with the same pose number (PIGE layout; its rotary angles must
     not change within it) or, in a LinuxCNC log, at the same rotary angles (within ``angle_tol_deg``: two
@@ -196,5 +287,4 @@ def group_poses(log: ProbeLog, *, angle_tol_deg: float = 1e-4) -> list[np.ndarra
             i = int(bad[0])
             raise FileFormatError(log.path, int(log.lines[i]), f"pose P{log.pose_index[i]}: the rotary angles changed "
                                                                 "within one pose")
-    starts = np.flatnonzero(new)
-    return [np.arange(s, e) for s, e in zip(starts, [*starts[1:], len(a)], strict=True)]
+    return np.append(np.flatnonzero(new), len(a)).astype(np.int64)

@@ -28,13 +28,19 @@ File columns: ``trig_<p>_<x|y|z>`` for ``p`` in ``cos3``, ``sin3``, ``vert`` (9 
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from pige_sym.errors import FileFormatError
-from pige_sym.measurements.measurement import Measurement
-from pige_sym.measurements.sphere_fit import contact_weights, linear_response, stylus_normals, vertical_contacts
+from pige_sym.measurements.measurement import Measurement, numeric_column
+from pige_sym.measurements.sphere_fit import (
+    Points,
+    contact_weights,
+    flatten,
+    linear_response,
+    pose_of_contact,
+    stylus_normals,
+    vertical_contacts,
+)
 
 PARTS = ("cos3", "sin3", "vert")
 COLUMNS = tuple(f"trig_{p}_{a}" for p in PARTS for a in "xyz")
@@ -49,14 +55,14 @@ def _perturbations(normals: np.ndarray) -> np.ndarray:
     return -pre
 
 
-def trigger_sensitivities(points_mm: list[np.ndarray], centres_mm: np.ndarray, radius_fitted: bool,
+def trigger_sensitivities(points_mm: Points, centres_mm: np.ndarray, radius_fitted: bool,
                           moves: str = "normal", stylus_rotations: np.ndarray | None = None) -> np.ndarray:
     """Centre shift per unit lobing (cos, sin) and vertical pre-travel, shape=(n, 3, 3) [µm/µm].
 
     Parameters
     ----------
-    points_mm : list of ndarray, shape=(m_i, 3) [mm]
-        Each pose's contacts (stylus centres).
+    points_mm : list of ndarray, shape=(m_i, 3) [mm], or (points (N, 3), starts (n + 1,))
+        Each pose's contacts (stylus centres; :func:`~pige_sym.measurements.sphere_fit.flatten`).
     centres_mm : ndarray, shape=(n, 3) [mm]
         The fitted centres.
     radius_fitted : bool
@@ -72,17 +78,17 @@ def trigger_sensitivities(points_mm: list[np.ndarray], centres_mm: np.ndarray, r
     ndarray, shape=(n, 3, 3)
         ``[i, :, j]``: the shift of centre ``i`` per µm of part ``j`` (``cos3``, ``sin3``, ``vert``).
     """
-    normals = [(p - c) / np.linalg.norm(p - c, axis=1, keepdims=True) for p, c in zip(points_mm, centres_mm,
-                                                                                         strict=True)]
-    weights = contact_weights(normals, moves, stylus_rotations)
-    local = stylus_normals(normals, stylus_rotations)
-    return linear_response(normals, weights, [_perturbations(g) for g in local], radius_fitted)[0]
+    pts, starts = flatten(points_mm)
+    v = pts - np.asarray(centres_mm)[pose_of_contact(starts)]
+    normals = v / np.linalg.norm(v, axis=1, keepdims=True)
+    weights = np.asarray(contact_weights(normals, moves, stylus_rotations, starts))
+    local = np.asarray(stylus_normals(normals, stylus_rotations, starts))
+    return linear_response(normals, weights, _perturbations(local), radius_fitted, starts)[0]
 
 
-def sensitivity_columns(sens: np.ndarray) -> dict[str, list[str]]:
-    """The file columns of :func:`trigger_sensitivities` (``repr`` of each value)."""
-    return {f"trig_{p}_{a}": [repr(float(v)) for v in sens[:, i, j]]
-            for j, p in enumerate(PARTS) for i, a in enumerate("xyz")}
+def sensitivity_columns(sens: np.ndarray) -> dict[str, np.ndarray]:
+    """The file columns of :func:`trigger_sensitivities`, each shape=(n,) [µm/µm]."""
+    return {f"trig_{p}_{a}": np.array(sens[:, i, j]) for j, p in enumerate(PARTS) for i, a in enumerate("xyz")}
 
 
 def read_sensitivities(m: Measurement) -> np.ndarray | None:
@@ -93,24 +99,16 @@ def read_sensitivities(m: Measurement) -> np.ndarray | None:
     FileFormatError
         Some of the columns only, or a value that is not a finite number.
     """
-    present = [c for c in COLUMNS if c in m.extra_columns]
+    columns = {c: numeric_column(m, c) for c in COLUMNS}
+    present = [c for c, v in columns.items() if v is not None]
     if not present:
         return None
     if len(present) != len(COLUMNS):
-        missing = ", ".join(c for c in COLUMNS if c not in m.extra_columns)
+        missing = ", ".join(c for c in COLUMNS if columns[c] is None)
         raise FileFormatError(m.path or "measurement", None, f"trigger sensitivity columns incomplete: add {missing} "
                               "(pige import-probe writes all nine) or remove them")
     out = np.zeros((m.n_rows, 3, 3))
     for j, p in enumerate(PARTS):
         for i, a in enumerate("xyz"):
-            name = f"trig_{p}_{a}"
-            for r, text in enumerate(m.extra_columns[name]):
-                try:
-                    v = float(text)
-                except ValueError:
-                    v = math.nan
-                if not math.isfinite(v):
-                    raise FileFormatError(m.path or "measurement", None,
-                                          f"row {r + 1}, column {name}: {text!r} is not a finite number")
-                out[r, i, j] = v
+            out[:, i, j] = columns[f"trig_{p}_{a}"]
     return out

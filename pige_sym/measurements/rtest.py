@@ -56,6 +56,7 @@ from pige_sym.measurements.measurement import (
     REFERENCE_TOLERANCE,
     Measurement,
     column_limit,
+    format_line_problem,
     missing_tool,
     parse_vec3,
 )
@@ -92,8 +93,7 @@ def _read_metadata(lines: _Lines, p: str) -> tuple[dict[str, str], dict[str, int
     """Format line and ``# key: value`` lines; returns them and the first line after them."""
     first = lines.next()
     if first is None or first.strip() != FORMAT_LINE:
-        got = first.strip() if first is not None else "an empty file"
-        raise FileFormatError(p, 1, f"first line must be {FORMAT_LINE!r}, got {got[:80]!r}")
+        raise FileFormatError(p, 1, format_line_problem(first, FORMAT_LINE))
     meta: dict[str, str] = {}
     meta_line: dict[str, int] = {}
     line = lines.next()

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
@@ -102,16 +102,43 @@ def row_text(m: Measurement, i: int) -> str:
     return ",".join(vals)
 
 
+#: Rows formatted at a time by :func:`measurement_chunks` (bounds the memory of a large file's text).
+CHUNK_ROWS = 16384
+
+
 def format_measurement(m: Measurement) -> str:
     """Render a measurement as ``pige-rtest 1`` text."""
+    return "".join(measurement_chunks(m))
+
+
+def measurement_chunks(m: Measurement, rows: int = CHUNK_ROWS) -> Iterator[str]:
+    """The text of a measurement in pieces: the header, then ``rows`` rows at a time (exactly :func:`row_text`).
+
+    Columns are formatted whole (``repr`` of each value, as :func:`format_number`), so a large file costs a
+    few string operations per value and its text never needs to be held at once.
+    """
     validate_measurement(m)
-    body = "\n".join(row_text(m, i) for i in range(m.n_rows))
-    return header_text(m) + body + "\n"
+    yield header_text(m)
+    commanded = to_commanded(m.angles_deg, m.axis_sense, m.rotary_axes)
+    numeric = [m.t_s[:, None], commanded, m.deviation_um, *([] if m.linear_mm is None else [m.linear_mm]),
+               *(np.asarray(m.optional[c])[:, None] for c in OPTIONAL_COLUMNS if c in m.optional)]
+    table = np.column_stack([np.asarray(a, dtype=float).reshape(m.n_rows, -1) for a in numeric])
+    extras = list(m.extra_columns.values())
+    for start in range(0, m.n_rows, rows):
+        block = table[start:start + rows]
+        texts = [list(map(repr, block[:, j].tolist())) for j in range(block.shape[1])]
+        texts += [[str(v) for v in column[start:start + rows]] for column in extras]
+        yield "\n".join(map(",".join, zip(*texts, strict=True))) + "\n"
 
 
-def write_measurement(m: Measurement, path: str | os.PathLike[str]) -> Path:
-    """Write a measurement file (atomically: temp file then rename); missing parent folders are created."""
-    return atomic_write_text(path, format_measurement(m))
+def write_measurement(m: Measurement, path: str | os.PathLike[str], *,
+                      verify: Callable[[Path], None] | None = None) -> Path:
+    """Write a measurement file (atomically: temp file then rename); missing parent folders are created.
+
+    ``verify`` is called with the written temporary file before it replaces ``path`` (e.g. to read it back
+    with the reader); when it raises, nothing is written.
+    """
+    return atomic_write_text(path, measurement_chunks(m), verify=verify)
 
 
 class MeasurementWriter:

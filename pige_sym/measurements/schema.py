@@ -289,6 +289,29 @@ class ParamsFile:
     axis_sense: dict[str, int] = field(default_factory=dict)
 
 
+def refuse_unphysical(names: list[str], values: Any, std: Any, units: dict[str, str], source: str) -> None:
+    """Refuse an estimate of a PIGE beyond ±:data:`MAX_PIGE` by more than 3 standard errors.
+
+    The parameter reader refuses such values; an identification that would print one comes from a wrong
+    set-up (a ball, pivot or tool position, a probe import's options) or another machine's data, not from a
+    machine that runs: it is refused where it is computed, naming what to check.
+
+    Raises
+    ------
+    IdentificationError
+    """
+    import math
+
+    from pige_sym.errors import IdentificationError
+
+    for name, v, s in zip(names, values, std, strict=True):
+        if math.isfinite(v) and abs(v) - 3 * (s if math.isfinite(s) else 0.0) > MAX_PIGE:
+            raise IdentificationError(f"{source}: {name} = {v:.1f} {units.get(name, '')} is beyond ±{MAX_PIGE:g}, "
+                                      "more than any machine that runs: the set-up in the file is wrong (ball_mm, "
+                                      "pivot_<axis>_mm, tool_mm, axis_sense; for a probe import --pivot, --units, "
+                                      "--axis-sense) or the data are another machine's")
+
+
 def read_params_file(path: PathLike, *, machine: str | None = None, allow_missing: bool = False) -> ParamsFile:
     """Read and validate a parameter file (module docstring); :func:`params_document` on its JSON."""
     return params_document(load_json(path, "parameter file"), path, machine=machine, allow_missing=allow_missing)

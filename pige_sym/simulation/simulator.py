@@ -29,6 +29,7 @@ from pige_sym.files import to_json
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import Measurement, missing_tool
 from pige_sym.measurements.rtest_writer import write_measurement
+from pige_sym.measurements.schema import MAX_PIGE
 from pige_sym.model.effects import EffectContext, EffectInstance
 from pige_sym.model.trajectories import Trajectory
 from pige_sym.options import parse_number_assignments
@@ -94,6 +95,9 @@ def parse_pige(spec: str, machine: str, seed: int | None = None, **ranges: Any) 
     for k, v in items.items():
         if v is None or not isinstance(v, (int, float)) or not np.isfinite(v):
             raise InputError(f"parameter {k}: {v!r} is not a finite number")
+        if abs(v) > MAX_PIGE:
+            raise InputError(f"parameter {k}: {v:g} is beyond ±{MAX_PIGE:g} {kern.UNITS[k]}: not a machine that runs "
+                             "(pige's parameter files refuse it too)")
         out[k] = float(v)
     return out
 

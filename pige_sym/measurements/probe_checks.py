@@ -1,0 +1,159 @@
+"""Plausibility of a probe import: numbers no one should believe are refused where they arise, naming the flag.
+
+A wrong pivot, sphere position, unit, stylus offset or radius is the likeliest set-up mistake with a probe, and
+each still yields sphere centres and deviations; identify would then print axis errors of millimetres.  The
+import checks, in this order, and refuses with the file, the line and the option to check:
+
+1. **Options** (:func:`check_options`): ``--stylus-offset`` within ±:data:`MAX_STYLUS_OFFSET_MM`.
+2. **Repeated contacts** (:func:`check_repeated_contacts`): a log line whose X Y Z and angles repeat an earlier
+   line exactly, to the last written digit.  LinuxCNC writes no line for a trip at the previous position and a
+   probe never trips twice at the same nanometre, so it is a duplicated line: it would count a contact twice
+   and shrink the contact σ.
+3. **Poses** (:func:`check_pose_count`): the reference pose and enough others that identify can fit the
+   machine's location errors (``3(n − 1) > P``), not a file identify then calls "no data rows".
+4. **Contacts on a sphere** (:func:`check_contact_sigma`): the contacts' robust scatter about their own poses'
+   spheres below :data:`MAX_CONTACT_SIGMA_UM` (a touch probe repeats to about a micrometre).
+5. **The radius** (:func:`check_radius`): the fitted ``R_eff`` against ``R + r`` (a pre-travel is micrometres:
+   more than :data:`RADIUS_TOLERANCE_MM` off is a wrong ``--sphere-radius``/``--stylus-radius`` or ``--units``);
+   a given ``--radius`` against the radius the contacts lie on (the first-order shift of a free radius, from the
+   fit's own least squares): off by more than the faulty-contact limit, the option is wrong, not the pose.
+   Then the import's screen of faulty contacts (one pose off its own sphere: "re-probe the pose").
+6. **The reference centre** (:func:`check_reference`): with the program's sphere position (``--program`` or
+   ``--sphere``), the fitted ``c(0)`` within :data:`REFERENCE_TOLERANCE_MM` of it (``--sphere``, ``--units``,
+   ``--stylus-offset``, the work offset).
+7. **Deviations** (:func:`check_deviations`): every pose's centre within :data:`MAX_DEVIATION_UM` of where the
+   nominal motion of ``c(0)`` puts it; beyond, the nominal motion is wrong (``--pivot``, ``--axis-sense``,
+   ``--kinematics``, ``--units``, ``--stylus-offset``, ``--tool``), not the machine.
+
+Finally the file is written through a temporary file that pige's own reader reads back
+(:func:`~pige_sym.measurements.probe_import.verify_written`) before it replaces anything, so import-probe never
+writes a file identify refuses.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from pige_sym.errors import FileFormatError, InputError
+
+#: Largest ``|R_eff − (R + r)|`` [mm]: pre-travel and lobing are micrometres to a few tens of micrometres.
+RADIUS_TOLERANCE_MM = 0.1
+#: Largest distance of the reference pose's centre from the program's sphere position [mm].
+REFERENCE_TOLERANCE_MM = 0.5
+#: Largest pooled contact scatter [µm] (robust): contacts beyond it lie on no sphere.
+MAX_CONTACT_SIGMA_UM = 20.0
+#: Largest deviation of a centre from its nominal motion [µm]: 1 mm is far beyond a running machine's axis errors.
+MAX_DEVIATION_UM = 1000.0
+#: Largest ``--stylus-offset`` [mm]: the stylus centre is a stylus radius or so from the controlled point.
+MAX_STYLUS_OFFSET_MM = 100.0
+SETUP_FLAGS = "--pivot, --axis-sense, --kinematics, --units, --stylus-offset and --tool"
+
+
+def check_options(stylus_offset_mm: float) -> None:
+    """Refuse option values no set-up has (one-line InputError)."""
+    if abs(stylus_offset_mm) > MAX_STYLUS_OFFSET_MM:
+        raise InputError(f"--stylus-offset {stylus_offset_mm:g} mm: the stylus centre sits about a stylus radius "
+                         f"above the controlled point (at most ±{MAX_STYLUS_OFFSET_MM:g} mm); give it in mm")
+
+
+def check_repeated_contacts(path: str, xyz_mm: np.ndarray, angles_deg: np.ndarray, lines: np.ndarray,
+                            pose_index: np.ndarray | None = None) -> None:
+    """Refuse a log line that repeats an earlier one exactly (module docstring, 1).
+
+    Parameters
+    ----------
+    xyz_mm : (N, 3), angles_deg : (N, k), lines : (N,)
+        The contacts as read, their 1-based lines.
+    pose_index : (N,) or None
+        The program's pose numbers (PIGE layout); a repeated contact there is the same X Y Z in the same pose.
+    """
+    key = np.column_stack([xyz_mm, angles_deg] + ([] if pose_index is None else [pose_index]))
+    if len(key) < 2:
+        return
+    order = np.lexsort(key.T[::-1])
+    same = (key[order[1:]] == key[order[:-1]]).all(axis=1)
+    if not same.any():
+        return
+    pairs = np.column_stack([order[:-1][same], order[1:][same]])
+    pairs.sort(axis=1)
+    first, repeat = pairs[np.argmin(pairs[:, 1])]
+    raise FileFormatError(path, int(lines[repeat]), f"this contact repeats line {int(lines[first])} exactly (X Y Z "
+                          "and angles to the last digit): a duplicated log line (a probe never trips twice at the "
+                          "same point; LinuxCNC writes no line for a trip at the previous position); remove it")
+
+
+def check_pose_count(path: str, poses: int, parameters: int, first_line: int) -> None:
+    """Refuse a log too short for identify to fit ``parameters`` location errors (module docstring, 2)."""
+    need = parameters // 3 + 2  # 3(n − 1) > P
+    if poses < need:
+        raise FileFormatError(path, first_line, f"the log holds {poses} pose{'s' if poses != 1 else ''}"
+                              f"{' (the reference only)' if poses == 1 else ''}: identify needs the reference pose "
+                              f"and at least {need - 1} more to fit the {parameters} location errors; probe more poses")
+
+
+def check_radius(path: str, line: int, fit: Any, radius_shift_mm: float, nominal_mm: float, given: bool,
+                 limit_um: float) -> None:
+    """Refuse an effective radius that cannot be the set-up's (module docstring, 3).
+
+    Parameters
+    ----------
+    fit : SphereFit
+        The import's fit (its ``radius_mm`` fitted, or ``--radius``).
+    radius_shift_mm : float
+        How far a free radius would move from ``fit.radius_mm`` (0 when it was fitted).
+    nominal_mm : float
+        ``R + r`` from ``--sphere-radius`` and ``--stylus-radius``.
+    given : bool
+        ``--radius`` was given.
+    limit_um : float
+        The faulty-contact limit [µm].
+    """
+    data_radius = fit.radius_mm + radius_shift_mm
+    if given and abs(radius_shift_mm) * 1e3 > limit_um:
+        raise FileFormatError(path, line, f"--radius {fit.radius_mm:g} mm, but the contacts lie on a sphere of "
+                              f"{data_radius:.4f} mm ({radius_shift_mm * 1e3:+.1f} um): check --radius (the "
+                              "calibrated R + r - pre-travel), or leave it out to fit it")
+    if abs(data_radius - nominal_mm) > RADIUS_TOLERANCE_MM:
+        which = "--radius" if given and abs(fit.radius_mm - nominal_mm) > RADIUS_TOLERANCE_MM else \
+            "--sphere-radius and --stylus-radius"
+        raise FileFormatError(path, line, f"the contacts lie on a sphere of radius {data_radius:.4f} mm, but "
+                              f"--sphere-radius + --stylus-radius = {nominal_mm:g} mm (a pre-travel is micrometres): "
+                              f"check {which}, and --units (an inch log read as mm, or the reverse, scales it by "
+                              "25.4)")
+
+
+def check_reference(path: str, line: int, centre0_mm: np.ndarray, sphere_mm: Any, source: str) -> None:
+    """Refuse a reference centre millimetres from where the program put the sphere (module docstring, 4)."""
+    if sphere_mm is None:
+        return
+    off = float(np.linalg.norm(np.asarray(centre0_mm) - np.asarray(sphere_mm)))
+    if off > REFERENCE_TOLERANCE_MM:
+        c = ", ".join(f"{v:.3f}" for v in centre0_mm)
+        s = ", ".join(f"{v:g}" for v in sphere_mm)
+        raise FileFormatError(path, line, f"the reference pose's sphere centre is at {c} mm, {off:.3f} mm from "
+                              f"{s} where {source} puts it: check {source}, --units, --stylus-offset and the work "
+                              "offset the log was written in")
+
+
+def check_contact_sigma(path: str, sigma_um: float) -> None:
+    """Refuse contacts that lie on no sphere (module docstring, 5)."""
+    if sigma_um > MAX_CONTACT_SIGMA_UM:
+        raise FileFormatError(path, None, f"the contacts scatter {sigma_um:.1f} um about their poses' spheres (a touch "
+                              f"probe repeats to about 1 um; limit {MAX_CONTACT_SIGMA_UM:g} um): they lie on no "
+                              "sphere; check --format, --units and that the log holds one sphere's probing")
+
+
+def check_deviations(path: str, deviation_um: np.ndarray, lines: np.ndarray) -> None:
+    """Refuse centres millimetres from the nominal motion of ``c(0)`` (module docstring, 6).
+
+    ``lines`` holds each pose's first log line.
+    """
+    size = np.linalg.norm(deviation_um, axis=1)
+    worst = int(np.argmax(size))
+    if size[worst] > MAX_DEVIATION_UM:
+        raise FileFormatError(path, int(lines[worst]), f"this pose's sphere centre is {size[worst] / 1e3:.3f} mm from "
+                              f"where the nominal motion of the reference centre puts it (a machine's axis errors "
+                              f"move it micrometres; limit {MAX_DEVIATION_UM / 1e3:g} mm): the nominal motion is "
+                              f"wrong; check {SETUP_FLAGS}")

@@ -1,0 +1,231 @@
+"""Issue 33, numbers no one should believe: refused where they arise, naming what to check.
+
+- the probe import's set-up mistakes (pivot, sphere, units, stylus offset, radius, contacts on no sphere, a lone
+  reference pose, duplicated lines), and the property that import-probe never writes a file identify refuses
+  (hypothesis over damaged logs and wrong options);
+- identify never prints a PIGE the parameter reader refuses, simulate never makes one;
+- acquisition applies the readers' physical bounds to every reading;
+- the same measurement under two names is refused by content;
+- a file of another format version is named with the versions this pige reads.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from pige_sym.acquisition.device import RecordError, encode_sample, parse_record
+from pige_sym.cli.main import main
+from pige_sym.errors import IdentificationError
+from pige_sym.measurements.measurement import MEASUREMENT_FORMATS
+from pige_sym.measurements.rtest import read_measurement
+from pige_sym.measurements.schema import MAX_PIGE
+
+S = ["--sphere-radius", "12.7", "--stylus-radius", "1.5"]
+FEW = settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def refused(code: int, err: str, *fragments: str) -> None:
+    assert code == 2, err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    for f in fragments:
+        assert f in err, (f, err)
+
+
+@pytest.fixture(scope="module")
+def probe_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 13-pose LinuxCNC log of the virtual machine (sphere at 100, 20, 60; pivot 0)."""
+    d = tmp_path_factory.mktemp("probe")
+    assert main(["simulate", "--instrument", "sphere-probe", "--sphere", "100,20,60", *S, "--points", "12",
+                 "--seed", "1", "--rtcp-off", "M429", "--rtcp-on", "M428", "--out", str(d / "log.txt")]) == 0
+    return d / "log.txt"
+
+
+def _import(capsys, log: Path, out: Path, *extra: str) -> tuple[int, str, str]:
+    args = list(extra) if any(a == "--sphere-radius" for a in extra) else [*S, *extra]
+    return run(capsys, "import-probe", str(log), "--format", "linuxcnc", "--out", str(out), "--force", *args)
+
+
+# ------------------------------------------------------------------------------------- 9-12, 17: the probe import
+
+
+@pytest.mark.parametrize("extra, said", [
+    (["--pivot", "50,0,0"], "--pivot"), (["--pivot", "0,50,0"], "--pivot"), (["--pivot", "0,0,50"], "--pivot"),
+    (["--stylus-offset", "1.5"], "--stylus-offset"),
+    (["--sphere", "100,20,58.5"], "from 100, 20, 58.5 where --sphere puts it"),
+    (["--units", "inch"], "--units"),
+    (["--sphere-radius", "25", "--stylus-radius", "1.5"], "check --sphere-radius and --stylus-radius"),
+    (["--radius", "14.3"], "--radius 14.3 mm, but the contacts lie on a sphere of 14.19"),
+    (["--stylus-offset", "1e6"], "--stylus-offset 1e+06 mm"),
+])
+def test_a_wrong_set_up_is_refused_at_the_import_naming_the_flag(probe_log, tmp_path, capsys, extra, said) -> None:
+    out = tmp_path / "p.csv"
+    refused(*_import(capsys, probe_log, out, *extra)[::2], said)
+    assert not out.exists()
+    code, _, _ = _import(capsys, probe_log, out, "--sphere", "100,20,60")  # the right set-up imports
+    assert code == 0 and read_measurement(out).n_rows == 13
+
+
+def test_damaged_logs_are_refused_with_the_line(probe_log, tmp_path, capsys) -> None:
+    lines = probe_log.read_text().splitlines(keepends=True)
+    cases = {
+        "reference only": (lines[:5], "the log holds 1 pose (the reference only)"),
+        "duplicated line": (lines[:12] + [lines[11]] + lines[12:], "repeats line 12 exactly"),
+        "duplicated block": (lines + lines[:5], ":66: this contact repeats line 1"),
+        "five identical contacts": (lines[:20] + ["110.000000 20.000000 70.000000 0.000000 0.000000 10.000000 "
+                                                  "0.000000 0.000000 0.000000\n"] * 5, "repeats line 21"),
+    }
+    rng = np.random.default_rng(3)
+    noise = [" ".join(f"{v:f}" for v in [*rng.uniform(-100, 100, 3), a, 0, c, 0, 0, 0]) + "\n"
+             for a, c in [(0, 0)] * 5 + [(10, 30)] * 5 + [(20, 60)] * 5 + [(30, 90)] * 5]
+    cases["contacts on no sphere"] = (noise, "they lie on no sphere")
+    for name, (text, said) in cases.items():
+        log = tmp_path / f"{name.replace(' ', '_')}.txt"
+        log.write_text("".join(text))
+        refused(*_import(capsys, log, tmp_path / "x.csv")[::2], said)
+
+
+def test_the_coplanar_or_identical_contacts_of_a_pose_are_refused_by_the_fit() -> None:
+    from pige_sym.errors import InputError
+    from pige_sym.measurements.sphere_fit import fit_centres
+
+    ring = np.array([[10 * np.cos(t), 10 * np.sin(t), 0.0] for t in np.linspace(0, 5, 6)])
+    good = 14.2 * np.array([[0, 0, 1], [1, 0, 0.3], [-1, 0, 0.3], [0, 1, 0.5], [0, -1, 0.5]], dtype=float)
+    good /= np.linalg.norm(good, axis=1, keepdims=True) / 14.2
+    for bad in (np.tile([110.0, 20.0, 70.0], (5, 1)), ring, np.outer(np.arange(5.0), [1.0, 2.0, 3.0])):
+        with pytest.raises(InputError, match="pose 1: degenerate contact pattern"):
+            fit_centres([good, bad])
+
+
+# Damage a log the way files get damaged: lines dropped, doubled, swapped, digits changed, junk appended, and
+# import it with a wrong option now and then.  Either the import refuses in one line, or it writes a file that
+# identify reads and fits to PIGEs within what pige's parameter reader accepts.
+damage = st.lists(st.tuples(st.sampled_from(["drop", "double", "swap", "digit", "junk", "scale"]),
+                            st.integers(0, 64), st.integers(0, 9)), max_size=4)
+options = st.sampled_from([[], ["--pivot", "3,0,0"], ["--pivot", "0,0,400"], ["--stylus-offset", "0.02"],
+                           ["--units", "inch"], ["--radius", "14.2"], ["--radius", "14.25"], ["--moves", "normal"]])
+
+
+@FEW
+@given(edits=damage, opts=options)
+def test_import_probe_never_writes_a_file_identify_refuses(probe_log, tmp_path_factory, capsys, edits, opts) -> None:
+    lines = probe_log.read_text().splitlines()
+    for kind, i, d in edits:
+        i %= max(len(lines), 1)
+        if not lines:
+            break
+        if kind == "drop":
+            del lines[i]
+        elif kind == "double":
+            lines.insert(i, lines[i])
+        elif kind == "swap" and i + 1 < len(lines):
+            lines[i], lines[i + 1] = lines[i + 1], lines[i]
+        elif kind == "digit":
+            pos = [k for k, ch in enumerate(lines[i]) if ch.isdigit()]
+            if pos:
+                k = pos[(d * 7) % len(pos)]
+                lines[i] = lines[i][:k] + str(d) + lines[i][k + 1:]
+        elif kind == "junk":
+            lines.insert(i, "G38.2 X1 Y2" if d % 2 else "1 2 3")
+        elif kind == "scale":
+            lines[i] = " ".join(f"{float(v) * (1 + d):f}" for v in lines[i].split(" "))
+    d = tmp_path_factory.mktemp("dmg")
+    log, out = d / "log.txt", d / "p.csv"
+    log.write_text("\n".join(lines) + "\n")
+    code, _, err = _import(capsys, log, out, *opts)
+    if code != 0:
+        refused(code, err)
+        assert not out.exists()
+        return
+    code, res, err = run(capsys, "identify", str(out), "--json")
+    assert code == 0, err
+    import json
+
+    values = [v for v in json.loads(res)["pige"].values() if v is not None]
+    assert all(abs(v) <= MAX_PIGE for v in values)
+
+
+# ----------------------------------------------------------------- the class: identify, simulate and later steps
+
+
+def test_identify_refuses_a_pige_its_parameter_reader_would_refuse(tmp_path, capsys) -> None:
+    f = tmp_path / "run.csv"
+    refused(*run(capsys, "simulate", "--pige", "EX0C=-50005", "--out", str(f))[::2], "beyond ±10000")
+    assert main(["simulate", "--pige", "EX0C=-9000", "--out", str(f), "--seed", "1"]) == 0
+    assert main(["identify", str(f)]) == 0  # 9 mm: far beyond a good machine, but within what compensate accepts
+    capsys.readouterr()
+    m = read_measurement(f)
+    m.deviation_um *= 8.0  # EX0C about -72 mm
+    from pige_sym.identification.least_squares import identify
+
+    with pytest.raises(IdentificationError, match="EX0C = -7.*beyond ±10000"):
+        identify(m)
+
+
+# ------------------------------------------------------------------------------------------- 14: acquisition
+
+
+@given(st.floats(-1e12, 1e12, allow_nan=False), st.integers(0, 2))
+def test_a_reading_beyond_the_readers_bound_is_a_rejected_record(value, which) -> None:
+    readings = [261.28, -87.1, 15.0]
+    readings[which] = value
+    body = encode_sample(7, 1.5, tuple(readings))[1:].rstrip(b"\r\n")
+    if abs(float(f"{value:.4f}")) > 1e5:
+        with pytest.raises(RecordError, match="not a physical reading") as info:
+            parse_record(body)
+        assert info.value.reason == "number"
+    else:
+        assert parse_record(body).readings_um[which] == pytest.approx(value, abs=1e-3)
+
+
+# --------------------------------------------------------------------------------------- 15, 16: the files
+
+
+def test_the_same_measurement_under_two_names_is_refused_by_content(tmp_path, capsys) -> None:
+    a = tmp_path / "radial.csv"
+    assert main(["simulate", "--instrument", "ballbar", "--out", str(a), "--seed", "1"]) == 0
+    b = tmp_path / "copy_of_radial.csv"
+    b.write_bytes(a.read_bytes())
+    for command in ("identify", "diagnose"):
+        refused(*run(capsys, command, str(a), str(b))[::2], "has the same content as", "SHA-256")
+    refused(*run(capsys, "report", str(a), str(b), "--out", str(tmp_path / "rep"))[::2], "same content")
+
+
+@pytest.mark.parametrize("line, said", [
+    ("# pige-ballbar 2", "format pige-ballbar version 2: this pige reads pige-ballbar version 1 only"),
+    ("# pige-rtest 7", "format pige-rtest version 7: this pige reads pige-rtest version 1 only"),
+    ("# pige-gauge 1", "this pige reads no pige-gauge files"),
+])
+def test_another_format_version_is_named_with_those_supported(tmp_path, capsys, line, said) -> None:
+    f = tmp_path / "x.csv"
+    assert main(["simulate", "--instrument", "ballbar", "--out", str(f), "--seed", "1"]) == 0
+    text = f.read_text().splitlines(keepends=True)
+    f.write_text(line + "\n" + "".join(text[1:]))
+    refused(*run(capsys, "identify", str(f))[::2], said, ", ".join(MEASUREMENT_FORMATS))
+
+
+def test_what_the_reader_would_refuse_is_never_written(probe_log, tmp_path) -> None:
+    """The import's last check: its file is read back before it replaces anything (here a covariance spoiled
+    after the import, which only the read-back sees)."""
+    from pige_sym.errors import InputError
+    from pige_sym.measurements.probe_import import ProbeImport, import_probe_log, verify_written
+    from pige_sym.measurements.rtest_writer import write_measurement
+
+    m = import_probe_log(probe_log, "linuxcnc", ProbeImport("wC'A'bXYZ(C1)t", (0.0, 0.0, 0.0), 12.7, 1.5))
+    out = tmp_path / "p.csv"
+    write_measurement(m, out, verify=verify_written(out))
+    assert read_measurement(out).n_rows == m.n_rows
+    m.optional["cov_xx_um2"] = -m.optional["cov_xx_um2"]
+    with pytest.raises(InputError, match="not written: pige's reader refuses .* not positive definite"):
+        write_measurement(m, tmp_path / "q.csv", verify=verify_written(tmp_path / "q.csv"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.csv"]

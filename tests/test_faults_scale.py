@@ -1,0 +1,181 @@
+"""Issue 33, scale: the probe path is linear in the data and gives the same numbers as the direct forms.
+
+- the O(n) whitening of the reference-pose coupling against the dense Cholesky of the full covariance
+  (normal equations to 1e-9 relative);
+- the vectorised LinuxCNC log reader against the strict line-by-line reader (bit for bit; hypothesis), and the
+  strict reader's located refusal whenever the fast path declines;
+- the vectorised sphere fits (all poses at once) against one pose at a time;
+- the chunked measurement writer against the row-by-row text.
+
+Timings live in benchmarks/bench_scale.py, not here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.linalg import solve_triangular
+from scipy.spatial.transform import Rotation
+
+from pige_sym.errors import FileFormatError
+from pige_sym.identification.instruments import _whitening
+from pige_sym.measurements import probe_log
+from pige_sym.measurements.sphere_fit import fit_centres, fit_own_radius, flatten, inverse3, pose_grams, pose_sums
+
+SOME = settings(max_examples=40, deadline=None)
+
+
+def _spd(rng: np.random.Generator, n: int, scale: float) -> np.ndarray:
+    a = rng.normal(size=(n, 3, 3))
+    return scale * (a @ a.transpose(0, 2, 1) + 0.1 * np.eye(3))
+
+
+@pytest.mark.parametrize("rows", [1, 2, 7, 40])
+def test_the_linear_whitening_gives_the_dense_normal_equations(rows) -> None:
+    rng = np.random.default_rng(rows)
+    sigma = _spd(rng, rows, 0.3)
+    sigma0 = _spd(rng, 1, 2.0)[0]  # a reference centre worse than the others: strong coupling
+    rot = Rotation.random(rows, random_state=rows).as_matrix()
+    design = rng.normal(size=(rows, 3, 8))
+    data = rng.normal(size=(rows, 3))
+    dense = np.einsum("rij,jk,slk->rsil", rot, sigma0, rot).transpose(0, 2, 1, 3).reshape(3 * rows, 3 * rows)
+    for r in range(rows):
+        dense[3 * r:3 * r + 3, 3 * r:3 * r + 3] += sigma[r]
+    dense /= np.mean(np.diag(dense))
+    chol = np.linalg.cholesky(dense)
+    a_ref = solve_triangular(chol, design.reshape(-1, 8), lower=True)
+    y_ref = solve_triangular(chol, data.reshape(-1), lower=True)
+    whiten = _whitening(sigma, sigma0, rot)
+    a, y = whiten(design), whiten(data[:, :, None])[:, 0]
+    for got, ref in ((a.T @ a, a_ref.T @ a_ref), (a.T @ y, a_ref.T @ y_ref), (y @ y, y_ref @ y_ref)):
+        assert np.max(np.abs(got - ref)) <= 1e-9 * np.max(np.abs(ref))
+
+
+def test_a_probe_import_identifies_the_same_with_the_dense_covariance(tmp_path) -> None:
+    from pige_sym.cli.main import main
+    from pige_sym.identification.instruments import probe_covariance, whitened_rows
+    from pige_sym.identification.problem import build_problem
+    from pige_sym.kernels import load_kernels
+    from pige_sym.measurements.rtest import read_measurement
+
+    log, csv = tmp_path / "log.txt", tmp_path / "p.csv"
+    assert main(["simulate", "--instrument", "sphere-probe", "--sphere", "100,20,60", "--sphere-radius", "12.7",
+                 "--stylus-radius", "1.5", "--points", "30", "--seed", "4", "--rtcp-off", "M429", "--rtcp-on", "M428",
+                 "--out", str(log)]) == 0
+    assert main(["import-probe", str(log), "--format", "linuxcnc", "--sphere-radius", "12.7", "--stylus-radius",
+                 "1.5", "--out", str(csv)]) == 0
+    m = read_measurement(csv)
+    prob = build_problem(m, "xyz", explicit=True)
+    rot = load_kernels(m.machine).workpiece_rotation(m.angles_deg)
+    for rows in (prob.rows, prob.rows[::3]):  # every pose, and a subset (the diagnosis leaves outliers out)
+        a, y = whitened_rows(m, prob.design, prob.data, rot, rows)
+        cov = probe_covariance(m, rot, rows)
+        chol = np.linalg.cholesky(cov / np.mean(np.diag(cov)))
+        a_ref = solve_triangular(chol, prob.design[rows].reshape(-1, prob.design.shape[2]), lower=True)
+        y_ref = solve_triangular(chol, prob.data[rows].reshape(-1), lower=True)
+        np.testing.assert_allclose(a.T @ a, a_ref.T @ a_ref, rtol=1e-9, atol=1e-9 * np.abs(a_ref.T @ a_ref).max())
+        np.testing.assert_allclose(a.T @ y, a_ref.T @ y_ref, rtol=1e-9, atol=1e-9 * np.abs(a_ref.T @ y_ref).max())
+
+
+# ------------------------------------------------------------------------------------------ the log reader
+
+number = st.one_of(st.floats(-99999, 99999, allow_nan=False).map(lambda v: f"{v:f}"),
+                   st.integers(-10**5, 10**5).map(str), st.sampled_from(["-0.000000", "0.0", ".5", "+1.25", "7."]))
+angle = st.sampled_from(["0.000000", "10.000000", "-35.500000", "359.999999"])
+log_line = st.tuples(number, number, number, angle, st.just("0.000000"), angle, number, number, number).map(
+    " ".join)
+
+
+@SOME
+@given(lines=st.lists(log_line, min_size=1, max_size=30), blank=st.lists(st.integers(0, 30), max_size=3),
+       crlf=st.booleans(), tail=st.booleans())
+def test_the_vectorised_linuxcnc_reader_reads_exactly_what_the_strict_one_reads(lines, blank, crlf, tail) -> None:
+    for i in blank:
+        lines.insert(min(i, len(lines)), "")
+    end = "\r\n" if crlf else "\n"
+    raw = (end.join(lines) + (end if tail else "")).encode("ascii")
+    strict = _strict(raw)
+    fast = probe_log._linuxcnc_fast("log", raw, ("A", "C"), 1.0)
+    if isinstance(strict, str):
+        assert fast is None, strict  # the fast path never accepts what the strict one refuses
+        return
+    assert fast is not None
+    for name in ("xyz_mm", "angles_deg", "lines"):
+        assert np.array_equal(getattr(fast, name), getattr(strict, name)), name
+
+
+def _strict(raw: bytes) -> probe_log.ProbeLog | str:
+    try:
+        return probe_log._read_linuxcnc("log", probe_log._read_lines("log", raw), ("A", "C"), 1.0)
+    except FileFormatError as exc:
+        return str(exc)
+
+
+@SOME
+@given(lines=st.lists(log_line, min_size=2, max_size=12), at=st.integers(0, 11),
+       bad=st.sampled_from(["1  2", " 1", "nan", "1e999", "1,5", "\t", "x", "1e5", "-", "200000.000000", "١"]))
+def test_a_line_the_fast_path_declines_is_refused_by_the_strict_path_with_its_line(lines, at, bad) -> None:
+    at %= len(lines)
+    fields = lines[at].split(" ")
+    fields[1] = bad
+    lines[at] = " ".join(fields)
+    raw = ("\n".join(lines) + "\n").encode("utf-8")
+    strict = _strict(raw) if raw.isascii() else "not ASCII"
+    try:
+        got = probe_log.parse_probe_log("log", raw, "linuxcnc", ("A", "C"))
+    except FileFormatError as exc:
+        assert isinstance(strict, str) and (strict == str(exc) or not raw.isascii()), (strict, exc)
+        assert f"log:{at + 1}:" in str(exc) or not raw.isascii()
+        return
+    assert not isinstance(strict, str)
+    assert np.array_equal(got.xyz_mm, strict.xyz_mm)
+
+
+# ---------------------------------------------------------------------------------------------- the fits
+
+
+def _poses(rng: np.random.Generator, n: int, counts: list[int]) -> list[np.ndarray]:
+    out = []
+    for i in range(n):
+        k = counts[i % len(counts)]
+        d = rng.normal(size=(k, 3))
+        d[:, 2] = np.abs(d[:, 2]) + 0.3
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        out.append(rng.normal(size=3) + 14.2 * d + rng.normal(0, 1e-3, (k, 1)) * d)
+    return out
+
+
+@pytest.mark.parametrize("counts", [[5], [4, 5, 9, 6]])
+def test_all_poses_at_once_fit_as_one_pose_at_a_time(counts) -> None:
+    rng = np.random.default_rng(len(counts))
+    pts = _poses(rng, 12, counts)
+    together = fit_centres(pts, radius_mm=14.2, moves="axes")
+    alone = np.array([fit_centres([p], radius_mm=14.2, moves="axes").centres_mm[0] for p in pts])
+    np.testing.assert_allclose(together.centres_mm, alone, atol=1e-12)
+    own = fit_own_radius(pts, moves="axes")
+    for p, r in zip(pts, np.split(own, np.cumsum([len(p) for p in pts])[:-1]), strict=True):
+        expected = np.zeros(len(p)) if len(p) == 4 else fit_centres([p], moves="axes").residuals_um[0]
+        np.testing.assert_allclose(r, expected, atol=1e-6)
+    flat, starts = flatten(pts)
+    np.testing.assert_allclose(pose_sums(flat, starts), [p.sum(axis=0) for p in pts], atol=1e-12)
+    np.testing.assert_allclose(pose_grams(flat, flat, starts), [p.T @ p for p in pts], rtol=1e-12)
+    mats = np.array([p.T @ p for p in pts])
+    np.testing.assert_allclose(inverse3(mats) @ mats, np.tile(np.eye(3), (len(pts), 1, 1)), atol=1e-9)
+
+
+def test_the_chunked_writer_writes_exactly_the_rows(tmp_path) -> None:
+    from pige_sym.measurements.measurement import Measurement
+    from pige_sym.measurements.rtest_writer import header_text, measurement_chunks, row_text
+
+    rng = np.random.default_rng(5)
+    n = 50
+    dev = rng.normal(size=(n, 3)) * 10 ** rng.uniform(-9, 4, size=(n, 3))
+    dev[0] = 0.0
+    m = Measurement(machine="wC'A'bXYZ(C1)t", ball_mm=np.array([1.0, 2.0, 3.0]), t_s=np.arange(n) / 3.0,
+                    angles_deg=np.column_stack([np.linspace(0, 30, n), np.linspace(0, 300, n)]), deviation_um=dev,
+                    rotary_axes=("A", "C"), optional={"sd_um": rng.uniform(0, 1, n), "cov_xx_um2": rng.uniform(size=n)},
+                    extra_columns={"note": [f"n{i}" for i in range(n)]})
+    text = "".join(measurement_chunks(m, rows=7))
+    assert text == header_text(m) + "".join(row_text(m, i) + "\n" for i in range(n))
