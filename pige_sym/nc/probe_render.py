@@ -69,15 +69,16 @@ def header_items(plan: ProbePlan, dialect: str) -> dict[str, str]:
     if sense:
         items[SENSE_KEY] = sense
     items |= {f"pivot_{a}_mm": _vec(per_axis[a]) for a in plan.rotary_axes}
-    items |= {"sphere_mm": _vec(s.sphere_mm), "sphere_radius_mm": f"{s.sphere_radius_mm:g}",
-              "stylus_radius_mm": f"{s.stylus_radius_mm:g}"}
+    items |= {"sphere_mm": _vec(s.sphere_mm), "sphere_radius_mm": f"{s.sphere_radius_mm:.12g}",
+              "stylus_radius_mm": f"{s.stylus_radius_mm:.12g}"}
     if s.tool_mm is not None:
         items["tool_mm"] = _vec(s.tool_mm)
     return items | s.controller.header_items()
 
 
 def _vec(v: np.ndarray) -> str:
-    return ", ".join(f"{float(x):.6g}" for x in v)
+    # 12 digits: the read-back compares the header with the options to 2e-6, so 6 digits refused a pivot of -14.990659
+    return ", ".join(f"{float(x):.12g}" for x in v)
 
 
 def _header(plan: ProbePlan, dialect: str) -> list[str]:
