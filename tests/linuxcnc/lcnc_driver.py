@@ -11,20 +11,23 @@ The job is a JSON file named by the environment variable ``PIGE_LCNC_JOB``::
     {"result": "result.json",                      # written on exit, whatever happened
      "steps": [{"op": "mdi", "lines": ["M429", "G0 X0"], "read": ["ptt.tip-x"]},
                {"op": "program", "file": "probe.ngc", "timeout": 900, "clock": "ptt.clock"},
+               {"op": "hal", "commands": ["setp ptt.trip-radius 0"]},
                {"op": "read", "pins": ["ptt.trips"]}]}
 
 Before the steps: estop reset, machine on, every joint homed (the shipped sims home in place).  ``mdi``
 runs each line in MDI mode, waits until the interpreter is idle and the motion queue is empty, and reads
 ``read`` HAL pins after each line; ``program`` opens the file and runs it in AUTO until the interpreter is
-idle again.  ``clock`` (any step) names a HAL pin that counts simulated seconds: the step's simulated
-time is its change.  A step that raises an error message stops the job.  The result holds per step its wall time,
-the error channel's messages (kind, text), the readings, and the final joint and axis positions.
+idle again; ``hal`` runs ``halcmd`` commands; ``read`` reads pins.  ``clock`` (any step) names a HAL pin
+that counts simulated seconds: the step's simulated time is its change.  A step that raises an error
+message stops the job.  The result holds per step its wall time, the error channel's messages (kind,
+text), the readings, and the final joint and axis positions.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import subprocess
 import sys
 import time
 import traceback
@@ -43,8 +46,8 @@ class Driver:
         self.cmd = linuxcnc.command()
         self.err = linuxcnc.error_channel()
         self.messages: list[list[str]] = []
-        self.hal = hal.component("pige-driver")  # hal.get_value needs a component of this process
-        self.hal.ready()
+        self.hal_component = hal.component("pige-driver")  # hal.get_value needs a component of this process
+        self.hal_component.ready()
 
     def drain(self) -> bool:
         """Collect the error channel; True when an error arrived."""
@@ -108,6 +111,14 @@ class Driver:
         self.wait(lambda s: s.interp_state != linuxcnc.INTERP_IDLE or s.state == linuxcnc.RCS_DONE, 10,
                   "program start")
         self.idle(step.get("timeout", 900), f"program {step['file']}")
+        return {}
+
+    def hal(self, step: dict) -> dict:
+        """``halcmd`` commands (``setp``, ``sets``, ...), each must succeed."""
+        for command in step["commands"]:
+            proc = subprocess.run(["halcmd", *command.split()], capture_output=True, text=True)
+            if proc.returncode != 0:
+                raise RuntimeError(f"halcmd {command}: {proc.stdout}{proc.stderr}")
         return {}
 
     def positions(self) -> dict:

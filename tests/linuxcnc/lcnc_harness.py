@@ -8,10 +8,12 @@ What it takes (each found by trying it on Debian's linuxcnc-uspace 2.9.0~pre1, c
   readable by it (``mkdtemp`` makes mode-0700 folders: they are opened up to 0755).
 - **Isolation.**  HAL and NML live in System V shared memory with fixed keys, ``linuxcnc`` keeps a lock
   file at ``/tmp/linuxcnc.lock`` and, when it finds one, "cleans up the other instance" by killing
-  ``milltask``, ``linuxcncsvr`` … *by name*.  So every run gets its own IPC, PID and mount namespaces
-  (``unshare --ipc --pid --mount --fork --mount-proc --kill-child``) and a private ``/tmp`` (tmpfs, mode
-  1777, the run folder bound back into it): concurrent runs (of this suite or of anyone else on the machine)
-  cannot see or kill each other, and killing ``unshare`` ends every process of the run.
+  ``milltask``, ``linuxcncsvr`` … *by name*, and ``linuxcncsvr`` serves NML on TCP port 5005 (a second
+  instance: ``bind error: 98``).  So every run gets its own IPC, PID, mount and network namespaces
+  (``unshare --ipc --pid --mount --net --fork --mount-proc --kill-child``, loopback up) and a private
+  ``/tmp`` (tmpfs, mode 1777, the run folder bound back into it): concurrent runs (of this suite or of
+  anyone else on the machine) cannot see or kill each other, and killing ``unshare`` ends every process of
+  the run.
 - **Modules.**  ``loadrt NAME`` loads ``/usr/lib/linuxcnc/modules/NAME.so`` and nothing else (halcmd waits
   for a component named NAME, so a path does not work).  ``halcompile --compile`` builds the component in
   the run's folder and an overlay mount, private to the run's mount namespace, adds it to the module
@@ -52,6 +54,7 @@ FALLBACK_UID = "65534"
 RAPID_MM_S = 100
 ACCELERATION = 1000
 SYSTEM_PATH = "/usr/bin:/bin:/usr/sbin:/sbin"
+NAMESPACES = ("--ipc", "--pid", "--mount", "--net", "--fork", "--mount-proc")
 #: run inside the namespaces: private /tmp with the run folder bound back, the component added to the
 #: module folder, then linuxcnc; its exit status is the wrapper's
 WRAPPER = f"""#!/bin/sh
@@ -62,6 +65,7 @@ mount -t tmpfs -o mode=1777 tmpfs /tmp
 mkdir -p "$RUN"
 mount --bind /mnt "$RUN"
 umount /mnt
+ip link set lo up 2>/dev/null || true
 mount -t overlay overlay -o "lowerdir=$MODS:{MODULES}" {MODULES}
 export RTAPI_UID={FALLBACK_UID} RTAPI_FIFO_PATH=/tmp/rtapi_fifo PATH={SYSTEM_PATH} RUNTESTS=1 HOME="$RUN"
 unset DISPLAY
@@ -79,7 +83,7 @@ def unavailable() -> str | None:
         return f"LinuxCNC's sample configurations are not at {SAMPLES}"
     if os.geteuid() != 0:
         return "the LinuxCNC runs need root (private IPC/PID/mount namespaces for each simulation)"
-    probe = subprocess.run(["unshare", "--ipc", "--pid", "--mount", "--fork", "--mount-proc", "true"],
+    probe = subprocess.run(["unshare", *NAMESPACES, "true"],
                            capture_output=True, text=True)
     if probe.returncode != 0:
         return f"unshare cannot make namespaces here: {probe.stderr.strip()}"
@@ -160,8 +164,9 @@ class Sim:
         return self.root / "modules"
 
 
-def make_sim(root: Path, kind: str, hal_lines: list[str]) -> Sim:
-    """Copy the shipped ``{kind}-trt`` configuration into ``root/cfg`` and change it (:func:`ini_changes`)."""
+def make_sim(root: Path, kind: str, hal_lines: list[str], extra: tuple[IniChange, ...] | list[IniChange] = ()) -> Sim:
+    """Copy the shipped ``{kind}-trt`` configuration into ``root/cfg`` and change it (:func:`ini_changes`, then
+    ``extra``)."""
     sim = Sim(root, kind, hal_lines)
     shutil.copytree(SAMPLES, sim.cfg)
     driver = sim.cfg / "pige_driver.py"
@@ -169,7 +174,8 @@ def make_sim(root: Path, kind: str, hal_lines: list[str]) -> Sim:
     driver.chmod(0o755)
     (sim.cfg / "pige_true_machine.hal").write_text("\n".join(hal_lines) + "\n")
     text = (SAMPLES / f"{kind}-trt.ini").read_text()
-    sim.ini.write_text(apply_changes(text, ini_changes(kind, str(driver), "pige_true_machine.hal")))
+    changes = ini_changes(kind, str(driver), "pige_true_machine.hal") + list(extra)
+    sim.ini.write_text(apply_changes(text, changes))
     sim.modules.mkdir(exist_ok=True)
     for d in (root, sim.cfg, sim.modules):
         d.chmod(0o755)  # the fallback user reads the modules and the configuration
@@ -216,8 +222,7 @@ def run_sim(sim: Sim, steps: list[dict], timeout_s: float = 1800.0) -> RunResult
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "PYTHONPATH", "VIRTUAL_ENV")}
     env |= {"PIGE_LCNC_JOB": str(job), "PATH": SYSTEM_PATH}
     t0 = time.monotonic()
-    cmd = ["unshare", "--ipc", "--pid", "--mount", "--fork", "--mount-proc", "--kill-child",
-           "sh", str(wrapper), str(sim.root), str(sim.ini), str(sim.modules)]
+    cmd = ["unshare", *NAMESPACES, "--kill-child", "sh", str(wrapper), str(sim.root), str(sim.ini), str(sim.modules)]
     try:
         proc = subprocess.run(cmd, cwd=sim.cfg, env=env, capture_output=True, text=True, timeout=timeout_s,
                               stdin=subprocess.DEVNULL)

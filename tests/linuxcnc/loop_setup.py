@@ -16,11 +16,12 @@ import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from lcnc_harness import RunResult, Sim, compile_component, make_sim, run_sim
+from lcnc_harness import IniChange, RunResult, Sim, compile_component, make_sim, run_sim
 from true_table import COMPONENT_NAME, TrueTable, component_source
 
 SPHERE_RADIUS_MM = 6.35
@@ -95,12 +96,14 @@ def write_program(m: Machine, cfg: Path, kinematics: str, pivots: dict | None = 
     return cfg / name
 
 
-def import_and_identify(program: Path, log: Path, out: Path) -> dict[str, Any]:
+def import_and_identify(program: Path, log: Path, out: Path) -> Path:
     """``pige import-probe --program`` (its header gives machine, sense, pivots, kinematics) then
-    ``pige identify --json``: the identification's JSON."""
+    ``pige identify --json`` into ``<out>.json``: that file."""
     pige("import-probe", str(log), "--format", "linuxcnc", "--program", str(program), "--out", str(out),
          cwd=out.parent)
-    return json.loads(pige("identify", str(out), "--json", cwd=out.parent))
+    result = out.with_suffix(".json")
+    result.write_text(pige("identify", str(out), "--json", cwd=out.parent))
+    return result
 
 
 @dataclass
@@ -128,22 +131,36 @@ class ProbeRun:
     def readings(self) -> dict[str, Any]:
         return self.step("read")["readings"][0]
 
+    @cached_property
+    def identification_file(self) -> Path:
+        return import_and_identify(self.program, self.log, self.sim.root / "probe.csv")
+
+    @cached_property
+    def identification(self) -> dict[str, Any]:
+        return json.loads(self.identification_file.read_text())
+
 
 READ_PINS = ["ptt.trips", "ptt.clock", "ptt.twin-diff", "ptt.model-failures"]
 
 
-def probing_run(m: Machine, root: Path, kinematics: str, table: TrueTable | None = None) -> ProbeRun:
-    """Copy the shipped configuration, build the true machine, write the program, let LinuxCNC run it:
-    TCP kinematics selected first if the program probes in them (the sims start in identity), then the stylus
-    loaded (``T<n> M6``: the program checks the tool and its length, and applies G43 itself)."""
+def probing_run(m: Machine, root: Path, kinematics: str, *, table: TrueTable | None = None,
+                extra: list[IniChange] | None = None, components: dict[str, str] | None = None,
+                pivots: dict[str, tuple[float, float, float]] | None = None,
+                after: list[dict[str, Any]] | None = None) -> ProbeRun:
+    """Copy the shipped configuration (with ``extra`` INI changes and ``components`` compiled beside the true
+    machine), write the program (for ``pivots``, default the stock lines), let LinuxCNC run it: TCP kinematics
+    selected first if the program probes in them (the sims start in identity), then the stylus loaded
+    (``T<n> M6``: the program checks the tool and its length, and applies G43 itself); ``after`` steps follow."""
     table = table or m.true_table()
-    sim = make_sim(root, m.kind, table.hal_lines())
+    sim = make_sim(root, m.kind, table.hal_lines(), extra or [])
     compile_component(sim, component_source(m.code), COMPONENT_NAME)
-    program = write_program(m, sim.cfg, kinematics)
+    for name, source in (components or {}).items():
+        compile_component(sim, source, name)
+    program = write_program(m, sim.cfg, kinematics, pivots)
     setup = ([KINEMATICS_CODES[1]] if kinematics == "tcp" else []) + [f"T{m.stylus[0]} M6"]
     steps = [{"op": "mdi", "lines": setup},
              {"op": "program", "file": str(program), "timeout": 1800, "clock": "ptt.clock"},
-             {"op": "read", "pins": READ_PINS}]
+             {"op": "read", "pins": READ_PINS}, *(after or [])]
     return ProbeRun(m, sim, table, kinematics, run_sim(sim, steps))
 
 

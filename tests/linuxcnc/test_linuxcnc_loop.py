@@ -31,48 +31,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from lcnc_harness import compile_component, make_sim, run_sim, unavailable
-from loop_setup import (
-    MACHINES,
-    MODES,
-    PROBE_FEED_MM_MIN,
-    READ_PINS,
-    ProbeRun,
-    import_and_identify,
-    probing_run,
-    run_all,
-)
+from loop_setup import PROBE_FEED_MM_MIN, ProbeRun
 from stock_trt import stock_pins, trt_inverse
-from true_table import COMPONENT_NAME, component_source
+
+from conftest import RUNS, TWIN_TOL_MM
 
 pytestmark = pytest.mark.linuxcnc
 SERVO_PERIOD_S = 1e-3  # [EMCMOT]SERVO_PERIOD of the shipped sims
 STEP_MM = PROBE_FEED_MM_MIN / 60.0 * SERVO_PERIOD_S
-TWIN_TOL_MM = 1e-5  # the emitted model is first order in the PIGEs: second order here ~ 15 um x 75 urad ~ 1e-6 mm
-RUNS = [(k, mode) for k in sorted(MACHINES) for mode in MODES]
-
-
-@pytest.fixture(scope="module")
-def lcnc() -> None:
-    reason = unavailable()
-    if reason:
-        pytest.skip(reason)
-
-
-@pytest.fixture(scope="module")
-def smoke(lcnc: None, tmp_path_factory: pytest.TempPathFactory):
-    """A short run: start, home, MDI moves with the true table's outputs read after each; skip if no start."""
-    m = MACHINES["AC"]
-    table = m.true_table()
-    sim = make_sim(tmp_path_factory.mktemp("lcnc_smoke"), m.kind, table.hal_lines())
-    compile_component(sim, component_source(m.code), COMPONENT_NAME)
-    pins = ["ptt.tip-x", "ptt.tip-y", "ptt.tip-z", "ptt.probe"]
-    lines = ["G0 X10 Y-5 Z40", "G0 A20 C30", "G0 A-35.5 C-123.25 X-7 Y12 Z33"]
-    run = run_sim(sim, [{"op": "mdi", "lines": lines, "read": pins, "clock": "ptt.clock"},
-                        {"op": "read", "pins": READ_PINS}], timeout_s=600)
-    if "start_s" not in run.result:
-        pytest.skip(f"the LinuxCNC simulation does not start here:\n{run.summary()}")
-    return table, run
 
 
 def test_headless_sim_runs_mdi_and_the_true_table_matches_its_twin(smoke) -> None:
@@ -88,15 +54,6 @@ def test_headless_sim_runs_mdi_and_the_true_table_matches_its_twin(smoke) -> Non
     final = run.result["steps"][1]["readings"][0]
     assert final["ptt.model-failures"] == 0 and 0 <= final["ptt.twin-diff"] < TWIN_TOL_MM
     assert step["sim_s"] > 0
-
-
-@pytest.fixture(scope="module")
-def probe_runs(smoke, tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, str], ProbeRun]:
-    """Both machines probed in both kinematics, four simulations at once."""
-    jobs = {(k, mode): (lambda k=k, mode=mode: probing_run(MACHINES[k], tmp_path_factory.mktemp(f"lcnc_{k}_{mode}"),
-                                                           mode))
-            for k, mode in RUNS}
-    return run_all(jobs)
 
 
 def contact_joints(pr: ProbeRun, log: np.ndarray) -> np.ndarray:
@@ -134,7 +91,7 @@ def test_linuxcnc_runs_the_probing_program_and_logs_exact_contacts(probe_runs, k
 def test_pige_identifies_the_true_pige_from_linuxcnc_s_log(probe_runs, key) -> None:
     pr = probe_runs[key]
     assert pr.run.result["ok"], pr.run.summary()
-    ident = import_and_identify(pr.program, pr.log, pr.sim.root / "probe.csv")
+    ident = pr.identification
     truth = pr.machine.pige
     assert set(ident["pige"]) == set(truth)
     z = {k: (ident["pige"][k] - truth[k]) / ident["std"][k] for k in truth}
