@@ -15,7 +15,8 @@ The job is a JSON file named by the environment variable ``PIGE_LCNC_JOB``::
                {"op": "read", "pins": ["ptt.trips"]}]}
 
 Before the steps: estop reset, machine on, every joint homed (the shipped sims home in place).  ``mdi``
-runs each line in MDI mode, waits until the interpreter is idle and the motion queue is empty, and reads
+runs each line in MDI mode, waits until the interpreter is idle, the motion queue empty and the axes in
+position, and reads
 ``read`` HAL pins after each line; ``program`` opens the file and runs it in AUTO until the interpreter is
 idle again; ``hal`` runs ``halcmd`` commands; ``read`` reads pins.  ``clock`` (any step) names a HAL pin
 that counts simulated seconds: the step's simulated time is its change.  A step that raises an error
@@ -90,7 +91,7 @@ class Driver:
 
     def idle(self, timeout: float, what: str) -> None:
         self.wait(lambda s: s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0 and not s.queue_full
-                  and s.state != linuxcnc.RCS_EXEC, timeout, what)
+                  and s.state != linuxcnc.RCS_EXEC and s.inpos, timeout, what)
 
     def mdi(self, step: dict) -> dict:
         self.mode(linuxcnc.MODE_MDI)

@@ -27,7 +27,7 @@ from true_table import COMPONENT_NAME, TrueTable, component_source
 SPHERE_RADIUS_MM = 6.35
 STYLUS_RADIUS_MM = 1.5
 SPHERE_MM = np.array([20.0, 10.0, 15.0])  # table coordinates = machine coordinates at the reference pose
-PROBE_FEED_MM_MIN = 100.0  # with the 1 ms servo period: contacts exact to 1.67 um along the move
+PROBE_FEED_MM_MIN = 50.0  # with the 1 ms servo period: contacts exact to 0.83 um along the move
 CLEARANCE_MM = 1.0
 POSES = 12  # cone points: 13 poses with the reference
 KINEMATICS_CODES = ("M429", "M428")  # the shipped sims' remaps: identity, TCP (sparm=identityfirst)

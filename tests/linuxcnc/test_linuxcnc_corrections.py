@@ -9,10 +9,10 @@ is entered into a fresh copy of the shipped configuration, and the machine is pr
   within noise), the tilts are the true ones (the trt kinematics carry none);
 - (b) pige's own kinematics component (``pige gen --target linuxcnc``) with the ``setp`` lines compensate
   prints: all eight PIGEs the second run finds are the first run's errors.  Then, in TCP mode, MDI moves to
-  work points around the sphere: the true tool point (the true machine's ``tip`` pins) lands on each commanded
-  point, within 1 µm with the identified values, and to the model's second order with the true values
-  entered instead (the kinematics itself, free of identification noise).  The true tool point is the exact
-  rigid-body twin's at the joint feedback (pige's model in the true machine gives the same to 1e-5 mm).
+  work points around the sphere (at 6 mm, at three of the probed poses): the true tool point lands on each
+  commanded point, within 1 µm with the identified values, and to the model's second order with the true
+  values entered instead (the kinematics itself, free of identification noise).  The true tool point is the
+  exact rigid-body twin's at the joint feedback (pige's model in the true machine gives the same to 1e-5 mm).
 
 Four simulations at once; expected errors compared in units of the second run's standard errors.
 """
@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from corrections import enter_trt_pins, kinematics_changes, pige_kinematics, trt_correction, trt_lines
-from loop_setup import MACHINES, SPHERE_MM, Machine, ProbeRun, probing_run, run_all
+from loop_setup import MACHINES, SPHERE_MM, ProbeRun, probing_run, run_all
 
 from conftest import TWIN_TOL_MM
 
@@ -30,36 +30,35 @@ pytestmark = pytest.mark.linuxcnc
 TIP = ["ptt.tip-x", "ptt.tip-y", "ptt.tip-z"]
 JOINTS = [f"joint.{k}.pos-fb" for k in range(5)]
 TARGET_OFFSETS_MM = [(0, 0, 0), (6, 0, 0), (0, 6, 0), (-6, 0, 0), (0, -6, 0), (0, 0, 6)]
-TARGET_ANGLES = [(-30.0, 45.0), (-15.0, -120.0), (-40.0, 200.0)]  # commanded tilt, C [deg]
-SAFE_Z_MM = 60.0
+#: commanded (tilt, C) [deg]: probed poses 3, 5 and 11 of the 13-pose cone of each machine
+TARGET_ANGLES = {"AC": [(-26.3266, -102.4775), (-20.0, -180.0), (-38.9517, -336.5675)],
+                 "BC": [(-26.3266, -12.4775), (-20.0, -90.0), (-38.9517, -246.5675)]}
 
 
-def targets() -> list[tuple[float, float, float, float, float]]:
-    """Work points around the sphere centre at three poses: (x, y, z, tilt, c)."""
-    return [(*(SPHERE_MM + off), t, c) for t, c in TARGET_ANGLES for off in TARGET_OFFSETS_MM]
+def targets(machine: str) -> list[tuple[float, float, float, float, float]]:
+    """Work points around the sphere centre at three probed poses: (x, y, z, tilt, c)."""
+    return [(*(SPHERE_MM + off), t, c) for t, c in TARGET_ANGLES[machine] for off in TARGET_OFFSETS_MM]
 
 
-def move_lines(m: Machine) -> list[str]:
-    """Per target: up to the safe height, the rotary axes, over the point, down to it (TCP: work coordinates)."""
-    out = []
-    for x, y, z, t, c in targets():
-        out += [f"G0 Z{SAFE_Z_MM:g}", f"G0 {m.outer}{t:g} C{c:g}", f"G0 X{x:.4f} Y{y:.4f}", f"G0 Z{z:.4f}"]
-    return out
+def move_lines(machine: str) -> list[str]:
+    """One move per target in work coordinates (TCP); the true machine's probe is off, nothing to avoid."""
+    outer = MACHINES[machine].outer
+    return [f"G0 X{x:.4f} Y{y:.4f} Z{z:.4f} {outer}{t:g} C{c:g}" for x, y, z, t, c in targets(machine)]
 
 
-def tcp_move_steps(m: Machine, name: str) -> list[dict]:
+def tcp_move_steps(machine: str, name: str) -> list[dict]:
     """After the probing run: no more trips; the moves with the identified values, then with the true ones."""
+    m = MACHINES[machine]
     truth = [f"setp {name}.{k.lower()} {v!r}" for k, v in m.pige.items()]
     return [{"op": "hal", "commands": ["setp ptt.trip-radius -1"]},
-            {"op": "mdi", "lines": [f"G43 H{m.stylus[0]}", *move_lines(m)], "read": TIP + JOINTS},
+            {"op": "mdi", "lines": [f"G43 H{m.stylus[0]}", *move_lines(machine)], "read": TIP + JOINTS},
             {"op": "mdi", "lines": ["M429"]}, {"op": "hal", "commands": truth},
-            {"op": "mdi", "lines": ["M428", *move_lines(m)], "read": TIP + JOINTS}]
+            {"op": "mdi", "lines": ["M428", *move_lines(machine)], "read": TIP + JOINTS}]
 
 
-def landed(step: dict, skip: int, pins: list[str]) -> np.ndarray:
-    """The readings of ``pins`` at each target (after its last move), (n, len(pins))."""
-    rows = step["readings"][skip:]
-    return np.array([[rows[4 * k + 3][p] for p in pins] for k in range(len(targets()))])
+def landed(step: dict, pins: list[str]) -> np.ndarray:
+    """The readings of ``pins`` at each target (after the step's first line), (n, len(pins))."""
+    return np.array([[row[p] for p in pins] for row in step["readings"][1:]])
 
 
 @pytest.fixture(scope="session")
@@ -74,9 +73,9 @@ def correction_runs(probe_runs, tmp_path_factory: pytest.TempPathFactory) -> dic
             pivots=trt_lines(m.kind, pins)))
         root = tmp_path_factory.mktemp(f"lcnc_{k}_pige")
         name, source, lines = pige_kinematics(m, params, root / "kins")
-        jobs[(k, "pige")] = (lambda m=m, root=root, name=name, source=source, lines=lines: probing_run(
+        jobs[(k, "pige")] = (lambda m=m, k=k, root=root, name=name, source=source, lines=lines: probing_run(
             m, root, "tcp", extra=kinematics_changes(m.kind, name, lines), components={name: source},
-            after=tcp_move_steps(m, name)))
+            after=tcp_move_steps(k, name)))
     return run_all(jobs)
 
 
@@ -118,11 +117,11 @@ def test_tcp_moves_put_the_true_tool_point_on_target(correction_runs, machine):
     pr = correction_runs[(machine, "pige")]
     assert pr.run.result["ok"], pr.run.summary()
     steps = pr.run.result["steps"]
-    goal = np.array([t[:3] for t in targets()])
+    goal = np.array([t[:3] for t in targets(machine)])
     off = {}
     for label, k in (("identified", 4), ("true", 7)):
-        model = np.linalg.norm(landed(steps[k], 1, TIP) - goal, axis=1)  # the component's (pige's) model
-        twin = np.linalg.norm(pr.table.tip_in_table(landed(steps[k], 1, JOINTS)) - goal, axis=1)  # exact twin
+        model = np.linalg.norm(landed(steps[k], TIP) - goal, axis=1)  # the component's (pige's) model
+        twin = np.linalg.norm(pr.table.tip_in_table(landed(steps[k], JOINTS)) - goal, axis=1)  # exact twin
         assert np.abs(model - twin).max() < TWIN_TOL_MM
         off[label] = twin
     print(f"{machine}: true tool point (exact twin) off the commanded work point, {len(goal)} points: identified "

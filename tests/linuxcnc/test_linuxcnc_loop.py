@@ -21,7 +21,7 @@ missing, or when the simulation cannot start):
   ``motion.probe-input``; an exact rigid-body twin written in the test (CONVENTIONS §2–3) runs beside it and
   the largest distance between the two over the run is checked.  Motion latches the feedback position of the
   period in which the input rose, so every contact lies inside the trip sphere by less than one servo period
-  of probing feed (1.67 µm at F100): checked on every logged contact with the NumPy twin (in TCP mode through
+  of probing feed (0.83 µm at F50): checked on every logged contact with the NumPy twin (in TCP mode through
   the stock inverse kinematics transcribed in :mod:`stock_trt`).
 - **The runs:** both machines, in identity kinematics (the program switches with M429 and back with M428)
   and in the stock TCP kinematics (``--kinematics tcp``), four simulations at once.
