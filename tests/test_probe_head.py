@@ -533,3 +533,27 @@ def test_the_commands_tell_the_head_story(tmp_path, capsys, machine) -> None:
     assert "--tool x,y,z" in capsys.readouterr().err
     assert main(["demo", "--instrument", "sphere-probe", "--machine", machine, "--out", str(tmp_path / "d")]) == 0
     assert "standard errors of its estimate: yes" in capsys.readouterr().out
+
+
+def test_a_pivot_per_axis_is_read_when_the_head_lines_meet(tmp_path) -> None:
+    """--pivot AXIS=x,y,z on a head: the table's pivot places c_nom, the head's pivots must coincide (their place
+    drops out: only the tool matters); a fork head whose C and A lines miss each other is refused."""
+    case = CASES[MIXED]
+    path = tmp_path / "log.txt"
+    path.write_text(oracle_log(MIXED, mixed_poses(), pige=MIXED_TRUTH, tool=case["tool"], sphere=case["sphere"],
+                               table_pivot=case["table_pivot"], head_pivot=case["head_pivot"], sigma_um=0.5, seed=2))
+    pivots = {"C": tuple(case["table_pivot"]), "B": (7.0, -3.0, 222.0)}
+    m = import_probe_log(path, "linuxcnc", ProbeImport(MIXED, (0.0, 0.0, 0.0), R_SPHERE, R_STYLUS, pivots_mm=pivots,
+                                                       tool_mm=tuple(case["tool"])))
+    single = import_probe_log(path, "linuxcnc", ProbeImport(MIXED, tuple(case["table_pivot"]), R_SPHERE, R_STYLUS,
+                                                            tool_mm=tuple(case["tool"])))
+    np.testing.assert_allclose(m.deviation_um, single.deviation_um, atol=1e-9)
+    result = identify(m)
+    for i, name in enumerate(result.parameters):
+        assert abs(result.value(name) - MIXED_TRUTH[name]) <= 4 * result.std[i] + 0.3, name
+    fork = tmp_path / "fork.txt"
+    fork.write_text(oracle_log(FORK, fork_poses()[:3], pige={}, tool=CASES[FORK]["tool"], sphere=CASES[FORK]["sphere"],
+                               table_pivot=np.zeros(3), head_pivot=np.zeros(3), sigma_um=0.0, seed=0))
+    with pytest.raises(InputError, match=r"tool-side axes \(C, A\) through one pivot"):
+        import_probe_log(fork, "linuxcnc", ProbeImport(FORK, (0.0, 0.0, 0.0), R_SPHERE, R_STYLUS, tool_mm=(0, 0, -1.0),
+                                                       pivots_mm={"A": (0.0, 0.0, 0.0), "C": (0.0, 5.0, 0.0)}))

@@ -191,9 +191,10 @@ def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
     """The measurement of a probe log (module docstring)."""
     kern = load_kernels(spec.machine)
     check_tool(kern, spec.tool_mm)
-    if (spec.pivots_mm is not None or spec.kinematics == "tcp") and kern.TOOL_ROTARY:
-        raise InputError(f"{kern.MACHINE_CODE}: a pivot per axis and logs in TCP kinematics are read for table "
-                         "machines; give one --pivot x,y,z and a log probed with RTCP off")
+    if kern.TOOL_ROTARY and (spec.kinematics == "tcp" or not _head_lines_meet(kern, spec.pivots_mm)):
+        raise InputError(f"{kern.MACHINE_CODE}: a head's probe log is read with RTCP off and the lines of its "
+                         f"tool-side axes ({', '.join(kern.TOOL_ROTARY)}) through one pivot (give them the same "
+                         "--pivot, or one --pivot x,y,z)")
     check_options(spec.stylus_offset_mm)
     check_repeated_contacts(log.path, log.xyz_mm, log.angles_deg, log.lines, log.pose_index)
     starts = pose_starts(log)
@@ -209,7 +210,7 @@ def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
     fit = _fit(log, starts, pts, spec, frames)
     check_reference(log.path, int(log.lines[0]), fit.centres_mm[0], spec.sphere_mm,
                     "the program's header (sphere_mm)" if spec.program else "--sphere")
-    nominal = _nominal_centres(kern, angles, fit.centres_mm[0], spec.pivots())
+    nominal = _nominal_centres(kern, angles, fit.centres_mm[0], spec.pivots(), spec.tool_mm, head)
     deviation = -(fit.centres_mm - nominal) * 1e3
     deviation[0] = 0.0
     check_deviations(log.path, deviation, log.lines[starts[:-1]])
@@ -219,11 +220,24 @@ def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
     return m
 
 
-def _nominal_centres(kern: Any, angles: np.ndarray, centre0: np.ndarray,
-                     pivots: dict[str, np.ndarray] | np.ndarray) -> np.ndarray:
-    """``c_nom(θ)``: the nominal motion of ``c(0)``, shape=(n, 3) [mm] (one pivot, or one per axis on a table)."""
+def _head_lines_meet(kern: Any, pivots: dict[str, Any] | None) -> bool:
+    """Whether the tool-side axis lines go through one pivot (then ``h = (R_t − I)·tool``)."""
+    if pivots is None:
+        return True
+    heads = [np.asarray(pivots[a], dtype=float) for a in kern.TOOL_ROTARY]
+    return all(np.allclose(p, heads[0], rtol=0.0, atol=1e-9) for p in heads)
+
+
+def _nominal_centres(kern: Any, angles: np.ndarray, centre0: np.ndarray, pivots: dict[str, np.ndarray] | np.ndarray,
+                     tool_mm: Any = None, head_mm: np.ndarray | None = None) -> np.ndarray:
+    """``c_nom(θ)``: the nominal motion of ``c(0)``, shape=(n, 3) [mm] (one pivot, or one per axis).
+
+    With a pivot per axis it is the kernels' RTCP command of a tool point at ``c(0)``; on a head that command
+    also undoes the head's turn, ``−h``, which is added back (``head_mm``).
+    """
     if isinstance(pivots, dict):
-        return np.asarray(kern.linear_commands(angles, centre0, pivots, None))
+        lin = np.asarray(kern.linear_commands(angles, centre0, pivots, tool_mm))
+        return lin if head_mm is None or tool_mm is None else lin + head_mm
     return pivots + np.einsum("nij,j->ni", kern.workpiece_rotation(angles), centre0 - pivots)
 
 
