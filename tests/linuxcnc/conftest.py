@@ -1,11 +1,12 @@
-"""Shared by the LinuxCNC tests: skip without LinuxCNC, the smoke run, the probing runs of both machines in both
-kinematics (four simulations at once, once per session)."""
+"""Shared by the LinuxCNC tests: skip without LinuxCNC, the smoke run, and round one: the probing runs of both
+machines in both kinematics and the program's refusals (seven simulations at once, once per session)."""
 
 from __future__ import annotations
 
 import pytest
 from lcnc_harness import compile_component, make_sim, run_sim, unavailable
 from loop_setup import MACHINES, MODES, READ_PINS, ProbeRun, probing_run, run_all
+from safety_cases import CASES, safety_run
 from true_table import COMPONENT_NAME, component_source
 
 TWIN_TOL_MM = 1e-5  # the emitted model is first order in the PIGEs: second order here ~ 15 um x 75 urad ~ 1e-6 mm
@@ -36,11 +37,22 @@ def smoke(lcnc: None, tmp_path_factory: pytest.TempPathFactory):
 
 
 @pytest.fixture(scope="session")
-def probe_runs(smoke, tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, str], ProbeRun]:
-    """Both machines probed in both kinematics, four simulations at once."""
+def round_one(smoke, tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """Both machines probed in both kinematics, and the program's refusals (:mod:`safety_cases`): seven
+    simulations at once."""
     jobs = {(k, mode): (lambda k=k, mode=mode: probing_run(MACHINES[k], tmp_path_factory.mktemp(f"lcnc_{k}_{mode}"),
                                                            mode))
             for k, mode in RUNS}
+    jobs |= {("safety", case): (lambda case=case: safety_run(case, tmp_path_factory.mktemp("lcnc_safety")))
+             for case in CASES}
     return run_all(jobs)
 
 
+@pytest.fixture(scope="session")
+def probe_runs(round_one: dict) -> dict[tuple[str, str], ProbeRun]:
+    return {key: round_one[key] for key in RUNS}
+
+
+@pytest.fixture(scope="session")
+def refused(round_one: dict) -> dict:
+    return {case: round_one[("safety", case)] for case in CASES}
