@@ -265,50 +265,104 @@ def test_runs_fitted_with_different_effects_are_noted() -> None:
     assert len(other.notes) == 1 and "none vs angular_error_C" in other.notes[0]
 
 
-def test_twelve_adds_started_at_once_on_a_new_database_all_succeed(tmp_path) -> None:
-    """The first migration must be safe under concurrency: no 'table schema_version already exists'."""
-    import subprocess
+# Racers for the concurrency tests: one fresh interpreter (single-threaded: OpenBLAS kept to one thread)
+# imports the code once, forks one process per call, and releases them all at once by closing a pipe they
+# block on (a starting gun: every racer returns from its read at the same instant, after every import).
+# Each racer is a separate process with its own database connection, as twelve `pige` commands would be;
+# forking a pre-imported interpreter instead of starting twelve saves their imports (~1.4 s CPU each) and
+# makes the start tighter than a wall-clock instant agreed in advance.
+RACE = """
+import importlib, json, os, sys, traceback
+module, name = sys.argv[1].split(":")
+func = getattr(importlib.import_module(module), name)
+spec = json.loads(sys.argv[2])
+for extra in spec["preload"]:
+    importlib.import_module(extra)
+
+
+def racer(args, gun_r, log):
+    fd = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    status = 1
+    try:
+        os.read(gun_r, 1)  # returns when the parent closes the pipe
+        result = func(*args)
+        status = result if isinstance(result, int) else 0
+    except SystemExit as exc:
+        status = exc.code if isinstance(exc.code, int) else 1
+    except BaseException:
+        traceback.print_exc()
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+
+
+out = []
+for r, calls in enumerate(spec["rounds"]):
+    gun_r, gun_w = os.pipe()
+    children = []
+    for i, args in enumerate(calls):
+        log = os.path.join(spec["folder"], f"racer{r}-{i}.log")
+        pid = os.fork()
+        if pid == 0:
+            os.close(gun_w)
+            racer(args, gun_r, log)
+        children.append((pid, log))
+    os.close(gun_r)
+    os.close(gun_w)  # the starting gun
+    results = []
+    for pid, log in children:
+        _, status = os.waitpid(pid, 0)
+        with open(log, encoding="utf-8", errors="replace") as f:
+            results.append([os.waitstatus_to_exitcode(status), f.read()])
+    out.append(results)
+print(json.dumps(out))
+"""
+
+
+def _race(func: str, rounds: list[list[list[object]]], folder: Path, preload: tuple[str, ...] = ()) -> list[list]:
+    """Per round, ``func(*args)`` for every ``args`` of the round in separate processes started at once (RACE);
+    the rounds one after the other.  Returns per round ``[exit status, output]`` per call."""
     import sys
 
-    from pige_sym.model.trajectories import cone_frustum
-    from pige_sym.simulation.simulator import random_pige, simulate
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    spec = json.dumps({"rounds": rounds, "folder": str(folder), "preload": list(preload)})
+    done = subprocess.run([sys.executable, "-c", RACE, func, spec], capture_output=True, text=True, timeout=300,
+                          env=env, check=False)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
+
+def test_twelve_adds_started_at_once_on_a_new_database_all_succeed(tmp_path) -> None:
+    """The first migration must be safe under concurrency: no 'table schema_version already exists'.
+
+    Twelve ``pige history add`` (``main`` as ``python -m pige_sym`` runs it) in twelve processes released at
+    one instant on a new SQLite database: every one succeeds and the database holds all twelve runs."""
     files = []
     for i in range(12):
         sim = simulate(AC, cone_frustum(AC, points=12), pige=random_pige(AC, i), noise_um=0.3, seed=i)
         files.append(sim.write(tmp_path / f"run{i}.csv")[0])
     db = tmp_path / "new.db"
-    procs = [subprocess.Popen([sys.executable, "-m", "pige_sym", "history", "add", str(f), "--machine-id", "M-7",
-                               "--db", str(db), "--method", "gauss-newton", "--date", f"2026-01-{i + 1:02d}"],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for i, f in enumerate(files)]
-    results = [p.communicate(timeout=300) for p in procs]
-    failed = [(p.returncode, err) for p, (_, err) in zip(procs, results, strict=True) if p.returncode != 0]
+    calls = [[["history", "add", str(f), "--machine-id", "M-7", "--db", str(db), "--method", "gauss-newton",
+               "--date", f"2026-01-{i + 1:02d}"]] for i, f in enumerate(files)]
+    [results] = _race("pige_sym.cli.main:main", [calls], tmp_path,
+                      preload=("pige_sym.cli.history", "pige_sym.verdict.history", "pige_sym.diagnosis.diagnose",
+                               "pige_sym.identification.least_squares", "pige_sym.measurements.rtest"))
+    failed = [(status, out) for status, out in results if status != 0]
     assert not failed, failed
-    from pige_sym.verdict.history.store import connect, list_runs
-
+    assert all("added run" in out for _, out in results)
     assert len(list_runs(connect(f"sqlite:///{db}"), "M-7")) == 12
 
 
-CONNECT_AT = """
-import sys, time
-from pige_sym.verdict.history.store import connect
-time.sleep(max(0.0, float(sys.argv[2]) - time.time()))
-connect(sys.argv[1])
-"""
-
-
 def test_the_first_migration_is_safe_when_twelve_processes_connect_at_the_same_instant(tmp_path) -> None:
-    """Twelve processes (not forks: a fork of a threaded test run can deadlock) connect at one agreed instant."""
-    import subprocess
-    import sys
-    import time
-
-    for trial in range(3):
-        url = f"sqlite:///{tmp_path / f'race{trial}.db'}"
-        start = time.time() + 4.0
-        procs = [subprocess.Popen([sys.executable, "-c", CONNECT_AT, url, repr(start)], stderr=subprocess.PIPE,
-                                  text=True) for _ in range(12)]
-        errors = [p.communicate(timeout=120)[1] for p in procs]
-        failed = [e.strip().splitlines()[-1] for p, e in zip(procs, errors, strict=True) if p.returncode != 0]
+    """Twelve processes (not forks of this test run: a fork of a threaded run can deadlock; forks of a fresh
+    single-threaded interpreter, RACE) connect to a new database at one instant, three times."""
+    urls = [f"sqlite:///{tmp_path / f'race{trial}.db'}" for trial in range(3)]
+    rounds = _race("pige_sym.verdict.history.store:connect", [[[url]] * 12 for url in urls], tmp_path)
+    for url, results in zip(urls, rounds, strict=True):
+        failed = [out.strip().splitlines()[-1] for status, out in results if status != 0]
         assert not failed, failed[:2]
+        with connect(url).connect() as conn:
+            assert conn.execute(sa.select(sa.func.count()).select_from(T.schema_version)).scalar() == len(MIGRATIONS)
