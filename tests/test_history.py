@@ -216,6 +216,9 @@ def test_joint_statistic_matches_an_independent_computation() -> None:
     assert comp.p_value == pytest.approx(stats.f.sf(t2 / 8, 8, min(a.dof, b.dof)), rel=1e-6)
     ey = next(c for c in comp.changes if c.parameter == "EY0A")
     assert ey.std == pytest.approx(np.sqrt(cov[0, 0])) and ey.z == pytest.approx(d[0] / np.sqrt(cov[0, 0]))
+    va, vb = a.covariance[0, 0], b.covariance[0, 0]
+    welch = (va + vb) ** 2 / (va**2 / a.dof + vb**2 / b.dof)
+    assert ey.p_value == pytest.approx(2 * stats.t.sf(abs(ey.z), welch), rel=1e-9)
 
 
 def test_undetermined_parameters_are_not_tested() -> None:
