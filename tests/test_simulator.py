@@ -9,6 +9,8 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from conftest import REPO, reference_files, require_shared
 from pige_sym import load_kernels
@@ -63,6 +65,23 @@ def test_figure_eight_and_steps_shapes(code) -> None:
     appr = approach_directions(st.angles_deg)
     assert {1, -1} <= set(appr[:, 1].tolist())  # both directions of approach
     assert np.all(np.diff(st.t_s) == 10.0)
+
+
+def _approach_by_rows(a: np.ndarray) -> np.ndarray:
+    """Oracle, row by row: the sign of the last non-zero move of each axis so far, 0 before any move."""
+    out = np.zeros(a.shape, dtype=int)
+    for i in range(1, a.shape[0]):
+        step = np.sign(a[i] - a[i - 1]).astype(int)
+        out[i] = np.where(step != 0, step, out[i - 1])
+    return out
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 2), st.lists(st.lists(st.integers(-2, 2), min_size=2, max_size=2), max_size=25))
+def test_approach_directions_is_the_last_move_row_by_row(k: int, rows: list[list[int]]) -> None:
+    a = np.array(rows, dtype=float).reshape(-1, 2)[:, :k] if k else np.array([r[0] for r in rows], dtype=float)
+    got = approach_directions(a)
+    assert got.shape == a.shape and got.dtype == np.int_ and np.array_equal(got, _approach_by_rows(a))
 
 
 @pytest.mark.parametrize("name", ["ac_cone_exact", "bc_cone_exact", "ac_fig8_exact", "bc_fig8_clean",

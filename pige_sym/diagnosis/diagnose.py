@@ -122,6 +122,7 @@ from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import Measurement
 from pige_sym.measurements.probe_trigger import read_sensitivities
 from pige_sym.model.effects import EffectSpec
+from pige_sym.model.trajectories import approach_directions
 
 __all__ = ["DiagnosisResult", "Finding", "Rejected", "diagnose"]
 
@@ -189,25 +190,13 @@ class _Setup:
         return row_residuals(design, np.eye(len(used)), beta, self.m.deviation_um, rows)
 
 
-def _approach(angles_deg: np.ndarray) -> np.ndarray:
-    """Sign of the last non-zero move of each axis, shape=(n, k) (``approach_directions``, vectorised)."""
-    step = np.sign(np.diff(angles_deg, axis=0)).astype(int)
-    n = angles_deg.shape[0]
-    out = np.zeros(angles_deg.shape, dtype=int)
-    pos = np.where(step != 0, np.arange(1, n)[:, None], 0)
-    last = np.maximum.accumulate(pos, axis=0)  # row (1-based in step) of the last move, 0 = none yet
-    filled = np.take_along_axis(np.vstack([np.zeros((1, step.shape[1]), dtype=int), step]), last, axis=0)
-    out[1:] = filled
-    return out
-
-
 def _setup(m: Measurement, candidates: list[str] | None) -> _Setup:
     kern = load_kernels(m.machine)
     if m.frame == "table":
         m = Measurement(**{**m.__dict__, "deviation_um": m.deviation_machine_um(kern), "frame": "machine"})
     if m.n_rows < 3:
         raise InputError(f"{m.path or 'measurement'}: {m.n_rows} rows cannot be diagnosed: measure more points")
-    approach = _approach(m.angles_deg)
+    approach = approach_directions(m.angles_deg)
     probe = instrument(m) == "sphere-probe"
     layout = build_layout(kern, m.angles_deg, m.t_s, approach, candidates, table_drift=probe,
                           probe_sensitivity=read_sensitivities(m) if probe else None, reference_centre=probe)

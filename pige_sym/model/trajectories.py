@@ -71,9 +71,12 @@ def approach_directions(angles_deg: np.ndarray) -> np.ndarray:
     """Sign of the last non-zero move of each axis, shape=(n, k) of {−1, 0, +1}."""
     a = np.asarray(angles_deg, dtype=float)
     out = np.zeros(a.shape, dtype=int)
+    if a.shape[0] < 2:
+        return out
     step = np.sign(np.diff(a, axis=0)).astype(int)
-    for i in range(1, a.shape[0]):
-        out[i] = np.where(step[i - 1] != 0, step[i - 1], out[i - 1])
+    rows = np.arange(1, a.shape[0]).reshape((-1,) + (1,) * (a.ndim - 1))
+    last = np.maximum.accumulate(np.where(step != 0, rows, 0), axis=0)  # row of the last move, 0 = none yet
+    out[1:] = np.take_along_axis(np.concatenate([np.zeros_like(step[:1]), step]), last, axis=0)
     return out
 
 
