@@ -1,4 +1,8 @@
-"""Shared test helpers: location of ../shared and of the reference data; one BLAS thread."""
+"""Shared fixtures: one BLAS thread, a temporary kernel cache, bytecode kept under PYTHONDONTWRITEBYTECODE.
+
+The checkout's and ../shared's locations and the reference reader are in ``testdata.py``: tests import them from
+there, never from ``conftest`` (a conftest.py in a sub-folder, as tests/linuxcnc has, replaces this one as
+the module ``conftest``)."""
 
 from __future__ import annotations
 
@@ -12,48 +16,7 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import json  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-
-REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
-REFERENCE = SHARED / "reference"
-
-
-def reference_files(pattern: str) -> list[Path]:
-    """Reference CSVs matching a glob, or [] when ../shared is absent."""
-    return sorted(REFERENCE.glob(pattern)) if REFERENCE.is_dir() else []
-
-
-def require_shared() -> None:
-    if not REFERENCE.is_dir():
-        pytest.skip("../shared/reference is absent (a user's clone has none)")
-
-
-def load_reference(path: Path) -> tuple[dict[str, str], dict[str, np.ndarray], dict]:
-    """Minimal independent reader of a reference CSV: (metadata, columns, truth)."""
-    meta: dict[str, str] = {}
-    rows = []
-    header: list[str] = []
-    for line in path.read_text().splitlines():
-        if line.startswith("#"):
-            if ":" in line:
-                k, v = line[1:].split(":", 1)
-                meta[k.strip()] = v.strip()
-            continue
-        if not line.strip():
-            continue
-        if not header:
-            header = line.split(",")
-            continue
-        rows.append([float(x) for x in line.split(",")])
-    arr = np.array(rows)
-    cols = {h: arr[:, i] for i, h in enumerate(header)}
-    truth = json.loads(path.with_name(path.stem + ".truth.json").read_text())
-    return meta, cols, truth
 
 
 @pytest.fixture(autouse=True, scope="session")

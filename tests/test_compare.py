@@ -8,13 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import load_reference
 from pige_sym.cli.main import main
 from pige_sym.kernels import load_kernels
 from pige_sym.model.effects import EffectContext, parse_effect
 from pige_sym.model.trajectories import cone_frustum
 from pige_sym.simulation.simulator import random_pige, simulate
 from pige_sym.verdict.compare import compare_measurements
+from testdata import load_reference
 
 AC = "wC'A'bXYZ(C1)t"
 EFFECT = "angular_error_C:harmonic=2,cos_urad=12,sin_urad=-8"

@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from conftest import REFERENCE, reference_files, require_shared
 from pige_sym.diagnosis.diagnose import diagnose
 from pige_sym.diagnosis.residual_plots import residual_plots
 from pige_sym.measurements.rtest import read_measurement
 from pige_sym.model.effects import parse_effect
 from pige_sym.model.trajectories import cone_frustum, steps
 from pige_sym.simulation.simulator import random_pige, simulate
+from testdata import REFERENCE, reference_files, require_shared
 
 AC, BC = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t"
 AXES = {AC: ("A", "C"), BC: ("B", "C")}

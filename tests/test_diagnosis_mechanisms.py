@@ -8,11 +8,11 @@ import sys
 
 import numpy as np
 
-from conftest import REPO
 from pige_sym.diagnosis.diagnose import diagnose
 from pige_sym.model.effects import EffectInstance, EffectSpec, parse_effect
 from pige_sym.model.trajectories import cone_frustum, steps
 from pige_sym.simulation.simulator import random_pige, simulate
+from testdata import REPO
 
 AC = "wC'A'bXYZ(C1)t"
 

@@ -161,7 +161,7 @@ def test_the_same_file_is_refused(db_url: str, tmp_path: Path, capsys: pytest.Ca
 
 def test_verdict_is_stored_and_machine_structure_checked(db_url: str, tmp_path: Path,
                                                          capsys: pytest.CaptureFixture[str]) -> None:
-    from conftest import REPO
+    from testdata import REPO
 
     csv = _write_run(tmp_path / "run.csv", 22)
     assert main(["history", "add", str(csv), "--machine-id", "M", "--db", db_url, "--json",

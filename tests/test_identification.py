@@ -9,13 +9,13 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import REPO, reference_files, require_shared
 from pige_sym.identification.least_squares import identify
 from pige_sym.identification.result import IdentificationResult
 from pige_sym.measurements.rtest import read_measurement
 from pige_sym.model.effects import parse_effect
 from pige_sym.model.trajectories import cone_frustum, figure_eight
 from pige_sym.simulation.simulator import random_pige, simulate
+from testdata import REPO, reference_files, require_shared
 
 AC, BC = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t"
 BALLS = {AC: (120.0, 0.0, 80.0), BC: (60.0, 90.0, 110.0)}

@@ -9,11 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import reference_files, require_shared
 from pige_sym.errors import FileFormatError
 from pige_sym.measurements.measurement import Measurement
 from pige_sym.measurements.rtest import read_angle_file, read_measurement
 from pige_sym.measurements.rtest_writer import MeasurementWriter, write_measurement
+from testdata import reference_files, require_shared
 
 GOOD = """# pige-rtest 1
 # machine: wC'A'bXYZ(C1)t

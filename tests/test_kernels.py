@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO, load_reference, reference_files, require_shared
 from pige_sym import load_kernels, parse_machine_code
 from pige_sym.errors import UnsupportedMachineError
 from pige_sym.kernels import SHIPPED_MACHINES
+from testdata import REPO, load_reference, reference_files, require_shared
 
 UNIT = {0: np.array([1.0, 0, 0]), 1: np.array([0, 1.0, 0]), 2: np.array([0, 0, 1.0])}
 # per rotary letter: the machine-axis index of (position error 1, position error 2, orientation 1, orientation 2)

@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO
 from pige_sym.cli.main import main
 from pige_sym.compensation.study import compensation_study
 from pige_sym.kernels import load_kernels
@@ -20,6 +19,7 @@ from pige_sym.model.trajectories import cone_frustum, figure_eight
 from pige_sym.nc.program import make_rtest_program
 from pige_sym.report import ReportData, build_report, gather_report, write_report
 from pige_sym.simulation.simulator import random_pige, simulate
+from testdata import REPO
 
 AC = "wC'A'bXYZ(C1)t"
 WEIRD = 'odd <b>&"name'

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO
 from pige_sym.cli.main import main
 from pige_sym.report import gather_report, write_report
 from pige_sym.simulation.simulator import random_pige
+from testdata import REPO
 
 AC = "wC'A'bXYZ(C1)t"
 TOLERANCES = REPO / "examples" / "tolerances.json"

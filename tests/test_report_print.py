@@ -21,9 +21,9 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO
 from pige_sym.cli.main import main
 from pige_sym.simulation.simulator import random_pige
+from testdata import REPO
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 PDFTOTEXT = shutil.which("pdftotext")

@@ -12,7 +12,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import REPO, reference_files, require_shared
 from pige_sym import load_kernels
 from pige_sym.errors import InputError
 from pige_sym.measurements.rtest import read_measurement
@@ -20,6 +19,7 @@ from pige_sym.model.effects import EffectContext, EffectSpec, parse_effect
 from pige_sym.model.projection import parse_projection
 from pige_sym.model.trajectories import approach_directions, cone_frustum, figure_eight, from_angle_file, steps
 from pige_sym.simulation.simulator import parse_pige, random_pige, simulate
+from testdata import REPO, reference_files, require_shared
 
 AC, BC = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t"
 
@@ -88,7 +88,7 @@ def test_approach_directions_is_the_last_move_row_by_row(k: int, rows: list[list
                                   "ac_steps_angular_error_C"])
 def test_trajectories_reproduce_reference_angles(name) -> None:
     require_shared()
-    from conftest import REFERENCE
+    from testdata import REFERENCE
 
     m = read_measurement(REFERENCE / f"{name}.csv")
     if "cone" in name:
@@ -117,7 +117,7 @@ def test_simulating_reference_truth_reproduces_exact_files(tmp_path, path) -> No
 
 def test_simulated_angular_error_matches_reference() -> None:
     require_shared()
-    from conftest import REFERENCE
+    from testdata import REFERENCE
 
     m = read_measurement(REFERENCE / "ac_steps_angular_error_C.csv")
     truth = json.loads((REFERENCE / "ac_steps_angular_error_C.truth.json").read_text())

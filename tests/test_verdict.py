@@ -10,12 +10,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import REPO
 from pige_sym.cli.main import main
 from pige_sym.errors import FileFormatError
 from pige_sym.model.trajectories import cone_frustum
 from pige_sym.simulation.simulator import random_pige, simulate
 from pige_sym.verdict.check import Estimates, check, decide, overall, read_tolerances, tolerances_from_dict
+from testdata import REPO
 
 AC = "wC'A'bXYZ(C1)t"
 FMT = "pige-tolerances 1"
