@@ -190,3 +190,14 @@ def test_tcp_kinematics_never_moves_in_an_unknown_direction() -> None:
     edited = "\n".join(lines[:k] + [f"G0 {words[-1]}"] + lines[k + 1:]) + "\n"
     with pytest.raises(NCProgramError, match="X, Y and Z"):
         verify_probe_program(edited, "linuxcnc", tcp, ("A", "C"))
+
+
+def test_lengths_and_offsets_with_many_digits_read_back(tmp_path) -> None:
+    """The stated stylus length and work offset keep their digits: the program reads back and checks them."""
+    ctrl = ProbeController(rtcp_off="M429", rtcp_on="M428", stylus_tool=7, stylus_length_mm=123.4567,
+                           work_offset="G55", work_offset_mm=(-14.990659, 250.123456, -0.0000004))
+    setup = dataclasses.replace(STOCK, controller=ctrl)
+    text = _program(setup)
+    assert "o901 if [ABS[#5403 - 123.4567] GT 0.0005]" in text and "[ABS[#5241 - -14.990659] GT 0.0005]" in text
+    verify_probe_program(text, "linuxcnc", setup, ("A", "C"))
+    assert header_setup(text, "p").controller.work_offset_mm == (-14.990659, 250.123456, 0.0)

@@ -128,7 +128,10 @@ class ProbeController:
 
 
 def _g(v: float) -> str:
-    return f"{float(v):.6g}" if abs(v) >= 1e-4 or v == 0 else f"{float(v):.4f}"
+    """A length [mm] as written in the header and in G-code expressions: to 1 nm, trailing zeros dropped
+    (six significant digits would round a 123.4567 mm stylus to 123.457, which the read-back then refuses)."""
+    text = f"{float(v):.6f}".rstrip("0").rstrip(".")
+    return "0" if text in ("", "-0") else text
 
 
 def controller_from_header(items: Mapping[str, str], path: str) -> ProbeController:
