@@ -95,6 +95,22 @@ def test_damaged_logs_are_refused_with_the_line(probe_log, tmp_path, capsys) -> 
         refused(*_import(capsys, log, tmp_path / "x.csv")[::2], said)
 
 
+def test_a_repeated_pose_may_share_a_contact_with_the_first(probe_log, tmp_path, capsys) -> None:
+    """A drift check probes a pose again at the same angles: a contact written to the same digits (the probing
+    axis of a 0.1 µm log repeats) is not a duplicated line; the same pose pasted twice is."""
+    lines = probe_log.read_text().splitlines(keepends=True)
+    def nudged(line: str) -> str:  # the X coordinate one digit off: another trip at the same pose
+        x, rest = line.split(" ", 1)
+        return f"{x[:-1]}{(int(x[-1]) + 3) % 10} {rest}"
+
+    again = [ln if k == 0 else nudged(ln) for k, ln in enumerate(lines[5:10])]
+    log = tmp_path / "repeat.txt"
+    log.write_text("".join(lines + again))
+    code, out, err = _import(capsys, log, tmp_path / "r.csv")
+    assert code == 0, err
+    assert read_measurement(tmp_path / "r.csv").n_rows == 14
+
+
 def test_the_coplanar_or_identical_contacts_of_a_pose_are_refused_by_the_fit() -> None:
     from pige_sym.errors import InputError
     from pige_sym.measurements.sphere_fit import fit_centres
@@ -223,9 +239,9 @@ def test_what_the_reader_would_refuse_is_never_written(probe_log, tmp_path) -> N
 
     m = import_probe_log(probe_log, "linuxcnc", ProbeImport("wC'A'bXYZ(C1)t", (0.0, 0.0, 0.0), 12.7, 1.5))
     out = tmp_path / "p.csv"
-    write_measurement(m, out, verify=verify_written(out))
+    write_measurement(m, out, verify=verify_written(out, m))
     assert read_measurement(out).n_rows == m.n_rows
     m.optional["cov_xx_um2"] = -m.optional["cov_xx_um2"]
     with pytest.raises(InputError, match="not written: pige's reader refuses .* not positive definite"):
-        write_measurement(m, tmp_path / "q.csv", verify=verify_written(tmp_path / "q.csv"))
+        write_measurement(m, tmp_path / "q.csv", verify=verify_written(tmp_path / "q.csv", m))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.csv"]

@@ -179,3 +179,51 @@ def test_the_chunked_writer_writes_exactly_the_rows(tmp_path) -> None:
                     extra_columns={"note": [f"n{i}" for i in range(n)]})
     text = "".join(measurement_chunks(m, rows=7))
     assert text == header_text(m) + "".join(row_text(m, i) + "\n" for i in range(n))
+
+
+@settings(max_examples=60, deadline=None)
+@given(rows=st.integers(2, 12), big=st.sampled_from([0.0, 2e5, -3e5, 1e4]), where=st.integers(0, 11),
+       repeat=st.booleans(), reference=st.sampled_from([0.0, 1e-6, 0.5]), backwards=st.booleans(),
+       column=st.sampled_from(["dx_um", "sd_um", "cov_xy_um2", "cx_mm", "A_deg"]))
+def test_the_written_file_is_checked_exactly_as_the_reader_would(tmp_path_factory, rows, big, where, repeat,
+                                                                  reference, backwards, column) -> None:
+    """``check_as_read`` (import-probe's check before publishing its file) refuses exactly what ``read_measurement``
+    refuses in the same file, with the same message: the rows are not parsed twice, the verdict is the same."""
+    from pige_sym.measurements.measurement import Measurement
+    from pige_sym.measurements.rtest import check_as_read, read_measurement
+    from pige_sym.measurements.rtest_writer import write_measurement
+
+    rng = np.random.default_rng(rows)
+    dev = rng.normal(size=(rows, 3))
+    dev[0] = reference
+    angles = np.column_stack([np.linspace(0, 30, rows), np.linspace(0, 300, rows)])
+    t = np.arange(rows, dtype=float)
+    if backwards and rows > 2:
+        t[-1] = 0.5
+    optional = {"sd_um": rng.uniform(0, 1, rows), "cov_xy_um2": rng.normal(size=rows), "cx_mm": rng.normal(size=rows)}
+    i = where % rows
+    if column == "dx_um":
+        dev[i, 0] += big
+    elif column == "A_deg":
+        angles[i, 0] += big
+    else:
+        optional[column][i] += big
+    if repeat:
+        dev[-1], angles[-1], t[-1] = dev[-2], angles[-2], t[-2]
+        for v in optional.values():
+            v[-1] = v[-2]
+    log_line = [str(k) for k in range(rows)]
+    if repeat:
+        log_line[-1] = log_line[-2]
+    m = Measurement(machine="wC'A'bXYZ(C1)t", ball_mm=np.array([1.0, 2.0, 3.0]), t_s=t, angles_deg=angles,
+                    deviation_um=dev, rotary_axes=("A", "C"), optional=optional, extra_columns={"log_line": log_line})
+    path = tmp_path_factory.mktemp("w") / "m.csv"
+    write_measurement(m, path)
+    outcomes = []
+    for check in (lambda: read_measurement(path), lambda: check_as_read(path, m)):
+        try:
+            check()
+            outcomes.append("read")
+        except FileFormatError as exc:
+            outcomes.append(str(exc))
+    assert outcomes[0] == outcomes[1]

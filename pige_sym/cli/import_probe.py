@@ -26,7 +26,7 @@ def _run(args: argparse.Namespace) -> int:
     spec = _spec(args)
     out = check_output(args.out, force=args.force, inputs=[x for x in (args.log, args.program) if x], what="--out")
     m = import_probe_log(args.log, args.format, spec)
-    write_measurement(m, out, verify=verify_written(out))  # read back before it replaces anything
+    write_measurement(m, out, verify=verify_written(out, m))  # read back before it replaces anything
     r_eff_text, _, how = m.metadata["r_eff_mm"].partition(" ")
     print(f"wrote {out}: {m.n_rows} poses, {int(m.optional['n_samples'].sum())} contacts; R_eff "
           f"{float(r_eff_text):.4f} mm {how}, contact sigma {float(m.metadata['contact_sigma_um']):.3f} um; largest "

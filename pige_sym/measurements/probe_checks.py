@@ -5,10 +5,12 @@ each still yields sphere centres and deviations; identify would then print axis 
 import checks, in this order, and refuses with the file, the line and the option to check:
 
 1. **Options** (:func:`check_options`): ``--stylus-offset`` within ±:data:`MAX_STYLUS_OFFSET_MM`.
-2. **Repeated contacts** (:func:`check_repeated_contacts`): a log line whose X Y Z and angles repeat an earlier
-   line exactly, to the last written digit.  LinuxCNC writes no line for a trip at the previous position and a
-   probe never trips twice at the same nanometre, so it is a duplicated line: it would count a contact twice
-   and shrink the contact σ.
+2. **Repeated contacts** (:func:`check_repeated_contacts`): a contact whose X Y Z and angles repeat another of
+   its own pose exactly (to the last written digit), or a pose repeating an earlier one contact for contact.
+   The contacts of one pose probe different directions and LinuxCNC writes no line for a trip at the previous
+   position, so it is a duplicated line: it would count a contact twice and shrink the contact σ.  Poses
+   repeated at the same angles (drift measurements) are not compared contact by contact: a probing axis
+   written to 0.1 µm (Heidenhain) can repeat a value.
 3. **Poses** (:func:`check_pose_count`): the reference pose and enough others that identify can fit the
    machine's location errors (``3(n − 1) > P``), not a file identify then calls "no data rows".
 4. **Contacts on a sphere** (:func:`check_contact_sigma`): the contacts' robust scatter about their own poses'
@@ -59,29 +61,48 @@ def check_options(stylus_offset_mm: float) -> None:
 
 
 def check_repeated_contacts(path: str, xyz_mm: np.ndarray, angles_deg: np.ndarray, lines: np.ndarray,
-                            pose_index: np.ndarray | None = None) -> None:
-    """Refuse a log line that repeats an earlier one exactly (module docstring, 1).
+                            starts: np.ndarray) -> None:
+    """Refuse duplicated log lines (module docstring, 2): a contact equal to another of its own pose (two contacts
+    of one pose probe different directions), or a whole pose equal, contact for contact, to an earlier one (a
+    block pasted twice).  Two poses at the same angles (a repeated pose, a drift measurement) may share a
+    coordinate or even a contact to the written digit; they are not compared contact by contact.
 
     Parameters
     ----------
     xyz_mm : (N, 3), angles_deg : (N, k), lines : (N,)
         The contacts as read, their 1-based lines.
-    pose_index : (N,) or None
-        The program's pose numbers (PIGE layout); a repeated contact there is the same X Y Z in the same pose.
+    starts : (n + 1,)
+        Where each pose begins (:func:`~pige_sym.measurements.probe_log.pose_starts`).
     """
-    key = np.column_stack([xyz_mm, angles_deg] + ([] if pose_index is None else [pose_index]))
+    key = np.column_stack([xyz_mm, angles_deg])
     if len(key) < 2:
         return
-    order = np.lexsort(key.T[::-1])
-    same = (key[order[1:]] == key[order[:-1]]).all(axis=1)
-    if not same.any():
-        return
-    pairs = np.column_stack([order[:-1][same], order[1:][same]])
-    pairs.sort(axis=1)
-    first, repeat = pairs[np.argmin(pairs[:, 1])]
-    raise FileFormatError(path, int(lines[repeat]), f"this contact repeats line {int(lines[first])} exactly (X Y Z "
-                          "and angles to the last digit): a duplicated log line (a probe never trips twice at the "
-                          "same point; LinuxCNC writes no line for a trip at the previous position); remove it")
+    pose = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
+    order = np.lexsort((*key.T[::-1], pose))  # by pose, then by the contact's numbers
+    same = (key[order[1:]] == key[order[:-1]]).all(axis=1) & (pose[order[1:]] == pose[order[:-1]])
+    found = [tuple(sorted(p)) for p in np.column_stack([order[:-1][same], order[1:][same]])]
+    found += _repeated_poses(key, starts)
+    if found:
+        first, repeat = min(found, key=lambda p: p[1])
+        raise FileFormatError(path, int(lines[repeat]), f"this contact repeats line {int(lines[first])} exactly "
+                              "(X Y Z and angles to the last digit): a duplicated log line (a probe never trips "
+                              "twice at the same point; LinuxCNC writes no line for a trip at the previous "
+                              "position); remove it")
+
+
+def _repeated_poses(key: np.ndarray, starts: np.ndarray) -> list[tuple[int, int]]:
+    """(first contact, its repeat) of poses equal contact for contact to an earlier pose of as many contacts."""
+    counts = np.diff(starts)
+    out = []
+    for c in np.unique(counts):
+        poses = np.flatnonzero(counts == c)
+        rows = starts[poses][:, None] + np.arange(c)
+        blocks = np.ascontiguousarray(key[rows].reshape(len(poses), -1))
+        _, first, inverse = np.unique(blocks.view(np.dtype((np.void, blocks.dtype.itemsize * blocks.shape[1]))),
+                                      return_index=True, return_inverse=True)
+        again = np.flatnonzero(first[inverse.reshape(-1)] != np.arange(len(poses)))
+        out += [(int(starts[poses[first[inverse.reshape(-1)[i]]]]), int(starts[poses[i]])) for i in again[:1]]
+    return out
 
 
 def check_pose_count(path: str, poses: int, parameters: int, first_line: int) -> None:

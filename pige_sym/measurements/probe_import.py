@@ -196,8 +196,8 @@ def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
                          f"tool-side axes ({', '.join(kern.TOOL_ROTARY)}) through one pivot (give them the same "
                          "--pivot, or one --pivot x,y,z)")
     check_options(spec.stylus_offset_mm)
-    check_repeated_contacts(log.path, log.xyz_mm, log.angles_deg, log.lines, log.pose_index)
     starts = pose_starts(log)
+    check_repeated_contacts(log.path, log.xyz_mm, log.angles_deg, log.lines, starts)
     check_pose_count(log.path, len(starts) - 1, len(kern.LOCATION_PARAMETERS), int(log.lines[-1]))
     angles = to_conventions(log.angles_deg[starts[:-1]], spec.axis_sense, kern.ROTARY_AXES)
     if np.abs(angles[0]).max() > 1e-9:
@@ -327,15 +327,16 @@ def row_covariances(m: Measurement) -> np.ndarray:
     return cov
 
 
-def verify_written(out: Path | str) -> Any:
-    """A check for :func:`~pige_sym.measurements.rtest_writer.write_measurement`: the temporary file must be read
-    by pige's reader, covariances included, as identify reads it; the import is refused with the reader's reason
-    otherwise, and nothing is written."""
+def verify_written(out: Path | str, m: Measurement) -> Any:
+    """A check for :func:`~pige_sym.measurements.rtest_writer.write_measurement` of ``m``: the written file must pass
+    the reader's validation (:func:`~pige_sym.measurements.rtest.check_as_read`: its header read back, its rows
+    checked as read) and the covariances their check; the import is refused with the reader's reason otherwise,
+    and nothing is written."""
     def verify(tmp: Path) -> None:
-        from pige_sym.measurements.rtest import read_measurement
+        from pige_sym.measurements.rtest import check_as_read
 
         try:
-            m = read_measurement(tmp)
+            check_as_read(tmp, m)
             row_covariances(m)
         except FileFormatError as exc:
             where = f"line {exc.line}: " if exc.line is not None else ""

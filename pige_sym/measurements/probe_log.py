@@ -235,8 +235,9 @@ def _fields(buf: np.ndarray, begin: np.ndarray, end: np.ndarray) -> np.ndarray |
         return None
     if (space == begin[line]).any() or (space + 1 == end[line]).any() or (part[space + 1] == 32).any():
         return None  # an empty field
-    ends = np.sort(np.concatenate([space, end]))
-    starts = np.sort(np.concatenate([begin, space + 1]))
+    per_line = space.reshape(-1, 8)  # eight spaces per line, in order (checked above)
+    ends = np.column_stack([per_line, end]).ravel()
+    starts = np.column_stack([begin, per_line + 1]).ravel()
     parsed = parse_decimal_fields(part, ends, starts)
     return None if parsed is None else parsed.reshape(-1, 9)
 

@@ -43,7 +43,7 @@ import numpy as np
 from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
 from pige_sym.errors import FileFormatError, PigeError
 from pige_sym.files import open_regular_file, read_input_text
-from pige_sym.measurements.axis_sense import METADATA_KEY, read_axis_sense, to_conventions
+from pige_sym.measurements.axis_sense import METADATA_KEY, read_axis_sense, to_commanded, to_conventions
 
 if TYPE_CHECKING:
     pass
@@ -228,17 +228,7 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
         h = _read_header(fh, p)
         body = DataBody(p, h)
         body.read(fh)
-    meta, meta_line = h.meta, h.meta_line
-    ball = parse_vec3(meta["ball_mm"], p, meta_line["ball_mm"], "ball_mm")
-    frame = meta.get("frame", "machine")
-    if frame not in FRAMES:
-        raise FileFormatError(p, meta_line.get("frame"), f"frame must be 'machine' or 'table', got {frame!r}")
-    tool = parse_vec3(meta["tool_mm"], p, meta_line["tool_mm"], "tool_mm") if "tool_mm" in meta else None
-    why = missing_tool(meta["machine"], tool, "'# tool_mm: x, y, z' (pige writes it when given --tool)")
-    if why:
-        raise FileFormatError(p, meta_line["machine"], why)
-    pivots = _read_pivots(p, h)
-    sense = read_axis_sense(meta.get(METADATA_KEY, ""), h.rotary, p, meta_line.get(METADATA_KEY))
+    ball, frame, tool, pivots, sense = _header_values(p, h)
     body.require_rows()
     angle_cols = [f"{a}_deg" for a in h.rotary]
     groups = {"t_s": body.gather(["t_s"]), "angles": body.gather(angle_cols),
@@ -251,6 +241,7 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
             groups[c], names[c] = body.gather([c]), [c]
     col = {c: groups[g][:, i] for g, cs in names.items() for i, c in enumerate(cs)}
     _check_values(p, body.first_line, col, body.extras, angle_cols)
+    meta = h.meta
     return Measurement(
         machine=meta["machine"], ball_mm=ball, t_s=groups["t_s"][:, 0],
         angles_deg=to_conventions(groups["angles"], sense, h.rotary), axis_sense=sense,
@@ -259,6 +250,52 @@ def read_measurement(path: str | os.PathLike[str]) -> Measurement:
         optional={c: groups[c][:, 0] for c in OPTIONAL_COLUMNS if c in groups},
         extra_columns=body.extras, metadata=meta, path=p,
     )
+
+
+def _header_values(p: str, h: Header) -> tuple[np.ndarray, str, np.ndarray | None, dict[str, np.ndarray],
+                                                 dict[str, int]]:
+    """Ball, frame, tool, pivots and axis sense from the metadata, validated (file and line in refusals)."""
+    meta, meta_line = h.meta, h.meta_line
+    ball = parse_vec3(meta["ball_mm"], p, meta_line["ball_mm"], "ball_mm")
+    frame = meta.get("frame", "machine")
+    if frame not in FRAMES:
+        raise FileFormatError(p, meta_line.get("frame"), f"frame must be 'machine' or 'table', got {frame!r}")
+    tool = parse_vec3(meta["tool_mm"], p, meta_line["tool_mm"], "tool_mm") if "tool_mm" in meta else None
+    why = missing_tool(meta["machine"], tool, "'# tool_mm: x, y, z' (pige writes it when given --tool)")
+    if why:
+        raise FileFormatError(p, meta_line["machine"], why)
+    pivots = _read_pivots(p, h)
+    sense = read_axis_sense(meta.get(METADATA_KEY, ""), h.rotary, p, meta_line.get(METADATA_KEY))
+    return ball, frame, tool, pivots, sense
+
+
+def check_as_read(path: str | os.PathLike[str], m: Measurement) -> None:
+    """What :func:`read_measurement` would refuse in the file ``path`` that ``m`` was just written to.
+
+    The header is read from the file itself and validated as the reader validates it; it must name ``m``'s
+    columns.  The rows are checked as the reader checks them (limits, reference row, time order, repeated
+    rows) on ``m``'s arrays: the writer writes every number with ``repr``, whose text reads back to the same
+    double, so the file's values are these (tested by the round trips), and a large file is not parsed twice.
+
+    Raises
+    ------
+    FileFormatError
+        As :func:`read_measurement` would (file, line, problem).
+    """
+    p = str(path)
+    with open_regular_file(path) as fh:
+        h = _read_header(fh, p)
+    _header_values(p, h)
+    if h.names != m.columns():
+        raise FileFormatError(p, h.header_line, f"the columns written ({', '.join(h.names)}) are not the "
+                              f"measurement's ({', '.join(m.columns())})")
+    angle_cols = [f"{a}_deg" for a in h.rotary]
+    commanded = to_commanded(m.angles_deg, m.axis_sense, m.rotary_axes)
+    col = {"t_s": m.t_s, **{c: commanded[:, k] for k, c in enumerate(angle_cols)},
+           **{c: m.deviation_um[:, k] for k, c in enumerate(DEVIATION_COLUMNS)},
+           **({} if m.linear_mm is None else {c: m.linear_mm[:, k] for k, c in enumerate(LINEAR_COLUMNS)}),
+           **{c: np.asarray(m.optional[c], dtype=float) for c in OPTIONAL_COLUMNS if c in m.optional}}
+    _check_values(p, h.header_line + 1, col, {k: list(v) for k, v in m.extra_columns.items()}, angle_cols)
 
 
 def _read_pivots(p: str, h: Header) -> dict[str, np.ndarray]:

@@ -126,7 +126,7 @@ def measurement_chunks(m: Measurement, rows: int = CHUNK_ROWS) -> Iterator[str]:
     extras = list(m.extra_columns.values())
     for start in range(0, m.n_rows, rows):
         block = table[start:start + rows]
-        texts = [list(map(repr, block[:, j].tolist())) for j in range(block.shape[1])]
+        texts = [list(map(float.__repr__, block[:, j].tolist())) for j in range(block.shape[1])]
         texts += [[str(v) for v in column[start:start + rows]] for column in extras]
         yield "\n".join(map(",".join, zip(*texts, strict=True))) + "\n"
 
