@@ -448,14 +448,12 @@ def _vm_log(tmp_path: Path, machine: str, dialect: str, seed: int, *, points: in
     return text, check, import_probe_log(path, dialect, spec)
 
 
-@pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc", "siemens", "heidenhain"])
+@pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc", "siemens"])
 @pytest.mark.parametrize("machine", [FORK, MIXED])
 def test_head_programs_read_back_and_run_on_the_virtual_machine(tmp_path, machine, dialect) -> None:
     text, check, m = _vm_log(tmp_path, machine, dialect, seed=3)
     assert check.poses == 31 and min(check.contacts) == 5 and check.min_rapid_clearance_mm > 2.5
     assert check.min_overtravel_mm >= 1.0 - 2e-4 and check.min_rotary_clearance_mm > 0.5
-    if dialect == "heidenhain":
-        assert "TCH PROBE 4.2 IX" in text  # the inclined moves of a head: touch-probe cycle 4 (3-D)
     result = identify(m)
     truth = CASES[machine]["truth"]
     for i, name in enumerate(result.parameters):
@@ -499,10 +497,9 @@ def test_the_head_program_is_refused_when_edited_unsafely() -> None:
     into = lines[:k - 1] + ["G0 " + " ".join(f"{a}{v:.4f}" for a, v in zip("XYZ", point, strict=True))] + lines[k - 1:]
     with pytest.raises(NCProgramError, match="hit it"):
         verify_probe_program("\n".join(into) + "\n", "linuxcnc", setup, plan.rotary_axes)
-    heid = render_probe_program(plan, "heidenhain")
-    bad = heid.replace("REFERENCE SYSTEM:0", "REFERENCE SYSTEM:1", 1)
-    with pytest.raises(NCProgramError, match="cycle 4 that is not as pige writes it"):
-        verify_probe_program(bad, "heidenhain", setup, plan.rotary_axes)
+    # no Heidenhain program for a head: its inclined moves would need cycle 4, whose syntax nothing here settles
+    with pytest.raises(InputError, match="cycle 4"):
+        render_probe_program(plan, "heidenhain")
     # the header states the tool: a program of another stylus is refused
     other = dataclasses.replace(setup, tool_mm=np.array([0.0, 0.0, -200.0]))
     with pytest.raises(NCProgramError, match="tool_mm"):

@@ -201,3 +201,11 @@ def test_lengths_and_offsets_with_many_digits_read_back(tmp_path) -> None:
     assert "o901 if [ABS[#5403 - 123.4567] GT 0.0005]" in text and "[ABS[#5241 - -14.990659] GT 0.0005]" in text
     verify_probe_program(text, "linuxcnc", setup, ("A", "C"))
     assert header_setup(text, "p").controller.work_offset_mm == (-14.990659, 250.123456, 0.0)
+
+
+def test_a_head_is_not_probed_in_tcp_kinematics() -> None:
+    head = ProbeSetup("wC'bXYZB(C1)t", np.array([40.0, 10.0, 30.0]), np.zeros(3), 12.7, 1.5,
+                      tool_mm=np.array([0.0, 0.0, -150.0]),
+                      controller=ProbeController(kinematics="tcp", stylus_tool=9, stylus_length_mm=150.0))
+    with pytest.raises(InputError, match="RTCP off"):
+        _program(head)

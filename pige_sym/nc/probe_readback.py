@@ -16,8 +16,8 @@ sphere (centre turned by the rotary axes, radius ``R + r``) and refuses, naming 
 
 On a head or mixed machine (``setup.tool_mm``) the program commands the linear axes and the stylus centre is
 the program's point plus the head's offset ``h(θ) = (R_t(θ) − I)·tool`` (CONVENTIONS §7): every check is made
-on the stylus centre.  Heidenhain programs probe a head's inclined moves with touch-probe cycle 4 (measuring
-in 3-D), read as a logged probing move.
+on the stylus centre.  pige writes no Heidenhain program for a head (its inclined moves would need touch-probe
+cycle 4, whose syntax no source at hand settles), so none is read.
 
 G-code dialects are also read by the modal interpreter (:mod:`pige_sym.nc.interpreter`, pass-through for the
 probing and macro statements): a program it refuses is refused.
@@ -111,8 +111,7 @@ def probe_operations(text: str, dialect: str, path: str = "<program>",
         if i in fixed or not line or _SKIP[dialect].fullmatch(line):
             i += 1
             continue
-        special = _guarded(lines, i, dialect, pos, path) if not line.startswith("TCH PROBE 4.") else \
-            _measure_3d(lines, i, pos, path)
+        special = _guarded(lines, i, dialect, pos, path)
         if special is not None:
             ops.append(special[0])
             i = special[1]
@@ -230,27 +229,6 @@ def _guarded(lines: list[str], i: int, dialect: str, pos: np.ndarray, path: str)
         feed = float(re.search(r" F([\d.]+)$", at(i)).group(1))  # type: ignore[union-attr]
     block = confirm_lines(Confirm(pos.copy(), target, axis, value), dialect, fmt, feed, w, label)
     return Operation("confirm", words, i + 1, axis, value, w), _checked(lines, start, block, path)
-
-
-_CYCLE4 = re.compile(r"TCH PROBE 4\.3 ABST\+(\d+\.\d+) F(\d+(?:\.\d+)?) MB(\d+\.\d+) REFERENCE SYSTEM:0")
-
-
-def _measure_3d(lines: list[str], i: int, pos: np.ndarray, path: str) -> tuple[Operation, int]:
-    """Heidenhain touch-probe cycle 4 (measuring in 3-D) as pige writes it: a logged probing move from the
-    current position along ``IX IY IZ`` (a unit vector) at most ``ABST``, retracting ``MB = ABST`` (to the start)."""
-    block = lines[i:i + 4]
-    direction = re.fullmatch(r"TCH PROBE 4\.2 IX([-+]\d+\.\d+) IY([-+]\d+\.\d+) IZ([-+]\d+\.\d+)",
-                             block[2] if len(block) > 2 else "")
-    tail = _CYCLE4.fullmatch(block[3] if len(block) > 3 else "")
-    if block[:2] != ["TCH PROBE 4.0 MEASURING IN 3-D", "TCH PROBE 4.1 Q11"] or not direction or not tail \
-            or tail.group(1) != tail.group(3):
-        raise NCProgramError(path, i + 1, "a touch-probe cycle 4 that is not as pige writes it (4.0 MEASURING IN 3-D, "
-                                          "4.1 Q11, 4.2 IX IY IZ unit vector, 4.3 ABST F MB = ABST REFERENCE SYSTEM:0)")
-    u = np.array([float(v) for v in direction.groups()])
-    if abs(float(np.linalg.norm(u)) - 1.0) > 1e-3 or np.isnan(pos).any():
-        raise NCProgramError(path, i + 3, "cycle 4: the direction must be a unit vector and the start known")
-    target = pos + u * float(tail.group(1))
-    return Operation("probe", dict(zip("XYZ", target.tolist(), strict=True)), i + 4), i + 4
 
 
 def _guard_follows(lines: list[str], i: int, dialect: str) -> bool:

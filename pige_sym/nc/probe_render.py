@@ -226,8 +226,8 @@ def _pose_lines_head(plan: ProbePlan, i: int, dialect: str) -> list[str]:
     """A pose of a head machine (:mod:`pige_sym.nc.probe_program`): every point is the stylus centre minus the
     head's offset ``h`` (the program commands the linear axes); the probe comes over the first start at the safe
     height, down to the clearance plane normal to the stylus axis, and to every start along the stylus axis;
-    the probing moves run along or across the stylus axis (``G38.2``/``G31``/``MEAS`` with X, Y and Z; on a TNC
-    touch-probe cycle 4, measuring in 3-D); the retract goes back along the move and up to the clearance plane."""
+    the probing moves run along or across the stylus axis (``G38.2``/``G31``/``MEAS`` with X, Y and Z); the
+    retract goes back along the move and up to the clearance plane."""
     s = plan.setup
     assert plan.head_mm is not None
     h = plan.head_mm[i]
@@ -240,23 +240,10 @@ def _pose_lines_head(plan: ProbePlan, i: int, dialect: str) -> list[str]:
             else [_rapid(_xyz(above, dialect), dialect)]
         down = [] if np.allclose(start, above, atol=1e-9) else [_rapid(_xyz(start, dialect), dialect)]
         shifted = Contact(start, c.target - h, c.axis, c.sign, above)
-        out += down + (_probe_3d(shifted, s.probe_feed_mm_min) if dialect == "heidenhain" else
-                       _probe(shifted, dialect, s.probe_feed_mm_min))
+        out += down + _probe(shifted, dialect, s.probe_feed_mm_min)
         out += _log_line(dialect, i, k, angles)
         out += [_rapid(_xyz(start, dialect), dialect), *([_rapid(_xyz(above, dialect), dialect)] if down else [])]
     return out
-
-
-def _probe_3d(c: Contact, feed: float) -> list[str]:
-    """Heidenhain touch-probe cycle 4 (measuring in 3-D): from the current position (the start) along the unit
-    vector ``IX IY IZ`` at most ``ABST``; the stylus centre lands in Q11–Q13 (the log's parameters); after the
-    trigger the probe retracts ``MB`` (the whole path: no farther than the start)."""
-    path = c.target - c.start
-    dist = float(np.linalg.norm(path))
-    u = path / dist
-    return ["TCH PROBE 4.0 MEASURING IN 3-D", "TCH PROBE 4.1 Q11",
-            "TCH PROBE 4.2 " + " ".join(f"I{a}{_num(v, 'heidenhain')}" for a, v in zip("XYZ", u, strict=True)),
-            f"TCH PROBE 4.3 ABST{_num(dist, 'heidenhain')} F{feed:g} MB{dist:.4f} REFERENCE SYSTEM:0"]
 
 
 def _pose_lines_tcp(plan: ProbePlan, i: int, dialect: str) -> list[str]:
@@ -291,6 +278,14 @@ def render_probe_program(plan: ProbePlan, dialect: str) -> str:
     if dialect not in PROBE_DIALECTS:
         raise InputError(f"--dialect {dialect!r}: use one of {', '.join(PROBE_DIALECTS)}")
     plan.setup.controller.check(dialect)
+    if plan.setup.controller.kinematics == "tcp" and plan.frames is not None:
+        raise InputError("--kinematics tcp: probing in TCP kinematics is written for table machines; a head or mixed "
+                         "machine probes with RTCP off (--kinematics identity)")
+    if dialect == "heidenhain" and plan.frames is not None:
+        raise InputError("--dialect heidenhain: a head turns the stylus, so most probing moves are inclined, which a "
+                         "TNC probes with touch-probe cycle 4 (measuring in 3-D); no source at hand settles that "
+                         "cycle's syntax, so pige does not write it: use --dialect linuxcnc, fanuc or siemens for a "
+                         "head or mixed machine (Heidenhain's own KinematicsOpt cycles 451/452 calibrate heads)")
     lines = _header(plan, dialect) + _confirmation(plan, dialect) + _log_open(dialect)
     for i in range(len(plan.angles_deg)):
         lines += _pose_lines(plan, i, dialect)
