@@ -67,8 +67,9 @@ def save_figure(fig: Any, path: Path) -> str:
 
 
 def _legend_outside(ax: Any) -> None:
-    """The legend right of the axes, where it covers no point."""
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    """The legend right of the axes, where it covers no point (none when nothing is labelled)."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
 
 
 def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path) -> list[str]:
