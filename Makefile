@@ -4,6 +4,8 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 MACHINE ?= wC'A'bXYZ(C1)t
+# Test processes (pytest-xdist): one per core; each test file runs whole in one of them (its module fixtures once).
+TEST_JOBS ?= auto
 # Kernels live in generated/ (the shipped machines are tracked there; the list is in pige_sym/constants.py).
 
 .PHONY: help venv gen gen-all check-generated test test-slow test-linuxcnc lint demo bench clean
@@ -28,11 +30,11 @@ gen-all: $(STAMP)  ## regenerate every shipped machine's kernels in generated/
 check-generated: $(STAMP)  ## regenerate shipped kernels in memory and fail on any code difference
 	$(PY) -m pige_sym gen --check --all-shipped
 
-test: $(STAMP)  ## run the default test suite (slow studies excluded)
-	$(PY) -m pytest -q
+test: $(STAMP)  ## run the default test suite (slow studies excluded), one process per core
+	$(PY) -m pytest -q -n $(TEST_JOBS) --dist loadfile
 
 test-slow: $(STAMP)  ## run the slow studies too
-	$(PY) -m pytest -q -m ''
+	$(PY) -m pytest -q -m '' -n $(TEST_JOBS) --dist loadfile
 
 test-linuxcnc: $(STAMP)  ## the loop on real LinuxCNC 2.9 simulations (tests/linuxcnc; skips without linuxcnc-uspace)
 	$(PY) -m pytest -q -rsP -m linuxcnc tests/linuxcnc
