@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -15,7 +13,7 @@ from pige_sym.measurements.rtest import read_measurement
 from pige_sym.model.effects import parse_effect
 from pige_sym.model.trajectories import cone_frustum, figure_eight
 from pige_sym.simulation.simulator import random_pige, simulate
-from testdata import REPO, reference_files, require_shared
+from testdata import reference_files, require_shared
 
 AC, BC = "wC'A'bXYZ(C1)t", "wC'B'bXYZ(C1)t"
 BALLS = {AC: (120.0, 0.0, 80.0), BC: (60.0, 90.0, 110.0)}
@@ -102,22 +100,24 @@ def test_double_differential_reports_stages() -> None:
     assert res.unidentifiable and any(v is None for v in d["pige"].values())
 
 
-def test_json_round_trip_and_cli(tmp_path) -> None:
+def test_json_round_trip_and_cli(tmp_path, capsys) -> None:
+    from pige_sym.cli.main import main
+
     sim = simulate(AC, cone_frustum(AC), pige=random_pige(AC, 4), noise_um=0.25, seed=4)
     path = tmp_path / "run.csv"
     sim.write(path)
-    proc = subprocess.run([sys.executable, "-m", "pige_sym", "identify", str(path), "--json", "--method",
-                           "double-differential"], capture_output=True, text=True, cwd=REPO, timeout=60)
-    assert proc.returncode == 0, proc.stderr
-    d = json.loads(proc.stdout)
+    status = main(["identify", str(path), "--json", "--method", "double-differential"])  # in this process
+    out = capsys.readouterr()
+    assert status == 0, out.err
+    d = json.loads(out.out)
     for key in ("pige", "std", "units", "rank", "condition", "rms_um", "method", "unidentifiable", "outlier_rows",
                 "stages"):
         assert key in d
     back = IdentificationResult.from_dict(d)
     assert back.parameters == list(d["pige"])
-    bad = subprocess.run([sys.executable, "-m", "pige_sym", "identify", str(path), "--projection", "q"],
-                         capture_output=True, text=True, cwd=REPO, timeout=60)
-    assert bad.returncode == 2 and "projection" in bad.stderr and "Traceback" not in bad.stderr
+    assert main(["identify", str(path), "--projection", "q"]) == 2  # an exception would end the test
+    err = capsys.readouterr().err
+    assert "projection" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
 def test_large_input_uses_basis_sums() -> None:
