@@ -33,8 +33,8 @@ check-generated: $(STAMP)  ## regenerate shipped kernels in memory and fail on a
 test: $(STAMP)  ## run the default test suite (slow studies excluded), one process per core
 	$(PY) -m pytest -q -n $(TEST_JOBS) --dist loadfile
 
-test-slow: $(STAMP)  ## run the slow studies too
-	$(PY) -m pytest -q -m '' -n $(TEST_JOBS) --dist loadfile
+test-slow: $(STAMP)  ## run the slow studies too (not the LinuxCNC runs: make test-linuxcnc)
+	$(PY) -m pytest -q -m 'not linuxcnc' -n $(TEST_JOBS) --dist loadfile
 
 test-linuxcnc: $(STAMP)  ## the loop on real LinuxCNC 2.9 simulations (tests/linuxcnc; skips without linuxcnc-uspace)
 	$(PY) -m pytest -q -rsP -m linuxcnc tests/linuxcnc
