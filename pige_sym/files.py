@@ -76,15 +76,19 @@ def check_output(path: PathLike, *, force: bool = False, inputs: Iterable[PathLi
             raise InputError(f"{what} {p} is not a regular file (FIFO, socket or device): pige never replaces one")
         if not force:
             raise InputError(f"{what} {p} exists: pass --force to replace it, or choose another name")
-    parent = p.parent if str(p.parent) else Path(".")
-    existing = parent
+    _check_writable_ancestor(p.parent if str(p.parent) else Path("."), p, what, "directory")
+    return p
+
+
+def _check_writable_ancestor(start: Path, path: Path, what: str, noun: str) -> None:
+    """Refuse ``path`` when its nearest existing ancestor (from ``start`` up) is not a writable ``noun``."""
+    existing = start
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent
     if not existing.is_dir():
-        raise InputError(f"{what} {p}: {existing} is not a directory")
+        raise InputError(f"{what} {path}: {existing} is not a {noun}")
     if not os.access(existing, os.W_OK | os.X_OK):
-        raise InputError(f"{what} {p}: the folder {existing} is not writable")
-    return p
+        raise InputError(f"{what} {path}: the folder {existing} is not writable")
 
 
 def check_output_folder(path: PathLike, *, force: bool = False, inputs: Iterable[PathLike] = (),
@@ -102,13 +106,7 @@ def check_output_folder(path: PathLike, *, force: bool = False, inputs: Iterable
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise InputError(f"{what} {out} exists and is not a folder: give a folder name")
-    existing = out
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if not existing.is_dir():
-        raise InputError(f"{what} {out}: {existing} is not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise InputError(f"{what} {out}: the folder {existing} is not writable")
+    _check_writable_ancestor(out, out, what, "folder")
     if out.is_dir():
         _check_replaced(out, list(names), force, inputs, what)
     return out

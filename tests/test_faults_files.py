@@ -25,6 +25,7 @@ import pytest
 from pige_sym.cli.main import main
 from pige_sym.errors import FileFormatError
 from pige_sym.files import peek_input, read_input_bytes, staged_folder
+from testdata import refused_in_one_line
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 PNG_END = b"IEND\xaeB`\x82"
@@ -35,11 +36,7 @@ def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str]:
     return code, capsys.readouterr().err
 
 
-def refused(code: int, err: str, *fragments: str) -> None:
-    assert code == 2, err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    for f in fragments:
-        assert f in err, (f, err)
+refused = refused_in_one_line
 
 
 @pytest.fixture(scope="module")

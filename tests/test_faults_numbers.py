@@ -24,6 +24,7 @@ from pige_sym.errors import IdentificationError
 from pige_sym.measurements.measurement import MEASUREMENT_FORMATS
 from pige_sym.measurements.rtest import read_measurement
 from pige_sym.measurements.schema import MAX_PIGE
+from testdata import refused_in_one_line
 
 S = ["--sphere-radius", "12.7", "--stylus-radius", "1.5"]
 FEW = settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -35,11 +36,7 @@ def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
     return code, out.out, out.err
 
 
-def refused(code: int, err: str, *fragments: str) -> None:
-    assert code == 2, err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    for f in fragments:
-        assert f in err, (f, err)
+refused = refused_in_one_line
 
 
 @pytest.fixture(scope="module")

@@ -22,6 +22,14 @@ def reference_files(pattern: str) -> list[Path]:
     return sorted(REFERENCE.glob(pattern)) if REFERENCE.is_dir() else []
 
 
+def refused_in_one_line(code: int, err: str, *fragments: str) -> None:
+    """Assert a command was refused as bad input (exit 2) with one line on stderr naming every fragment."""
+    assert code == 2, err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    for f in fragments:
+        assert f in err, (f, err)
+
+
 def require_shared() -> None:
     if not REFERENCE.is_dir():
         pytest.skip("../shared/reference is absent (a user's clone has none)")
