@@ -38,7 +38,8 @@ def test_linuxcnc_runs_the_head_program_and_every_contact_is_where_pige_meant_it
     gap = np.linalg.norm(machine.tip_in_table(joints) - SPHERE_MM, axis=1) - machine.trip_radius_mm
     assert gap.max() <= 1e-6 and gap.min() >= -STEP_MM - 1e-6, (gap.min(), gap.max())
     sim_s = next(s for s in run.result["steps"] if s["op"] == "program")["sim_s"]
-    print(f"head: {len(log)} contacts, {sim_s:.1f} s simulated, gap {gap.min() * 1e3:.3f}..{gap.max() * 1e3:.3f} um")
+    print(f"head: {len(log)} contacts, {sim_s:.1f} s simulated, gap {gap.min() * 1e3:.3f}..{gap.max() * 1e3:.3f} um, "
+          f"attempts {run.attempts}")
 
 
 def test_pige_identifies_the_head_machine_from_linuxcnc_s_log(head_run: HeadRun) -> None:

@@ -84,7 +84,8 @@ def test_linuxcnc_runs_the_probing_program_and_logs_exact_contacts(probe_runs, k
     assert gap.max() <= 1e-6 and gap.min() >= -STEP_MM - 1e-6, (gap.min(), gap.max())
     sim_s = pr.step("program")["sim_s"]
     print(f"{key}: {len(log)} contacts, {sim_s:.1f} s simulated, {pr.step('program')['wall_s']:.1f} s wall, "
-          f"gap {gap.min() * 1e3:.3f}..{gap.max() * 1e3:.3f} um, twin {pr.readings['ptt.twin-diff']:.1e} mm")
+          f"gap {gap.min() * 1e3:.3f}..{gap.max() * 1e3:.3f} um, twin {pr.readings['ptt.twin-diff']:.1e} mm, "
+          f"attempts {pr.run.attempts}")
     assert sim_s < 180.0, f"a 13-pose probing run took {sim_s:.1f} s of simulated machine time"
 
 
