@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from true_table import axis_line, rotate
+from true_table import axis_line, rotate, true_machine_hal
 
 SOURCE = (Path(__file__).resolve().parent / "true_mixed.comp").read_text()
 COMPONENT_NAME = "pige_true_mixed"
@@ -65,11 +65,7 @@ class TrueMixed:
 
     def hal_lines(self, name: str = "ptm") -> list[str]:
         """Load the component, run it last in the servo thread, net it to the joints and the probe input."""
-        out = [f"loadrt {COMPONENT_NAME} names={name}", f"addf {name} servo-thread"]
-        for k, pin in enumerate(("joint-x", "joint-y", "joint-z", "joint-head", "joint-table")):
-            out.append(f"net J{k}:pos-fb => {name}.{pin}")
-        out.append(f"net pige:probe <= {name}.probe => motion.probe-input")
-        return out + [f"setp {name}.{pin} {value!r}" for pin, value in self.pin_values().items()]
+        return true_machine_hal(COMPONENT_NAME, name, ("joint-head", "joint-table"), self.pin_values())
 
     def pin_values(self) -> dict[str, float]:
         vals: dict[str, float] = {}

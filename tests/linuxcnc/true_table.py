@@ -47,6 +47,16 @@ AXES = {
 OTHER = {"A": (1, 2), "B": (0, 2), "C": (0, 1)}  # the machine axes of the position / orientation errors
 
 
+def true_machine_hal(component: str, name: str, rotary_pins: tuple[str, str], values: dict[str, float]) -> list[str]:
+    """HAL lines of a true machine: load ``component`` as ``name``, run it last in the servo thread, net the five
+    joints' feedback (X, Y, Z, then ``rotary_pins``) and its ``probe`` output to motion, ``setp`` its inputs."""
+    out = [f"loadrt {component} names={name}", f"addf {name} servo-thread"]
+    for k, pin in enumerate(("joint-x", "joint-y", "joint-z", *rotary_pins)):
+        out.append(f"net J{k}:pos-fb => {name}.{pin}")
+    out.append(f"net pige:probe <= {name}.probe => motion.probe-input")
+    return out + [f"setp {name}.{pin} {value!r}" for pin, value in values.items()]
+
+
 def axis_line(axis: str, pivot_mm: np.ndarray, pige: dict[str, float]) -> tuple[np.ndarray, np.ndarray, float]:
     """The true line of a rotary axis: point [mm], unit direction, zero-position error [rad] (CONVENTIONS §3)."""
     u, pos, rot, zero = AXES[axis]
@@ -107,11 +117,7 @@ class TrueTable:
 
     def hal_lines(self, name: str = "ptt") -> list[str]:
         """Load the component, run it last in the servo thread, net it to the joints and the probe input."""
-        out = [f"loadrt {COMPONENT_NAME} names={name}", f"addf {name} servo-thread"]
-        for k, pin in enumerate(("joint-x", "joint-y", "joint-z", "joint-r1", "joint-r2")):
-            out.append(f"net J{k}:pos-fb => {name}.{pin}")
-        out.append(f"net pige:probe <= {name}.probe => motion.probe-input")
-        return out + [f"setp {name}.{pin} {value!r}" for pin, value in self.pin_values().items()]
+        return true_machine_hal(COMPONENT_NAME, name, ("joint-r1", "joint-r2"), self.pin_values())
 
     def pin_values(self) -> dict[str, float]:
         """Every input pin: the emitted model's (pivots, senses, errors) and the twin's (lines)."""
