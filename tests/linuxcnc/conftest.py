@@ -1,11 +1,11 @@
 """Shared by the LinuxCNC tests: skip without LinuxCNC, the smoke run, and round one: the probing runs of both
-table machines in both kinematics, the head machine's run and the program's refusals (eight simulations at once,
+table machines in both kinematics, the two head machines' runs and the program's refusals (nine simulations at once,
 once per session)."""
 
 from __future__ import annotations
 
 import pytest
-from head_setup import HeadRun, head_probing_run
+from head_setup import HEADS, HeadRun, head_probing_run
 from lcnc_harness import compile_component, make_sim, run_sim, unavailable
 from loop_setup import MACHINES, MODES, READ_PINS, ProbeRun, probing_run, run_all
 from safety_cases import CASES, safety_run
@@ -40,14 +40,15 @@ def smoke(lcnc: None, tmp_path_factory: pytest.TempPathFactory):
 
 @pytest.fixture(scope="session")
 def round_one(smoke, tmp_path_factory: pytest.TempPathFactory) -> dict:
-    """Both table machines probed in both kinematics, the head machine probed (:mod:`head_setup`), and the
-    program's refusals (:mod:`safety_cases`): eight simulations at once."""
+    """Both table machines probed in both kinematics, the two head machines probed (:mod:`head_setup`), and the
+    program's refusals (:mod:`safety_cases`): nine simulations at once."""
     jobs = {(k, mode): (lambda k=k, mode=mode: probing_run(MACHINES[k], tmp_path_factory.mktemp(f"lcnc_{k}_{mode}"),
                                                            mode))
             for k, mode in RUNS}
     jobs |= {("safety", case): (lambda case=case: safety_run(case, tmp_path_factory.mktemp("lcnc_safety")))
              for case in CASES}
-    jobs[("head", "identity")] = lambda: head_probing_run(tmp_path_factory.mktemp("lcnc_head"))
+    jobs |= {("head", k): (lambda k=k: head_probing_run(HEADS[k], tmp_path_factory.mktemp(f"lcnc_head_{k}")))
+             for k in HEADS}
     return run_all(jobs)
 
 
@@ -62,5 +63,5 @@ def refused(round_one: dict) -> dict:
 
 
 @pytest.fixture(scope="session")
-def head_run(round_one: dict) -> HeadRun:
-    return round_one[("head", "identity")]
+def head_runs(round_one: dict) -> dict[str, HeadRun]:
+    return {k: round_one[("head", k)] for k in HEADS}
