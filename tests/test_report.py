@@ -5,8 +5,6 @@ from __future__ import annotations
 import base64
 import json
 import re
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +17,7 @@ from pige_sym.model.trajectories import cone_frustum, figure_eight
 from pige_sym.nc.program import make_rtest_program
 from pige_sym.report import ReportData, build_report, gather_report, write_report
 from pige_sym.simulation.simulator import random_pige, simulate
-from testdata import REPO
+from testdata import CHROMIUM, REPO, run_chromium, simulated_probe_file
 
 AC = "wC'A'bXYZ(C1)t"
 WEIRD = 'odd <b>&"name'
@@ -196,7 +194,6 @@ def test_help_has_examples(capsys: pytest.CaptureFixture[str]) -> None:
     assert "examples:" in capsys.readouterr().out
 
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHECK = """<script>
 window.addEventListener('load', function () {
   var imgs = Array.from(document.images);
@@ -211,20 +208,12 @@ window.addEventListener('load', function () {
 </script>"""
 
 
-def _chromium(tmp: Path, *args: str) -> subprocess.CompletedProcess[str]:
-    assert CHROMIUM is not None
-    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-           "--disable-background-networking", "--disable-component-update", "--disable-sync", "--hide-scrollbars",
-           f"--user-data-dir={tmp / 'profile'}", "--virtual-time-budget=10000", *args]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
-
-
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt-get install chromium)")
 def test_renders_in_headless_chromium(built: tuple[ReportData, Path, str], tmp_path: Path) -> None:
     data, path, text = built
     probe = tmp_path / "probe.html"
     probe.write_text(text.replace("</body>", CHECK + "</body>"), encoding="utf-8")
-    run = _chromium(tmp_path, "--dump-dom", probe.as_uri())
+    run = run_chromium(tmp_path, "--dump-dom", probe.as_uri())
     found = re.search(r'<pre id="pige-check">([^<]*)</pre>', run.stdout)
     assert found, run.stderr[-2000:]
     check = dict(kv.split("=", 1) for kv in found.group(1).split())
@@ -234,7 +223,7 @@ def test_renders_in_headless_chromium(built: tuple[ReportData, Path, str], tmp_p
     assert "answer:1" in sections and sections.count("identification:1") == 2 and sections.count("sobol:1") == 2
 
     shot = tmp_path / "shot.png"
-    _chromium(tmp_path, f"--screenshot={shot}", "--window-size=1280,2400", path.as_uri())
+    run_chromium(tmp_path, f"--screenshot={shot}", "--window-size=1280,2400", path.as_uri())
     assert shot.is_file() and shot.stat().st_size > 50_000
     import matplotlib.image
 
@@ -370,7 +359,7 @@ def test_fits_1000_px_and_the_verdict_is_on_the_first_screen(built: tuple[Report
     _, _, text = built
     probe = tmp_path / "layout.html"
     probe.write_text(text.replace("</body>", CHECK_LAYOUT + "</body>"), encoding="utf-8")
-    run = _chromium(tmp_path, "--window-size=1000,800", "--dump-dom", probe.as_uri())
+    run = run_chromium(tmp_path, "--window-size=1000,800", "--dump-dom", probe.as_uri())
     found = re.search(r'<pre id="pige-layout">([^<]*)</pre>', run.stdout)
     assert found, run.stderr[-2000:]
     check = {k: int(v) for k, v in (kv.split("=", 1) for kv in found.group(1).split())}
@@ -411,16 +400,8 @@ def test_no_figures_keeps_them_only_in_the_page(tmp_path: Path) -> None:
 
 def test_a_probe_report_speaks_of_contacts_and_poses(tmp_path: Path) -> None:
     """Issue 34 item 5: a probe import's report in the probe's words: poses and contacts, no seconds, no nest."""
-    sphere = ["--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius", "1.5"]
-    kins = ["--rtcp-off", "M429", "--rtcp-on", "M428", "--stylus-tool", "99", "--stylus-length", "120"]
-    assert main(["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, *sphere,
-                 "--out", str(tmp_path / "probe.ngc")]) == 0
-    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, *sphere, "--program",
-                 str(tmp_path / "probe.ngc"), "--seed", "3", "--noise", "0.3",
-                 "--effect", "table_drift:vx_um=6,vy_um=-4,vz_um=8,tau_s=10", "--out", str(tmp_path / "log.txt")]) == 0
-    assert main(["import-probe", str(tmp_path / "log.txt"), "--format", "linuxcnc", *sphere[2:],
-                 "--out", str(tmp_path / "probe.csv")]) == 0
-    data = gather_report([tmp_path / "probe.csv"], tolerances=TOLERANCES)
+    probe = simulated_probe_file(tmp_path, 3, "table_drift:vx_um=6,vy_um=-4,vz_um=8,tau_s=10", "--noise", "0.3")
+    data = gather_report([probe], tolerances=TOLERANCES)
     (rep,) = data.measurements
     assert rep.diagnosis is not None and [f.effect for f in rep.diagnosis.findings] == ["table_drift"]
     html = write_report(data, tmp_path / "out").read_text(encoding="utf-8")

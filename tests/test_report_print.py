@@ -23,9 +23,8 @@ import pytest
 
 from pige_sym.cli.main import main
 from pige_sym.simulation.simulator import random_pige
-from testdata import REPO
+from testdata import CHROMIUM, REPO, run_chromium, simulated_probe_file
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 PDFTOTEXT = shutil.which("pdftotext")
 TOLERANCES = REPO / "examples" / "tolerances.json"
 AC = "wC'A'bXYZ(C1)t"
@@ -62,14 +61,6 @@ window.addEventListener('load', function () {
 </script>"""
 
 
-def _chromium(tmp: Path, *args: str) -> subprocess.CompletedProcess[str]:
-    assert CHROMIUM is not None
-    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-           "--disable-background-networking", "--disable-component-update", "--disable-sync", "--hide-scrollbars",
-           f"--user-data-dir={tmp / 'profile'}", "--virtual-time-budget=10000", *args]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=180, check=False)
-
-
 @pytest.fixture(scope="module")
 def reports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """report.html of an R-test run with a finding, a probe import and four ballbar setups with an effect."""
@@ -81,16 +72,8 @@ def reports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     assert main(["report", str(run), "--out", str(root / "rtest"), "--program", str(root / "rtest.mpf"),
                  "--tolerances", str(TOLERANCES)]) == 0
     out["rtest"] = root / "rtest" / "report.html"
-    sphere = ["--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius", "1.5"]
-    kins = ["--rtcp-off", "M429", "--rtcp-on", "M428", "--stylus-tool", "99", "--stylus-length", "120"]
-    assert main(["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, *sphere,
-                 "--out", str(root / "probe.ngc")]) == 0
-    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, *sphere, "--program",
-                 str(root / "probe.ngc"), "--seed", "2", "--effect", "table_drift:vx_um=3,vy_um=-2,vz_um=4,tau_s=10",
-                 "--out", str(root / "probe_log.txt")]) == 0
-    assert main(["import-probe", str(root / "probe_log.txt"), "--format", "linuxcnc", *sphere[2:],
-                 "--out", str(root / "probe.csv")]) == 0
-    assert main(["report", str(root / "probe.csv"), "--out", str(root / "probe"), "--tolerances",
+    probe = simulated_probe_file(root, 2, "table_drift:vx_um=3,vy_um=-2,vz_um=4,tau_s=10")
+    assert main(["report", str(probe), "--out", str(root / "probe"), "--tolerances",
                  str(TOLERANCES)]) == 0
     out["probe"] = root / "probe" / "report.html"
     truth = ",".join(f"{k}={v!r}" for k, v in random_pige(AC, 4).items())
@@ -112,7 +95,7 @@ def _layout(html: Path, tmp: Path, width: int, *, printed: bool = False) -> dict
         text = text.replace("@media print{", "@media all{")
     probe = tmp / f"layout-{width}-{printed}.html"
     probe.write_text(text.replace("</body>", LAYOUT + "</body>"), encoding="utf-8")
-    run = _chromium(tmp, f"--window-size={width},800", "--dump-dom", probe.as_uri())
+    run = run_chromium(tmp, f"--window-size={width},800", "--dump-dom", probe.as_uri(), timeout_s=180)
     found = re.search(r'<pre id="pige-layout">([^<]*)</pre>', run.stdout)
     assert found, run.stderr[-2000:]
     return dict(kv.split("=", 1) for kv in found.group(1).split())
@@ -140,7 +123,7 @@ def test_the_printed_page_loses_no_column_and_opens_every_detail(reports, kind, 
 @pytest.mark.parametrize("kind", ["rtest", "probe", "ballbar"])
 def test_the_pdf_has_every_column_and_no_heading_alone_at_a_page_bottom(reports, kind, tmp_path) -> None:
     pdf = tmp_path / f"{kind}.pdf"
-    _chromium(tmp_path, "--no-pdf-header-footer", f"--print-to-pdf={pdf}", reports[kind].as_uri())
+    run_chromium(tmp_path, "--no-pdf-header-footer", f"--print-to-pdf={pdf}", reports[kind].as_uri(), timeout_s=180)
     data = pdf.read_bytes()
     assert data.startswith(b"%PDF") and len(re.findall(rb"/Type\s*/Page\b", data)) >= 2
     if PDFTOTEXT is None:

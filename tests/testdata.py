@@ -7,6 +7,8 @@ conftest.py in a sub-folder (tests/linuxcnc) replaces as the module of that name
 from __future__ import annotations
 
 import json
+import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +17,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 REFERENCE = SHARED / "reference"
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
 def reference_files(pattern: str) -> list[Path]:
@@ -56,3 +59,29 @@ def load_reference(path: Path) -> tuple[dict[str, str], dict[str, np.ndarray], d
     cols = {h: arr[:, i] for i, h in enumerate(header)}
     truth = json.loads(path.with_name(path.stem + ".truth.json").read_text())
     return meta, cols, truth
+
+
+def run_chromium(tmp: Path, *args: str, timeout_s: float = 120) -> subprocess.CompletedProcess[str]:
+    """Headless chromium with a throw-away profile in ``tmp`` and ``args`` (the caller skips without it)."""
+    assert CHROMIUM is not None
+    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+           "--disable-background-networking", "--disable-component-update", "--disable-sync", "--hide-scrollbars",
+           f"--user-data-dir={tmp / 'profile'}", "--virtual-time-budget=10000", *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False)
+
+
+def simulated_probe_file(folder: Path, seed: int, effect: str, *extra: str) -> Path:
+    """``folder/probe.csv``: a LinuxCNC probing program, the virtual machine's log of it (``seed``, ``effect``,
+    ``extra`` simulate options) and its import, as a user makes them."""
+    from pige_sym.cli.main import main
+
+    sphere = ["--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius", "1.5"]
+    kins = ["--rtcp-off", "M429", "--rtcp-on", "M428", "--stylus-tool", "99", "--stylus-length", "120"]
+    assert main(["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, *sphere,
+                 "--out", str(folder / "probe.ngc")]) == 0
+    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *kins, *sphere, "--program",
+                 str(folder / "probe.ngc"), "--seed", str(seed), *extra, "--effect", effect,
+                 "--out", str(folder / "probe_log.txt")]) == 0
+    assert main(["import-probe", str(folder / "probe_log.txt"), "--format", "linuxcnc", *sphere[2:],
+                 "--out", str(folder / "probe.csv")]) == 0
+    return folder / "probe.csv"
