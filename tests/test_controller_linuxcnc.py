@@ -126,9 +126,9 @@ def test_what_linuxcnc_cannot_hold_is_named_with_the_error_it_leaves() -> None:
     assert [s.split()[0] for s in scope.not_representable] == ["EB0A", "EA0C"]
     tilts_only = CompensationParameters(kern.MACHINE_CODE, {"EB0A": 30.0, "EA0C": -20.0}, dict(kern.UNITS), None, {},
                                         "test", [])
-    assert scope.rmse_table_only_um == pytest.approx(tool_point_summary(tilts_only, "linuxcnc").rmse_before_um,
-                                                     rel=1e-6)
-    assert scope.rmse_nc_rewrite_um < 0.05 < scope.rmse_table_only_um < scope.rmse_before_um
+    tilts_left = tool_point_summary(tilts_only, "linuxcnc").before
+    assert scope.controller_only.expected_um == pytest.approx(tilts_left.expected_um, rel=1e-6)
+    assert scope.complete.expected_um < 0.05 < scope.controller_only.expected_um < scope.before.expected_um
     text = format_controller(params, "linuxcnc")
     assert "NOT representable" in text and "EB0A +30 urad" in text and "\nsetp xyzac-trt-kins" not in text
     assert "# xyzac-trt-kins.y-offset: add +0.0030000" in text and "requires LinuxCNC >= 2.9" in text

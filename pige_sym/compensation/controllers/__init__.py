@@ -68,12 +68,26 @@ def get_controller(name: str) -> ModuleType:
 
 
 def format_controller(params: Any, style: str = "table", *, carrier: int = 1,
-                      current: Any = None, heidenhain_trans: str | None = None) -> str:
+                      current: Any = None, heidenhain_trans: str | None = None, enter: str = "weighed") -> str:
     """The corrections of ``params`` in the words of controller ``style`` (docs/controller-corrections.md).
 
-    Every controller also says what it enters, what it cannot represent and the tool-point error each
-    choice leaves (:mod:`~pige_sym.compensation.controllers.scope`).
+    The values are weighed by their uncertainty over the axes' travel (:func:`entered_for_controller`).  Every
+    controller also says what it enters, what it cannot represent and the tool-point error each choice leaves,
+    with a 95 % bound (:mod:`~pige_sym.compensation.controllers.scope`).
     """
     module = get_controller(style)
     options = ControllerOptions(carrier=carrier, current=current, heidenhain_trans=heidenhain_trans)
-    return str(module.render(params, options))
+    return str(module.render(entered_for_controller(params, enter), options))
+
+
+def entered_for_controller(params: Any, enter: str = "weighed", travel: Any = None) -> Any:
+    """``params`` with the values to enter: weighed by their uncertainty over the axes' travel (``travel``: axis
+    → (min, max) [deg], :func:`~pige_sym.compensation.weighing.travel_poses`), or every estimate (``all``)."""
+    from pige_sym.compensation.weighing import every_estimate, travel_poses, weigh, with_entered
+
+    if enter not in ("weighed", "all"):
+        raise InputError(f"enter {enter!r}: use weighed or all")
+    if params.weighing is not None:
+        return params
+    weighing = weigh(params, travel_poses(params, travel))
+    return with_entered(params, every_estimate(weighing) if enter == "all" else weighing)
