@@ -291,7 +291,8 @@ def test_a_ballbar_setup_joins_the_map_fit() -> None:
     rows = [(0.0, 0.0)] + [(a, c) for a in grid for c in np.arange(0.0, 360.0, 30.0)]
     angles = np.array(rows)
     traj = Trajectory("grid", ("A", "C"), angles, np.arange(len(rows)) * 8.0, "map grid")
-    rtests = [(f"r{i}", simulate(AC, traj, pige={}, ball_mm=b, noise_um=0.05, seed=i, error_maps=truth_maps).measurement)
+    rtests = [(f"r{i}", simulate(AC, traj, pige={}, ball_mm=b, noise_um=0.05, seed=i,
+                                 error_maps=truth_maps).measurement)
               for i, b in enumerate(((110, 0, 40), (-50, 95, 90)))]
     two = identify_maps(rtests, MapSpec(("C", "A"), 30.0))
     assert any(u.motion.endswith("C") and u.angle_deg is not None for u in two.undetermined)
