@@ -309,3 +309,19 @@ def test_a_ballbar_setup_joins_the_map_fit() -> None:
     for name, tv in truth_maps.axes["C"].values.items():
         assert np.isfinite(c.value[name]).all(), (name, [u for u in mixed.undetermined][:3])
         assert np.all(np.abs(c.value[name] - tv) <= 4 * c.std[name] + 0.5), name
+
+
+def test_diagnose_says_when_a_map_explains_the_residual(ac_mappable: Any, capsys: Any) -> None:
+    """The held-out gain of the maps, cross-validated by pose: large on a machine with maps, none on one without."""
+    paths, oracle = ac_mappable
+    assert main(["diagnose", *paths, "--map", "C,A", "--map-step", "15", "--json"]) == 0
+    gain = json.loads(capsys.readouterr().out)["map_gain"]
+    assert gain["map_explains_the_residual"] and gain["gain"] > 0.5
+    assert gain["harmonics"] and all(0 <= h["share"] <= 1 for h in gain["harmonics"])
+    flat = OracleMachine(oracle.axes, oracle.side, oracle.pige, {})
+    folder = Path(paths[0]).parent / "flat"
+    folder.mkdir(exist_ok=True)
+    flat_paths = _write(folder, flat, SETUPS, 0.15, 3)
+    assert main(["diagnose", *flat_paths, "--map", "C,A", "--map-step", "15"]) == 0
+    text = capsys.readouterr().out
+    assert "the error maps do not explain the residual" in text

@@ -162,8 +162,46 @@ class _Layout:
         return [f"{m.name}@{self.grids[m.axis].angles_deg[g]:g}" for m, g in self.columns]
 
 
-def identify_maps(items: Sequence[tuple[str, Measurement | BallbarRun]], spec: MapSpec) -> MapResult:
-    """The joint fit of PIGEs, zero-position errors and maps (module docstring).
+@dataclass
+class MapSystem:
+    """The prepared fit: every file's block in the final columns, their first weights, and the bookkeeping.
+
+    Attributes
+    ----------
+    machine : str
+    names : list of str
+        The PIGEs and zero-position errors (all, in kernel order).
+    fitted_zero : list of int
+        Indices into ``names`` of those fitted (a zero-position error the files cannot determine is not).
+    shared : list of str
+        The blocks' shared columns: the fitted PIGEs, then per motion its z, the left-out functions, the held
+        values (:func:`_projection`).
+    blocks : list of Block
+    sigmas : list of float
+        Each file's σ from its own PIGE fit (the first pass).
+    zeros : IdentificationResult
+        The fit of the PIGEs and zero-position errors alone (why a zero-position error is not fitted).
+    """
+
+    machine: str
+    names: list[str]
+    fitted_zero: list[int]
+    shared: list[str]
+    blocks: list[Block]
+    sigmas: list[float]
+    layout: _Layout
+    groups: dict[str, Any]
+    undetermined: list[Undetermined]
+    zeros: IdentificationResult
+
+    @property
+    def n_pige(self) -> int:
+        return len(self.fitted_zero)
+
+
+def map_system(items: Sequence[tuple[str, Measurement | BallbarRun]], spec: MapSpec) -> MapSystem:
+    """Every file's block with the map columns, checked per grid angle, projected and orthogonalised
+    (module docstring).
 
     Raises
     ------
@@ -190,11 +228,17 @@ def identify_maps(items: Sequence[tuple[str, Measurement | BallbarRun]], spec: M
     shared = [names[j] for j in fitted_zero] + new_names
     nuisance = [j for j, n in enumerate(shared) if n.endswith(":left-out")]
     fitted = _orthogonalised(fitted, sigmas, nuisance, len(fitted_zero))
-    joint = identify_blocks(machine, shared, fitted, sigmas, items)
-    sigmas = _refined_sigmas(joint, fitted)
-    joint = identify_blocks(machine, shared, fitted, sigmas, items)
-    maps, more = _maps(joint.result, layout, groups)
-    return MapResult(_pige_part(joint, names, fitted_zero, zeros), maps, undetermined + more, spec)
+    return MapSystem(machine, names, fitted_zero, shared, fitted, sigmas, layout, groups, undetermined, zeros)
+
+
+def identify_maps(items: Sequence[tuple[str, Measurement | BallbarRun]], spec: MapSpec) -> MapResult:
+    """The joint fit of PIGEs, zero-position errors and maps (module docstring; :func:`map_system`)."""
+    s = map_system(items, spec)
+    joint = identify_blocks(s.machine, s.shared, s.blocks, s.sigmas, items)
+    sigmas = _refined_sigmas(joint, s.blocks)
+    joint = identify_blocks(s.machine, s.shared, s.blocks, sigmas, items)
+    maps, more = _maps(joint.result, s.layout, s.groups)
+    return MapResult(_pige_part(joint, s.names, s.fitted_zero, s.zeros), maps, s.undetermined + more, spec)
 
 
 def _layout(items: Sequence[tuple[str, Any]], spec: MapSpec, axes: tuple[str, ...]) -> _Layout:
