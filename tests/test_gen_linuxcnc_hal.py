@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -93,7 +94,8 @@ def test_pin_names_come_from_kernel_metadata_alone() -> None:
     pins = linuxcnc_pins.pin_names("k", kin.ROTARY_AXES, kin.PARAMETERS, kin.UNITS, bool(kin.TOOL_ROTARY))
     comp = load_target("linuxcnc").render(parse_machine_code("wbXYZCA(C1)t"), "k")["k.comp"]
     created = [line.split('"')[1] for line in comp.splitlines() if "hal_pin_" in line and '"k.' in line]
-    assert created == list(pins)
+    grids = [p for axis in kin.ROTARY_AXES for p in linuxcnc_pins.map_grid_pins("k", axis)]
+    assert created == list(pins) + grids  # the map values' pins are made in a loop: the HAL session below
     assert {"k.tool-x", "k.sense-a", "k.ex0c", "k.ec0c", "k.pivot-c-z"} <= set(pins)
     assert pins["k.eb0a"] == "EB0A [urad]" and pins["k.ea0a"] == "EA0A [urad] zero-position error"
 
@@ -183,6 +185,9 @@ def test_a_hal_session_loads_the_component_and_switches_it(compiled, tmp_path, r
     kin = load_kernels(code)
     for pin in linuxcnc_pins.pin_names(name, kin.ROTARY_AXES, kin.PARAMETERS, kin.UNITS, False):
         assert pin in log, f"{pin} missing:\n{log}"
+    shown = set(re.findall(rf"\b{name}\.\S+", log))
+    assert set(linuxcnc_pins.map_pin_names(name, kin.ROTARY_AXES)) <= shown  # 1034 map pins, by name
+    assert f"{name}.ecc-rev-{linuxcnc_pins.MAP_NODES - 1:02d}" in shown
     assert f"s32   IN              1  {name}.sense-a" in log
     values = [ln.strip() for ln in log.splitlines() if ln.strip() in ("TRUE", "FALSE")]
     assert values == ["TRUE", "TRUE", "FALSE", "TRUE"], log  # identity first; switched to 1; 2 refused: still 1

@@ -69,6 +69,8 @@ from pige_sym.errors import InputError, UnsupportedMachineError
 NEWTON_MAX_STEPS = 3
 #: Residual |inverse(world) − joints| [mm] below which ``P_forward`` stops.
 NEWTON_TOL_MM = 1e-10
+#: Map slots per rotary axis: the six error motions of CONVENTIONS §10, then the reversal of φ.
+MAP_SLOTS = 7
 
 
 class _Printer(C99CodePrinter):
@@ -110,6 +112,8 @@ class KinematicsExpressions:
         ``c`` = linear_commands at ball = 0 [mm].
     errors : list of sympy.Symbol
         One symbol per kernel parameter, ``PARAMETERS`` order.
+    motions : list of sympy.Symbol
+        One symbol per error motion of a carried body, ``MOTION_PARAMETERS`` order.
     """
 
     model: SymbolicModel
@@ -118,6 +122,7 @@ class KinematicsExpressions:
     nominal_rotation: sp.Matrix
     nominal_offset: sp.Matrix
     errors: list[sp.Symbol]
+    motions: list[sp.Symbol]
 
 
 def check_supported(structure: MachineStructure) -> None:
@@ -155,7 +160,9 @@ def kinematics_expressions(code: str | MachineStructure) -> KinematicsExpression
 def _expressions(structure: MachineStructure) -> KinematicsExpressions:
     model = build_model(structure)
     errors = [sp.Symbol(name, real=True) for name in model.parameters]
-    offset = (model.jacobian + model.workpiece_rotation * model.reference_jacobian) * sp.Matrix(errors)
+    motions = [sp.Symbol(f"mo_{name}", real=True) for name in model.motion_parameters]
+    offset = ((model.jacobian + model.workpiece_rotation * model.reference_jacobian) * sp.Matrix(errors)
+              + model.motion_jacobian * sp.Matrix(motions))
     joints = (model.linear_commands - offset / 1000).applyfunc(sp.expand)
     ball = list(model.ball)
     jacobian = joints.jacobian(ball).applyfunc(sp.expand)
@@ -166,7 +173,7 @@ def _expressions(structure: MachineStructure) -> KinematicsExpressions:
         raise UnsupportedMachineError(f"machine {structure.canonical!r}: the nominal kinematics are not a rigid "
                                       "motion of the tool point; no closed-form inverse")
     nominal_offset = model.linear_commands.subs({b: 0 for b in ball}).applyfunc(sp.expand)
-    return KinematicsExpressions(model, joints, jacobian, rotation, nominal_offset, errors)
+    return KinematicsExpressions(model, joints, jacobian, rotation, nominal_offset, errors, motions)
 
 
 def generator_hash(structure: MachineStructure, *modules: str) -> str:
@@ -193,6 +200,7 @@ def _locals(kin: KinematicsExpressions, prefix: str, used: set[str],
     for j, sym in enumerate(model.tool):
         candidates.append((sym.name, f"p->tool[{j}] - dt" if j == spindle else f"p->tool[{j}]"))
     candidates += [(e.name, f"p->errors[{k}]") for k, e in enumerate(kin.errors)]
+    candidates += [(m.name, f"p->motion[{k}]") for k, m in enumerate(kin.motions)]
     names = {name for name, _ in candidates}
     needed = set(used) & names
     for name, code in reversed(candidates):
@@ -258,6 +266,7 @@ def _forward_nominal(kin: KinematicsExpressions, prefix: str) -> str:
 def _declarations(kin: KinematicsExpressions, prefix: str) -> str:
     model = kin.model
     k, n, spindle = len(model.rotary), len(kin.errors), "XYZ"[model.spindle_direction]
+    m = len(kin.motions)
     index = "\n".join(f"#define {prefix}_{name} {i}  /* [{model.units[name]}]"
                       + (" zero-position error */" if i >= model.n_location else " */")
                       for i, name in enumerate(model.parameters))
@@ -267,6 +276,7 @@ def _declarations(kin: KinematicsExpressions, prefix: str) -> str:
 
 #define {prefix}_N_ROTARY {k}  /* rotary axes, in this order: {", ".join(model.rotary_axes)} */
 #define {prefix}_N_ERRORS {n}
+#define {prefix}_N_MOTIONS {m}  /* per rotary axis dx, dy, dz [um], rx, ry, rz [urad] of its carried body */
 #define {prefix}_SPINDLE_AXIS {model.spindle_direction}  /* tool offset along machine {spindle} */
 #define {prefix}_NEWTON_MAX_STEPS {NEWTON_MAX_STEPS}
 #define {prefix}_NEWTON_TOL_MM {NEWTON_TOL_MM!r}
@@ -279,6 +289,7 @@ typedef struct {prefix}_params {{
     double sense[{k}];       /* commanded sense: theta = sense * theta_cmd (negative: -1, else +1) */
     double errors[{n}];     /* location errors [um, urad], then zero-position errors [urad] */
     double tool_offset;    /* tool length along the spindle axis [mm], part of world (LinuxCNC G43) */
+    double motion[{m}];    /* error motions of the carried bodies at this pose [um, urad] ({prefix}_map_add) */
 }} {prefix}_params;
 
 /* Geometry at the origin, senses +1, no errors, no tool offset. */
@@ -291,6 +302,7 @@ typedef struct {prefix}_params {{
     }}
     for (j = 0; j < 3; j++) p->tool[j] = 0.0;
     for (i = 0; i < {n}; i++) p->errors[i] = 0.0;
+    for (i = 0; i < {m}; i++) p->motion[i] = 0.0;
     p->tool_offset = 0.0;
 }}
 
@@ -298,6 +310,84 @@ typedef struct {prefix}_params {{
 {prefix}_API double {prefix}_theta(const {prefix}_params *p, const double angles_cmd_deg[], int i)
 {{
     return (p->sense[i] < 0.0 ? -1.0 : 1.0) * angles_cmd_deg[i] * 0.017453292519943295;
+}}"""
+
+
+def _initializer(rows: list[str]) -> str:
+    """A C initializer of a 2-D array: ``{{a, b}, {c, d}}``."""
+    return "{" + ", ".join("{" + r + "}" for r in rows) + "}"
+
+
+def _maps(kin: KinematicsExpressions, prefix: str) -> str:
+    """Error maps (CONVENTIONS §10) to ``motion[]``: hat-function weights on a uniform grid and, per axis, where
+    each of its map's slots goes (:func:`pige_sym.model.error_motions.axis_motions`, φ times s)."""
+    from pige_sym.model.error_motions import MOTION_COMPONENTS, axis_motions
+
+    model = kin.model
+    workpiece = {a.name for a in model.structure.workpiece_axes}
+    columns, signs, names = [], [], []
+    for i, axis in enumerate(model.rotary_axes):
+        motions = axis_motions(axis, per_direction=True)
+        columns.append(", ".join(str(6 * i + MOTION_COMPONENTS.index(mo.component)) for mo in motions))
+        signs.append(", ".join("-1.0" if mo.kind in ("positioning", "reversal") and axis in workpiece else "1.0"
+                               for mo in motions))
+        names.append(f"{axis}: " + ", ".join(mo.name for mo in motions))
+    k = len(model.rotary_axes)
+    return f"""/* Error maps of the rotary axes (CONVENTIONS §10): per axis {MAP_SLOTS} slots, the six motions of its
+   carried body in the order of CONVENTIONS' table, then the reversal map of phi (phi+ - phi-):
+   {"; ".join(names)} [um, urad]. */
+#define {prefix}_MAP_SLOTS {MAP_SLOTS}
+/* index in motion[] of each slot */
+static const int {prefix}_map_column[{k}][{MAP_SLOTS}] = {_initializer(columns)};
+/* phi and its reversal turn the body about the axis by s * phi: s = -1 on the workpiece side (CONVENTIONS §3) */
+static const double {prefix}_map_sign[{k}][{MAP_SLOTS}] = {_initializer(signs)};
+
+/* Hat-function weights of theta [deg] on the nodes start + i * step, i < nodes: the map's value at theta is
+   (1 - *w1) * v[*i0] + *w1 * v[*i1].  A full-turn grid (full_turn != 0, nodes * step = 360) wraps from its last
+   node to its first; any other grid holds its end values outside.  0, or -1 (no map) when nodes < 1 or the step
+   is not positive. */
+{prefix}_API int {prefix}_map_weights(double start_deg, double step_deg, int nodes, int full_turn, double theta_deg,
+                                   int *i0, int *i1, double *w1)
+{{
+    double u, k;
+    *i0 = 0;
+    *i1 = 0;
+    *w1 = 0.0;
+    if (nodes < 1 || !(step_deg > 0.0)) return -1;
+    if (nodes == 1) return 0;
+    if (full_turn) {{
+        u = fmod(theta_deg - start_deg, 360.0);
+        if (u < 0.0) u += 360.0;
+        u /= step_deg;
+        k = floor(u);
+        if (k >= nodes) k = nodes - 1;  /* rounding at the wrap */
+        *i0 = (int)k;
+        *i1 = (*i0 + 1) % nodes;
+        *w1 = u - k;
+        return 0;
+    }}
+    u = (theta_deg - start_deg) / step_deg;
+    if (u <= 0.0) return 0;
+    if (u >= nodes - 1) {{
+        *i0 = *i1 = nodes - 1;
+        return 0;
+    }}
+    k = floor(u);
+    *i0 = (int)k;
+    *i1 = *i0 + 1;
+    *w1 = u - k;
+    return 0;
+}}
+
+/* Add to motion[] the error motions of rotary axis i's carried body from its map values at this pose: slot[0..5]
+   the six motions [um, urad], slot[6] the reversal [urad], of which half acts with the direction of approach
+   approach_theta (+1: theta increasing, -1: decreasing, 0: the mean). */
+{prefix}_API void {prefix}_map_add(int i, const double slot[{prefix}_MAP_SLOTS], double approach_theta, double motion[])
+{{
+    int j;
+    for (j = 0; j < {prefix}_MAP_SLOTS - 1; j++) motion[{prefix}_map_column[i][j]] += {prefix}_map_sign[i][j] * slot[j];
+    j = {prefix}_MAP_SLOTS - 1;
+    motion[{prefix}_map_column[i][j]] += {prefix}_map_sign[i][j] * 0.5 * approach_theta * slot[j];
 }}"""
 
 
@@ -403,6 +493,6 @@ def render_model_c(code: str | MachineStructure, prefix: str, *, include_math: b
                                                                 generator_hash(structure))], " */"])
     parts = [head] if header else []
     parts += [f"#ifndef {guard}\n#define {guard}" + ("\n\n#include <math.h>" if include_math else ""),
-             _declarations(kin, prefix), _inverse(kin, prefix), _jacobian(kin, prefix),
+             _declarations(kin, prefix), _maps(kin, prefix), _inverse(kin, prefix), _jacobian(kin, prefix),
              _forward_nominal(kin, prefix), _NEWTON.format(P=prefix), f"#endif /* {guard} */"]
     return "\n\n".join(parts) + "\n"

@@ -21,15 +21,28 @@ Pins (all ``in``; :func:`pin_names`): ``<name>.pivot-<axis>-x|y|z`` [mm], ``<nam
 θ = σ·θ_cmd, CONVENTIONS §9; the stock trt kinematics of 2.9 turn the table the other way, σ = −1),
 ``<name>.<pige>`` for the location errors [µm, µrad] and the zero-position errors [µrad], names in
 lower case (``<name>.ex0c``, ``<name>.ec0c``).
+
+**Error maps** (CONVENTIONS §10) are pins too, set by ``setp`` lines that ``pige compensate --controller
+linuxcnc`` prints (:mod:`pige_sym.codegen.targets.linuxcnc_pins`): per rotary axis a uniform grid of at most
+``MAP_NODES`` angles (start, step, nodes, full turn) and per node the six motions and the reversal of φ.  Pins
+rather than a table read at start-up: the values can be set and changed like the PIGEs, by ``setp`` in a HAL
+file or at run time, without a file format, a path, or file access from a realtime module (RTAI has none).
+Per call the component reads the two nodes around each angle (7 slots each) and adds the motions, linearly
+interpolated, to the model's first-order offset (``P_params.motion``): the inverse stays closed form, the
+forward's one Newton step stays exact.  The reversal needs the direction of approach, which positions alone do
+not give: ``<name>.vel-<axis>`` takes the joint's velocity command (``net … joint.N.vel-cmd``), and its last
+non-zero sign is kept, as LinuxCNC's own screw compensation does (``src/emc/motion/control.c``,
+``compute_screw_comp``).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from pige_sym.codegen.c_model import generator_hash, header_lines, kinematics_expressions, render_model_c
+from pige_sym.codegen.c_model import MAP_SLOTS, generator_hash, header_lines, kinematics_expressions, render_model_c
 from pige_sym.codegen.machine_code import MachineStructure
 from pige_sym.codegen.targets import linuxcnc_pins
+from pige_sym.codegen.targets.linuxcnc_pins import MAP_NODES
 
 NAME = "linuxcnc"
 DESCRIPTION = "LinuxCNC kinematics component (<name>.comp for halcompile) with every PIGE as a pin"
@@ -78,6 +91,13 @@ takes Newton steps with the generated Jacobian (the model is affine in the tool 
 is exact to rounding). Orientation errors of the tool are not corrected (the rotary joints are the
 commanded angles).
 
+Error maps (CONVENTIONS 10): per rotary axis a uniform grid (map-<axis>-start, -step [deg], -nodes, at most
+{MAP_NODES}, 0 = no map, -full-turn) in the CONVENTIONS angle, and per node the six error motions of the body
+the axis carries (<motion>-NN [um, urad], e.g. exc-00 ... ecc-00) and the reversal of the positioning map
+(<phi>-rev-NN, phi+ minus phi-); linear interpolation, wrapping on a full-turn grid. They enter the same
+first-order offset as the PIGEs. The direction of approach is the last non-zero sign of vel-<axis> (net
+joint.N.vel-cmd to it), shown on approach-<axis>.
+
 Pins (all in; PIGEs in um and urad exactly as pige prints them):
 {pin_doc}
 """;'''
@@ -88,7 +108,10 @@ def _pin_struct(structure: MachineStructure, name: str, parameters: tuple[str, .
     lines = ["static struct {", f"    hal_float_t *pivot[{k}][3];"]
     lines += ["    hal_float_t *tool[3];"] if tool_rotary else []
     lines += [f"    hal_s32_t *sense[{k}];", f"    hal_float_t *errors[{n}];", "    hal_float_t *tool_offset;",
-              "    hal_bit_t *kinstype_is[3];", f"}} *{name}_hal;"]
+              "    hal_bit_t *kinstype_is[3];",
+              f"    hal_float_t *map_start[{k}], *map_step[{k}], *vel[{k}];",
+              f"    hal_s32_t *map_nodes[{k}], *approach[{k}];", f"    hal_bit_t *map_full_turn[{k}];",
+              f"    hal_float_t *map[{k}][{MAP_SLOTS}][{MAP_NODES}];", f"}} *{name}_hal;"]
     return "\n".join(lines)
 
 
@@ -108,9 +131,10 @@ def _setup(structure: MachineStructure, name: str, parameters: tuple[str, ...], 
             for i, p in enumerate(parameters)]
     new += [f'    res += hal_pin_bit_newf(HAL_OUT, &({h}->kinstype_is[{t}]), comp_id, "kinstype.is-{t}");'
             for t in range(3)]
+    new += _map_pin_setup(structure, name)
     k = len(structure.rotary_axes)
     return "\n".join([
-        f"static int {name}_setup(void)", "{", "    int res = 0, i;",
+        f"static int {name}_setup(void)", "{", "    int res = 0, i, j, n;",
         "    if (comp_id < 0) goto error;  /* comp_id of rtapi_app_main (halcompile) */",
         "    if (hal_set_unready(comp_id)) goto error;",
         f"    {h} = hal_malloc(sizeof(*{h}));", f"    if (!{h}) goto error;", *new,
@@ -123,6 +147,55 @@ def _setup(structure: MachineStructure, name: str, parameters: tuple[str, ...], 
         "    return 0;", "error:", f"    {h} = 0;  /* the kinematics functions then return -1 */",
         f'    rtapi_print_msg(RTAPI_MSG_ERR, "{name}: setup failed (res=%d)\\n", res);',
         "    return -1;", "}"])
+
+
+def _map_pin_setup(structure: MachineStructure, name: str) -> list[str]:
+    """The map pins of every rotary axis (:func:`~pige_sym.codegen.targets.linuxcnc_pins.map_pin_names`)."""
+    h = f"{name}_hal"
+    out = []
+    for i, r in enumerate(structure.rotary_axes):
+        a = r.name.lower()
+        stems = ", ".join(f'"{name}.{stem}"' for stem in linuxcnc_pins.map_slot_names(r.name))
+        out += [f'    res += hal_pin_float_newf(HAL_IN, &({h}->map_start[{i}]), comp_id, "{name}.map-{a}-start");',
+                f'    res += hal_pin_float_newf(HAL_IN, &({h}->map_step[{i}]), comp_id, "{name}.map-{a}-step");',
+                f'    res += hal_pin_s32_newf(HAL_IN, &({h}->map_nodes[{i}]), comp_id, "{name}.map-{a}-nodes");',
+                f'    res += hal_pin_bit_newf(HAL_IN, &({h}->map_full_turn[{i}]), comp_id, '
+                f'"{name}.map-{a}-full-turn");',
+                f'    res += hal_pin_float_newf(HAL_IN, &({h}->vel[{i}]), comp_id, "{name}.vel-{a}");',
+                f'    res += hal_pin_s32_newf(HAL_OUT, &({h}->approach[{i}]), comp_id, "{name}.approach-{a}");',
+                "    {", f"        static const char *stems[{MAP_SLOTS}] = {{{stems}}};",
+                f"        for (j = 0; j < {MAP_SLOTS}; j++) for (n = 0; n < {MAP_NODES}; n++)",
+                f'            res += hal_pin_float_newf(HAL_IN, &({h}->map[{i}][j][n]), comp_id, "%s-%02d", '
+                'stems[j], n);',
+                "    }"]
+    return out
+
+
+def _map_motions(structure: MachineStructure, name: str) -> str:
+    """The error motions of this pose from the map pins (CONVENTIONS §10), and the direction of approach."""
+    h = f"{name}_hal"
+    k = len(structure.rotary_axes)
+    return "\n".join([
+        "/* The carried bodies' error motions at the commanded angles, from the map pins.  The direction of approach",
+        "   of each axis is the sign of its joint's last non-zero velocity command (as LinuxCNC's own screw",
+        "   compensation takes it, src/emc/motion/control.c), kept between calls. */",
+        f"static int {name}_approach_cmd[{k}];",
+        f"static void {name}_set_motions({name}_params *p, const double angles_cmd_deg[])",
+        "{", f"    double slot[{MAP_SLOTS}], w1, v;", "    int i, j, i0, i1, n;",
+        f"    for (i = 0; i < {name}_N_MOTIONS; i++) p->motion[i] = 0.0;",
+        f"    for (i = 0; i < {k}; i++) {{",
+        f"        v = *({h}->vel[i]);",
+        f"        if (v > 0.0) {name}_approach_cmd[i] = 1;",
+        f"        else if (v < 0.0) {name}_approach_cmd[i] = -1;",
+        f"        *({h}->approach[i]) = {name}_approach_cmd[i];",
+        f"        n = *({h}->map_nodes[i]);",
+        f"        if (n > {MAP_NODES}) continue;  /* more nodes than pins: no map */",
+        f"        if ({name}_map_weights(*({h}->map_start[i]), *({h}->map_step[i]), n, *({h}->map_full_turn[i]),",
+        "                p->sense[i] * angles_cmd_deg[i], &i0, &i1, &w1)) continue;",
+        f"        for (j = 0; j < {MAP_SLOTS}; j++)",
+        f"            slot[j] = (1.0 - w1) * *({h}->map[i][j][i0]) + w1 * *({h}->map[i][j][i1]);",
+        f"        {name}_map_add(i, slot, p->sense[i] * {name}_approach_cmd[i], p->motion);",
+        "    }", "}"])
 
 
 def _load_params(structure: MachineStructure, name: str, parameters: tuple[str, ...], tool_rotary: bool) -> str:
@@ -219,6 +292,7 @@ int kinematicsForward(const double *j, EmcPose *pos, const KINEMATICS_FORWARD_FL
     (void)iflags;
     if (!{N}_hal) return -1;  /* setup failed: no pins */
     {N}_read_pins(&p);
+    {N}_set_motions(&p, j + 3);
     return {N}_pose_forward(&p, {N}_type != {N}_identity_type, j, pos);
 }}
 
@@ -226,10 +300,12 @@ int kinematicsInverse(const EmcPose *pos, double *j, const KINEMATICS_INVERSE_FL
                       KINEMATICS_FORWARD_FLAGS *fflags)
 {{
     {N}_params p;
+    const double angles[] = {{{ANGLES}}};
     (void)iflags;
     (void)fflags;
     if (!{N}_hal) return -1;  /* setup failed: no pins */
     {N}_read_pins(&p);
+    {N}_set_motions(&p, angles);
     {N}_pose_inverse(&p, {N}_type != {N}_identity_type, pos, j);
     return 0;
 }}"""
@@ -256,8 +332,9 @@ def render_comp(structure: MachineStructure, name: str, regenerate: str) -> str:
         f"static int {name}_type = 0;           /* motion.switchkins-type */",
         f"static int {name}_identity_type = 1;  /* 0 with sparm=identityfirst */",
         _pin_struct(structure, name, params, tool_rotary), _setup(structure, name, params, tool_rotary),
-        _load_params(structure, name, params, tool_rotary), _pose_layer(structure, name),
-        _KINEMATICS.format(N=name)]
+        _load_params(structure, name, params, tool_rotary), _map_motions(structure, name),
+        _pose_layer(structure, name),
+        _KINEMATICS.format(N=name, ANGLES=", ".join(f"pos->{_POSE_MEMBER[r.name]}" for r in structure.rotary_axes))]
     return decl + "\n\n" + "\n\n".join(c_part) + "\n"
 
 

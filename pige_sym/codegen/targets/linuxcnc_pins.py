@@ -14,6 +14,16 @@ Pins (all ``in``), for a component ``<name>``:
 * ``<name>.sense-<axis>`` (s32): the commanded sense σ, θ = σ·θ_cmd (CONVENTIONS §9), +1 at load;
 * ``<name>.<pige>`` in lower case: each location error [µm, µrad] and zero-position error [µrad]
   (``<name>.ex0c``, ``<name>.eb0a``, ``<name>.ec0c``).
+
+The error maps of each rotary axis (CONVENTIONS §10; :func:`map_pin_names`), on a uniform grid of at most
+:data:`MAP_NODES` angles:
+
+* ``<name>.map-<axis>-start`` [deg], ``-step`` [deg], ``-nodes`` (s32, 0: no map, the default),
+  ``-full-turn`` (bit: the grid wraps, ``nodes · step`` = 360°), in the CONVENTIONS angle θ = σ·θ_cmd;
+* ``<name>.<motion>-<NN>`` [µm, µrad]: the value of each motion of §10 at node NN (``<name>.exc-00``,
+  ``<name>.ecc-11``), and ``<name>.<φ>-rev-<NN>`` the reversal map φ⁺ − φ⁻ (``<name>.ecc-rev-00``);
+* ``<name>.vel-<axis>`` (in, float): the joint's velocity command (net ``joint.N.vel-cmd``), whose last non-zero
+  sign is the direction of approach; ``<name>.approach-<axis>`` (out, s32): that direction, commanded sense.
 """
 
 from __future__ import annotations
@@ -25,6 +35,8 @@ from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
 from pige_sym.errors import InputError, UnsupportedMachineError
 
 _VALID_NAME = re.compile(r"[a-z][a-z0-9_]{0,47}")
+#: Grid angles per rotary axis the component's map pins hold (5° over a full turn, 2.5° over 180°).
+MAP_NODES = 73
 
 
 def check_machine(structure: MachineStructure) -> None:
@@ -105,3 +117,38 @@ def pin_names(name: str, rotary_axes: Sequence[str], parameters: Sequence[str], 
 def error_pin(name: str, parameter: str) -> str:
     """The pin of one PIGE or zero-position error, e.g. ``pige_xyzac_trt.ex0c``."""
     return f"{name}.{parameter.lower()}"
+
+
+def map_slot_names(axis: str) -> tuple[str, ...]:
+    """The pin stem of each map slot of ``axis`` in the component's slot order: the six motions of CONVENTIONS
+    §10 (``exc`` … ``ecc``), then the reversal of φ (``ecc-rev``)."""
+    from pige_sym.model.error_motions import axis_motions
+
+    return tuple(m.name.lower().replace(":reversal", "-rev") for m in axis_motions(axis, per_direction=True))
+
+
+def map_grid_pins(name: str, axis: str) -> dict[str, str]:
+    """The grid pins of one axis' maps → what each holds."""
+    a = axis.lower()
+    return {f"{name}.map-{a}-start": f"first grid angle of {axis}'s maps, CONVENTIONS angle [deg]",
+            f"{name}.map-{a}-step": f"grid step of {axis}'s maps [deg]",
+            f"{name}.map-{a}-nodes": f"grid angles of {axis}'s maps (s32, 0: no map), at most {MAP_NODES}",
+            f"{name}.map-{a}-full-turn": f"{axis}'s grid wraps (bit; nodes x step = 360)",
+            f"{name}.vel-{a}": f"{axis}'s joint velocity command (net joint.N.vel-cmd): direction of approach",
+            f"{name}.approach-{a}": f"out s32: {axis}'s last direction of motion, commanded sense (+1, -1, 0)"}
+
+
+def map_pin(name: str, stem: str, node: int) -> str:
+    """One map value's pin, e.g. ``pige_xyzac_trt.exc-07`` (``stem`` from :func:`map_slot_names`)."""
+    if not 0 <= node < MAP_NODES:
+        raise InputError(f"map node {node}: the component holds nodes 0..{MAP_NODES - 1}")
+    return f"{name}.{stem}-{node:02d}"
+
+
+def map_pin_names(name: str, rotary_axes: Sequence[str]) -> list[str]:
+    """Every map pin the component creates, in its order: per axis the grid pins, then the values."""
+    out: list[str] = []
+    for axis in rotary_axes:
+        out += list(map_grid_pins(name, axis))
+        out += [map_pin(name, stem, n) for stem in map_slot_names(axis) for n in range(MAP_NODES)]
+    return out
