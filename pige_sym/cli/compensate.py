@@ -78,6 +78,10 @@ def _run(args: argparse.Namespace) -> int:
             current = read_current(args.current) if args.current else None
             print(format_controller(entered, args.controller, carrier=args.carrier, current=current,
                                     heidenhain_trans=args.heidenhain_trans))
+        if args.comp_dir:
+            _write_comp_files(args, entered)
+    elif args.comp_dir:
+        raise InputError("--comp-dir writes LinuxCNC compensation files: give it with --controller linuxcnc")
     if args.controller and not args.program:
         if args.json:
             print(to_json({"machine": params.machine, "parameters_from": params.source,
@@ -101,6 +105,27 @@ def _run(args: argparse.Namespace) -> int:
         return 0
     _print_report(rep, str(out), params.units)
     return 0
+
+
+def _write_comp_files(args: argparse.Namespace, entered: Any) -> None:
+    """``--comp-dir DIR``: LinuxCNC's ``[JOINT_n]COMP_FILE`` of every positioning map (never over a file without
+    ``--force``)."""
+    from pige_sym.compensation.controllers.tables.linuxcnc_comp import comp_files
+
+    if args.controller != "linuxcnc":
+        raise InputError(f"--comp-dir writes LinuxCNC compensation files, not {args.controller}'s: give --controller "
+                         "linuxcnc")
+    files = comp_files(entered)
+    if not files:
+        raise InputError(f"--comp-dir: {args.params} holds no positioning map (ECC, EAA, ...): identify with --map")
+    folder = Path(args.comp_dir)
+    if not folder.is_dir():
+        raise InputError(f"--comp-dir {folder}: not an existing folder")
+    targets = {name: check_output(folder / name, force=args.force, inputs=[args.params], what="--comp-dir file")
+               for name in files}
+    for name, text in files.items():
+        atomic_write_text(targets[name], text)
+        print(f"wrote {targets[name]} ({text.count(chr(10))} entries)")
 
 
 def _travel(items: list[str] | None) -> dict[str, tuple[float, float]]:
@@ -229,6 +254,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--heidenhain-trans", choices=["position", "shift"],
                    help="what a HEIDENHAIN Trans row holds: the next element's position relative to the previous one, "
                         "or the shift of the previous ones (the negative); required with --controller heidenhain")
+    p.add_argument("--comp-dir", metavar="DIR", help="with --controller linuxcnc: write each rotary joint's "
+                   "positioning map as a LinuxCNC COMP_FILE into DIR (an existing folder; replaced only with --force)")
     p.add_argument("--json", action="store_true", help="print the change report as one JSON object")
     p.set_defaults(handler=_run)
 

@@ -24,7 +24,7 @@ from typing import Any
 from pige_sym.errors import InputError
 
 #: Modules of this package that are not controllers.
-NOT_CONTROLLERS = frozenset({"axis_lines", "hal_config", "scope"})
+NOT_CONTROLLERS = frozenset({"axis_lines", "hal_config", "scope", "tables"})
 
 
 @dataclass(frozen=True)

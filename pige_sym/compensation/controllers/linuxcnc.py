@@ -22,6 +22,10 @@ docs/linuxcnc-kinematics.md) carries every PIGE and zero-position error as a HAL
 supports (heads and mixed machines too).  Its pins hold absolute values (the identified PIGEs [µm, µrad], the
 axis senses and the nominal pivots the PIGEs refer to), so its ``setp`` lines need no ``current``.  Pin
 names come from the kernels' metadata (:mod:`pige_sym.codegen.targets.linuxcnc_pins`, no SymPy).
+
+Error maps (CONVENTIONS §10): the positioning map of each rotary joint as a ``[JOINT_n]COMP_FILE`` for the stock
+kinematics (:mod:`.tables.linuxcnc_comp`, written by ``--comp-dir``), and every map as pins of pige's component
+(:mod:`.tables.linuxcnc_kins_maps`).
 """
 
 from __future__ import annotations
@@ -30,6 +34,9 @@ from pige_sym.compensation.controllers import ControllerOptions
 from pige_sym.compensation.controllers.axis_lines import MM_DECIMALS, signed
 from pige_sym.compensation.controllers.hal_config import HalConfig
 from pige_sym.compensation.controllers.scope import scope_lines
+from pige_sym.compensation.controllers.tables.linuxcnc_comp import render_lines as comp_file_lines
+from pige_sym.compensation.controllers.tables.linuxcnc_kins_maps import map_setp_lines
+from pige_sym.compensation.controllers.tables.positioning import positioning_names
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError, UnsupportedMachineError
 from pige_sym.kernels import load_kernels
@@ -96,7 +103,7 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
         return trt + f"\n# pige's kinematics component cannot describe this machine: {exc}"
     if not trt:
         trt = f"# LinuxCNC's stock trt kinematics: {trt_refusal}"
-    return trt + "\n" + "\n".join(pige)
+    return "\n".join([trt, *comp_file_lines(params), *pige])
 
 
 def _render_trt(params: CompensationParameters, options: ControllerOptions) -> str:
@@ -201,4 +208,10 @@ def pige_kinematics_lines(params: CompensationParameters) -> list[str]:
             out.append(f"# {pin}: not estimated (the parameter file has no {n}; left as it is)")
         else:
             out.append(f"setp {pin} {params.values.get(n, 0.0):.4f}")
-    return out
+    return out + map_setp_lines(params, name)
+
+
+def map_motions(params: CompensationParameters) -> list[str]:
+    """The maps the stock kinematics hold with their COMP_FILEs (``<axis>:<name>``): φ; pige's component, printed
+    beside them, carries every map."""
+    return positioning_names(params)

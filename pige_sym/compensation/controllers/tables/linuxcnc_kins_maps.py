@@ -1,0 +1,103 @@
+"""The ``setp`` lines that enter the error maps into pige's LinuxCNC kinematics component.
+
+The component (``pige gen --target linuxcnc``, :mod:`pige_sym.codegen.targets.linuxcnc`) holds per rotary axis a
+uniform grid in the CONVENTIONS angle θ (``map-<axis>-start``, ``-step``, ``-nodes``, ``-full-turn``) and per node
+seven slots: the six motions of CONVENTIONS §10 and the reversal φ⁺ − φ⁻ (pin names:
+:mod:`pige_sym.codegen.targets.linuxcnc_pins`).  A map per direction (``ECC+``, ``ECC-``) enters as its mean and
+its reversal; the direction of approach comes from the joint's velocity command, netted to ``vel-<axis>``.
+
+Every slot of every node used gets a line: a motion the file has no map of, or a grid angle without a value, is
+set to 0 with a comment (nothing corrected there, as the NC rewrite does), so no value set before stays in force.
+The grid is set to 0 nodes first and to its size last, so a running machine never sees half a map.  A grid that is
+not uniform, or larger than the component's ``MAP_NODES``, is refused with the reason.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pige_sym.codegen.targets import linuxcnc_pins as pins
+from pige_sym.compensation.parameters import CompensationParameters
+from pige_sym.errors import InputError
+from pige_sym.model.error_motions import AxisMaps, axis_motions
+
+#: Decimals of a map value [µm, µrad].
+VALUE_DECIMALS = 4
+
+
+def slot_values(axis_maps: AxisMaps) -> tuple[list[np.ndarray], list[str]]:
+    """The seven slots' values at the grid angles (NaN: no value) and, per slot, what the file gives for it."""
+    axis = axis_maps.grid.axis
+    motions = axis_motions(axis, per_direction=True)
+    n = axis_maps.grid.n
+    by_kind = {m.kind: v for m, v in axis_maps.motion_values()}
+    stored = {m.name: np.asarray(v, dtype=float) for m, v in axis_maps.motion_values()}
+    out, said = [], []
+    for m in motions:
+        v = by_kind.get(m.kind) if m.kind in ("positioning", "reversal") else stored.get(m.name)
+        out.append(np.full(n, np.nan) if v is None else np.asarray(v, dtype=float))
+        said.append("not in the file: 0" if v is None else "from the file")
+    return out, said
+
+
+def _grid_lines(name: str, axis_maps: AxisMaps) -> tuple[list[str], list[str]]:
+    """(lines before the values, lines after them) that set one axis' grid."""
+    g = axis_maps.grid
+    axis = g.axis
+    a = axis.lower()
+    angles = np.asarray(g.angles_deg, dtype=float)
+    if g.n > pins.MAP_NODES:
+        raise InputError(f"{axis}: {g.n} grid angles; pige's LinuxCNC component holds at most {pins.MAP_NODES} per "
+                         "axis (identify with a larger --map-step)")
+    steps = np.diff(np.append(angles, angles[0] + 360.0) if g.full_turn else angles)
+    if g.n > 1 and not np.allclose(steps, steps[0], rtol=0.0, atol=1e-9):
+        raise InputError(f"{axis}: grid angles {', '.join(f'{x:g}' for x in angles)} are not equidistant"
+                         + (" around the turn" if g.full_turn else "") + "; pige's LinuxCNC component takes a uniform "
+                         "grid (start, step, nodes)")
+    step = float(steps[0]) if g.n > 1 else 1.0
+    before = [f"setp {name}.map-{a}-nodes 0", f"setp {name}.map-{a}-start {angles[0]:.10g}",
+              f"setp {name}.map-{a}-step {step:.10g}", f"setp {name}.map-{a}-full-turn {int(bool(g.full_turn))}"]
+    return before, [f"setp {name}.map-{a}-nodes {g.n}"]
+
+
+def map_setp_lines(params: CompensationParameters, name: str) -> list[str]:
+    """The comments and ``setp``/``net`` lines that enter every map of ``params`` into component ``name``.
+
+    Raises
+    ------
+    InputError
+        A grid the component cannot hold (module docstring).
+    """
+    maps = params.error_maps
+    if maps is None:
+        return []
+    out = ["# error maps (CONVENTIONS §10) as pins of pige's kinematics component: it corrects the tool point for "
+           "every motion (do not enter the COMP_FILEs as well: phi would be corrected twice)"]
+    for axis, axis_maps in maps.axes.items():
+        g = axis_maps.grid
+        before, after = _grid_lines(name, axis_maps)
+        values, said = slot_values(axis_maps)
+        stems = pins.map_slot_names(axis)
+        out.append(f"# {axis}: {g.n} grid angles theta {g.angles_deg[0]:g}..{g.angles_deg[-1]:g} deg"
+                   + (" (full turn, wraps)" if g.full_turn else " (end values hold outside)") + "; "
+                   + ", ".join(f"{stem} {s}" for stem, s in zip(stems, said, strict=True)))
+        out += before
+        for stem, v in zip(stems, values, strict=True):
+            empty = [f"{a:g}" for a, x in zip(g.angles_deg, v, strict=True) if not np.isfinite(x)]
+            if empty and len(empty) < g.n:
+                out.append(f"# {stem}: no value at theta = {', '.join(empty)} deg: set to 0 (nothing corrected there)")
+            out += [f"setp {pins.map_pin(name, stem, k)} {x + 0.0:.{VALUE_DECIMALS}f}"
+                    for k, x in enumerate(np.nan_to_num(v))]
+        out += after
+    for i, a in enumerate(_axes(params)):
+        if a in maps.axes and any(n.endswith(("+", "-", ":reversal")) for n in maps.axes[a].values):
+            out += [f"# {a}'s map is per direction: the component takes the direction of approach from joint {3 + i}'s "
+                    f"velocity command (if joint.{3 + i}.vel-cmd already drives a signal, link the pin to it instead)",
+                    f"net pige-vel-{a.lower()} joint.{3 + i}.vel-cmd => {name}.vel-{a.lower()}"]
+    return out
+
+
+def _axes(params: CompensationParameters) -> tuple[str, ...]:
+    from pige_sym.kernels import load_kernels
+
+    return tuple(load_kernels(params.machine).ROTARY_AXES)
