@@ -196,13 +196,28 @@ def _parameters(doc: Any) -> CompensationParameters:
 
 
 def _error_maps(data: dict[str, Any] | None) -> Any:
-    """The validated ``error_motions`` of a parameter file as :class:`~pige_sym.model.error_motions.ErrorMaps`."""
+    """The validated ``error_motions`` of a parameter file as :class:`~pige_sym.model.error_motions.ErrorMaps`.
+
+    A positioning map given per direction (``ECC+`` and ``ECC-``) is kept as those two: the file's ``ECC`` and
+    ``ECC:reversal`` beside them are their mean and difference (``pige identify`` writes all four), and kept
+    too they would correct φ twice.
+    """
     from pige_sym.model.error_motions import AxisMaps, ErrorMaps, MapGrid
 
     if not data:
         return None
-    return ErrorMaps({ax: AxisMaps(MapGrid(ax, m["angle_deg"], m["full_turn"]), dict(m["value"]))
+    return ErrorMaps({ax: AxisMaps(MapGrid(ax, m["angle_deg"], m["full_turn"]), _primary_maps(ax, m["value"]))
                       for ax, m in data.items()})
+
+
+def _primary_maps(axis: str, values: dict[str, Any]) -> dict[str, Any]:
+    """``values`` without φ and its reversal where φ⁺ and φ⁻ are given (:func:`_error_maps`)."""
+    from pige_sym.model.error_motions import axis_motions
+
+    phi = next(m.name for m in axis_motions(axis) if m.kind == "positioning")
+    if phi + "+" in values and phi + "-" in values:
+        return {n: v for n, v in values.items() if n not in (phi, phi + ":reversal")}
+    return dict(values)
 
 
 def extension_prefixes(extensions: list[AngleExtension]) -> list[str]:
