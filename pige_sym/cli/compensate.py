@@ -77,7 +77,8 @@ def _run(args: argparse.Namespace) -> int:
 
             current = read_current(args.current) if args.current else None
             print(format_controller(entered, args.controller, carrier=args.carrier, current=current,
-                                    heidenhain_trans=args.heidenhain_trans))
+                                    heidenhain_trans=args.heidenhain_trans, machine_axes=_machine_axes(args),
+                                    isg_unit_deg=args.isg_unit_deg))
         if args.comp_dir:
             _write_comp_files(args, entered)
     elif args.comp_dir:
@@ -105,6 +106,17 @@ def _run(args: argparse.Namespace) -> int:
         return 0
     _print_report(rep, str(out), params.units)
     return 0
+
+
+def _machine_axes(args: argparse.Namespace) -> dict[str, str]:
+    """``--machine-axis C=C1`` (repeatable): the controller's name of each rotary axis."""
+    out: dict[str, str] = {}
+    for item in args.machine_axis or []:
+        axis, sep, name = (x.strip() for x in item.partition("="))
+        if not sep or not axis or not name or not name.replace("_", "").isalnum():
+            raise InputError(f"--machine-axis {item!r}: give AXIS=NAME, e.g. C=C1 (letters, digits, '_')")
+        out[axis.upper()] = name
+    return out
 
 
 def _write_comp_files(args: argparse.Namespace, entered: Any) -> None:
@@ -254,6 +266,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--heidenhain-trans", choices=["position", "shift"],
                    help="what a HEIDENHAIN Trans row holds: the next element's position relative to the previous one, "
                         "or the shift of the previous ones (the negative); required with --controller heidenhain")
+    p.add_argument("--machine-axis", action="append", metavar="AXIS=NAME",
+                   help="the controller's name of a rotary axis where its compensation tables need it (SINUMERIK "
+                        "machine axis name, MD10000), e.g. C=C1")
+    p.add_argument("--isg-unit-deg", type=float, metavar="U",
+                   help="ISG/TwinCAT CNC: the angle [deg] of one unit of a rotary axis' kw.ssfk list (not settled "
+                        "by the manual: read it from your axis' list)")
     p.add_argument("--comp-dir", metavar="DIR", help="with --controller linuxcnc: write each rotary joint's "
                    "positioning map as a LinuxCNC COMP_FILE into DIR (an existing folder; replaced only with --force)")
     p.add_argument("--json", action="store_true", help="print the change report as one JSON object")

@@ -40,11 +40,17 @@ class ControllerOptions:
         :func:`.hal_config.read_current`), for absolute lines.
     heidenhain_trans : str, optional
         What a HEIDENHAIN ``Trans`` row holds: ``position`` or ``shift`` (:mod:`.heidenhain`).
+    machine_axes : dict of str to str, optional
+        The controller's name of each rotary axis where its tables need it (SINUMERIK machine axis names).
+    isg_unit_deg : float, optional
+        The angle [deg] of one unit of an ISG ``kw.ssfk`` list of a rotary axis (:mod:`.tables.isg_ssfk`).
     """
 
     carrier: int = 1
     current: Any = None
     heidenhain_trans: str | None = None
+    machine_axes: dict[str, str] | None = None
+    isg_unit_deg: float | None = None
 
 
 def controller_names() -> tuple[str, ...]:
@@ -68,7 +74,8 @@ def get_controller(name: str) -> ModuleType:
 
 
 def format_controller(params: Any, style: str = "table", *, carrier: int = 1,
-                      current: Any = None, heidenhain_trans: str | None = None, enter: str = "weighed") -> str:
+                      current: Any = None, heidenhain_trans: str | None = None, enter: str = "weighed",
+                      machine_axes: dict[str, str] | None = None, isg_unit_deg: float | None = None) -> str:
     """The corrections of ``params`` in the words of controller ``style`` (docs/controller-corrections.md).
 
     The values are weighed by their uncertainty over the axes' travel (:func:`entered_for_controller`).  Every
@@ -76,7 +83,8 @@ def format_controller(params: Any, style: str = "table", *, carrier: int = 1,
     with a 95 % bound (:mod:`~pige_sym.compensation.controllers.scope`).
     """
     module = get_controller(style)
-    options = ControllerOptions(carrier=carrier, current=current, heidenhain_trans=heidenhain_trans)
+    options = ControllerOptions(carrier=carrier, current=current, heidenhain_trans=heidenhain_trans,
+                                machine_axes=machine_axes, isg_unit_deg=isg_unit_deg)
     return str(module.render(entered_for_controller(params, enter), options))
 
 

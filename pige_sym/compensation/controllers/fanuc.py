@@ -37,6 +37,7 @@ import numpy as np
 from pige_sym.compensation.controllers import ControllerOptions
 from pige_sym.compensation.controllers.axis_lines import MM_DECIMALS, Structure, axis_sense, signed, structure
 from pige_sym.compensation.controllers.scope import scope_lines
+from pige_sym.compensation.controllers.tables.refused import fanuc_lines
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
@@ -84,7 +85,12 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
     body = _table_type(first, second) if side == "table" else _tool_type(first, second)
     body.append("chain rebuilt from A-79348E in pige's tests (tests/test_controller_fanuc.py), not run on a FANUC "
                 "control: measure again after entering")
-    return "\n".join(head + body)
+    return "\n".join(head + body + fanuc_lines(params))
+
+
+def map_motions(params: CompensationParameters) -> list[str]:
+    """No error map: the pitch error compensation is refused (:mod:`.tables.refused`)."""
+    return []
 
 
 def _xyz(v: np.ndarray) -> list[str]:

@@ -34,6 +34,7 @@ import numpy as np
 from pige_sym.compensation.controllers import ControllerOptions
 from pige_sym.compensation.controllers.axis_lines import DEG_DECIMALS, MM_DECIMALS, axis_sense, signed, structure
 from pige_sym.compensation.controllers.scope import positions_and_zeros, scope_lines
+from pige_sym.compensation.controllers.tables.refused import heidenhain_lines
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
 
@@ -78,7 +79,12 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
                "rows that place it): " + ", ".join(rotations))
     out.append("chain rebuilt from the manual in pige's tests (tests/test_controller_heidenhain.py), not run on a "
                "TNC: check the layout against your table and measure again (cycle 451)")
-    return "\n".join(out)
+    return "\n".join(out + heidenhain_lines(params))
+
+
+def map_motions(params: CompensationParameters) -> list[str]:
+    """No error map: the nonlinear axis error compensation is refused (:mod:`.tables.refused`)."""
+    return []
 
 
 def _side(label: str, rows: list[dict[str, Any]], start: str, sign: float) -> list[str]:

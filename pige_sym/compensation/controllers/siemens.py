@@ -50,6 +50,8 @@ from pige_sym.compensation.controllers.axis_lines import (
     structure,
 )
 from pige_sym.compensation.controllers.scope import positions_and_zeros, scope_lines
+from pige_sym.compensation.controllers.tables.siemens_lec import map_motions as map_motions
+from pige_sym.compensation.controllers.tables.siemens_lec import render_lines as lec_lines
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
@@ -126,7 +128,8 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
         lines += [f"$TC_CARR{first + k}[{carrier}]=$TC_CARR{first + k}[{carrier}]{signed(change[k], MM_DECIMALS)}"
                   for k in range(3)]
     lines += [f"$TC_CARR{k}[{carrier}]=$TC_CARR{k}[{carrier}]{signed(v, DEG_DECIMALS)}" for k, v in offsets.items()]
-    return "\n".join(lines + _base_and_machine_data(params, st, carrier, vectors))
+    return "\n".join(lines + _base_and_machine_data(params, st, carrier, vectors)
+                     + lec_lines(params, options.machine_axes))
 
 
 def _senses_text(params: CompensationParameters, rows: tuple[dict[str, Any], ...]) -> str:

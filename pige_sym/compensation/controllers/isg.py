@@ -1,0 +1,39 @@
+"""``isg``: ISG kernel / Beckhoff TwinCAT CNC, the error maps of the rotary axes in its axis compensation lists.
+
+The positioning map of each rotary axis as the leadscrew error compensation list ``kw.ssfk`` (bilateral: one
+table per direction of motion; :mod:`.tables.isg_ssfk`, with the pages it follows and the unit the user states
+with ``--isg-unit-deg``), and the volumetric compensation's ``EXA`` … ``ECC`` tables refused with the reason
+(:mod:`.tables.refused`).  The kinematic transformation's own parameters (the PIGEs) are not written here: no
+page of its parameters was read; the scope lines name every PIGE as not represented.
+"""
+
+from __future__ import annotations
+
+from pige_sym.compensation.controllers import ControllerOptions
+from pige_sym.compensation.controllers.scope import scope_lines
+from pige_sym.compensation.controllers.tables.isg_ssfk import render_lines as ssfk_lines
+from pige_sym.compensation.controllers.tables.positioning import positioning_names
+from pige_sym.compensation.controllers.tables.refused import isg_volumetric_lines
+from pige_sym.compensation.parameters import CompensationParameters
+
+TITLE = "ISG kernel / Beckhoff TwinCAT CNC: leadscrew error compensation lists (kw.ssfk) of the rotary axes"
+
+
+def representable(params: CompensationParameters) -> list[str]:
+    """No PIGE: the lists hold positioning errors only."""
+    return []
+
+
+def map_motions(params: CompensationParameters) -> list[str]:
+    """φ of every axis, per direction too (bilateral lists)."""
+    return positioning_names(params)
+
+
+def render(params: CompensationParameters, options: ControllerOptions) -> str:
+    """The lists' notes and bodies, the volumetric refusal and what the lists leave at the tool."""
+    out = [f"# ISG kernel / TwinCAT CNC compensation lists of {params.machine}; parameters from {params.source}",
+           *scope_lines(params, "isg", "# ")]
+    body = ssfk_lines(params, options.isg_unit_deg)
+    if not body:
+        out.append("# the parameter file holds no positioning map (identify with --map): no kw.ssfk list")
+    return "\n".join(out + body + isg_volumetric_lines(params))

@@ -1,0 +1,97 @@
+"""ISG kernel (Beckhoff TwinCAT CNC): the positioning map of a rotary axis as leadscrew error compensation ``kw.ssfk``.
+
+What the public pages settle (Beckhoff Information System, TF5200 TwinCAT 3 CNC Axis compensation, and the ISG
+kernel's HTML manual, read in 2026):
+
+- **Format** (``Leadscrew error compensation (kw.ssfk.*)``, "Overview of parameters" 308687883, "Example -
+  Non-equidistant bilateral SSFK" 308695435): an axis' compensation value list holds ``kw.ssfk.unit``
+  (P-COMP-00017), ``interval`` (P-COMP-00018: the distance of equidistant interpolation points, 0 = each point
+  given), ``kw_startpos`` (P-COMP-00019), ``kw_nr_max`` (P-COMP-00020, at most P-COMP-00059 ``max_points``,
+  default 1500), ``bilateral`` (P-COMP-00021: one table per direction of motion), ``modulo`` (P-COMP-00022)
+  and the table ``kw.ssfk.table[i].pos`` / ``.neg`` (P-COMP-00023/24: the values moving in the positive / negative
+  direction), SGN32 integers in the list's unit, one ``name value`` per line.  The list header ``kopf.*`` is
+  written by the TwinCAT System Manager when it configures the list (113371531); pige writes the body.
+- **Sign** (308695435): a value is the measured position error, ``Δs_i = s_ist,i − s_soll,i`` (the actual
+  position minus the programmed one), "absolute position errors" (15274025355); the CNC changes the position
+  setpoint by it and takes it out of the actual values it shows (15327297547).  So a value is the axis' error e
+  (:mod:`.positioning`).
+- **Interpolation** (15327297547): linear between interpolation points; both tables on the same points; outside
+  the table the value at its end holds.
+- Activation: P-AXIS-00175 ``lr_param.ssfk`` = 1 in the axis parameters (308687883).
+
+**Not settled, so stated by the user or refused:** the unit of a rotary axis' entries.  P-COMP-00017 offers
+encoder increments or "metric (in 0.1 µm)", listed for translatory axes (TwinCAT CNC 15274009995); the ISG
+kernel handles angles at 0.0001° by default (its "Measuring systems" page), but the pages read do not say that
+a rotary axis' ``kw.ssfk`` entries use it.  ``--isg-unit-deg U`` states the angle of one unit of the list
+(``kw.ssfk.unit = 1``); without it no table is written.  The modulo mode (P-COMP-00022) is not described in the
+pages read: a full-turn axis' table is written over ±10 turns without it (its map repeats every 360°; an axis
+whose positions wrap stays inside).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pige_sym.compensation.controllers.tables.positioning import PositioningMap, positioning_maps
+from pige_sym.compensation.parameters import CompensationParameters
+from pige_sym.errors import InputError
+
+SOURCE = ("Beckhoff TF5200 Axis compensation: kw.ssfk (113419147), parameters 308687883, example 308695435, "
+          "interpolation 15327297547")
+#: Default of P-COMP-00059 (kw.ssfk.max_points).
+MAX_POINTS = 1500
+TURNS = 10
+
+
+def ssfk_table(pm: PositioningMap, unit_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(positions, pos, neg) of one axis in list units (integers): equidistant, a full turn over ±10 turns.
+
+    Raises
+    ------
+    InputError
+        A grid that is not equidistant, a step that is not a whole number of units, or too many points.
+    """
+    step = pm.uniform_step_deg()
+    if step is None:
+        raise InputError(f"{pm.axis}: the map's grid angles are not equidistant (kw.ssfk.interval takes one step)")
+    units = step / unit_deg
+    if abs(units - round(units)) > 1e-6:
+        raise InputError(f"{pm.axis}: the grid step {step:g} deg is not a whole number of --isg-unit-deg {unit_deg:g}")
+    nodes = pm.nodes_cmd((-360.0 * TURNS, 360.0 * TURNS)) if pm.full_turn else pm.nodes_cmd()
+    if nodes.size > MAX_POINTS:
+        raise InputError(f"{pm.axis}: {nodes.size} points; kw.ssfk holds {MAX_POINTS} by default (P-COMP-00059)")
+    positions = np.round(nodes / unit_deg).astype(np.int64)
+    pos = np.round(pm.commanded_error_deg(nodes, +1) / unit_deg).astype(np.int64)
+    neg = np.round(pm.commanded_error_deg(nodes, -1) / unit_deg).astype(np.int64)
+    return positions, pos, neg
+
+
+def list_body(pm: PositioningMap, unit_deg: float) -> list[str]:
+    """The ``kw.ssfk`` lines of one axis (module docstring)."""
+    positions, pos, neg = ssfk_table(pm, unit_deg)
+    body = ["kw.ssfk.unit 1", f"kw.ssfk.interval {positions[1] - positions[0]}", f"kw.ssfk.kw_startpos {positions[0]}",
+            f"kw.ssfk.kw_nr_max {positions.size}", "kw.ssfk.bilateral 1", "kw.ssfk.modulo 0"]
+    body += [f"kw.ssfk.table[{i}].pos {v}" for i, v in enumerate(pos)]
+    return body + [f"kw.ssfk.table[{i}].neg {v}" for i, v in enumerate(neg)]
+
+
+def render_lines(params: CompensationParameters, unit_deg: float | None) -> list[str]:
+    """Per axis: the notes (``#``, outside the list) and the list body; the refusal when the unit is not given."""
+    maps = positioning_maps(params)
+    if not maps:
+        return []
+    out = [f"# positioning maps (CONVENTIONS §10) as kw.ssfk lists ({SOURCE}): a value is the axis' error (actual "
+           "minus programmed) in its commanded sense, pos/neg by the direction of motion"]
+    if unit_deg is None or not (math.isfinite(unit_deg) and unit_deg > 0):
+        return out + ["# not written: the unit of a rotary axis' kw.ssfk entries is not settled by the pages read "
+                      "(P-COMP-00017: encoder increments or 0.1 um): give --isg-unit-deg U, the angle [deg] of one "
+                      "unit of your axis' list (kw.ssfk.unit 1)"]
+    for axis, pm in maps.items():
+        body = list_body(pm, unit_deg)
+        out += [f"# {n}" for n in pm.notes()]
+        out += [f"# {axis}: list body ({len(body)} lines, no comment inside; values rounded to 1 unit = "
+                f"{unit_deg:g} deg, {unit_deg * math.pi / 180 * 1e6:.3g} urad; outside the table the end values hold)",
+                *body]
+    return out

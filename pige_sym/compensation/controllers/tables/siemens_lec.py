@@ -1,0 +1,98 @@
+"""SINUMERIK 840D sl: the positioning map of a rotary axis as leadscrew error compensation (``$AA_ENC_COMP``).
+
+What the pages read settle (Function Manual Extended Functions, K3 Compensations, 03/2013, 6FC5397-1BP40-3BA1):
+
+- **Format** (pp. 240, 242): per machine axis AXi and measuring system e, ``$AA_ENC_COMP[e,N,AXi]`` the value of
+  interpolation point N, ``$AA_ENC_COMP_STEP[e,AXi]`` their distance, ``$AA_ENC_COMP_MIN[e,AXi]`` the position of
+  point 0, ``$AA_ENC_COMP_MAX[e,AXi]`` that of the last point, ``$AA_ENC_COMP_IS_MODULO[e,AXi]``; the example is
+  a program ``%_N_AX_EEC_INI`` … ``CHANDATA(1)`` … ``M17``.  MD38000 ``$MA_MM_ENC_COMP_MAX_POINTS[e,AXi]``
+  reserves the points (p. 239); the tables load only while MD32700 ``$MA_ENC_COMP_ENABLE[e]`` is 0, and the
+  compensation acts with it 1 once the axis is referenced (pp. 237, 239).
+- **Sign** (p. 238): the compensation value modifies the axis' position actual value, and "a positive
+  compensation value causes the corresponding machine axis to move in the negative direction".  So the value is
+  the axis' error e (the axis stands at θ_cmd + e: :mod:`.positioning`), in the axis' own unit (degrees for a
+  rotary axis: the position it modifies; 808D Function Manual 01/2017, p. 109, spindle table 0° to 360°).
+- **Interpolation** (p. 237): linear between equidistant points; below point 0 its value holds, above the last
+  point the last value (p. 240), except with the modulo function: the table repeats, the value at MAX followed
+  by the value at MIN, so a full turn is written MIN 0°, MAX 360° with both values entered (808D p. 109; K3
+  p. 249 for the sag tables: "these two values should be identical").
+
+One table serves both directions of motion: a map per direction enters its mean, and the reversal φ⁺ − φ⁻ is
+named as not entered (the direction-dependent tables of p. 249, ``$AN_CEC_DIRECTION``, are sag compensation
+tables; the pages read do not state the sign of their values).  The machine axis name AXi is the NC's
+(MD10000 ``$MN_AXCONF_MACHAX_NAME_TAB``): given with ``--machine-axis C=<name>``, never assumed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pige_sym.compensation.controllers.tables.positioning import PositioningMap, positioning_maps
+from pige_sym.compensation.parameters import CompensationParameters
+from pige_sym.errors import InputError
+
+SOURCE = "SINUMERIK K3 Compensations 6FC5397-1BP40-3BA1 pp. 237-242; 808D Function Manual 01/2017 p. 109"
+#: Decimals of a compensation value [deg]: 1e-9 deg.
+VALUE_DECIMALS = 9
+
+
+def lec_table(pm: PositioningMap) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(positions [deg], values [deg], modulo) of one axis' table: a full turn 0…360° with the modulo function, a
+    tilt axis its grid (module docstring).
+
+    Raises
+    ------
+    InputError
+        The grid is not equidistant.
+    """
+    step = pm.uniform_step_deg()
+    if step is None:
+        raise InputError(f"{pm.axis}: the map's grid angles are not equidistant; $AA_ENC_COMP takes one step "
+                         "($AA_ENC_COMP_STEP)")
+    if pm.full_turn:
+        nodes = pm.nodes_cmd((0.0, 360.0))
+        first = float(nodes[np.searchsorted(nodes, -1e-9)])
+        positions = first + step * np.arange(int(round(360.0 / step)) + 1)
+    else:
+        positions = pm.nodes_cmd()
+    return positions, pm.commanded_error_deg(positions, 0), pm.full_turn
+
+
+def render_lines(params: CompensationParameters, machine_axes: dict[str, str] | None) -> list[str]:
+    """The ``;`` notes and the ``$AA_ENC_COMP`` program of every positioning map (empty without maps)."""
+    maps = positioning_maps(params)
+    if not maps:
+        return []
+    out = [f"; positioning maps (CONVENTIONS §10) as leadscrew error compensation $AA_ENC_COMP ({SOURCE}): the "
+           "value [deg] is the axis' error in its commanded sense; a positive value moves the axis negative (p. 238)"]
+    missing = [a for a in maps if not (machine_axes or {}).get(a)]
+    if missing:
+        return out + [f"; not printed: the machine axis name of {', '.join(missing)} (MD10000 "
+                      f"$MN_AXCONF_MACHAX_NAME_TAB) is not known: give --machine-axis {missing[0]}=<name>"]
+    body = ["%_N_AX_EEC_INI", "CHANDATA(1)"]
+    for axis, pm in maps.items():
+        name = machine_axes[axis]  # type: ignore[index]
+        positions, values, modulo = lec_table(pm)
+        out += [f"; {n}" for n in pm.notes()]
+        if pm.per_direction:
+            out.append(f"; {axis}: one table for both directions: the mean of {axis}'s positioning maps per direction "
+                       "is entered, the reversal is NOT (module docstring)")
+        out.append(f"; {axis} = machine axis {name}: {positions.size} points, commanded {positions[0]:g}.."
+                   f"{positions[-1]:g} deg" + (" with the modulo function (0 and 360 hold the same value)" if modulo else
+                              "; outside, the end values hold (p. 240)")
+                   + f"; requires MD38000 $MA_MM_ENC_COMP_MAX_POINTS[0,{name}] >= {positions.size}, the table loaded "
+                   f"with MD32700 $MA_ENC_COMP_ENABLE[0] = 0, then 1")
+        body += [f"$AA_ENC_COMP[0,{k},{name}]={v + 0.0:.{VALUE_DECIMALS}f}" for k, v in enumerate(values)]
+        body += [f"$AA_ENC_COMP_STEP[0,{name}]={positions[1] - positions[0]:.10g}",
+                 f"$AA_ENC_COMP_MIN[0,{name}]={positions[0]:.10g}", f"$AA_ENC_COMP_MAX[0,{name}]={positions[-1]:.10g}",
+                 f"$AA_ENC_COMP_IS_MODULO[0,{name}]={int(modulo)}"]
+    return out + [*body, "M17"]
+
+
+def map_motions(params: CompensationParameters) -> list[str]:
+    """The maps the table carries whole: φ of an axis mapped for both directions at once."""
+    maps = params.error_maps
+    if maps is None:
+        return []
+    return [f"{ax}:{phi}" for ax, pm in positioning_maps(params).items() if not pm.per_direction
+            for phi in maps.axes[ax].values if phi[1] == phi[2]]
