@@ -77,9 +77,10 @@ def render_lines(params: CompensationParameters, machine_axes: dict[str, str] | 
         if pm.per_direction:
             out.append(f"; {axis}: one table for both directions: the mean of {axis}'s positioning maps per direction "
                        "is entered, the reversal is NOT (module docstring)")
+        span = (" with the modulo function (0 and 360 hold the same value)" if modulo
+                else "; outside, the end values hold (p. 240)")
         out.append(f"; {axis} = machine axis {name}: {positions.size} points, commanded {positions[0]:g}.."
-                   f"{positions[-1]:g} deg" + (" with the modulo function (0 and 360 hold the same value)" if modulo else
-                              "; outside, the end values hold (p. 240)")
+                   f"{positions[-1]:g} deg{span}"
                    + f"; requires MD38000 $MA_MM_ENC_COMP_MAX_POINTS[0,{name}] >= {positions.size}, the table loaded "
                    f"with MD32700 $MA_ENC_COMP_ENABLE[0] = 0, then 1")
         body += [f"$AA_ENC_COMP[0,{k},{name}]={v + 0.0:.{VALUE_DECIMALS}f}" for k, v in enumerate(values)]
