@@ -234,3 +234,60 @@ def test_map_add_gives_the_kernels_motions_of_the_maps(models, code: str) -> Non
             assert slot.size == MAP_SLOTS
             m.add(i, slot, float(approach[p, i]), motion)
         assert np.abs(motion - expected[p]).max() < 1e-9, p
+
+
+@pytest.mark.parametrize("axis", ["A", "B", "C", "C2"])
+def test_the_code_generators_slots_are_the_models_motions(axis: str) -> None:
+    from pige_sym.codegen.map_slots import map_slots
+
+    assert map_slots(axis) == [(m.name, m.component, m.kind) for m in axis_motions(axis, per_direction=True)]
+
+
+def test_the_printed_setp_lines_enter_the_weighed_maps(models, tmp_path, capsys) -> None:
+    """pige compensate --controller linuxcnc: its map pins, read back into the compiled map functions as the
+    component reads them, give the motions of the maps it weighed, at any pose and direction."""
+    import json
+    import re
+
+    from pige_sym.cli.main import main
+    from pige_sym.codegen.targets.linuxcnc_pins import default_name, map_slot_names
+    from pige_sym.compensation.controllers import entered_for_controller
+    from pige_sym.compensation.parameters import load_parameters
+
+    code = MACHINES[0]
+    m = models[code]
+    rng = np.random.default_rng(9)
+
+    def entry(n: int, kind: str, scale: float) -> dict:
+        return {"value": list(rng.normal(scale=scale, size=n)), "std": [0.2] * n, "unit": "um", "kind": kind}
+
+    grid_c, grid_a = list(np.arange(12) * 30.0), list(np.arange(0.0, 91.0, 30.0))
+    motions_c = {n: entry(12, "radial", 3.0) for n in ("EXC", "EYC", "EZC", "EAC", "EBC")}
+    motions_a = {n: entry(4, "radial", 3.0) for n in ("EYA", "EZA", "EXA", "EBA", "ECA", "EAA")}
+    doc = {"machine": code, "pige": {n: 0.0 for n in m.kin.LOCATION_PARAMETERS}, "axis_sense": {"A": -1, "C": -1},
+           "error_motions": {"C": {"angle_deg": grid_c, "full_turn": True, **motions_c,
+                                   "ECC+": entry(12, "positioning", 30.0), "ECC-": entry(12, "positioning", 30.0)},
+                             "A": {"angle_deg": grid_a, "full_turn": False, **motions_a}}}
+    path = tmp_path / "maps.json"
+    path.write_text(json.dumps(doc))
+    assert main(["compensate", "--params", str(path), "--controller", "linuxcnc"]) == 0
+    text = capsys.readouterr().out
+    name = default_name(code)
+    pins = {p: float(v) for p, v in re.findall(rf"^setp {name}\.(\S+) (\S+)$", text, flags=re.M)}
+    assert f"net pige-vel-c joint.4.vel-cmd => {name}.vel-c" in text
+    entered = entered_for_controller(load_parameters(path)).error_maps
+    angles = np.column_stack([rng.uniform(-100, 0, 40), rng.uniform(-700, 700, 40)])  # commanded, sigma -1
+    approach_cmd = rng.choice([-1, 1], size=angles.shape)
+    expected = entered.pose_motions(m.kin, -angles, -approach_cmd)
+    for p in range(len(angles)):
+        motion = np.zeros(len(m.kin.MOTION_PARAMETERS))
+        for i, ax in enumerate(m.kin.ROTARY_AXES):
+            a = ax.lower()
+            nodes = int(pins[f"map-{a}-nodes"])
+            i0, i1, w1, st = m.weights(pins[f"map-{a}-start"], pins[f"map-{a}-step"], nodes,
+                                       bool(pins[f"map-{a}-full-turn"]), -angles[p, i:i + 1])
+            assert st[0] == 0
+            slot = np.array([(1 - w1[0]) * pins[f"{stem}-{i0[0]:02d}"] + w1[0] * pins[f"{stem}-{i1[0]:02d}"]
+                             for stem in map_slot_names(ax)])
+            m.add(i, slot, float(-approach_cmd[p, i]), motion)
+        assert np.abs(motion - expected[p]).max() < 2e-4, p  # the lines' 4 decimals

@@ -320,18 +320,18 @@ def _initializer(rows: list[str]) -> str:
 
 def _maps(kin: KinematicsExpressions, prefix: str) -> str:
     """Error maps (CONVENTIONS §10) to ``motion[]``: hat-function weights on a uniform grid and, per axis, where
-    each of its map's slots goes (:func:`pige_sym.model.error_motions.axis_motions`, φ times s)."""
-    from pige_sym.model.error_motions import MOTION_COMPONENTS, axis_motions
+    each of its map's slots goes (:func:`pige_sym.codegen.map_slots.map_slots`, φ times s)."""
+    from pige_sym.codegen.map_slots import MOTION_COMPONENTS, map_slots
 
     model = kin.model
     workpiece = {a.name for a in model.structure.workpiece_axes}
     columns, signs, names = [], [], []
     for i, axis in enumerate(model.rotary_axes):
-        motions = axis_motions(axis, per_direction=True)
-        columns.append(", ".join(str(6 * i + MOTION_COMPONENTS.index(mo.component)) for mo in motions))
-        signs.append(", ".join("-1.0" if mo.kind in ("positioning", "reversal") and axis in workpiece else "1.0"
-                               for mo in motions))
-        names.append(f"{axis}: " + ", ".join(mo.name for mo in motions))
+        slots = map_slots(axis)
+        columns.append(", ".join(str(6 * i + MOTION_COMPONENTS.index(component)) for _, component, _ in slots))
+        signs.append(", ".join("-1.0" if kind in ("positioning", "reversal") and axis in workpiece else "1.0"
+                               for _, _, kind in slots))
+        names.append(f"{axis}: " + ", ".join(name for name, _, _ in slots))
     k = len(model.rotary_axes)
     return f"""/* Error maps of the rotary axes (CONVENTIONS §10): per axis {MAP_SLOTS} slots, the six motions of its
    carried body in the order of CONVENTIONS' table, then the reversal map of phi (phi+ - phi-):

@@ -122,9 +122,9 @@ def error_pin(name: str, parameter: str) -> str:
 def map_slot_names(axis: str) -> tuple[str, ...]:
     """The pin stem of each map slot of ``axis`` in the component's slot order: the six motions of CONVENTIONS
     §10 (``exc`` … ``ecc``), then the reversal of φ (``ecc-rev``)."""
-    from pige_sym.model.error_motions import axis_motions
+    from pige_sym.codegen.map_slots import map_slots
 
-    return tuple(m.name.lower().replace(":reversal", "-rev") for m in axis_motions(axis, per_direction=True))
+    return tuple(name.lower().replace(":reversal", "-rev") for name, _, _ in map_slots(axis))
 
 
 def map_grid_pins(name: str, axis: str) -> dict[str, str]:
