@@ -7,12 +7,12 @@ axes, the stock lines, the stylus a tool of the shipped table), with a true mach
 **Measure.** Three sphere setups (:data:`SETUPS`, three points of the table not on one line, CONVENTIONS §10), one
 pige probing program each, run one after the other in one simulation in identity kinematics.  Until
 ``pige program --map`` exists, the poses are an angle file written here on the 30° grid of the maps: C up
-through a turn and back at the tilt :data:`SWEEP_TILT_DEG` (each C grid angle approached from both sides: the
-reversal), then the tilt on through its grid at C 0 and back down at C 180 (no pose twice in a row: LinuxCNC
-writes no line for a trip at the previous position, so pige's import refuses a repeated contact).  LinuxCNC
-writes each program's log (``PROBEOPEN``); it is copied aside before the next.  pige imports the logs and
-identifies the PIGEs and the maps jointly (``--map C,<tilt> --map-step 30 --map-per-direction C``), and the PIGEs
-alone.
+through a turn at the tilt 30° and back down at 60° (each C grid angle approached from both sides: the
+reversal), then the tilt 90° at C 0 and 180 and the tilt 0 at C 180 (:func:`angle_rows`).  No pose repeats with
+the same approach: the probe would trip at the same servo periods and LinuxCNC log the same contacts, which
+pige's import refuses as duplicated lines.  LinuxCNC writes each program's log (``PROBEOPEN``); it is copied
+aside before the next.  pige imports the logs and identifies the PIGEs and the maps jointly (``--map C,<tilt>
+--map-step 30 --map-per-direction C``), and the PIGEs alone.
 
 pige takes the reference pose of each file as reached from neither side (φ the mean of φ⁺ and φ⁻, the identify
 of issue 39); so before each measurement program the true machine's directions of approach are reset, as a
@@ -60,7 +60,7 @@ from true_map_table import COMPONENT_NAME, TrueMapTable, hidden_map
 STEP_DEG = 30.0
 C_GRID = np.arange(0.0, 360.0, STEP_DEG)
 TILT_GRID = np.arange(0.0, 90.0 + 1e-9, STEP_DEG)
-SWEEP_TILT_DEG = 30.0
+SWEEP_TILT_DEG = (30.0, 60.0)  # the tilt of C's sweep up, and of its sweep down
 #: sphere centres in table coordinates [mm], one per setup: three points not on one line
 SETUPS = (np.array([20.0, 10.0, 15.0]), np.array([-30.0, 15.0, 25.0]), np.array([-15.0, -15.0, 10.0]))
 #: held-out (tilt, C) [deg, CONVENTIONS angles]: between the grid angles of both maps
@@ -104,11 +104,11 @@ MAP_MACHINES = {"AC": MapMachine(MACHINES["AC"], (11, 12)), "BC": MapMachine(MAC
 
 
 def angle_rows() -> np.ndarray:
-    """The poses [deg, CONVENTIONS angles] (tilt, C): reference, C up a turn and down, the tilt up and down."""
-    up = [(SWEEP_TILT_DEG, c) for c in np.arange(0.0, 360.0 + 1e-9, STEP_DEG)]
-    down = [(SWEEP_TILT_DEG, c) for c in np.arange(360.0 - STEP_DEG, -1e-9, -STEP_DEG)]
-    tilt = [(t, 0.0) for t in TILT_GRID if t > SWEEP_TILT_DEG] + [(t, 180.0) for t in TILT_GRID[::-1]]
-    return np.array([(0.0, 0.0), *up, *down, *tilt])
+    """The poses [deg, CONVENTIONS angles] (tilt, C): the reference, C up a turn at one tilt and down at another,
+    then the last tilt at two C angles and the reference tilt at C 180 (module docstring)."""
+    up = [(SWEEP_TILT_DEG[0], c) for c in np.arange(0.0, 360.0 + 1e-9, STEP_DEG)]
+    down = [(SWEEP_TILT_DEG[1], c) for c in np.arange(360.0 - STEP_DEG, -1e-9, -STEP_DEG)]
+    return np.array([(0.0, 0.0), *up, *down, (TILT_GRID[-1], 0.0), (TILT_GRID[-1], 180.0), (0.0, 180.0)])
 
 
 def write_programs(mm: MapMachine, cfg: Path, kinematics: str) -> list[Path]:
