@@ -62,7 +62,7 @@ C_GRID = np.arange(0.0, 360.0, STEP_DEG)
 TILT_GRID = np.arange(0.0, 90.0 + 1e-9, STEP_DEG)
 SWEEP_TILT_DEG = (30.0, 60.0)  # the tilt of C's sweep up, and of its sweep down
 #: sphere centres in table coordinates [mm], one per setup: three points not on one line
-SETUPS = (np.array([20.0, 10.0, 15.0]), np.array([-30.0, 15.0, 25.0]), np.array([-15.0, -15.0, 10.0]))
+SETUPS = (np.array([20.0, 10.0, 15.0]), np.array([-25.0, 10.0, 10.0]), np.array([-15.0, -15.0, 10.0]))
 #: held-out (tilt, C) [deg, CONVENTIONS angles]: between the grid angles of both maps
 HELD_OUT = ((15.0, 45.0), (45.0, 105.0), (75.0, 195.0), (45.0, 285.0), (15.0, 345.0), (75.0, 135.0))
 TARGET_OFFSETS_MM = ((0, 0, 0), (6, 0, 0), (0, 6, 0), (-6, 0, 0), (0, -6, 0), (0, 0, 6))
