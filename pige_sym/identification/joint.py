@@ -176,6 +176,27 @@ def common_axis_sense(items: Sequence[tuple[str, Measurement | BallbarRun]]) -> 
     return dict(senses.pop()) if senses else {}
 
 
+def common_geometry(items: Sequence[tuple[str, Measurement | BallbarRun]], key: str) -> Any:
+    """The nominal pivots (``pivots_mm``) or tool (``tool_mm``) every measurement file states, for the result: the
+    PIGEs refer to them, and a parameter file without them would put a controller's axes elsewhere.  None when no
+    file states them; refused when two files state different ones."""
+    stated = [(lab, getattr(x, key)) for lab, x in items if isinstance(x, Measurement) and getattr(x, key) is not None
+              and len(getattr(x, key)) > 0]
+    if not stated:
+        return None
+
+    def norm(v: Any) -> Any:
+        return {a: [float(c) for c in np.asarray(p, dtype=float)] for a, p in v.items()} if isinstance(v, dict) \
+            else [float(c) for c in np.asarray(v, dtype=float)]
+
+    first_label, first = stated[0][0], norm(stated[0][1])
+    for lab, v in stated[1:]:
+        if norm(v) != first:
+            raise InputError(f"{lab} states {key} {norm(v)} but {first_label} {first}: the PIGEs refer to one "
+                             "nominal geometry; identify files of different set-ups apart")
+    return first
+
+
 def file_blocks(items: Sequence[tuple[str, Measurement | BallbarRun]], with_zero: bool = False) -> list[Block]:
     """Each file's block, in order."""
     return [ballbar_block(x, lab, with_zero) if isinstance(x, BallbarRun) else measurement_block(x, lab, with_zero)
@@ -223,8 +244,9 @@ def _assemble(machine: str, names: list[str], all_names: list[str], blocks: list
         identifiable=ident[:p], rms_um=float(np.sqrt(np.mean(resid**2))), sigma_um=pooled, dof=n_obs - sol.rank,
         n_rows=sum(b.data.size for b in blocks), n_obs=n_obs, rank=sol.rank - constants_determined, condition=cond,
         singular_values=sol.svals, observability=observability(sol.svals, n_obs), unidentifiable=combos,
-        outlier_rows=[], residuals_um=np.zeros((0, 1)), stages=[], ball_mm=[float(x) for x in ball], pivots_mm={},
-        tool_mm=None, vif=sol.vif[:p], unobserved=[all_names[j] for j in sol.unobserved if j < p],
+        outlier_rows=[], residuals_um=np.zeros((0, 1)), stages=[], ball_mm=[float(x) for x in ball],
+        pivots_mm=common_geometry(items, "pivots_mm") or {}, tool_mm=common_geometry(items, "tool_mm"),
+        vif=sol.vif[:p], unobserved=[all_names[j] for j in sol.unobserved if j < p],
         axis_sense=common_axis_sense(items),
     )
     refuse_unphysical(list(names), values[:p], std[:p], units, "the joint fit")
