@@ -176,10 +176,13 @@ def common_axis_sense(items: Sequence[tuple[str, Measurement | BallbarRun]]) -> 
     return dict(senses.pop()) if senses else {}
 
 
-def common_geometry(items: Sequence[tuple[str, Measurement | BallbarRun]], key: str) -> Any:
+def common_geometry(items: Sequence[tuple[str, Measurement | BallbarRun]], key: str, differ: str | None = "refuse"
+                    ) -> Any:
     """The nominal pivots (``pivots_mm``) or tool (``tool_mm``) every measurement file states, for the result: the
-    PIGEs refer to them, and a parameter file without them would put a controller's axes elsewhere.  None when no
-    file states them; refused when two files state different ones."""
+    PIGEs refer to the pivots, and a parameter file without them would put a controller's axes elsewhere.  None when
+    no file states them; when two files state different ones: refused (``differ="refuse"``: one machine has one
+    nominal geometry), or None (``differ=None``: the setups of a head differ by their tool, and none of them is
+    the tool a program machines with)."""
     stated = [(lab, getattr(x, key)) for lab, x in items if isinstance(x, Measurement) and getattr(x, key) is not None
               and len(getattr(x, key)) > 0]
     if not stated:
@@ -192,6 +195,8 @@ def common_geometry(items: Sequence[tuple[str, Measurement | BallbarRun]], key: 
     first_label, first = stated[0][0], norm(stated[0][1])
     for lab, v in stated[1:]:
         if norm(v) != first:
+            if differ is None:
+                return None
             raise InputError(f"{lab} states {key} {norm(v)} but {first_label} {first}: the PIGEs refer to one "
                              "nominal geometry; identify files of different set-ups apart")
     return first
@@ -245,7 +250,7 @@ def _assemble(machine: str, names: list[str], all_names: list[str], blocks: list
         n_rows=sum(b.data.size for b in blocks), n_obs=n_obs, rank=sol.rank - constants_determined, condition=cond,
         singular_values=sol.svals, observability=observability(sol.svals, n_obs), unidentifiable=combos,
         outlier_rows=[], residuals_um=np.zeros((0, 1)), stages=[], ball_mm=[float(x) for x in ball],
-        pivots_mm=common_geometry(items, "pivots_mm") or {}, tool_mm=common_geometry(items, "tool_mm"),
+        pivots_mm=common_geometry(items, "pivots_mm") or {}, tool_mm=common_geometry(items, "tool_mm", differ=None),
         vif=sol.vif[:p], unobserved=[all_names[j] for j in sol.unobserved if j < p],
         axis_sense=common_axis_sense(items),
     )

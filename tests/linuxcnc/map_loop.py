@@ -168,7 +168,7 @@ class MapRun:
         for i, (log, program) in enumerate(zip(self.logs, self.programs, strict=True)):
             path = self.sim.root / f"setup{i}.csv"
             pige("import-probe", str(log), "--format", "linuxcnc", "--program", str(program), "--out", str(path),
-                 cwd=self.sim.root)
+                 "--force", cwd=self.sim.root)
             out.append(path)
         return out
 
