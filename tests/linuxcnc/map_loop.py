@@ -292,13 +292,14 @@ def pige_maps_run(mm: MapMachine, first: MapRun, root: Path) -> MapRun:
     programs = write_programs(mm, sim.cfg, "tcp")
     read = TRUE_PINS + MOTOR_PINS + [f"{name}.approach-{a.lower()}" for a in (mm.outer, "C")]
     moves = move_lines(mm)
+    # each series from the reference angles at joint Z 80 in identity kinematics: the tool length (G43) and the
+    # TCP switch then keep every joint inside the sim's limits
+    start = [KINEMATICS_CODES[0], "G49", "G53 G0 Z80", f"G0 {mm.outer}0 C0", KINEMATICS_CODES[1], f"G43 H{m.stylus[0]}"]
     after = [{"op": "hal", "commands": ["setp ptm.trip-radius -1"]},
-             {"op": "mdi", "lines": [KINEMATICS_CODES[0], "G49", "G53 G0 Z115", KINEMATICS_CODES[1],
-                                     f"G43 H{m.stylus[0]}", *moves], "read": read},
+             {"op": "mdi", "lines": [*start, *moves], "read": read},
              {"op": "mdi", "lines": [KINEMATICS_CODES[0]]},
              {"op": "hal", "commands": only + no_map},
-             {"op": "mdi", "lines": ["G49", "G53 G0 Z115", KINEMATICS_CODES[1], f"G43 H{m.stylus[0]}", *moves],
-              "read": read}]
+             {"op": "mdi", "lines": [*start, *moves], "read": read}]
     steps = [{"op": "mdi", "lines": [KINEMATICS_CODES[1], f"T{m.stylus[0]} M6"]},
              *setup_steps(mm, programs, "tcp", reset=False), *after]
     return MapRun(mm, sim, programs, run_sim(sim, steps, timeout_s=7200), "pige-maps")

@@ -35,6 +35,8 @@ from map_loop import (
     targets,
 )
 
+from pige_sym.codegen.targets.linuxcnc_pins import default_name
+
 pytestmark = pytest.mark.linuxcnc
 RAD = np.pi / 180.0
 
@@ -206,13 +208,15 @@ def test_held_out_tcp_moves_land_within_a_micrometre_and_pige_alone_leaves_five_
     goal = np.array([p for p, _ in targets(mm)])
     table = mm.true_table()
     off = {}
-    for label, index in (("maps", -3), ("pige only", -1)):
+    for label, index in (("maps", -4), ("pige only", -1)):
         rows = run.run.result["steps"][index]["readings"][-len(goal):]
         tip = np.array([[r[p] for p in TRUE_PINS[:3]] for r in rows])
         motors = np.array([[r[p] for p in MOTOR_PINS] for r in rows])
         approach = np.array([[r["ptm.approach1"], r["ptm.approach2"]] for r in rows])
         twin = table.tip_in_table(motors, approach)
         assert np.abs(twin - tip).max() < 1e-6  # the component and its NumPy twin agree
+        kins = np.array([r[f"{default_name(mm.base.code)}.approach-c"] for r in rows])
+        assert (-kins == approach[:, 1]).all()  # C's direction: pige's (vel-cmd, sigma -1) = the true motor's
         off[label] = np.linalg.norm(tip - goal, axis=1) * 1e3
     print(f"{machine} held-out TCP moves ({len(goal)} work points 6 mm around the sphere at {len(HELD_OUT)} angles "
           f"between the grid angles): true tool point off the target, pige's kinematics with maps max "
