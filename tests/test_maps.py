@@ -325,3 +325,56 @@ def test_diagnose_says_when_a_map_explains_the_residual(ac_mappable: Any, capsys
     assert main(["diagnose", *flat_paths, "--map", "C,A", "--map-step", "15"]) == 0
     text = capsys.readouterr().out
     assert "the error maps do not explain the residual" in text
+
+
+def test_a_positioning_map_per_approach_direction() -> None:
+    """C approached from both sides at every angle: ECC+ and ECC- (the reversal kept whole, §10)."""
+    from pige_sym.identification.maps import MapSpec, identify_maps
+    from pige_sym.kernels import load_kernels
+    from pige_sym.model.error_motions import AxisMaps, ErrorMaps, MapGrid
+    from pige_sym.model.trajectories import Trajectory
+    from pige_sym.simulation.simulator import simulate
+
+    kern = load_kernels(AC)
+    rng = np.random.default_rng(9)
+    c_grid = np.arange(0.0, 360.0, 30.0)
+    mean = _projected("ECC", c_grid, rng.normal(scale=8.0, size=c_grid.size))
+    reversal = 12.0 + rng.normal(scale=3.0, size=c_grid.size)  # backlash of 12 urad, varying with the angle
+    maps = ErrorMaps({"C": AxisMaps(MapGrid("C", c_grid, True), {"ECC+": mean + reversal / 2,
+                                                                  "ECC-": mean - reversal / 2})})
+    rows = [(0.0, 0.0)]
+    for a in (0.0, -30.0, -60.0, -90.0):
+        up = [(a, c) for c in c_grid]
+        # up, past the last angle, then down: each angle reached from both sides (330° from above too)
+        rows += up + [(a, 350.0)] + [(a, c) for c in c_grid[::-1]]
+    angles = np.array(rows)
+    traj = Trajectory("both ways", ("A", "C"), angles, np.arange(len(rows)) * 8.0, "both ways")
+    items = [(f"s{i}", simulate(AC, traj, pige={}, ball_mm=b, noise_um=0.05, seed=i, error_maps=maps).measurement)
+             for i, b in enumerate(((110, 0, 40), (-50, 95, 90), (-60, -90, 140)))]
+    result = identify_maps(items, MapSpec(("C",), 30.0, ("C",)))
+    c = result.maps["C"]
+    assert not result.undetermined
+    for name, truth in (("ECC+", mean + reversal / 2), ("ECC-", mean - reversal / 2)):
+        est, std = c.value[name], c.std[name]
+        assert np.isfinite(est).all(), name
+        assert np.all(np.abs(est - truth) <= 4 * std + 0.5), (name, np.abs(est - truth) / std)
+    assert np.all(np.abs(c.value["ECC:reversal"] - reversal) <= 4 * c.std["ECC:reversal"] + 0.5)
+    assert "ECC+" in c.to_dict() and kern.MACHINE_CODE == AC
+
+
+def test_an_angle_reached_from_one_side_only_has_no_reversal_value() -> None:
+    """A sweep up and straight back down reaches its top angle from below only: ECC- is not determined there."""
+    from pige_sym.identification.maps import MapSpec, identify_maps
+    from pige_sym.model.trajectories import Trajectory
+    from pige_sym.simulation.simulator import simulate
+
+    c_grid = np.arange(0.0, 360.0, 30.0)
+    rows = [(0.0, 0.0)] + [(a, c) for a in (0.0, -45.0, -90.0) for c in (*c_grid, *c_grid[::-1])]
+    traj = Trajectory("both ways", ("A", "C"), np.array(rows), np.arange(len(rows)) * 8.0, "both ways")
+    items = [(f"s{i}", simulate(AC, traj, pige={}, ball_mm=b, noise_um=0.05, seed=i).measurement)
+             for i, b in enumerate(((110, 0, 40), (-50, 95, 90), (-60, -90, 140)))]
+    result = identify_maps(items, MapSpec(("C",), 30.0, ("C",)))
+    top = [u for u in result.undetermined if u.angle_deg == 330.0]
+    assert {u.motion for u in top} == {"ECC", "ECC:reversal"}
+    assert all("see 6 of its 7 motions" in u.why for u in top)
+    assert np.isnan(result.maps["C"].value["ECC-"][-1]) and np.isfinite(result.maps["C"].value["ECC-"][:-1]).all()
