@@ -255,6 +255,26 @@ def test_a_configuration_of_another_machine_or_controller_is_refused(tmp_path, c
                      "a directory")
 
 
+@pytest.mark.parametrize("off, on, said", [
+    ("M429", "M429", "one code cannot switch the kinematics both on and off"),
+    ("M0429", "M429", "one code cannot switch the kinematics both on and off"),
+    ("M2", "M428", "M2 already means end"),
+    ("M429", "G1", "G1 already means motion:G1"),
+])
+def test_one_code_for_both_kinematics_switches_is_refused(tmp_path, capsys, off, on, said) -> None:
+    """Issue 43 item 3: the program would leave the machine in whichever kinematics one code gives it."""
+    out = tmp_path / "probe.ngc"
+    one_line_refusal(*run(capsys, "program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--sphere",
+                          "100,0,50", "--sphere-radius", "12.5", "--stylus-radius", "1.5", "--stylus-tool", "9",
+                          "--stylus-length", "120", "--rtcp-off", off, "--rtcp-on", on, "--out", str(out))[::2], said)
+    assert not out.exists()
+    from pige_sym.nc.compensate import with_rtcp_codes
+    from pige_sym.nc.dialects import get_dialect
+
+    with pytest.raises(InputError, match=said):  # the NC rewrite declares the same codes the same way
+        with_rtcp_codes(get_dialect("linuxcnc"), (on,), (off,))
+
+
 def _in_memory(machine: str, **change: object) -> object:
     from pige_sym.compensation.parameters import CompensationParameters
     from pige_sym.kernels import load_kernels
