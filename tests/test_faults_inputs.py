@@ -275,6 +275,14 @@ def test_one_code_for_both_kinematics_switches_is_refused(tmp_path, capsys, off,
         with_rtcp_codes(get_dialect("linuxcnc"), (on,), (off,))
 
 
+@pytest.mark.parametrize("name", ["trivkins", "userkins", "pid", "motmod", "xyzab_tdr_kins", "xyzacb_trsrn"])
+def test_gen_refuses_the_names_of_linuxcncs_own_modules(tmp_path, capsys, name) -> None:
+    """Issue 43 item 21: ``halcompile --install`` of a component named like a shipped module replaces it."""
+    one_line_refusal(*run(capsys, "gen", "--target", "linuxcnc", AC, "--name", name, "--out",
+                          str(tmp_path / "k"))[::2], f"--name {name}: LinuxCNC ships a module of that name")
+    assert not (tmp_path / "k").exists()
+
+
 def _in_memory(machine: str, **change: object) -> object:
     from pige_sym.compensation.parameters import CompensationParameters
     from pige_sym.kernels import load_kernels
