@@ -306,9 +306,12 @@ def test_no_controller_entry_is_made_from_values_beyond_physical_bounds(machine,
     """Check before writing: whatever built the parameters (a script, not the file reader), every controller refuses
     values no machine has before it renders a line."""
     from pige_sym.compensation.controllers import controller_names, format_controller
+    from pige_sym.nc.compensate import compensate_nc
 
     params = _in_memory(machine, **change)
     for style in controller_names():
         with pytest.raises(InputError, match=re.escape(said)) as info:
             format_controller(params, style, heidenhain_trans="position")
         assert str(info.value).startswith("script: ") and "\n" not in str(info.value)
+    with pytest.raises(InputError, match=re.escape(said)):  # a program written for a controller: the same check
+        compensate_nc("G90 G71\nN10 G1 X1 Y2 Z3 A10 C20\n", params, dialect="siemens")

@@ -161,6 +161,8 @@ def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: s
         A block that cannot be read or is refused (with its line).
     CompensationError
         A correction beyond the limits, or a failed read-back.
+    InputError
+        Parameters beyond physical bounds (:func:`~pige_sym.compensation.controllers.entry_checks.check_parameters`).
     """
     was_enabled = gc.isenabled()
     gc.disable()  # ~10^6 short-lived objects, no cycles: the collector would only rescan them (~20 %)
@@ -180,6 +182,9 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
 
     if not (max_change_mm > 0 and max_change_deg > 0 and np.isfinite([max_change_mm, max_change_deg]).all()):
         raise InputError("--max-change: both limits must be positive finite numbers")
+    from pige_sym.compensation.controllers.entry_checks import check_parameters
+
+    check_parameters(params)  # a program is written for a controller too: the same bounds before anything is made
     kern = load_kernels(params.machine)
     axes = tuple(kern.ROTARY_AXES)
     program_axis_sense(text, axes, path, params.axis_sense)  # a pige program's header must agree

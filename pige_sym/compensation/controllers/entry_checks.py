@@ -1,12 +1,12 @@
 """Check before writing: what every controller's entries are made from, against physical bounds.
 
-Every controller (:mod:`pige_sym.compensation.controllers`) enters values made from the parameters: the
-PIGEs and zero-position errors [µm, µrad], the nominal pivots [mm] the corrected axis lines start from, and
-on head machines the tool vector [mm].  Before anything is rendered they are held to the bounds the
-parameter file's reader holds them to (:mod:`~pige_sym.measurements.schema`: ``MAX_PIGE``,
-``MAX_POSITION_MM``), whatever built them (a file, a result in memory, a script), and the pivots must
-belong to the machine's rotary axes.  Today's configuration of a controller is checked by the controller
-that reads one (``check_current``, LinuxCNC's ``--current``).
+Every controller (:mod:`pige_sym.compensation.controllers`) and the NC rewrite (:mod:`pige_sym.nc.compensate`)
+make what they write from the parameters: the PIGEs and zero-position errors [µm, µrad], the nominal pivots
+[mm] the corrected axis lines start from, and on head machines the tool vector [mm].  Before anything is
+rendered they are held to the bounds the parameter file's reader holds them to
+(:mod:`~pige_sym.measurements.schema`: ``MAX_PIGE``, ``MAX_POSITION_MM``), whatever built them (a file, a
+result in memory, a script), and the pivots must belong to the machine's rotary axes.  Today's configuration
+of a controller is checked by the controller that reads one (``check_current``, LinuxCNC's ``--current``).
 """
 
 from __future__ import annotations
@@ -51,5 +51,5 @@ def _bounded(source: str, field: str, values: Iterable[object], bound: float, un
     for v in items:
         number = float(v) if isinstance(v, numbers.Real) and not isinstance(v, bool) else math.nan
         if not abs(number) <= bound:
-            raise InputError(f"{source}: {field} = {v!r:.40}: no controller entry is made from it (a finite number "
-                             f"within ±{bound:g} {unit}); give the parameters of a machine")
+            raise InputError(f"{source}: {field} = {v!r:.40}: nothing is written for a controller from it (a finite "
+                             f"number within ±{bound:g} {unit}); give the parameters of a machine")
