@@ -24,6 +24,7 @@ from pige_sym.errors import IdentificationError
 from pige_sym.measurements.measurement import MEASUREMENT_FORMATS
 from pige_sym.measurements.rtest import read_measurement
 from pige_sym.measurements.schema import MAX_PIGE
+from pige_sym.options import strict_float
 from testdata import refused_in_one_line
 
 S = ["--sphere-radius", "12.7", "--stylus-radius", "1.5"]
@@ -150,7 +151,7 @@ def test_import_probe_never_writes_a_file_identify_refuses(probe_log, tmp_path_f
                 lines[i] = lines[i][:k] + str(d) + lines[i][k + 1:]
         elif kind == "junk":
             lines.insert(i, "G38.2 X1 Y2" if d % 2 else "1 2 3")
-        elif kind == "scale":
+        elif kind == "scale" and all(strict_float(v) is not None for v in lines[i].split(" ")):  # not junk
             lines[i] = " ".join(f"{float(v) * (1 + d):f}" for v in lines[i].split(" "))
     d = tmp_path_factory.mktemp("dmg")
     log, out = d / "log.txt", d / "p.csv"
