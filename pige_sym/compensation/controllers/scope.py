@@ -83,9 +83,9 @@ def tool_point_summary(params: CompensationParameters, style: str) -> Controller
                 for e in params.extensions]
     missing += list(params.ignored)
     if params.error_maps is not None:
-        held = getattr(get_controller(style), "map_motions", lambda _p: [])(params)
+        tables = set(getattr(get_controller(style), "map_motions", lambda _p: [])(params))
         left = [f"{ax}:{name}" for ax, m in params.error_maps.axes.items() for name in m.values
-                if f"{ax}:{name}" not in held]
+                if f"{ax}:{name}" not in tables]
         if left:
             missing.append(f"the error maps {', '.join(left)} (CONVENTIONS §10; the NC rewrite compensates them)")
     w = weighing_of(params)
