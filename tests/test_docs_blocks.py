@@ -1,9 +1,11 @@
 """Every shell block of every docs/*.md runs as pasted.
 
 Each page's ```` ```sh ```` (or ```` ```bash ````) blocks are taken from the page itself, in order, and run by
-bash with ``set -e`` as one script (one shell, as a reader pasting them in turn), in a fresh folder laid out
-like the checkout's root: links to ``.venv``, ``examples`` and ``tests``, and ``.venv/bin`` on ``PATH``
-(the pages say: from the checkout's root with ``pige`` on your PATH). Every command must succeed.
+bash as one script (one shell, as a reader pasting them in turn), in a fresh folder laid out like the
+checkout's root: links to ``.venv``, ``examples`` and ``tests``, and ``.venv/bin`` on ``PATH`` (the pages say:
+from the checkout's root with ``pige`` on your PATH). Every command must succeed: the script
+(:func:`testdata.strict_script`) checks the status of every top-level command, so ``a && b`` fails when ``a``
+fails (``set -e`` alone lets it pass), and a failure names the page and line.
 
 A block that cannot run here (it needs a serial port, a controller, another terminal) is marked on the
 line before its fence with ``<!-- not-run: reason -->``; the reason is required. Pages added later are
@@ -20,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from testdata import strict_script
 
 ROOT = Path(__file__).resolve().parents[1]
 NOT_RUN = re.compile(r"^<!--\s*not-run:\s*(\S.*?)\s*-->$")
@@ -63,8 +66,7 @@ def run_page(page: Path, folder: Path) -> subprocess.CompletedProcess[str]:
     for name, target in ((".venv", venv), ("examples", ROOT / "examples"), ("tests", ROOT / "tests")):
         (folder / name).symlink_to(target)
     blocks = [b for b in shell_blocks(page.read_text(encoding="utf-8")) if b.not_run is None]
-    script = "set -e\nexport PATH=\"$PWD/.venv/bin:$PATH\"\n" + "\n".join(
-        f"# {page.name} line {b.line}\n{b.text}" for b in blocks) + "\n"
+    script = "export PATH=\"$PWD/.venv/bin:$PATH\"\n" + strict_script([(page.name, b.line, b.text) for b in blocks])
     env = {k: v for k, v in os.environ.items() if k not in {"PIGE_HISTORY_DB", "PIGE_KERNEL_DIR"}}
     env["PIGE_HISTORY_DB"] = str(folder / "history-default.db")  # never the user's own history
     env["PIGE_KERNEL_DIR"] = str(folder / "kernels")
@@ -77,6 +79,32 @@ def test_blocks_and_markers_are_found() -> None:
     blocks = shell_blocks(text)
     assert [(b.line, b.text, b.not_run) for b in blocks] == [(3, "echo one", None),
                                                              (11, "echo two", "needs a serial port")]
+
+
+def _run_script(text: str, tmp_path: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(["bash", "-c", strict_script([("page.md", 10, text)])], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=60)
+
+
+@pytest.mark.parametrize(("text", "line"), [
+    ("false && echo never\necho after", 10),
+    ("echo one; true\nfor i in 1 2; do\n  test $i = 1 && false\ndone\necho after", 11),
+    ("false | cat\necho after", 10),
+    ("cat > f <<'EOF'\nline && not run\nEOF\nfalse\necho after", 13),
+    ("echo a \\\n  && false\necho after", 10)])
+def test_a_failing_command_fails_the_page_even_in_an_and_list(text: str, line: int, tmp_path: Path) -> None:
+    done = _run_script(text, tmp_path)
+    assert done.returncode != 0 and "after" not in done.stdout, done.stdout
+    assert f"page.md line {line}: " in done.stderr, done.stderr  # the page and the line of the command
+
+
+def test_a_handled_failure_and_a_here_document_pass(tmp_path: Path) -> None:
+    text = ("false || echo handled\ncat > f.txt <<'EOF'\na && b\n$(not run)\nEOF\nfor s in x y; do\n"
+            "  echo $s\ndone\necho \"multi\nline\" && echo after")
+    done = _run_script(text, tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["handled", "x", "y", "multi", "line", "after"]
+    assert (tmp_path / "f.txt").read_text() == "a && b\n$(not run)\n"
 
 
 def test_a_not_run_marker_gives_its_reason_and_most_blocks_run() -> None:
