@@ -304,6 +304,8 @@ class HistoryData:
         Consecutive runs.
     limits : dict of str to float
         Tolerance band per parameter [µm, µrad] (from ``--tolerances``, else the last run's check).
+    check : CheckResult or None
+        The last run judged against ``--tolerances`` (None without them: the verdict stored with the run).
     """
 
     machine_id: str
@@ -311,7 +313,9 @@ class HistoryData:
     runs: list[Any]
     comparisons: list[Any]
     limits: dict[str, float] = field(default_factory=dict)
+    check: CheckResult | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"machine_id": self.machine_id, "database": self.database, "runs": [r.to_dict() for r in self.runs],
-                "comparisons": [c.to_dict() for c in self.comparisons], "limits": self.limits}
+                "comparisons": [c.to_dict() for c in self.comparisons], "limits": self.limits,
+                "check": None if self.check is None else self.check.to_dict()}

@@ -49,7 +49,7 @@ from pige_sym.measurements.measurement import Measurement
 from pige_sym.measurements.sets import read_files
 from pige_sym.nc.program_file import read_program
 from pige_sym.simulation.simulator import normalise_parameter_name
-from pige_sym.verdict.check import Tolerances, check, estimates_from_result, read_tolerances
+from pige_sym.verdict.check import Estimates, Tolerances, check, estimates_from_result, read_tolerances
 
 if TYPE_CHECKING:
     pass
@@ -446,12 +446,25 @@ def gather_history(machine_id: str, db: str | None, tol: Tolerances | None) -> H
     engine = connect(db, create=False)
     runs = list_runs(engine, machine_id)
     comps = [compare_runs(a, b, from_run=a.id, to_run=b.id) for a, b in zip(runs, runs[1:], strict=False)]
+    judged = None
     if tol is not None:
         limits = tol.resolve(runs[-1].machine_code)
+        judged = check(_run_estimates(runs[-1]), tol)  # the last run against the tolerances of this report
     else:
         last = next((r.check for r in reversed(runs) if r.check), None)
         limits = {str(i["name"]): float(i["limit"]) for i in (last or {}).get("items", [])}
-    return HistoryData(machine_id, engine.url.render_as_string(hide_password=True), runs, comps, limits)
+    return HistoryData(machine_id, engine.url.render_as_string(hide_password=True), runs, comps, limits, judged)
+
+
+def _run_estimates(run: Any) -> Estimates:
+    """The stored estimate of a history run, to be judged (:func:`pige_sym.verdict.check.check`)."""
+    def number(x: float) -> float | None:
+        return float(x) if math.isfinite(float(x)) else None
+
+    values = {p: number(v) for p, v in zip(run.parameters, run.values, strict=True)}
+    std = {p: number(s) if values[p] is not None else None for p, s in zip(run.parameters, run.std, strict=True)}
+    return Estimates(run.machine_code, run.method, f"run {run.id} ({Path(run.file_name).name})", values, std,
+                     dict(run.units), [str(f.get("effect")) for f in run.effects])
 
 
 def findings_text(rep: MeasurementReport) -> str:

@@ -70,9 +70,17 @@ def _answer_history(data: ReportData) -> str:
     h = data.history
     assert h is not None
     last = h.runs[-1]
-    verdict = (f'<span data-verdict="{esc(last.verdict)}" class="badge {esc(last.verdict)}">'
-               f"{_BADGE.get(last.verdict, last.verdict)}</span> <small>stored with run {last.id}</small>"
-               if last.verdict else '<span data-verdict="none" class="badge none">not judged</span>')
+    if h.check is not None:  # judged now against the report's --tolerances
+        odd = [f"{i.name} {i.status}" for i in h.check.items if i.status != "pass"]
+        verdict = (f'<span data-verdict="{esc(h.check.verdict)}" class="badge {esc(h.check.verdict)}">'
+                   f"{_BADGE[h.check.verdict]}</span> <small>run {last.id} against {esc(h.check.tolerances)}"
+                   f"{esc(': ' + ', '.join(odd) if odd else f': all {len(h.check.items)} items pass')}</small>")
+    elif last.verdict:
+        verdict = (f'<span data-verdict="{esc(last.verdict)}" class="badge {esc(last.verdict)}">'
+                   f"{_BADGE.get(last.verdict, last.verdict)}</span> <small>stored with run {last.id}</small>")
+    else:
+        verdict = ('<span data-verdict="none" class="badge none">not judged</span> <small>no tolerances stored with '
+                   "the run or given (pige report --history ID --tolerances TOL.json)</small>")
     moved = [f"{c.parameter} {num(c.change, '+.3g')} ± {num(c.std, '.2g')} {units(c.unit)} "
              f"(run {c.from_run} → {c.to_run})"
              for comp in h.comparisons for c in comp.changes if c.significant]
