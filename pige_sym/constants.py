@@ -21,6 +21,10 @@ SHIPPED_MACHINES: tuple[str, ...] = (
     "wC'bXYZB(C1)t",
 )
 
+#: The R-test's nominal noise per deviation component [µm]: what ``pige plan`` and ``pige simulate`` assume, and
+#: what ``pige identify``'s model check judges an R-test file's residual against unless ``--noise`` states it.
+RTEST_NOISE_UM = 0.25
+
 #: Ball centre at the reference pose, workpiece frame [mm] (CONVENTIONS §4).
 DEFAULT_BALL_MM: tuple[float, float, float] = (120.0, 0.0, 80.0)
 

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from testdata import strict_script
 
 ROOT = Path(__file__).resolve().parents[1]

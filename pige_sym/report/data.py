@@ -20,6 +20,7 @@ from pige_sym.diagnosis.diagnose import DiagnosisResult
 from pige_sym.diagnosis.joint import JointDiagnosis
 from pige_sym.files import json_ready
 from pige_sym.identification.least_squares import METHODS
+from pige_sym.identification.model_check import ModelCheck
 from pige_sym.identification.result import IdentificationResult
 from pige_sym.identification.studies import ProjectionStudy, SobolStudy
 from pige_sym.kernels import load_kernels
@@ -158,6 +159,7 @@ class MeasurementReport:
     check: CheckResult | None = None
     measured_at: str = ""
     time_source: str = ""
+    model_check: ModelCheck | None = None  # of the Gauss–Newton PIGE-only fit (pige identify's)
 
     @property
     def primary(self) -> IdentificationResult:
@@ -203,6 +205,7 @@ class MeasurementReport:
             "projection": None if self.projection is None else self.projection.to_dict(),
             "sobol": None if self.sobol is None else {**self.sobol.to_dict(), "half_ranges": self.sobol_ranges},
             "check": None if self.check is None else self.check.to_dict(),
+            "model_check": None if self.model_check is None else self.model_check.to_dict(),
             "measured_at": self.measured_at, "time_source": self.time_source,
             "figures": [str(f.path) for f in self.figures],
             "notes": self.notes,

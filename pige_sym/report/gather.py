@@ -42,6 +42,7 @@ from pige_sym.diagnosis.diagnose import DiagnosisResult, diagnose
 from pige_sym.diagnosis.joint import JointDiagnosis, diagnose_joint
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.identification.least_squares import METHODS, IdentificationError, identify
+from pige_sym.identification.model_check import check_model
 from pige_sym.identification.studies import projection_study, sobol_study
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.ballbar import BallbarRun
@@ -370,6 +371,7 @@ def _gather_one(p: Path, label: str, m: Measurement, truth: Truth | None, opt: _
     bar.update(1)
     primary = opt.method if diag is not None or opt.method != "diagnosis" else "gauss-newton"
     rep = compensation_before_after(p, label, m, truth, results, diag, primary, bar)
+    rep.model_check = check_model(m, results["gauss-newton"])
     rep.measured_at, rep.time_source = measurement_time(p, m.metadata, None)
     if diag_error is not None:
         rep.diagnosis_error = diag_error
