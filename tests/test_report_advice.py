@@ -67,3 +67,31 @@ def test_the_report_shows_the_estimate_compensation_uses_and_where_it_differs(
     assert "the estimate used for compensation (green: the diagnosis' final fit)" in words  # the figure's caption
     differs = re.search(r'data-differs="pige-only">([^<]*)<', _answer(html))
     assert differs and "EB0A" in differs.group(1) and "EX0C" not in differs.group(1)
+
+
+@pytest.fixture(scope="module")
+def ballbar_report(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """docs/ballbar.md's nine setups of one machine (they agree; EY0C is out of tolerance), reported."""
+    folder = tmp_path_factory.mktemp("ballbar")
+    files = []
+    for setup in ("radial", "tangential", "axial"):
+        for axis, tilt in (("C", []), ("C", ["--tilt", "-45"]), ("A", [])):
+            out = folder / f"{setup}_{axis}{'45' if tilt else ''}.csv"
+            assert main(["simulate", "--instrument", "ballbar", "--setup", setup, "--axis", axis, *tilt, "--pige",
+                         "random", "--seed", "1", "--out", str(out)]) == 0
+            files.append(str(out))
+    assert main(["report", *files, "--out", str(folder / "report"), "--tolerances", str(TOLERANCES)]) == 0
+    return (folder / "report" / "report.html").read_text(encoding="utf-8")
+
+
+def test_the_ballbar_report_has_one_badge_the_verdict(ballbar_report: str) -> None:
+    answer = _answer(ballbar_report)
+    badges = re.findall(r'<span[^>]*class="badge[^"]*"[^>]*>([^<]*)<', answer)
+    assert badges == ["FAIL"], badges  # the verdict; before: a green "PASS" for the agreement above it
+    assert 'data-verdict="fail"' in answer and "PASS" not in answer
+    words = _words(answer)
+    assert ("do the files agree? The files agree on one set of PIGEs (F test p = 0.76): they can be identified "
+            "together. (a consistency check of the setups, not the verdict)") in words
+    section = ballbar_report[ballbar_report.index('data-section="joint"'):]
+    assert 'class="badge' not in section[:section.index("</p>")] and 'data-agreement="agree"' in section
+    assert "seen jointly nothing beyond the PIGEs: none of the 23 catalogue effects searched" in words

@@ -31,7 +31,8 @@ from pige_sym.report.words import count, value_std
 
 
 def _agreement_sentence(d: JointDiagnosis) -> tuple[str, str]:
-    """(badge class, plain sentence) of the agreement test."""
+    """(agree, disagree or none; plain sentence) of the agreement test.  Shown as a plain line, never as a
+    badge: it says whether the files are consistent, not whether the machine is in tolerance (the verdict)."""
     status, a = d.agreement_status, d.agreement
     if a is None:
         if len(d.files) == 1:
@@ -41,16 +42,34 @@ def _agreement_sentence(d: JointDiagnosis) -> tuple[str, str]:
     if status == "disagree":
         bad = [f.label for f in d.files if f.disagrees]
         who = f" — the file that disagrees: {', '.join(bad)}" if bad else " — no single file stands out"
-        return "fail", (f"the files do not agree on one set of PIGEs (p = {a.p_value:.2g}){who}; the "
-                        "machine changed between the setups or an effect the model misses shows differently in "
-                        "each: do not use the joint estimate")
-    return "pass", f"the files agree on one set of PIGEs (p = {a.p_value:.2g})"
+        return "disagree", (f"the files do not agree on one set of PIGEs (F test p = {a.p_value:.2g}){who}; the "
+                            "machine changed between the setups or an effect the model misses shows differently in "
+                            "each: do not use the joint estimate")
+    return "agree", (f"the files agree on one set of PIGEs (F test p = {a.p_value:.2g}): they can be identified "
+                     "together")
+
+
+def _agreement_line(d: JointDiagnosis) -> str:
+    """The agreement as a plain line (no badge: the verdict is the only badge)."""
+    kind, sentence = _agreement_sentence(d)
+    text = esc(sentence[0].upper() + sentence[1:]) + "."
+    return f'<span data-agreement="{esc(kind)}"' + (' class="bad">' if kind == "disagree" else ">") + text + "</span>"
+
+
+def _seen_jointly(d: JointDiagnosis) -> str:
+    """The effects the setups show together, or what was searched and not found."""
+    if d.effects:
+        return "; ".join(f.title() + ": " + ", ".join(f"{p} = {value_std(v, f.std[p])} {units(f.units[p])}"
+                                                      for p, v in f.params.items()) for f in d.effects)
+    if d.searched:
+        return (f"nothing beyond the PIGEs: none of the {len(d.searched)} catalogue effects searched on the joint "
+                "rows of the setups is accepted")
+    return "nothing searched jointly (the joint search is for sets of ballbar setups)"
 
 
 def answer_joint_html(i: int, jr: JointReport) -> str:
     """The first-screen answer of a joint section: machine, files, agreement, verdict, largest PIGE."""
     d = jr.diagnosis
-    kind, sentence = _agreement_sentence(d)
     if jr.check is None:
         verdict = ('<span data-verdict="none" class="badge none">not judged</span> <small>no tolerances given '
                    "(pige report --tolerances TOL.json)</small>")
@@ -62,16 +81,13 @@ def answer_joint_html(i: int, jr: JointReport) -> str:
     res = d.final
     piges = [n for n in res.parameters if "." not in n]  # effect parameters are named <effect>.<parameter>
     known = [n for n, v in zip(res.parameters, res.values, strict=True) if n in piges and math.isfinite(float(v))]
-    seen = "; ".join(f.effect + "".join(f" {k}={v:.3g}" for k, v in f.options.items()) + ": "
-                     + ", ".join(f"{p} = {value_std(v, f.std[p])} {units(f.units[p])}" for p, v in f.params.items())
-                     for f in d.effects)
     facts = [("machine", f"<code>{esc(jr.machine)}</code>"),
              ("files", esc(f"{count(len(jr.paths), 'file')} identified jointly: ")
               + ", ".join(f'<span class="file">{path_html(p.name)}</span>' for p in jr.paths)),
-             ("agreement", f'<span class="badge {esc(kind)}">{esc(kind.upper() if kind != "none" else "—")}'
-                           f"</span> {esc(sentence)}"),
              ("verdict (joint estimate)", verdict),
-             ("seen jointly", esc(seen or "nothing beyond the PIGEs")),
+             ("do the files agree?", _agreement_line(d) + " <small>(a consistency check of the setups, not the "
+                                     "verdict)</small>"),
+             ("seen jointly", esc(_seen_jointly(d))),
              ("determined", esc(f"{len(known)} of {len(piges)} PIGEs"
                                 + (f"; not determined by these setups: {', '.join(res.unidentifiable)}"
                                    if res.unidentifiable else ""))),
@@ -154,11 +170,9 @@ def _pige_table(jr: JointReport, *, compact: bool = False) -> str:
 def joint_html(i: int, jr: JointReport, figures: str = "") -> str:
     """The joint section (module docstring); ``figures`` is its figures' HTML."""
     d = jr.diagnosis
-    kind, sentence = _agreement_sentence(d)
     parts = [f'<section data-section="joint" id="joint-{i + 1}">',
              f"<h2>Joint identification — {count(len(jr.paths), 'file')} of <code>{esc(jr.machine)}</code></h2>",
-             f'<p><span class="badge {esc(kind)}">{esc(kind.upper() if kind != "none" else "—")}</span> '
-             f"{esc(sentence[0].upper() + sentence[1:])}.</p>",
+             f"<p>Agreement of the files (a consistency check, not the verdict): {_agreement_line(d)}</p>",
              "<p>Every file's rows are divided by its own noise σ and fitted with one set of PIGEs (a free "
              "constant per relative ballbar file, whose zero is unknown). A ballbar file is one projection per "
              "pose, along the bar: it is checked for agreement only; R-test and probe files also get their own "
