@@ -10,7 +10,10 @@
 
 from __future__ import annotations
 
+import json
 import re
+import shlex
+from html import unescape as html_unescape
 from pathlib import Path
 
 import pytest
@@ -95,3 +98,115 @@ def test_the_ballbar_report_has_one_badge_the_verdict(ballbar_report: str) -> No
     section = ballbar_report[ballbar_report.index('data-section="joint"'):]
     assert 'class="badge' not in section[:section.index("</p>")] and 'data-agreement="agree"' in section
     assert "seen jointly nothing beyond the PIGEs: none of the 23 catalogue effects searched" in words
+
+
+def _next_step(html: str) -> tuple[str, list[str], list[str]]:
+    """The first screen's next step: its sentence, reasons and commands."""
+    cell = re.search(r'<span data-next-step="1">(.*?)</span>(.*?)</td>', _answer(html), re.DOTALL)
+    assert cell, _answer(html)[-2000:]
+    reasons = [html_unescape(r) for r in re.findall(r"<li>(.*?)</li>", cell.group(2))]
+    commands = [html_unescape(c) for c in re.findall(r'<code class="cmd">(.*?)</code>', cell.group(2))]
+    return html_unescape(cell.group(1)), reasons, commands
+
+
+def _undecided_tolerances(path: Path, estimate: dict[str, float], std: dict[str, float], names: list[str]) -> Path:
+    """Limits that leave ``names`` undecided (|v| + 1 u: inside the ±2u guard band), the rest loose."""
+    limits = {n: abs(estimate[n]) + std[n] for n in names}
+    path.write_text(json.dumps({"format": "pige-tolerances 1", "defaults": {"um": 100, "urad": 200},
+                                "limits": limits}))
+    return path
+
+
+def _planned_std(command: str, folder: Path, capsys: pytest.CaptureFixture[str],
+                 monkeypatch: pytest.MonkeyPatch) -> dict[str, float]:
+    """Run a suggested ``pige plan`` command (in ``folder``) with --json; its predicted std per PIGE."""
+    monkeypatch.chdir(folder)
+    words = shlex.split(command.split("   #")[0])
+    assert words[:2] == ["pige", "plan"], command
+    capsys.readouterr()
+    assert main([*words[1:], "--json", *(["--force"] if "--out" in words else [])]) == 0
+    return json.loads(capsys.readouterr().out)["std"]
+
+
+def test_every_verdict_state_says_what_to_do_next(readme_report: tuple[Path, str], tmp_path: Path) -> None:
+    from pige_sym.report import gather_report, render_html
+
+    folder, html = readme_report
+    what, _, commands = _next_step(html)  # FAIL: correct with the estimate used, measure again, compare
+    assert what.startswith("Out of tolerance (EY0C): correct the machine with the estimate this report used")
+    assert commands[:2] == [f"pige diagnose {folder / 'run.csv'} --json > diagnosis.json",
+                            f"pige compensate {folder / 'rtest.mpf'} --params diagnosis.json --out "
+                            f"{folder / 'rtest_comp.mpf'}"] and commands[2].startswith("pige compare ")
+    what, _, commands = _next_step(render_html(gather_report([folder / "run.csv"])))  # not judged
+    assert what.startswith("Judge the estimate") and commands[0].startswith("pige check ")
+    assert main(["simulate", "--machine", AC, "--pige", "EX0C=0.4,EY0C=-0.3,EB0A=2", "--seed", "2", "--out",
+                 str(tmp_path / "after.csv")]) == 0
+    what, _, commands = _next_step(render_html(gather_report([tmp_path / "after.csv"], tolerances=TOLERANCES)))
+    assert what.startswith("In tolerance: nothing to correct") and commands[0].startswith("pige history add ")
+    compare = render_html(gather_report([], compare=(folder / "run.csv", tmp_path / "after.csv")))
+    what, _, commands = _next_step(compare)
+    assert "removed 97% of the RMS deviation" in what and commands == [f"pige check {tmp_path / 'after.csv'} "
+                                                                       "--tolerances TOL.json"]
+
+
+def test_an_undecided_rtest_verdict_names_the_test_that_decides_it(readme_report: tuple[Path, str], tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str],
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    from pige_sym.report import gather_report, render_html
+
+    folder, _ = readme_report
+    diag = gather_report([folder / "run.csv"]).measurements[0].primary
+    est = dict(zip(diag.parameters, diag.values.tolist(), strict=True))
+    std = dict(zip(diag.parameters, diag.std.tolist(), strict=True))
+    tol = _undecided_tolerances(tmp_path / "tol.json", est, std, ["EB0A", "EZ0A"])
+    what, reasons, commands = _next_step(render_html(gather_report([folder / "run.csv"], tolerances=tol)))
+    assert what.startswith("Undecided: EZ0A, EB0A cannot be called in or out of tolerance") and len(reasons) == 2
+    need = {}
+    for name, reason in zip(["EZ0A", "EB0A"], reasons, strict=True):
+        found = re.search(rf"^{name} = .* deciding needs u ≤ ([\d.]+) \S+ \(([\d.]+)× smaller\): (\d+) poses of this "
+                          r"test instead of 30", reason)
+        assert found, reason
+        need[name] = float(found.group(1))
+        assert need[name] == pytest.approx(std[name] / 2, rel=0.05)  # (|v| + u − |v|) / k, k = 2
+        assert int(found.group(3)) == pytest.approx(30 * 4, abs=3)  # u twice too large: 4x the poses
+    assert ("a larger tilt range" in reasons[1]) and ("tilt" not in reasons[0])  # EB0A is an orientation error
+    assert len(commands) == 1 and commands[0].startswith(f'pige plan --machine "{AC}" --points 1')
+    planned = _planned_std(commands[0], tmp_path, capsys, monkeypatch)  # the suggested command runs, decides both
+    assert all(planned[n] <= need[n] for n in need), (planned, need)
+
+
+def test_an_undecided_probe_verdict_names_a_probe_plan(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    import contextlib
+    import io
+
+    from pige_sym import api
+    from pige_sym.report import gather_report, render_html
+    from testdata import simulated_probe_file
+
+    with contextlib.redirect_stdout(io.StringIO()):
+        probe = simulated_probe_file(tmp_path, 5, "angular_error_C:harmonic=2,cos_urad=0,sin_urad=0")
+    res = api.identify(probe)
+    est = dict(zip(res.parameters, res.values.tolist(), strict=True))
+    std = dict(zip(res.parameters, res.std.tolist(), strict=True))
+    tol = _undecided_tolerances(tmp_path / "tol.json", est, std, ["EC0A"])
+    html = render_html(gather_report([probe], tolerances=tol, method="gauss-newton"))
+    what, reasons, commands = _next_step(html)
+    assert what.startswith("Undecided: EC0A") and reasons[0].startswith("EC0A = ") and "a sphere farther" in reasons[0]
+    assert commands[0].startswith(f'pige plan --instrument sphere-probe --machine "{AC}" --sphere ')
+    assert "--sphere-radius 12.7 --stylus-radius 1.5" in commands[0]
+    planned = _planned_std(commands[0], tmp_path, capsys, monkeypatch)
+    assert planned["EC0A"] <= std["EC0A"] / 2 * 1.05, (planned["EC0A"], std["EC0A"])
+
+
+def test_a_history_report_says_what_to_do_next(readme_report: tuple[Path, str], tmp_path: Path) -> None:
+    folder, _ = readme_report
+    db = f"sqlite:///{tmp_path / 'history.db'}"
+    assert main(["simulate", "--machine", AC, "--pige", "EX0C=0.4,EY0C=-0.3,EB0A=2", "--seed", "2", "--out",
+                 str(tmp_path / "after.csv")]) == 0
+    for date, path in (("2026-01-05", folder / "run.csv"), ("2026-02-05", tmp_path / "after.csv")):
+        assert main(["history", "add", str(path), "--machine-id", "M-5", "--date", date, "--db", db]) == 0
+    assert main(["report", "--history", "M-5", "--db", db, "--out", str(tmp_path / "h")]) == 0
+    what, _, commands = _next_step((tmp_path / "h" / "report.html").read_text(encoding="utf-8"))
+    assert "changed in the last run: measure again to confirm before acting" in what and "EY0C" in what
+    assert commands == ["pige history add NEXT.csv --machine-id M-5"]

@@ -12,6 +12,7 @@ from pige_sym.report.data import MeasurementReport, ReportData
 from pige_sym.report.estimate_used import differs_short
 from pige_sym.report.html_blocks import esc, img, kvs, num, table, units
 from pige_sym.report.lead import improvement, main_finding, pige_rows
+from pige_sym.report.next_step import compare_next, history_next, measurement_next, next_html
 from pige_sym.report.words import value_std
 from pige_sym.verdict.check import CheckResult
 
@@ -61,6 +62,7 @@ def _answer_one(i: int, rep: MeasurementReport, data: ReportData) -> str:
         ("verdict", verdict_html(rep)),
         ("main finding", esc(main_finding(rep))),
         (f"improvement ({imp.label})", f'<span class="basis {esc(imp.basis)}">{esc(imp.label)}</span> {esc(imp.text)}'),
+        ("next step", next_html(measurement_next(rep, data))),
     ]
     differs = differs_short(rep)
     return (f'<div class="answer" id="answer-m{i + 1}"><div class="facts">{kvs(facts)}</div>'
@@ -91,7 +93,8 @@ def _answer_history(data: ReportData) -> str:
              ("runs", esc(f"{len(h.runs)}, last measured {last.measured_at}")),
              ("verdict of the last run", verdict),
              ("what changed", esc("; ".join(moved) if moved else "no significant change between consecutive runs "
-                                 "(family-wise false-alarm rate 1 % per comparison)"))]
+                                 "(family-wise false-alarm rate 1 % per comparison)")),
+             ("next step", next_html(history_next(data)))]
     return f'<div class="answer"><div class="facts">{kvs(facts)}</div></div>'
 
 
@@ -103,7 +106,8 @@ def _answer_compare(data: ReportData) -> str:
                          "measurement files and --tolerances for a verdict</small>"),
              ("improvement (measured)", f'<span class="basis measured">measured</span> '
                                         f"{esc(f'RMS |d| {c.rms_before_um:.3g} → {c.rms_after_um:.3g} µm ')}"
-                                        f"{esc(f'({c.improvement:.0%} less)')}")]
+                                        f"{esc(f'({c.improvement:.0%} less)')}"),
+             ("next step", next_html(compare_next(data)))]
     return f'<div class="answer"><div class="facts">{kvs(facts)}</div></div>'
 
 

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from pige_sym.diagnosis.joint import JointDiagnosis
 from pige_sym.report.data import JointReport
 from pige_sym.report.html_blocks import esc, kvs, num, path_html, table, units
@@ -91,7 +93,7 @@ def answer_joint_html(i: int, jr: JointReport) -> str:
              ("determined", esc(f"{len(known)} of {len(piges)} PIGEs"
                                 + (f"; not determined by these setups: {', '.join(res.unidentifiable)}"
                                    if res.unidentifiable else ""))),
-             ("next", esc(_next_step(jr)))]
+             ("next step", esc(_next_step(jr)))]
     return (f'<div class="answer" id="answer-j{i + 1}"><div class="facts">{kvs(facts)}</div>'
             f'<div class="used"><p class="cap">PIGEs of the joint estimate</p>{_pige_table(jr, compact=True)}'
             "</div></div>")
@@ -109,6 +111,16 @@ def _next_step(jr: JointReport) -> str:
                 "that determines every PIGE")
     if jr.check is not None and jr.check.verdict == "pass":
         return "in tolerance: nothing to correct; keep the run (pige history add) to see drift later"
+    if jr.check is not None and jr.check.verdict == "undecided":
+        und = [i for i in jr.check.items if i.status == "undecided"]
+        needs = [abs(i.limit - abs(i.value)) / jr.check.k for i in und if i.value is not None and i.std is not None]
+        sigma = float(np.median([f.sigma_um for f in d.files]))
+        target = f" --target {min(needs):.2g}" if needs and min(needs) > 0 else ""
+        return (f"undecided: {', '.join(i.name for i in und)} cannot be called in or out of tolerance with this "
+                f"uncertainty; deciding needs a standard uncertainty of {min(needs):.2g} or less" if needs else
+                f"undecided: {', '.join(i.name for i in und)} have no value") + (
+                f" — setups that reach it: pige plan --instrument ballbar --machine \"{jr.machine}\" --noise "
+                f"{sigma:.2g}{target} --out setups.json")
     return ("correct the machine: pige compensate PROGRAM --params joint.json (with pige diagnose FILES --json > "
             "joint.json), or --controller STYLE for the kinematic description; then measure again")
 
