@@ -73,7 +73,7 @@ def test_the_report_shows_the_estimate_compensation_uses_and_where_it_differs(
 
 
 @pytest.fixture(scope="module")
-def ballbar_report(tmp_path_factory: pytest.TempPathFactory) -> str:
+def ballbar_report(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[str], str]:
     """docs/ballbar.md's nine setups of one machine (they agree; EY0C is out of tolerance), reported."""
     folder = tmp_path_factory.mktemp("ballbar")
     files = []
@@ -84,18 +84,19 @@ def ballbar_report(tmp_path_factory: pytest.TempPathFactory) -> str:
                          "random", "--seed", "1", "--out", str(out)]) == 0
             files.append(str(out))
     assert main(["report", *files, "--out", str(folder / "report"), "--tolerances", str(TOLERANCES)]) == 0
-    return (folder / "report" / "report.html").read_text(encoding="utf-8")
+    return files, (folder / "report" / "report.html").read_text(encoding="utf-8")
 
 
-def test_the_ballbar_report_has_one_badge_the_verdict(ballbar_report: str) -> None:
-    answer = _answer(ballbar_report)
+def test_the_ballbar_report_has_one_badge_the_verdict(ballbar_report: tuple[list[str], str]) -> None:
+    _, html = ballbar_report
+    answer = _answer(html)
     badges = re.findall(r'<span[^>]*class="badge[^"]*"[^>]*>([^<]*)<', answer)
     assert badges == ["FAIL"], badges  # the verdict; before: a green "PASS" for the agreement above it
     assert 'data-verdict="fail"' in answer and "PASS" not in answer
     words = _words(answer)
     assert ("do the files agree? The files agree on one set of PIGEs (F test p = 0.76): they can be identified "
             "together. (a consistency check of the setups, not the verdict)") in words
-    section = ballbar_report[ballbar_report.index('data-section="joint"'):]
+    section = html[html.index('data-section="joint"'):]
     assert 'class="badge' not in section[:section.index("</p>")] and 'data-agreement="agree"' in section
     assert "seen jointly nothing beyond the PIGEs: none of the 23 catalogue effects searched" in words
 
@@ -210,3 +211,16 @@ def test_a_history_report_says_what_to_do_next(readme_report: tuple[Path, str], 
     what, _, commands = _next_step((tmp_path / "h" / "report.html").read_text(encoding="utf-8"))
     assert "changed in the last run: measure again to confirm before acting" in what and "EY0C" in what
     assert commands == ["pige history add NEXT.csv --machine-id M-5"]
+
+
+def test_the_ballbar_next_step_runs(ballbar_report: tuple[list[str], str], tmp_path: Path,
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """The joint section's advice: compensate from `pige diagnose FILES --json` (before, compensate refused the
+    joint JSON's keys: 'unknown key agreement')."""
+    files, html = ballbar_report
+    assert "pige compensate PROGRAM --params joint.json (with pige diagnose FILES --json &gt; joint.json)" in html
+    capsys.readouterr()
+    assert main(["diagnose", *files, "--json"]) == 0
+    (tmp_path / "joint.json").write_text(capsys.readouterr().out)
+    assert main(["compensate", "--params", str(tmp_path / "joint.json"), "--controller", "linuxcnc"]) == 0
+    assert "entered: EY0A, EZ0A, EX0C, EY0C" in capsys.readouterr().out

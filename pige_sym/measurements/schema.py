@@ -243,13 +243,14 @@ class ParamsDocument:
                                                                               "max_abs": MAX_POSITION_MM})
     findings: list[Any] | None = None
     axis_sense: dict[str, int] | None = None
+    effects: list[Any] | None = None  # several files' diagnosis: the effects seen jointly (findings, alike)
 
     #: Keys ``pige identify/diagnose --json`` write that a parameter file does not use.
     IGNORED_KEYS: ClassVar[frozenset[str]] = frozenset({
         "method", "projection", "loss", "std", "ci95", "rank", "n_parameters", "condition", "rms_um", "sigma_um",
         "dof", "n_rows", "n_obs", "observability", "unidentifiable", "outlier_rows", "vif", "baseline", "options",
         "plots", "rejected", "params", "bic", "heldout_rms_um", "unobservable", "identifiable", "warnings",
-        "unobserved", "clusters",
+        "unobserved", "clusters", "model_check", "effects_searched", "joint_effects", "files", "agreement", "notes",
     })
 
 
@@ -375,7 +376,8 @@ def params_document(data: Any, path: PathLike, *, machine: str | None = None,
         path=p, machine=kern.MACHINE_CODE, pige=values, effect_values={k: float(v or 0.0) for k, v in effects.items()},
         set_to_zero=tuple(missing), units=dict(doc.units or kern.UNITS),
         tool_mm=None if doc.tool_mm is None else (doc.tool_mm[0], doc.tool_mm[1], doc.tool_mm[2]),
-        pivots_mm={a: (v[0], v[1], v[2]) for a, v in (doc.pivots_mm or {}).items()}, findings=list(doc.findings or []),
+        pivots_mm={a: (v[0], v[1], v[2]) for a, v in (doc.pivots_mm or {}).items()},
+        findings=list(doc.findings or []) + list(doc.effects or []),
         axis_sense=sense,
     )
 
