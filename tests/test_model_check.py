@@ -48,7 +48,10 @@ def test_the_readme_run_is_flagged_with_the_next_step(tmp_path: Path, capsys: py
     assert "model check: the residual is well above the noise: the PIGE model misses something" in printed
     assert "Next step: pige diagnose run.csv" in printed and "99.9 % quantile" in printed
     assert main(["identify", "run.csv", "--json"]) == 0
-    check = json.loads(capsys.readouterr().out)["model_check"]
+    printed = capsys.readouterr().out
+    check = json.loads(printed)["model_check"]
+    Path("identify.json").write_text(printed)  # still a parameter file: compensate reads it
+    assert main(["compensate", "--params", "identify.json", "--controller", "siemens"]) == 0
     assert check["flagged"] and check["next_step"] == "pige diagnose run.csv" and check["alpha"] == ALPHA
     assert check["noise_um"] == 0.25 and check["test"] == "chi-square" and check["ratio"] > 10  # 4x the noise
     # the same file with the noise stated as large as its residual: explained
