@@ -38,15 +38,13 @@ if TYPE_CHECKING:
     from pige_sym.diagnosis.joint import JointDiagnosis
     from pige_sym.diagnosis.results import DiagnosisResult
     from pige_sym.identification.joint import JointResult
-    from pige_sym.identification.model_check import ModelCheck
     from pige_sym.identification.result import IdentificationResult
     from pige_sym.measurements.measurement import Measurement
     from pige_sym.nc.compensate import CompensationResult
     from pige_sym.planning.plan import Plan
     from pige_sym.verdict.check import CheckResult
 
-__all__ = ["check", "compensate", "diagnose", "identify", "identify_files", "model_check", "plan", "read", "simulate",
-           "write"]
+__all__ = ["check", "compensate", "diagnose", "identify", "identify_files", "plan", "read", "simulate", "write"]
 
 PathLike = str | os.PathLike[str]
 
@@ -207,33 +205,6 @@ def identify(data: Measurement | PathLike, *, method: str = "gauss-newton", proj
     from pige_sym.identification.least_squares import identify as run
 
     return run(_measurement(data), method=method, projection=projection, loss=loss, with_zero=with_zero)
-
-
-def model_check(data: Measurement | PathLike, result: IdentificationResult, *,
-                noise_um: float | None = None) -> ModelCheck | None:
-    """Does the PIGE model explain the file down to its noise?  (``pige identify``'s model check.)
-
-    A chi-square test of the whitened residual against its degrees of freedom, with the noise ``noise_um``
-    [µm per component] or else the file's (a probe import's centre covariances) or the instrument's nominal;
-    flagged above the 99.9 % quantile (:mod:`pige_sym.identification.model_check`).
-
-    Returns
-    -------
-    ModelCheck or None
-        ``flagged`` (the model misses something: run ``next_step``, ``pige diagnose FILE``), ``chi2``, ``dof``,
-        ``quantile``, ``p_value``, ``noise_um`` and where it comes from; None when the fit has no residual.
-
-    Examples
-    --------
-    >>> import pige_sym.api as pige
-    >>> run = pige.simulate(pige={"EX0C": 8.0}, effects=["angular_error_C"], seed=1)
-    >>> pige.model_check(run, pige.identify(run)).flagged
-    True
-    """
-    from pige_sym.identification.model_check import check_model
-
-    m = _measurement(data)
-    return check_model(m, result, noise_um=noise_um)
 
 
 def identify_files(paths: Sequence[PathLike], *, with_zero: bool = False) -> JointResult:

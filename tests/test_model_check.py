@@ -19,7 +19,7 @@ import pytest
 
 import pige_sym.api as pige
 from pige_sym.cli.main import main
-from pige_sym.identification.model_check import ALPHA, f_quantile, f_upper_tail
+from pige_sym.identification.model_check import ALPHA, check_model, f_quantile, f_upper_tail
 from testdata import simulated_probe_file
 
 AC = "wC'A'bXYZ(C1)t"
@@ -64,7 +64,7 @@ def test_noise_only_rtest_files_are_not_flagged() -> None:
     flagged, p = 0, []
     for seed in range(200):
         run = pige.simulate(seed=seed, noise_um=0.25)
-        check = pige.model_check(run, pige.identify(run))
+        check = check_model(run, pige.identify(run))
         assert check is not None
         flagged += check.flagged
         p.append(check.p_value)
@@ -82,9 +82,9 @@ def test_probe_imports_judged_against_their_own_covariances(tmp_path: Path) -> N
         drift = simulated_probe_file(tmp_path / "drift", 3, "table_drift:vx_um=6,vy_um=-4,vz_um=8,tau_s=10")
     for path in clean:
         m = pige.read(path)
-        check = pige.model_check(m, pige.identify(m))
+        check = check_model(m, pige.identify(m))
         assert check is not None and not check.flagged, check.text()
         assert check.test_name == "F" and 40 < check.noise_dof < 100  # 155 contacts − 3·31 − 1 = 61
     m = pige.read(drift)
-    check = pige.model_check(m, pige.identify(m))
+    check = check_model(m, pige.identify(m))
     assert check is not None and check.flagged and check.next_step == f"pige diagnose {drift}"

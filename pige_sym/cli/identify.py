@@ -12,6 +12,7 @@ from pige_sym.files import to_json
 def _run(args: argparse.Namespace) -> int:
     from pige_sym import api
     from pige_sym.cli._setup import finite_option
+    from pige_sym.identification.model_check import check_model
     from pige_sym.identification.result import format_result
     from pige_sym.measurements.ballbar import is_ballbar_file
 
@@ -22,7 +23,7 @@ def _run(args: argparse.Namespace) -> int:
     m = api.read(args.files[0])
     result = api.identify(m, method=args.method, projection=args.projection, loss=args.loss,
                           with_zero=args.with_zero)
-    check = api.model_check(m, result, noise_um=args.noise)
+    check = check_model(m, result, noise_um=args.noise)
     if args.json:
         print(to_json({**result.to_dict(), "model_check": None if check is None else check.to_dict()}))
     else:
