@@ -224,3 +224,21 @@ def test_the_ballbar_next_step_runs(ballbar_report: tuple[list[str], str], tmp_p
     (tmp_path / "joint.json").write_text(capsys.readouterr().out)
     assert main(["compensate", "--params", str(tmp_path / "joint.json"), "--controller", "linuxcnc"]) == 0
     assert "entered: EY0A, EZ0A, EX0C, EY0C" in capsys.readouterr().out
+
+
+def test_an_undecided_ballbar_verdict_says_what_decides_it(ballbar_report: tuple[list[str], str],
+                                                           tmp_path: Path) -> None:
+    from pige_sym.report import gather_report, render_html
+
+    files, _ = ballbar_report
+    joint = gather_report(files).joints[0].diagnosis.final
+    est = dict(zip(joint.parameters, joint.values.tolist(), strict=True))
+    std = dict(zip(joint.parameters, joint.std.tolist(), strict=True))
+    tol = _undecided_tolerances(tmp_path / "tol.json", est, std, ["EB0A"])
+    answer = html_unescape(_words(_answer(render_html(gather_report(files, tolerances=tol)))))
+    found = re.search(r"next step undecided: EB0A needs u ≤ ([\d.]+) µrad \(now ([\d.]+)\): ([\d.]+)× the points per "
+                      r"setup \(u falls as 1/√points\), or setups that see it better: pige plan --instrument ballbar "
+                      rf'--machine "{re.escape(AC)}" --noise [\d.]+ --target ([\d.]+) --out setups.json', answer)
+    assert found, answer[:1500]
+    assert float(found.group(1)) == pytest.approx(std["EB0A"] / 2, rel=0.05) and float(found.group(3)) == \
+        pytest.approx(4, rel=0.1) and found.group(4) == found.group(1)

@@ -112,17 +112,29 @@ def _next_step(jr: JointReport) -> str:
     if jr.check is not None and jr.check.verdict == "pass":
         return "in tolerance: nothing to correct; keep the run (pige history add) to see drift later"
     if jr.check is not None and jr.check.verdict == "undecided":
-        und = [i for i in jr.check.items if i.status == "undecided"]
-        needs = [abs(i.limit - abs(i.value)) / jr.check.k for i in und if i.value is not None and i.std is not None]
-        sigma = float(np.median([f.sigma_um for f in d.files]))
-        target = f" --target {min(needs):.2g}" if needs and min(needs) > 0 else ""
-        return (f"undecided: {', '.join(i.name for i in und)} cannot be called in or out of tolerance with this "
-                f"uncertainty; deciding needs a standard uncertainty of {min(needs):.2g} or less" if needs else
-                f"undecided: {', '.join(i.name for i in und)} have no value") + (
-                f" — setups that reach it: pige plan --instrument ballbar --machine \"{jr.machine}\" --noise "
-                f"{sigma:.2g}{target} --out setups.json")
+        return _undecided_step(jr)
     return ("correct the machine: pige compensate PROGRAM --params joint.json (with pige diagnose FILES --json > "
             "joint.json), or --controller STYLE for the kinematic description; then measure again")
+
+
+def _undecided_step(jr: JointReport) -> str:
+    """An undecided joint verdict: per item the standard uncertainty that decides it, how many times the points
+    per setup reach it (u falls as 1/√points), and the ballbar plan whose worst std is that target."""
+    assert jr.check is not None
+    und = [i for i in jr.check.items if i.status == "undecided"]
+    parts, needs = [], []
+    for i in und:
+        if i.value is None or i.std is None:
+            parts.append(f"{i.name} has no value (no setup here determines it)")
+            continue
+        need = abs(i.limit - abs(i.value)) / jr.check.k
+        needs.append(need)
+        parts.append(f"{i.name} needs u ≤ {need:.2g} {i.unit} (now {i.std:.2g}): "
+                     + (f"{(i.std / need) ** 2:.2g}× the points per setup" if need > 0 else "it lies on its limit"))
+    sigma = float(np.median([f.sigma_um for f in jr.diagnosis.files]))
+    target = f" --target {min(needs):.2g}" if needs and min(needs) > 0 else ""
+    return (f"undecided: {'; '.join(parts)} (u falls as 1/√points), or setups that see it better: pige plan "
+            f"--instrument ballbar --machine \"{jr.machine}\" --noise {sigma:.2g}{target} --out setups.json")
 
 
 def _files_table(jr: JointReport) -> str:
