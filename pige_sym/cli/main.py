@@ -33,12 +33,28 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: {message}\n")
 
 
+#: ``pige --help``'s examples: a first session (README.md), in the order a user runs them.
+EXAMPLES = """\
+examples (a first session; every command has --help with more):
+  pige program --machine "wC'A'bXYZ(C1)t" --trajectory cone-frustum --ball 120,0,80 --out rtest.mpf
+  pige simulate --machine "wC'A'bXYZ(C1)t" --pige random --seed 1 --effect angular_error_C --out run.csv
+  pige identify run.csv                         # the PIGEs, and whether the model explains the file
+  pige diagnose run.csv --json > diagnosis.json # what the PIGE model misses, fitted
+  pige check run.csv --tolerances examples/tolerances.json
+  pige compensate rtest.mpf --params diagnosis.json --out rtest_comp.mpf
+  pige report run.csv --out report --program rtest.mpf --tolerances examples/tolerances.json
+  pige demo --instrument sphere-probe --out probe-demo   # the whole story with a touch probe
+
+exit status: 0 success, 1 the command ran but failed (not in tolerance, ...), 2 bad input (one line)."""
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pige`` with every subcommand."""
     parser = _Parser(
         prog="pige",
         description=("Identify and compensate the rotary-axis PIGEs of five-axis machines from an R-test, "
                      "a touch probe on a calibration sphere, or a double ballbar."),
+        epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     from pige_sym.constants import VERSION as __version__

@@ -32,6 +32,7 @@ from pige_sym.files import atomic_write_text, check_output
 
 def _run_probe(args: argparse.Namespace) -> int:
     from pige_sym.cli._probe import probe_setup
+    from pige_sym.identification.result import per_pose
     from pige_sym.kernels import load_kernels
     from pige_sym.model.trajectories import make_trajectory
     from pige_sym.nc.probe_program import plan_probing
@@ -52,7 +53,7 @@ def _run_probe(args: argparse.Namespace) -> int:
     if fmt is not None:
         atomic_write_text(fmt, heidenhain_format_file(plan))
     print(f"wrote {out}: {check.poses} poses ({plan.description}), {sum(check.contacts)} contacts "
-          f"({min(check.contacts)}-{max(check.contacts)} per pose), {args.dialect}"
+          f"({per_pose(min(check.contacts), max(check.contacts))}), {args.dialect}"
           + (f", format file {fmt}" if fmt is not None else ""))
     print(f"read back: rapid moves at least {check.min_rapid_clearance_mm:.2f} mm from the sphere, rotary moves "
           f"{check.min_rotary_clearance_mm:.1f} mm above it, every probing move {check.min_overtravel_mm:.2f} mm past "

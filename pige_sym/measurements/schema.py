@@ -258,6 +258,7 @@ class ParamsDocument:
                                                                               "max_abs": MAX_POSITION_MM})
     findings: list[Any] | None = None
     axis_sense: dict[str, int] | None = None
+    effects: list[Any] | None = None  # several files' diagnosis: the effects seen jointly (findings, alike)
     std: dict[str, float | None] | None = field(default=None, metadata={"max_abs": MAX_PIGE})
     covariance: CovarianceDocument | None = None
     error_motions: dict[str, dict[str, Any]] | None = None
@@ -267,7 +268,8 @@ class ParamsDocument:
         "method", "projection", "loss", "ci95", "rank", "n_parameters", "condition", "rms_um", "sigma_um",
         "dof", "n_rows", "n_obs", "observability", "unidentifiable", "outlier_rows", "vif", "baseline", "options",
         "plots", "rejected", "params", "bic", "heldout_rms_um", "unobservable", "identifiable", "warnings",
-        "unobserved", "clusters", "files", "map_step_deg", "map_undetermined",
+        "unobserved", "clusters", "files", "map_step_deg", "map_undetermined", "model_check", "effects_searched",
+        "joint_effects", "agreement", "notes",
     })
 
 
@@ -416,7 +418,8 @@ def params_document(data: Any, path: PathLike, *, machine: str | None = None,
         path=p, machine=kern.MACHINE_CODE, pige=values, effect_values={k: float(v or 0.0) for k, v in effects.items()},
         set_to_zero=tuple(missing), units=dict(doc.units or kern.UNITS),
         tool_mm=None if doc.tool_mm is None else (doc.tool_mm[0], doc.tool_mm[1], doc.tool_mm[2]),
-        pivots_mm={a: (v[0], v[1], v[2]) for a, v in (doc.pivots_mm or {}).items()}, findings=list(doc.findings or []),
+        pivots_mm={a: (v[0], v[1], v[2]) for a, v in (doc.pivots_mm or {}).items()},
+        findings=list(doc.findings or []) + list(doc.effects or []),
         axis_sense=sense, std=std, covariance_names=tuple(doc.covariance.parameters) if doc.covariance and cov else (),
         covariance=cov, ball_mm=None if doc.ball_mm is None else (doc.ball_mm[0], doc.ball_mm[1], doc.ball_mm[2]),
         error_motions=maps,

@@ -20,6 +20,7 @@ from pige_sym.diagnosis.diagnose import DiagnosisResult
 from pige_sym.diagnosis.joint import JointDiagnosis
 from pige_sym.files import json_ready
 from pige_sym.identification.least_squares import METHODS
+from pige_sym.identification.model_check import ModelCheck
 from pige_sym.identification.result import IdentificationResult
 from pige_sym.identification.studies import ProjectionStudy, SobolStudy
 from pige_sym.kernels import load_kernels
@@ -158,6 +159,7 @@ class MeasurementReport:
     check: CheckResult | None = None
     measured_at: str = ""
     time_source: str = ""
+    model_check: ModelCheck | None = None  # of the Gauss–Newton PIGE-only fit (pige identify's)
 
     @property
     def primary(self) -> IdentificationResult:
@@ -203,6 +205,7 @@ class MeasurementReport:
             "projection": None if self.projection is None else self.projection.to_dict(),
             "sobol": None if self.sobol is None else {**self.sobol.to_dict(), "half_ranges": self.sobol_ranges},
             "check": None if self.check is None else self.check.to_dict(),
+            "model_check": None if self.model_check is None else self.model_check.to_dict(),
             "measured_at": self.measured_at, "time_source": self.time_source,
             "figures": [str(f.path) for f in self.figures],
             "notes": self.notes,
@@ -304,6 +307,8 @@ class HistoryData:
         Consecutive runs.
     limits : dict of str to float
         Tolerance band per parameter [µm, µrad] (from ``--tolerances``, else the last run's check).
+    check : CheckResult or None
+        The last run judged against ``--tolerances`` (None without them: the verdict stored with the run).
     """
 
     machine_id: str
@@ -311,7 +316,9 @@ class HistoryData:
     runs: list[Any]
     comparisons: list[Any]
     limits: dict[str, float] = field(default_factory=dict)
+    check: CheckResult | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"machine_id": self.machine_id, "database": self.database, "runs": [r.to_dict() for r in self.runs],
-                "comparisons": [c.to_dict() for c in self.comparisons], "limits": self.limits}
+                "comparisons": [c.to_dict() for c in self.comparisons], "limits": self.limits,
+                "check": None if self.check is None else self.check.to_dict()}

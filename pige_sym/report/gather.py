@@ -42,6 +42,7 @@ from pige_sym.diagnosis.diagnose import DiagnosisResult, diagnose
 from pige_sym.diagnosis.joint import JointDiagnosis, diagnose_joint
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.identification.least_squares import METHODS, IdentificationError, identify
+from pige_sym.identification.model_check import check_model
 from pige_sym.identification.studies import projection_study, sobol_study
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.ballbar import BallbarRun
@@ -49,7 +50,7 @@ from pige_sym.measurements.measurement import Measurement
 from pige_sym.measurements.sets import read_files
 from pige_sym.nc.program_file import read_program
 from pige_sym.simulation.simulator import normalise_parameter_name
-from pige_sym.verdict.check import Tolerances, check, estimates_from_result, read_tolerances
+from pige_sym.verdict.check import Estimates, Tolerances, check, estimates_from_result, read_tolerances
 
 if TYPE_CHECKING:
     pass
@@ -370,6 +371,7 @@ def _gather_one(p: Path, label: str, m: Measurement, truth: Truth | None, opt: _
     bar.update(1)
     primary = opt.method if diag is not None or opt.method != "diagnosis" else "gauss-newton"
     rep = compensation_before_after(p, label, m, truth, results, diag, primary, bar)
+    rep.model_check = check_model(m, results["gauss-newton"])
     rep.measured_at, rep.time_source = measurement_time(p, m.metadata, None)
     if diag_error is not None:
         rep.diagnosis_error = diag_error
@@ -446,12 +448,25 @@ def gather_history(machine_id: str, db: str | None, tol: Tolerances | None) -> H
     engine = connect(db, create=False)
     runs = list_runs(engine, machine_id)
     comps = [compare_runs(a, b, from_run=a.id, to_run=b.id) for a, b in zip(runs, runs[1:], strict=False)]
+    judged = None
     if tol is not None:
         limits = tol.resolve(runs[-1].machine_code)
+        judged = check(_run_estimates(runs[-1]), tol)  # the last run against the tolerances of this report
     else:
         last = next((r.check for r in reversed(runs) if r.check), None)
         limits = {str(i["name"]): float(i["limit"]) for i in (last or {}).get("items", [])}
-    return HistoryData(machine_id, engine.url.render_as_string(hide_password=True), runs, comps, limits)
+    return HistoryData(machine_id, engine.url.render_as_string(hide_password=True), runs, comps, limits, judged)
+
+
+def _run_estimates(run: Any) -> Estimates:
+    """The stored estimate of a history run, to be judged (:func:`pige_sym.verdict.check.check`)."""
+    def number(x: float) -> float | None:
+        return float(x) if math.isfinite(float(x)) else None
+
+    values = {p: number(v) for p, v in zip(run.parameters, run.values, strict=True)}
+    std = {p: number(s) if values[p] is not None else None for p, s in zip(run.parameters, run.std, strict=True)}
+    return Estimates(run.machine_code, run.method, f"run {run.id} ({Path(run.file_name).name})", values, std,
+                     dict(run.units), [str(f.get("effect")) for f in run.effects])
 
 
 def findings_text(rep: MeasurementReport) -> str:

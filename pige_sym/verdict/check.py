@@ -311,7 +311,7 @@ class CheckResult:
                 else "simple acceptance (uncertainty not used)")
         source = f"{self.source}: " if self.source else ""
         given = self.tolerances in ("", "tolerances")  # a dict in a script: no file to name
-        limits = "the tolerances given" if given else f"tolerances {self.tolerances}"
+        limits = "limits set by the calling script (no tolerance file)" if given else f"tolerances {self.tolerances}"
         lines = [f"{source}{self.method} estimate of {self.machine}, {limits}, {rule}",
                  f"{'parameter':28s} {'value':>9s} {'std':>7s} {'limit':>8s} unit  status     why"]
         for it in self.items:
