@@ -126,6 +126,9 @@ class MeasurementReport:
         The NC program compensated with the primary estimate.
     compensated_program : Path or None
         Where :func:`write_report` wrote it (beside the figures).
+    weighing : Weighing or None
+        The values compensation enters, weighed by their uncertainty (:mod:`pige_sym.compensation.weighing`),
+        judged on the NC program's poses when one is given, else on the measured poses.
     projection : ProjectionStudy or None
     sobol : SobolStudy or None
     figures : list of ReportFigure
@@ -160,6 +163,7 @@ class MeasurementReport:
     measured_at: str = ""
     time_source: str = ""
     model_check: ModelCheck | None = None  # of the Gauss–Newton PIGE-only fit (pige identify's)
+    weighing: Any = None  # what compensation enters of the primary estimate (compensation.weighing.Weighing)
 
     @property
     def primary(self) -> IdentificationResult:

@@ -280,10 +280,31 @@ def compensation_html(rep: MeasurementReport, base: Path | None) -> str:
         parts.append(f'<p class="note"><span class="unid">Not compensated (no value): '
                      f"{esc(', '.join(rep.not_compensated))}</span> — set to 0.{esc(unknown)}</p>")
     parts.append(_compensation_table(rep))
+    parts.append(_weighing_html(rep))
     if rep.compensated_program is not None:
         parts.append(f"<p>Compensated NC program written to <code>{esc(rep.compensated_program)}</code>.</p>")
     parts.append(figs(rep, "compensation", base))
     return "\n".join(parts)
+
+
+def _weighing_html(rep: MeasurementReport) -> str:
+    """What compensation enters of the estimate, weighed by its uncertainty, and what it is predicted to leave."""
+    from pige_sym.compensation.weighing import weighing_rows
+
+    w = rep.weighing
+    if w is None:
+        return ""
+    units = {**rep.primary.units}
+    rows = weighing_rows(w, units) if w.covariance_from != "none" else []
+    said = ("Every value is entered as estimated: each lies many standard errors from 0." if not rows else
+            "Entered, weighed by its uncertainty (docs/algorithms.md, \"Corrections weighed by their uncertainty\"):")
+    items = "".join(f"<li>{esc(r)}</li>" for r in rows)
+    pred = w.predicted.get("entered")
+    none = w.predicted.get("none")
+    predicted = (f" Predicted tool-point RMS error over {esc(w.judged_on)}: {num(none.expected_um, '.2f')} µm "
+                 f"uncorrected, {num(pred.expected_um, '.2f')} µm after compensation (95 % ≤ "
+                 f"{num(pred.p95_um, '.2f')} µm), from the estimate's covariance.") if pred and none else ""
+    return f"<p>{esc(said)}{predicted}</p>" + (f"<ul>{items}</ul>" if items else "")
 
 
 def _compensation_table(rep: MeasurementReport) -> str:
