@@ -90,10 +90,11 @@ def _combination(vec: np.ndarray, motions: list[Motion]) -> str:
 
 def _remedy(axis: str, rank: int, full: int, tool_side: bool = False) -> str:
     points = "one measured point" if rank <= 3 else "two measured points" if rank < full else "the points"
-    where = ("the tool side: the stylus or ball at three positions in the spindle, two tool lengths and an offset "
-             "one" if tool_side else "the workpiece side: the sphere or ball at three positions on the table")
-    return (f"{points} per angle: measure at three points per angle, not on one line (for the axis nearest "
-            f"{where}; pige plan --map {axis})")
+    where = ("a tool-side axis: the stylus or ball at three positions in the spindle, two tool lengths and an "
+             "offset one" if tool_side else "a workpiece-side axis: the sphere or ball at three positions on the "
+             "table")
+    return (f"{points} per angle: measure at three points per angle, not on one line (for {where}; pige plan "
+            f"--map {axis})")
 
 
 def _step(grid: MapGrid) -> float:
