@@ -214,12 +214,14 @@ def _run_map(args: argparse.Namespace) -> int:
     machine time and what fewer setups leave undetermined (--out: the plan as JSON)."""
     from pige_sym.cli._maps import map_options_text
     from pige_sym.files import atomic_write_text, check_output, to_json
+    from pige_sym.planning.map_ballbar import plan_ballbar_maps
     from pige_sym.planning.map_plan import format_map_plan, plan_map_test
 
     if args.grade or args.reveal or args.ball_region:
         raise InputError("--map plans a map test: leave out --grade, --reveal and --ball-region")
     out = check_output(args.out, force=args.force, what="--out") if args.out else None
-    plan = plan_map_test(_map_request(args))
+    request = _map_request(args)
+    plan = plan_ballbar_maps(request) if request.instrument == "ballbar" else plan_map_test(request)
     result = plan.to_dict() | {"angles_deg": {a: plan.setups[0].angles_deg[:, k].tolist() for k, a in
                                               enumerate(plan.setups[0].item.rotary_axes)}
                                if plan.request.instrument != "ballbar" else None}

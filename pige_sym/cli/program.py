@@ -73,21 +73,22 @@ def _run_probe(args: argparse.Namespace) -> int:
 def _run_probe_maps(args: argparse.Namespace, kern: Any, setup: Any) -> int:
     """``--map AXES``: one probing program per setup of the map test (``pige plan --map``), each planned, read back
     and checked as a single program is; nothing is written unless every one passes."""
+    import dataclasses
+
     from pige_sym.cli._maps import map_request, numbered
-    from pige_sym.nc.probe_program import plan_probing
     from pige_sym.nc.probe_readback import verify_probe_program
     from pige_sym.nc.probe_render import heidenhain_format_file, render_probe_program
     from pige_sym.planning.map_plan import plan_map_test
 
     plan = plan_map_test(map_request(args, kern, "sphere-probe", point=setup.sphere_mm, tool=setup.tool_mm,
                                      probe=setup, noise_um=args.noise, pose_s=args.pose_time,
-                                     contact_s=args.contact_time))
+                                     contact_s=args.contact_time), fewer=False)
     outs = numbered(args.out, len(plan.setups))
     written = []
     for s, out in zip(plan.setups, outs, strict=True):
-        assert s.probe is not None
+        assert s.probe is not None and s.probe_plan is not None
         grid = f"{s.label}: maps of {args.map} every {args.map_step:g} deg"
-        probe_plan = plan_probing(s.probe, s.angles_deg, grid)
+        probe_plan = dataclasses.replace(s.probe_plan, description=grid)
         text = render_probe_program(probe_plan, args.dialect)
         check = verify_probe_program(text, args.dialect, s.probe, probe_plan.rotary_axes, path=str(out))
         path = check_output(out, force=args.force, what="--out")

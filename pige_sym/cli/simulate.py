@@ -107,9 +107,11 @@ def _program_setup(args: argparse.Namespace, text: str) -> Any:
     h = header_setup(text, args.program)
     if h.dialect != args.dialect:
         raise InputError(f"--dialect {args.dialect}: the program {args.program} is a {h.dialect} program")
-    return ProbeSetup(h.machine, h.sphere_mm, np.zeros(3), h.sphere_radius_mm, h.stylus_radius_mm,
-                      clearance_mm=args.clearance, overtravel_mm=args.overtravel, contacts=args.contacts,
-                      pivots_mm=h.pivots_mm, axis_sense=h.axis_sense, controller=h.controller)
+    single = h.tool_mm is not None  # a head is probed about one pivot (the axis lines meet)
+    return ProbeSetup(h.machine, h.sphere_mm, next(iter(h.pivots_mm.values())) if single else np.zeros(3),
+                      h.sphere_radius_mm, h.stylus_radius_mm, clearance_mm=args.clearance,
+                      overtravel_mm=args.overtravel, contacts=args.contacts, pivots_mm=None if single else h.pivots_mm,
+                      axis_sense=h.axis_sense, controller=h.controller, tool_mm=h.tool_mm)
 
 
 def _stated(setup: Any, args: argparse.Namespace, text: str) -> Any:

@@ -3,12 +3,8 @@ the machine time, and what fewer setups cannot determine.
 
 Sphere probe and R-test (:func:`plan_map_test`): the candidate setups of :mod:`~pige_sym.planning.map_setups`
 (three measured points per inner axis, not on one line) at the poses of the map grid; the plan takes the fewest
-of them, in order, whose predicted fit determines every value (``--map-setups N`` fixes the number).  Ballbar
-(:func:`plan_ballbar_maps`): one reading per pose, so a map needs many setups; candidates are the radial,
-tangential and axial setups of :func:`~pige_sym.simulation.ballbar.ballbar_setup` — the table axis swept with the
-tilt axis at 0 and at the middle of its range, the tilt axis swept to each end of its range, each with the table
-ball at ``--map-point`` and 100 mm higher — added one at a time, each time the one that determines the most values
-(then the smallest worst standard error), up to :data:`MAX_BALLBAR_SETUPS`.
+of them, in order, whose predicted fit determines every value (``--map-setups N`` fixes the number).  The ballbar
+has its own search (:mod:`~pige_sym.planning.map_ballbar`).
 
 The predictions are :func:`~pige_sym.identification.map_design.predict_maps`: the design of ``identify --map``
 on the planned files, each file's rows weighed by its instrument's noise.  With fewer setups the same per-angle
@@ -24,19 +20,14 @@ from typing import Any
 import numpy as np
 
 from pige_sym.errors import InputError
-from pige_sym.identification.map_design import MapPrediction, design_sigma, predict_maps
-from pige_sym.kernels import load_kernels
-from pige_sym.measurements.ballbar import SETUPS
+from pige_sym.identification.map_design import MapPrediction, predict_maps
 from pige_sym.planning.map_setups import (
     MapSetup,
     MapTestRequest,
-    axis_nodes,
     map_poses,
     propose_points,
     setup_file,
 )
-
-MAX_BALLBAR_SETUPS = 12
 
 
 @dataclass
@@ -91,8 +82,7 @@ class MapPlan:
             "setups": [_setup_dict(s) for s in self.setups], "seconds": self.seconds,
             "complete": self.prediction.complete, "prediction": self.prediction.to_dict(),
             "fewer_setups": [{"setups": k, "determined": p.counts()[0], "values": p.counts()[1],
-                              "summary": self.summary(p), "undetermined": [u.to_dict() for u in p.undetermined]}
-                             for k, p in self.fewer],
+                              "summary": self.summary(p)} for k, p in self.fewer],
             "planning_s": self.planning_s,
         }
 
@@ -111,15 +101,17 @@ def _setup_dict(s: MapSetup) -> dict[str, Any]:
     return out
 
 
-def _predict(setups: list[MapSetup], request: MapTestRequest) -> MapPrediction:
+def predict_setups(setups: list[MapSetup], request: MapTestRequest) -> MapPrediction:
+    """The prediction of ``identify --map`` on the setups' planned files."""
     return predict_maps([(s.label, s.item) for s in setups], [s.sigma_um for s in setups], request.spec)
 
 
-def plan_map_test(request: MapTestRequest) -> MapPlan:
-    """The setups, their poses and predictions (module docstring)."""
+def plan_map_test(request: MapTestRequest, *, fewer: bool = True) -> MapPlan:
+    """The setups, their poses and predictions (module docstring).  With ``request.setups`` given and ``fewer``
+    False, only the chosen set is predicted (what ``pige program --map`` needs)."""
     start = time.perf_counter()
     if request.instrument == "ballbar":
-        return plan_ballbar_maps(request)
+        raise InputError("ballbar map tests are planned by pige_sym.planning.map_ballbar.plan_ballbar_maps")
     angles = map_poses(request.machine, request.spec, request.ranges)
     pairs = propose_points(request)
     if request.setups is not None and not 1 <= request.setups <= len(pairs):
@@ -128,79 +120,13 @@ def plan_map_test(request: MapTestRequest) -> MapPlan:
     preds: list[MapPrediction] = []
     for i, (point, tool) in enumerate(pairs):
         setups.append(setup_file(request, f"map setup {i + 1}", point, tool, angles))
-        preds.append(_predict(setups, request))
+        if fewer or request.setups is None or len(setups) == request.setups:
+            preds.append(predict_setups(setups, request))
         if len(setups) == request.setups or (request.setups is None and preds[-1].complete):
             break
-    k = len(setups)
     for s in setups:
-        s.label = f"map setup {setups.index(s) + 1} of {k}"
+        s.label = f"map setup {setups.index(s) + 1} of {len(setups)}"
     return MapPlan(request, setups, preds[-1], list(enumerate(preds[:-1], start=1)), time.perf_counter() - start)
-
-
-def ballbar_candidates(request: MapTestRequest) -> list[MapSetup]:
-    """The candidate ballbar setups of a map test (module docstring), each with its planned file."""
-    from pige_sym.planning.ballbar import setup_label
-    from pige_sym.simulation.ballbar import ballbar_setup, simulate_ballbar
-
-    kern = load_kernels(request.machine)
-    table = next((a for a in kern.ROTARY_AXES if a[0] == "C"), None)
-    tilt = next((a for a in kern.ROTARY_AXES if a != table), None)
-    if table is None or tilt is None or kern.TOOL_ROTARY:
-        raise InputError(f"{kern.MACHINE_CODE}: ballbar setups are planned for a C table on a tilt axis")
-    lo, hi = request.ranges[tilt]
-    nodes = axis_nodes(tilt, request.spec.step_deg, request.ranges)
-    middle = float(nodes[np.argmin(np.abs(nodes - (lo + hi) / 2))]) or float(nodes[-1])
-    balls = [np.asarray(request.point_mm, dtype=float), np.asarray(request.point_mm, dtype=float) + [0.0, 0.0, 100.0]]
-    candidates = []
-    for ball in balls:
-        b = (float(ball[0]), float(ball[1]), float(ball[2]))
-        for kind in SETUPS:
-            candidates += [ballbar_setup(kern.MACHINE_CODE, kind, table, table_ball_mm=b, tilt_deg=t) for t in
-                           (0.0, middle)]
-            candidates += [ballbar_setup(kern.MACHINE_CODE, kind, tilt, table_ball_mm=b, tilt_range_deg=end)
-                           for end in (lo, hi) if end != 0.0]
-    out = []
-    for s in candidates:
-        run = simulate_ballbar(kern.MACHINE_CODE, s, pige={}, noise_um=0.0)
-        n = run.n_rows
-        out.append(MapSetup(f"{setup_label(s)}, table ball {', '.join(f'{x:g}' for x in s.table_ball_mm)}",
-                            s.table_ball_mm, None, s.angles_deg, n * request.pose_s, run,
-                            design_sigma(run, request.noise_um), ballbar=s))
-    return out
-
-
-def plan_ballbar_maps(request: MapTestRequest) -> MapPlan:
-    """Ballbar setups added one at a time (module docstring)."""
-    start = time.perf_counter()
-    candidates = ballbar_candidates(request)
-    limit = request.setups or MAX_BALLBAR_SETUPS
-    chosen: list[MapSetup] = []
-    preds: list[MapPrediction] = []
-    while len(chosen) < min(limit, len(candidates)):
-        best: tuple[Any, ...] | None = None
-        for c in candidates:
-            if c in chosen:
-                continue
-            pred = _predict(chosen + [c], request)
-            done, _ = pred.counts()
-            worst = max((v for v in (np.nanmax(m.std[mo.name]) if np.isfinite(m.std[mo.name]).any() else np.nan
-                                     for m in pred.maps.values() for mo in m.motions) if np.isfinite(v)),
-                        default=np.inf)
-            key = (-done, worst)
-            if best is None or key < best[0]:
-                best = (key, c, pred)
-        assert best is not None
-        chosen.append(best[1])
-        preds.append(best[2])
-        if request.setups is None and best[2].complete and _covers(best[2], request):
-            break
-    return MapPlan(request, chosen, preds[-1], list(enumerate(preds[:-1], start=1)), time.perf_counter() - start)
-
-
-def _covers(pred: MapPrediction, request: MapTestRequest) -> bool:
-    """Whether every grid of the prediction spans the planned range of its axis."""
-    return all(m.grid.full_turn or m.grid.n >= axis_nodes(ax, request.spec.step_deg, request.ranges).size
-               for ax, m in pred.maps.items())
 
 
 def format_map_plan(plan: MapPlan) -> str:

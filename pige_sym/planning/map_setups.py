@@ -46,7 +46,7 @@ from pige_sym.measurements.ballbar import BallbarRun
 from pige_sym.measurements.measurement import Measurement, missing_tool
 from pige_sym.measurements.probe_import import INSTRUMENT, covariance_columns
 from pige_sym.model.error_motions import axis_direction, is_full_turn
-from pige_sym.nc.probe_program import ProbeSetup, plan_probing
+from pige_sym.nc.probe_program import ProbePlan, ProbeSetup, plan_probing
 from pige_sym.planning.families import parse_range
 from pige_sym.planning.probe import centre_covariances
 
@@ -135,6 +135,8 @@ class MapSetup:
         Probe: contacts in all.
     probe : ProbeSetup or None
         Probe: the set-up its program is written for.
+    probe_plan : ProbePlan or None
+        Probe: its poses' contacts (:func:`~pige_sym.nc.probe_program.plan_probing`).
     ballbar : Any
         Ballbar: its :class:`~pige_sym.simulation.ballbar.BallbarSetup`.
     """
@@ -148,6 +150,7 @@ class MapSetup:
     sigma_um: float
     contacts: int = 0
     probe: ProbeSetup | None = None
+    probe_plan: ProbePlan | None = None
     ballbar: Any = None
 
 
@@ -297,4 +300,4 @@ def setup_file(request: MapTestRequest, label: str, point: np.ndarray, tool: np.
                     metadata={"instrument": INSTRUMENT})
     contacts = sum(len(c) for c in plan.contacts)
     return MapSetup(label, point, tool, angles, n * request.pose_s + contacts * request.contact_s, m,
-                    design_sigma(m, request.noise_um), contacts, setup)
+                    design_sigma(m, request.noise_um), contacts, setup, plan)
