@@ -69,13 +69,17 @@ def local_check(blocks: list[Any], sigmas: list[float], p: int,
             motions = [layout.columns[j][0] for j in idx]
             unseen = np.abs(sol.null_vectors).max(axis=1) > 1e-3
             said = "; ".join(_combination(sol.null_vectors[:, c], motions) for c in range(sol.null_vectors.shape[1]))
+            directions = all(m.kind in ("positioning", "reversal") for m, off in zip(motions, unseen, strict=True)
+                             if off)
+            remedy = (f"approach {ax} {grid.angles_deg[g]:g}° from both sides, with the angle increasing and "
+                      "decreasing (at an end of the travel that means going beyond it)" if directions else
+                      _remedy(ax, sol.rank, len(idx), ax in layout.tool_side))
             for j, m, off in zip(idx, motions, unseen, strict=True):
                 if off:
                     kept[j] = False
                     out.append(Undetermined(m.name, float(grid.angles_deg[g]), f"the poses near {ax} "
                                             f"{grid.angles_deg[g]:g}° see {sol.rank} of its {len(idx)} motions; "
-                                            f"not seen: {said}",
-                                            _remedy(ax, sol.rank, len(idx), ax in layout.tool_side)))
+                                            f"not seen: {said}", remedy))
     return out, kept
 
 

@@ -376,6 +376,8 @@ def map_values(values: np.ndarray, covariance: np.ndarray, layout: MapLayout,
             elif gr["nodes"]:
                 more.append(Undetermined(m.name, None, f"only {len(gr['nodes'])} grid angle(s) have a value: after "
                                          f"leaving out the {m.left_out} functions of §10 nothing is left",
+                                         "determine its other angles first (their reasons are given)"
+                                         if len(gr["nodes"]) < grid.n else
                                          f"measure more angles of {ax} (pige plan --map {ax})"))
             value[m.name], std[m.name], cov[m.name] = v, s, c
         for m in layout.motions[ax]:
