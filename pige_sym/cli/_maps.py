@@ -72,7 +72,8 @@ def map_request(args: argparse.Namespace, kern: Any, instrument: str, *, point: 
         None if tool is None else np.asarray(tool, dtype=float), noise_um, points, tools,
         finite_option(args.map_extension, "--map-extension", positive=True),
         finite_option(args.map_offset, "--map-offset", positive=True), probe,
-        {a: np.asarray(v, dtype=float) for a, v in (pivots or {}).items()}, pose_s, contact_s, args.map_setups)
+        {a: np.asarray(v, dtype=float) for a, v in (pivots or {}).items()}, pose_s, contact_s, args.map_setups,
+        getattr(args, "target", None))
 
 
 def numbered(out: str, count: int) -> list[Path]:

@@ -313,7 +313,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--budget", type=float, default=1800.0, help="sphere-probe: probing time budget [s]")
     p.add_argument("--pose-time", type=float, default=20.0, help="sphere-probe: time per pose (retract, rotate) [s]")
     p.add_argument("--contact-time", type=float, default=8.0, help="sphere-probe: time per contact [s]")
-    p.add_argument("--target", type=float, help="ballbar: largest acceptable predicted std [um or urad] (default 2)")
+    p.add_argument("--target", type=float,
+                   help="ballbar: largest acceptable predicted std [um or urad] (default 2; with --map: none, the "
+                   "fewest setups that determine every value)")
     p.add_argument("--force", action="store_true", help="replace an existing --out file")
     p.add_argument("--json", action="store_true", help="print the figures as one JSON object")
     p.set_defaults(handler=_run)

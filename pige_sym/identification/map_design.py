@@ -73,6 +73,11 @@ class MapPrediction:
         s = self.maps[axis].std[motion]
         return float(np.nanmax(s)) if np.isfinite(s).any() else math.nan
 
+    def worst_std(self) -> float:
+        """The largest predicted standard error of a determined value [µm or µrad] (inf when none is)."""
+        stds = np.concatenate([m.std[mo.name] for m in self.maps.values() for mo in m.motions])
+        return float(np.nanmax(stds)) if np.isfinite(stds).any() else math.inf
+
     def to_dict(self) -> dict[str, Any]:
         """``{"error_motions": {axis: {"angle_deg", motion: {"std": [...]}}}, "undetermined", "pige_std"}``."""
         motions = {ax: {"angle_deg": [float(a) for a in m.grid.angles_deg], "full_turn": m.grid.full_turn,
@@ -80,6 +85,7 @@ class MapPrediction:
                                      "kind": mo.kind} for mo in m.motions}} for ax, m in self.maps.items()}
         done, total = self.counts()
         return {"machine": self.machine, "map_step_deg": self.spec.step_deg, "error_motions": motions,
+                "worst_std": json_float(self.worst_std()),
                 "determined": done, "values": total, "undetermined": [u.to_dict() for u in self.undetermined],
                 "pige_std": self.pige_std}
 

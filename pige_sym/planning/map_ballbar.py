@@ -12,7 +12,8 @@ The search (:func:`plan_ballbar_maps`) adds one candidate at a time: the one aft
 broken by the largest sum over the grid angles of the smallest scaled singular value of their columns (the
 combination seen worst).  Once every column is seen, the full prediction
 (:func:`~pige_sym.identification.map_design.predict_maps`) decides; the search stops when it determines every
-value on the whole planned grid, or after :data:`MAX_BALLBAR_SETUPS` setups — then the plan says what is left.
+value on the whole planned grid (and, with ``--target``, the worst predicted standard error is within it), or
+after :data:`MAX_BALLBAR_SETUPS` setups — then the plan says what is left.
 The per-angle scores use the blocks of ``identify --map`` built once for every candidate on the common grid.
 """
 
@@ -97,7 +98,8 @@ def plan_ballbar_maps(request: MapTestRequest) -> MapPlan:
         chosen.append(max(scored, key=lambda t: t[0])[1])
         if request.setups is None and max(scored)[0][0] == len(layout.columns):
             pred = predict_setups([candidates[i] for i in chosen], request)
-            if pred.complete and _covers(pred, request):
+            within = request.target is None or pred.worst_std() <= request.target
+            if pred.complete and _covers(pred, request) and within:
                 break
     setups = [candidates[i] for i in chosen]
     preds = [predict_setups(setups[:k], request) for k in range(1, len(setups) + 1)]

@@ -155,6 +155,9 @@ def format_map_plan(plan: MapPlan) -> str:
             med = f"{np.median(ok):.3g}" if ok.size else "-"
             worst = f"{ok.max():.3g}" if ok.size else "-"
             lines.append(f"{ax:<6}{mo.name:<16}{mo.unit:<6}{med:>9}{worst:>9}   {std.size - ok.size} of {std.size}")
+    if r.target is not None:
+        met = "within" if pred.worst_std() <= r.target else f"NOT within (best found with {len(plan.setups)} setups)"
+        lines += ["", f"worst predicted std {pred.worst_std():.3g}: {met} --target {r.target:g}"]
     pige = ", ".join(f"{n} {'undetermined' if v is None else f'{v:.3g}'}" for n, v in pred.pige_std.items())
     lines += ["", f"PIGEs and zero-position errors: {pige}"]
     if not pred.complete:

@@ -87,6 +87,8 @@ class MapTestRequest:
         Machine time per pose (probe: retract and turn; R-test and ballbar: move and dwell) and per contact.
     setups : int or None
         Exactly this many setups (default: the fewest that determine every value).
+    target : float or None
+        Ballbar: also keep adding setups until the worst predicted standard error is within it [µm or µrad].
     """
 
     machine: str
@@ -105,6 +107,7 @@ class MapTestRequest:
     pose_s: float = 20.0
     contact_s: float = 8.0
     setups: int | None = None
+    target: float | None = None
 
     def __post_init__(self) -> None:
         if self.instrument not in INSTRUMENTS:
