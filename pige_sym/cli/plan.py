@@ -211,35 +211,71 @@ def _map_request(args: argparse.Namespace) -> Any:
 
 def _run_map(args: argparse.Namespace) -> int:
     """``--map AXES``: the setups and poses that determine every map value, their predicted standard errors, the
-    machine time and what fewer setups leave undetermined (--out: the plan as JSON)."""
-    from pige_sym.cli._maps import map_options_text
+    machine time and what fewer setups leave undetermined (--out: the plan as JSON and, but for the ballbar, the
+    poses as an angle file beside it)."""
     from pige_sym.files import atomic_write_text, check_output, to_json
     from pige_sym.planning.map_ballbar import plan_ballbar_maps
     from pige_sym.planning.map_plan import format_map_plan, plan_map_test
 
     if args.grade or args.reveal or args.ball_region:
         raise InputError("--map plans a map test: leave out --grade, --reveal and --ball-region")
-    out = check_output(args.out, force=args.force, what="--out") if args.out else None
     request = _map_request(args)
+    out = check_output(args.out, force=args.force, what="--out") if args.out else None
+    poses = None if out is None or request.instrument == "ballbar" else check_output(
+        out.with_name(out.stem + "_poses.csv"), force=args.force, what="poses file")
     plan = plan_ballbar_maps(request) if request.instrument == "ballbar" else plan_map_test(request)
-    result = plan.to_dict() | {"angles_deg": {a: plan.setups[0].angles_deg[:, k].tolist() for k, a in
-                                              enumerate(plan.setups[0].item.rotary_axes)}
-                               if plan.request.instrument != "ballbar" else None}
+    result = plan.to_dict() | {"poses_file": None if poses is None else str(poses)}
     if out is not None:
         atomic_write_text(out, to_json(result) + "\n")
+    if poses is not None:
+        _write_poses(poses, plan)
     if args.json:
         print(to_json(result | {"out": None if out is None else str(out)}))
         return 0 if plan.prediction.complete else 1
     print(format_map_plan(plan))
-    if args.instrument == "sphere-probe":
-        print(f"\nnext, one program per setup (map_1.ngc … map_{len(plan.setups)}.ngc): pige program --instrument "
-              f"sphere-probe --machine \"{plan.request.machine}\" {map_options_text(args, len(plan.setups))} "
-              f"--sphere {args.sphere} --sphere-radius {args.sphere_radius:g} --stylus-radius {args.stylus_radius:g}"
-              + (f" --tool {args.tool}" if args.tool else "") + " --dialect linuxcnc --stylus-tool N "
-              "--stylus-length L --out map.ngc")
+    print(_next_commands(args, plan, poses))
     if out is not None:
-        print(f"\nwrote {out} (the plan as JSON)")
+        print(f"\nwrote {out} (the plan as JSON)" + (f" and {poses} (its poses)" if poses is not None else ""))
     return 0 if plan.prediction.complete else 1
+
+
+def _write_poses(path: Any, plan: Any) -> None:
+    """The poses every setup visits as an angle file (``t_s,<axis>_deg``), read back."""
+    from pige_sym.files import atomic_write_text
+    from pige_sym.measurements.rtest import read_angle_file
+
+    setup = plan.setups[0]
+    axes = tuple(setup.item.rotary_axes)
+    lines = [f"# pige plan --map: the poses of every setup of the map test of {plan.request.machine}",
+             ",".join(["t_s", *(f"{a}_deg" for a in axes)])]
+    per = setup.seconds / setup.angles_deg.shape[0]
+    lines += [",".join([f"{i * per:.10g}", *(f"{v:.10g}" for v in row)]) for i, row in enumerate(setup.angles_deg)]
+    atomic_write_text(path, "\n".join(lines) + "\n")
+    read_axes, angles, _ = read_angle_file(path)
+    if read_axes != axes or angles.shape != setup.angles_deg.shape or abs(angles - setup.angles_deg).max() > 0:
+        raise InputError(f"{path}: the file read back differs from the plan (please report this)")
+
+
+def _next_commands(args: argparse.Namespace, plan: Any, poses: Any) -> str:
+    """What to run next: one program per setup (sphere probe), or each setup's R-test program."""
+    from pige_sym.cli._maps import map_options_text
+
+    r = plan.request
+    if r.instrument == "sphere-probe":
+        return (f"\nnext, one program per setup (map_1.ngc … map_{len(plan.setups)}.ngc): pige program --instrument "
+                f"sphere-probe --machine \"{r.machine}\" {map_options_text(args, len(plan.setups))} "
+                f"--sphere {args.sphere} --sphere-radius {args.sphere_radius:g} --stylus-radius "
+                f"{args.stylus_radius:g}" + (f" --tool {args.tool}" if args.tool else "")
+                + " --dialect linuxcnc --stylus-tool N --stylus-length L --out map.ngc")
+    if r.instrument == "rtest":
+        traj = poses if poses is not None else "POSES.csv (give --out plan.json: it writes plan_poses.csv)"
+        lines = [f"  pige program --machine \"{r.machine}\" --trajectory {traj} --ball "
+                 f"{','.join(f'{x:.10g}' for x in s.point_mm)}"
+                 + ("" if s.tool_mm is None else f" --tool {','.join(f'{x:.10g}' for x in s.tool_mm)}")
+                 + f" --out map_{i}.mpf" for i, s in enumerate(plan.setups, start=1)]
+        return "\nnext, each setup's R-test program:\n" + "\n".join(lines)
+    return "\nnext, each setup: pige program --instrument ballbar --setup KIND --axis AXIS [--tilt DEG] " \
+        "--table-ball x,y,z (the setups above)"
 
 
 def _run(args: argparse.Namespace) -> int:
