@@ -365,3 +365,37 @@ def test_a_ballbar_plan_names_its_setups_and_predicts_identifys_standard_errors(
     assert plan.prediction.worst_std() > 20
     sharp = plan_ballbar_maps(dataclasses.replace(plan.request, target=2.0))
     assert sharp.prediction.worst_std() <= 2.0 and len(sharp.setups) > len(plan.setups)
+
+
+def test_an_rtest_map_plan_writes_its_poses_for_each_setups_program(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "plan.json"
+    assert main(["plan", "--machine", FORK, "--tool", "0,0,-160", "--map", "C,A", "--map-step", "30", "--map-range",
+                 "A=-60:60", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    poses = tmp_path / "plan_poses.csv"
+    assert poses.is_file() and json.loads(out.read_text())["poses_file"] == str(poses)
+    commands = [ln.strip() for ln in text.splitlines() if ln.strip().startswith("pige program")]
+    assert len(commands) == 3 and "--tool 50,0,-160" in commands[2]
+    assert main(["program", "--machine", FORK, "--trajectory", str(poses), "--ball", "120,0,80", "--tool",
+                 "50,0,-160", "--out", str(tmp_path / "map_3.mpf")]) == 0
+    assert "61 poses" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--map", "C,X"], "give rotary axes"),
+    (["--map", "C", "--map-range", "C=0:90"], "turns fully"),
+    (["--map", "C,A", "--map-range", "A=10:90"], "excludes 0"),
+    (["--map", "C", "--map-per-direction", "A"], "map the axis too"),
+    (["--map", "C,A", "--map-step", "7"], "must divide 360"),
+    (["--map", "C,A", "--map-setups", "4"], "give 1 to 3"),
+])
+def test_map_options_are_refused_in_one_line(args: list[str], said: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["plan", "--machine", AC, *args]) == 2
+    err = capsys.readouterr().err
+    assert said in err and err.count("\n") == 1, err
+
+
+def test_program_map_is_for_the_sphere_probe(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["program", "--machine", AC, "--map", "C,A", "--out", str(tmp_path / "x.mpf")]) == 2
+    assert "--instrument sphere-probe" in capsys.readouterr().err and not (tmp_path / "x.mpf").exists()
