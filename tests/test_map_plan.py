@@ -399,3 +399,10 @@ def test_map_options_are_refused_in_one_line(args: list[str], said: str, capsys:
 def test_program_map_is_for_the_sphere_probe(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["program", "--machine", AC, "--map", "C,A", "--out", str(tmp_path / "x.mpf")]) == 2
     assert "--instrument sphere-probe" in capsys.readouterr().err and not (tmp_path / "x.mpf").exists()
+
+
+def test_a_pose_the_stylus_cannot_reach_is_refused_with_its_setup(capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["plan", "--instrument", "sphere-probe", "--machine", FORK, *SPHERE, "--tool", "0,0,-160", "--map",
+                 "C,A", "--map-range", "A=-120:120", "--map-step", "30"])
+    err = capsys.readouterr().err
+    assert code == 2 and "map setup 1 (point 100, 20, 60 mm, tool 0, 0, -160 mm): pose 1 (A=-120" in err

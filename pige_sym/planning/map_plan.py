@@ -119,7 +119,13 @@ def plan_map_test(request: MapTestRequest, *, fewer: bool = True) -> MapPlan:
     setups: list[MapSetup] = []
     preds: list[MapPrediction] = []
     for i, (point, tool) in enumerate(pairs):
-        setups.append(setup_file(request, f"map setup {i + 1}", point, tool, angles))
+        try:
+            setups.append(setup_file(request, f"map setup {i + 1}", point, tool, angles))
+        except InputError as exc:
+            where = f"point {', '.join(f'{x:.6g}' for x in point)} mm" + (
+                "" if tool is None else f", tool {', '.join(f'{x:.6g}' for x in tool)} mm")
+            raise InputError(f"map setup {i + 1} ({where}): {exc} (give --map-point / --map-tool, --map-range or "
+                             "--map-step)") from None
         if fewer or request.setups is None or len(setups) == request.setups:
             preds.append(predict_setups(setups, request))
         if len(setups) == request.setups or (request.setups is None and preds[-1].complete):
