@@ -24,7 +24,8 @@ import time
 import numpy as np
 
 from pige_sym.errors import InputError
-from pige_sym.identification.map_check import local_check
+from pige_sym.identification.joint import Block
+from pige_sym.identification.map_check import MapLayout, local_check
 from pige_sym.identification.map_design import MapPrediction, design_sigma
 from pige_sym.identification.maps import map_blocks
 from pige_sym.kernels import load_kernels
@@ -67,14 +68,14 @@ def ballbar_candidates(request: MapTestRequest) -> list[MapSetup]:
     return out
 
 
-def _scores(blocks: list, sigmas: list[float], p: int, layout: object) -> tuple[int, float]:
+def _scores(blocks: list[Block], sigmas: list[float], p: int, layout: MapLayout) -> tuple[int, float]:
     """(columns the per-angle test sees, sum over the grid angles of the smallest scaled singular value)."""
-    _, kept = local_check(blocks, sigmas, p, layout)  # type: ignore[arg-type]
+    _, kept = local_check(blocks, sigmas, p, layout)
     a = np.vstack([b.design[:, p:] / s for b, s in zip(blocks, sigmas, strict=True)])
     total = 0.0
-    for ax, grid in layout.grids.items():  # type: ignore[attr-defined]
+    for ax, grid in layout.grids.items():
         for g in range(grid.n):
-            idx = [j for j, (m, gg) in enumerate(layout.columns) if m.axis == ax and gg == g]  # type: ignore[attr-defined]
+            idx = [j for j, (m, gg) in enumerate(layout.columns) if m.axis == ax and gg == g]
             cols = a[:, idx]
             norms = np.linalg.norm(cols, axis=0)
             if np.all(norms > 0):

@@ -9,7 +9,7 @@ Poses (:func:`map_poses`)
     −45 to 45° for a head's), which must contain 0.  Per direction (``--map-per-direction``) the swept axis goes
     up through its grid and back down — a full-turn axis on to 360° and back, so every angle is met from both
     sides — and an outer axis is visited out and back, with the sweep at each visit.  An end of a limited range
-    is met from inside only, so its reversal stays undetermined; the plan says so.
+    is met from inside only, so φ⁺ and φ⁻ cannot be told apart there; the plan says so.
 
 Measured points (:func:`propose_points`)
     CONVENTIONS §10: one measured point per angle gives three numbers, the motions have six; an axis needs three
