@@ -26,6 +26,23 @@ from pige_sym.files import atomic_write_text, check_output, to_json
 from pige_sym.nc.probe_program import PROBE_DIALECTS
 
 
+def _error_maps(args: argparse.Namespace, kern: Any) -> Any:
+    """``--error-maps FILE``: the ``error_motions`` of a JSON file (``pige identify --map --json`` writes them;
+    validated by :func:`~pige_sym.measurements.error_motions_file.read_error_motions`), or None."""
+    from pige_sym.errors import FileFormatError
+    from pige_sym.measurements.error_motions_file import read_error_motions
+    from pige_sym.measurements.schema import load_json
+    from pige_sym.model.error_motions import error_maps_from
+
+    if not args.error_maps:
+        return None
+    data = load_json(args.error_maps, "--error-maps file")
+    if not isinstance(data, dict) or not isinstance(data.get("error_motions"), dict) or not data["error_motions"]:
+        raise FileFormatError(args.error_maps, None, 'expected a JSON object with an "error_motions" object (axis: '
+                              '{"angle_deg": [...], "EXC": {"value": [...]}, ...}), as identify --map --json writes')
+    return error_maps_from(read_error_motions(data["error_motions"], args.error_maps, kern))
+
+
 def _run_probe(args: argparse.Namespace) -> int:
     from pige_sym.cli._probe import probe_setup
     from pige_sym.cli._setup import parse_vec3
@@ -57,8 +74,8 @@ def _run_probe(args: argparse.Namespace) -> int:
     machine = ProbeMachine(setup, pige_values(args.pige, kern.MACHINE_CODE, args.seed),
                            [parse_effect(e, tuple(kern.ROTARY_AXES)) for e in args.effect or []],
                            (offset[0], offset[1], offset[2]), args.noise, args.pretravel, args.lobing,
-                           args.vertical_pretravel, args.seed, (bent[0], bent[1], bent[2]))
-    inputs = [x for x in (args.trajectory, args.pige, args.program) if x and os.path.isfile(x)]
+                           args.vertical_pretravel, args.seed, (bent[0], bent[1], bent[2]), _error_maps(args, kern))
+    inputs = [x for x in (args.trajectory, args.pige, args.program, args.error_maps) if x and os.path.isfile(x)]
     out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
     truth_path = check_output(out.with_name(out.stem + ".truth.json"), force=args.force, inputs=inputs,
                               what="truth sidecar")
@@ -70,7 +87,8 @@ def _run_probe(args: argparse.Namespace) -> int:
              "contact_noise_um": args.noise, "pretravel_um": args.pretravel, "lobing_um": args.lobing,
              "vertical_pretravel_um": args.vertical_pretravel, "seed": args.seed,
              **({} if setup.tool_mm is None else {"tool_mm": [float(v) for v in setup.tool_mm],
-                                                  "stylus_error_um": list(machine.tool_error_um)})}
+                                                  "stylus_error_um": list(machine.tool_error_um)}),
+             **({} if machine.error_maps is None else {"error_motions": machine.error_maps.to_dict()})}
     atomic_write_text(truth_path, to_json(truth) + "\n")
     print(f"wrote {out} ({log.count(chr(10))} contacts, {args.dialect} log) and {truth_path}")
     return 0
@@ -89,9 +107,11 @@ def _program_setup(args: argparse.Namespace, text: str) -> Any:
     h = header_setup(text, args.program)
     if h.dialect != args.dialect:
         raise InputError(f"--dialect {args.dialect}: the program {args.program} is a {h.dialect} program")
-    return ProbeSetup(h.machine, h.sphere_mm, np.zeros(3), h.sphere_radius_mm, h.stylus_radius_mm,
-                      clearance_mm=args.clearance, overtravel_mm=args.overtravel, contacts=args.contacts,
-                      pivots_mm=h.pivots_mm, axis_sense=h.axis_sense, controller=h.controller)
+    single = h.tool_mm is not None  # a head is probed about one pivot (the axis lines meet)
+    return ProbeSetup(h.machine, h.sphere_mm, next(iter(h.pivots_mm.values())) if single else np.zeros(3),
+                      h.sphere_radius_mm, h.stylus_radius_mm, clearance_mm=args.clearance,
+                      overtravel_mm=args.overtravel, contacts=args.contacts, pivots_mm=None if single else h.pivots_mm,
+                      axis_sense=h.axis_sense, controller=h.controller, tool_mm=h.tool_mm)
 
 
 def _stated(setup: Any, args: argparse.Namespace, text: str) -> Any:
@@ -137,8 +157,10 @@ def _run_ballbar(args: argparse.Namespace) -> int:
     out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
     truth_path = check_output(out.with_name(out.stem + ".truth.json"), force=args.force, inputs=inputs,
                               what="truth sidecar")
+    maps = _error_maps(args, kern)
     run, outlier_rows = simulate_ballbar_with_outliers(kern.MACHINE_CODE, setup, pige=pige, noise_um=args.noise,
-                                                       seed=args.seed, zero=args.zero, effects=effects)
+                                                       seed=args.seed, zero=args.zero, effects=effects,
+                                                       error_maps=maps)
     run.axis_sense = axis_sense_option(args, tuple(kern.ROTARY_AXES)) or {}
     # a ballbar reads to 0.1 um at best: written to 0.1 nm, the file shows no 17-digit noise of the simulation
     run = replace(run, dl_um=np.round(run.dl_um, BALLBAR_DECIMALS) + 0.0)
@@ -147,7 +169,8 @@ def _run_ballbar(args: argparse.Namespace) -> int:
              "effects": [e.to_dict() for e in effects], "outlier_rows": outlier_rows,
              "noise_um": args.noise, "seed": args.seed, "zero": args.zero,
              "written_resolution_um": 10.0**-BALLBAR_DECIMALS,
-             "model": "exact |T - P| - L0; effects first order at the tool ball, projected on the bar",
+             "model": "exact |T - P| - L0; effects and error maps first order at the tool ball, projected on the bar",
+             **({} if maps is None else {"error_motions": maps.to_dict()}),
              **({"axis_sense": run.axis_sense} if run.axis_sense else {})}
     atomic_write_text(truth_path, to_json(truth) + "\n")
     print(f"wrote {out} ({run.n_rows} rows, {setup.label} setup, bar {run.length_mm:g} mm, zero {args.zero}) "
@@ -177,14 +200,15 @@ def _run(args: argparse.Namespace) -> int:
             raise InputError(f"--pivot {axis}: not a rotary axis of {kern.MACHINE_CODE} ({axes})")
     pige = pige_values(args.pige, kern.MACHINE_CODE, args.seed)
     effects = [parse_effect(e, tuple(kern.ROTARY_AXES)) for e in args.effect or []]
-    inputs = [x for x in (args.trajectory, args.pige) if os.path.isfile(x)]
+    maps = _error_maps(args, kern)
+    inputs = [x for x in (args.trajectory, args.pige, args.error_maps) if x and os.path.isfile(x)]
     out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
     truth_path = check_output(out.with_name(out.stem + ".truth.json"), force=args.force, inputs=inputs,
                               what="truth sidecar")
     result = simulate(
         kern.MACHINE_CODE, traj, pige=pige, ball_mm=ball, pivots_mm=pivots, tool_mm=tool, effects=effects,
         noise_um=args.noise, seed=args.seed, frame=args.frame,
-        axis_sense=axis_sense_option(args, tuple(kern.ROTARY_AXES)),
+        axis_sense=axis_sense_option(args, tuple(kern.ROTARY_AXES)), error_maps=maps,
     )
     csv = write_measurement(result.measurement, out)
     truth = atomic_write_text(truth_path, to_json(result.truth) + "\n")
@@ -221,6 +245,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--effect", action="append", metavar="NAME[:k=v,...]",
                    help="add an unmodelled effect (ballbar: first order at the tool ball, projected on the bar)")
     p.add_argument("--noise", type=float, default=0.25, help="sensor noise sigma [um] (default %(default)s)")
+    p.add_argument("--error-maps", metavar="FILE", help="error maps of the rotary axes (CONVENTIONS §10): a JSON file "
+                   "with an \"error_motions\" object, as pige identify --map --json writes it (every instrument)")
     p.add_argument("--seed", type=int, default=None, help="random seed")
     p.add_argument("--frame", choices=["machine", "table"], default="machine", help="frame of the deviations")
     p.add_argument("--out", required=True, help="output CSV (a .truth.json sidecar is written beside it)")

@@ -270,7 +270,7 @@ def _measurement(kern: Any, log: ProbeLog, spec: ProbeImport, starts: np.ndarray
     n = len(starts) - 1
     cov = fit.covariance_um2
     numbers = {c: np.array(fit.centres_mm[:, k]) for k, c in enumerate(CENTRE_COLUMNS)}
-    numbers |= {c: np.array(cov[:, i, j]) for c, (i, j) in zip(COV_COLUMNS, _UPPER, strict=True)}
+    numbers |= covariance_columns(cov)
     extra = {"log_line": list(map(str, log.lines[starts[:-1]].tolist()))}
     meta = {
         "instrument": INSTRUMENT,
@@ -303,6 +303,11 @@ def import_probe_log(path: str | os.PathLike[str], fmt: str, spec: ProbeImport) 
     """Read a probe log and return its measurement (:func:`probe_measurement`)."""
     kern = load_kernels(spec.machine)
     return probe_measurement(read_probe_log(path, fmt, tuple(kern.ROTARY_AXES), units=spec.units), spec)
+
+
+def covariance_columns(cov: np.ndarray) -> dict[str, np.ndarray]:
+    """The per-row centre covariances (n, 3, 3) [µm²] as the file's columns ``cov_xx_um2 … cov_zz_um2``."""
+    return {c: np.array(cov[:, i, j]) for c, (i, j) in zip(COV_COLUMNS, _UPPER, strict=True)}
 
 
 def row_covariances(m: Measurement) -> np.ndarray:
