@@ -378,3 +378,16 @@ def test_an_angle_reached_from_one_side_only_has_no_reversal_value() -> None:
     assert {u.motion for u in top} == {"ECC", "ECC:reversal"}
     assert all("see 6 of its 7 motions" in u.why for u in top)
     assert np.isnan(result.maps["C"].value["ECC-"][-1]) and np.isfinite(result.maps["C"].value["ECC-"][:-1]).all()
+
+
+def test_the_report_has_a_map_section(ac_case: Any, tmp_path: Path) -> None:
+    """pige report FILES --map C,A: the plots, the table per motion, what the maps leave, the gain."""
+    paths, _ = ac_case
+    out = tmp_path / "report"
+    assert main(["report", *paths, "--map", "C,A", "--out", str(out)]) == 0
+    html = (out / "report.html").read_text(encoding="utf-8")
+    assert 'id="maps"' in html and "Error maps of the rotary axes" in html
+    assert html.count("map_C.png") + html.count("map_A.png") >= 0  # the plots are inlined as data URIs
+    assert "What the maps leave" in html and "held-out by pose" in html
+    assert "Every value of every map is determined" in html
+    assert (out / "figures" / "map_C.png").is_file() or any(out.rglob("map_C.png"))

@@ -283,10 +283,12 @@ class ReportData:
     plan: Any = None  # a graded test plan (pige_sym.planning.Plan), shown by report.plan_section
     plan_html: str = ""
     joints: list[JointReport] = field(default_factory=list)  # joint sections (pige_sym.report.joint_section)
+    maps: Any = None  # the error maps of the files (pige_sym.report.map_section.MapReport), with --map
 
     def to_dict(self) -> dict[str, Any]:
         return json_ready({
             "joint": [j.to_dict() for j in self.joints],
+            "maps": None if self.maps is None else self.maps.to_dict(),
             "report": None if self.html_path is None else str(self.html_path),
             "created": self.created, "version": __version__, "settings": self.settings,
             "studies": list(self.studies), "program": None if self.program is None else str(self.program),

@@ -446,6 +446,14 @@ def draw_report_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
         figs.append(ReportFigure("trend", _save(trend_figure(data.history), out_dir / "history_trend.png"),
                                  f"History of machine {data.history.machine_id}: each PIGE per run with ± 2 std, "
                                  "the tolerance band and the significant changes."))
+    if data.maps is not None:
+        from pige_sym.identification.map_output import map_figure
+
+        out_dir.mkdir(parents=True, exist_ok=True)
+        for axis in data.maps.result.maps:
+            figs.append(ReportFigure("maps", _save(map_figure(data.maps.result, axis), out_dir / f"map_{axis}.png"),
+                                     f"The error motions of {axis} (conventions §10) with ±2σ bands: translations "
+                                     "[µm] above, rotations [µrad] below."))
     for i, jr in enumerate(data.joints):
         if jr.curves:
             out_dir.mkdir(parents=True, exist_ok=True)

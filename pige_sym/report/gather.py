@@ -163,7 +163,8 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
                   seed: int = 0, progress: bool = False, tolerances: str | os.PathLike[str] | None = None,
                   rule: str = "guard", k: float = 2.0,
                   compare: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None,
-                  history: str | None = None, db: str | None = None, joint: bool = False) -> ReportData:
+                  history: str | None = None, db: str | None = None, joint: bool = False,
+                  maps: Any = None) -> ReportData:
     """Compute everything a report shows (no files written).
 
     Parameters
@@ -199,6 +200,8 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
         Machine id and database URL: the trend section.
     joint : bool
         Also identify two or more R-test/probe files of one machine jointly (ballbar files always are).
+    maps : MapSpec, optional
+        Fit the error maps of these axes jointly from every file (:mod:`~pige_sym.report.map_section`).
 
     Returns
     -------
@@ -234,6 +237,10 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
         data.comparison = compare_measurements(*compare)
     if history is not None:
         data.history = gather_history(history, db, tol)
+    if maps is not None:
+        from pige_sym.report.map_section import gather_maps
+
+        data.maps = gather_maps([(str(p), x) for p, x, _ in every], maps)
     return data
 
 

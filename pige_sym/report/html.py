@@ -171,7 +171,8 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
                    + [f'<a href="#m{i + 1}">{esc(r.path.name)}</a>' for i, r in enumerate(data.measurements)]
                    + (['<a href="#compare">measured before/after</a>'] if data.comparison is not None else [])
                    + (['<a href="#history">history</a>'] if data.history is not None else [])
-                   + (['<a href="#plan">test plan</a>'] if data.plan_html or data.plan is not None else []))
+                   + (['<a href="#plan">test plan</a>'] if data.plan_html or data.plan is not None else [])
+                   + (['<a href="#maps">error maps</a>'] if data.maps is not None else []))
     settings = "; ".join(f"{k}: {v}" for k, v in data.settings.items())
     parts = [
         "<!DOCTYPE html>",
@@ -199,6 +200,10 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
                   history_html(data, base), "</section>"]
     parts += [joint_html(i, j, "".join(img(f, base) for f in data.figures if f.key == f"joint-{i + 1}"))
               for i, j in enumerate(data.joints)]
+    if data.maps is not None:
+        from pige_sym.report.map_section import maps_html
+
+        parts.append(maps_html(data.maps, "".join(img(f, base) for f in data.figures if f.key == "maps")))
     parts += [_measurement_html(i, rep, base) for i, rep in enumerate(data.measurements)]
     if data.plan_html:
         parts.append(data.plan_html)
