@@ -80,15 +80,52 @@ def check_output(path: PathLike, *, force: bool = False, inputs: Iterable[PathLi
     return p
 
 
+def _dangling_link(p: Path) -> str | None:
+    """Why ``p`` cannot be a folder pige creates: a symbolic link whose target does not exist (None otherwise)."""
+    if not p.is_symlink() or p.exists():
+        return None
+    try:
+        target = os.readlink(p)
+    except OSError:
+        target = "?"
+    return (f"{p} is a symbolic link to {target}, which does not exist: pige never creates what a link points "
+            "to; create that folder, or give another")
+
+
 def _check_writable_ancestor(start: Path, path: Path, what: str, noun: str) -> None:
-    """Refuse ``path`` when its nearest existing ancestor (from ``start`` up) is not a writable ``noun``."""
+    """Refuse ``path`` when its nearest existing ancestor (from ``start`` up) is not a writable ``noun``, or when a
+    dangling symbolic link stands on the way (creating the folders would fail, or follow the link)."""
     existing = start
     while not existing.exists() and existing != existing.parent:
+        dangling = _dangling_link(existing)
+        if dangling:
+            raise InputError(f"{what} {path}: {dangling}")
         existing = existing.parent
     if not existing.is_dir():
         raise InputError(f"{what} {path}: {existing} is not a {noun}")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise InputError(f"{what} {path}: the folder {existing} is not writable")
+
+
+def make_folder(folder: PathLike, *, what: str = "--out") -> Path:
+    """Create an output folder and its parents (nothing when it exists; a link to a folder is followed).
+
+    Raises
+    ------
+    InputError
+        A dangling symbolic link on the way (pige never creates what a link points to), or the folder cannot
+        be created; one line naming ``what`` and the folder.
+    """
+    p = Path(folder)
+    for q in (p, *p.parents):
+        dangling = _dangling_link(q)
+        if dangling:
+            raise InputError(f"{what}: {dangling}")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{what}: cannot create the folder {p} ({exc.strerror or exc})") from None
+    return p
 
 
 def check_output_folder(path: PathLike, *, force: bool = False, inputs: Iterable[PathLike] = (),

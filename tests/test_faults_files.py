@@ -223,3 +223,32 @@ def test_an_interrupt_while_the_report_is_written_leaves_nothing_partial(inputs,
         assert all(p.read_bytes().endswith(PNG_END) for p in out.rglob("*.png"))
     else:
         assert proc.returncode == 130 and "interrupted" in err, (proc.returncode, err)
+
+
+# ----------------------------------------------------------------------- issue 43: links, interrupts, temporary files
+
+
+@pytest.fixture
+def default_sigint():
+    """SIGINT raises KeyboardInterrupt in this test, as in a terminal (a test runner may have set another handler)."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
+@pytest.mark.skipif(not hasattr(os, "symlink"), reason="no symbolic links")
+def test_a_dangling_link_as_an_output_folder_is_refused_and_never_followed(inputs, tmp_path, capsys) -> None:
+    """Issue 43, 7: gen --out, gen --target linuxcnc --out, diagnose --plots (and report, demo) ended in
+    FileExistsError; now one line naming the link and its target, and the target is never created."""
+    target = tmp_path / "nowhere"
+    link = tmp_path / "link"
+    link.symlink_to(target)
+    ac = "wC'A'bXYZ(C1)t"
+    for argv in (["gen", ac, "--out", str(link)], ["gen", "--target", "linuxcnc", ac, "--out", str(link)],
+                 ["gen", "--target", "linuxcnc", ac, "--out", str(link / "sub")],
+                 ["diagnose", str(inputs / "run.csv"), "--plots", str(link)],
+                 ["report", str(inputs / "run.csv"), "--out", str(link), "--no-figures"],
+                 ["demo", "--out", str(link / "demo")]):
+        refused(*run(capsys, *argv), f"{link} is a symbolic link to {target}, which does not exist")
+        assert link.is_symlink() and not target.exists(), argv
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link"]
