@@ -187,11 +187,42 @@ def staged_folder(path: PathLike, *, force: bool = False, inputs: Iterable[PathL
                 tmp = _make_stage(host, out, what)
             yield tmp
             with _deferred_interrupts():
+                raise_if_interrupted()
                 _commit(tmp, out, force, list(inputs), what)
         except BaseException:
             if tmp is not None:
                 shutil.rmtree(tmp, ignore_errors=True)
             raise
+
+
+#: Set by pige's interrupt handlers that raise KeyboardInterrupt wherever the program is (SIGINT while a command
+#: runs, SIGTERM while a folder is staged).  Python ignores an exception raised in a finaliser (``__del__``, a weakref
+#: callback: it prints "Exception ignored ... KeyboardInterrupt" and goes on), so an interrupt can be lost on its way
+#: up; the latch keeps it, and nothing is published after one (:func:`raise_if_interrupted`).
+_INTERRUPTED = threading.Event()
+
+
+def note_interrupt() -> None:
+    """Remember that an interrupt reached the process (called by the handlers that raise KeyboardInterrupt)."""
+    _INTERRUPTED.set()
+
+
+def clear_interrupt() -> None:
+    """Forget a noted interrupt (a command starts or ends)."""
+    _INTERRUPTED.clear()
+
+
+def interrupt_noted() -> bool:
+    """Whether an interrupt was noted since the command started (its KeyboardInterrupt may have been lost)."""
+    return _INTERRUPTED.is_set()
+
+
+def raise_if_interrupted() -> None:
+    """Raise KeyboardInterrupt (once) when an interrupt was noted: called just before an output is published, so an
+    interrupt whose KeyboardInterrupt was swallowed on the way still stops the output from appearing."""
+    if _INTERRUPTED.is_set():
+        _INTERRUPTED.clear()
+        raise KeyboardInterrupt
 
 
 def _make_stage(host: Path, out: Path, what: str) -> Path:
@@ -216,6 +247,7 @@ def _terminate_as_interrupt() -> Iterator[None]:
         return
 
     def _raise(signum: int, frame: object) -> None:
+        note_interrupt()
         raise KeyboardInterrupt
 
     old = signal.signal(signal.SIGTERM, _raise)
@@ -313,26 +345,43 @@ def atomic_write_text(path: PathLike, text: str | Iterable[str], *, encoding: st
     p = Path(path)
     if p.is_symlink() or (p.exists() and not p.is_file()):
         raise InputError(f"{p} is not a regular file: pige never replaces one")
-    p.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(p.parent if str(p.parent) else Path("."), what=f"cannot write {p}")
     mode = new_file_mode() if not p.exists() else p.stat().st_mode & 0o7777
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+    tmp: Path | None = None
     try:
-        os.fchmod(fd, mode)
-        with os.fdopen(fd, "w", encoding=encoding, newline=newline) as fh:
+        with _deferred_interrupts():  # the temporary file exists only once the clean-up below knows its name
+            fd, name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+            tmp = Path(name)
+            try:
+                fh = os.fdopen(fd, "w", encoding=encoding, newline=newline)
+            except BaseException:
+                os.close(fd)
+                raise
+        with fh:
+            os.fchmod(fh.fileno(), mode)
             for piece in [text] if isinstance(text, str) else text:
                 fh.write(piece)
             fh.flush()
             os.fsync(fh.fileno())
         if verify is not None:
-            verify(Path(tmp_name))
-        os.replace(tmp_name, p)
+            verify(tmp)
+        with _deferred_interrupts():
+            raise_if_interrupted()
+            os.replace(tmp, p)
     except OSError as exc:
-        Path(tmp_name).unlink(missing_ok=True)
+        _remove_quietly(tmp)
         raise InputError(f"cannot write {p}: {exc.strerror or exc}") from exc
     except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
+        _remove_quietly(tmp)
         raise
     return p
+
+
+def _remove_quietly(path: Path | None) -> None:
+    """Remove a temporary file pige made (nothing when None or gone); an interrupt meanwhile waits for it."""
+    if path is not None:
+        with _deferred_interrupts():
+            path.unlink(missing_ok=True)
 
 
 def open_regular_file(path: PathLike) -> IO[bytes]:

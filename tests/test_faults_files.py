@@ -252,3 +252,55 @@ def test_a_dangling_link_as_an_output_folder_is_refused_and_never_followed(input
         refused(*run(capsys, *argv), f"{link} is a symbolic link to {target}, which does not exist")
         assert link.is_symlink() and not target.exists(), argv
     assert sorted(p.name for p in tmp_path.iterdir()) == ["link"]
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_an_interrupt_as_the_temporary_file_is_made_leaves_none(tmp_path, monkeypatch, default_sigint) -> None:
+    """Issue 43, 12: SIGINT right after the temporary file was created, before the writer held its name, left a
+    0-byte ``.NAME.*.tmp``; the interrupt now waits until the clean-up knows the file."""
+    import tempfile
+
+    from pige_sym.files import atomic_write_text
+
+    real = tempfile.mkstemp
+
+    def made_then_interrupted(*args: object, **kwargs: object) -> tuple[int, str]:
+        made = real(*args, **kwargs)  # type: ignore[call-overload]
+        os.kill(os.getpid(), signal.SIGINT)  # the handler runs before this function returns
+        time.sleep(0.01)
+        return made
+
+    monkeypatch.setattr(tempfile, "mkstemp", made_then_interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write_text(tmp_path / "pige_xyzac_trt.comp", "component pige_xyzac_trt;\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_an_interrupt_lost_in_a_finaliser_still_ends_the_report_with_130(inputs, tmp_path, monkeypatch, capsys,
+                                                                        default_sigint) -> None:
+    """Issue 43, 11: Python drops a KeyboardInterrupt raised in a finaliser ("Exception ignored ... KeyboardInterrupt")
+    and goes on: the report was written and the run ended with status 0.  Now status 130 and no report."""
+    import pige_sym.report.html as html
+
+    lost: list[BaseException | None] = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: lost.append(u.exc_value))
+
+    class Finaliser:
+        def __del__(self) -> None:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.01)
+
+    real = html.render_html
+
+    def render_and_lose_an_interrupt(*args: object, **kwargs: object) -> str:
+        text = real(*args, **kwargs)  # type: ignore[arg-type]
+        Finaliser()  # dropped at once: the SIGINT lands in its __del__
+        return text
+
+    monkeypatch.setattr(html, "render_html", render_and_lose_an_interrupt)
+    out = tmp_path / "rep"
+    code, err = run(capsys, "report", str(inputs / "run.csv"), "--out", str(out), "--no-figures")
+    assert [type(e) for e in lost] == [KeyboardInterrupt]  # the interrupt was indeed swallowed on its way
+    assert code == 130 and err.strip().endswith("interrupted"), (code, err)
+    assert not out.exists() and [p.name for p in tmp_path.iterdir()] == []

@@ -70,7 +70,10 @@ def tolerant_console() -> None:
 class _Interrupts:
     """While a command runs, SIGINT raises KeyboardInterrupt as usual and is remembered: a C extension
     (matplotlib's renderer, a module being imported) may turn the KeyboardInterrupt into another exception,
-    which is then an interrupt too.  The previous handler is put back afterwards."""
+    which is then an interrupt too, and Python drops one raised in a finaliser (``__del__``: "Exception ignored
+    ... KeyboardInterrupt") and goes on; the command then ends with status 130 all the same, and nothing is
+    published after the interrupt (:func:`pige_sym.files.raise_if_interrupted`).  The previous handler is put
+    back afterwards."""
 
     def __init__(self) -> None:
         self.seen = False
@@ -80,19 +83,28 @@ class _Interrupts:
         import signal
         import threading
 
+        from pige_sym.files import clear_interrupt
+
+        clear_interrupt()
         if threading.current_thread() is threading.main_thread() and \
                 signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             self.old = signal.signal(signal.SIGINT, self._handle)
         return self
 
     def __exit__(self, *exc: object) -> None:
+        from pige_sym.files import clear_interrupt
+
+        clear_interrupt()
         if self.old is not None:
             import signal
 
             signal.signal(signal.SIGINT, self.old)  # type: ignore[arg-type]
 
     def _handle(self, signum: int, frame: object) -> None:
+        from pige_sym.files import note_interrupt
+
         self.seen = True
+        note_interrupt()
         raise KeyboardInterrupt
 
 
@@ -112,7 +124,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _run(args: argparse.Namespace, interrupts: _Interrupts) -> int:
     """The command's handler, its errors turned into exit statuses (module docstring)."""
     try:
-        return int(args.handler(args))
+        status = int(args.handler(args))
     except PigeError as exc:
         print(f"pige {args.command}: {exc}", file=sys.stderr)
         return 2
@@ -120,10 +132,16 @@ def _run(args: argparse.Namespace, interrupts: _Interrupts) -> int:
         sys.stderr.close()
         return 0
     except KeyboardInterrupt:
-        print(f"pige {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted(args)
     except Exception:
         if interrupts.seen:  # a KeyboardInterrupt that a C extension turned into another exception
-            print(f"pige {args.command}: interrupted", file=sys.stderr)
-            return 130
+            return _interrupted(args)
         raise
+    if interrupts.seen:  # a KeyboardInterrupt dropped in a finaliser: the command went on, but was interrupted
+        return _interrupted(args)
+    return status
+
+
+def _interrupted(args: argparse.Namespace) -> int:
+    print(f"pige {args.command}: interrupted", file=sys.stderr)
+    return 130
