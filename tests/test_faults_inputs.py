@@ -179,3 +179,61 @@ def test_fuzzed_findings_compensate_with_bounded_values_or_are_refused(tmp_path_
     for ext in got.extensions:
         assert 1 <= ext.spec.harmonic <= MAX_HARMONIC
         assert all(np.isfinite(v) and abs(v) <= MAX_PIGE for v in ext.params.values())
+
+
+# ------------------------------------------------------------------------------ issue 43, 9: a 400-digit integer
+
+
+BIG = "1" * 400
+
+
+@pytest.mark.parametrize("slot, said", [
+    ("params", "pige.EY0A: expected a finite number"),
+    ("finding", "harmonic inf"),
+    ("tolerance", "limits.EX0C: a limit must be a positive finite number, got a number beyond"),
+    ("default", "defaults.um: a limit must be a positive finite number"),
+    ("pige file", "pige.EY0A: expected a finite number, got one beyond ±1.8e308"),
+    ("truth", "parameter EY0A: inf is not a finite number"),
+])
+def test_a_400_digit_integer_in_any_json_input_is_refused_in_one_line(tmp_path, capsys, slot, said) -> None:
+    """It passed for a number and ended in OverflowError where a reader called float(); the one JSON reader now
+    reads an integer of more than 18 digits as the float it denotes, so every finiteness check sees it."""
+    import json
+
+    run_csv = tmp_path / "run.csv"
+    assert main(["simulate", "--out", str(run_csv), "--seed", "1", "--points", "8"]) == 0
+    prog = tmp_path / "prog.mpf"
+    assert main(["program", "--trajectory", "cone-frustum", "--out", str(prog), "--points", "8"]) == 0
+    tol = {"format": "pige-tolerances 1", "machine": AC, "defaults": {"um": 10, "urad": 20}, "limits": {"EX0C": 8}}
+    doc = {"machine": AC, "pige": dict(PIGES), "findings": [json_copy(FINDING)]}
+    if slot in ("params", "pige file", "truth"):
+        doc["pige"]["EY0A"] = "@big"
+    elif slot == "finding":
+        doc["findings"][0]["options"]["harmonic"] = "@big"
+    else:
+        tol["limits" if slot == "tolerance" else "defaults"]["EX0C" if slot == "tolerance" else "um"] = "@big"
+    text = json.dumps(tol if slot in ("tolerance", "default") else doc).replace('"@big"', BIG)
+    given = tmp_path / ("run.truth.json" if slot == "truth" else "in.json")
+    given.write_text(text)
+    capsys.readouterr()
+    argv = {"params": ["compensate", str(prog), "--params", str(given), "--out", str(tmp_path / "o.mpf")],
+            "finding": ["compensate", str(prog), "--params", str(given), "--out", str(tmp_path / "o.mpf")],
+            "tolerance": ["check", str(run_csv), "--tolerances", str(given)],
+            "default": ["check", str(run_csv), "--tolerances", str(given)],
+            "pige file": ["simulate", "--pige", str(given), "--out", str(tmp_path / "s.csv")],
+            "truth": ["report", str(run_csv), "--out", str(tmp_path / "rep"), "--no-figures"]}[slot]
+    one_line_refusal(*run(capsys, *argv)[::2], said)
+    assert not (tmp_path / "o.mpf").exists() and not (tmp_path / "rep").exists()
+
+
+@FEW
+@given(value=st.integers(-10**500, 10**500))
+def test_every_json_integer_reads_as_a_number_float_can_take(value) -> None:
+    from pige_sym.measurements.schema import MAX_INT_DIGITS, strict_loads
+
+    got = strict_loads(f'{{"x": [{value}]}}')["x"][0]
+    as_float = float(got)  # never OverflowError
+    if len(str(abs(value))) <= MAX_INT_DIGITS:
+        assert got == value and isinstance(got, int)
+    else:
+        assert isinstance(got, float) and (as_float == float(str(value)))

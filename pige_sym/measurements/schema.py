@@ -4,7 +4,8 @@ Reading (:func:`load_json`)
 ---------------------------
 Only regular files (no FIFO or device), at most :data:`MAX_JSON_BYTES`, UTF-8 (a BOM is
 allowed), strict JSON: ``NaN``/``Infinity`` tokens, repeated keys and nesting deeper
-than :data:`MAX_DEPTH` are refused.  Every refusal is a
+than :data:`MAX_DEPTH` are refused.  An integer longer than :data:`MAX_INT_DIGITS` digits is read as the float
+it denotes (a 400-digit one is ``inf``, refused wherever a finite number is required, as ``1e400`` is).  Every refusal is a
 :class:`~pige_sym.errors.FileFormatError` naming the file, the line when known, and the
 field as a path (``pige.EX0C``).
 
@@ -65,6 +66,17 @@ def _reject_constant(token: str) -> float:
     raise ValueError(f"{token} is not allowed in pige JSON (use null for 'no value')")
 
 
+#: Digits of the longest integer read as an integer (any 64-bit count); a longer one is read as the number it is, a
+#: float (``inf`` beyond ±1.8e308), so every bound and finiteness check applies to it as to ``1e400``.
+MAX_INT_DIGITS = 18
+
+
+def _json_int(text: str) -> int | float:
+    """An integer literal of JSON: an int up to :data:`MAX_INT_DIGITS` digits, else the float it denotes (a 400-digit
+    integer would pass for a number and overflow ``float()`` later, wherever a reader converts it)."""
+    return int(text) if len(text.lstrip("-")) <= MAX_INT_DIGITS else float(text)
+
+
 def _no_repeats(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for k, v in pairs:
@@ -103,15 +115,28 @@ def load_json(path: PathLike, what: str = "JSON file") -> Any:
         raise FileFormatError(p, None, f"{what} is not UTF-8 text ({exc.reason} at byte {exc.start}): save it as "
                               "UTF-8") from None
     try:
-        data = json.loads(text, parse_constant=_reject_constant, object_pairs_hook=_no_repeats)
+        return strict_loads(text)
     except json.JSONDecodeError as exc:
         raise FileFormatError(p, exc.lineno, f"not valid JSON: {exc.msg}") from None
     except ValueError as exc:
         raise FileFormatError(p, None, f"not valid pige JSON: {exc}") from None
+
+
+def strict_loads(text: str) -> Any:
+    """The JSON value of ``text`` as :func:`load_json` reads a file (its rules, module docstring).
+
+    Raises
+    ------
+    ValueError
+        ``json.JSONDecodeError`` (with its line) for text that is not JSON; a plain ValueError for NaN/Infinity,
+        a repeated key or nesting deeper than :data:`MAX_DEPTH`.
+    """
+    try:
+        data = json.loads(text, parse_constant=_reject_constant, parse_int=_json_int, object_pairs_hook=_no_repeats)
     except RecursionError:
-        raise FileFormatError(p, None, f"nested deeper than {MAX_DEPTH} levels") from None
+        raise ValueError(f"nested deeper than {MAX_DEPTH} levels") from None
     if _depth(data, MAX_DEPTH) > MAX_DEPTH:
-        raise FileFormatError(p, None, f"nested deeper than {MAX_DEPTH} levels")
+        raise ValueError(f"nested deeper than {MAX_DEPTH} levels")
     return data
 
 
@@ -152,7 +177,7 @@ def _check(tp: Any, value: Any, where: str, meta: Mapping[str, Any]) -> Any:
             raise SchemaRefusal(where, f"expected a number, got {_type_name(value)}")
         v = float(value)
         if not math.isfinite(v):
-            raise SchemaRefusal(where, "expected a finite number")
+            raise SchemaRefusal(where, "expected a finite number, got one beyond ±1.8e308")
         limit = meta.get("max_abs")
         if limit is not None and abs(v) > limit:
             raise SchemaRefusal(where, f"{v:g} is not physical (|value| <= {limit:g})")
