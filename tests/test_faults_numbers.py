@@ -62,7 +62,10 @@ def _import(capsys, log: Path, out: Path, *extra: str) -> tuple[int, str, str]:
     (["--sphere", "100,20,58.5"], "from 100, 20, 58.5 where --sphere puts it"),
     (["--units", "inch"], "--units"),
     (["--sphere-radius", "25", "--stylus-radius", "1.5"], "check --sphere-radius and --stylus-radius"),
-    (["--radius", "14.3"], "--radius 14.3 mm, but the contacts lie on a sphere of 14.19"),
+    (["--radius", "14.3"], "--radius 14.3 mm, but the contacts lie on a sphere of 14.2000 mm (-100.0 um)"),
+    # issue 43, 5: a radius far from the data's ended in LinAlgError (the fit with it came before the check)
+    (["--radius", "25"], "--radius 25 mm, but the contacts lie on a sphere of 14.2000 mm"),
+    (["--radius", "1e6"], "--radius 1e+06 mm, but the contacts lie on a sphere of 14.2000 mm"),
     (["--stylus-offset", "1e6"], "--stylus-offset 1e+06 mm"),
 ])
 def test_a_wrong_set_up_is_refused_at_the_import_naming_the_flag(probe_log, tmp_path, capsys, extra, said) -> None:

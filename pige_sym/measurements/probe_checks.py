@@ -17,8 +17,9 @@ import checks, in this order, and refuses with the file, the line and the option
    spheres below :data:`MAX_CONTACT_SIGMA_UM` (a touch probe repeats to about a micrometre).
 5. **The radius** (:func:`check_radius`): the fitted ``R_eff`` against ``R + r`` (a pre-travel is micrometres:
    more than :data:`RADIUS_TOLERANCE_MM` off is a wrong ``--sphere-radius``/``--stylus-radius`` or ``--units``);
-   a given ``--radius`` against the radius the contacts lie on (the first-order shift of a free radius, from the
-   fit's own least squares): off by more than the faulty-contact limit, the option is wrong, not the pose.
+   a given ``--radius`` against the radius the contacts lie on (the fit with a free radius, made first: a fit with a
+   radius far from the data's has no meaning): off by more than the faulty-contact limit, the option is wrong, not
+   the pose.
    Then the import's screen of faulty contacts (one pose off its own sphere: "re-probe the pose").
 6. **The reference centre** (:func:`check_reference`): with the program's sphere position (``--program`` or
    ``--sphere``), the fitted ``c(0)`` within :data:`REFERENCE_TOLERANCE_MM` of it (``--sphere``, ``--units``,
@@ -114,32 +115,29 @@ def check_pose_count(path: str, poses: int, parameters: int, first_line: int) ->
                               f"and at least {need - 1} more to fit the {parameters} location errors; probe more poses")
 
 
-def check_radius(path: str, line: int, fit: Any, radius_shift_mm: float, nominal_mm: float, given: bool,
+def check_radius(path: str, line: int, data_radius_mm: float, given_mm: float | None, nominal_mm: float,
                  limit_um: float) -> None:
-    """Refuse an effective radius that cannot be the set-up's (module docstring, 3).
+    """Refuse an effective radius that cannot be the set-up's (module docstring, 5).
 
     Parameters
     ----------
-    fit : SphereFit
-        The import's fit (its ``radius_mm`` fitted, or ``--radius``).
-    radius_shift_mm : float
-        How far a free radius would move from ``fit.radius_mm`` (0 when it was fitted).
+    data_radius_mm : float
+        The radius the contacts lie on (the fit with a free radius).
+    given_mm : float or None
+        ``--radius`` when given.
     nominal_mm : float
         ``R + r`` from ``--sphere-radius`` and ``--stylus-radius``.
-    given : bool
-        ``--radius`` was given.
     limit_um : float
         The faulty-contact limit [µm].
     """
-    data_radius = fit.radius_mm + radius_shift_mm
-    if given and abs(radius_shift_mm) * 1e3 > limit_um:
-        raise FileFormatError(path, line, f"--radius {fit.radius_mm:g} mm, but the contacts lie on a sphere of "
-                              f"{data_radius:.4f} mm ({radius_shift_mm * 1e3:+.1f} um): check --radius (the "
-                              "calibrated R + r - pre-travel), or leave it out to fit it")
-    if abs(data_radius - nominal_mm) > RADIUS_TOLERANCE_MM:
-        which = "--radius" if given and abs(fit.radius_mm - nominal_mm) > RADIUS_TOLERANCE_MM else \
+    if given_mm is not None and not abs(data_radius_mm - given_mm) * 1e3 <= limit_um:
+        raise FileFormatError(path, line, f"--radius {given_mm:g} mm, but the contacts lie on a sphere of "
+                              f"{data_radius_mm:.4f} mm ({(data_radius_mm - given_mm) * 1e3:+.1f} um): check --radius "
+                              "(the calibrated R + r - pre-travel), or leave it out to fit it")
+    if abs(data_radius_mm - nominal_mm) > RADIUS_TOLERANCE_MM:
+        which = "--radius" if given_mm is not None and abs(given_mm - nominal_mm) > RADIUS_TOLERANCE_MM else \
             "--sphere-radius and --stylus-radius"
-        raise FileFormatError(path, line, f"the contacts lie on a sphere of radius {data_radius:.4f} mm, but "
+        raise FileFormatError(path, line, f"the contacts lie on a sphere of radius {data_radius_mm:.4f} mm, but "
                               f"--sphere-radius + --stylus-radius = {nominal_mm:g} mm (a pre-travel is micrometres): "
                               f"check {which}, and --units (an inch log read as mm, or the reverse, scales it by "
                               "25.4)")
