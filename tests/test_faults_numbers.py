@@ -245,3 +245,51 @@ def test_what_the_reader_would_refuse_is_never_written(probe_log, tmp_path) -> N
     with pytest.raises(InputError, match="not written: pige's reader refuses .* not positive definite"):
         write_measurement(m, tmp_path / "q.csv", verify=verify_written(tmp_path / "q.csv", m))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.csv"]
+
+
+# ------------------------------------------------------------------- issue 43: a head's probing program and its header
+
+
+FORK = "wbXYZCA(C1)t"
+HEAD_SET_UP = ["--machine", FORK, "--sphere", "100,20,60", *S, "--tool", "0,0,-160"]
+CONTROLLER = ["--rtcp-off", "M429", "--rtcp-on", "M428", "--stylus-tool", "99", "--stylus-length", "120"]
+
+
+@pytest.fixture(scope="module")
+def head_probe(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A fork head's probing program (LinuxCNC, tool 0, 0, -160 mm) and the log of a simulated run of it."""
+    d = tmp_path_factory.mktemp("head")
+    prog, log = d / "head.ngc", d / "head.txt"
+    assert main(["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *HEAD_SET_UP, *CONTROLLER,
+                 "--trajectory", "cone-frustum", "--out", str(prog)]) == 0
+    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--program", str(prog),
+                 *HEAD_SET_UP, *CONTROLLER, "--seed", "4", "--out", str(log)]) == 0
+    return prog, log
+
+
+@pytest.mark.parametrize("item, value, said", [
+    ("tool_mm", "0, 0, 1e300", "1e300 mm is not physical"),
+    ("tool_mm", "0, 0, nan", "'nan' is not a finite number"),
+    ("sphere_mm", "100, inf, 60", "'inf' is not a finite number"),
+    ("sphere_radius_mm", "NaN", "'NaN' is not a finite number"),
+    ("stylus_radius_mm", "-1.5", "-1.5 mm must be positive"),
+    ("pivot_A_mm", "0, 0, 1e6", "1e6 mm is not physical"),
+])
+def test_a_damaged_program_header_is_refused_with_its_line_and_item(head_probe, tmp_path, capsys, item, value,
+                                                                    said) -> None:
+    """Issue 43, 8 and 20: a header tool_mm of 1e300 ended import-probe in a traceback, a NaN was blamed on the log
+    ("log:1: pose 0: a contact is not a finite point").  Every header number is now checked where it is read."""
+    prog, log = head_probe
+    lines = prog.read_text().splitlines(keepends=True)
+    at = next(i for i, ln in enumerate(lines) if ln.startswith(f"(pige {item}:"))
+    lines[at] = f"(pige {item}: {value})\n"
+    bad = tmp_path / "bad.ngc"
+    bad.write_text("".join(lines))
+    for argv in (["import-probe", str(log), "--format", "linuxcnc", "--program", str(bad), "--out",
+                  str(tmp_path / "p.csv")],
+                 ["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--program", str(bad), "--out",
+                  str(tmp_path / "s.txt")]):
+        code, _, err = run(capsys, *argv)
+        refused(code, err, f"bad.ngc:{at + 1}: header item pige {item}: {said}", "write the program again")
+        assert log.name not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.ngc"]
