@@ -293,3 +293,26 @@ def test_a_damaged_program_header_is_refused_with_its_line_and_item(head_probe, 
         refused(code, err, f"bad.ngc:{at + 1}: header item pige {item}: {said}", "write the program again")
         assert log.name not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.ngc"]
+
+
+def test_simulate_runs_a_head_program_from_its_header(head_probe, tmp_path, capsys) -> None:
+    """Issue 43, 13: ``simulate --program`` without the set-up options refused every head program ("the program
+    states tool_mm [0. 0. -160.], but this run has None"); the header now gives the tool, as it gives the rest, and
+    an option that disagrees with the header is named."""
+    prog, _ = head_probe
+    log, csv = tmp_path / "log.txt", tmp_path / "p.csv"
+    short = ["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--program", str(prog)]
+    code, _, err = run(capsys, *short, "--seed", "5", "--out", str(log))
+    assert code == 0, err
+    code, _, err = run(capsys, "import-probe", str(log), "--format", "linuxcnc", "--program", str(prog), "--out",
+                       str(csv))
+    assert code == 0, err
+    np.testing.assert_allclose(read_measurement(csv).tool_mm, [0.0, 0.0, -160.0])
+    # the long form without the controller options: the header states them too
+    code, _, err = run(capsys, *short, *HEAD_SET_UP, "--out", str(tmp_path / "long.txt"))
+    assert code == 0, err
+    for extra, said in ((["--tool", "0,0,-150"], "states tool_mm 0, 0, -160, but this run has 0, 0, -150 (--tool)"),
+                        (["--sphere-radius", "12"], "states sphere_radius_mm 12.7, but this run has 12 "
+                                                    "(--sphere-radius)")):
+        refused(*run(capsys, *short, *extra, "--out", str(tmp_path / "x.txt"))[::2], said, "give --program alone")
+    assert not (tmp_path / "x.txt").exists()

@@ -156,9 +156,30 @@ def header_agrees(text: str, setup: ProbeSetup, rotary_axes: tuple[str, ...], pa
     checks.append(("tool_mm", h.tool_mm, setup.tool_mm, same_tool))
     for name, stated, given, ok in checks:
         if not ok:
-            raise NCProgramError(path, None, f"the program states {name} {stated}, but this run has {given}: give "
-                                             "the options the program was written with (or write it again)")
+            option = _OPTIONS.get(name, "--pivot" if name.startswith("pivot_") else name)
+            run = f"{option} is not given" if given is None else f"this run has {_shown(given)} ({option})"
+            raise NCProgramError(path, None, f"the program states {name} {_shown(stated)}, but {run}: give {option} "
+                                             "as the program states it, or leave out what its header states (give "
+                                             "--program alone), or write the program again")
     return h
+
+
+#: The option that gives each header item (the controller state is several).
+_OPTIONS = {"machine": "--machine", SENSE_KEY: "--axis-sense", "sphere_mm": "--sphere",
+            "sphere_radius_mm": "--sphere-radius", "stylus_radius_mm": "--stylus-radius", "tool_mm": "--tool",
+            "controller state": "--kinematics/--rtcp-off/--rtcp-on/--stylus-tool/--stylus-length/--work-offset/"
+                                "--window"}
+
+
+def _shown(value: object) -> str:
+    """A header value as a person reads it: ``0, 0, -160`` for a vector, ``none`` for None."""
+    if value is None:
+        return "none"
+    if isinstance(value, np.ndarray):
+        return ", ".join(f"{float(v):g}" for v in value)
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
 
 
 def _canonical(code: str) -> str:
