@@ -95,6 +95,45 @@ def test_damaged_logs_are_refused_with_the_line(probe_log, tmp_path, capsys) -> 
         refused(*_import(capsys, log, tmp_path / "x.csv")[::2], said)
 
 
+LOG_LINES = {  # the second contact of a pose as each controller's DPRNT/WRITE/FN 16 writes it, X made absurd
+    "siemens": "PIGE P0 K1 X{x} Y20.000000 Z63.675200 A0.000000 C0.000000",
+    "fanuc": "PIGE P   0 K 1 X {x}Y  20.0000Z  63.6752 A  0.0000 C  0.0000",
+    "heidenhain": "PIGE P    0 K 1 X +{x} Y  +20.0000 Z  +63.6752 A   +0.0000 C   +0.0000",
+}
+
+
+@pytest.mark.parametrize("fmt", sorted(LOG_LINES))
+@pytest.mark.parametrize("x, said", [("1e300", "X: 1e+300 is beyond ±100000"), ("1E300", "X: 1e+300 is beyond"),
+                                     ("1.2.3", "'.3' is not a field")])
+def test_an_absurd_number_in_a_controller_log_is_named_with_its_field(fmt, x, said) -> None:
+    """Issue 43, 16: ``X1e300`` was refused with "fields P K X Y Z A C; a contact line has P K X Y Z A C": the
+    found and expected lists the same (the exponent was left over, unnamed)."""
+    from pige_sym.errors import FileFormatError
+    from pige_sym.measurements.probe_log import parse_probe_log
+
+    first = LOG_LINES[fmt].replace("K1", "K0").replace("K 1", "K 0").format(x="113.7159")
+    raw = f"{first}\n{LOG_LINES[fmt].format(x=x)}\n".encode()
+    with pytest.raises(FileFormatError) as refusal:
+        parse_probe_log("log.txt", raw, fmt, ("A", "C"))
+    assert str(refusal.value).startswith(f"log.txt:2: {said}"), refusal.value
+
+
+@FEW
+@given(fmt=st.sampled_from(sorted(LOG_LINES)), at=st.integers(0, 80),
+       junk=st.text(alphabet="PKXYZACQe+-. 0123456789n", min_size=1, max_size=6))
+def test_a_field_refusal_never_lists_the_expected_fields_as_found(fmt, at, junk) -> None:
+    from pige_sym.errors import FileFormatError
+    from pige_sym.measurements.probe_log import parse_probe_log
+
+    line = LOG_LINES[fmt].format(x="113.7159")
+    at = min(at, len(line))
+    raw = f"{line[:at]}{junk}{line[at:]}\n".encode()
+    try:
+        parse_probe_log("log.txt", raw, fmt, ("A", "C"))
+    except FileFormatError as exc:
+        assert "fields P K X Y Z A C;" not in str(exc) and "\n" not in str(exc), exc
+
+
 def test_a_repeated_pose_may_share_a_contact_with_the_first(probe_log, tmp_path, capsys) -> None:
     """A drift check probes a pose again at the same angles: a contact written to the same digits (the probing
     axis of a 0.1 µm log repeats) is not a duplicated line; the same pose pasted twice is."""
