@@ -134,6 +134,20 @@ def test_a_field_refusal_never_lists_the_expected_fields_as_found(fmt, at, junk)
         assert "fields P K X Y Z A C;" not in str(exc) and "\n" not in str(exc), exc
 
 
+@pytest.mark.parametrize("x", ["99999.000000", "1000.000000", "200.000000", "-110.000000"])
+def test_one_absurd_contact_is_named_by_its_line_not_called_a_degenerate_pattern(probe_log, tmp_path, capsys,
+                                                                                 x) -> None:
+    """Issue 43, 17: one mistyped X in a pose of five contacts was refused as "pose 1: degenerate contact pattern
+    (normals spread 0.000 ...); probe it from more directions"."""
+    lines = probe_log.read_text().splitlines(keepends=True)
+    lines[6] = x + lines[6][lines[6].index(" "):]
+    log = tmp_path / "log.txt"
+    log.write_text("".join(lines))
+    code, _, err = _import(capsys, log, tmp_path / "p.csv")
+    refused(code, err, "log.txt:7: this contact lies", "of its pose's contacts (lines 6-10)", "re-probe the pose")
+    assert "degenerate" not in err and not (tmp_path / "p.csv").exists()
+
+
 def test_a_repeated_pose_may_share_a_contact_with_the_first(probe_log, tmp_path, capsys) -> None:
     """A drift check probes a pose again at the same angles: a contact written to the same digits (the probing
     axis of a 0.1 µm log repeats) is not a duplicated line; the same pose pasted twice is."""

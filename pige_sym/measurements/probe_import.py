@@ -45,6 +45,7 @@ from pige_sym.measurements.probe_checks import (
     SETUP_FLAGS,
     check_contact_sigma,
     check_deviations,
+    check_far_contacts,
     check_options,
     check_pose_count,
     check_radius,
@@ -205,6 +206,7 @@ def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
     pts = _pose_points(log, starts, spec.stylus_offset_mm, head)
     if spec.kinematics == "tcp":
         pts = _machine_points(kern, pts, starts, angles, spec)
+    check_far_contacts(log.path, pts, starts, log.lines, spec.sphere_radius_mm + spec.stylus_radius_mm)
     fit = _fit(log, starts, pts, spec, frames)
     check_reference(log.path, int(log.lines[0]), fit.centres_mm[0], spec.sphere_mm,
                     "the program's header (sphere_mm)" if spec.program else "--sphere")
