@@ -237,3 +237,21 @@ def test_every_json_integer_reads_as_a_number_float_can_take(value) -> None:
         assert got == value and isinstance(got, int)
     else:
         assert isinstance(got, float) and (as_float == float(str(value)))
+
+
+def test_a_sense_refusal_names_what_disagrees_not_an_option_never_given(tmp_path, capsys) -> None:
+    """Issue 43, 19: a program written with --axis-sense C=-1, compensated with a parameter file in CONVENTIONS'
+    sense, was refused with "but --axis-sense says ..." although no --axis-sense was given."""
+    prog, out = tmp_path / "prog.mpf", tmp_path / "o.mpf"
+    assert main(["program", "--trajectory", "cone-frustum", "--points", "8", "--axis-sense", "C=-1", "--out",
+                 str(prog)]) == 0
+    params = _params(tmp_path, {"machine": AC, "pige": dict(PIGES)})
+    capsys.readouterr()
+    code, _, err = run(capsys, "compensate", str(prog), "--params", str(params), "--out", str(out))
+    one_line_refusal(code, err, "prog.mpf records the commanded axis sense C=-1",
+                     f"but the parameter file {params} records CONVENTIONS' sense", "parameters of the same")
+    assert "--axis-sense says" not in err and not out.exists()
+    # given, the option is named as before
+    code, _, err = run(capsys, "compensate", str(prog), "--params", str(params), "--axis-sense", "C=-1", "--out",
+                       str(out))
+    one_line_refusal(code, err, "but --axis-sense says C=-1")

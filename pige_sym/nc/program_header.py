@@ -64,9 +64,10 @@ def read_header_lines(text: str, path: str = "<program>") -> dict[str, tuple[str
     return out
 
 
-def program_axis_sense(text: str, rotary_axes: Sequence[str], path: str,
-                       given: Mapping[str, int] | None) -> dict[str, int]:
-    """The commanded axis sense of a program: its header's, checked against ``--axis-sense`` (``given``).
+def program_axis_sense(text: str, rotary_axes: Sequence[str], path: str, given: Mapping[str, int] | None, *,
+                       given_by: str = "--axis-sense", fix: str | None = None) -> dict[str, int]:
+    """The commanded axis sense of a program: its header's, checked against ``given`` (``--axis-sense`` unless
+    ``given_by`` names another source, :func:`~pige_sym.measurements.axis_sense.reconcile`).
 
     A program without the header item (a CAM program) takes ``given`` (None: CONVENTIONS' sense).
     """
@@ -79,4 +80,4 @@ def program_axis_sense(text: str, rotary_axes: Sequence[str], path: str,
         recorded = parse_axis_sense(header[METADATA_KEY], rotary_axes, f"{path}: pige {METADATA_KEY}")
     except InputError as exc:
         raise NCProgramError(path, None, str(exc)) from None
-    return reconcile(recorded, given, path, rotary_axes)
+    return reconcile(recorded, given, path, rotary_axes, given_by=given_by, fix=fix)
