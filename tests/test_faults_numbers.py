@@ -369,3 +369,20 @@ def test_simulate_runs_a_head_program_from_its_header(head_probe, tmp_path, caps
                                                     "(--sphere-radius)")):
         refused(*run(capsys, *short, *extra, "--out", str(tmp_path / "x.txt"))[::2], said, "give --program alone")
     assert not (tmp_path / "x.txt").exists()
+
+
+def test_a_program_pige_did_not_write_is_never_pointed_at_by_a_line(tmp_path, capsys) -> None:
+    """Issue 43, 18: a 3 m head --tool was refused as "h3m.ngc:132: probing move ... ends 0.999 mm past its
+    surface", a line of a file that was never written.  Now the refusal says the program made failed its read-back,
+    that nothing was written, and what the 3 m lever does to the 4-decimal angles."""
+    out = tmp_path / "h3m.ngc"
+    far = ["--machine", FORK, "--sphere", "100,20,60", *S, "--tool", "0,0,-3000", *CONTROLLER]
+    code, _, err = run(capsys, "program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *far, "--out",
+                       str(out))
+    refused(code, err, f"the probing program for {out} fails pige's read-back at its line", "nothing was written",
+            "the stylus 3000 mm from its pivot", "up to 2.6 um: check --tool")
+    assert f"{out}:" not in err
+    code, _, err = run(capsys, "simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *far, "--out",
+                       str(tmp_path / "log.txt"))
+    refused(code, err, "the probing program made for these options fails pige's read-back", "check --tool")
+    assert "<program>:" not in err and list(tmp_path.iterdir()) == []

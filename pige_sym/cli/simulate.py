@@ -33,7 +33,7 @@ def _run_probe(args: argparse.Namespace) -> int:
     from pige_sym.model.effects import parse_effect
     from pige_sym.model.trajectories import make_trajectory
     from pige_sym.nc.probe_program import plan_probing
-    from pige_sym.nc.probe_readback import verify_probe_program
+    from pige_sym.nc.probe_readback import verify_probe_program, verify_rendered_program
     from pige_sym.nc.probe_render import render_probe_program
     from pige_sym.nc.program_file import read_program
     from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
@@ -49,7 +49,10 @@ def _run_probe(args: argparse.Namespace) -> int:
         setup = probe_setup(args, kern.MACHINE_CODE, dialect=args.dialect, controller_required=False)
         traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
         text = render_probe_program(plan_probing(setup, traj.angles_deg, traj.description), args.dialect)
-    verify_probe_program(text, args.dialect, setup, tuple(kern.ROTARY_AXES), path=args.program or "<program>")
+    if args.program:
+        verify_probe_program(text, args.dialect, setup, tuple(kern.ROTARY_AXES), path=args.program)
+    else:
+        verify_rendered_program(text, args.dialect, setup, tuple(kern.ROTARY_AXES))
     offset = parse_vec3(args.setup_offset, "--setup-offset")
     bent = parse_vec3(args.stylus_error, "--stylus-error")
     if any(bent) and setup.tool_mm is None:
