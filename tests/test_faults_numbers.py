@@ -386,3 +386,47 @@ def test_a_program_pige_did_not_write_is_never_pointed_at_by_a_line(tmp_path, ca
                        str(tmp_path / "log.txt"))
     refused(code, err, "the probing program made for these options fails pige's read-back", "check --tool")
     assert "<program>:" not in err and list(tmp_path.iterdir()) == []
+
+
+def test_the_history_refuses_absurd_estimates_when_adding_and_when_reading(tmp_path, capsys, monkeypatch) -> None:
+    """Issue 43, 4: estimates of NaN or 1e308 in the history were compared as "no significant change", exit 0.
+    Reading refuses them as damage (run and column named); adding never stores what reading would refuse."""
+    import shutil
+    import sqlite3
+
+    import pige_sym.verdict.history.store as store
+
+    runs = [tmp_path / f"run{k}.csv" for k in (1, 2)]
+    for k, f in enumerate(runs, 1):
+        assert main(["simulate", "--out", str(f), "--seed", str(k), "--points", "12"]) == 0
+    db = tmp_path / "h.sqlite"
+    for f in runs:
+        assert main(["history", "add", str(f), "--machine-id", "M", "--db", str(db), "--method", "gauss-newton"]) == 0
+    capsys.readouterr()
+    for first, said in (("NaN", "values_json: not valid JSON (NaN is not allowed"),
+                        ("1e308", "values_json: EY0A = 1e+308 um is beyond ±10000"),
+                        ("-1e308", "values_json: EY0A = -1e+308 um is beyond ±10000"),
+                        ("1e999", "values_json: EY0A: expected a finite number or null")):
+        bad = tmp_path / "bad.sqlite"
+        shutil.copy(db, bad)
+        with sqlite3.connect(bad) as conn:
+            text = conn.execute("SELECT values_json FROM runs WHERE id = 2").fetchone()[0]
+            conn.execute("UPDATE runs SET values_json = ? WHERE id = 2", (f"[{first}," + text.split(",", 1)[1],))
+        conn.close()
+        code, out, err = run(capsys, "history", "show", "M", "--db", str(bad))
+        refused(code, err, f"is damaged (run 2, {said}")
+        assert "no significant change" not in out
+    real = store._estimate_set
+
+    def absurd(paths: list[Path], method: str) -> tuple:
+        read, result, effects, stored = real(paths, method)
+        result.values[0] = 1e308  # what a faulty fit or a damaged input could hand on
+        return read, result, effects, stored
+
+    monkeypatch.setattr(store, "_estimate_set", absurd)
+    third = tmp_path / "run3.csv"
+    assert main(["simulate", "--out", str(third), "--seed", "3", "--points", "12"]) == 0
+    before = db.read_bytes()
+    refused(*run(capsys, "history", "add", str(third), "--machine-id", "M", "--db", str(db), "--method",
+                 "gauss-newton")[::2], "run3.csv: not added to the history", "EY0A = 1e+308 um is beyond ±10000")
+    assert db.read_bytes() == before

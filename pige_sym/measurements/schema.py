@@ -4,9 +4,9 @@ Reading (:func:`load_json`)
 ---------------------------
 Only regular files (no FIFO or device), at most :data:`MAX_JSON_BYTES`, UTF-8 (a BOM is
 allowed), strict JSON: ``NaN``/``Infinity`` tokens, repeated keys and nesting deeper
-than :data:`MAX_DEPTH` are refused.  An integer longer than :data:`MAX_INT_DIGITS` digits is read as the float
-it denotes (a 400-digit one is ``inf``, refused wherever a finite number is required, as ``1e400`` is).  Every refusal is a
-:class:`~pige_sym.errors.FileFormatError` naming the file, the line when known, and the
+than :data:`MAX_DEPTH` are refused.  An integer longer than :data:`MAX_INT_DIGITS` digits is read as the
+float it denotes (a 400-digit one is ``inf``, refused wherever a finite number is required, as ``1e400`` is).
+Every refusal is a :class:`~pige_sym.errors.FileFormatError` naming the file, the line when known, and the
 field as a path (``pige.EX0C``).
 
 Schemas (:func:`from_json`)
@@ -314,8 +314,20 @@ class ParamsFile:
     axis_sense: dict[str, int] = field(default_factory=dict)
 
 
+def unphysical(names: list[str], values: Any, std: Any) -> tuple[str, float] | None:
+    """The first (name, value) of an estimate beyond ±:data:`MAX_PIGE` by more than 3 standard errors, or None.
+
+    The rule :func:`refuse_unphysical` and the history's reader apply (an undetermined value, NaN, is none).
+    """
+    for name, v, s in zip(names, values, std, strict=True):
+        v, s = float(v), float(s)
+        if math.isfinite(v) and abs(v) - 3 * (s if math.isfinite(s) else 0.0) > MAX_PIGE:
+            return name, v
+    return None
+
+
 def refuse_unphysical(names: list[str], values: Any, std: Any, units: dict[str, str], source: str) -> None:
-    """Refuse an estimate of a PIGE beyond ±:data:`MAX_PIGE` by more than 3 standard errors.
+    """Refuse an estimate of a PIGE beyond ±:data:`MAX_PIGE` by more than 3 standard errors (:func:`unphysical`).
 
     The parameter reader refuses such values; an identification that would print one comes from a wrong
     set-up (a ball, pivot or tool position, a probe import's options) or another machine's data, not from a
@@ -325,16 +337,15 @@ def refuse_unphysical(names: list[str], values: Any, std: Any, units: dict[str, 
     ------
     IdentificationError
     """
-    import math
-
     from pige_sym.errors import IdentificationError
 
-    for name, v, s in zip(names, values, std, strict=True):
-        if math.isfinite(v) and abs(v) - 3 * (s if math.isfinite(s) else 0.0) > MAX_PIGE:
-            raise IdentificationError(f"{source}: {name} = {v:.1f} {units.get(name, '')} is beyond ±{MAX_PIGE:g}, "
-                                      "more than any machine that runs: the set-up in the file is wrong (ball_mm, "
-                                      "pivot_<axis>_mm, tool_mm, axis_sense; for a probe import --pivot, --units, "
-                                      "--axis-sense) or the data are another machine's")
+    found = unphysical(names, values, std)
+    if found is not None:
+        name, v = found
+        raise IdentificationError(f"{source}: {name} = {v:.1f} {units.get(name, '')} is beyond ±{MAX_PIGE:g}, "
+                                  "more than any machine that runs: the set-up in the file is wrong (ball_mm, "
+                                  "pivot_<axis>_mm, tool_mm, axis_sense; for a probe import --pivot, --units, "
+                                  "--axis-sense) or the data are another machine's")
 
 
 def read_params_file(path: PathLike, *, machine: str | None = None, allow_missing: bool = False) -> ParamsFile:
