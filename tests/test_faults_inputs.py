@@ -255,3 +255,21 @@ def test_a_sense_refusal_names_what_disagrees_not_an_option_never_given(tmp_path
     code, _, err = run(capsys, "compensate", str(prog), "--params", str(params), "--axis-sense", "C=-1", "--out",
                        str(out))
     one_line_refusal(code, err, "but --axis-sense says C=-1")
+
+
+def test_report_refuses_ballbar_files_of_two_machines_as_identify_does(tmp_path, capsys) -> None:
+    """Issue 43, "not a defect", decided: ``report`` took an AC and a BC ballbar file together (a joint section per
+    machine) where ``identify`` refuses them; files fitted jointly must measure one machine in both (one check)."""
+    files = []
+    for machine in (AC, "wC'B'bXYZ(C1)t"):
+        f = tmp_path / f"bb_{len(files)}.csv"
+        assert main(["simulate", "--instrument", "ballbar", "--machine", machine, "--setup", "radial", "--axis", "C",
+                     "--seed", "1", "--out", str(f)]) == 0
+        files.append(str(f))
+    capsys.readouterr()
+    said = "the files measure different machines (wC'A'bXYZ(C1)t, wC'B'bXYZ(C1)t)"
+    one_line_refusal(*run(capsys, "identify", *files)[::2], said, "identify them apart")
+    out = tmp_path / "rep"
+    one_line_refusal(*run(capsys, "report", *files, "--out", str(out), "--no-figures")[::2], said,
+                     "report them apart")
+    assert not out.exists()

@@ -41,6 +41,7 @@ from pige_sym.compensation.parameters import angle_extensions
 from pige_sym.diagnosis.diagnose import DiagnosisResult, diagnose
 from pige_sym.diagnosis.joint import JointDiagnosis, diagnose_joint
 from pige_sym.errors import FileFormatError, InputError
+from pige_sym.identification.joint import common_machine
 from pige_sym.identification.least_squares import METHODS, IdentificationError, identify
 from pige_sym.identification.studies import projection_study, sobol_study
 from pige_sym.kernels import load_kernels
@@ -172,7 +173,9 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
         read (and their truth sidecars checked) before any computation, so a bad file fails fast, and a
         file given twice is refused.  Each R-test/probe file gets its own section; the files of a
         machine with a ballbar file (or, with ``joint``, two files or more) also get a joint section
-        (:mod:`~pige_sym.report.joint_section`).  May be empty with ``compare`` or ``history``.
+        (:mod:`~pige_sym.report.joint_section`).  Files fitted jointly (a ballbar file among them, or ``joint``)
+        must measure one machine, as ``identify`` requires of them (the same check): an AC and a BC ballbar file
+        are refused, not reported side by side.  May be empty with ``compare`` or ``history``.
     studies : iterable of {"projection", "sobol"}
     program : path-like, optional
         An 840D-style NC program compensated with each measurement's estimate.
@@ -212,6 +215,8 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     paths = [Path(p) for p in measurement_paths]
     _check_options(method, presets, sobol_samples, paths, compare is not None or history is not None)
     loaded, every = _read_inputs(paths)
+    if joint or any(isinstance(x, BallbarRun) for _, x, _ in every):  # fitted jointly: one machine, as identify asks
+        common_machine([(p.name, x) for p, x, _ in every], apart="report them apart (one report per machine)")
     tol = read_tolerances(tolerances) if tolerances is not None else None
     program_text = read_program(program) if program is not None else None
     steps_per_file = 4 + len(study_set) + (program is not None)
