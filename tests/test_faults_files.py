@@ -307,6 +307,26 @@ def test_an_interrupt_lost_in_a_finaliser_still_ends_the_report_with_130(inputs,
     assert not out.exists() and [p.name for p in tmp_path.iterdir()] == []
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_an_interrupt_while_the_commands_are_loaded_ends_with_130(monkeypatch, capsys, default_sigint) -> None:
+    """Building the parser imports every command's module (seconds on a loaded machine): Ctrl-C there gave a
+    traceback, or NumPy's "PyCapsule_Import could not import module" and status 1."""
+    import importlib
+
+    cli = importlib.import_module("pige_sym.cli.main")  # the module (pige_sym.cli.main is also the function)
+
+    def import_broken_by_the_interrupt() -> None:
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.01)
+        except KeyboardInterrupt:  # what NumPy's C import does with it
+            raise ImportError('PyCapsule_Import could not import module "datetime"') from None
+
+    monkeypatch.setattr(cli, "build_parser", import_broken_by_the_interrupt)
+    assert cli.main(["gen", "--target", "linuxcnc", "wC'A'bXYZ(C1)t"]) == 130
+    assert capsys.readouterr().err == "pige gen: interrupted\n"
+
+
 # ------------------------------------------------------------------------- issue 43, 6: a damaged history database
 
 

@@ -109,15 +109,22 @@ class _Interrupts:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``pige``; returns the exit status."""
+    """Entry point of ``pige``; returns the exit status (an interrupt, also while the parser is built: 130)."""
     tolerant_console()
-    parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv:  # `pige` alone: what it can do
-        parser.print_help()
-        return 0
-    args = parser.parse_args(argv)
     with _Interrupts() as interrupts:
+        try:
+            parser = build_parser()  # imports every command's module: seconds on a loaded machine
+            if not argv:  # `pige` alone: what it can do
+                parser.print_help()
+                return 0
+            args = parser.parse_args(argv)
+        except KeyboardInterrupt:
+            return _interrupted(argv[0] if argv else "")
+        except Exception:
+            if interrupts.seen:  # an import the interrupt broke (NumPy's C modules turn it into an ImportError)
+                return _interrupted(argv[0] if argv else "")
+            raise
         return _run(args, interrupts)
 
 
@@ -132,16 +139,16 @@ def _run(args: argparse.Namespace, interrupts: _Interrupts) -> int:
         sys.stderr.close()
         return 0
     except KeyboardInterrupt:
-        return _interrupted(args)
+        return _interrupted(args.command)
     except Exception:
         if interrupts.seen:  # a KeyboardInterrupt that a C extension turned into another exception
-            return _interrupted(args)
+            return _interrupted(args.command)
         raise
     if interrupts.seen:  # a KeyboardInterrupt dropped in a finaliser: the command went on, but was interrupted
-        return _interrupted(args)
+        return _interrupted(args.command)
     return status
 
 
-def _interrupted(args: argparse.Namespace) -> int:
-    print(f"pige {args.command}: interrupted", file=sys.stderr)
+def _interrupted(command: str) -> int:
+    print(f"pige {command}: interrupted" if command else "pige: interrupted", file=sys.stderr)
     return 130
