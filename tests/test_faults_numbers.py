@@ -361,8 +361,10 @@ def test_simulate_runs_a_head_program_from_its_header(head_probe, tmp_path, caps
                        str(csv))
     assert code == 0, err
     np.testing.assert_allclose(read_measurement(csv).tool_mm, [0.0, 0.0, -160.0])
-    # the long form without the controller options: the header states them too
-    code, _, err = run(capsys, *short, *HEAD_SET_UP, "--out", str(tmp_path / "long.txt"))
+    # the long form without the radii, the tool and the controller options: the header states them too
+    code, _, err = run(capsys, *short, "--machine", FORK, "--sphere", "100,20,60", "--out", str(tmp_path / "long.txt"))
+    assert code == 0, err
+    code, _, err = run(capsys, *short, *HEAD_SET_UP, "--out", str(tmp_path / "long.txt"), "--force")
     assert code == 0, err
     for extra, said in ((["--tool", "0,0,-150"], "states tool_mm 0, 0, -160, but this run has 0, 0, -150 (--tool)"),
                         (["--sphere-radius", "12"], "states sphere_radius_mm 12.7, but this run has 12 "

@@ -93,7 +93,10 @@ def _program_setup(args: argparse.Namespace, text: str) -> Any:
     if not args.sphere:
         return _stated(_header_probe_setup(args, h), args, h)
     dialect = args.dialect if _controller_given(args) else None  # None: the header's controller state, unchecked here
-    return _stated(probe_setup(args, args.machine, dialect=dialect, controller_required=False), args, h)
+    radii = {k: getattr(args, k) if getattr(args, k) is not None else stated  # the header's radii where none is given
+             for k, stated in (("sphere_radius", h.sphere_radius_mm), ("stylus_radius", h.stylus_radius_mm))}
+    filled = argparse.Namespace(**{**vars(args), **radii})
+    return _stated(probe_setup(filled, args.machine, dialect=dialect, controller_required=False), args, h)
 
 
 def _controller_given(args: argparse.Namespace) -> bool:
