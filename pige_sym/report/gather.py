@@ -214,9 +214,7 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     study_set = parse_studies(studies)
     paths = [Path(p) for p in measurement_paths]
     _check_options(method, presets, sobol_samples, paths, compare is not None or history is not None)
-    loaded, every = _read_inputs(paths)
-    if joint or any(isinstance(x, BallbarRun) for _, x, _ in every):  # fitted jointly: one machine, as identify asks
-        common_machine([(p.name, x) for p, x, _ in every], apart="report them apart (one report per machine)")
+    loaded, every = _read_inputs(paths, joint)
     tol = read_tolerances(tolerances) if tolerances is not None else None
     program_text = read_program(program) if program is not None else None
     steps_per_file = 4 + len(study_set) + (program is not None)
@@ -306,15 +304,18 @@ def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, Truth | 
     return out
 
 
-def _read_inputs(paths: list[Path]) -> tuple[list[tuple[Path, Measurement, Truth | None]],
-                                             list[tuple[Path, Measurement | BallbarRun, Truth | None]]]:
-    """(R-test/probe files with their truth, every file with its truth), each read and checked once."""
+def _read_inputs(paths: list[Path], joint: bool) -> tuple[list[tuple[Path, Measurement, Truth | None]],
+                                                         list[tuple[Path, Measurement | BallbarRun, Truth | None]]]:
+    """(R-test/probe files with their truth, every file with its truth), each read and checked once; files fitted
+    jointly (a ballbar file among them, or ``joint``) must measure one machine, as identify asks (the same check)."""
     loaded, every = [], []
     for p, item in read_files(paths) if paths else []:
         truth = read_truth(p, item.machine)
         every.append((Path(p), item, truth))
         if isinstance(item, Measurement):
             loaded.append((Path(p), item, truth))
+    if joint or any(isinstance(x, BallbarRun) for _, x, _ in every):
+        common_machine([(p.name, x) for p, x, _ in every], apart="report them apart (one report per machine)")
     return loaded, every
 
 
