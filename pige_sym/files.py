@@ -208,7 +208,8 @@ def note_interrupt() -> None:
 
 
 def clear_interrupt() -> None:
-    """Forget a noted interrupt (a command starts or ends)."""
+    """Forget a noted interrupt: a command starts or ends, or code that catches KeyboardInterrupt on purpose has
+    handled it (the acquisition, which then writes its summary)."""
     _INTERRUPTED.clear()
 
 
