@@ -66,14 +66,12 @@ def _reject_constant(token: str) -> float:
     raise ValueError(f"{token} is not allowed in pige JSON (use null for 'no value')")
 
 
-#: Digits of the longest integer read as an integer (any 64-bit count); a longer one is read as the number it is, a
-#: float (``inf`` beyond ±1.8e308), so every bound and finiteness check applies to it as to ``1e400``.
+#: Digits of the longest integer read as an int (a 64-bit count); a longer one is the float it denotes.
 MAX_INT_DIGITS = 18
 
 
 def _json_int(text: str) -> int | float:
-    """An integer literal of JSON: an int up to :data:`MAX_INT_DIGITS` digits, else the float it denotes (a 400-digit
-    integer would pass for a number and overflow ``float()`` later, wherever a reader converts it)."""
+    """A JSON integer: an int, or beyond :data:`MAX_INT_DIGITS` digits the float (``inf``) no ``float()`` overflows."""
     return int(text) if len(text.lstrip("-")) <= MAX_INT_DIGITS else float(text)
 
 
@@ -123,14 +121,7 @@ def load_json(path: PathLike, what: str = "JSON file") -> Any:
 
 
 def strict_loads(text: str) -> Any:
-    """The JSON value of ``text`` as :func:`load_json` reads a file (its rules, module docstring).
-
-    Raises
-    ------
-    ValueError
-        ``json.JSONDecodeError`` (with its line) for text that is not JSON; a plain ValueError for NaN/Infinity,
-        a repeated key or nesting deeper than :data:`MAX_DEPTH`.
-    """
+    """The JSON value of ``text`` by :func:`load_json`'s rules; ValueError (``JSONDecodeError``: with the line)."""
     try:
         data = json.loads(text, parse_constant=_reject_constant, parse_int=_json_int, object_pairs_hook=_no_repeats)
     except RecursionError:
@@ -314,20 +305,8 @@ class ParamsFile:
     axis_sense: dict[str, int] = field(default_factory=dict)
 
 
-def unphysical(names: list[str], values: Any, std: Any) -> tuple[str, float] | None:
-    """The first (name, value) of an estimate beyond ±:data:`MAX_PIGE` by more than 3 standard errors, or None.
-
-    The rule :func:`refuse_unphysical` and the history's reader apply (an undetermined value, NaN, is none).
-    """
-    for name, v, s in zip(names, values, std, strict=True):
-        v, s = float(v), float(s)
-        if math.isfinite(v) and abs(v) - 3 * (s if math.isfinite(s) else 0.0) > MAX_PIGE:
-            return name, v
-    return None
-
-
 def refuse_unphysical(names: list[str], values: Any, std: Any, units: dict[str, str], source: str) -> None:
-    """Refuse an estimate of a PIGE beyond ±:data:`MAX_PIGE` by more than 3 standard errors (:func:`unphysical`).
+    """Refuse an estimate of a PIGE beyond ±:data:`MAX_PIGE` by more than 3 standard errors.
 
     The parameter reader refuses such values; an identification that would print one comes from a wrong
     set-up (a ball, pivot or tool position, a probe import's options) or another machine's data, not from a
@@ -338,8 +317,9 @@ def refuse_unphysical(names: list[str], values: Any, std: Any, units: dict[str, 
     IdentificationError
     """
     from pige_sym.errors import IdentificationError
+    from pige_sym.measurements.measurement import unphysical
 
-    found = unphysical(names, values, std)
+    found = unphysical(names, values, std, MAX_PIGE)
     if found is not None:
         name, v = found
         raise IdentificationError(f"{source}: {name} = {v:.1f} {units.get(name, '')} is beyond ±{MAX_PIGE:g}, "

@@ -11,7 +11,7 @@ plain columns.  A row is decoded (:func:`decode_run`) only when it is what
 - ``dof``: a whole number ≥ 0; ``rms_um``: null or a finite number ≥ 0; ``effects_json``: a list of objects;
   ``check_json``: null or an object;
 - no estimate beyond ±:data:`~pige_sym.measurements.schema.MAX_PIGE` by more than 3 standard errors
-  (:func:`~pige_sym.measurements.schema.unphysical`, what identify refuses): no machine that runs has one.
+  (:func:`~pige_sym.measurements.measurement.unphysical`, what identify refuses): no machine that runs has one.
 
 Anything else raises :class:`~pige_sym.errors.SchemaRefusal` naming the column; the store turns it into a
 one-line refusal naming the database, the run and how to recover.  The same checks run on a run before it is added
@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 
 from pige_sym.errors import SchemaRefusal
-from pige_sym.measurements.schema import MAX_PIGE, strict_loads, unphysical
+from pige_sym.measurements.measurement import unphysical
+from pige_sym.measurements.schema import MAX_PIGE, strict_loads
 
 TEXT_COLUMNS = ("machine_id", "file_name", "file_sha256", "measured_at", "time_source", "added_at", "machine_code",
                 "method")
@@ -177,7 +178,7 @@ def decode_run(row: Any) -> RunRecord:
     check = None if get["check_json"] is None else _json(get, "check_json")
     if check is not None and not isinstance(check, dict):
         raise SchemaRefusal("check_json", "expected an object or null")
-    absurd = unphysical(params, values, std)
+    absurd = unphysical(params, values, std, MAX_PIGE)
     if absurd is not None:
         name, v = absurd
         raise SchemaRefusal("values_json", f"{name} = {v:g} {units.get(name, '')} is beyond ±{MAX_PIGE:g}, more "
