@@ -14,7 +14,7 @@
 #    8  EB0B     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 4b08d6474d65f1af
+# input hash   : b8a4ac05aab7e964
 """R-test kernels for wC'bXYZB(C1)t (generated; do not edit — pige gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -39,7 +39,7 @@ UNITS = {'EX0B': 'um', 'EZ0B': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EA0B': 'urad',
 BASIS = ('1', 'cos(B)', 'sin(B)', 'cos(C)', 'sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '4b08d6474d65f1af'
+GENERATOR_HASH = 'b8a4ac05aab7e964'
 
 
 def _angles(angles_deg: Any) -> np.ndarray:
@@ -358,6 +358,29 @@ def orientation_jacobian(angles_deg):
     out[:, 1, 2] += -1 * c_B * s_C
     out[:, 0, 3] += -1 * s_B * c_C
     out[:, 1, 3] += -1 * s_B * s_C
+    return out
+
+
+def motion_orientation_jacobian(angles_deg):
+    """Tool-orientation error per unit error motion, shape=(n, 3, 12) [µrad per µm or µrad].
+
+    Columns MOTION_PARAMETERS; ω as orientation_jacobian (the spindle frame relative to the workpiece, in W).
+    """
+    cos_th, sin_th = _cos_sin(angles_deg)
+    n = cos_th.shape[1]
+    c_C = cos_th[1]
+    s_C = sin_th[1]
+    out = np.zeros((n, 3, 12))
+    out[:, 2, 5] += 1 * 1.0
+    out[:, 2, 11] += -1 * 1.0
+    out[:, 0, 3] += 1 * c_C
+    out[:, 0, 9] += -1 * c_C
+    out[:, 1, 4] += 1 * c_C
+    out[:, 1, 10] += -1 * c_C
+    out[:, 0, 4] += -1 * s_C
+    out[:, 0, 10] += 1 * s_C
+    out[:, 1, 3] += 1 * s_C
+    out[:, 1, 9] += -1 * s_C
     return out
 
 

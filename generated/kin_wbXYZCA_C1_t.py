@@ -14,7 +14,7 @@
 #    8  EA0A     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 7499d6d7f8d64367
+# input hash   : d0d223d893743fcd
 """R-test kernels for wbXYZCA(C1)t (generated; do not edit — pige gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -39,7 +39,7 @@ UNITS = {'EY0A': 'um', 'EZ0A': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EB0A': 'urad',
 BASIS = ('1', 'cos(A)', 'sin(A)', 'cos(C)', 'sin(C)', 'cos(A)*cos(C)', 'cos(A)*sin(C)', 'sin(A)*cos(C)', 'sin(A)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '7499d6d7f8d64367'
+GENERATOR_HASH = 'd0d223d893743fcd'
 
 
 def _angles(angles_deg: Any) -> np.ndarray:
@@ -382,6 +382,27 @@ def orientation_jacobian(angles_deg):
     out[:, 0, 2] += 1 * c_A * s_C
     out[:, 1, 3] += 1 * s_A * c_C
     out[:, 0, 3] += -1 * s_A * s_C
+    return out
+
+
+def motion_orientation_jacobian(angles_deg):
+    """Tool-orientation error per unit error motion, shape=(n, 3, 12) [µrad per µm or µrad].
+
+    Columns MOTION_PARAMETERS; ω as orientation_jacobian (the spindle frame relative to the workpiece, in W).
+    """
+    cos_th, sin_th = _cos_sin(angles_deg)
+    n = cos_th.shape[1]
+    c_C = cos_th[1]
+    s_C = sin_th[1]
+    out = np.zeros((n, 3, 12))
+    out[:, 0, 9] += 1 * 1.0
+    out[:, 1, 10] += 1 * 1.0
+    out[:, 2, 5] += 1 * 1.0
+    out[:, 2, 11] += 1 * 1.0
+    out[:, 0, 3] += 1 * c_C
+    out[:, 1, 4] += 1 * c_C
+    out[:, 0, 4] += -1 * s_C
+    out[:, 1, 3] += 1 * s_C
     return out
 
 

@@ -384,7 +384,7 @@ def compensate(program: PathLike,
                parameters: IdentificationResult | DiagnosisResult | CompensationParameters | PathLike, *,
                machine: str | None = None, dialect: str | None = None, pass_through: bool = False,
                max_change_mm: float | None = None, max_change_deg: float | None = None, allow_missing: bool = False,
-               rtcp_on: Sequence[str] = (), rtcp_off: Sequence[str] = ()) -> CompensationResult:
+               rtcp_on: Sequence[str] = (), rtcp_off: Sequence[str] = (), enter: str = "weighed") -> CompensationResult:
     """Rewrite an NC program so the tool lands where the nominal program intended (``pige compensate``).
 
     The output is in the program's own dialect, read back and verified before it is returned;
@@ -410,6 +410,9 @@ def compensate(program: PathLike,
         Set PIGEs without a value to 0 (and say so) instead of refusing.
     rtcp_on, rtcp_off : sequence of str
         Extra codes that switch RTCP on or off on this controller (``pige compensate --rtcp-on``).
+    enter : {"weighed", "all"}
+        Enter each estimate weighed by its uncertainty (``report.weighing`` says what and why,
+        :mod:`pige_sym.compensation.weighing`), or every estimate as it is.
 
     Returns
     -------
@@ -442,7 +445,7 @@ def compensate(program: PathLike,
     return compensate_nc(text, params, path=str(program), dialect=dialect, pass_through=pass_through,
                          max_change_mm=DEFAULT_MAX_CHANGE_MM if max_change_mm is None else max_change_mm,
                          max_change_deg=DEFAULT_MAX_CHANGE_DEG if max_change_deg is None else max_change_deg,
-                         rtcp_on=tuple(rtcp_on), rtcp_off=tuple(rtcp_off))
+                         rtcp_on=tuple(rtcp_on), rtcp_off=tuple(rtcp_off), enter=enter)
 
 
 def plan(machine: str = DEFAULT_MACHINE, *, points: int = 30, limits: Sequence[str] = (), noise_um: float = 0.25,

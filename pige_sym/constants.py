@@ -21,6 +21,10 @@ SHIPPED_MACHINES: tuple[str, ...] = (
     "wC'bXYZB(C1)t",
 )
 
+#: Largest magnitude of a PIGE, an effect parameter or a map value [µm or µrad]: 10 mm or 10 mrad is far beyond a
+#: machine that runs at all (every file reader refuses more).
+MAX_PIGE = 1e4
+
 #: Ball centre at the reference pose, workpiece frame [mm] (CONVENTIONS §4).
 DEFAULT_BALL_MM: tuple[float, float, float] = (120.0, 0.0, 80.0)
 
@@ -43,3 +47,6 @@ DEFAULT_DWELL_S = 7.0
 #: Largest change pige compensate may make to a word without refusing the program [mm], [deg].
 DEFAULT_MAX_CHANGE_MM = 0.2
 DEFAULT_MAX_CHANGE_DEG = 0.1
+#: Travel of a rotary axis that does not turn fully (A, B) on which controller entries are judged, unless
+#: ``pige compensate --travel`` gives it [deg, CONVENTIONS angle].  A full-turn C axis is judged on 0-360 deg.
+DEFAULT_TILT_TRAVEL_DEG: tuple[float, float] = (-90.0, 90.0)

@@ -148,7 +148,7 @@ def test_entries_that_would_make_the_tool_point_worse_are_flagged() -> None:
     values = {"EY0A": 12.0, "EZ0A": -9.0, "EX0C": -14.0, "EY0C": 10.0, "EA0A": 100.0, "EC0C": -50.0}
     worse = Machine(HEAD, values, {}, np.zeros(3), np.array([0.0, 0.0, -250.0])).params()
     scope = tool_point_summary(worse, "fanuc")
-    assert scope.rmse_table_only_um > scope.rmse_before_um
+    assert scope.controller_only.expected_um > scope.before.expected_um
     assert "WARNING: entering only these values makes the predicted tool-point error LARGER" in \
         format_controller(worse, "fanuc")
     better = Machine(HEAD, {"EY0A": 12.0, "EZ0A": -9.0}, {}, np.zeros(3), np.array([0.0, 0.0, -250.0])).params()

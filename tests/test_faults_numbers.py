@@ -24,6 +24,7 @@ from pige_sym.errors import IdentificationError
 from pige_sym.measurements.measurement import MEASUREMENT_FORMATS
 from pige_sym.measurements.rtest import read_measurement
 from pige_sym.measurements.schema import MAX_PIGE
+from pige_sym.options import strict_float
 from testdata import refused_in_one_line
 
 S = ["--sphere-radius", "12.7", "--stylus-radius", "1.5"]
@@ -206,7 +207,7 @@ def test_import_probe_never_writes_a_file_identify_refuses(probe_log, tmp_path_f
                 lines[i] = lines[i][:k] + str(d) + lines[i][k + 1:]
         elif kind == "junk":
             lines.insert(i, "G38.2 X1 Y2" if d % 2 else "1 2 3")
-        elif kind == "scale":
+        elif kind == "scale" and all(strict_float(v) is not None for v in lines[i].split(" ")):  # not junk
             lines[i] = " ".join(f"{float(v) * (1 + d):f}" for v in lines[i].split(" "))
     d = tmp_path_factory.mktemp("dmg")
     log, out = d / "log.txt", d / "p.csv"
@@ -432,3 +433,40 @@ def test_the_history_refuses_absurd_estimates_when_adding_and_when_reading(tmp_p
     refused(*run(capsys, "history", "add", str(third), "--machine-id", "M", "--db", str(db), "--method",
                  "gauss-newton")[::2], "run3.csv: not added to the history", "EY0A = 1e+308 um is beyond ±10000")
     assert db.read_bytes() == before
+
+
+# ------------------------------------------------------------------- issue 43 item 2: today's configuration, bounded
+
+BOUNDED_INI = """[KINS]
+KINEMATICS = xyzac-trt-kins
+[HAL]
+HALCMD = loadrt xyzac-trt-kins
+HALCMD = net :z-offset xyzac-trt-kins.z-offset
+HALCMD = setp xyzac-trt-kins.x-rot-point 0
+HALCMD = setp xyzac-trt-kins.y-rot-point 0
+HALCMD = setp xyzac-trt-kins.z-rot-point 0
+HALCMD = {line}
+"""
+
+
+@pytest.mark.parametrize("line, said", [
+    ("setp xyzac-trt-kins.y-offset 1e300", "machine.ini:9: y-offset = 1e+300 mm is not a position on a machine"),
+    ("setp xyzac-trt-kins.y-offset 99999999", "machine.ini:9: y-offset = 99999999 mm is not a position"),
+    ("setp xyzac-trt-kins.y-offset -100000.5", "machine.ini:9: y-offset = -100000.5 mm"),
+    ("sets :z-offset 1e300", "machine.ini:9: z-offset = 1e+300 mm (through signal :z-offset)"),
+    ("setp xyzac-trt-kins.tool-offset 1e12", "machine.ini:9: tool-offset = 1e+12 mm"),
+    ("setp xyzac-trt-kins.conventional-directions 7", "machine.ini:9: conventional-directions = 7: the pin is a bit"),
+])
+def test_current_values_no_machine_has_are_refused_at_their_line(tmp_path, capsys, line, said) -> None:
+    """A value of ``--current`` beyond the bound of every position pige reads (``MAX_POSITION_MM``) would be
+    printed back as an absolute line (a 300-digit ``setp``): refused, naming the file, the line and the pin."""
+    params = tmp_path / "params.json"
+    params.write_text('{"machine": "wC\'A\'bXYZ(C1)t", "pige": {"EY0A": 4.5, "EZ0A": 3.1, "EB0A": 0.5, "EC0A": 11.4, '
+                      '"EX0C": -5.9, "EY0C": -14.9, "EA0C": 2.3, "EB0C": 2.5}}')
+    ini = tmp_path / "machine.ini"
+    ini.write_text(BOUNDED_INI.format(line=line))
+    refused(*run(capsys, "compensate", "--params", str(params), "--controller", "linuxcnc", "--current",
+                 str(ini))[::2], said)
+    pins = "y-offset=1e300,x-rot-point=0,y-rot-point=0,z-rot-point=0,z-offset=0"
+    refused(*run(capsys, "compensate", "--params", str(params), "--controller", "linuxcnc", "--current", pins)[::2],
+            "--current PIN=VALUE", "y-offset = 1e+300 mm")

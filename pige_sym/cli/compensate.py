@@ -56,9 +56,20 @@ def _axis_sense(args: argparse.Namespace, params: Any) -> dict[str, int]:
     return reconcile(params.axis_sense, axis_sense_option(args, axes), str(args.params), axes)
 
 
+def _current(args: argparse.Namespace) -> Any:
+    """``--current`` read (:func:`~pige_sym.compensation.controllers.hal_config.read_current`), for a controller."""
+    if args.current is None:
+        return None
+    if not args.controller:
+        raise InputError("--current is today's configuration of a controller: give it with --controller linuxcnc")
+    from pige_sym.compensation.controllers.hal_config import read_current
+
+    return read_current(args.current)
+
+
 def _run(args: argparse.Namespace) -> int:
     from pige_sym import api
-    from pige_sym.compensation.controllers import format_controller
+    from pige_sym.compensation.controllers import check_before_writing, entered_for_controller, format_controller
     from pige_sym.compensation.controllers.axis_lines import controller_corrections
     from pige_sym.compensation.parameters import load_parameters
     from pige_sym.nc.program_file import read_program
@@ -70,16 +81,17 @@ def _run(args: argparse.Namespace) -> int:
     for name in params.ignored:
         if "--allow-missing" in name:
             print(f"warning: {name}")
-    if args.controller and not args.json:
-        from pige_sym.compensation.controllers.hal_config import read_current
-
-        current = read_current(args.current) if args.current else None
-        print(format_controller(params, args.controller, carrier=args.carrier, current=current,
-                                heidenhain_trans=args.heidenhain_trans))
+    current = _current(args)
+    if args.controller:
+        entered = entered_for_controller(params, args.enter, _travel(args.travel))
+        if not args.json:
+            print(format_controller(entered, args.controller, carrier=args.carrier, current=current,
+                                    heidenhain_trans=args.heidenhain_trans))
     if args.controller and not args.program:
         if args.json:
+            check_before_writing(params, args.controller, current)
             print(to_json({"machine": params.machine, "parameters_from": params.source,
-                           "axes": controller_corrections(params)}))
+                           "axes": controller_corrections(entered)} | _controller_json(entered, args.controller)))
         return 0
     if not args.program:
         raise InputError("give a PROGRAM to compensate (or --controller to print the corrected kinematics)")
@@ -89,7 +101,7 @@ def _run(args: argparse.Namespace) -> int:
     max_mm, max_deg = _max_change(args.max_change)
     result = api.compensate(args.program, params, dialect=args.dialect, pass_through=args.pass_through,
                             max_change_mm=max_mm, max_change_deg=max_deg, rtcp_on=args.rtcp_on or (),
-                            rtcp_off=args.rtcp_off or ())
+                            rtcp_off=args.rtcp_off or (), enter=args.enter)
     atomic_write_text(out, result.text, newline="")
     rep = result.report
     if args.json:
@@ -97,13 +109,62 @@ def _run(args: argparse.Namespace) -> int:
                                        "extensions": [{"effect": e.spec.id, "options": e.spec.options,
                                                        "params": e.params} for e in params.extensions]}))
         return 0
-    _print_report(rep, str(out))
+    _print_report(rep, str(out), params.units)
     return 0
 
 
-def _print_report(rep: CompensationReport, out: str) -> None:
+def _travel(items: list[str] | None) -> dict[str, tuple[float, float]]:
+    """``--travel A=-120:30`` (repeatable) as axis → (min, max) [deg]."""
+    import math
+
+    out: dict[str, tuple[float, float]] = {}
+    for item in items or []:
+        axis, _, span = item.partition("=")
+        lo, sep, hi = span.partition(":")
+        try:
+            low, high = float(lo), float(hi)
+        except ValueError:
+            low = high = math.nan
+        if not sep or not axis.strip() or not (math.isfinite(low) and math.isfinite(high) and low < high
+                                               and high - low <= 720):
+            raise InputError(f"--travel {item!r}: give AXIS=MIN:MAX in degrees, MIN < MAX, e.g. A=-120:30")
+        out[axis.strip().upper()] = (low, high)
+    return out
+
+
+def _controller_json(params: Any, style: str) -> dict[str, Any]:
+    """``entered`` (what this controller's entries carry; null elsewhere) and the predicted errors."""
+    from pige_sym.compensation.controllers.scope import representable, tool_point_summary
+
+    held = set(representable(params, style))
+    w = params.weighing
+    scope = tool_point_summary(params, style)
+    return {"entered": {n: (v if n in held else None) for n, v in w.entered.items()},
+            "predicted_after_um": scope.controller_only.to_dict() if scope.controller_only else None,
+            "predicted_complete_um": scope.complete.to_dict() if scope.complete else None,
+            "weighing": w.to_dict()}
+
+
+def _print_weighing(rep: CompensationReport, units: dict[str, str]) -> None:
+    from pige_sym.compensation.weighing import weighing_rows
+
+    w = rep.weighing
+    if w is None:
+        return
+    for note in w.notes:
+        print(f"note: {note}")
+    for row in weighing_rows(w, units) if w.covariance_from != "none" else []:
+        print(f"  {row}")
+    p = w.predicted
+    if p:
+        print(f"predicted tool-point RMS error over {w.judged_on}: uncorrected {p['none'].text()}, after compensation "
+              f"{p['entered'].text()}")
+
+
+def _print_report(rep: CompensationReport, out: str, units: dict[str, str]) -> None:
     print(f"wrote {out} ({rep.dialect}): {rep.compensated} of {rep.moves} linear moves changed; "
           f"parameters from {rep.parameters_from}; read back and verified")
+    _print_weighing(rep, units)
     print(f"largest change: {rep.max_change_mm:.4f} mm, {rep.max_change_deg:.4f} deg "
           f"(limits {rep.limits['mm']:g} mm, {rep.limits['deg']:g} deg)")
     for c in rep.changes[:20]:
@@ -162,6 +223,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from pige_sym.cli._setup import add_axis_sense_argument
 
     add_axis_sense_argument(p)
+    p.add_argument("--enter", choices=["weighed", "all"], default="weighed",
+                   help="weighed (default): each estimate weighed by its uncertainty, a weakly determined one entered "
+                        "in part or not (docs/algorithms.md); all: every estimate as it is")
+    p.add_argument("--travel", action="append", metavar="AXIS=MIN:MAX",
+                   help="travel of a rotary axis [deg] over which controller entries are judged (default: C 0:360, "
+                        "others -90:90)")
     p.add_argument("--allow-missing", action="store_true",
                    help="set PIGEs without a value (missing, or not identifiable) to 0 and say which")
     p.add_argument("--controller", choices=list(controller_names()), help="print the corrected kinematics "

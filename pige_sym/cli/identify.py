@@ -14,6 +14,12 @@ def _run(args: argparse.Namespace) -> int:
     from pige_sym.identification.result import format_result
     from pige_sym.measurements.ballbar import is_ballbar_file
 
+    if args.map:
+        return _run_maps(args)
+    if args.plots or args.map_step is not None or args.map_per_direction:
+        from pige_sym.errors import InputError
+
+        raise InputError("--plots, --map-step and --map-per-direction go with --map AXES")
     if len(args.files) > 1 or is_ballbar_file(args.files[0]):
         return _run_joint(args)
     result = api.identify(args.files[0], method=args.method, projection=args.projection, loss=args.loss,
@@ -44,6 +50,48 @@ def _run_joint(args: argparse.Namespace) -> int:
     return 0
 
 
+def _axes(text: str | None, what: str) -> tuple[str, ...]:
+    from pige_sym.errors import InputError
+
+    axes = tuple(a.strip().upper() for a in (text or "").split(",") if a.strip())
+    if text is not None and not axes:
+        raise InputError(f"{what} {text!r}: give rotary axes, e.g. C,A")
+    return axes
+
+
+def _run_maps(args: argparse.Namespace) -> int:
+    """``--map AXES``: the PIGEs, the zero-position errors and the error maps, jointly from every file."""
+    from pige_sym.errors import InputError
+    from pige_sym.files import check_output
+    from pige_sym.identification.joint import format_files
+    from pige_sym.identification.map_output import format_maps, plot_maps, plot_paths
+    from pige_sym.identification.maps import DEFAULT_MAP_STEP_DEG, MapSpec, identify_maps
+    from pige_sym.identification.result import format_result
+    from pige_sym.measurements.sets import read_files
+
+    if args.method != "gauss-newton" or args.projection != "xyz" or args.loss != "linear" or args.with_zero:
+        raise InputError("--map fits every file jointly (gauss-newton, full 3-D, loss linear) and always with the "
+                         "zero-position errors: leave out --method, --projection, --loss and --with-zero")
+    axes, per_direction = _axes(args.map, "--map"), _axes(args.map_per_direction, "--map-per-direction")
+    extra = [a for a in per_direction if a not in axes]
+    if extra:
+        raise InputError(f"--map-per-direction {','.join(extra)}: map the axis too "
+                         f"(--map {','.join(axes + tuple(extra))})")
+    if args.plots:
+        for path in plot_paths(axes, args.plots):
+            check_output(path, force=args.force, inputs=args.files, what="--plots")
+    spec = MapSpec(axes, DEFAULT_MAP_STEP_DEG if args.map_step is None else args.map_step, per_direction)
+    result = identify_maps(read_files(args.files), spec)
+    written = plot_maps(result, args.plots) if args.plots else []
+    if args.json:
+        print(to_json(result.to_dict() | ({"plots": written} if written else {})))
+    else:
+        print(format_result(result.result) + "\n" + format_files(result.joint.files) + "\n" + format_maps(result))
+        for plot in written:
+            print(f"wrote {plot}")
+    return 0
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "identify",
@@ -56,7 +104,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "  pige identify run.csv\n"
             "  pige identify run.csv --method double-differential --projection y\n"
             "  pige identify run.csv --loss soft_l1 --json > result.json\n"
-            "  pige identify radial_C.csv tangential_C.csv axial_A.csv      # ballbar setups, jointly"
+            "  pige identify radial_C.csv tangential_C.csv axial_A.csv      # ballbar setups, jointly\n"
+            "  pige identify s1.csv s2.csv s3.csv --map C,A --map-step 15   # error maps (CONVENTIONS §10)"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -67,5 +116,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--projection", default="xyz", help="x, y, z, xyz, a vector a,b,c or htm:... (default xyz)")
     p.add_argument("--loss", choices=LOSSES, default="linear", help="robust losses flag outlier rows")
     p.add_argument("--with-zero", action="store_true", help="also estimate the zero-position errors")
+    p.add_argument("--map", metavar="AXES", help="also identify the error maps of these rotary axes (CONVENTIONS "
+                   "§10), jointly from every file: probe setups, R-test runs, ballbar setups (docs/maps.md)")
+    p.add_argument("--map-step", type=float, metavar="DEG", help="grid step of the maps [deg] (default 15)")
+    p.add_argument("--map-per-direction", metavar="AXES",
+                   help="map these axes' positioning error per approach direction (ECC+ and ECC-)")
+    p.add_argument("--plots", metavar="DIR", help="with --map: draw each axis' maps with their ±2σ bands")
+    p.add_argument("--force", action="store_true", help="replace existing plots")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_run)

@@ -259,9 +259,10 @@ def _render_motion_jacobian(model: SymbolicModel) -> str:
     return _with_constant(const, _function(SPECS["motion_jacobian"], body, candidates, geometry=True))
 
 
-def _render_orientation_jacobian(model: SymbolicModel) -> str:
-    ori = trig_basis(model.orientation_jacobian, model.trig_pairs)
-    p = len(model.parameters)
+def _render_orientation_jacobian(model: SymbolicModel, motions: bool = False) -> str:
+    matrix = model.motion_orientation_jacobian if motions else model.orientation_jacobian
+    ori = trig_basis(matrix, model.trig_pairs)
+    p = matrix.shape[1]
     body = [f"    out = np.zeros((n, 3, {p}))"]
     for m, cm in zip(ori.monomials, ori.coefficients, strict=True):
         term = " * ".join(_monomial_factors(model.rotary_axes, m)) or "1.0"
@@ -270,7 +271,8 @@ def _render_orientation_jacobian(model: SymbolicModel) -> str:
                 if cm[i, j] != 0:
                     body.append(f"    out[:, {i}, {j}] += {_code(cm[i, j])} * {term}")
     body.append("    return out")
-    return _function(SPECS["orientation_jacobian"].format(P=p), body, _trig_locals(model), geometry=False)
+    spec = SPECS["motion_orientation_jacobian" if motions else "orientation_jacobian"].format(P=p)
+    return _function(spec, body, _trig_locals(model), geometry=False)
 
 
 def _render_matrix(model: SymbolicModel, matrix: sp.Matrix, name: str, geometry: bool) -> str:
@@ -410,6 +412,7 @@ def render_module(code: str | MachineStructure) -> str:
         _render_reference_jacobian(model),
         _render_motion_jacobian(model),
         _render_orientation_jacobian(model),
+        _render_orientation_jacobian(model, motions=True),
         _render_matrix(model, model.workpiece_rotation, "workpiece_rotation", geometry=False),
         _render_matrix(model, model.tool_rotation, "tool_rotation", geometry=False),
         _render_matrix(model, model.linear_commands, "linear_commands", geometry=True),

@@ -160,6 +160,8 @@ class SymbolicModel:
         frame, applied after the axis' own motion).  Angle-dependent error motions
         (angular positioning, tilt/wobble, radial runout, backlash) are these columns
         times functions of the angles.
+    motion_orientation_jacobian : sympy.Matrix, shape (3, 6k)
+        The tool-orientation error ω [µrad] (as ``orientation_jacobian``) per unit error motion, same columns.
     """
 
     structure: MachineStructure
@@ -176,6 +178,7 @@ class SymbolicModel:
     reference_jacobian: sp.Matrix
     orientation_jacobian: sp.Matrix
     motion_jacobian: sp.Matrix
+    motion_orientation_jacobian: sp.Matrix
     motion_parameters: tuple[str, ...]
     spindle_direction: int
     has_tool_rotary: bool
@@ -336,26 +339,29 @@ class _Derivatives:
     jacobian_raw: sp.Matrix
     motion: sp.Matrix
     orientation: sp.Matrix
+    motion_orientation: sp.Matrix
 
 
 def _derivatives(chain: _Chain, params: list[sp.Symbol], motions: list[sp.Symbol], lin_subs: dict,
                  rel_nom: sp.Matrix) -> _Derivatives:
     """Differentiate the chain one error symbol at a time (the others are 0, so expressions stay small)."""
-    jac_cols, ori_cols, motion_cols = [], [], []
+    jac_cols: list[sp.Matrix] = []
+    ori_cols: list[sp.Matrix] = []
+    motion_cols: list[sp.Matrix] = []
+    motion_ori_cols: list[sp.Matrix] = []
     for sym in params + motions:
         ball_act, nest_act, rot_w_act, rot_t_act = chain.evaluate(sym)
         col = (ball_act - nest_act).diff(sym).subs(sym, 0).subs(lin_subs)
-        if sym in motions:
-            motion_cols.append(col)
-            continue
-        jac_cols.append(col)
         # orientation of the spindle frame relative to W: R_rel_act = (I + [ω]x) R_rel_nom
         dm = (rot_w_act.T * rot_t_act).diff(sym).subs(sym, 0) * rel_nom.T
-        ori_cols.append(sp.Matrix([dm[2, 1], dm[0, 2], dm[1, 0]]))
+        ori = sp.Matrix([dm[2, 1], dm[0, 2], dm[1, 0]])
+        (motion_cols if sym in motions else jac_cols).append(col)
+        (motion_ori_cols if sym in motions else ori_cols).append(ori)
     return _Derivatives(
         jacobian_raw=sp.Matrix.hstack(*jac_cols) * MM_TO_UM,
         motion=chain.reduce(sp.Matrix.hstack(*motion_cols) * MM_TO_UM),
         orientation=chain.reduce(sp.Matrix.hstack(*ori_cols) * 10**6),
+        motion_orientation=chain.reduce(sp.Matrix.hstack(*motion_ori_cols) * 10**6),
     )
 
 
@@ -417,6 +423,7 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
         reference_jacobian=chain.reduce(jac_ref),
         orientation_jacobian=der.orientation,
         motion_jacobian=der.motion,
+        motion_orientation_jacobian=der.motion_orientation,
         motion_parameters=tuple(m.name for m in motion_syms),
         spindle_direction=spindle_dir,
         has_tool_rotary=any(a.kind == "rotary" for a in structure.tool_axes),

@@ -33,6 +33,11 @@ SPECS: dict[str, str] = {
     ω = orientation_jacobian @ params is the small rotation of the spindle frame
     relative to the workpiece, expressed in W: R_rel_actual = (I + [ω]x) R_rel_nominal.
     """''',
+    "motion_orientation_jacobian": '''def motion_orientation_jacobian(angles_deg):
+    """Tool-orientation error per unit error motion, shape=(n, 3, {P}) [µrad per µm or µrad].
+
+    Columns MOTION_PARAMETERS; ω as orientation_jacobian (the spindle frame relative to the workpiece, in W).
+    """''',
     "workpiece_rotation": '''def workpiece_rotation(angles_deg):
     """Nominal rotation of the workpiece frame W into M, shape=(n, 3, 3)."""''',
     "tool_rotation": '''def tool_rotation(angles_deg):

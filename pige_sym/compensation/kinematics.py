@@ -80,6 +80,16 @@ def raw_offset(kern: Any, angles_deg: np.ndarray, points_mm: np.ndarray, params:
     return np.asarray(moving + np.einsum("nij,nj->ni", kern.workpiece_rotation(a), fixed))
 
 
+def motion_offset(kern: Any, angles_deg: np.ndarray, points_mm: np.ndarray, motions: np.ndarray,
+                  pivots: dict | None, tool: Any) -> np.ndarray:
+    """Un-zeroed tool-point minus workpiece-point error of each pose's error motions ``motions`` (n, 6k),
+    a different workpiece point per pose, shape=(n, 3) [µm] (``motion_jacobian`` is affine in the point)."""
+    a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    pts = np.atleast_2d(np.asarray(points_mm, dtype=float))
+    base, slopes = _affine_parts(lambda x: np.einsum("nim,nm->ni", kern.motion_jacobian(a, x, pivots, tool), motions))
+    return np.asarray(base + sum(pts[:, j, None] * slopes[j] for j in range(3)))
+
+
 def _linear_affine(kern: Any, angles_deg: np.ndarray, pivots: dict | None, tool: Any) -> tuple[np.ndarray, np.ndarray]:
     """RTCP commands as ``base + cols @ point``: base (n, 3) [mm], cols (n, 3, 3)."""
     base, slopes = _affine_parts(lambda x: kern.linear_commands(angles_deg, x, pivots, tool))
@@ -154,17 +164,21 @@ def svd_3x2(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def orientation_steps(kern: Any, angles_deg: np.ndarray, params: np.ndarray,
-                      max_step_deg: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      max_step_deg: float | None = None,
+                      motions: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Rotary-angle corrections Δθ (n, k) [deg] that cancel the orientation error to first order.
 
-    Solves ``(∂v/∂θ)·Δθ = −ω×v`` per pose by SVD.  With ``max_step_deg``, a singular
-    direction whose step would exceed it (near the orientation pole, where ∂v/∂C → 0) is
-    dropped; the second result (n,) marks the poses where that happened.
+    Solves ``(∂v/∂θ)·Δθ = −ω×v`` per pose by SVD, ω from the parameters of each pose and, when given, the
+    error motions of each pose ``motions`` (n, 6k) (:meth:`~pige_sym.model.error_motions.ErrorMaps.pose_motions`).
+    With ``max_step_deg``, a singular direction whose step would exceed it (near the orientation pole, where
+    ∂v/∂C → 0) is dropped; the second result (n,) marks the poses where that happened.
     """
     a = np.atleast_2d(angles_deg)
     n, k = a.shape
     v = kern.tool_direction(a)
     omega = np.einsum("nip,np->ni", kern.orientation_jacobian(a), params) * 1e-6
+    if motions is not None:
+        omega = omega + np.einsum("nim,nm->ni", kern.motion_orientation_jacobian(a), motions) * 1e-6
     target = -np.cross(omega, v)
     h = 1e-4
     dv = np.stack([(kern.tool_direction(a + h * e) - kern.tool_direction(a - h * e)) / (2 * h) for e in np.eye(k)],
@@ -192,7 +206,7 @@ def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndar
                      rtcp: bool | np.ndarray = False, pivots_mm: dict | None = None, tool_mm: Any = None,
                      extensions: list[AngleExtension] | tuple[()] = (),
                      approach: np.ndarray | None = None, max_angle_step_deg: float | None = None,
-                     keep_turn: bool = False) -> CompensatedPoses:
+                     keep_turn: bool = False, error_maps: Any = None) -> CompensatedPoses:
     """Compensated commands for programmed poses (module docstring).
 
     Parameters
@@ -211,11 +225,14 @@ def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndar
         (:func:`orientation_steps`).
     keep_turn : bool
         Leave a rotary command that the correction would move across a multiple of 360° (NC programs).
+    error_maps : ErrorMaps, optional
+        The rotary axes' error maps (CONVENTIONS §10) to compensate too, at the programmed angles.
     """
     kern = load_kernels(machine)
     a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
     n = a.shape[0]
     p = pose_parameters(kern, values, a, extensions, approach)
+    motions = error_maps.pose_motions(kern, a, approach) if error_maps is not None and n else None
     xyz = np.atleast_2d(np.asarray(xyz_mm, dtype=float))
     flags = np.broadcast_to(np.asarray(rtcp, dtype=bool), (n,))
     pts = xyz.copy()
@@ -224,7 +241,7 @@ def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndar
     new_a = a.copy()
     limited = np.zeros(n, dtype=bool)
     if kern.HAS_DIRECTION_SOLVER and n:
-        step, limited = orientation_steps(kern, a, p, max_angle_step_deg)
+        step, limited = orientation_steps(kern, a, p, max_angle_step_deg, motions)
         if keep_turn:
             # never move a rotary command across a multiple of 360 deg: on a roll-over axis that can
             # mean a full turn of the table; the orientation of such a pose is left (reported as limited)
@@ -233,6 +250,8 @@ def compensate_poses(machine: str, values: dict[str, float], angles_deg: np.ndar
             limited |= crossing.any(axis=1)
         new_a = a + step
     d_raw = raw_offset(kern, new_a, pts, p, pivots_mm, tool_mm) * 1e-3  # mm
+    if motions is not None:
+        d_raw = d_raw + motion_offset(kern, new_a, pts, motions, pivots_mm, tool_mm) * 1e-3
     new_xyz = np.empty_like(pts)
     if flags.any():
         rot = kern.workpiece_rotation(new_a[flags])
@@ -276,13 +295,17 @@ def predicted_errors(params: CompensationParameters, angles_deg: np.ndarray, xyz
     if rtcp.any():
         machine_xyz[rtcp] = linear_commands_at(kern, a1[rtcp], machine_xyz[rtcp], pivots, params.tool_mm)
     approach = approach_directions(a0) if approach is None else approach
+    maps = getattr(params, "error_maps", None)
     err = tool_point_error(params.machine, params.values, a1, machine_xyz, pts, pivots_mm=pivots,
-                           tool_mm=params.tool_mm, extensions=params.extensions, approach=approach)
+                           tool_mm=params.tool_mm, extensions=params.extensions, approach=approach, error_maps=maps)
     orient = np.full(a0.shape[0], np.nan)
     if kern.HAS_DIRECTION_SOLVER and a0.shape[0]:
         p = pose_parameters(kern, params.values, a1, params.extensions, approach)
         v1 = kern.tool_direction(a1)
         omega = np.einsum("nip,np->ni", kern.orientation_jacobian(a1), p) * 1e-6
+        if maps is not None:
+            omega = omega + np.einsum("nim,nm->ni", kern.motion_orientation_jacobian(a1),
+                                      maps.pose_motions(kern, a1, approach)) * 1e-6
         orient = np.linalg.norm(v1 + np.cross(omega, v1) - kern.tool_direction(a0), axis=1) * 1e6
     return np.linalg.norm(err, axis=1), orient
 
@@ -290,13 +313,18 @@ def predicted_errors(params: CompensationParameters, angles_deg: np.ndarray, xyz
 def tool_point_error(machine: str, values: dict[str, float], angles_deg: np.ndarray, xyz_mm: np.ndarray,
                      points_mm: np.ndarray, *, pivots_mm: dict | None = None, tool_mm: Any = None,
                      extensions: list[AngleExtension] | tuple[()] = (),
-                     approach: np.ndarray | None = None) -> np.ndarray:
+                     approach: np.ndarray | None = None, error_maps: Any = None) -> np.ndarray:
     """Tool point minus intended workpiece point on a machine with errors ``values``, shape=(n, 3) [µm].
 
-    ``extensions`` are angle errors the machine also has (evaluated at the commanded angles;
-    ``approach`` defaults to the directions of approach of the poses in order).
+    ``extensions`` are angle errors the machine also has, ``error_maps`` its error motions (CONVENTIONS §10),
+    both evaluated at the commanded angles (``approach`` defaults to the directions of approach of the poses
+    in order).
     """
     kern = load_kernels(machine)
     p = pose_parameters(kern, values, angles_deg, extensions, approach)
     nominal = linear_commands_at(kern, np.atleast_2d(angles_deg), np.atleast_2d(points_mm), pivots_mm, tool_mm)
-    return (xyz_mm - nominal) * 1e3 + raw_offset(kern, angles_deg, points_mm, p, pivots_mm, tool_mm)
+    out = (xyz_mm - nominal) * 1e3 + raw_offset(kern, angles_deg, points_mm, p, pivots_mm, tool_mm)
+    if error_maps is not None and np.atleast_2d(angles_deg).shape[0]:
+        motions = error_maps.pose_motions(kern, angles_deg, approach)
+        out = out + motion_offset(kern, angles_deg, points_mm, motions, pivots_mm, tool_mm)
+    return out

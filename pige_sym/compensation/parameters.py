@@ -92,6 +92,21 @@ class CompensationParameters:
     axis_sense : dict of str to int
         Axes the controller commands in the reverse of CONVENTIONS' sense (axis → −1, CONVENTIONS §9), as
         the parameter file records it: NC angles and controller angle entries are written in that sense.
+    std : dict of str to float
+        Standard errors the file states [µm, µrad] (PIGEs and effect parameters ``<id>.<param>``).
+    covariance : (tuple of str, ndarray (q, q)) or None
+        The estimates' covariance the file states, with the names of its rows.
+    set_to_zero : list of str
+        PIGEs without a value in the file, set to 0 by ``--allow-missing`` (never weighed or entered).
+    ball_mm : list of float or None
+        The measured point (ball or sphere centre at the reference pose) [mm].
+    weighing : Weighing or None
+        How ``values`` were chosen from the file's estimates when they are the entered values
+        (:func:`pige_sym.compensation.weighing.with_entered`); None when they are the file's own.
+    error_maps : ErrorMaps or None
+        The rotary axes' error maps of the file (CONVENTIONS §10), compensated with the PIGEs.
+    error_map_std : dict
+        axis → motion → standard errors of the map values (NaN where none).
     """
 
     machine: str
@@ -103,6 +118,28 @@ class CompensationParameters:
     ignored: list[str]
     extensions: list[AngleExtension] = field(default_factory=list)
     axis_sense: dict[str, int] = field(default_factory=dict)
+    std: dict[str, float] = field(default_factory=dict)
+    covariance: tuple[tuple[str, ...], np.ndarray] | None = None
+    set_to_zero: list[str] = field(default_factory=list)
+    ball_mm: list[float] | None = None
+    weighing: Any = None
+    error_maps: Any = None
+    error_map_std: dict[str, dict[str, tuple[float, ...]]] = field(default_factory=dict)
+
+    def covariance_of(self, names: list[str]) -> tuple[np.ndarray | None, str]:
+        """The covariance of ``names`` (q, q) and where it comes from: ``covariance``, ``std`` or ``none``.
+
+        The file's covariance when it covers every name; else the standard errors as uncorrelated ones
+        when the file gives one for every name (and each is positive); else ``None``.
+        """
+        if self.covariance is not None and set(names) <= set(self.covariance[0]):
+            idx = [self.covariance[0].index(n) for n in names]
+            cov = self.covariance[1][np.ix_(idx, idx)]
+            if (np.diag(cov) > 0).all():
+                return cov, "covariance"
+        if all(self.std.get(n, 0.0) > 0 for n in names):
+            return np.diag([self.std[n] ** 2 for n in names]), "std"
+        return None, "none"
 
 
 def load_parameters(path: str | os.PathLike[str], machine: str | None = None, *,
@@ -149,8 +186,30 @@ def _parameters(doc: Any) -> CompensationParameters:
     if why:
         raise FileFormatError(doc.path, None, why)
     pivots = {a: list(v) for a, v in doc.pivots_mm.items()}
+    cov = None if doc.covariance is None else (tuple(doc.covariance_names), np.asarray(doc.covariance, dtype=float))
     return CompensationParameters(kern.MACHINE_CODE, dict(doc.pige), dict(doc.units), tool, pivots, doc.path,
-                                  ignored, extensions, dict(doc.axis_sense))
+                                  ignored, extensions, dict(doc.axis_sense), dict(doc.std), cov,
+                                  list(doc.set_to_zero), None if doc.ball_mm is None else list(doc.ball_mm),
+                                  error_maps=_error_maps(doc.error_motions),
+                                  error_map_std={ax: {n: tuple(v) for n, v in m["std"].items()}
+                                                 for ax, m in (doc.error_motions or {}).items()})
+
+
+def _error_maps(data: dict[str, Any] | None) -> Any:
+    """The validated ``error_motions`` of a parameter file as :class:`~pige_sym.model.error_motions.ErrorMaps`."""
+    from pige_sym.model.error_motions import AxisMaps, ErrorMaps, MapGrid
+
+    if not data:
+        return None
+    return ErrorMaps({ax: AxisMaps(MapGrid(ax, m["angle_deg"], m["full_turn"]), dict(m["value"]))
+                      for ax, m in data.items()})
+
+
+def extension_prefixes(extensions: list[AngleExtension]) -> list[str]:
+    """The name prefix of each extension's parameters as the diagnosis writes them: ``<id>``, or ``<id>@h<h>``
+    where two extensions share an id (:func:`pige_sym.diagnosis.diagnose._param_names`)."""
+    ids = [e.spec.id for e in extensions]
+    return [e.spec.id if ids.count(e.spec.id) == 1 else f"{e.spec.id}@h{e.spec.harmonic}" for e in extensions]
 
 
 def _extensions(data: dict[str, Any], path: str,

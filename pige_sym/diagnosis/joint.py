@@ -114,7 +114,7 @@ class JointDiagnosis:
                 "agreement": None if self.agreement is None else self.agreement.to_dict(),
                 "files": [f.to_dict() for f in self.files], "notes": self.notes,
                 "effects": [f.to_dict() for f in self.effects],
-                "pige": final["pige"], "std": final["std"], "units": final["units"],
+                "pige": final["pige"], "std": final["std"], "covariance": final["covariance"], "units": final["units"],
                 "unidentifiable": final["unidentifiable"], "rank": final["rank"], "condition": final["condition"],
                 "rms_um": final["rms_um"], "ball_mm": final["ball_mm"], "pivots_mm": final["pivots_mm"],
                 "tool_mm": final["tool_mm"]}

@@ -163,7 +163,7 @@ class DiagnosisResult:
                          "heldout_rms_um": self.baseline_heldout_rms_um},
             "findings": [f.to_dict() for f in self.findings],
             "rejected": [r.to_dict() for r in self.rejected],
-            "pige": final["pige"], "std": final["std"], "units": final["units"],
+            "pige": final["pige"], "std": final["std"], "covariance": final["covariance"], "units": final["units"],
             "unidentifiable": final["unidentifiable"], "rank": final["rank"], "condition": final["condition"],
             "rms_um": final["rms_um"], "outlier_rows": self.outlier_rows, "method": "diagnosis",
             "ball_mm": final["ball_mm"], "pivots_mm": final["pivots_mm"], "tool_mm": final["tool_mm"],

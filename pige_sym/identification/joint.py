@@ -28,7 +28,7 @@ import numpy as np
 
 from pige_sym.errors import IdentificationError, InputError
 from pige_sym.identification.instruments import instrument, whitened_rows
-from pige_sym.identification.problem import build_problem
+from pige_sym.identification.problem import ExtraColumns, build_problem
 from pige_sym.identification.result import IdentificationResult, json_float
 from pige_sym.identification.spectrum import combination_text, observability, solve_scaled
 from pige_sym.kernels import load_kernels
@@ -87,9 +87,10 @@ def _pige_names(machine: str, with_zero: bool) -> tuple[list[str], list[int]]:
     return names, [kern.PARAMETERS.index(n) for n in names]
 
 
-def measurement_block(m: Measurement, label: str, with_zero: bool) -> Block:
-    """The block of an R-test or probe measurement (full 3-D projection, every row but the reference)."""
-    prob = build_problem(m, "xyz", with_zero=with_zero, explicit=True)
+def measurement_block(m: Measurement, label: str, with_zero: bool, extra: ExtraColumns | None = None) -> Block:
+    """The block of an R-test or probe measurement (full 3-D projection, every row but the reference); ``extra``
+    columns (all rows, zeroed) follow the PIGEs'."""
+    prob = build_problem(m, "xyz", with_zero=with_zero, extra=extra, explicit=True)
     assert prob.design is not None and prob.data is not None
     if instrument(m) == "rtest":
         a = prob.design[prob.rows].reshape(-1, prob.design.shape[2])

@@ -165,11 +165,29 @@ class IdentificationResult:
         }
         if self.axis_sense:
             out["axis_sense"] = dict(self.axis_sense)
+        out["covariance"] = self.covariance_dict()
         if self.vif is not None:
             out["vif"] = {p: json_float(v) for p, v in zip(self.parameters, self.vif, strict=True)}
         if self.method == "double-differential":
             out["stages"] = [s.to_dict() for s in self.stages]
         return out
+
+    def covariance_dict(self) -> dict[str, Any] | None:
+        """``{"parameters": [...], "matrix": [[...]]}`` over the determined parameters [µm², µm·µrad, µrad²]
+        (the parameter file's ``covariance``, :class:`~pige_sym.measurements.schema.CovarianceDocument`)."""
+        cov = np.asarray(self.covariance, dtype=float)
+        if cov.shape != (len(self.parameters),) * 2:
+            return None
+        keep = [i for i in range(len(self.parameters)) if np.isfinite(self.values[i]) and np.isfinite(self.std[i])
+                and self.std[i] > 0 and np.isfinite(cov[i]).all()]
+        keep = [i for i in keep if all(np.isfinite(cov[i, j]) for j in keep)]
+        if not keep:
+            return None
+        sub = cov[np.ix_(keep, keep)]
+        root = np.sqrt(np.clip(np.diag(sub), 1e-300, None))
+        corr = np.clip(0.5 * (sub + sub.T) / np.outer(root, root), -1.0, 1.0)
+        sub = corr * np.outer(self.std[keep], self.std[keep])  # its diagonal: the std printed beside it, exactly
+        return {"parameters": [self.parameters[i] for i in keep], "matrix": sub.tolist()}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> IdentificationResult:

@@ -75,6 +75,10 @@ class KernelModule(Protocol):
         """``(n, 3, 12)`` deviation per error motion of each rotary axis."""
         ...
 
+    def motion_orientation_jacobian(self, angles_deg: ArrayLike) -> Array:
+        """``(n, 3, 6k)`` tool-orientation error per unit error motion [µrad per µm or µrad]."""
+        ...
+
     def orientation_jacobian(self, angles_deg: ArrayLike) -> Array:
         """``(n, 3, p)`` tool-orientation error relative to the workpiece [µrad per parameter unit]."""
         ...

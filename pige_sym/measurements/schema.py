@@ -49,13 +49,16 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
 
+import numpy as np
+
+from pige_sym.constants import MAX_PIGE as _MAX_PIGE
 from pige_sym.errors import FileFormatError, InputError, PigeError, SchemaRefusal
 from pige_sym.files import PathLike, open_regular_file
 
 MAX_JSON_BYTES = 16 * 2**20
 MAX_DEPTH = 16
-#: Largest magnitude of a PIGE [µm or µrad]: 10 mm or 10 mrad is far beyond a machine that runs at all.
-MAX_PIGE = 1e4
+#: Largest magnitude of a PIGE [µm or µrad] (:data:`pige_sym.constants.MAX_PIGE`).
+MAX_PIGE = _MAX_PIGE
 #: Largest magnitude of a position in a parameter file [mm].
 MAX_POSITION_MM = 1e5
 
@@ -243,6 +246,18 @@ def _vec3_mm() -> Any:
 
 
 @dataclass(frozen=True)
+class CovarianceDocument:
+    """``covariance`` of a parameter file: the estimates' covariance over ``parameters`` [µm², µm·µrad, µrad²].
+
+    ``matrix`` is square, symmetric and positive semi-definite, one row per name of ``parameters`` (each a
+    determined parameter of ``pige``); its diagonal is the square of ``std`` where the file gives both.
+    """
+
+    parameters: list[str]
+    matrix: list[list[float]]
+
+
+@dataclass(frozen=True)
 class ParamsDocument:
     """A parameter file as written (``pige identify --json``, ``pige diagnose --json`` or by hand).
 
@@ -259,13 +274,16 @@ class ParamsDocument:
                                                                               "max_abs": MAX_POSITION_MM})
     findings: list[Any] | None = None
     axis_sense: dict[str, int] | None = None
+    std: dict[str, float | None] | None = field(default=None, metadata={"max_abs": MAX_PIGE})
+    covariance: CovarianceDocument | None = None
+    error_motions: dict[str, dict[str, Any]] | None = None
 
     #: Keys ``pige identify/diagnose --json`` write that a parameter file does not use.
     IGNORED_KEYS: ClassVar[frozenset[str]] = frozenset({
-        "method", "projection", "loss", "std", "ci95", "rank", "n_parameters", "condition", "rms_um", "sigma_um",
+        "method", "projection", "loss", "ci95", "rank", "n_parameters", "condition", "rms_um", "sigma_um",
         "dof", "n_rows", "n_obs", "observability", "unidentifiable", "outlier_rows", "vif", "baseline", "options",
         "plots", "rejected", "params", "bic", "heldout_rms_um", "unobservable", "identifiable", "warnings",
-        "unobserved", "clusters",
+        "unobserved", "clusters", "files", "map_step_deg", "map_undetermined",
     })
 
 
@@ -291,6 +309,15 @@ class ParamsFile:
         ``findings`` of a diagnosis (unvalidated structure beyond strict JSON).
     axis_sense : dict of str to int
         Axes the measured controller commands in the reverse of CONVENTIONS' sense (axis → −1, CONVENTIONS §9).
+    std : dict of str to float
+        Standard errors of the determined values [µm, µrad] (``null`` ones left out).
+    covariance_names, covariance : tuple of str, (q, q) or None
+        The estimates' covariance and the names of its rows (:class:`CovarianceDocument`).
+    ball_mm : (3,) [mm] or None
+        The measured point (ball or sphere centre at the reference pose).
+    error_motions : dict or None
+        The validated error maps (CONVENTIONS §10, :func:`~pige_sym.measurements.error_motions_file.
+        read_error_motions`): axis → ``angle_deg``, ``full_turn``, ``value`` and ``std`` per motion.
     """
 
     path: str
@@ -303,6 +330,11 @@ class ParamsFile:
     pivots_mm: dict[str, tuple[float, float, float]]
     findings: list[Any]
     axis_sense: dict[str, int] = field(default_factory=dict)
+    std: dict[str, float] = field(default_factory=dict)
+    covariance_names: tuple[str, ...] = ()
+    covariance: tuple[tuple[float, ...], ...] | None = None
+    ball_mm: tuple[float, float, float] | None = None
+    error_motions: dict[str, Any] | None = None
 
 
 def refuse_unphysical(names: list[str], values: Any, std: Any, units: dict[str, str], source: str) -> None:
@@ -387,13 +419,51 @@ def params_document(data: Any, path: PathLike, *, machine: str | None = None,
     bad_effect = [k for k, v in effects.items() if v is None]
     if bad_effect:
         raise FileFormatError(p, None, f"pige.{bad_effect[0]}: an effect parameter needs a value")
+    std = {k: v for k, v in (doc.std or {}).items() if v is not None}
+    negative = [k for k, v in std.items() if v < 0]
+    if negative:
+        raise FileFormatError(p, None, f"std.{negative[0]}: a standard error cannot be negative")
+    determined = set(values) - set(missing) | set(effects)
+    cov = _covariance(p, doc.covariance, determined, std)
+    from pige_sym.measurements.error_motions_file import read_error_motions
+
+    maps = read_error_motions(doc.error_motions, p, kern) if doc.error_motions else None
     return ParamsFile(
         path=p, machine=kern.MACHINE_CODE, pige=values, effect_values={k: float(v or 0.0) for k, v in effects.items()},
         set_to_zero=tuple(missing), units=dict(doc.units or kern.UNITS),
         tool_mm=None if doc.tool_mm is None else (doc.tool_mm[0], doc.tool_mm[1], doc.tool_mm[2]),
         pivots_mm={a: (v[0], v[1], v[2]) for a, v in (doc.pivots_mm or {}).items()}, findings=list(doc.findings or []),
-        axis_sense=sense,
+        axis_sense=sense, std=std, covariance_names=tuple(doc.covariance.parameters) if doc.covariance and cov else (),
+        covariance=cov, ball_mm=None if doc.ball_mm is None else (doc.ball_mm[0], doc.ball_mm[1], doc.ball_mm[2]),
+        error_motions=maps,
     )
+
+
+
+def _covariance(path: str, cov: CovarianceDocument | None, determined: set[str],
+                std: dict[str, float]) -> tuple[tuple[float, ...], ...] | None:
+    """The validated covariance rows (:class:`CovarianceDocument`), or None."""
+    if cov is None:
+        return None
+    names, rows = cov.parameters, cov.matrix
+    bad = [n for n in names if n not in determined]
+    if bad or len(set(names)) != len(names):
+        why = f"{bad[0]!r} has no value in pige" if bad else "a name is repeated"
+        raise FileFormatError(path, None, f"covariance.parameters: {why}; give each determined parameter once")
+    if len(rows) != len(names) or any(len(r) != len(names) for r in rows):
+        raise FileFormatError(path, None, f"covariance.matrix: expected {len(names)} rows of {len(names)} numbers, one "
+                              "per name of covariance.parameters")
+    m = np.asarray(rows, dtype=float)
+    scale = float(np.abs(m).max(initial=0.0)) or 1.0
+    if not np.isfinite(m).all() or np.abs(m - m.T).max(initial=0.0) > 1e-9 * scale:
+        raise FileFormatError(path, None, "covariance.matrix: must be finite and symmetric")
+    if m.size and np.linalg.eigvalsh(m).min() < -1e-9 * scale:
+        raise FileFormatError(path, None, "covariance.matrix: not positive semi-definite (not a covariance)")
+    for i, n in enumerate(names):
+        if n in std and not math.isclose(math.sqrt(max(m[i, i], 0.0)), std[n], rel_tol=1e-6, abs_tol=1e-9):
+            raise FileFormatError(path, None, f"covariance.matrix: the variance of {n} ({m[i, i]:.6g}) is not std.{n} "
+                                  f"squared ({std[n] ** 2:.6g}); write both from one identification")
+    return tuple(tuple(float(x) for x in r) for r in m)
 
 
 def _axis_sense(path: str, given: dict[str, int] | None, rotary_axes: tuple[str, ...]) -> dict[str, int]:

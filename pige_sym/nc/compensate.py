@@ -7,14 +7,17 @@
    exactly as programmed) and moves under a work offset other than the one of the first
    compensated move (the parameters hold for one set-up).  Every other block that moves an
    axis is listed with the reason it passes through.
-3. **Compensate** all planned poses at once (:func:`pige_sym.compensation.kinematics.compensate_poses`) with
+3. **Weigh** the estimates by their uncertainty (:mod:`pige_sym.compensation.weighing`), judged on the
+   planned poses: a weakly determined parameter is entered in part or not at all, and the tool-point error
+   the correction leaves is predicted with a 95 % bound (``enter="all"`` enters every estimate as it is).
+4. **Compensate** all planned poses at once (:func:`pige_sym.compensation.kinematics.compensate_poses`) with
    the orientation-pole guard (no rotary axis turned by more than ``max_change_deg`` to fix
    the orientation; such poses are listed as *orientation limited*, their position is still
    corrected); a rotary command is never moved across a multiple of 360° (on a roll-over axis that
    could turn the table a full revolution), that pose's orientation is left and listed too.
-4. **Guard**: a pose whose correction exceeds ``max_change_mm`` / ``max_change_deg`` refuses the
+5. **Guard**: a pose whose correction exceeds ``max_change_mm`` / ``max_change_deg`` refuses the
    whole program (like the change limits of a controller's own calibration cycle).
-5. **Rewrite** (:mod:`pige_sym.nc.rewrite`) and **read back** (:mod:`pige_sym.nc.verify`); the
+6. **Rewrite** (:mod:`pige_sym.nc.rewrite`) and **read back** (:mod:`pige_sym.nc.verify`); the
    report holds per changed block the words before/after, the predicted tool-point error
    [µm] and orientation error [µrad] before/after on the identified machine, and the change.
 """
@@ -28,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.compensation.parameters import CompensationParameters
+from pige_sym.compensation.weighing import Weighing
 from pige_sym.constants import DEFAULT_MAX_CHANGE_DEG as DEFAULT_MAX_CHANGE_DEG
 from pige_sym.constants import DEFAULT_MAX_CHANGE_MM as DEFAULT_MAX_CHANGE_MM
 from pige_sym.errors import InputError
@@ -35,8 +39,8 @@ from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
 from pige_sym.measurements.axis_sense import format_axis_sense, to_commanded, to_conventions
 from pige_sym.nc.detect import detect_dialect
 from pige_sym.nc.dialects import Dialect, get_dialect
+from pige_sym.nc.dialects.base import kinematics_switch_codes
 from pige_sym.nc.interpreter import Program, interpret
-from pige_sym.nc.lexer import LexError, tokenize
 from pige_sym.nc.program_header import program_axis_sense
 from pige_sym.nc.rewrite import Rewrite, header_position, rewrite_program
 from pige_sym.nc.state import Block
@@ -96,9 +100,14 @@ class CompensationReport:
     limits: dict[str, float]
     verified: bool
     not_compensated_parameters: list[str] = field(default_factory=list)
+    weighing: Weighing | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        out = asdict(self)
+        del out["weighing"]
+        w = self.weighing.to_dict() if self.weighing is not None else {}
+        return out | {"entered": w.get("entered"), "predicted_after_um": w.get("predicted_after_um"),
+                      "weighing": w or None}
 
 
 @dataclass
@@ -110,17 +119,8 @@ class CompensationResult:
 
 
 def with_rtcp_codes(dialect: Dialect, on: tuple[str, ...] = (), off: tuple[str, ...] = ()) -> Dialect:
-    """The dialect with controller-specific RTCP codes (``M428``) declared."""
-    extra: dict[str, str] = {}
-    for codes, action in ((on, "rtcp:on"), (off, "rtcp:off")):
-        for c in codes:
-            try:
-                toks = tokenize(c.strip(), siemens=dialect.siemens)
-            except LexError:
-                toks = []
-            if len(toks) != 1 or toks[0].kind not in ("word", "name"):
-                raise InputError(f"--rtcp-on/--rtcp-off {c!r}: give one G/M code or keyword, e.g. M428")
-            extra[toks[0].code] = action
+    """The dialect with controller-specific RTCP codes (``M428``) declared (:func:`kinematics_switch_codes`)."""
+    extra = kinematics_switch_codes(dialect, on, off)
     return dialect.with_codes(extra) if extra else dialect
 
 
@@ -153,7 +153,7 @@ def plan(program: Program) -> tuple[list[Block], list[dict[str, Any]]]:
 def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: str | None = None,
                   pass_through: bool = False, max_change_mm: float = DEFAULT_MAX_CHANGE_MM,
                   max_change_deg: float = DEFAULT_MAX_CHANGE_DEG, rtcp_on: tuple[str, ...] = (),
-                  rtcp_off: tuple[str, ...] = (), header: bool = True) -> CompensationResult:
+                  rtcp_off: tuple[str, ...] = (), header: bool = True, enter: str = "weighed") -> CompensationResult:
     """Compensate a program with identified parameters (module docstring).
 
     Parameters
@@ -163,6 +163,9 @@ def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: s
     params : CompensationParameters
     max_change_mm, max_change_deg : float
         Change limits [mm], [deg].
+    enter : {"weighed", "all"}
+        Enter the values weighed by their uncertainty (:mod:`~pige_sym.compensation.weighing`), or every
+        estimate as it is.
 
     Raises
     ------
@@ -170,12 +173,14 @@ def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: s
         A block that cannot be read or is refused (with its line).
     CompensationError
         A correction beyond the limits, or a failed read-back.
+    InputError
+        Parameters beyond physical bounds (:func:`~pige_sym.compensation.controllers.entry_checks.check_parameters`).
     """
     was_enabled = gc.isenabled()
     gc.disable()  # ~10^6 short-lived objects, no cycles: the collector would only rescan them (~20 %)
     try:
         return _compensate_nc(text, params, path, dialect, pass_through, max_change_mm, max_change_deg, rtcp_on,
-                              rtcp_off, header)
+                              rtcp_off, header, enter)
     finally:
         if was_enabled:
             gc.enable()
@@ -183,12 +188,15 @@ def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: s
 
 def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_through: bool,
                    max_change_mm: float, max_change_deg: float, rtcp_on: tuple[str, ...], rtcp_off: tuple[str, ...],
-                   header: bool) -> CompensationResult:
+                   header: bool, enter: str) -> CompensationResult:
     from pige_sym.errors import CompensationError
     from pige_sym.kernels import load_kernels
 
     if not (max_change_mm > 0 and max_change_deg > 0 and np.isfinite([max_change_mm, max_change_deg]).all()):
         raise InputError("--max-change: both limits must be positive finite numbers")
+    from pige_sym.compensation.controllers.entry_checks import check_parameters
+
+    check_parameters(params)  # a program is written for a controller too: the same bounds before anything is made
     kern = load_kernels(params.machine)
     axes = tuple(kern.ROTARY_AXES)
     program_axis_sense(text, axes, path, params.axis_sense, given_by=f"the parameter file {params.source}",
@@ -198,12 +206,13 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
     d = with_rtcp_codes(get_dialect(dialect or detect_dialect(text, path)), rtcp_on, rtcp_off)
     program = interpret(text, d, axes, path=path, pass_through=pass_through)
     chosen, passed = plan(program)
-    poses = _compensated_poses(params, chosen, max_change_deg)
+    weighing, entered = _weighed(params, chosen, enter)
+    poses = _compensated_poses(entered, chosen, max_change_deg)
     _guard(chosen, poses, max_change_mm, max_change_deg, path, CompensationError)
     new_commanded = to_commanded(poses.new_angles_deg, params.axis_sense, axes)
     new_poses = np.hstack([poses.new_xyz_mm, new_commanded]).tolist() if chosen else []
     targets = dict(zip([b.line_no for b in chosen], map(tuple, new_poses), strict=True))
-    rw = rewrite_program(program, targets, header=_header(params) if header else None)
+    rw = rewrite_program(program, targets, header=_header(params, weighing) if header else None)
     check = verify(program, rw.text, {c.line_in for c in rw.changed}, rw.header_lines, header_position(program),
                    max_mm=max_change_mm + 1e-4, max_deg=max_change_deg + 1e-4, pass_through=pass_through,
                    targets=targets)
@@ -219,8 +228,33 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
         [chosen[i].line_no for i in np.flatnonzero(poses.orientation_limited).tolist()],
         program.notes + _rtcp_note(program, chosen) + _arc_start_notes(program, check.read_back, rw.header_lines),
         check.max_change_mm, check.max_change_deg, {"mm": max_change_mm, "deg": max_change_deg}, True,
-        list(params.ignored))
+        list(params.ignored), weighing)
     return CompensationResult(rw.text, report)
+
+
+def _weighed(params: CompensationParameters, chosen: list[Block],
+             enter: str) -> tuple[Weighing | None, CompensationParameters]:
+    """The weighing judged on the planned poses, and the parameters to compensate with (module docstring)."""
+    from pige_sym.compensation.kinematics import workpiece_points
+    from pige_sym.compensation.weighing import every_estimate, program_poses, weigh, with_entered
+    from pige_sym.kernels import load_kernels
+
+    if enter not in ("weighed", "all"):
+        raise InputError(f"enter {enter!r}: use weighed or all")
+    if not chosen:
+        return None, params
+    kern = load_kernels(params.machine)
+    axes = tuple(kern.ROTARY_AXES)
+    after = np.array([b.after for b in chosen], dtype=float).reshape(-1, 3 + len(axes))
+    angles, points = to_conventions(after[:, 3:], params.axis_sense, axes), after[:, :3].copy()
+    rtcp = np.array([b.rtcp for b in chosen], dtype=bool)
+    if (~rtcp).any():
+        pivots = {a: np.asarray(v, dtype=float) for a, v in params.pivots_mm.items()} or None
+        points[~rtcp] = workpiece_points(kern, angles[~rtcp], points[~rtcp], pivots, params.tool_mm)
+    weighing = weigh(params, program_poses(angles, points))
+    if enter == "all":
+        weighing = every_estimate(weighing)
+    return weighing, with_entered(params, weighing)
 
 
 def _rtcp_note(program: Program, chosen: list[Block]) -> list[str]:
@@ -251,8 +285,13 @@ def _arc_start_notes(program: Program, out: Program | None, header_lines: int) -
     return notes
 
 
-def _header(params: Any) -> list[str]:
+def _header(params: Any, weighing: Weighing | None) -> list[str]:
     head = [f"compensated by pige_sym for {params.machine}, parameters {params.source}"]
+    if weighing is not None and weighing.covariance_from != "none":
+        partial = [f"{n}={v:.4g}" for n, v in weighing.entered.items()
+                   if v is not None and not weighing.why[n].startswith("entered as estimated")]
+        if partial:
+            head.append("weighed by uncertainty, entered: " + ", ".join(partial))
     sense = format_axis_sense(params.axis_sense)
     if sense:
         head.append(f"pige {SENSE_KEY}: {sense}")
@@ -276,10 +315,13 @@ def _compensated_poses(params: Any, chosen: list[Block], max_change_deg: float) 
     rtcp = np.array([b.rtcp for b in chosen], dtype=bool)
     pivots = {a: np.asarray(v, dtype=float) for a, v in params.pivots_mm.items()} or None
     # directions of approach matter only to a compensated reversal error (backlash)
-    approach = approach_directions(angles) if len(chosen) and params.extensions else np.zeros_like(angles)
+    maps = params.error_maps
+    per_direction = params.extensions or (maps is not None and any(
+        m.kind == "reversal" for ax in maps.axes.values() for m, _ in ax.motion_values()))
+    approach = approach_directions(angles) if len(chosen) and per_direction else np.zeros_like(angles)
     return compensate_poses(params.machine, params.values, angles, xyz, rtcp=rtcp, pivots_mm=pivots,
                             tool_mm=params.tool_mm, extensions=params.extensions, approach=approach,
-                            max_angle_step_deg=max_change_deg, keep_turn=True)
+                            max_angle_step_deg=max_change_deg, keep_turn=True, error_maps=maps)
 
 
 def _guard(chosen: list[Block], poses: Any, max_mm: float, max_deg: float, path: str, error: type) -> None:
@@ -307,7 +349,7 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
     a, xyz, rtcp = poses.angles_deg[rows], poses.xyz_mm[rows], np.asarray(poses.rtcp, dtype=bool)[rows]
     from pige_sym.model.trajectories import approach_directions
 
-    approach = approach_directions(a) if params.extensions else np.zeros_like(a)
+    approach = approach_directions(a) if params.extensions or params.error_maps is not None else np.zeros_like(a)
     tp0, or0 = predicted_errors(params, a, xyz, rtcp, a, xyz, approach)
     tp1, or1 = predicted_errors(params, a, xyz, rtcp, new[:, 3:], new[:, :3], approach)
     d_mm = np.abs(new[:, :3] - xyz).max(axis=1).tolist()

@@ -26,6 +26,7 @@ random direction, projected.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -107,13 +108,21 @@ def effect_lengths(machine: str, setup: BallbarSetup, effects: list[EffectInstan
 
 def simulate_ballbar(machine: str, setup: BallbarSetup, *, pige: dict[str, float], noise_um: float = 0.2,
                      seed: int | None = None, zero: str = "relative",
-                     effects: list[EffectInstance] | None = None) -> BallbarRun:
-    """The file a setup produces on a machine with errors ``pige`` [µm, µrad] and ``effects``.
+                     effects: list[EffectInstance] | None = None, error_maps: Any = None) -> BallbarRun:
+    """The file a setup produces on a machine with errors ``pige`` [µm, µrad], ``effects`` and error maps
+    (CONVENTIONS §10, :class:`~pige_sym.model.error_motions.ErrorMaps`).
 
-    The PIGEs' length is exact (``|T − P| − L0``), the effects' first order (module docstring).
+    The PIGEs' length is exact (``|T − P| − L0``), the effects' and the maps' first order (module docstring):
+    the maps' tool-point error at ``table_ball + offset`` projected on the bar.
     """
-    return simulate_ballbar_with_outliers(machine, setup, pige=pige, noise_um=noise_um, seed=seed, zero=zero,
-                                          effects=effects)[0]
+    run = simulate_ballbar_with_outliers(machine, setup, pige=pige, noise_um=noise_um, seed=seed, zero=zero,
+                                         effects=effects)[0]
+    if error_maps is not None:
+        kern = load_kernels(machine)
+        raw = error_maps.raw_deviation(kern, setup.angles_deg, setup.table_ball_mm + setup.offset_mm)
+        extra = np.einsum("ni,ni->n", bar_directions(kern.workpiece_rotation(setup.angles_deg), setup.offset_mm), raw)
+        run.dl_um = run.dl_um + (extra - extra[0] if zero == "relative" else extra)
+    return run
 
 
 def simulate_ballbar_with_outliers(machine: str, setup: BallbarSetup, *, pige: dict[str, float],

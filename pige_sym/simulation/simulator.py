@@ -31,6 +31,7 @@ from pige_sym.measurements.measurement import Measurement, missing_tool
 from pige_sym.measurements.rtest_writer import write_measurement
 from pige_sym.measurements.schema import MAX_PIGE
 from pige_sym.model.effects import EffectContext, EffectInstance
+from pige_sym.model.error_motions import ErrorMaps
 from pige_sym.model.trajectories import Trajectory
 from pige_sym.options import parse_number_assignments
 
@@ -172,7 +173,8 @@ def add_effects(dev: np.ndarray, effects: list[EffectInstance], ctx: EffectConte
 def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | None = None,
              ball_mm: Any = DEFAULT_BALL_MM, pivots_mm: dict[str, Any] | None = None, tool_mm: Any = None,
              effects: list[EffectInstance] | None = None, noise_um: float = 0.25, seed: int | None = None,
-             frame: str = "machine", axis_sense: dict[str, int] | None = None) -> SimulationResult:
+             frame: str = "machine", axis_sense: dict[str, int] | None = None,
+             error_maps: ErrorMaps | None = None) -> SimulationResult:
     """Simulate an R-test measurement.
 
     Parameters
@@ -192,6 +194,9 @@ def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | N
     axis_sense : dict of str to int, optional
         Axes the controller commands in the reverse sense (CONVENTIONS §9): the trajectory's angles are θ,
         the file written from the result holds θ_cmd = σ·θ and records the sense.
+    error_maps : ErrorMaps, optional
+        Error motions of rotary axes (CONVENTIONS §10), added to first order; recorded in the truth as
+        ``error_motions``.
 
     Returns
     -------
@@ -209,6 +214,8 @@ def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | N
     dev = kern.deviation(angles, params, ball, pivots or None, tool)
     ctx = EffectContext(kern, angles, trajectory.t_s, ball, pivots or None, tool)
     dev, outlier_rows = add_effects(dev, effects or [], ctx, rng)
+    if error_maps is not None:
+        dev = dev + error_maps.deviation(kern, angles, ball, pivots or None, tool, trajectory.approach)
     effect_records = [eff.to_dict() for eff in effects or []]
     noise = rng.normal(scale=noise_um, size=dev.shape) if noise_um > 0 else np.zeros_like(dev)
     dev = dev + noise
@@ -236,5 +243,6 @@ def simulate(machine: str, trajectory: Trajectory, *, pige: dict[str, float] | N
         "trajectory": trajectory.description,
         "frame": frame,
         **({"axis_sense": dict(axis_sense)} if axis_sense else {}),
+        **({"error_motions": error_maps.to_dict()} if error_maps is not None else {}),
     }
     return SimulationResult(m, truth)

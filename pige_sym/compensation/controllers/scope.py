@@ -1,6 +1,8 @@
 """What a controller's kinematic description can hold, what it cannot, and what that leaves at the tool.
 
-Per style, the controller module's ``representable`` names the PIGEs its entries carry (CONVENTIONS §3):
+Per style, the controller module's ``representable`` names the PIGEs its entries carry (CONVENTIONS §3), and
+its optional ``map_motions(params)`` the error maps (``<axis>:<motion>``, CONVENTIONS §10) its tables carry;
+every other map is named as not representable:
 
 - ``linuxcnc`` (``xyzac-trt-kins`` / ``xyzbc-trt-kins``, ``src/emc/kinematics/trtfuncs.c``): the rotary
   table's C line is at ``(x-rot-point, y-rot-point)``; the tilt axis (A about X, B about Y) turns about the
@@ -16,32 +18,41 @@ Per style, the controller module's ``representable`` names the PIGEs its entries
 Angle extensions of a diagnosis (``angular_error_*``, ``backlash_*``) depend on the pose: no kinematic
 table holds them; only the NC rewrite compensates them.
 
-:func:`tool_point_summary` predicts, on the default test (cone frustum, ball at ``DEFAULT_BALL_MM``), the
-tool-point RMSE before correction, after entering only what the controller holds, and after the NC rewrite.
+The values come weighed by their uncertainty (:mod:`pige_sym.compensation.weighing`, judged over the axes'
+travel): :func:`tool_point_summary` predicts, with a 95 % bound, the tool-point RMS error over those poses
+uncorrected, after entering only what the controller holds, and after entering every entered value (the NC
+rewrite, or pige's own kinematics component).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 from pige_sym.compensation.controllers import get_controller
 from pige_sym.compensation.parameters import CompensationParameters
-from pige_sym.compensation.study import compensation_study
-from pige_sym.constants import DEFAULT_BALL_MM
+from pige_sym.compensation.weighing import ErrorPrediction, Weighing, estimate_of, travel_poses, weigh, weighing_rows
 from pige_sym.kernels import load_kernels
-from pige_sym.model.trajectories import make_trajectory
 
 
 @dataclass
 class ControllerScope:
-    """What one controller style holds of a parameter set, and the tool-point error it leaves [µm]."""
+    """What one controller style holds of a parameter set, and the tool-point error it leaves.
+
+    Attributes
+    ----------
+    entered, not_representable : list of str
+    before, controller_only, complete : ErrorPrediction or None
+        Predicted RMS tool-point error [µm] over ``judged_on``: uncorrected, after this controller's
+        entries, after every entered value; None without standard errors in the file.
+    judged_on : str
+    """
 
     entered: list[str]
     not_representable: list[str]
-    rmse_before_um: float
-    rmse_table_only_um: float
-    rmse_nc_rewrite_um: float
+    before: ErrorPrediction | None
+    controller_only: ErrorPrediction | None
+    complete: ErrorPrediction | None
+    judged_on: str
 
 
 def representable(params: CompensationParameters, style: str) -> list[str]:
@@ -56,8 +67,13 @@ def positions_and_zeros(params: CompensationParameters) -> list[str]:
     return position + [n for n in kern.PARAMETERS if n in kern.ZERO_PARAMETERS]
 
 
+def weighing_of(params: CompensationParameters) -> Weighing:
+    """The weighing ``params`` were entered by, or one judged over the axes' travel."""
+    return params.weighing if params.weighing is not None else weigh(params, travel_poses(params))
+
+
 def tool_point_summary(params: CompensationParameters, style: str) -> ControllerScope:
-    """Entered, not representable, and the predicted tool-point RMSE before / table only / NC rewrite."""
+    """Entered, not representable, and the predicted tool-point error uncorrected / these entries / complete."""
     kern = load_kernels(params.machine)
     held = set(representable(params, style))
     values = {k: v for k, v in params.values.items() if v != 0.0}
@@ -66,14 +82,26 @@ def tool_point_summary(params: CompensationParameters, style: str) -> Controller
     missing += [f"{e.spec.id} ({', '.join(f'{k}={v:.3g}' for k, v in e.params.items())} urad: depends on the pose)"
                 for e in params.extensions]
     missing += list(params.ignored)
-    traj = make_trajectory(kern.MACHINE_CODE, "cone-frustum")
-    tool = params.tool_mm if kern.TOOL_ROTARY else None
-    common: dict[str, Any] = {"truth": params.values, "ball_mm": DEFAULT_BALL_MM, "tool_mm": tool,
-                              "pivots_mm": params.pivots_mm or None, "truth_extensions": params.extensions}
-    table = compensation_study(kern.MACHINE_CODE, [traj], identified={n: values[n] for n in entered}, **common)[0]
-    nc = compensation_study(kern.MACHINE_CODE, [traj], identified=params.values, extensions=params.extensions,
-                            **common)[0]
-    return ControllerScope(entered, missing, table.rmse_before_um, table.rmse_after_um, nc.rmse_after_um)
+    if params.error_maps is not None:
+        tables = set(getattr(get_controller(style), "map_motions", lambda _p: [])(params))
+        left = [f"{ax}:{name}" for ax, m in params.error_maps.axes.items() for name in m.values
+                if f"{ax}:{name}" not in tables]
+        if left:
+            missing.append(f"the error maps {', '.join(left)} (CONVENTIONS §10; the NC rewrite compensates them)")
+    w = weighing_of(params)
+    return ControllerScope(entered, missing, w.predicted_for({}), w.predicted_for({n: values[n] for n in entered}),
+                           w.predicted_for(estimate_of(params)), w.judged_on)
+
+
+def weighing_lines(params: CompensationParameters, comment: str) -> list[str]:
+    """The rule, and per value not entered as estimated: its estimate ± std and what is entered."""
+    w = weighing_of(params)
+    if w.covariance_from == "none":
+        return [f"{comment}{note}" for note in w.notes]
+    rows = weighing_rows(w, params.units) or ["every estimate is entered as estimated (each many standard errors "
+                                              "from 0)"]
+    return [f"{comment}weighed by uncertainty (docs/algorithms.md): {w.rule}", *(f"{comment}{n}" for n in w.notes),
+            *(f"{comment}  {r}" for r in rows)]
 
 
 def scope_lines(params: CompensationParameters, style: str, comment: str) -> list[str]:
@@ -81,17 +109,21 @@ def scope_lines(params: CompensationParameters, style: str, comment: str) -> lis
     s = tool_point_summary(params, style)
     base = getattr(get_controller(style), "base_data", None)
     extra = [n for n in (base(params) if base else []) if params.values.get(n, 0.0) != 0.0]
-    note = ([f"{comment}printed below as changes of base data, not entered above (the RMSE after entering leaves "
+    note = ([f"{comment}printed below as changes of base data, not entered above (the error after entering leaves "
              f"them out): {', '.join(extra)}"] if extra else [])
-    if s.rmse_table_only_um > s.rmse_before_um:
+    if s.before and s.controller_only and s.controller_only.expected_um > s.before.expected_um:
         note.append(f"{comment}WARNING: entering only these values makes the predicted tool-point error LARGER "
-                    f"({s.rmse_table_only_um:.3f} > {s.rmse_before_um:.3f} um on the default cone): what they cannot "
+                    f"({s.controller_only.expected_um:.2f} > {s.before.expected_um:.2f} um): what they cannot "
                     "hold outweighs them; do not enter them alone (use the NC rewrite)")
-    return note + [
+    if s.before and s.controller_only and s.complete:
+        predicted = (f"{comment}predicted tool-point RMS error over {s.judged_on}: uncorrected {s.before.text()}; "
+                     f"after these entries only {s.controller_only.text()}; after every entered value (pige's "
+                     f"kinematics, or the NC rewrite: pige compensate PROGRAM) {s.complete.text()}")
+    else:
+        predicted = f"{comment}predicted tool-point error: not predicted (the parameter file states no uncertainty)"
+    return weighing_lines(params, comment) + note + [
         f"{comment}entered: {', '.join(s.entered) or 'nothing'}",
         f"{comment}NOT representable in this controller's kinematics (only the NC rewrite compensates them): "
         f"{'; '.join(s.not_representable) or 'none'}",
-        f"{comment}predicted tool-point RMSE on the default cone (ball {', '.join(f'{x:g}' for x in DEFAULT_BALL_MM)} "
-        f"mm): {s.rmse_before_um:.3f} um uncorrected, {s.rmse_table_only_um:.3f} um after entering these values "
-        f"only, {s.rmse_nc_rewrite_um:.3f} um after the NC rewrite (pige compensate PROGRAM)",
+        predicted,
     ]

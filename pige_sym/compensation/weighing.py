@@ -1,0 +1,417 @@
+"""Which values to enter, and how much: every estimate weighed by its uncertainty.
+
+An identification gives estimates x̂ with a covariance Σ (``pige identify/diagnose --json`` write it as
+``covariance``).  Entering x̂ as it is corrects the machine by x̂, so it leaves ``x − x̂`` behind: for a
+weakly determined parameter (EB0A 45 ± 35 µrad where the truth is 15) that can be more than it removes.
+
+**The rule** (docs/algorithms.md, "Corrections weighed by their uncertainty"): the entered values are the
+posterior mean of the parameters under a zero-mean normal prior whose variance per parameter is estimated
+from the data itself (empirical Bayes, "automatic relevance determination"),
+
+    T = diag(τ²) maximising N(x̂; 0, Σ + T) (:func:`prior_variances`),   c = T (T + Σ)⁻¹ x̂.
+
+With uncorrelated estimates ``τᵢ² = max(x̂ᵢ² − σᵢ², 0)``: E[x̂ᵢ²] = xᵢ² + σᵢ², so τᵢ² is the size of the
+parameter without its noise.  A parameter the data do not show (τᵢ = 0) is **not entered**, and the
+parameters correlated with it take their estimate conditional on it being 0 (what an identification
+without it would give); a parameter many standard errors from 0 is entered as estimated; in between it is
+entered in part.  The full covariance is used, so a combination the data determine well keeps its value
+even when each parameter alone is weak.  Without a covariance in the file the standard errors stand for
+it (correlations unknown); without standard errors nothing is weighed (said so).
+
+**The prediction.** The tool-point error after entering c on a machine whose parameters are x is, to
+first order, ``D(θ, point)·(x − c)`` (:func:`~pige_sym.compensation.kinematics.raw_offset`, the same
+kernels as the identification).  Its RMS over a set of poses is drawn for ``x ~ N(x̂, Σ)`` (``DRAWS``
+draws, a fixed seed): the expected value is the draws' mean, the 95 % bound their 95th percentile.
+Nothing is predicted as 0.000 when it is known to ±2 µm.
+
+The poses are the compensated program's poses (the NC rewrite) or, for controller entries, the axes'
+travel (:func:`travel_poses`): a poorly determined PIGE hurts most where the measured poses did not go.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from pige_sym.compensation.kinematics import raw_offset
+from pige_sym.compensation.parameters import AngleExtension, CompensationParameters, extension_prefixes
+from pige_sym.constants import DEFAULT_BALL_MM, DEFAULT_TILT_TRAVEL_DEG
+from pige_sym.kernels import load_kernels
+from pige_sym.model.trajectories import approach_directions
+
+#: Draws of the parameters for the predicted error (fixed seed: the same file gives the same numbers).
+DRAWS = 4000
+#: Poses at most: a longer program is judged on this many, evenly spaced along it.
+MAX_POSES = 20000
+#: Grid step of the travel poses [deg].
+TRAVEL_STEP_DEG = 5.0
+#: The rule, as reports and ``--json`` state it.
+RULE = ("posterior mean under a prior N(0, diag(tau^2)) whose variances the estimates and their covariance "
+        "determine (tau^2 = max(x^2 - std^2, 0) for an uncorrelated value): what the data do not show is not "
+        "entered, a well-determined value is entered as estimated")
+
+
+@dataclass(frozen=True)
+class ErrorPrediction:
+    """Predicted RMS tool-point error over the judged poses [µm]: expected value and 95 % bound."""
+
+    expected_um: float
+    p95_um: float
+
+    def to_dict(self) -> dict[str, float]:
+        return {"expected": self.expected_um, "p95": self.p95_um}
+
+    def text(self) -> str:
+        if self.p95_um == self.expected_um:
+            return f"{self.expected_um:.2f} um (if the values were exact: no uncertainty stated)"
+        return f"{self.expected_um:.2f} um (95 % <= {self.p95_um:.2f})"
+
+
+@dataclass(frozen=True)
+class JudgedPoses:
+    """The poses a correction is judged on.
+
+    Attributes
+    ----------
+    angles_deg : (n, k) [deg]
+        CONVENTIONS angles (§9 θ) of the machine's rotary axes, in kernel order.
+    points_mm : (n, 3) [mm]
+        Intended workpiece point of each pose.
+    approach : (n, k) of {−1, 0, +1}
+        Direction of approach of each axis (a reversal error depends on it).
+    description : str
+        Which poses, for the reader.
+    """
+
+    angles_deg: np.ndarray
+    points_mm: np.ndarray
+    approach: np.ndarray
+    description: str
+
+
+@dataclass
+class Weighing:
+    """What is entered and what it is predicted to leave.
+
+    Attributes
+    ----------
+    estimate, std : dict of str to float
+        The file's values and standard errors [µm, µrad] (PIGEs, zero-position errors, effect parameters).
+    entered : dict of str to float or None
+        The value to enter per parameter; ``None`` where nothing is entered (not determined).
+    why : dict of str to str
+        Per parameter, in words: entered as estimated, in part, or not (and why).
+    predicted : dict of str to ErrorPrediction
+        ``none`` (no correction), ``all_estimates`` (every estimate entered) and ``entered`` (this
+        recommendation); empty without an uncertainty.
+    judged_on : str
+    rule : str
+    covariance_from : str
+        ``covariance``, ``std`` (correlations unknown) or ``none`` (nothing weighed).
+    """
+
+    estimate: dict[str, float]
+    std: dict[str, float]
+    entered: dict[str, float | None]
+    why: dict[str, str]
+    predicted: dict[str, ErrorPrediction]
+    judged_on: str
+    rule: str = RULE
+    covariance_from: str = "covariance"
+    notes: list[str] = field(default_factory=list)
+    covariance: np.ndarray | None = field(default=None, repr=False)
+    moments: np.ndarray | None = field(default=None, repr=False)
+
+    def predicted_for(self, values: dict[str, float]) -> ErrorPrediction | None:
+        """The RMS tool-point error left by entering ``values`` (others not entered) on the judged poses."""
+        if self.covariance is None or self.moments is None:
+            return None
+        names = list(self.estimate)
+        est = np.array([self.estimate[n] for n in names])
+        return predict(est, self.covariance, self.moments, np.array([values.get(n, 0.0) for n in names]))
+
+    def to_dict(self) -> dict[str, Any]:
+        pred = {k: v.to_dict() for k, v in self.predicted.items()}
+        return {"entered": dict(self.entered), "why": dict(self.why), "rule": self.rule,
+                "covariance_from": self.covariance_from, "judged_on": self.judged_on,
+                "predicted_after_um": pred.get("entered"), "predicted_before_um": pred.get("none"),
+                "predicted_all_estimates_um": pred.get("all_estimates"), "notes": list(self.notes)}
+
+
+def entered_values(estimate: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    """The values to enter, shape=(q,) [µm, µrad]: ``c = T (T + Σ)⁻¹ x̂`` with T of :func:`prior_variances`.
+
+    Parameters
+    ----------
+    estimate : (q,) [µm, µrad]
+    covariance : (q, q)
+        Positive definite (its diagonal positive).
+    """
+    x = np.asarray(estimate, dtype=float)
+    cov = np.asarray(covariance, dtype=float)
+    tau2 = prior_variances(x, cov)
+    return np.where(tau2 > 0, tau2 * np.linalg.solve(np.diag(tau2) + cov, x), 0.0)
+
+
+def prior_variances(estimate: np.ndarray, covariance: np.ndarray, *, sweeps: int = 500) -> np.ndarray:
+    """τ² that maximise the evidence ``N(x̂; 0, Σ + diag τ²)`` one at a time (type-II maximum likelihood), shape=(q,).
+
+    Coordinate ascent with each coordinate's exact maximum (Tipping & Faul 2003, "Fast marginal likelihood
+    maximisation for sparse Bayesian models"): with ``C = Σ + T``, ``S = C⁻¹ᵢᵢ``, ``Q = (C⁻¹x̂)ᵢ`` and
+    ``s = S/(1 − τᵢ²S)``, ``q = Q/(1 − τᵢ²S)`` (the same without parameter i), the evidence is largest at
+    ``τᵢ² = (q² − s)/s²`` when ``q² > s``, else at 0.  It starts from ``max(x̂ᵢ² − σᵢ², 0)`` (the exact answer for
+    uncorrelated estimates) and sweeps until no τᵢ² moves by more than 1e-12 of ``x̂ᵢ² + σᵢ²``: a maximum of the
+    evidence in every coordinate.
+    """
+    x = np.asarray(estimate, dtype=float)
+    cov = np.asarray(covariance, dtype=float)
+    scale = x**2 + np.diag(cov)
+    tau2 = np.clip(x**2 - np.diag(cov), 0.0, None)
+    for _ in range(sweeps):
+        moved = 0.0
+        c_inv = np.linalg.inv(cov + np.diag(tau2))  # afresh each sweep; rank-one updates within it
+        for i in range(x.size):
+            big_s, big_q = c_inv[i, i], c_inv[i] @ x
+            shrink = 1.0 - tau2[i] * big_s
+            s, q = big_s / shrink, big_q / shrink
+            new = (q * q - s) / (s * s) if q * q > s else 0.0
+            change = new - tau2[i]
+            if change:
+                col = c_inv[:, i].copy()
+                c_inv -= change * np.outer(col, col) / (1.0 + change * col[i])  # Sherman-Morrison
+            moved = max(moved, abs(change) / scale[i])
+            tau2[i] = new
+        if moved <= 1e-12:
+            break
+    return tau2
+
+
+def error_moments(params: CompensationParameters, names: list[str], poses: JudgedPoses) -> np.ndarray:
+    """``M = Dᵀ D / n`` of the tool-point error per unit parameter over the poses, shape=(q, q).
+
+    ``(x − c)ᵀ M (x − c)`` is the mean square tool-point error [µm²] left by entering ``c``.
+    """
+    kern = load_kernels(params.machine)
+    pivots = {a: np.asarray(v, dtype=float) for a, v in params.pivots_mm.items()} or None
+    a, pts = poses.angles_deg, poses.points_mm
+    by_name = dict(_effect_columns(params.extensions))
+    maps = _map_columns(params, kern, poses, pivots)
+    cols = []
+    for name in names:
+        if name in maps:
+            cols.append(maps[name].reshape(-1))
+            continue
+        p = np.zeros((a.shape[0], len(kern.PARAMETERS)))
+        if name in by_name:
+            ext, key = by_name[name]
+            unit = AngleExtension(ext.spec, {k: float(k == key) for k in ext.params})
+            axis = ext.spec.axis
+            p[:, kern.PARAMETERS.index(f"E{axis[0]}0{axis}")] = unit.zero_error_urad(a, tuple(kern.ROTARY_AXES),
+                                                                                     poses.approach)
+        else:
+            p[:, kern.PARAMETERS.index(name)] = 1.0
+        cols.append(raw_offset(kern, a, pts, p, pivots, params.tool_mm).reshape(-1))
+    d = np.stack(cols, axis=1) if cols else np.zeros((3 * a.shape[0], 0))
+    return np.asarray(d.T @ d / max(a.shape[0], 1))
+
+
+def _map_columns(params: CompensationParameters, kern: Any, poses: JudgedPoses,
+                 pivots: dict | None) -> dict[str, np.ndarray]:
+    """Tool-point error per unit map value at each pose, name → (n, 3) [µm per µm or µrad]."""
+    if params.error_maps is None or not poses.angles_deg.shape[0]:
+        return {}
+    a, pts = poses.angles_deg, poses.points_mm
+    names, weights, comps = params.error_maps.value_columns(kern, a, poses.approach)
+    base = kern.motion_jacobian(a, np.zeros(3), pivots, params.tool_mm)
+    per_point = base + sum(pts[:, j, None, None] * (kern.motion_jacobian(a, e, pivots, params.tool_mm) - base)
+                           for j, e in enumerate(np.eye(3)))
+    return {n: per_point[:, :, comps[i]] * weights[:, i, None] for i, n in enumerate(names)}
+
+
+def _effect_columns(extensions: list[AngleExtension]) -> list[tuple[str, tuple[AngleExtension, str]]]:
+    """``(<id>.<param>, (extension, param))`` of every effect parameter (the names the diagnosis writes)."""
+    return [(f"{pre}.{k}", (e, k)) for pre, e in zip(extension_prefixes(extensions), extensions, strict=True)
+            for k in e.params]
+
+
+def predict(estimate: np.ndarray, covariance: np.ndarray, moments: np.ndarray, entered: np.ndarray,
+            seed: int = 0) -> ErrorPrediction:
+    """RMS tool-point error left by ``entered`` for parameters drawn from N(estimate, covariance) [µm]."""
+    rng = np.random.default_rng(seed)
+    vals, vecs = np.linalg.eigh(covariance)
+    root = vecs * np.sqrt(np.clip(vals, 0.0, None))
+    left = (estimate - entered)[None, :] + rng.standard_normal((DRAWS, estimate.size)) @ root.T
+    rms = np.sqrt(np.clip(np.einsum("si,ij,sj->s", left, moments, left), 0.0, None))
+    return ErrorPrediction(float(rms.mean()), float(np.quantile(rms, 0.95)))
+
+
+def weigh(params: CompensationParameters, poses: JudgedPoses) -> Weighing:
+    """Decide what to enter from ``params`` and predict what it leaves on ``poses`` (module docstring).
+
+    A head machine's file without ``tool_mm`` is weighed all the same; what it leaves is then not predicted
+    (the tool point is not known).
+    """
+    from pige_sym.measurements.measurement import missing_tool
+
+    est = estimate_of(params)
+    names = list(est)
+    values = np.array([est[n] for n in names])
+    cov, source = _covariance(params, names)
+    no_tool = missing_tool(params.machine, params.tool_mm, "tool_mm")
+    moments = None if no_tool else error_moments(params, names, poses)
+    undetermined: dict[str, float | None] = {n: None for n in params.set_to_zero}
+    notes = [f"the error left is not predicted: {no_tool}"] if no_tool else []
+    if cov is None:
+        cov = np.zeros((len(names), len(names)))
+        entered, std, source = values, {}, "none"
+        why = {n: "entered as given: the file states no uncertainty" for n in names}
+        notes.append("the parameter file states no standard errors: nothing is weighed, and the errors are "
+                     "predicted as if its values were exact (pige identify --json writes them)")
+    else:
+        std = {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(names)}
+        entered = entered_values(values, cov)
+        why = {n: _why(values[i], std[n], entered[i]) for i, n in enumerate(names)}
+        if source != "covariance":
+            notes.append("the parameter file has standard errors but no covariance: the parameters are weighed as if "
+                         "uncorrelated")
+    predicted = {} if moments is None else {
+        "none": predict(values, cov, moments, np.zeros_like(values)), "entered": predict(values, cov, moments, entered)}
+    if moments is not None and source != "none":
+        predicted["all_estimates"] = predict(values, cov, moments, values)
+    chosen: dict[str, float | None] = {n: float(v) for n, v in zip(names, entered, strict=True)}
+    return Weighing(est, std, chosen | undetermined,
+                    why | {n: "not determined by the data: not entered" for n in undetermined}, predicted,
+                    poses.description, covariance_from=source, notes=notes, covariance=cov, moments=moments)
+
+
+def _covariance(params: CompensationParameters, names: list[str]) -> tuple[np.ndarray | None, str]:
+    """The estimates' covariance: the file's for the PIGEs and effects, the map values' standard errors as
+    uncorrelated ones (the file holds no covariance of a map); None when any value has no uncertainty."""
+    maps = set(params.error_maps.values()) if params.error_maps is not None else set()
+    plain = [n for n in names if n not in maps]
+    cov, source = params.covariance_of(plain)
+    if not maps or cov is None:
+        return cov, source
+    std = []
+    for n in names:
+        if n in maps:
+            axis, rest = n.split(":", 1)
+            motion, angle = rest.split("@")
+            grid = params.error_maps.axes[axis].grid.angles_deg
+            g = int(np.flatnonzero(np.isclose(grid, float(angle)))[0])
+            s = params.error_map_std.get(axis, {}).get(motion, ())
+            std.append(s[g] if g < len(s) else np.nan)
+    if not all(np.isfinite(x) and x > 0 for x in std):
+        return None, "none"
+    out = np.zeros((len(names), len(names)))
+    idx = [names.index(n) for n in plain]
+    out[np.ix_(idx, idx)] = cov
+    midx = [names.index(n) for n in names if n in maps]
+    out[midx, midx] = np.square(std)
+    return out, source
+
+
+def every_estimate(weighing: Weighing) -> Weighing:
+    """The weighing overruled: every estimate entered as it is (``--enter all``), predicted as such."""
+    entered = {n: (weighing.estimate[n] if v is not None else None) for n, v in weighing.entered.items()}
+    why = {n: ("entered as estimated (--enter all)" if v is not None else weighing.why[n]) for n, v in entered.items()}
+    predicted = dict(weighing.predicted)
+    if "all_estimates" in predicted:
+        predicted["entered"] = predicted["all_estimates"]
+    return replace(weighing, entered=entered, why=why, predicted=predicted, notes=weighing.notes + [
+        "--enter all: every estimate is entered as it is, whatever its uncertainty"])
+
+
+def _why(value: float, std: float, entered: float) -> str:
+    if entered == 0.0:
+        return "not entered: the data do not show it beyond its uncertainty"
+    share = entered / value if value else math.inf
+    if abs(share - 1.0) < 0.05:
+        return "entered as estimated"
+    if 0.0 < share < 1.0:
+        return f"entered in part ({share:.0%} of the estimate): weakly determined"
+    return "entered as its estimate given the values weighed down beside it (they are correlated)"
+
+
+def weighing_rows(weighing: Weighing, units: dict[str, str]) -> list[str]:
+    """One line per value not entered as estimated: ``EB0A +45.35 ± 35 urad: entered in part (73 % …): +32.9``;
+    the map values (``C:EXC@30``) in one line per axis and motion."""
+    rows = []
+    maps: dict[str, list[str]] = {}
+    for n, v in weighing.entered.items():
+        if "@" in n:
+            maps.setdefault(n.split("@")[0], []).append(weighing.why[n])
+            continue
+        if weighing.why[n].startswith("entered as estimated"):
+            continue
+        unit = units.get(n, "") if "." not in n else "urad"
+        said = f"{n} {weighing.estimate[n]:+.4g} ± {weighing.std[n]:.2g} {unit}" if n in weighing.std else n
+        value = f": enter {v:+.4g}" if v is not None and v != 0.0 else ""
+        rows.append(f"{said}: {weighing.why[n]}{value}")
+    for motion, whys in maps.items():
+        whole = sum(w.startswith("entered as estimated") for w in whys)
+        none = sum(w.startswith("not entered") for w in whys)
+        if whole < len(whys):
+            rows.append(f"map {motion}: {whole} of {len(whys)} values entered as estimated, {none} not entered (within "
+                        f"their uncertainty), {len(whys) - whole - none} in part")
+    return rows
+
+
+def estimate_of(params: CompensationParameters) -> dict[str, float]:
+    """Every determined value of ``params``: PIGEs and zero-position errors, then effect parameters."""
+    out = {n: v for n, v in params.values.items() if n not in params.set_to_zero}
+    for name, (ext, key) in _effect_columns(params.extensions):
+        out[name] = ext.params[key]
+    if params.error_maps is not None:
+        out |= params.error_maps.values()
+    return out
+
+
+def with_entered(params: CompensationParameters, weighing: Weighing) -> CompensationParameters:
+    """``params`` holding the entered values (a parameter not entered at 0, effects with their entered part)."""
+    entered = {n: v for n, v in weighing.entered.items() if v is not None}
+    values = {n: entered.get(n, 0.0) for n in params.values}
+    maps = params.error_maps.with_values(entered) if params.error_maps is not None else None
+    exts = [AngleExtension(e.spec, {k: entered.get(f"{pre}.{k}", 0.0) for k in e.params})
+            for pre, e in zip(extension_prefixes(params.extensions), params.extensions, strict=True)]
+    return replace(params, values=values, extensions=exts, weighing=weighing, error_maps=maps)
+
+
+def travel_poses(params: CompensationParameters, travel_deg: dict[str, tuple[float, float]] | None = None,
+                 ) -> JudgedPoses:
+    """A grid over the rotary axes' travel at the measured point and at the default R-test ball.
+
+    A full-turn axis (C, and any axis not in ``travel_deg`` whose letter is C) runs 0…360°; every other axis
+    ``DEFAULT_TILT_TRAVEL_DEG`` unless ``travel_deg`` gives its range [deg] (CONVENTIONS angles).
+    """
+    kern = load_kernels(params.machine)
+    axes = tuple(kern.ROTARY_AXES)
+    travel = dict(travel_deg or {})
+    grids = []
+    for ax in axes:
+        lo, hi = travel.get(ax, (0.0, 360.0 - TRAVEL_STEP_DEG) if ax[0] == "C" else DEFAULT_TILT_TRAVEL_DEG)
+        grids.append(np.linspace(lo, hi, int(round((hi - lo) / TRAVEL_STEP_DEG)) + 1))
+    angles = np.stack([g.ravel() for g in np.meshgrid(*grids, indexing="ij")], axis=1)
+    points = [tuple(params.ball_mm)] if params.ball_mm is not None else []
+    points += [DEFAULT_BALL_MM] if tuple(DEFAULT_BALL_MM) not in points else []
+    ang = np.vstack([angles] * len(points))
+    pts = np.repeat(np.asarray(points, dtype=float), angles.shape[0], axis=0)
+    ranges = ", ".join(f"{ax} {g[0]:g}…{g[-1]:g}°" for ax, g in zip(axes, grids, strict=True))
+    where = " and ".join("(" + ", ".join(f"{x:g}" for x in p) + ") mm" for p in points)
+    return JudgedPoses(ang, pts, np.zeros_like(ang),
+                       f"the axes' travel ({ranges}, every {TRAVEL_STEP_DEG:g}°) at {where}")
+
+
+def program_poses(angles_deg: np.ndarray, points_mm: np.ndarray, approach: np.ndarray | None = None,
+                  ) -> JudgedPoses:
+    """The compensated program's poses (at most ``MAX_POSES``, evenly spaced along the program)."""
+    a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    n = a.shape[0]
+    appr = approach_directions(a) if approach is None else np.atleast_2d(approach)
+    take = np.unique(np.linspace(0, n - 1, MAX_POSES).round().astype(int)) if n > MAX_POSES else np.arange(n)
+    said = f"the compensated program's {n} poses" + (f" ({take.size} of them, evenly spaced)" if n > MAX_POSES
+                                                     else "")
+    return JudgedPoses(a[take], np.atleast_2d(points_mm)[take], appr[take], said)
