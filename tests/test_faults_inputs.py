@@ -181,6 +181,100 @@ def test_fuzzed_findings_compensate_with_bounded_values_or_are_refused(tmp_path_
         assert all(np.isfinite(v) and abs(v) <= MAX_PIGE for v in ext.params.values())
 
 
+# ------------------------------------------------------------------------------ issue 43, 9: a 400-digit integer
+
+
+BIG = "1" * 400
+
+
+@pytest.mark.parametrize("slot, said", [
+    ("params", "pige.EY0A: expected a finite number"),
+    ("finding", "harmonic inf"),
+    ("tolerance", "limits.EX0C: a limit must be a positive finite number, got a number beyond"),
+    ("default", "defaults.um: a limit must be a positive finite number"),
+    ("pige file", "pige.EY0A: expected a finite number, got one beyond ±1.8e308"),
+    ("truth", "parameter EY0A: inf is not a finite number"),
+])
+def test_a_400_digit_integer_in_any_json_input_is_refused_in_one_line(tmp_path, capsys, slot, said) -> None:
+    """It passed for a number and ended in OverflowError where a reader called float(); the one JSON reader now
+    reads an integer of more than 18 digits as the float it denotes, so every finiteness check sees it."""
+    import json
+
+    run_csv = tmp_path / "run.csv"
+    assert main(["simulate", "--out", str(run_csv), "--seed", "1", "--points", "8"]) == 0
+    prog = tmp_path / "prog.mpf"
+    assert main(["program", "--trajectory", "cone-frustum", "--out", str(prog), "--points", "8"]) == 0
+    tol = {"format": "pige-tolerances 1", "machine": AC, "defaults": {"um": 10, "urad": 20}, "limits": {"EX0C": 8}}
+    doc = {"machine": AC, "pige": dict(PIGES), "findings": [json_copy(FINDING)]}
+    if slot in ("params", "pige file", "truth"):
+        doc["pige"]["EY0A"] = "@big"
+    elif slot == "finding":
+        doc["findings"][0]["options"]["harmonic"] = "@big"
+    else:
+        tol["limits" if slot == "tolerance" else "defaults"]["EX0C" if slot == "tolerance" else "um"] = "@big"
+    text = json.dumps(tol if slot in ("tolerance", "default") else doc).replace('"@big"', BIG)
+    given = tmp_path / ("run.truth.json" if slot == "truth" else "in.json")
+    given.write_text(text)
+    capsys.readouterr()
+    argv = {"params": ["compensate", str(prog), "--params", str(given), "--out", str(tmp_path / "o.mpf")],
+            "finding": ["compensate", str(prog), "--params", str(given), "--out", str(tmp_path / "o.mpf")],
+            "tolerance": ["check", str(run_csv), "--tolerances", str(given)],
+            "default": ["check", str(run_csv), "--tolerances", str(given)],
+            "pige file": ["simulate", "--pige", str(given), "--out", str(tmp_path / "s.csv")],
+            "truth": ["report", str(run_csv), "--out", str(tmp_path / "rep"), "--no-figures"]}[slot]
+    one_line_refusal(*run(capsys, *argv)[::2], said)
+    assert not (tmp_path / "o.mpf").exists() and not (tmp_path / "rep").exists()
+
+
+@FEW
+@given(value=st.integers(-10**500, 10**500))
+def test_every_json_integer_reads_as_a_number_float_can_take(value) -> None:
+    from pige_sym.measurements.schema import MAX_INT_DIGITS, strict_loads
+
+    got = strict_loads(f'{{"x": [{value}]}}')["x"][0]
+    as_float = float(got)  # never OverflowError
+    if len(str(abs(value))) <= MAX_INT_DIGITS:
+        assert got == value and isinstance(got, int)
+    else:
+        assert isinstance(got, float) and (as_float == float(str(value)))
+
+
+def test_a_sense_refusal_names_what_disagrees_not_an_option_never_given(tmp_path, capsys) -> None:
+    """Issue 43, 19: a program written with --axis-sense C=-1, compensated with a parameter file in CONVENTIONS'
+    sense, was refused with "but --axis-sense says ..." although no --axis-sense was given."""
+    prog, out = tmp_path / "prog.mpf", tmp_path / "o.mpf"
+    assert main(["program", "--trajectory", "cone-frustum", "--points", "8", "--axis-sense", "C=-1", "--out",
+                 str(prog)]) == 0
+    params = _params(tmp_path, {"machine": AC, "pige": dict(PIGES)})
+    capsys.readouterr()
+    code, _, err = run(capsys, "compensate", str(prog), "--params", str(params), "--out", str(out))
+    one_line_refusal(code, err, "prog.mpf records the commanded axis sense C=-1",
+                     f"but the parameter file {params} records CONVENTIONS' sense", "parameters of the same")
+    assert "--axis-sense says" not in err and not out.exists()
+    # given, the option is named as before
+    code, _, err = run(capsys, "compensate", str(prog), "--params", str(params), "--axis-sense", "C=-1", "--out",
+                       str(out))
+    one_line_refusal(code, err, "but --axis-sense says C=-1")
+
+
+def test_report_refuses_ballbar_files_of_two_machines_as_identify_does(tmp_path, capsys) -> None:
+    """Issue 43, "not a defect", decided: ``report`` took an AC and a BC ballbar file together (a joint section per
+    machine) where ``identify`` refuses them; files fitted jointly must measure one machine in both (one check)."""
+    files = []
+    for machine in (AC, "wC'B'bXYZ(C1)t"):
+        f = tmp_path / f"bb_{len(files)}.csv"
+        assert main(["simulate", "--instrument", "ballbar", "--machine", machine, "--setup", "radial", "--axis", "C",
+                     "--seed", "1", "--out", str(f)]) == 0
+        files.append(str(f))
+    capsys.readouterr()
+    said = "the files measure different machines (wC'A'bXYZ(C1)t, wC'B'bXYZ(C1)t)"
+    one_line_refusal(*run(capsys, "identify", *files)[::2], said, "identify them apart")
+    out = tmp_path / "rep"
+    one_line_refusal(*run(capsys, "report", *files, "--out", str(out), "--no-figures")[::2], said,
+                     "report them apart")
+    assert not out.exists()
+
+
 # ------------------------------------------- issue 43: what a controller is given is checked before anything is written
 
 HEAD_PIGES = dict(PIGES)  # a fork head C + A has the same eight PIGE names

@@ -59,7 +59,7 @@ def _program_and_log(args: argparse.Namespace, code: str, out: Path) -> tuple[Pa
     from pige_sym.kernels import load_kernels
     from pige_sym.model.trajectories import make_trajectory
     from pige_sym.nc.probe_program import ProbeSetup, plan_probing
-    from pige_sym.nc.probe_readback import verify_probe_program
+    from pige_sym.nc.probe_readback import verify_rendered_program
     from pige_sym.nc.probe_render import render_probe_program
     from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
     from pige_sym.simulation.simulator import random_pige
@@ -71,7 +71,7 @@ def _program_and_log(args: argparse.Namespace, code: str, out: Path) -> tuple[Pa
     _stage(1, "probing program (LinuxCNC), read back against the sphere")
     plan = plan_probing(setup, traj.angles_deg, traj.description)
     text = render_probe_program(plan, "linuxcnc")
-    check = verify_probe_program(text, "linuxcnc", setup, plan.rotary_axes)
+    check = verify_rendered_program(text, "linuxcnc", setup, plan.rotary_axes, out=str(out / "probe.ngc"))
     atomic_write_text(out / "probe.ngc", text)
     print(f"wrote {out / 'probe.ngc'}: {check.poses} poses, {sum(check.contacts)} contacts; rapid moves >= "
           f"{check.min_rapid_clearance_mm:.2f} mm from the sphere, rotary moves {check.min_rotary_clearance_mm:.1f} mm "

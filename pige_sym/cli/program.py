@@ -43,7 +43,7 @@ def _run_probe(args: argparse.Namespace) -> int:
     from pige_sym.kernels import load_kernels
     from pige_sym.model.trajectories import make_trajectory
     from pige_sym.nc.probe_program import plan_probing
-    from pige_sym.nc.probe_readback import verify_probe_program
+    from pige_sym.nc.probe_readback import verify_rendered_program
     from pige_sym.nc.probe_render import heidenhain_format_file, render_probe_program
 
     kern = load_kernels(args.machine)
@@ -53,7 +53,7 @@ def _run_probe(args: argparse.Namespace) -> int:
     traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
     plan = plan_probing(setup, traj.angles_deg, traj.description)
     text = render_probe_program(plan, args.dialect)
-    check = verify_probe_program(text, args.dialect, setup, plan.rotary_axes, path=args.out)
+    check = verify_rendered_program(text, args.dialect, setup, plan.rotary_axes, out=args.out)
     inputs = [args.trajectory]
     out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
     fmt = check_output(out.with_suffix(".A"), force=args.force, inputs=inputs, what="format file") \

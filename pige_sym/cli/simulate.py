@@ -50,7 +50,7 @@ def _run_probe(args: argparse.Namespace) -> int:
     from pige_sym.model.effects import parse_effect
     from pige_sym.model.trajectories import make_trajectory
     from pige_sym.nc.probe_program import plan_probing
-    from pige_sym.nc.probe_readback import verify_probe_program
+    from pige_sym.nc.probe_readback import verify_probe_program, verify_rendered_program
     from pige_sym.nc.probe_render import render_probe_program
     from pige_sym.nc.program_file import read_program
     from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
@@ -66,7 +66,10 @@ def _run_probe(args: argparse.Namespace) -> int:
         setup = probe_setup(args, kern.MACHINE_CODE, dialect=args.dialect, controller_required=False)
         traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
         text = render_probe_program(plan_probing(setup, traj.angles_deg, traj.description), args.dialect)
-    verify_probe_program(text, args.dialect, setup, tuple(kern.ROTARY_AXES), path=args.program or "<program>")
+    if args.program:
+        verify_probe_program(text, args.dialect, setup, tuple(kern.ROTARY_AXES), path=args.program)
+    else:
+        verify_rendered_program(text, args.dialect, setup, tuple(kern.ROTARY_AXES))
     offset = parse_vec3(args.setup_offset, "--setup-offset")
     bent = parse_vec3(args.stylus_error, "--stylus-error")
     if any(bent) and setup.tool_mm is None:
@@ -95,38 +98,58 @@ def _run_probe(args: argparse.Namespace) -> int:
 
 
 def _program_setup(args: argparse.Namespace, text: str) -> Any:
-    """The set-up of ``--program``: its header's (with ``--sphere`` etc. given, those options, which must agree)."""
-    import numpy as np
-
+    """The set-up of ``--program``: what its header states, with the options given in place of its items (the
+    read-back then refuses any that disagrees, naming the option).  With ``--sphere`` every set-up option is read
+    as for a new program (:func:`~pige_sym.cli._probe.probe_setup`); without it (the short form) the header gives
+    the sphere, radii, pivots, axis sense, controller state and, on a head, the tool."""
     from pige_sym.cli._probe import probe_setup
     from pige_sym.nc.probe_header import header_setup
-    from pige_sym.nc.probe_program import ProbeSetup
 
-    if args.sphere:
-        return _stated(probe_setup(args, args.machine, dialect=args.dialect, controller_required=False), args, text)
     h = header_setup(text, args.program)
     if h.dialect != args.dialect:
         raise InputError(f"--dialect {args.dialect}: the program {args.program} is a {h.dialect} program")
-    single = h.tool_mm is not None  # a head is probed about one pivot (the axis lines meet)
-    return ProbeSetup(h.machine, h.sphere_mm, next(iter(h.pivots_mm.values())) if single else np.zeros(3),
-                      h.sphere_radius_mm, h.stylus_radius_mm, clearance_mm=args.clearance,
-                      overtravel_mm=args.overtravel, contacts=args.contacts, pivots_mm=None if single else h.pivots_mm,
-                      axis_sense=h.axis_sense, controller=h.controller, tool_mm=h.tool_mm)
+    if not args.sphere:
+        return _stated(_header_probe_setup(args, h), args, h)
+    dialect = args.dialect if _controller_given(args) else None  # None: the header's controller state, unchecked here
+    radii = {k: getattr(args, k) if getattr(args, k) is not None else stated  # the header's radii where none is given
+             for k, stated in (("sphere_radius", h.sphere_radius_mm), ("stylus_radius", h.stylus_radius_mm))}
+    filled = argparse.Namespace(**{**vars(args), **radii})
+    return _stated(probe_setup(filled, args.machine, dialect=dialect, controller_required=False), args, h)
 
 
-def _stated(setup: Any, args: argparse.Namespace, text: str) -> Any:
+def _controller_given(args: argparse.Namespace) -> bool:
+    return any(getattr(args, k) is not None for k in ("kinematics", "rtcp_off", "rtcp_on", "stylus_tool",
+                                                       "stylus_length"))
+
+
+def _header_probe_setup(args: argparse.Namespace, h: Any) -> Any:
+    """The short form's set-up: the header's, with the sphere-probe options that were given (not their defaults)."""
+    import numpy as np
+
+    from pige_sym.cli._probe import probe_controller, probe_tool
+    from pige_sym.cli._setup import axis_sense_option, finite_option
+    from pige_sym.nc.probe_program import ProbeSetup
+
+    radius, stylus = (finite_option(v, flag, positive=True) if v is not None else stated for v, flag, stated in
+                      ((args.sphere_radius, "--sphere-radius", h.sphere_radius_mm),
+                       (args.stylus_radius, "--stylus-radius", h.stylus_radius_mm)))
+    tool = probe_tool(args.tool)
+    sense = axis_sense_option(args, tuple(h.pivots_mm))
+    return ProbeSetup(h.machine, h.sphere_mm, np.zeros(3), radius, stylus, clearance_mm=args.clearance,
+                      overtravel_mm=args.overtravel, contacts=args.contacts, pivots_mm=h.pivots_mm,
+                      axis_sense=h.axis_sense if sense is None else sense,
+                      controller=probe_controller(args, args.dialect, required=False) if _controller_given(args)
+                      else h.controller, tool_mm=None if tool is None else np.array(tool))
+
+
+def _stated(setup: Any, args: argparse.Namespace, h: Any) -> Any:
     """The set-up with what the program's header states where no option says it (the read-back then checks
     that every option given agrees)."""
     import dataclasses
 
-    from pige_sym.nc.probe_header import header_setup
-
-    h = header_setup(text, args.program)
-    given = any(getattr(args, k) is not None for k in ("kinematics", "rtcp_off", "rtcp_on", "stylus_tool",
-                                                        "stylus_length"))
     tool = setup.tool_mm if setup.tool_mm is not None else h.tool_mm
     single = tool is not None and not args.pivot  # a head is probed about one pivot (the axis lines meet)
-    return dataclasses.replace(setup, controller=setup.controller if given else h.controller,
+    return dataclasses.replace(setup, controller=setup.controller if _controller_given(args) else h.controller,
                                axis_sense=setup.axis_sense if args.axis_sense is not None else h.axis_sense,
                                pivots_mm=None if single else setup.pivots_mm if args.pivot else h.pivots_mm,
                                pivot_mm=next(iter(h.pivots_mm.values())) if single else setup.pivot_mm,

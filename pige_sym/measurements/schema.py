@@ -4,8 +4,9 @@ Reading (:func:`load_json`)
 ---------------------------
 Only regular files (no FIFO or device), at most :data:`MAX_JSON_BYTES`, UTF-8 (a BOM is
 allowed), strict JSON: ``NaN``/``Infinity`` tokens, repeated keys and nesting deeper
-than :data:`MAX_DEPTH` are refused.  Every refusal is a
-:class:`~pige_sym.errors.FileFormatError` naming the file, the line when known, and the
+than :data:`MAX_DEPTH` are refused.  An integer longer than :data:`MAX_INT_DIGITS` digits is read as the
+float it denotes (a 400-digit one is ``inf``, refused wherever a finite number is required, as ``1e400`` is).
+Every refusal is a :class:`~pige_sym.errors.FileFormatError` naming the file, the line when known, and the
 field as a path (``pige.EX0C``).
 
 Schemas (:func:`from_json`)
@@ -68,6 +69,15 @@ def _reject_constant(token: str) -> float:
     raise ValueError(f"{token} is not allowed in pige JSON (use null for 'no value')")
 
 
+#: Digits of the longest integer read as an int (a 64-bit count); a longer one is the float it denotes.
+MAX_INT_DIGITS = 18
+
+
+def _json_int(text: str) -> int | float:
+    """A JSON integer: an int, or beyond :data:`MAX_INT_DIGITS` digits the float (``inf``) no ``float()`` overflows."""
+    return int(text) if len(text.lstrip("-")) <= MAX_INT_DIGITS else float(text)
+
+
 def _no_repeats(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for k, v in pairs:
@@ -106,15 +116,21 @@ def load_json(path: PathLike, what: str = "JSON file") -> Any:
         raise FileFormatError(p, None, f"{what} is not UTF-8 text ({exc.reason} at byte {exc.start}): save it as "
                               "UTF-8") from None
     try:
-        data = json.loads(text, parse_constant=_reject_constant, object_pairs_hook=_no_repeats)
+        return strict_loads(text)
     except json.JSONDecodeError as exc:
         raise FileFormatError(p, exc.lineno, f"not valid JSON: {exc.msg}") from None
     except ValueError as exc:
         raise FileFormatError(p, None, f"not valid pige JSON: {exc}") from None
+
+
+def strict_loads(text: str) -> Any:
+    """The JSON value of ``text`` by :func:`load_json`'s rules; ValueError (``JSONDecodeError``: with the line)."""
+    try:
+        data = json.loads(text, parse_constant=_reject_constant, parse_int=_json_int, object_pairs_hook=_no_repeats)
     except RecursionError:
-        raise FileFormatError(p, None, f"nested deeper than {MAX_DEPTH} levels") from None
+        raise ValueError(f"nested deeper than {MAX_DEPTH} levels") from None
     if _depth(data, MAX_DEPTH) > MAX_DEPTH:
-        raise FileFormatError(p, None, f"nested deeper than {MAX_DEPTH} levels")
+        raise ValueError(f"nested deeper than {MAX_DEPTH} levels")
     return data
 
 
@@ -155,7 +171,7 @@ def _check(tp: Any, value: Any, where: str, meta: Mapping[str, Any]) -> Any:
             raise SchemaRefusal(where, f"expected a number, got {_type_name(value)}")
         v = float(value)
         if not math.isfinite(v):
-            raise SchemaRefusal(where, "expected a finite number")
+            raise SchemaRefusal(where, "expected a finite number, got one beyond ±1.8e308")
         limit = meta.get("max_abs")
         if limit is not None and abs(v) > limit:
             raise SchemaRefusal(where, f"{v:g} is not physical (|value| <= {limit:g})")
@@ -334,16 +350,16 @@ def refuse_unphysical(names: list[str], values: Any, std: Any, units: dict[str, 
     ------
     IdentificationError
     """
-    import math
-
     from pige_sym.errors import IdentificationError
+    from pige_sym.measurements.measurement import unphysical
 
-    for name, v, s in zip(names, values, std, strict=True):
-        if math.isfinite(v) and abs(v) - 3 * (s if math.isfinite(s) else 0.0) > MAX_PIGE:
-            raise IdentificationError(f"{source}: {name} = {v:.1f} {units.get(name, '')} is beyond ±{MAX_PIGE:g}, "
-                                      "more than any machine that runs: the set-up in the file is wrong (ball_mm, "
-                                      "pivot_<axis>_mm, tool_mm, axis_sense; for a probe import --pivot, --units, "
-                                      "--axis-sense) or the data are another machine's")
+    found = unphysical(names, values, std, MAX_PIGE)
+    if found is not None:
+        name, v = found
+        raise IdentificationError(f"{source}: {name} = {v:.1f} {units.get(name, '')} is beyond ±{MAX_PIGE:g}, "
+                                  "more than any machine that runs: the set-up in the file is wrong (ball_mm, "
+                                  "pivot_<axis>_mm, tool_mm, axis_sense; for a probe import --pivot, --units, "
+                                  "--axis-sense) or the data are another machine's")
 
 
 def read_params_file(path: PathLike, *, machine: str | None = None, allow_missing: bool = False) -> ParamsFile:

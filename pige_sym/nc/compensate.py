@@ -199,7 +199,10 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
     check_parameters(params)  # a program is written for a controller too: the same bounds before anything is made
     kern = load_kernels(params.machine)
     axes = tuple(kern.ROTARY_AXES)
-    program_axis_sense(text, axes, path, params.axis_sense)  # a pige program's header must agree
+    program_axis_sense(text, axes, path, params.axis_sense, given_by=f"the parameter file {params.source}",
+                       fix="a program is compensated with parameters of the same commanded sense (CONVENTIONS §9): "
+                           "use parameters identified from measurements made in the program's sense, or write the "
+                           "program again in theirs")  # a pige program's header must agree
     d = with_rtcp_codes(get_dialect(dialect or detect_dialect(text, path)), rtcp_on, rtcp_off)
     program = interpret(text, d, axes, path=path, pass_through=pass_through)
     chosen, passed = plan(program)

@@ -41,6 +41,7 @@ from pige_sym.compensation.parameters import angle_extensions
 from pige_sym.diagnosis.diagnose import DiagnosisResult, diagnose
 from pige_sym.diagnosis.joint import JointDiagnosis, diagnose_joint
 from pige_sym.errors import FileFormatError, InputError
+from pige_sym.identification.joint import common_machine
 from pige_sym.identification.least_squares import METHODS, IdentificationError, identify
 from pige_sym.identification.model_check import check_model
 from pige_sym.identification.studies import projection_study, sobol_study
@@ -174,7 +175,9 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
         read (and their truth sidecars checked) before any computation, so a bad file fails fast, and a
         file given twice is refused.  Each R-test/probe file gets its own section; the files of a
         machine with a ballbar file (or, with ``joint``, two files or more) also get a joint section
-        (:mod:`~pige_sym.report.joint_section`).  May be empty with ``compare`` or ``history``.
+        (:mod:`~pige_sym.report.joint_section`).  Files fitted jointly (a ballbar file among them, or ``joint``)
+        must measure one machine, as ``identify`` requires of them (the same check): an AC and a BC ballbar file
+        are refused, not reported side by side.  May be empty with ``compare`` or ``history``.
     studies : iterable of {"projection", "sobol"}
     program : path-like, optional
         An 840D-style NC program compensated with each measurement's estimate.
@@ -215,7 +218,7 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     study_set = parse_studies(studies)
     paths = [Path(p) for p in measurement_paths]
     _check_options(method, presets, sobol_samples, paths, compare is not None or history is not None)
-    loaded, every = _read_inputs(paths)
+    loaded, every = _read_inputs(paths, joint)
     tol = read_tolerances(tolerances) if tolerances is not None else None
     program_text = read_program(program) if program is not None else None
     steps_per_file = 4 + len(study_set) + (program is not None)
@@ -309,15 +312,18 @@ def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, Truth | 
     return out
 
 
-def _read_inputs(paths: list[Path]) -> tuple[list[tuple[Path, Measurement, Truth | None]],
-                                             list[tuple[Path, Measurement | BallbarRun, Truth | None]]]:
-    """(R-test/probe files with their truth, every file with its truth), each read and checked once."""
+def _read_inputs(paths: list[Path], joint: bool) -> tuple[list[tuple[Path, Measurement, Truth | None]],
+                                                         list[tuple[Path, Measurement | BallbarRun, Truth | None]]]:
+    """(R-test/probe files with their truth, every file with its truth), each read and checked once; files fitted
+    jointly (a ballbar file among them, or ``joint``) must measure one machine, as identify asks (the same check)."""
     loaded, every = [], []
     for p, item in read_files(paths) if paths else []:
         truth = read_truth(p, item.machine)
         every.append((Path(p), item, truth))
         if isinstance(item, Measurement):
             loaded.append((Path(p), item, truth))
+    if joint or any(isinstance(x, BallbarRun) for _, x, _ in every):
+        common_machine([(p.name, x) for p, x, _ in every], apart="report them apart (one report per machine)")
     return loaded, every
 
 

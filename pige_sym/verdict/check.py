@@ -150,7 +150,8 @@ def _limit(value: Any, path: str, where: str) -> float:
         raise FileFormatError(path, None, f"{where}: expected a positive number, got {json.dumps(value)}")
     x = float(value)
     if not math.isfinite(x) or x <= 0:
-        raise FileFormatError(path, None, f"{where}: a limit must be a positive finite number, got {value!r}")
+        said = "a number beyond ±1.8e308" if math.isinf(x) else repr(value)
+        raise FileFormatError(path, None, f"{where}: a limit must be a positive finite number, got {said}")
     return x
 
 
