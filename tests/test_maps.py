@@ -391,3 +391,15 @@ def test_the_report_has_a_map_section(ac_case: Any, tmp_path: Path) -> None:
     assert "What the maps leave" in html and "held-out by pose" in html
     assert "Every value of every map is determined" in html
     assert (out / "figures" / "map_C.png").is_file() or any(out.rglob("map_C.png"))
+
+
+def test_identify_draws_each_map_and_never_replaces_a_plot_without_force(ac_case: Any, capsys: Any,
+                                                                          tmp_path: Path) -> None:
+    paths, _ = ac_case
+    plots = tmp_path / "plots"
+    assert main(["identify", *paths, "--map", "C,A", "--plots", str(plots)]) == 0
+    assert (plots / "map_C.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and (plots / "map_A.png").is_file()
+    capsys.readouterr()
+    assert main(["identify", *paths, "--map", "C,A", "--plots", str(plots)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["identify", *paths, "--map", "C,A", "--plots", str(plots), "--force"]) == 0
