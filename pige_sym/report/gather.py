@@ -234,6 +234,13 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     data = ReportData(reports, study_set, options.program, _settings_shown(options), created)
     data.joints = gather_joints(every, tolerances=tol, rule=rule, k=k, every_group=joint,
                                 diagnoses={rep.path: rep.diagnosis for rep in reports})
+    _gather_beyond_files(data, every, compare, history, db, tol, maps)
+    return data
+
+
+def _gather_beyond_files(data: ReportData, every: list[tuple[Path, Any, Truth | None]], compare: Any,
+                         history: str | None, db: str | None, tol: Any, maps: Any) -> None:
+    """The sections that are not one file's: measured before/after, the history's trend, the error maps."""
     if compare is not None:
         from pige_sym.verdict.compare import compare_measurements
 
@@ -244,7 +251,6 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
         from pige_sym.report.map_section import gather_maps
 
         data.maps = gather_maps([(str(p), x) for p, x, _ in every], maps)
-    return data
 
 
 def _common_truth(truths: Sequence[Truth | None], diag: JointDiagnosis) -> dict[str, float] | None:
