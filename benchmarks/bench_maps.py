@@ -24,8 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pige_sym.identification.joint import whitened_system  # noqa: E402
-from pige_sym.identification.maps import MapSpec, _block, _layout, identify_maps  # noqa: E402
-from pige_sym.kernels import load_kernels  # noqa: E402
+from pige_sym.identification.maps import MapSpec, identify_maps, map_blocks  # noqa: E402
 from pige_sym.model.error_motions import AxisMaps, ErrorMaps, MapGrid  # noqa: E402
 from pige_sym.model.trajectories import Trajectory  # noqa: E402
 from pige_sym.simulation.simulator import random_pige, simulate  # noqa: E402
@@ -70,8 +69,7 @@ def timing(poses_per_setup: int) -> tuple[float, float]:
     items = _items(poses_per_setup)
     spec = MapSpec(("C", "A"), STEP)
     fit = _median(lambda: identify_maps(items, spec))
-    layout = _layout(items, spec, tuple(load_kernels(AC).ROTARY_AXES))
-    blocks = [_block(x, lab, layout, load_kernels(AC)) for lab, x in items]  # type: ignore[arg-type]
+    blocks = map_blocks(items, spec)[3]  # type: ignore[arg-type]
     a, y = whitened_system(blocks, [1.0] * len(blocks))
     floor = _median(lambda: np.linalg.lstsq(a, y, rcond=None))
     return fit, floor

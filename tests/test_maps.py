@@ -325,3 +325,81 @@ def test_diagnose_says_when_a_map_explains_the_residual(ac_mappable: Any, capsys
     assert main(["diagnose", *flat_paths, "--map", "C,A", "--map-step", "15"]) == 0
     text = capsys.readouterr().out
     assert "the error maps do not explain the residual" in text
+
+
+def test_a_positioning_map_per_approach_direction() -> None:
+    """C approached from both sides at every angle: ECC+ and ECC- (the reversal kept whole, §10)."""
+    from pige_sym.identification.maps import MapSpec, identify_maps
+    from pige_sym.kernels import load_kernels
+    from pige_sym.model.error_motions import AxisMaps, ErrorMaps, MapGrid
+    from pige_sym.model.trajectories import Trajectory
+    from pige_sym.simulation.simulator import simulate
+
+    kern = load_kernels(AC)
+    rng = np.random.default_rng(9)
+    c_grid = np.arange(0.0, 360.0, 30.0)
+    mean = _projected("ECC", c_grid, rng.normal(scale=8.0, size=c_grid.size))
+    reversal = 12.0 + rng.normal(scale=3.0, size=c_grid.size)  # backlash of 12 urad, varying with the angle
+    maps = ErrorMaps({"C": AxisMaps(MapGrid("C", c_grid, True), {"ECC+": mean + reversal / 2,
+                                                                  "ECC-": mean - reversal / 2})})
+    rows = [(0.0, 0.0)]
+    for a in (0.0, -30.0, -60.0, -90.0):
+        up = [(a, c) for c in c_grid]
+        # up, past the last angle, then down: each angle reached from both sides (330° from above too)
+        rows += up + [(a, 350.0)] + [(a, c) for c in c_grid[::-1]]
+    angles = np.array(rows)
+    traj = Trajectory("both ways", ("A", "C"), angles, np.arange(len(rows)) * 8.0, "both ways")
+    items = [(f"s{i}", simulate(AC, traj, pige={}, ball_mm=b, noise_um=0.05, seed=i, error_maps=maps).measurement)
+             for i, b in enumerate(((110, 0, 40), (-50, 95, 90), (-60, -90, 140)))]
+    result = identify_maps(items, MapSpec(("C",), 30.0, ("C",)))
+    c = result.maps["C"]
+    assert not result.undetermined
+    for name, truth in (("ECC+", mean + reversal / 2), ("ECC-", mean - reversal / 2)):
+        est, std = c.value[name], c.std[name]
+        assert np.isfinite(est).all(), name
+        assert np.all(np.abs(est - truth) <= 4 * std + 0.5), (name, np.abs(est - truth) / std)
+    assert np.all(np.abs(c.value["ECC:reversal"] - reversal) <= 4 * c.std["ECC:reversal"] + 0.5)
+    assert "ECC+" in c.to_dict() and kern.MACHINE_CODE == AC
+
+
+def test_an_angle_reached_from_one_side_only_has_no_reversal_value() -> None:
+    """A sweep up and straight back down reaches its top angle from below only: ECC- is not determined there."""
+    from pige_sym.identification.maps import MapSpec, identify_maps
+    from pige_sym.model.trajectories import Trajectory
+    from pige_sym.simulation.simulator import simulate
+
+    c_grid = np.arange(0.0, 360.0, 30.0)
+    rows = [(0.0, 0.0)] + [(a, c) for a in (0.0, -45.0, -90.0) for c in (*c_grid, *c_grid[::-1])]
+    traj = Trajectory("both ways", ("A", "C"), np.array(rows), np.arange(len(rows)) * 8.0, "both ways")
+    items = [(f"s{i}", simulate(AC, traj, pige={}, ball_mm=b, noise_um=0.05, seed=i).measurement)
+             for i, b in enumerate(((110, 0, 40), (-50, 95, 90), (-60, -90, 140)))]
+    result = identify_maps(items, MapSpec(("C",), 30.0, ("C",)))
+    top = [u for u in result.undetermined if u.angle_deg == 330.0]
+    assert {u.motion for u in top} == {"ECC", "ECC:reversal"}
+    assert all("see 6 of its 7 motions" in u.why for u in top)
+    assert np.isnan(result.maps["C"].value["ECC-"][-1]) and np.isfinite(result.maps["C"].value["ECC-"][:-1]).all()
+
+
+def test_the_report_has_a_map_section(ac_case: Any, tmp_path: Path) -> None:
+    """pige report FILES --map C,A: the plots, the table per motion, what the maps leave, the gain."""
+    paths, _ = ac_case
+    out = tmp_path / "report"
+    assert main(["report", *paths, "--map", "C,A", "--out", str(out)]) == 0
+    html = (out / "report.html").read_text(encoding="utf-8")
+    assert 'id="maps"' in html and "Error maps of the rotary axes" in html
+    assert html.count("map_C.png") + html.count("map_A.png") >= 0  # the plots are inlined as data URIs
+    assert "What the maps leave" in html and "held-out by pose" in html
+    assert "Every value of every map is determined" in html
+    assert (out / "figures" / "map_C.png").is_file() or any(out.rglob("map_C.png"))
+
+
+def test_identify_draws_each_map_and_never_replaces_a_plot_without_force(ac_case: Any, capsys: Any,
+                                                                          tmp_path: Path) -> None:
+    paths, _ = ac_case
+    plots = tmp_path / "plots"
+    assert main(["identify", *paths, "--map", "C,A", "--plots", str(plots)]) == 0
+    assert (plots / "map_C.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and (plots / "map_A.png").is_file()
+    capsys.readouterr()
+    assert main(["identify", *paths, "--map", "C,A", "--plots", str(plots)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["identify", *paths, "--map", "C,A", "--plots", str(plots), "--force"]) == 0

@@ -21,6 +21,7 @@ from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import missing_tool
 from pige_sym.measurements.schema import MAX_PIGE
 from pige_sym.model.effects import EffectSpec
+from pige_sym.model.error_motions import error_maps_from
 from pige_sym.model.trajectories import approach_directions
 
 COMPENSABLE_KINDS = ("angular_error", "backlash")
@@ -190,34 +191,9 @@ def _parameters(doc: Any) -> CompensationParameters:
     return CompensationParameters(kern.MACHINE_CODE, dict(doc.pige), dict(doc.units), tool, pivots, doc.path,
                                   ignored, extensions, dict(doc.axis_sense), dict(doc.std), cov,
                                   list(doc.set_to_zero), None if doc.ball_mm is None else list(doc.ball_mm),
-                                  error_maps=_error_maps(doc.error_motions),
+                                  error_maps=error_maps_from(doc.error_motions),
                                   error_map_std={ax: {n: tuple(v) for n, v in m["std"].items()}
                                                  for ax, m in (doc.error_motions or {}).items()})
-
-
-def _error_maps(data: dict[str, Any] | None) -> Any:
-    """The validated ``error_motions`` of a parameter file as :class:`~pige_sym.model.error_motions.ErrorMaps`.
-
-    A positioning map given per direction (``ECC+`` and ``ECC-``) is kept as those two: the file's ``ECC`` and
-    ``ECC:reversal`` beside them are their mean and difference (``pige identify`` writes all four), and kept
-    too they would correct φ twice.
-    """
-    from pige_sym.model.error_motions import AxisMaps, ErrorMaps, MapGrid
-
-    if not data:
-        return None
-    return ErrorMaps({ax: AxisMaps(MapGrid(ax, m["angle_deg"], m["full_turn"]), _primary_maps(ax, m["value"]))
-                      for ax, m in data.items()})
-
-
-def _primary_maps(axis: str, values: dict[str, Any]) -> dict[str, Any]:
-    """``values`` without φ and its reversal where φ⁺ and φ⁻ are given (:func:`_error_maps`)."""
-    from pige_sym.model.error_motions import axis_motions
-
-    phi = next(m.name for m in axis_motions(axis) if m.kind == "positioning")
-    if phi + "+" in values and phi + "-" in values:
-        return {n: v for n, v in values.items() if n not in (phi, phi + ":reversal")}
-    return dict(values)
 
 
 def extension_prefixes(extensions: list[AngleExtension]) -> list[str]:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.identification.joint import Block, whitened_system
-from pige_sym.identification.maps import MapResult, MapSpec, identify_maps, map_system
+from pige_sym.identification.maps import MapResult, MapSpec, design_maps, identify_maps, map_blocks, n_location
 from pige_sym.measurements.ballbar import BallbarRun
 from pige_sym.measurements.measurement import Measurement
 
@@ -92,14 +92,17 @@ def map_gain(items: Sequence[tuple[str, Measurement | BallbarRun]], spec: MapSpe
              result: MapResult | None = None) -> MapGain:
     """The held-out gain of the maps and the single harmonics' shares (module docstring)."""
     fitted = result if result is not None else identify_maps(items, spec)
-    system = map_system(items, spec)
-    a, y = whitened_system(system.blocks, [f.sigma_um for f in fitted.joint.files])
-    pose = np.concatenate([_pose_of_rows(b, k) for k, b in enumerate(system.blocks)])
+    machine, names, layout, raw = map_blocks(items, spec)
+    sigmas = [f.sigma_um for f in fitted.joint.files]
+    fitted_zero = [j for j in range(len(names)) if j < n_location(machine) or np.isfinite(fitted.result.values[j])]
+    blocks = design_maps(names, layout, raw, sigmas, fitted_zero).blocks
+    a, y = whitened_system(blocks, sigmas)
+    pose = np.concatenate([_pose_of_rows(b, k) for k, b in enumerate(blocks)])
     folds = np.full(pose.size, -1)
     for f, group in enumerate(np.array_split(np.unique(pose), FOLDS)):
         folds[np.isin(pose, group)] = f
-    n_shared = system.blocks[0].design.shape[1]
-    pige_cols = list(range(system.n_pige)) + list(range(n_shared, a.shape[1]))
+    n_shared = blocks[0].design.shape[1]
+    pige_cols = list(range(len(fitted_zero))) + list(range(n_shared, a.shape[1]))
     held = {"pige": _heldout(a[:, pige_cols], y, folds), "map": _heldout(a, y, folds)}
     return MapGain(held["pige"], held["map"], FOLDS, _harmonics(fitted))
 

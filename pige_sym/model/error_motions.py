@@ -325,3 +325,26 @@ class ErrorMaps:
         raw = self.raw_deviation(kernels, angles_deg, point_mm, pivots_mm, tool_mm, approach)
         rot = kernels.workpiece_rotation(np.atleast_2d(np.asarray(angles_deg, dtype=float)))
         return np.asarray(raw - np.einsum("nij,j->ni", rot, raw[0]))
+
+
+def error_maps_from(data: dict[str, Any] | None) -> ErrorMaps | None:
+    """The validated ``error_motions`` of a file (:func:`pige_sym.measurements.error_motions_file.read_error_motions`:
+    axis → ``{"angle_deg", "full_turn", "value", "std"}``) as :class:`ErrorMaps`; None when there are none.
+
+    A positioning map given per direction (``ECC+`` and ``ECC-``) is kept as those two: the file's ``ECC`` and
+    ``ECC:reversal`` beside them are their mean and difference (``pige identify --map-per-direction`` writes all
+    four), and kept too they would correct φ twice.
+    """
+    if not data:
+        return None
+    return ErrorMaps({ax: AxisMaps(MapGrid(ax, np.asarray(m["angle_deg"], dtype=float), bool(m["full_turn"])),
+                                   {n: np.asarray(v, dtype=float) for n, v in _primary_maps(ax, m["value"]).items()})
+                      for ax, m in data.items()})
+
+
+def _primary_maps(axis: str, values: dict[str, Any]) -> dict[str, Any]:
+    """``values`` without φ and its reversal where φ⁺ and φ⁻ are given (:func:`error_maps_from`)."""
+    phi = next(m.name for m in axis_motions(axis) if m.kind == "positioning")
+    if phi + "+" in values and phi + "-" in values:
+        return {n: v for n, v in values.items() if n not in (phi, phi + ":reversal")}
+    return dict(values)

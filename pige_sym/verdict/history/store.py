@@ -12,26 +12,35 @@ The schema is created and migrated on connect (:mod:`~pige_sym.verdict.history.m
 is identified by the SHA-256 of its bytes and is added once (a second add is refused).  The
 stored estimate is the one used for compensation: the diagnosis' final fit (PIGEs jointly with
 the accepted effects) by default, with its full covariance.
+
+A database that exists is checked before anything is read or written: SQLite's page check
+(``PRAGMA quick_check``), pige's tables and their columns, the schema version; every stored run is read
+strictly (:mod:`~pige_sym.verdict.history.records`).  A damaged one is refused in one line naming it, what is
+damaged (the run and column when known) and how to recover (restore it from a backup).  Reading
+(``history show``, ``report --history``) opens the database read-only (SQLite ``mode=ro``, PostgreSQL
+read-only transactions) and migrates nothing, so a refused database is left exactly as it was.  A new SQLite
+file is created with the mode every pige output gets (``0666`` less the umask: ``0664`` under ``002``, so a
+shop's group can add runs), not SQLite's fixed ``0644``.
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
+import weakref
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import sqlalchemy as sa
 
-from pige_sym.errors import FileFormatError, InputError
+from pige_sym.errors import FileFormatError, HistoryError, InputError, SchemaRefusal
 from pige_sym.verdict.history import tables as T
-from pige_sym.verdict.history.migrations import migrate
+from pige_sym.verdict.history.migrations import MIGRATIONS, migrate
+from pige_sym.verdict.history.records import RunRecord, check_new_run, decode_run
 
 ENV_URL = "PIGE_HISTORY_DB"
 
@@ -65,110 +74,177 @@ def normalise_url(text: str | None) -> str:
 
 
 def connect(url: str | None = None, *, create: bool = True) -> sa.Engine:
-    """Engine of the history database, schema migrated.
+    """Engine of the history database, schema migrated (module docstring).
 
-    ``create=False`` (reading: ``history show``, ``report --history``) refuses an SQLite file that does not
-    exist instead of creating an empty database there.
+    ``create=False`` (reading: ``history show``, ``report --history``) opens it read-only and migrates nothing; an
+    SQLite file that does not exist is refused instead of created there.
 
     Raises
     ------
     InputError
         The database cannot be opened or reached (message with the URL, password hidden), or (``create=False``)
-        the SQLite file does not exist.
+        the SQLite file does not exist or holds no history.
+    HistoryError
+        The database is damaged (nothing in it is changed).
     """
     full = normalise_url(url)
-    if full.startswith("sqlite:///"):
-        path = Path(full.removeprefix("sqlite:///"))
-        if not create and str(path) not in ("", ":memory:") and not path.is_file():
+    path = _sqlite_file(full)
+    if path is not None:
+        if not create and not path.is_file():
             raise InputError(f"no history database at {path} (pige history add creates one; --db or "
                              f"$PIGE_HISTORY_DB name another)")
-        if str(path) not in ("", ":memory:"):
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise InputError(f"--db {path}: cannot create {path.parent} ({exc.strerror or exc})") from None
-    engine = sa.create_engine(full)
+        if create and not path.exists():
+            _new_sqlite_file(path)
+    engine = _engine(full, path, read_only=not create)
+    shown = str(path) if path is not None else engine.url.render_as_string(hide_password=True)
+    _WHERE[engine] = (shown, path is not None)
+    state = _checked(engine, shown, path is not None)
+    if not create:
+        if state != "ready":
+            raise InputError(f"history database {shown} holds no history yet (pige history add creates it)")
+        return engine
+    try:
+        migrate(engine)
+    except sa.exc.SQLAlchemyError as exc:
+        raise InputError(f"history database {shown}: {_reason(exc)}") from None
+    return engine
+
+
+#: Every column of ``runs`` as the database holds it (no type conversion: the reader checks each value).
+_RAW_RUNS: list[sa.Label[Any]] = [sa.literal_column(f"runs.{c.name}").label(c.name) for c in T.runs.columns]
+
+
+def _sqlite_file(full: str) -> Path | None:
+    """The file of an SQLite URL (None: another database, or SQLite in memory)."""
+    if not full.startswith("sqlite:///"):
+        return None
+    path = Path(full.removeprefix("sqlite:///"))
+    return None if str(path) in ("", ":memory:") else path
+
+
+def _new_sqlite_file(path: Path) -> None:
+    """Create an empty SQLite file (SQLite fills it) with the mode ``0666`` less the umask, its folder first."""
+    from pige_sym.files import make_folder
+
+    make_folder(path.parent, what="--db")
+    try:
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+    except FileExistsError:  # another process made it meanwhile
+        pass
+    except OSError as exc:
+        raise InputError(f"--db {path}: cannot create it ({exc.strerror or exc})") from None
+
+
+def _engine(full: str, path: Path | None, *, read_only: bool) -> sa.Engine:
+    """The engine; read-only: SQLite ``mode=ro`` (the file is never written), PostgreSQL read-only transactions."""
+    if path is not None and read_only:
+        import sqlite3
+        from urllib.parse import quote
+
+        uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+        engine = sa.create_engine("sqlite://", creator=lambda: sqlite3.connect(uri, uri=True,
+                                                                              check_same_thread=False))
+    elif read_only and full.startswith("postgresql"):
+        engine = sa.create_engine(full, connect_args={"options": "-c default_transaction_read_only=on"})
+    else:
+        engine = sa.create_engine(full)
     if engine.dialect.name == "sqlite":
         @sa.event.listens_for(engine, "connect")
         def _fk(dbapi_conn: Any, _record: Any) -> None:
             dbapi_conn.execute("PRAGMA foreign_keys=ON")
-    try:
-        migrate(engine)
-    except sa.exc.SQLAlchemyError as exc:
-        shown = engine.url.render_as_string(hide_password=True)
-        raise InputError(f"history database {shown}: {str(exc.orig if hasattr(exc, 'orig') else exc).strip()}"
-                         .splitlines()[0]) from None
     return engine
 
 
-@dataclass
-class RunRecord:
-    """One stored run (the estimate in the attribute names :func:`~pige_sym.verdict.history.compare_runs` reads).
+def _reason(exc: BaseException) -> str:
+    """The database's own words for an error, one line."""
+    orig = getattr(exc, "orig", None) or exc
+    return (str(orig).strip().splitlines() or [type(orig).__name__])[0]
 
-    Attributes
-    ----------
-    values, std : ndarray, shape=(P,) [µm, µrad]
-        NaN where undetermined.
-    covariance : ndarray, shape=(P, P)
-    effects : list of dict
-        Accepted findings (effect, options, params, std, units).
-    check : dict or None
-        ``pige check`` result when tolerances were given at ``add``.
+
+def damaged(shown: str, what: str, sqlite: bool) -> HistoryError:
+    """The one-line refusal of a damaged database (module docstring)."""
+    backup = "restore the file from a backup" if sqlite else "restore the database from a backup"
+    return HistoryError(f"history database {shown} is damaged ({what}): {backup}; pige has changed nothing in it")
+
+
+def _checked(engine: sa.Engine, shown: str, sqlite: bool) -> str:
+    """``"empty"`` (none of pige's tables: a new database) or ``"ready"``; a damaged database is refused.
+
+    Raises
+    ------
+    InputError
+        The database cannot be reached, or is newer than this pige.
+    HistoryError
+        Damaged: SQLite's page check fails, a table or column is missing, the schema version is unreadable, a
+        stored run is not what pige writes (:func:`~pige_sym.verdict.history.records.decode_run`).
     """
+    import time
 
-    id: int
-    machine_id: str
-    file_name: str
-    file_sha256: str
-    measured_at: str
-    time_source: str
-    added_at: str
-    machine_code: str
-    method: str
-    parameters: list[str]
-    units: dict[str, str]
-    values: np.ndarray
-    std: np.ndarray
-    covariance: np.ndarray
-    dof: int
-    rms_um: float | None
-    effects: list[dict[str, Any]] = field(default_factory=list)
-    verdict: str | None = None
-    check: dict[str, Any] | None = None
+    from pige_sym.verdict.history.migrations import MIGRATION_ATTEMPTS
 
-    def to_dict(self) -> dict[str, Any]:
-        from pige_sym.files import json_ready
+    try:
+        conn = engine.connect()
+    except sa.exc.SQLAlchemyError as exc:
+        raise InputError(f"history database {shown}: {_reason(exc)}") from None
+    with conn:
+        for attempt in range(MIGRATION_ATTEMPTS):
+            try:
+                return _check_schema(conn, shown, sqlite)
+            except sa.exc.OperationalError as exc:  # another process holds the file a moment: wait, as migrate does
+                if "locked" not in str(exc) or attempt == MIGRATION_ATTEMPTS - 1:
+                    raise damaged(shown, _reason(exc), sqlite) from None
+                conn.rollback()
+                time.sleep(0.05 * (attempt + 1))
+            except sa.exc.SQLAlchemyError as exc:
+                raise damaged(shown, _reason(exc), sqlite) from None
+    raise AssertionError("unreachable")  # pragma: no cover
 
-        return json_ready({
-            "id": self.id, "machine_id": self.machine_id, "file": self.file_name, "sha256": self.file_sha256,
-            "measured_at": self.measured_at, "time_source": self.time_source, "added_at": self.added_at,
-            "machine": self.machine_code, "method": self.method,
-            "pige": dict(zip(self.parameters, self.values, strict=True)),
-            "std": dict(zip(self.parameters, self.std, strict=True)), "units": self.units,
-            "covariance": {"parameters": self.parameters, "matrix": self.covariance}, "dof": self.dof,
-            "rms_um": self.rms_um, "effects": [f.get("effect") for f in self.effects], "verdict": self.verdict,
-            "check": self.check,
-        })
+
+def _check_schema(conn: sa.Connection, shown: str, sqlite: bool) -> str:
+    """:func:`_checked`'s checks.  The schema version is read first: it is recorded last, once a migration's tables
+    all exist, so a database another process is creating this moment is never taken for a damaged one.  A database
+    with no version recorded and no run (a creation under way, or interrupted) is new: migrating completes it."""
+    if sqlite:
+        found = [str(r[0]) for r in conn.exec_driver_sql("PRAGMA quick_check").all()]
+        if found != ["ok"]:
+            raise damaged(shown, f"SQLite's page check: {found[0] if found else 'no answer'}", sqlite)
+    versions: list[Any] = []
+    if sa.inspect(conn).has_table("schema_version"):
+        versions = list(conn.execute(sa.select(sa.literal_column("version")).select_from(T.schema_version)).scalars())
+    inspector = sa.inspect(conn)  # a fresh one: the tables as they are now, after the version
+    names = set(inspector.get_table_names())
+    if not versions:
+        stored = "runs" in names and conn.execute(sa.select(sa.literal_column("id")).select_from(T.runs).limit(1))\
+            .first() is not None
+        if not stored:
+            return "empty"
+        why = "the table schema_version is missing" if "schema_version" not in names else "no schema version recorded"
+        raise damaged(shown, f"{why}, but runs are stored", sqlite)
+    for table in T.metadata.sorted_tables:
+        if table.name not in names:
+            raise damaged(shown, f"the table {table.name} is missing", sqlite)
+        have = {c["name"] for c in inspector.get_columns(table.name)}
+        missing = [c.name for c in table.columns if c.name not in have]
+        if missing:
+            raise damaged(shown, f"the table {table.name} has no column {missing[0]}", sqlite)
+    if not all(isinstance(v, int) and not isinstance(v, bool) for v in versions):
+        raise damaged(shown, f"schema_version holds {versions[:3]}, not pige's version numbers", sqlite)
+    newest = max(m.version for m in MIGRATIONS)
+    if max(versions) > newest:
+        raise InputError(f"history database {shown} has schema version {max(versions)}, newer than this pige_sym "
+                         f"knows ({newest}): upgrade pige_sym")
+    for row in conn.execute(sa.select(*_RAW_RUNS).select_from(T.runs).order_by(T.runs.c.id)):  # every run, any machine
+        try:
+            decode_run(row)
+        except SchemaRefusal as exc:
+            raise damaged(shown, f"run {row.id}, {exc}", sqlite) from None
+    return "ready"
 
 
 def _dumps(x: Any) -> str:
     from pige_sym.files import to_json
 
     return to_json(x, indent=None)
-
-
-def _floats(text: str) -> np.ndarray:
-    return np.array([np.nan if v is None else v for v in json.loads(text)], dtype=float)
-
-
-def _record(row: Any) -> RunRecord:
-    params = json.loads(row.parameters)
-    cov = np.array([[np.nan if v is None else v for v in r] for r in json.loads(row.covariance_json)], dtype=float)
-    return RunRecord(row.id, row.machine_id, row.file_name, row.file_sha256, row.measured_at, row.time_source,
-                     row.added_at, row.machine_code, row.method, params, json.loads(row.units),
-                     _floats(row.values_json), _floats(row.std_json), cov.reshape(len(params), len(params)),
-                     int(row.dof), row.rms_um, json.loads(row.effects_json), row.verdict,
-                     None if row.check_json is None else json.loads(row.check_json))
 
 
 def measurement_time(path: Path, metadata: dict[str, str], given: str | None) -> tuple[str, str]:
@@ -305,6 +381,10 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.
         "rms_um": float(final.rms_um) if math.isfinite(final.rms_um) else None, "effects_json": _dumps(effects),
         "verdict": None if chk is None else chk.verdict, "check_json": None if chk is None else _dumps(chk.to_dict()),
     }
+    try:
+        check_new_run(values)  # what the history would refuse to read back is never stored
+    except SchemaRefusal as exc:
+        raise HistoryError(f"{p}: not added to the history: its estimate ({exc}) is not one pige stores") from None
     for attempt in range(3):
         try:
             row = _insert_run(engine, machine_id, code, now, values, p)
@@ -314,7 +394,7 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.
                 if _existing(conn, sha) is not None or attempt == 2:  # another user added the same file meanwhile
                     raise InputError(f"{p}: this file is already in the history: a run is added once") from None
             # else: another process created the machine at the same moment; its row is there now
-    return _record(row)
+    return decode_run(row)
 
 
 def _insert_run(engine: sa.Engine, machine_id: str, code: str, now: str, values: dict[str, Any], p: Path) -> Any:
@@ -330,25 +410,58 @@ def _insert_run(engine: sa.Engine, machine_id: str, code: str, now: str, values:
         return conn.execute(sa.select(T.runs).where(T.runs.c.id == run_id)).one()
 
 
+#: Where each engine :func:`connect` made points (for messages): its file or URL, and whether it is SQLite.
+_WHERE: weakref.WeakKeyDictionary[sa.Engine, tuple[str, bool]] = weakref.WeakKeyDictionary()
+
+
+def _where(engine: sa.Engine) -> tuple[str, bool]:
+    return _WHERE.get(engine) or (engine.url.render_as_string(hide_password=True), engine.dialect.name == "sqlite")
+
+
 def machine_ids(engine: sa.Engine) -> list[str]:
-    """Every machine id in the history, sorted."""
-    with engine.connect() as conn:
-        return sorted(conn.execute(sa.select(T.machines.c.machine_id)).scalars())
+    """Every machine id in the history, sorted.
+
+    Raises
+    ------
+    HistoryError
+        The database cannot be read (damaged).
+    """
+    try:
+        with engine.connect() as conn:
+            ids: list[Any] = list(conn.execute(sa.select(sa.literal_column("machines.machine_id"))
+                                    .select_from(T.machines)).scalars())
+    except sa.exc.SQLAlchemyError as exc:
+        shown, sqlite = _where(engine)
+        raise damaged(shown, _reason(exc), sqlite) from None
+    return sorted(str(x) for x in ids)
 
 
 def list_runs(engine: sa.Engine, machine_id: str) -> list[RunRecord]:
-    """Runs of a machine in measurement order (time, then insertion).
+    """Runs of a machine in measurement order (time, then insertion), each read strictly
+    (:func:`~pige_sym.verdict.history.records.decode_run`).
 
     Raises
     ------
     InputError
         No such machine id (the message lists the known ones).
+    HistoryError
+        A run or the database is damaged (the message names the run and the column).
     """
-    with engine.connect() as conn:
-        rows = conn.execute(sa.select(T.runs).where(T.runs.c.machine_id == machine_id)
-                            .order_by(T.runs.c.measured_at, T.runs.c.id)).all()
+    shown, sqlite = _where(engine)
+    try:
+        with engine.connect() as conn:
+            rows = conn.execute(sa.select(*_RAW_RUNS).select_from(T.runs).where(T.runs.c.machine_id == machine_id)
+                                .order_by(T.runs.c.measured_at, T.runs.c.id)).all()
+    except sa.exc.SQLAlchemyError as exc:
+        raise damaged(shown, _reason(exc), sqlite) from None
     if not rows:
         known = machine_ids(engine)
-        raise InputError(f"no machine {machine_id!r} in the history {engine.url.render_as_string(hide_password=True)}"
+        raise InputError(f"no machine {machine_id!r} in the history {shown}"
                          f"; known: {', '.join(known) or 'none (add a run with pige history add)'}")
-    return [_record(r) for r in rows]
+    out = []
+    for r in rows:
+        try:
+            out.append(decode_run(r))
+        except SchemaRefusal as exc:
+            raise damaged(shown, f"run {r.id}, {exc}", sqlite) from None
+    return out
