@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -25,6 +24,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from timing import median_seconds  # noqa: E402
 
 from pige_sym.diagnosis.joint import ALPHA, diagnose_joint  # noqa: E402
 from pige_sym.identification.joint import file_blocks, identify_joint, own_sigma, whitened_system  # noqa: E402
@@ -44,14 +46,6 @@ def _dense(kind: str, axis: str, tilt: float, poses: int) -> object:
     return dataclasses.replace(setup, angles_deg=angles)
 
 
-def _median(fn: object, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()  # type: ignore[operator]
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
-
 
 def joint_timing(poses: int = 1000) -> tuple[float, float, int]:
     """(joint identification [s], lstsq floor [s], rows) of 5 dense setups."""
@@ -61,7 +55,8 @@ def joint_timing(poses: int = 1000) -> tuple[float, float, int]:
     identify_joint(items)  # warm
     blocks = file_blocks(items)
     a, y = whitened_system(blocks, [own_sigma(b) for b in blocks])
-    return (_median(lambda: identify_joint(items), 7), _median(lambda: np.linalg.lstsq(a, y, rcond=None), 7),
+    return (median_seconds(lambda: identify_joint(items), 7),
+            median_seconds(lambda: np.linalg.lstsq(a, y, rcond=None), 7),
             int(y.size))
 
 

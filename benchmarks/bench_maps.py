@@ -13,15 +13,16 @@ floor is one ``numpy.linalg.lstsq`` of the fit's stacked, whitened system (the s
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from timing import median_seconds  # noqa: E402
 
 from pige_sym.identification.joint import whitened_system  # noqa: E402
 from pige_sym.identification.maps import MapSpec, identify_maps, map_blocks  # noqa: E402
@@ -55,23 +56,15 @@ def _items(poses_per_setup: int, seed: int = 0) -> list[tuple[str, object]]:
                                    error_maps=maps).measurement) for i, ball in enumerate(SETUPS)]
 
 
-def _median(fn: object, repeats: int = 3) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()  # type: ignore[operator]
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
-
 
 def timing(poses_per_setup: int) -> tuple[float, float]:
     """(identify --map [s], lstsq floor of the same system [s])."""
     items = _items(poses_per_setup)
     spec = MapSpec(("C", "A"), STEP)
-    fit = _median(lambda: identify_maps(items, spec))
+    fit = median_seconds(lambda: identify_maps(items, spec), 3)
     blocks = map_blocks(items, spec)[3]  # type: ignore[arg-type]
     a, y = whitened_system(blocks, [1.0] * len(blocks))
-    floor = _median(lambda: np.linalg.lstsq(a, y, rcond=None))
+    floor = median_seconds(lambda: np.linalg.lstsq(a, y, rcond=None), 3)
     return fit, floor
 
 

@@ -25,17 +25,10 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import peers  # noqa: E402
+from timing import median_seconds  # noqa: E402
 
 SIZES = (30, 1_000, 100_000, 1_000_000)
 
-
-def _median(fn: Callable[[], object], n: int) -> float:
-    times = []
-    for _ in range(n):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 def _reps(n: int) -> int:
@@ -92,10 +85,11 @@ def jacobian_rows() -> list[tuple[str, int, float, float, str]]:
         out = np.empty((n, 3, 10))
         floor_out = np.empty((n, 3, 8))
         floor_out.fill(0.0)
-        rows.append(("floor: cos/sin + write J", n, _median(lambda a=ang, o=floor_out: _floor(a, o), _reps(n)),
+        rows.append(("floor: cos/sin + write J", n, median_seconds(lambda a=ang, o=floor_out: _floor(a, o), _reps(n)),
                      float("nan"), ""))
         rows.append(("pige generated kernel (out=)", n,
-                     _median(lambda a=ang, o=out: kern.jacobian(a, None, peers.BALL, out=o), _reps(n)), float("nan"),
+                     median_seconds(lambda a=ang, o=out: kern.jacobian(a, None, peers.BALL, out=o), _reps(n)),
+                     float("nan"),
                      "10 columns (8 PIGEs + 2 zero errors)"))
         for name, build in builders.items():
             t0 = time.perf_counter()
@@ -106,14 +100,14 @@ def jacobian_rows() -> list[tuple[str, int, float, float, str]]:
             if err > 1e-9:
                 rows.append((name, n, float("nan"), first, f"DISAGREES with the kernel (rel {err:.1e}): not timed"))
                 continue
-            rows.append((name, n, _median(lambda f=fn, a=ang: f(a), _reps(n)), first, f"agrees to {err:.0e}"))
+            rows.append((name, n, median_seconds(lambda f=fn, a=ang: f(a), _reps(n)), first, f"agrees to {err:.0e}"))
             if name.startswith("CasADi"):
                 import casadi as ca
 
                 mapped, _ = peers.casadi_mapped("c" if "C -O3" in name else "vm", n)
                 dm = ca.DM(ang.T)
                 rows.append((name.replace(".map(N)", ".map(N), evaluation only (DM in/out)"), n,
-                             _median(lambda f=mapped, x=dm: f(x), _reps(n)), float("nan"),
+                             median_seconds(lambda f=mapped, x=dm: f(x), _reps(n)), float("nan"),
                              "no NumPy conversion, no zeroing: CasADi's own speed"))
     for m in missing:
         rows.append((m, 0, float("nan"), float("nan"), "skipped: not installed (pip install '.[bench]')"))
@@ -140,12 +134,13 @@ def identification_rows() -> list[tuple[str, int, float]]:
         dev = np.einsum("nip,p->ni", peers.kernel_jacobian(ang), truth)
         m = Measurement(machine=peers.AC, ball_mm=np.array(peers.BALL), t_s=np.arange(n, dtype=float),
                         angles_deg=ang, deviation_um=dev, rotary_axes=("A", "C"))
-        rows.append(("pige identify", n, _median(lambda mm=m: identify(mm), 3 if n > 1000 else 20)))
+        rows.append(("pige identify", n, median_seconds(lambda mm=m: identify(mm), 3 if n > 1000 else 20)))
         y = dev[1:].reshape(-1)
         for name, build in builders.items():
             fn = build(n)
             fn(ang)
-            rows.append((name, n, _median(lambda f=fn, a=ang, yy=y: _gauss_newton(f, a, yy), 3 if n > 1000 else 20)))
+            repeats = 3 if n > 1000 else 20
+            rows.append((name, n, median_seconds(lambda f=fn, a=ang, yy=y: _gauss_newton(f, a, yy), repeats)))
     return rows
 
 
