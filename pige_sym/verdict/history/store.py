@@ -30,6 +30,8 @@ import numpy as np
 import sqlalchemy as sa
 
 from pige_sym.errors import FileFormatError, InputError
+from pige_sym.measurements.measurement import Measurement
+from pige_sym.measurements.run_setup import setup_of
 from pige_sym.verdict.history import tables as T
 from pige_sym.verdict.history.migrations import migrate
 
@@ -114,6 +116,13 @@ class RunRecord:
         Accepted findings (effect, options, params, std, units).
     check : dict or None
         ``pige check`` result when tolerances were given at ``add``.
+    kind : {"full", "checkup"}
+        A calibration (``pige history add``) or a check-up (``pige checkup``).
+    setup : dict or None
+        The set-up the file was measured with (:class:`~pige_sym.measurements.run_setup.RunSetup` as a dict);
+        None for a set of files and for runs stored before schema version 2.
+    checkup : dict or None
+        What a check-up found (:mod:`pige_sym.verdict.checkup`).
     """
 
     id: int
@@ -135,6 +144,9 @@ class RunRecord:
     effects: list[dict[str, Any]] = field(default_factory=list)
     verdict: str | None = None
     check: dict[str, Any] | None = None
+    kind: str = "full"
+    setup: dict[str, Any] | None = None
+    checkup: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         from pige_sym.files import json_ready
@@ -147,7 +159,7 @@ class RunRecord:
             "std": dict(zip(self.parameters, self.std, strict=True)), "units": self.units,
             "covariance": {"parameters": self.parameters, "matrix": self.covariance}, "dof": self.dof,
             "rms_um": self.rms_um, "effects": [f.get("effect") for f in self.effects], "verdict": self.verdict,
-            "check": self.check,
+            "check": self.check, "kind": self.kind, "setup": self.setup, "checkup": self.checkup,
         })
 
 
@@ -161,14 +173,16 @@ def _floats(text: str) -> np.ndarray:
     return np.array([np.nan if v is None else v for v in json.loads(text)], dtype=float)
 
 
-def _record(row: Any) -> RunRecord:
+def run_record(row: Any) -> RunRecord:
     params = json.loads(row.parameters)
     cov = np.array([[np.nan if v is None else v for v in r] for r in json.loads(row.covariance_json)], dtype=float)
     return RunRecord(row.id, row.machine_id, row.file_name, row.file_sha256, row.measured_at, row.time_source,
                      row.added_at, row.machine_code, row.method, params, json.loads(row.units),
                      _floats(row.values_json), _floats(row.std_json), cov.reshape(len(params), len(params)),
                      int(row.dof), row.rms_um, json.loads(row.effects_json), row.verdict,
-                     None if row.check_json is None else json.loads(row.check_json))
+                     None if row.check_json is None else json.loads(row.check_json), row.kind,
+                     None if row.setup_json is None else json.loads(row.setup_json),
+                     None if row.checkup_json is None else json.loads(row.checkup_json))
 
 
 def measurement_time(path: Path, metadata: dict[str, str], given: str | None) -> tuple[str, str]:
@@ -304,6 +318,8 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.
         "std_json": _dumps(final.std), "covariance_json": _dumps(final.covariance), "dof": int(final.dof),
         "rms_um": float(final.rms_um) if math.isfinite(final.rms_um) else None, "effects_json": _dumps(effects),
         "verdict": None if chk is None else chk.verdict, "check_json": None if chk is None else _dumps(chk.to_dict()),
+        "kind": "full", "setup_json": _dumps(setup_of(m.items[0]).to_dict())
+        if len(m.items) == 1 and isinstance(m.items[0], Measurement) else None,
     }
     for attempt in range(3):
         try:
@@ -314,7 +330,7 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.
                 if _existing(conn, sha) is not None or attempt == 2:  # another user added the same file meanwhile
                     raise InputError(f"{p}: this file is already in the history: a run is added once") from None
             # else: another process created the machine at the same moment; its row is there now
-    return _record(row)
+    return run_record(row)
 
 
 def _insert_run(engine: sa.Engine, machine_id: str, code: str, now: str, values: dict[str, Any], p: Path) -> Any:
@@ -351,4 +367,44 @@ def list_runs(engine: sa.Engine, machine_id: str) -> list[RunRecord]:
         known = machine_ids(engine)
         raise InputError(f"no machine {machine_id!r} in the history {engine.url.render_as_string(hide_password=True)}"
                          f"; known: {', '.join(known) or 'none (add a run with pige history add)'}")
-    return [_record(r) for r in rows]
+    return [run_record(r) for r in rows]
+
+
+def existing_run(engine: sa.Engine, path: Path) -> None:
+    """Refuse a file that is already in the history (a run is added once).
+
+    Raises
+    ------
+    InputError
+    """
+    with engine.connect() as conn:
+        dup = _existing(conn, _sha256(path))
+    if dup is not None:
+        raise InputError(f"{path}: this file is already in the history (run {dup.id} of machine {dup.machine_id}, "
+                         f"added as {dup.file_name}): a run is added once")
+
+
+def add_checkup_run(engine: sa.Engine, path: Path, machine_id: str, code: str, measured: tuple[str, str], fit: Any,
+                    setup: dict[str, Any], verdict: str, checkup: dict[str, Any]) -> RunRecord:
+    """Store a check-up (``kind = checkup``): its PIGEs' estimate (:class:`~pige_sym.identification.subset.SubsetFit`),
+    the set-up it was measured with, its verdict and what it found (:mod:`pige_sym.verdict.checkup`).
+
+    Raises
+    ------
+    InputError
+        The file is already stored (also when another user stored it meanwhile).
+    """
+    now = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    values = {
+        "machine_id": machine_id, "file_sha256": _sha256(path), "file_name": str(path.resolve()),
+        "measured_at": measured[0], "time_source": measured[1], "added_at": now, "machine_code": code,
+        "method": "checkup", "parameters": _dumps(fit.parameters), "units": _dumps(fit.units),
+        "values_json": _dumps(fit.values), "std_json": _dumps(fit.std), "covariance_json": _dumps(fit.covariance),
+        "dof": int(fit.dof), "rms_um": float(fit.rms_um) if math.isfinite(fit.rms_um) else None,
+        "effects_json": "[]", "verdict": verdict, "check_json": None, "kind": "checkup",
+        "setup_json": _dumps(setup), "checkup_json": _dumps(checkup),
+    }
+    try:
+        return run_record(_insert_run(engine, machine_id, code, now, values, path))
+    except sa.exc.IntegrityError:
+        raise InputError(f"{path}: this file is already in the history: a run is added once") from None

@@ -1,0 +1,267 @@
+"""``pige checkup``: identify a check-up file, compare it with the machine's history, give a verdict, store the run.
+
+1. The file (R-test or probe, the program ``pige program --checkup`` wrote) is fitted for the check-up's PIGEs with
+   the others held (:mod:`~pige_sym.identification.subset`; the PIGEs are the program header's, else ``--pige``,
+   else those of the machine's last check-up, else the axis lines' positions).
+2. Each PIGE is judged against its control limits (:mod:`~pige_sym.verdict.checkup.limits`, learned from the
+   check-ups of the machine with the same poses), against its tolerance (ISO 14253-1 decision rule,
+   :func:`~pige_sym.verdict.check.decide`), and its trend is fitted and forecast
+   (:mod:`~pige_sym.verdict.checkup.trend`).
+3. **Verdict**: ``out`` when a PIGE is not shown within its tolerance (``fail`` or, under the guard rule,
+   ``undecided``), else ``drifted`` when one is outside its control limits, else ``ok``.  Exit status 0 for ``ok``,
+   1 for ``drifted`` and ``out``, 2 for bad input.
+4. **Changes to enter** (:mod:`~pige_sym.verdict.checkup.changes`): the check-up's PIGEs weighed by their uncertainty,
+   within ``--max-change``; with ``--controller`` as ``pige compensate --controller`` prints them.
+5. The run is stored with ``kind = checkup`` and what was found (``runs.checkup_json``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from datetime import datetime, timedelta
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pige_sym.errors import InputError
+from pige_sym.verdict.checkup.limits import ALPHA, METHOD, MIN_DOF, Limit, control_limit
+from pige_sym.verdict.checkup.reference import FORMAT, ChartState, chart_state, hours
+from pige_sym.verdict.checkup.trend import Trend, trend
+
+VERDICTS = ("ok", "drifted", "out")
+
+
+@dataclass
+class CheckupOptions:
+    """The options of ``pige checkup`` (its ``--help``)."""
+
+    tolerances: str | os.PathLike[str] | None = None
+    rule: str = "guard"
+    k: float = 2.0
+    alpha: float = ALPHA
+    pige: str | None = None
+    corrected: bool = False
+    date: str | None = None
+    controller: str | None = None
+    current: Any = None
+    carrier: int = 1
+    heidenhain_trans: str | None = None
+    max_change: tuple[float, float] = (0.2, 0.1)
+
+
+@dataclass
+class Item:
+    """One PIGE of a check-up: value, limits, tolerance, trend."""
+
+    name: str
+    unit: str
+    value: float
+    std: float
+    limit: Limit | None
+    tolerance: float | None
+    status: str
+    reason: str
+    trend: Trend | None = None
+
+    def to_dict(self, origin: str) -> dict[str, Any]:
+        t = None if self.trend is None else self.trend.to_dict() | {
+            k: when(origin, self.trend_hours(k)) for k in ("leaves_at", "leaves_low", "leaves_high")}
+        return {"name": self.name, "unit": self.unit, "value": self.value, "std": self.std,
+                "limit": None if self.limit is None else self.limit.to_dict(), "tolerance": self.tolerance,
+                "status": self.status, "reason": self.reason, "trend": t}
+
+    def trend_hours(self, key: str) -> float | None:
+        return None if self.trend is None else getattr(self.trend, key)
+
+
+def when(origin: str, h: float | None) -> str | None:
+    """The ISO time ``h`` hours after ``origin`` (None stays None)."""
+    if h is None or not math.isfinite(h):
+        return None
+    return (datetime.fromisoformat(origin) + timedelta(hours=h)).isoformat(timespec="minutes")
+
+
+@dataclass
+class CheckupResult:
+    """What ``pige checkup`` found (module docstring)."""
+
+    machine_id: str
+    machine: str
+    file: str
+    measured_at: str
+    verdict: str
+    items: list[Item]
+    held: dict[str, float]
+    provisional: bool
+    origin: str
+    alpha: float
+    signature: str
+    segment: int
+    corrected: bool
+    correction: dict[str, float]
+    changes: Any = None
+    run_id: int | None = None
+    fit: dict[str, Any] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def exit_status(self) -> int:
+        """0 for ``ok``, 1 when action is needed (``drifted``, ``out``)."""
+        return 0 if self.verdict == "ok" else 1
+
+    def in_control(self) -> dict[str, bool]:
+        return {i.name: not (i.limit is not None and i.limit.outside) for i in self.items}
+
+    def to_dict(self) -> dict[str, Any]:
+        from pige_sym.files import json_ready
+
+        return json_ready({
+            "format": FORMAT, "machine_id": self.machine_id, "machine": self.machine, "file": self.file,
+            "measured_at": self.measured_at, "run": self.run_id, "verdict": self.verdict,
+            "exit_status": self.exit_status,
+            "free": [i.name for i in self.items], "held": self.held, "provisional": self.provisional,
+            "method": METHOD, "alpha": self.alpha, "min_dof": MIN_DOF, "signature": self.signature,
+            "segment": self.segment, "after_correction": self.corrected, "correction": self.correction,
+            "in_control": self.in_control(), "items": [i.to_dict(self.origin) for i in self.items],
+            "tolerance": {i.name: i.tolerance for i in self.items if i.tolerance is not None},
+            "to_enter": None if self.changes is None else self.changes.entered,
+            "changes": None if self.changes is None else self.changes.to_dict(), "fit": self.fit,
+            "notes": self.notes})
+
+
+def run_checkup(engine: Any, path: str | os.PathLike[str], machine_id: str, opts: CheckupOptions) -> CheckupResult:
+    """The check-up of one file (module docstring); stored in the history.
+
+    Raises
+    ------
+    InputError, FileFormatError
+        Bad input: the file already stored or of another machine, no full calibration, no tolerances, …
+    """
+    from pige_sym.identification.instruments import instrument
+    from pige_sym.identification.subset import identify_subset
+    from pige_sym.kernels import load_kernels
+    from pige_sym.measurements.rtest import read_measurement
+    from pige_sym.verdict.checkup.changes import checkup_changes
+    from pige_sym.verdict.history.store import add_checkup_run, existing_run, list_runs, measurement_time
+
+    if not 0 < opts.alpha < 1:
+        raise InputError(f"--alpha must be between 0 and 1, got {opts.alpha}")
+    existing_run(engine, Path(path))
+    m = read_measurement(path)
+    kern = load_kernels(m.machine)
+    runs = list_runs(engine, machine_id)
+    _same_machine(m, machine_id, runs, kern.MACHINE_CODE, str(path))
+    measured, source = measurement_time(Path(path), m.metadata, opts.date)
+    if measured <= runs[-1].measured_at:
+        raise InputError(f"{path} was measured {measured}, not after the machine's last run (run {runs[-1].id}, "
+                         f"{runs[-1].measured_at}): a check-up follows the runs it is compared with (--date)")
+    free = _free(m, opts.pige, runs, kern)
+    signature = _signature(m, free)
+    state = chart_state(runs, free, signature, corrected=opts.corrected, location=list(kern.LOCATION_PARAMETERS))
+    if state.setup.instrument != instrument(m):
+        raise InputError(f"{path} is an {instrument(m)} file, the last full calibration (run {state.full.id}) an "
+                         f"{state.setup.instrument} run: a check-up repeats its instrument and set-up")
+    fit = identify_subset(m, free, state.held, noise_um=state.full.rms_um if instrument(m) == "rtest" else None)
+    tol = _tolerances(opts, runs, kern.MACHINE_CODE, free)
+    items = _items(fit, state, tol, opts, hours(measured, state.origin))
+    verdict = _verdict(items)
+    changes = checkup_changes(fit, m, opts)
+    result = CheckupResult(machine_id, kern.MACHINE_CODE, str(Path(path).resolve()), measured, verdict, items,
+                           state.held, any(i.limit is None or i.limit.provisional for i in items), state.origin,
+                           opts.alpha, signature, state.segment, opts.corrected, state.correction, changes,
+                           fit=fit.to_dict(), notes=list(fit.notes) + _notes(items))
+    from pige_sym.measurements.run_setup import setup_of
+
+    record = add_checkup_run(engine, Path(path), machine_id, kern.MACHINE_CODE, (measured, source), fit,
+                             setup_of(m).to_dict(), verdict, result.to_dict())
+    result.run_id = record.id
+    return result
+
+
+def _same_machine(m: Any, machine_id: str, runs: list[Any], code: str, path: str) -> None:
+    named = m.metadata.get("program_machine_id")
+    if named is not None and named != machine_id:
+        raise InputError(f"{path} was probed by the check-up program of machine {named!r}, not {machine_id!r}: use "
+                         "the right --machine-id")
+    if runs[-1].machine_code != code:
+        raise InputError(f"machine id {machine_id!r} is a {runs[-1].machine_code} in the history, {path} measures a "
+                         f"{code}: use the right --machine-id")
+
+
+def _free(m: Any, pige: str | None, runs: list[Any], kern: Any) -> list[str]:
+    """The check-up's PIGEs: the program header's, else ``--pige``, else the last check-up's, else the default."""
+    from pige_sym.planning.checkup import parse_free
+
+    stated = m.metadata.get("program_checkup")
+    if stated:
+        named = parse_free(stated, kern.MACHINE_CODE)
+        if pige and parse_free(pige, kern.MACHINE_CODE) != named:
+            raise InputError(f"--pige {pige}: the check-up program re-measures {stated}; leave --pige out")
+        return named
+    if pige:
+        return parse_free(pige, kern.MACHINE_CODE)
+    last = [r for r in runs if r.kind == "checkup"]
+    return list(last[-1].parameters) if last else parse_free(None, kern.MACHINE_CODE)
+
+
+def _signature(m: Any, free: list[str]) -> str:
+    """The PIGEs and the poses (to 0.1°): check-ups with the same signature share their chart."""
+    rows = ";".join(",".join(f"{v:.1f}" for v in row) for row in m.angles_deg)
+    return f"{','.join(free)}|{rows}"
+
+
+def _tolerances(opts: CheckupOptions, runs: list[Any], machine: str, free: list[str]) -> dict[str, float]:
+    """Limits of the check-up's PIGEs: ``--tolerances``, else the last check-up's, else the last stored check's."""
+    if opts.tolerances is not None:
+        from pige_sym.verdict.check import read_tolerances
+
+        limits = read_tolerances(opts.tolerances).resolve(machine)
+        return {n: limits[n] for n in free if n in limits}
+    for run in reversed(runs):
+        if run.kind == "checkup" and (run.checkup or {}).get("tolerance"):
+            return {n: float(v) for n, v in run.checkup["tolerance"].items() if n in free}
+        if run.check:
+            stored = {str(i["name"]): float(i["limit"]) for i in run.check.get("items", [])}
+            return {n: stored[n] for n in free if n in stored}
+    raise InputError(f"no tolerances are stored for machine {runs[0].machine_id}: give --tolerances TOL.json (it is "
+                     "kept for the next check-ups)")
+
+
+def _items(fit: Any, state: ChartState, tol: dict[str, float], opts: CheckupOptions, t_now: float) -> list[Item]:
+    from pige_sym.verdict.check import decide
+
+    items = []
+    for i, name in enumerate(fit.parameters):
+        value, std = float(fit.values[i]), float(fit.std[i])
+        limit = control_limit(state.points[name], state.segment, state.start.get(name), run_std=std,
+                              run_dof=fit.dof, m=len(fit.parameters), alpha=opts.alpha)
+        limit = None if limit is None else limit.judge(value)
+        if name in tol:
+            status, reason = decide(value, std, tol[name], rule=opts.rule, k=opts.k)
+        else:
+            status, reason = "no limit", "no tolerance given for it"
+        pts = state.trend[name] + [(t_now, value)]
+        tr = trend(np.array([p[0] for p in pts]), np.array([p[1] for p in pts]), t_now, tol.get(name))
+        items.append(Item(name, fit.units[name], value, std, limit, tol.get(name), status, reason, tr))
+    return items
+
+
+def _verdict(items: list[Item]) -> str:
+    if any(i.status in ("fail", "undecided") for i in items):
+        return "out"
+    if any(i.limit is not None and i.limit.outside for i in items):
+        return "drifted"
+    return "ok"
+
+
+def _notes(items: list[Item]) -> list[str]:
+    notes = []
+    if any(i.limit is None for i in items):
+        notes.append("the first check-up of this segment has no centre to compare with: judged on its tolerance only")
+    elif any(i.limit is not None and i.limit.provisional for i in items):
+        notes.append(f"provisional limits from the runs' own standard errors: the run-to-run scatter is learned from "
+                     f"{MIN_DOF + 1} in-control check-ups with the same poses on (docs/checkup.md)")
+    return notes
