@@ -52,7 +52,8 @@ def _rate(item: Any, per_day: bool) -> str:
         return "— (fewer than 3 points)"
     f = 24.0 if per_day else 1.0
     sig = "" if t.significant else " n.s."
-    return f"{t.rate * f:+.3g} [{t.rate_low * f:+.3g}, {t.rate_high * f:+.3g}]{sig}"
+    over = f" ({t.points} flagged)" if t.episode else ""
+    return f"{t.rate * f:+.3g} [{t.rate_low * f:+.3g}, {t.rate_high * f:+.3g}]{sig}{over}"
 
 
 def _leaves(item: Any, origin: str) -> str:
@@ -61,14 +62,16 @@ def _leaves(item: Any, origin: str) -> str:
     t = item.trend
     if t is None or t.leaves_at is None:
         return "—"
+    if not t.significant:
+        return "— (no drift shown)"
     low, high = when(origin, t.leaves_low), when(origin, t.leaves_high)
     return f"{when(origin, t.leaves_at)} ({low} .. {high or 'not bounded'})"
 
 
 def format_checkup(r: Any) -> str:
     """The check-up as text: verdict, one line per PIGE, what the limits rest on, the changes to enter."""
-    spans = [p.trend for p in r.items if p.trend is not None]
-    per_day = any(t.points > 0 for t in spans) and _span_hours(r) > 48
+    episode = any(p.trend is not None and p.trend.episode for p in r.items)
+    per_day = not episode and _span_hours(r) > 48
     unit = "day" if per_day else "h"
     lines = [f"check-up of {r.machine_id} ({r.machine}), run {r.run_id}, measured {r.measured_at}: "
              f"verdict {r.verdict.upper()}", f"file {r.file}",
@@ -80,8 +83,10 @@ def format_checkup(r: Any) -> str:
                      f"{_num(lim and lim.half_width, '.3f'):>9}{_num(lim and lim.z and lim.z * 1.0, '+.2f'):>7}"
                      f"{_num(it.tolerance, 'g'):>6}  {it.status + ('*' if lim and lim.outside else ''):<10}"
                      f"{_rate(it, per_day):<34}{_leaves(it, r.origin)}")
-    lines.append(f"(z: distance from the centre in limit widths, |z| > 1 outside; * outside its control limits; "
-                 f"units {', '.join(sorted({i.unit for i in r.items}))})")
+    lines.append(f"(z: distance from the centre in limit widths, |z| > 1 outside; * outside its control limits (by "
+                 f"{', '.join(sorted({i.limit.by for i in r.items if i.limit and i.limit.by})) or 'none'}); units "
+                 f"{', '.join(sorted({i.unit for i in r.items}))}; drift over the segment, or over the flagged "
+                 "check-ups of a drift)")
     lines.append(_limits_line(r))
     held = ", ".join(f"{n} {v:+.3g}" for n, v in r.held.items())
     lines.append(f"held at the last full calibration{' less the correction entered' if r.corrected else ''}: {held}")

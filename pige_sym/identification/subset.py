@@ -62,6 +62,8 @@ class SubsetFit:
     consistency_p : float or None
         p-value of the residual's χ² (module docstring); None when the noise is not known (R-test without it).
     notes : list of str
+    sensitivity : ndarray, shape=(F, H)
+        ``K = N_FF⁻¹ N_FH``: a held value off by ``δ`` moves the free estimates by ``−K δ`` (held in ``held``'s order).
     """
 
     machine: str
@@ -76,6 +78,7 @@ class SubsetFit:
     n_obs: int
     consistency_p: float | None = None
     notes: list[str] = field(default_factory=list)
+    sensitivity: np.ndarray | None = None
 
     def value_dict(self) -> dict[str, float]:
         return {n: float(v) for n, v in zip(self.parameters, self.values, strict=True)}
@@ -149,7 +152,9 @@ def identify_subset(m: Measurement, free: list[str], held: dict[str, float], *,
         "fully"]
     resid = _rms(problem, x)
     kept = {names[i]: float(held[names[i]]) for i in h}
-    return SubsetFit(kern.MACHINE_CODE, order, units, sol.values, std, cov, kept, dof, resid, problem.n_obs, p, notes)
+    sens = sol.cov_unit @ problem.normal[np.ix_(f, h)]
+    return SubsetFit(kern.MACHINE_CODE, order, units, sol.values, std, cov, kept, dof, resid, problem.n_obs, p, notes,
+                     sens)
 
 
 def _scale(m: Measurement, problem: Any, rss: float, resid_dof: int,

@@ -1,4 +1,4 @@
-"""``pige history fleet``: every machine of the history, its last full calibration and check-up, and when the next is due.
+"""``pige history fleet``: every machine of the history, its last calibration and check-up, when the next is due.
 
 **Next due** (UTC): now when the last check-up said ``drifted`` or ``out`` (or the last calibration failed its
 check); otherwise the last run plus the machine's usual interval — the median gap between its check-ups, or

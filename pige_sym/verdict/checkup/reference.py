@@ -8,8 +8,8 @@ From a machine's runs in measurement order (:func:`~pige_sym.verdict.history.lis
 - **segments** (:mod:`~pige_sym.verdict.checkup.limits`): a full calibration starts one at its values; a check-up
   stored with ``--corrected`` (the changes printed for the previous run were entered before it) starts one at the
   previous run's values less those changes;
-- **points**: the check-ups with the same signature (PIGEs and poses), each with its segment and whether it was
-  inside its limits when judged.
+- **points**: the check-ups with the same signature (PIGEs and poses), each with its segment and whether the
+  learned limits flagged it (those of a segment closed by a correction leave the scatter).
 
 A correction is what pige printed to enter: a check-up's ``to_enter`` (its PIGEs, weighed), or for a full calibration
 every PIGE weighed by its uncertainty (:func:`~pige_sym.compensation.weighing.entered_values`, what ``pige compensate
@@ -79,8 +79,9 @@ class ChartState:
         The segment's starting level per PIGE (until it has check-ups of its own).
     points : dict of str to list of Point
         Earlier check-ups with the same signature, per PIGE.
-    trend : dict of str to list of (float, float)
-        (hours from ``origin``, value) of the current segment's check-ups with the same signature.
+    trend : dict of str to list of (float, float, bool)
+        (hours from ``origin``, value, outside its limits when judged) of the current segment's check-ups with the
+        same signature.
     origin : str
         The time the hours count from (the machine's first run).
     correction : dict of str to float
@@ -93,7 +94,7 @@ class ChartState:
     segment: int
     start: dict[str, Start]
     points: dict[str, list[Point]]
-    trend: dict[str, list[tuple[float, float]]]
+    trend: dict[str, list[tuple[float, float, bool]]]
     origin: str
     previous: Any
     correction: dict[str, float] = field(default_factory=dict)
@@ -139,7 +140,7 @@ def chart_state(runs: list[Any], free: list[str], signature: str, *, corrected: 
     setup = run_setup(full)
     segment, level, start = 0, {}, {}
     points: dict[str, list[Point]] = {n: [] for n in free}
-    trend: dict[str, list[tuple[float, float]]] = {n: [] for n in free}
+    trend: dict[str, list[tuple[float, float, bool]]] = {n: [] for n in free}
     origin = runs[0].measured_at
     held_entered: dict[str, float] = {}
     prev = None
@@ -147,6 +148,7 @@ def chart_state(runs: list[Any], free: list[str], signature: str, *, corrected: 
         starts = run is None and corrected or run is not None and (
             run.kind == "full" or bool((run.checkup or {}).get("after_correction")))
         if starts:
+            _close(points, segment)
             segment += 1
             trend = {n: [] for n in free}
             if run is not None and run.kind == "full":
@@ -157,7 +159,8 @@ def chart_state(runs: list[Any], free: list[str], signature: str, *, corrected: 
                 if prev.kind == "full":
                     held_entered = fix
                 std = std_of(prev)
-                start = {n: Start(level[n] - fix.get(n, 0.0), std.get(n, 0.0)) for n in free if n in level}
+                kind = "full" if prev.kind == "full" else "corrected"
+                start = {n: Start(level[n] - fix.get(n, 0.0), std.get(n, 0.0), kind) for n in free if n in level}
         if run is None:
             break
         if run.kind == "checkup":
@@ -169,14 +172,23 @@ def chart_state(runs: list[Any], free: list[str], signature: str, *, corrected: 
     return ChartState(full, setup, held, segment, start, points, trend, origin, runs[-1], correction)
 
 
+def _close(points: dict[str, list[Point]], segment: int) -> None:
+    """A segment closed by a correction: its flagged check-ups leave the scatter (:mod:`~.limits`)."""
+    for pts in points.values():
+        for p in pts:
+            if p.segment == segment and p.flagged:
+                p.in_control = False
+
+
 def _add_point(run: Any, free: list[str], signature: str, segment: int, points: dict[str, list[Point]],
-               trend: dict[str, list[tuple[float, float]]], origin: str) -> None:
+               trend: dict[str, list[tuple[float, float, bool]]], origin: str) -> None:
     info = run.checkup or {}
     if info.get("signature") != signature:
         return
     values, std = values_of(run), std_of(run)
     for n in free:
         if n in values:
-            points[n].append(Point(values[n], std.get(n, 0.0), int(run.dof), segment,
-                                   bool(info.get("in_control", {}).get(n, True))))
-            trend[n].append((hours(run.measured_at, origin), values[n]))
+            learned = not bool((info.get("in_control") or {}).get(n, True))
+            points[n].append(Point(values[n], std.get(n, 0.0), int(run.dof), segment, True, learned))
+            outside = bool((info.get("outside") or {}).get(n, False))
+            trend[n].append((hours(run.measured_at, origin), values[n], outside))

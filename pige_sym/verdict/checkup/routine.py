@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.errors import InputError
-from pige_sym.verdict.checkup.limits import ALPHA, METHOD, MIN_DOF, Limit, control_limit
+from pige_sym.verdict.checkup.limits import ALPHA, METHOD, MIN_DOF, Limit, control_limit, pooled_scatter
 from pige_sym.verdict.checkup.reference import FORMAT, ChartState, chart_state, hours
 from pige_sym.verdict.checkup.trend import Trend, trend
 
@@ -112,8 +112,13 @@ class CheckupResult:
         """0 for ``ok``, 1 when action is needed (``drifted``, ``out``)."""
         return 0 if self.verdict == "ok" else 1
 
+    def outside(self) -> dict[str, bool]:
+        """Per PIGE: outside its control limits (learned or provisional)."""
+        return {i.name: bool(i.limit is not None and i.limit.outside) for i in self.items}
+
     def in_control(self) -> dict[str, bool]:
-        return {i.name: not (i.limit is not None and i.limit.outside) for i in self.items}
+        """Per PIGE: not flagged by learned limits (:mod:`~pige_sym.verdict.checkup.limits`)."""
+        return {i.name: not (i.limit is not None and i.limit.outside and not i.limit.provisional) for i in self.items}
 
     def to_dict(self) -> dict[str, Any]:
         from pige_sym.files import json_ready
@@ -125,7 +130,8 @@ class CheckupResult:
             "free": [i.name for i in self.items], "held": self.held, "provisional": self.provisional,
             "method": METHOD, "alpha": self.alpha, "min_dof": MIN_DOF, "signature": self.signature,
             "segment": self.segment, "after_correction": self.corrected, "correction": self.correction,
-            "in_control": self.in_control(), "items": [i.to_dict(self.origin) for i in self.items],
+            "in_control": self.in_control(), "outside": self.outside(),
+            "items": [i.to_dict(self.origin) for i in self.items],
             "tolerance": {i.name: i.tolerance for i in self.items if i.tolerance is not None},
             "to_enter": None if self.changes is None else self.changes.entered,
             "changes": None if self.changes is None else self.changes.to_dict(), "fit": self.fit,
@@ -166,8 +172,7 @@ def run_checkup(engine: Any, path: str | os.PathLike[str], machine_id: str, opts
                          f"{state.setup.instrument} run: a check-up repeats its instrument and set-up")
     fit = identify_subset(m, free, state.held, noise_um=state.full.rms_um if instrument(m) == "rtest" else None)
     tol = _tolerances(opts, runs, kern.MACHINE_CODE, free)
-    items = _items(fit, state, tol, opts, hours(measured, state.origin))
-    verdict = _verdict(items)
+    items, verdict = judge(fit, state, tol, opts, hours(measured, state.origin))
     changes = checkup_changes(fit, m, opts)
     result = CheckupResult(machine_id, kern.MACHINE_CODE, str(Path(path).resolve()), measured, verdict, items,
                            state.held, any(i.limit is None or i.limit.provisional for i in items), state.origin,
@@ -230,23 +235,82 @@ def _tolerances(opts: CheckupOptions, runs: list[Any], machine: str, free: list[
                      "kept for the next check-ups)")
 
 
+def start_std(full: Any, fit: Any) -> dict[str, float]:
+    """Standard error of a full calibration's value as a check-up's starting level [µm, µrad].
+
+    The check-up holds the other PIGEs at the calibration's values, so their errors ``δ_H`` move its fit by
+    ``−K δ_H`` (:attr:`~pige_sym.identification.subset.SubsetFit.sensitivity`); the difference to the calibration's
+    own value ``x_F + δ_F`` carries ``−(δ_F + K δ_H)``, of covariance ``[I K] Σ [I K]ᵀ`` with Σ the calibration's
+    covariance of (F, H).
+    """
+    names = list(fit.parameters) + list(fit.held)
+    if fit.sensitivity is None or any(n not in full.parameters for n in names):
+        return {}
+    idx = [full.parameters.index(n) for n in names]
+    cov = np.asarray(full.covariance, dtype=float)[np.ix_(idx, idx)]
+    lift = np.hstack([np.eye(len(fit.parameters)), np.asarray(fit.sensitivity)])
+    var = np.diag(lift @ cov @ lift.T)
+    if not np.isfinite(var).all():
+        return {}
+    return {n: float(np.sqrt(max(v, 0.0))) for n, v in zip(fit.parameters, var, strict=True)}
+
+
+def _starts(state: ChartState, fit: Any) -> dict[str, Any]:
+    """The segment's starting levels, a full calibration's with its standard error as the fit sees it."""
+    from pige_sym.verdict.checkup.limits import Start
+
+    if not any(s.source == "full" for s in state.start.values()):
+        return dict(state.start)
+    std = start_std(state.full, fit)
+    return {n: Start(s.value, std.get(n, s.std), "full") if s.source == "full" else s for n, s in state.start.items()}
+
+
+def judge(fit: Any, state: ChartState, tol: dict[str, float], opts: CheckupOptions,
+          t_now: float) -> tuple[list[Item], str]:
+    """Every PIGE of a check-up fit against its limits, its tolerance and its trend; and the verdict."""
+    items = _items(fit, state, tol, opts, t_now)
+    return items, _verdict(items)
+
+
 def _items(fit: Any, state: ChartState, tol: dict[str, float], opts: CheckupOptions, t_now: float) -> list[Item]:
     from pige_sym.verdict.check import decide
 
     items = []
+    starts = _starts(state, fit)
     for i, name in enumerate(fit.parameters):
         value, std = float(fit.values[i]), float(fit.std[i])
-        limit = control_limit(state.points[name], state.segment, state.start.get(name), run_std=std,
+        limit = control_limit(state.points[name], state.segment, starts.get(name), value=value, run_std=std,
                               run_dof=fit.dof, m=len(fit.parameters), alpha=opts.alpha)
-        limit = None if limit is None else limit.judge(value)
         if name in tol:
             status, reason = decide(value, std, tol[name], rule=opts.rule, k=opts.k)
         else:
             status, reason = "no limit", "no tolerance given for it"
-        pts = state.trend[name] + [(t_now, value)]
-        tr = trend(np.array([p[0] for p in pts]), np.array([p[1] for p in pts]), t_now, tol.get(name))
+        quiet = pooled_scatter([p for p in state.points[name] if p.in_control and not p.flagged])
+        tr = _trend(state.trend[name], (t_now, value), limit, quiet, (std, fit.dof), tol.get(name))
         items.append(Item(name, fit.units[name], value, std, limit, tol.get(name), status, reason, tr))
     return items
+
+
+def _trend(points: list[tuple[float, float, bool]], new: tuple[float, float], limit: Limit | None,
+           quiet: tuple[float | None, int], own: tuple[float, int], tolerance: float | None) -> Trend | None:
+    """The trend of the drift episode (the new value outside its limits: the flagged check-ups before it) or of the
+    segment (:mod:`~pige_sym.verdict.checkup.trend`), with the chart's scatter of the unflagged check-ups (``quiet``,
+    once learned; before: the run's own standard error, ``own``)."""
+    from pige_sym.verdict.checkup.trend import WINDOW
+
+    episode = bool(limit is not None and limit.outside)
+    if episode:
+        k = len(points)
+        while k > 0 and points[k - 1][2]:
+            k -= 1
+        window = [p[:2] for p in points[k:]]
+    else:
+        window = [p[:2] for p in points[-(WINDOW - 1):]]
+    window.append(new)
+    learned = limit is not None and not limit.provisional and quiet[0] is not None and quiet[1] >= MIN_DOF
+    scale, nu = (float(quiet[0] or 0.0), quiet[1]) if learned else own
+    return trend(np.array([p[0] for p in window]), np.array([p[1] for p in window]), new[0], tolerance,
+                 scale=scale, dof=nu, episode=episode)
 
 
 def _verdict(items: list[Item]) -> str:

@@ -1,18 +1,21 @@
 """The trend of a PIGE over the check-ups, and when it will leave its tolerance.
 
-**Fit** (robust: one bad check-up does not tilt it): the Theil–Sen line through the points ``(t_i, x_i)`` of the
-current segment (since the last full calibration or correction): the slope ``b`` is the median of the pairwise
-slopes, the level ``a`` the median of ``x_i − b·t_i``.  **Drift rate interval**: Sen's distribution-free
-interval of the slope at :data:`CONFIDENCE` (the ranks ``(N ∓ z·σ_S)/2`` of the ``N`` sorted pairwise slopes,
-``σ_S² = n(n−1)(2n+5)/18`` the variance of Kendall's S; the same as ``scipy.stats.theilslopes``); its half-width
-over ``z`` is quoted as the rate's standard error.
+**Which check-ups.**  During a drift episode (the new check-up is outside its control limits) the trend is fitted to
+the run of consecutive flagged check-ups that ends with it: the drift, not the quiet days before it (a warm-up of an
+hour checked every ten minutes after weeks of daily check-ups is on another time scale).  Otherwise to the
+segment's check-ups (the last :data:`WINDOW`): a slow drift that has not yet left the limits.
 
-**Forecast.**  The level follows the line; it leaves the tolerance ``±L`` when the line crosses ``L`` in the
-direction of the drift.  The interval comes from the band of lines through the pivot ``(t̃, x̃)`` (the median time
-and the line there) with every slope of the interval and the pivot moved by ``±δ``, ``δ = z·√(π/2)·σ̂/√n`` (σ̂ =
-1.4826·MAD of the residuals; √(π/2): a median's standard error): the earliest crossing is the band's outer edge,
-the latest its inner edge; when the slope interval reaches zero (a drift not shown at this confidence) there is no
-latest time.  Needs :data:`MIN_POINTS` points.  docs/checkup.md gives the measured coverage of the interval.
+**Fit** (robust: one bad check-up does not tilt it): the Theil–Sen line, slope ``b`` the median of the pairwise
+slopes, level ``a`` the median of ``x_i − b·t_i``.  **Its uncertainty** comes from the run-to-run scatter the chart
+learned (``s`` on ν degrees of freedom; provisional: the check-ups' own standard errors), not from the few points of
+the window: ``SE(b) = s/√S_tt`` with ``S_tt = Σ(t_i − t̄)²`` (the least-squares slope's; Theil–Sen's is a few per cent
+larger for normal scatter), the drift rate's interval ``b ± t_ν(0.95)·SE(b)`` at :data:`CONFIDENCE`.
+
+**Forecast.**  The level follows the line ``ŷ(t) = ȳ + b(t − t̄)`` (``ȳ`` the line at the mean time); it leaves the
+tolerance ``±L`` when ``ŷ`` crosses ``L`` on the side it drifts to.  The interval is the inverse of the line's band
+``ŷ(t) ± q·s·√(1/n + (t − t̄)²/S_tt)`` (Fieller's): its earliest time is where the band's outer edge meets ``L``, its
+latest where the inner edge does; when the drift is not shown at this confidence there is no latest time.  Coverage
+measured on simulated drifts: docs/checkup.md.
 """
 
 from __future__ import annotations
@@ -22,10 +25,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.special import ndtri  # normal quantile (scipy.stats' without its import time)
+from scipy.special import stdtrit  # Student t quantile (scipy.stats' without its import time)
 
 CONFIDENCE = 0.90
-MIN_POINTS = 4
+MIN_POINTS = 2
+#: Check-ups of a segment a quiet trend is fitted to (the newest).
+WINDOW = 30
 
 
 @dataclass
@@ -35,13 +40,15 @@ class Trend:
     Attributes
     ----------
     rate, rate_low, rate_high, rate_std : float
-        Theil–Sen slope, its interval at ``confidence`` and the interval's half-width over z [unit/h].
+        Theil–Sen slope, its interval at ``confidence`` and standard error [unit/h].
     level : float
         The line at ``t_now`` [unit].
     points : int
+    episode : bool
+        Fitted to a drift episode (the flagged check-ups) rather than the segment.
     leaves_at, leaves_low, leaves_high : float or None
-        When the line leaves ``±limit`` (None: not in the direction it drifts, or no limit); the interval's
-        earliest and latest time (``leaves_high`` None: the drift is not shown, no latest time) [h].
+        When the line leaves ``±limit`` (None: no limit, or it does not drift towards one); the interval's earliest
+        and latest time (``leaves_high`` None: the drift is not shown, no latest time) [h].
     """
 
     rate: float
@@ -51,6 +58,7 @@ class Trend:
     level: float
     points: int
     confidence: float
+    episode: bool = False
     limit: float | None = None
     leaves_at: float | None = None
     leaves_low: float | None = None
@@ -64,63 +72,79 @@ class Trend:
     def to_dict(self) -> dict[str, Any]:
         return {"rate_per_h": self.rate, "rate_low": self.rate_low, "rate_high": self.rate_high,
                 "rate_std": self.rate_std, "level": self.level, "points": self.points, "confidence": self.confidence,
-                "significant": self.significant, "limit": self.limit, "leaves_at_h": self.leaves_at,
-                "leaves_low_h": self.leaves_low, "leaves_high_h": self.leaves_high}
+                "significant": self.significant, "episode": self.episode, "limit": self.limit,
+                "leaves_at_h": self.leaves_at, "leaves_low_h": self.leaves_low, "leaves_high_h": self.leaves_high}
 
 
-def theil_sen(t: np.ndarray, x: np.ndarray, confidence: float = CONFIDENCE) -> tuple[float, float, float, float]:
-    """(slope, level at t = 0, slope low, slope high) of the Theil–Sen line with Sen's interval (module docstring).
-
-    Parameters
-    ----------
-    t, x : ndarray, shape=(n,)
-        Times [h] and values; at least two distinct times.
-    """
+def theil_sen(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
+    """(slope, level at t = 0) of the Theil–Sen line (module docstring); at least two distinct times."""
     t = np.asarray(t, dtype=float)
     x = np.asarray(x, dtype=float)
     i, j = np.triu_indices(t.size, 1)
     dt = t[j] - t[i]
     keep = dt != 0
-    slopes = np.sort((x[j] - x[i])[keep] / dt[keep])
-    if slopes.size == 0:
+    if not keep.any():
         raise ValueError("a trend needs two distinct times")
-    b = float(np.median(slopes))
-    a = float(np.median(x - b * t))
-    n, nt = t.size, slopes.size
-    z = float(ndtri(0.5 + confidence / 2.0))
-    sigma = math.sqrt(n * (n - 1) * (2 * n + 5) / 18.0)
-    low = slopes[max(int(round((nt - z * sigma) / 2.0)) - 1, 0)]
-    high = slopes[min(int(round((nt + z * sigma) / 2.0)), nt - 1)]
-    return b, a, float(low), float(high)
+    b = float(np.median((x[j] - x[i])[keep] / dt[keep]))
+    return b, float(np.median(x - b * t))
 
 
-def trend(t: np.ndarray, x: np.ndarray, t_now: float, limit: float | None = None, *,
-          confidence: float = CONFIDENCE) -> Trend | None:
-    """The trend and forecast of one PIGE (module docstring); None with fewer than :data:`MIN_POINTS` points."""
+def trend(t: np.ndarray, x: np.ndarray, t_now: float, limit: float | None = None, *, scale: float, dof: float,
+          episode: bool = False, confidence: float = CONFIDENCE) -> Trend | None:
+    """The trend and forecast of one PIGE (module docstring).
+
+    Parameters
+    ----------
+    t, x : ndarray, shape=(n,)
+        Times [h] and values of the window's check-ups, the new one last.
+    scale, dof : float
+        Run-to-run standard deviation and its degrees of freedom.
+
+    Returns
+    -------
+    Trend or None
+        None with fewer than :data:`MIN_POINTS` points or one time.
+    """
     t = np.asarray(t, dtype=float)
     x = np.asarray(x, dtype=float)
-    if t.size < MIN_POINTS or np.ptp(t) <= 0:
+    if t.size < MIN_POINTS or np.ptp(t) <= 0 or not (math.isfinite(scale) and scale > 0):
         return None
-    b, a, low, high = theil_sen(t, x, confidence)
-    z = float(ndtri(0.5 + confidence / 2.0))
-    out = Trend(b, low, high, (high - low) / (2 * z), a + b * t_now, int(t.size), confidence, limit)
+    b, a = theil_sen(t, x)
+    t_bar = float(t.mean())
+    s_tt = float(((t - t_bar) ** 2).sum())
+    q = float(stdtrit(max(dof, 1.0), 0.5 + confidence / 2.0))
+    se = scale / math.sqrt(s_tt)
+    out = Trend(b, b - q * se, b + q * se, se, a + b * t_now, int(t.size), confidence, episode, limit)
     if limit is None or b == 0:
         return out
     sign = 1.0 if b > 0 else -1.0
-    resid = x - (a + b * t)
-    robust = 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
-    delta = z * math.sqrt(math.pi / 2) * robust / math.sqrt(t.size)
-    pivot_t = float(np.median(t))
-    pivot_x = sign * (a + b * pivot_t)  # the drift taken upwards
-    fast, slow = (high, low) if sign > 0 else (-low, -high)
-    out.leaves_at = _crossing(pivot_t, pivot_x, sign * b, limit, t_now)
-    out.leaves_low = _crossing(pivot_t, pivot_x + delta, fast, limit, t_now)
-    out.leaves_high = _crossing(pivot_t, pivot_x - delta, slow, limit, t_now) if slow > 0 else None
+    y_bar = sign * (a + b * t_bar)  # the drift taken upwards
+    slope = sign * b
+    out.leaves_at = max(t_bar + (limit - y_bar) / slope, t_now)
+    out.leaves_low, out.leaves_high = _fieller(y_bar, slope, limit, q * scale, t.size, s_tt, t_bar, t_now)
     return out
 
 
-def _crossing(pivot_t: float, pivot_x: float, slope: float, limit: float, t_now: float) -> float | None:
-    """When ``pivot_x + slope·(t − pivot_t)`` reaches ``limit`` (not before ``t_now``); None for a slope ≤ 0."""
-    if slope <= 0:
-        return None
-    return max(pivot_t + (limit - pivot_x) / slope, t_now) if pivot_x < limit else t_now
+def _fieller(y_bar: float, b: float, limit: float, qs: float, n: int, s_tt: float, t_bar: float,
+             t_now: float) -> tuple[float | None, float | None]:
+    """Earliest and latest time the band ``y_bar + b·u ± qs·√(1/n + u²/S_tt)`` (u = t − t̄, b > 0) meets ``limit``.
+
+    The roots of ``(L − ȳ − b·u)² = qs²(1/n + u²/S_tt)``: with the slope shown (``b² > qs²/S_tt``) both edges meet
+    ``L``, the outer first; otherwise only the outer edge does (no latest time).  Times before ``t_now`` are
+    ``t_now`` (already there).
+    """
+    d = limit - y_bar
+    qa = b * b - qs * qs / s_tt
+    qb = -2.0 * b * d
+    qc = d * d - qs * qs / n
+    reached = d <= qs / math.sqrt(n)  # the band at the mean time holds the limit already
+    if qa > 0:
+        root = math.sqrt(max(qb * qb - 4 * qa * qc, 0.0))
+        lo, hi = (-qb - root) / (2 * qa), (-qb + root) / (2 * qa)
+        return (t_now if reached else max(t_bar + lo, t_now)), max(t_bar + hi, t_now)
+    if reached:
+        return t_now, None
+    if qa == 0:
+        return max(t_bar + qc / (2 * b * d), t_now), None
+    root = math.sqrt(qb * qb - 4 * qa * qc)  # qa < 0 < qc: real roots of opposite signs
+    return max(t_bar + max((-qb - root) / (2 * qa), (-qb + root) / (2 * qa)), t_now), None
