@@ -17,9 +17,9 @@ so it holds everything that moves a PIGE from run to run at a constant level (th
 temperature), not only each run's own measurement noise, and a level change between segments does not inflate it.
 
 **Shewhart test.**  The centre ``x̄`` is the mean of the current segment's ``n_c`` earlier in-control check-ups.  A
-new value ``x`` is outside when ``|x − x̄| > t_ν(1 − α/(4m)) · s · √(1 + 1/n_c)``: ``x − x̄`` and ``s`` are independent, so for
-a machine that holds still the chance is exactly ``α/(2m)`` (Student's t on ν degrees of freedom is the small-sample
-correction).  Before the segment's first check-up the centre is the level it starts from (the full calibration's
+new value ``x`` is outside when ``|x − x̄| > t_ν(1 − α/(4m)) · s · √(1 + 1/n_c)``: ``x − x̄`` and ``s`` are
+independent, so for a machine that holds still the chance is exactly ``α/(2m)`` (Student's t on ν degrees of freedom
+is the small-sample correction).  Before the segment's first check-up the centre is the level it starts from (the full calibration's
 value, or the previous value less the correction entered) with its own standard error ``u_c``; the spread is then
 ``√(s² + max(u_c², s²))``.
 
