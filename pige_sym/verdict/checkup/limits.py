@@ -19,9 +19,9 @@ temperature), not only each run's own measurement noise, and a level change betw
 **Shewhart test.**  The centre ``x̄`` is the mean of the current segment's ``n_c`` earlier in-control check-ups.  A
 new value ``x`` is outside when ``|x − x̄| > t_ν(1 − α/(4m)) · s · √(1 + 1/n_c)``: ``x − x̄`` and ``s`` are
 independent, so for a machine that holds still the chance is exactly ``α/(2m)`` (Student's t on ν degrees of freedom
-is the small-sample correction).  Before the segment's first check-up the centre is the level it starts from (the full calibration's
-value, or the previous value less the correction entered) with its own standard error ``u_c``; the spread is then
-``√(s² + max(u_c², s²))``.
+is the small-sample correction).  Before the segment's first check-up the centre is the level it starts from (the
+full calibration's value, or the previous value less the correction entered) with its own standard error ``u_c``;
+the spread is then ``√(s² + max(u_c², s²))``.
 
 **EWMA test** (a slow drift: a Shewhart chart sees a drift of one standard error per run only when it has built up to
 three or four).  The segment's *recursive residuals* ``w_j = (x_j − x̄_{j−1})/√(1 + 1/(j−1))`` (each in-control
