@@ -1,0 +1,240 @@
+"""The check-up (issue 42): history schema, plan, programs, the fit with PIGEs held, the command, trend, limits, timing.
+
+Oracles written here: the held PIGEs' effect by finite differences, scipy.stats' Theil–Sen slope, the trapezoidal move
+time by hand, Student's t false-alarm rate of the limits by simulation, the forecast's coverage on simulated drifts.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from datetime import timedelta
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sqlalchemy as sa
+from checkup_sim import FREE, MACHINE, T0, TRUTH, checkup_file, checkup_program, full_calibration, pige
+from testdata import refused_in_one_line
+
+from pige_sym.cli.main import main
+
+TOL = Path(__file__).resolve().parents[1] / "examples" / "tolerances.json"
+
+
+@pytest.fixture(scope="module")
+def machine(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    folder = tmp_path_factory.mktemp("checkup")
+    db = folder / "h.db"
+    full = full_calibration(folder, db, "DMU-1", TRUTH, tolerances=TOL)
+    return {"folder": folder, "db": db, "full": full, "program": checkup_program(folder, db, "DMU-1")}
+
+
+def _run(capsys: pytest.CaptureFixture[str], *args: object) -> tuple[int, str, str]:
+    capsys.readouterr()  # what came before (files made for the test)
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_a_history_of_schema_1_is_migrated_and_its_runs_read_as_full_calibrations(tmp_path: Path) -> None:
+    from pige_sym.verdict.history import connect, list_runs
+    from pige_sym.verdict.history.migrations import MIGRATIONS
+
+    path = tmp_path / "old.db"
+    engine = sa.create_engine(f"sqlite:///{path}")
+    with engine.begin() as conn:
+        MIGRATIONS[0].apply(conn)
+        conn.execute(sa.text("CREATE TABLE schema_version (version INTEGER PRIMARY KEY, description TEXT NOT NULL, "
+                             "applied_at VARCHAR(40) NOT NULL)"))
+        conn.execute(sa.text("INSERT INTO schema_version VALUES (1, 'v1', 'then')"))
+        conn.execute(sa.text("INSERT INTO machines VALUES ('OLD', :c, 'then')"), {"c": MACHINE})
+        conn.execute(sa.text(
+            "INSERT INTO runs (machine_id, file_sha256, file_name, measured_at, time_source, added_at, machine_code, "
+            "method, parameters, units, values_json, std_json, covariance_json, dof, effects_json) VALUES ('OLD', "
+            "'ab', '/gone.csv', '2025-01-01T00:00:00+00:00', 'x', 'x', :c, 'gauss-newton', '[\"EX0C\"]', "
+            "'{\"EX0C\": \"um\"}', '[1.5]', '[0.1]', '[[0.01]]', 30, '[]')"), {"c": MACHINE})
+    runs = list_runs(connect(str(path)), "OLD")
+    assert [(r.kind, r.setup, r.values[0]) for r in runs] == [("full", None, 1.5)]
+    with pytest.raises(Exception, match="no stored set-up and its file is not there"):
+        from pige_sym.verdict.checkup.reference import run_setup
+
+        run_setup(runs[0])
+
+
+def test_the_plan_takes_the_fewest_poses_inside_the_calibrated_range(machine: dict, capsys) -> None:
+    code, out, _ = _run(capsys, "plan", "--checkup", "--machine-id", "DMU-1", "--db", machine["db"], "--json")
+    plan = json.loads(out)
+    assert code == 0 and plan["free"] == FREE and plan["seconds"] <= 120
+    angles = np.array(plan["angles_deg"])
+    assert angles.shape[0] == 3 and not angles[0].any()  # 4 offsets, 3 per pose: the reference and two more
+    from pige_sym.measurements.rtest import read_measurement
+
+    full = read_measurement(machine["full"])
+    assert (angles.min(axis=0) >= full.angles_deg.min(axis=0) - 1e-9).all()
+    assert (angles.max(axis=0) <= full.angles_deg.max(axis=0) + 1e-9).all()
+    code, out, _ = _run(capsys, "plan", "--checkup", "--machine-id", "DMU-1", "--db", machine["db"], "--pige",
+                        "EX0C,EY0C", "--json")
+    assert code == 0 and len(json.loads(out)["angles_deg"]) == 2  # the C line's offsets: one pose turned in C
+    code, _, err = _run(capsys, "plan", "--checkup", "--machine-id", "DMU-1", "--db", machine["db"], "--budget", "20")
+    refused_in_one_line(code, err, "take", "--budget 20")
+
+
+def test_the_predicted_standard_errors_are_those_of_the_check_up_fits(machine: dict, tmp_path: Path, capsys) -> None:
+    from pige_sym.identification.subset import identify_subset
+    from pige_sym.measurements.rtest import read_measurement
+
+    _, out, _ = _run(capsys, "plan", "--checkup", "--machine-id", "DMU-1", "--db", machine["db"], "--json")
+    predicted = np.array([json.loads(out)["std"][n] for n in FREE])
+    held = {n: v for n, v in TRUTH.items() if n not in FREE}
+    fits = [identify_subset(read_measurement(checkup_file(machine["program"], TRUTH, 40 + i, tmp_path / f"{i}.csv")),
+                            FREE, held) for i in range(10)]
+    stated = np.mean([f.std for f in fits], axis=0)
+    assert np.all(np.abs(stated / predicted - 1) < 0.35), (stated, predicted)  # contact scatter 0.3 vs the full's
+
+
+@pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc", "siemens", "heidenhain"])
+def test_check_up_programs_in_every_dialect_are_read_back_and_state_the_check_up(machine: dict, dialect: str,
+                                                                                 tmp_path: Path, capsys) -> None:
+    out = tmp_path / f"c.{dialect}"
+    code, text, _ = _run(capsys, "program", "--checkup", "--machine-id", "DMU-1", "--db", machine["db"], "--dialect",
+                         dialect, "--out", out)
+    assert code == 0 and "read back:" in text
+    from pige_sym.nc.program_header import read_header
+
+    header = read_header(out.read_text())
+    assert header["checkup"] == ",".join(FREE) and header["machine_id"] == "DMU-1"
+    sphere = np.array([float(v) for v in header["sphere_mm"].split(",")])
+    assert np.abs(sphere - [100, 20, 60]).max() < 1e-3  # where the calibration found it (fitted c(0), to 0.1 um)
+    if dialect != "heidenhain":  # the program's safety statements are today's (tool, length, work offset)
+        assert "99" in out.read_text() and "120" in out.read_text()
+
+
+def test_the_fit_with_held_pige_against_finite_differences(machine: dict, tmp_path: Path) -> None:
+    from pige_sym.identification.subset import identify_subset
+    from pige_sym.measurements.rtest import read_measurement
+
+    m = read_measurement(checkup_file(machine["program"], TRUTH, 3, tmp_path / "c.csv", noise=0.0))
+    held = {n: v for n, v in TRUTH.items() if n not in FREE}
+    fit = identify_subset(m, FREE, held)
+    assert np.abs(fit.values - [TRUTH[n] for n in FREE]).max() < 0.02  # the log's six decimals
+    assert fit.sensitivity is not None
+    for j, name in enumerate(held):
+        moved = identify_subset(m, FREE, held | {name: held[name] + 10.0})
+        assert np.allclose((moved.values - fit.values) / 10.0, -fit.sensitivity[:, j], atol=1e-6)
+
+
+def test_pige_checkup_says_ok_drifted_or_out_and_stores_the_run(machine: dict, tmp_path: Path, capsys) -> None:
+    db, prog = machine["db"], machine["program"]
+    days = iter(range(1, 50))
+    status = {}
+    for case, shift in (("ok", 0.0), ("drifted", 2.0), ("out", 7.0)):
+        path = checkup_file(prog, TRUTH | {"EX0C": TRUTH["EX0C"] + shift}, 60 + next(days), tmp_path / f"{case}.csv")
+        code, out, _ = _run(capsys, "checkup", path, "--machine-id", "DMU-1", "--db", db, "--date",
+                            (T0 + timedelta(days=next(days))).isoformat(), "--json")
+        res = json.loads(out)
+        status[case] = (code, res["verdict"], res["run"])
+    assert status["ok"][:2] == (0, "ok") and status["drifted"][:2] == (1, "drifted") and status["out"][:2] == (1, "out")
+    code, out, _ = _run(capsys, "history", "show", "DMU-1", "--db", db, "--json")
+    runs = json.loads(out)["runs"]
+    assert [r["kind"] for r in runs] == ["full", "checkup", "checkup", "checkup"]
+    assert runs[-1]["checkup"]["to_enter"]["EX0C"] == pytest.approx(TRUTH["EX0C"] + 7.0, abs=0.5)
+    code, out, _ = _run(capsys, "history", "fleet", "--db", db, "--json")
+    row = json.loads(out)["machines"][0]
+    assert code == 0 and row["verdict"] == "out" and "said out" in row["why"]
+
+
+def test_bad_input_is_refused_with_status_2(machine: dict, tmp_path: Path, capsys) -> None:
+    db = machine["db"]
+    path = checkup_file(machine["program"], TRUTH, 90, tmp_path / "c.csv")
+    code, _, err = _run(capsys, "checkup", path, "--machine-id", "OTHER", "--db", db)
+    refused_in_one_line(code, err, "DMU-1", "OTHER")
+    code, _, err = _run(capsys, "checkup", machine["full"], "--machine-id", "DMU-1", "--db", db)
+    refused_in_one_line(code, err, "already in the history")
+    code, _, err = _run(capsys, "checkup", path, "--machine-id", "DMU-1", "--db", db, "--date", "2020-01-01")
+    refused_in_one_line(code, err, "not after the machine's last run")
+    code, _, err = _run(capsys, "checkup", path, "--machine-id", "DMU-1", "--db", tmp_path / "none.db")
+    refused_in_one_line(code, err, "no history database")
+
+
+def test_a_first_check_up_needs_tolerances_and_a_full_calibration(tmp_path: Path, capsys) -> None:
+    db = tmp_path / "h.db"
+    full = full_calibration(tmp_path, db, "NEW", TRUTH, seed=4)
+    path = checkup_file(checkup_program(tmp_path, db, "NEW"), TRUTH, 91, tmp_path / "c.csv")
+    code, _, err = _run(capsys, "checkup", path, "--machine-id", "NEW", "--db", db, "--date", "2027-01-01")
+    refused_in_one_line(code, err, "--tolerances")
+    assert full.exists()
+
+
+def test_theil_sen_slope_against_scipy() -> None:
+    from scipy.stats import theilslopes
+
+    from pige_sym.verdict.checkup.trend import theil_sen
+
+    rng = np.random.default_rng(1)
+    for n in (2, 3, 7, 20):
+        t = np.sort(rng.uniform(0, 100, n))
+        x = 0.3 * t + rng.standard_normal(n) + np.where(rng.uniform(size=n) < 0.1, 20.0, 0.0)
+        assert theil_sen(t, x)[0] == pytest.approx(theilslopes(x, t)[0], rel=1e-12)
+
+
+def test_the_forecast_interval_covers_the_true_crossing() -> None:
+    """Linear drifts of 0.5 to 2 scatter units per run over 6 check-ups, scatter known on 20 dof: the 90 % interval
+    of the time the line reaches the limit holds the true time in about nine of ten cases."""
+    from pige_sym.verdict.checkup.trend import trend
+
+    rng = np.random.default_rng(2)
+    hits, cases = 0, 400
+    for _ in range(cases):
+        rate = rng.uniform(0.5, 2.0)
+        t = np.arange(6.0)
+        x = rate * t + rng.standard_normal(6)
+        s = math.sqrt(rng.chisquare(20) / 20)
+        tr = trend(t, x, 5.0, 20.0, scale=s, dof=20)
+        truth = 20.0 / rate
+        assert tr is not None and tr.leaves_low is not None
+        hits += tr.leaves_low <= truth <= (tr.leaves_high if tr.leaves_high is not None else math.inf)
+    assert 0.84 <= hits / cases <= 0.96, hits
+
+
+def test_limits_hold_their_false_alarm_rate_for_a_machine_that_holds_still() -> None:
+    """The Shewhart test is exact (Student t); each test of each PIGE at alpha/(2m) = 0.125 % here."""
+    from pige_sym.verdict.checkup.limits import Point, control_limit
+
+    rng = np.random.default_rng(3)
+    flags = np.zeros(2)
+    n = 8000
+    for _ in range(n):
+        x = rng.standard_normal(9)
+        lim = control_limit([Point(v, 1.0, 17, 1) for v in x[:-1]], 1, None, value=x[-1], run_std=1.0, run_dof=17,
+                            m=4)
+        assert lim is not None and not lim.provisional
+        flags += [abs(lim.z or 0) > 1, lim.ewma is not None and abs(lim.ewma) > (lim.ewma_width or math.inf)]
+    assert (flags / n <= 0.0035).all(), flags / n  # 0.125 % each; three binomial sd above it
+    lim = control_limit([Point(0.0, 1.0, 17, 1)] * 3, 1, None, value=100.0, run_std=1.0, run_dof=17, m=4)
+    assert lim is not None and lim.provisional and lim.outside  # scatter 0 on 2 dof: provisional, and it can flag
+
+
+def test_machine_time_of_a_move_by_hand() -> None:
+    from pige_sym.nc.probe_timing import move_seconds
+
+    assert move_seconds(100.0, 100.0, 1000.0) == pytest.approx(1.1)  # 100 mm at 100 mm/s: 1 s + 0.1 s to accelerate
+    assert move_seconds(1.0, 100.0, 1000.0) == pytest.approx(2 * math.sqrt(1e-3))  # never reaches 100 mm/s
+    assert move_seconds(0.0, 100.0, 1000.0) == 0.0
+
+
+def test_the_check_up_program_time_against_its_moves(machine: dict) -> None:
+    """The timed program: 27 probing moves of the clearance (3 mm) at F100 are 48.6 s alone; the rest is rapids."""
+    from pige_sym.nc.probe_header import header_setup
+    from pige_sym.nc.probe_program import ProbeSetup
+    from pige_sym.nc.probe_timing import program_seconds
+
+    text = Path(machine["program"]).read_text()
+    h = header_setup(text, "p")
+    setup = ProbeSetup(h.machine, h.sphere_mm, h.pivots_mm["A"], h.sphere_radius_mm, h.stylus_radius_mm,
+                       controller=h.controller)
+    t = program_seconds(text, "linuxcnc", setup, ("A", "C"))
+    probes = text.count("G38.2")
+    assert probes == 27
+    assert t.probing_s == pytest.approx(probes * (3.0 / (100 / 60)) + 3 * 1.0, rel=0.2)  # + the 3 confirmations
+    assert 60 < t.seconds < 120
