@@ -20,6 +20,7 @@ import numpy as np
 
 from pige_sym.cli.main import main
 from pige_sym.identification.subset import SubsetFit
+from pige_sym.verdict.checkup.limits import TRUST_DOF
 from pige_sym.verdict.checkup.reference import chart_state
 from pige_sym.verdict.checkup.routine import CheckupOptions, judge
 from pige_sym.verdict.history.store import RunRecord
@@ -129,8 +130,11 @@ class ChartSim:
         t_now = (when - datetime.fromisoformat(state.origin)).total_seconds() / 3600.0
         items, verdict = judge(fit, state, dict.fromkeys(FREE, self.tolerance), opts, t_now)
         outside = {i.name: bool(i.limit is not None and i.limit.outside) for i in items}
-        in_control = {i.name: not (outside[i.name] and i.limit is not None and not i.limit.provisional) for i in items}
-        info = {"signature": "sim", "in_control": in_control, "outside": outside, "after_correction": corrected,
+        flagged = {i.name: bool(outside[i.name] and i.limit is not None and not i.limit.provisional) for i in items}
+        in_control = {i.name: not (flagged[i.name] and i.limit is not None and i.limit.dof >= TRUST_DOF)
+                      for i in items}
+        info = {"signature": "sim", "in_control": in_control, "outside": outside, "flagged": flagged,
+                "after_correction": corrected,
                 "to_enter": {n: float(v) for n, v in zip(FREE, x, strict=True)}}
         rec = _record(len(self.runs) + 1, when, "checkup", FREE, x, fit.std, fit.covariance, fit.dof, info, verdict)
         self.runs.append(rec)

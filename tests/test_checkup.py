@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sqlalchemy as sa
-from checkup_sim import FREE, MACHINE, T0, TRUTH, checkup_file, checkup_program, full_calibration, pige
-from testdata import refused_in_one_line
+from checkup_sim import FREE, MACHINE, T0, TRUTH, checkup_file, checkup_program, full_calibration
 
 from pige_sym.cli.main import main
+from testdata import refused_in_one_line
 
 TOL = Path(__file__).resolve().parents[1] / "examples" / "tolerances.json"
 
@@ -238,3 +238,17 @@ def test_the_check_up_program_time_against_its_moves(machine: dict) -> None:
     assert probes == 27
     assert t.probing_s == pytest.approx(probes * (3.0 / (100 / 60)) + 3 * 1.0, rel=0.2)  # + the 3 confirmations
     assert 60 < t.seconds < 120
+
+
+def test_the_report_of_a_machine_with_check_ups_has_their_trend_plot(machine: dict, tmp_path: Path, capsys) -> None:
+    path = checkup_file(machine["program"], TRUTH, 77, tmp_path / "c.csv")
+    code, _, _ = _run(capsys, "checkup", path, "--machine-id", "DMU-1", "--db", machine["db"], "--date",
+                      (T0 + timedelta(days=300)).isoformat())
+    assert code in (0, 1)
+    code, out, _ = _run(capsys, "report", "--history", "DMU-1", "--db", machine["db"], "--out", tmp_path / "rep")
+    page = (tmp_path / "rep" / "report.html").read_text()
+    assert code == 0 and 'data-section="checkup"' in page and 'data-figure="checkup-trend"' in page
+    assert (tmp_path / "rep" / "_report" / "checkup_trend.png").stat().st_size > 10_000
+    code, out, _ = _run(capsys, "report", "--history", "DMU-1", "--db", machine["db"], "--out", tmp_path / "r2",
+                        "--json")
+    assert code == 0

@@ -1,7 +1,7 @@
 """The heat test (issue 42, item 4): a machine that drifts as it warms up, checked every 10 minutes.
 
 The virtual machine (:mod:`checkup_sim`, an AC table with a probe and a sphere) is calibrated cold, then checked
-cold on eight mornings: its history.  On the ninth day it warms up: its pivots grow over the hour,
+cold on twelve mornings: its history.  On the next day but one it warms up: its pivots grow over the hour,
 ``δ(t) = δ∞·(1 − exp(−t/τ))``, τ = 15 min (98 % after an hour), the A axis line rising (EZ0A +10 µm) and the C axis
 line moving along X (EX0C +7 µm): EZ0A from −2 to +8 µm (tolerance ±10), EX0C from 2.5 to 9.5 µm (tolerance ±8, left
 at 23.3 min).  A check-up (the program ``pige program --checkup`` wrote, run by the virtual machine, imported,
@@ -23,6 +23,7 @@ from checkup_sim import FREE, T0, TRUTH, checkup_file, checkup_program, full_cal
 from pige_sym.verdict.checkup.routine import CheckupOptions, run_checkup
 from pige_sym.verdict.history import connect
 
+COLD_DAYS = 12
 TAU_MIN = 15.0
 GROWTH = {"EZ0A": 10.0, "EX0C": 7.0}
 CROSSING_MIN = -TAU_MIN * math.log(1.5 / 7.0)  # EX0C reaches 8 um
@@ -43,10 +44,10 @@ def timeline(tmp_path_factory: pytest.TempPathFactory) -> list[dict]:
     full_calibration(folder, db, "HEAT", TRUTH, when=T0 - timedelta(hours=1), tolerances=TOLERANCES)
     program = checkup_program(folder, db, "HEAT")
     engine = connect(str(db))
-    for day in range(8):  # the cold history: one check-up a morning
+    for day in range(COLD_DAYS):  # the cold history: one check-up a morning
         run_checkup(engine, checkup_file(program, TRUTH, 200 + day, folder / f"cold{day}.csv"), "HEAT",
                     CheckupOptions(date=(T0 + timedelta(days=day)).isoformat()))
-    start = T0 + timedelta(days=9)
+    start = T0 + timedelta(days=COLD_DAYS + 1)
     rows: list[dict] = []
     entered: dict[str, float] = {}
     corrected = False

@@ -3,10 +3,12 @@
 **The chart.**  Every check-up of a machine with the same poses and PIGEs (the plan's *signature*) is one point per
 PIGE.  Points fall into *segments*: a segment starts at each full calibration and at each check-up run after the
 controller was corrected (``pige checkup --corrected``); within a segment the machine is expected to hold its level.
-Within the open segment every check-up counts (a false alarm nobody acted on stays: dropping the largest deviations
-would shrink the scatter, and a scatter that came out small by chance would then flag every later check-up).  When a
-segment is closed by a correction or a new calibration (the assignable cause was found), its check-ups that the
-learned limits flagged leave the scatter: a warm-up that was corrected does not widen the limits of the next weeks.
+A check-up the learned limits flagged once the scatter had :data:`TRUST_DOF` degrees of freedom leaves the centre, the
+scatter and the EWMA (a drift must not widen the limits it is judged by); one flagged earlier stays (with few degrees
+of freedom the scatter can come out small by chance, and dropping what it flags would keep it small and flag every
+later check-up).  When a segment is closed by a correction or a new calibration (the assignable cause was found),
+every check-up of it the learned limits flagged leaves the scatter: a corrected warm-up does not widen the limits of
+the next weeks.
 
 **Scatter.**  The run-to-run scatter of PIGE ``p`` is the pooled within-segment standard deviation of the earlier
 in-control check-ups,
@@ -54,6 +56,8 @@ from scipy.special import stdtrit  # Student t quantile (scipy.stats' without it
 ALPHA = 0.01
 #: Degrees of freedom of the pooled scatter from which the learned limits replace the provisional ones.
 MIN_DOF = 4
+#: Degrees of freedom from which a check-up the learned limits flag leaves the chart (module docstring).
+TRUST_DOF = 10
 #: Weight of the newest recursive residual in the EWMA.
 LAMBDA = 0.4
 METHOD = ("per PIGE a Shewhart test of the value against the mean of the segment's earlier check-ups and an EWMA "
@@ -75,9 +79,9 @@ class Point:
         Degrees of freedom of ``std``.
     segment : int
     in_control : bool
-        False when the learned limits flagged it and its segment was closed by a correction (module docstring).
+        False when it leaves the chart (module docstring).
     flagged : bool
-        The learned limits flagged it.
+        The learned limits flagged it (it leaves the chart with its segment).
     """
 
     value: float

@@ -188,7 +188,8 @@ def _add_point(run: Any, free: list[str], signature: str, segment: int, points: 
     values, std = values_of(run), std_of(run)
     for n in free:
         if n in values:
-            learned = not bool((info.get("in_control") or {}).get(n, True))
-            points[n].append(Point(values[n], std.get(n, 0.0), int(run.dof), segment, True, learned))
+            kept = bool((info.get("in_control") or {}).get(n, True))
+            learned = bool((info.get("flagged") or {}).get(n, False))
+            points[n].append(Point(values[n], std.get(n, 0.0), int(run.dof), segment, kept, learned))
             outside = bool((info.get("outside") or {}).get(n, False))
             trend[n].append((hours(run.measured_at, origin), values[n], outside))

@@ -116,9 +116,16 @@ class CheckupResult:
         """Per PIGE: outside its control limits (learned or provisional)."""
         return {i.name: bool(i.limit is not None and i.limit.outside) for i in self.items}
 
+    def flagged(self) -> dict[str, bool]:
+        """Per PIGE: outside its learned limits."""
+        return {i.name: bool(i.limit is not None and i.limit.outside and not i.limit.provisional) for i in self.items}
+
     def in_control(self) -> dict[str, bool]:
-        """Per PIGE: not flagged by learned limits (:mod:`~pige_sym.verdict.checkup.limits`)."""
-        return {i.name: not (i.limit is not None and i.limit.outside and not i.limit.provisional) for i in self.items}
+        """Per PIGE: stays in the chart (:mod:`~pige_sym.verdict.checkup.limits`, ``TRUST_DOF``)."""
+        from pige_sym.verdict.checkup.limits import TRUST_DOF
+
+        return {i.name: not (self.flagged()[i.name] and i.limit is not None and i.limit.dof >= TRUST_DOF)
+                for i in self.items}
 
     def to_dict(self) -> dict[str, Any]:
         from pige_sym.files import json_ready
@@ -130,7 +137,7 @@ class CheckupResult:
             "free": [i.name for i in self.items], "held": self.held, "provisional": self.provisional,
             "method": METHOD, "alpha": self.alpha, "min_dof": MIN_DOF, "signature": self.signature,
             "segment": self.segment, "after_correction": self.corrected, "correction": self.correction,
-            "in_control": self.in_control(), "outside": self.outside(),
+            "in_control": self.in_control(), "outside": self.outside(), "flagged": self.flagged(),
             "items": [i.to_dict(self.origin) for i in self.items],
             "tolerance": {i.name: i.tolerance for i in self.items if i.tolerance is not None},
             "to_enter": None if self.changes is None else self.changes.entered,
