@@ -252,3 +252,16 @@ def test_the_report_of_a_machine_with_check_ups_has_their_trend_plot(machine: di
     code, out, _ = _run(capsys, "report", "--history", "DMU-1", "--db", machine["db"], "--out", tmp_path / "r2",
                         "--json")
     assert code == 0
+
+
+def test_t_quantile_and_chi_square_tail_against_scipy() -> None:
+    from scipy.special import chdtrc, stdtrit
+
+    from pige_sym.identification.distributions import chi2_sf, t_quantile
+
+    for dof in (1, 1.5, 2, 3, 4, 7, 10, 19, 60, 1e3, 1e6, 1e8):
+        for p in (0.5, 0.6, 0.95, 0.99875, 0.999375, 1 - 1e-7, 0.01, 1e-6):
+            assert t_quantile(dof, p) == pytest.approx(stdtrit(dof, p), rel=1e-7, abs=1e-9), (dof, p)
+    for k in (1, 2, 3, 17, 60, 1000):
+        for x in (0.01, 1.0, 5.0, 30.0, 300.0, 3000.0):
+            assert chi2_sf(k, x) == pytest.approx(chdtrc(k, x), rel=1e-10, abs=1e-300), (k, x)

@@ -50,7 +50,7 @@ def plan_from_history(args: argparse.Namespace, *, budget_s: float | None, contr
 
     if not args.machine_id or not args.machine_id.strip():
         raise InputError("--checkup needs --machine-id ID (the machine whose last full calibration it repeats)")
-    runs = list_runs(connect(args.db, create=False), args.machine_id)
+    runs = list_runs(connect(args.db, create=False), args.machine_id, light=True)
     full = last_full(runs)
     setup = run_setup(full)
     last = [r for r in runs if r.kind == "checkup"]

@@ -29,9 +29,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.special import chdtrc  # chi-square survival function (scipy.stats' without its import time)
 
 from pige_sym.errors import IdentificationError, InputError
+from pige_sym.identification.distributions import chi2_sf
 from pige_sym.identification.instruments import instrument
 from pige_sym.identification.problem import build_problem
 from pige_sym.identification.spectrum import solve_scaled
@@ -145,7 +145,7 @@ def identify_subset(m: Measurement, free: list[str], held: dict[str, float], *,
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     units = {n: kern.UNITS[n] for n in order}
     refuse_unphysical(order, sol.values, std, units, m.path or "the measurement")
-    p = None if expected is None or resid_dof <= 0 else float(chdtrc(resid_dof, rss / expected))
+    p = None if expected is None or resid_dof <= 0 else chi2_sf(resid_dof, rss / expected)
     notes = [] if p is None or p >= CONSISTENCY_ALPHA else [
         f"the check-up's poses disagree with the held PIGEs beyond their noise (chi-square p = {p:.2g}): an "
         "orientation error, the set-up or the probe changed since the last full calibration; calibrate the machine "

@@ -19,6 +19,10 @@ the history.  The record is a JSON object::
 ``probe`` is null for an R-test.  The probing program's items are kept as its header wrote them
 (:data:`~pige_sym.measurements.probe_import.PROGRAM_KEYS`); a probe file imported without ``--program`` has
 none, and a check-up program then needs the controller options on the command line.
+
+What a check-up re-measures (:func:`default_free`, :func:`parse_free`): by default the axis lines' positions, the
+location errors in µm (thermal growth moves the axis lines; it hardly tilts them; Heidenhain's cycle 452 likewise
+re-measures the positions only); the others are held at the last full calibration's values.
 """
 
 from __future__ import annotations
@@ -108,3 +112,33 @@ def _number(text: str | None) -> float | None:
     except (ValueError, IndexError):
         return None
     return x if math.isfinite(x) else None
+
+
+def default_free(machine: str) -> list[str]:
+    """The PIGEs a check-up re-measures by default: the location errors in µm (the axis lines' positions)."""
+    from pige_sym.kernels import load_kernels
+
+    kern = load_kernels(machine)
+    return [n for n in kern.LOCATION_PARAMETERS if kern.UNITS[n] == "um"]
+
+
+def parse_free(text: str | None, machine: str) -> list[str]:
+    """``--pige EX0C,EY0C`` in the kernels' order (the letter O accepted for the digit zero), or the default.
+
+    Raises
+    ------
+    InputError
+        A name that is not a location PIGE of the machine.
+    """
+    from pige_sym.kernels import load_kernels
+
+    kern = load_kernels(machine)
+    if not text:
+        return default_free(machine)
+    names = [x.strip().upper() for x in text.split(",") if x.strip()]
+    names = [n[:2] + "0" + n[3:] if len(n) >= 4 and n[0] == "E" and n[2] == "O" else n for n in names]
+    bad = [n for n in names if n not in kern.LOCATION_PARAMETERS]
+    if bad or not names:
+        raise InputError(f"--pige {text!r}: give location PIGEs of {kern.MACHINE_CODE} "
+                         f"({', '.join(kern.LOCATION_PARAMETERS)})")
+    return [n for n in kern.LOCATION_PARAMETERS if n in names]

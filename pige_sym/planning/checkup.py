@@ -39,7 +39,7 @@ import numpy as np
 from pige_sym.errors import InputError
 from pige_sym.identification.spectrum import NULL_RTOL, scaled_spectrum
 from pige_sym.kernels import load_kernels
-from pige_sym.measurements.run_setup import RunSetup
+from pige_sym.measurements.run_setup import RunSetup, default_free, parse_free  # noqa: F401 - re-exported
 from pige_sym.measurements.sphere_fit import contact_weights
 from pige_sym.nc.probe_program import ROUNDING_MARGIN_MM, ProbeSetup, plan_probing
 from pige_sym.nc.probe_safety import ProbeController
@@ -50,27 +50,6 @@ DEFAULT_BUDGET_S = 120.0
 #: Most poses after the reference a check-up may take.
 MAX_POSES = 6
 CONTACT_CHOICES = tuple(range(4, 10))
-
-
-def default_free(machine: str) -> list[str]:
-    """The PIGEs a check-up re-measures by default: the location errors in µm (the axis lines' positions)."""
-    kern = load_kernels(machine)
-    return [n for n in kern.LOCATION_PARAMETERS if kern.UNITS[n] == "um"]
-
-
-def parse_free(text: str | None, machine: str) -> list[str]:
-    """``--pige EX0C,EY0C`` (kernel order kept), or the default; refused when a name is not a location PIGE."""
-    kern = load_kernels(machine)
-    if not text:
-        return default_free(machine)
-    from pige_sym.simulation.simulator import normalise_parameter_name
-
-    names = [normalise_parameter_name(x.strip()) for x in text.split(",") if x.strip()]
-    bad = [n for n in names if n not in kern.LOCATION_PARAMETERS]
-    if bad or not names:
-        raise InputError(f"--pige {text!r}: give location PIGEs of {kern.MACHINE_CODE} "
-                         f"({', '.join(kern.LOCATION_PARAMETERS)})")
-    return [n for n in kern.LOCATION_PARAMETERS if n in names]
 
 
 @dataclass

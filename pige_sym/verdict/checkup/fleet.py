@@ -80,6 +80,8 @@ def fleet_row(runs: list[Any], now: datetime) -> FleetRow:
 
 def fleet(engine: Any, now: datetime) -> list[FleetRow]:
     """Every machine of the history, sorted by id (one query)."""
+    import json
+
     import sqlalchemy as sa
 
     from pige_sym.verdict.history import tables as T
@@ -88,6 +90,13 @@ def fleet(engine: Any, now: datetime) -> list[FleetRow]:
     with engine.connect() as conn:
         rows = conn.execute(sa.select(T.runs).order_by(T.runs.c.machine_id, T.runs.c.measured_at, T.runs.c.id)).all()
     by_machine: dict[str, list[Any]] = {}
+    last_text: dict[str, str | None] = {}
     for row in rows:
-        by_machine.setdefault(row.machine_id, []).append(run_record(row))
+        by_machine.setdefault(row.machine_id, []).append(run_record(row, light=True))
+        if row.kind == "checkup":
+            last_text[row.machine_id] = row.checkup_json
+    for machine, runs in by_machine.items():  # the last check-up's forecast: its whole record
+        last = [r for r in runs if r.kind == "checkup"]
+        if last and last_text.get(machine):
+            last[-1].checkup = json.loads(str(last_text[machine]))
     return [fleet_row(runs, now) for _, runs in sorted(by_machine.items())]

@@ -50,7 +50,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.special import stdtrit  # Student t quantile (scipy.stats' without its import time)
+
+from pige_sym.identification.distributions import t_quantile
 
 #: Family-wise false-alarm rate per check-up (all its PIGEs together).
 ALPHA = 0.01
@@ -176,7 +177,7 @@ def pooled_scatter(points: list[Point]) -> tuple[float | None, int]:
 
 def quantile(alpha: float, tests: int, dof: float) -> float:
     """``t_dof(1 − α/(2·tests))``, the two-sided Bonferroni critical value (normal for infinite ``dof``)."""
-    return float(stdtrit(dof if math.isfinite(dof) else 1e12, 1.0 - alpha / (2.0 * tests)))
+    return t_quantile(dof if math.isfinite(dof) else 1e12, 1.0 - alpha / (2.0 * tests))
 
 
 def ewma_of(values: list[float], lam: float = LAMBDA) -> tuple[float, float] | None:

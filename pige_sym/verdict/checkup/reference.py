@@ -158,14 +158,15 @@ def chart_state(runs: list[Any], free: list[str], signature: str, *, corrected: 
                 fix = correction_of(prev)
                 if prev.kind == "full":
                     held_entered = fix
-                std = std_of(prev)
+                std, base = std_of(prev), level | values_of(prev)
                 kind = "full" if prev.kind == "full" else "corrected"
-                start = {n: Start(level[n] - fix.get(n, 0.0), std.get(n, 0.0), kind) for n in free if n in level}
+                start = {n: Start(base[n] - fix.get(n, 0.0), std.get(n, 0.0), kind) for n in free if n in base}
         if run is None:
             break
         if run.kind == "checkup":
             _add_point(run, free, signature, segment, points, trend, origin)
-        level = level | values_of(run)
+        if run.kind == "full":
+            level = values_of(run)
         prev = run
     correction = correction_of(runs[-1]) if corrected else {}
     held = _held(full, free, list(location), held_entered)
@@ -185,9 +186,10 @@ def _add_point(run: Any, free: list[str], signature: str, segment: int, points: 
     info = run.checkup or {}
     if info.get("signature") != signature:
         return
-    values, std = values_of(run), std_of(run)
+    values = dict(zip(run.parameters, run.values.tolist(), strict=True))
+    std = dict(zip(run.parameters, run.std.tolist(), strict=True))
     for n in free:
-        if n in values:
+        if n in values and math.isfinite(values[n]):
             kept = bool((info.get("in_control") or {}).get(n, True))
             learned = bool((info.get("flagged") or {}).get(n, False))
             points[n].append(Point(values[n], std.get(n, 0.0), int(run.dof), segment, kept, learned))

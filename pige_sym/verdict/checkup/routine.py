@@ -127,6 +127,14 @@ class CheckupResult:
         return {i.name: not (self.flagged()[i.name] and i.limit is not None and i.limit.dof >= TRUST_DOF)
                 for i in self.items}
 
+    def chart(self) -> dict[str, Any]:
+        """What later check-ups read of this one (:mod:`~pige_sym.verdict.checkup.reference`)."""
+        from pige_sym.files import json_ready
+
+        full = self.to_dict()
+        return json_ready({k: full[k] for k in ("signature", "after_correction", "in_control", "outside", "flagged",
+                                                "to_enter", "tolerance")})
+
     def to_dict(self) -> dict[str, Any]:
         from pige_sym.files import json_ready
 
@@ -165,7 +173,7 @@ def run_checkup(engine: Any, path: str | os.PathLike[str], machine_id: str, opts
     existing_run(engine, Path(path))
     m = read_measurement(path)
     kern = load_kernels(m.machine)
-    runs = list_runs(engine, machine_id)
+    runs = list_runs(engine, machine_id, light=True)
     _same_machine(m, machine_id, runs, kern.MACHINE_CODE, str(path))
     measured, source = measurement_time(Path(path), m.metadata, opts.date)
     if measured <= runs[-1].measured_at:
@@ -188,7 +196,7 @@ def run_checkup(engine: Any, path: str | os.PathLike[str], machine_id: str, opts
     from pige_sym.measurements.run_setup import setup_of
 
     record = add_checkup_run(engine, Path(path), machine_id, kern.MACHINE_CODE, (measured, source), fit,
-                             setup_of(m).to_dict(), verdict, result.to_dict())
+                             setup_of(m).to_dict(), verdict, result.to_dict(), result.chart())
     result.run_id = record.id
     return result
 
@@ -205,7 +213,7 @@ def _same_machine(m: Any, machine_id: str, runs: list[Any], code: str, path: str
 
 def _free(m: Any, pige: str | None, runs: list[Any], kern: Any) -> list[str]:
     """The check-up's PIGEs: the program header's, else ``--pige``, else the last check-up's, else the default."""
-    from pige_sym.planning.checkup import parse_free
+    from pige_sym.measurements.run_setup import parse_free
 
     stated = m.metadata.get("program_checkup")
     if stated:

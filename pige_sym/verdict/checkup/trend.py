@@ -25,7 +25,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.special import stdtrit  # Student t quantile (scipy.stats' without its import time)
+
+from pige_sym.identification.distributions import t_quantile
 
 CONFIDENCE = 0.90
 MIN_POINTS = 2
@@ -112,7 +113,7 @@ def trend(t: np.ndarray, x: np.ndarray, t_now: float, limit: float | None = None
     b, a = theil_sen(t, x)
     t_bar = float(t.mean())
     s_tt = float(((t - t_bar) ** 2).sum())
-    q = float(stdtrit(max(dof, 1.0), 0.5 + confidence / 2.0))
+    q = t_quantile(max(dof, 1.0), 0.5 + confidence / 2.0)
     se = scale / math.sqrt(s_tt)
     out = Trend(b, b - q * se, b + q * se, se, a + b * t_now, int(t.size), confidence, episode, limit)
     if limit is None or b == 0:

@@ -173,16 +173,37 @@ def _floats(text: str) -> np.ndarray:
     return np.array([np.nan if v is None else v for v in json.loads(text)], dtype=float)
 
 
-def run_record(row: Any) -> RunRecord:
-    params = json.loads(row.parameters)
-    cov = np.array([[np.nan if v is None else v for v in r] for r in json.loads(row.covariance_json)], dtype=float)
+_SHARED: dict[str, Any] = {}
+
+
+def _shared(text: str) -> Any:
+    """``json.loads`` of a text many runs repeat (their parameter names and units), parsed once."""
+    if text not in _SHARED:
+        _SHARED[text] = json.loads(text)
+    return _SHARED[text]
+
+
+def run_record(row: Any, *, light: bool = False, numbers: tuple[np.ndarray, np.ndarray] | None = None,
+               chart: Any = None) -> RunRecord:
+    """The record of a row of ``runs``; ``light`` (a check-up read as a chart point): its ``checkup`` is the small
+    ``chart_json`` (``chart``: parsed already), its covariance the diagonal of its standard errors, its set-up not
+    read; ``numbers``: its values and standard errors parsed already."""
+    params = list(_shared(row.parameters))
+    values, std = numbers if numbers is not None else (_floats(row.values_json), _floats(row.std_json))
+    as_point = light and row.kind == "checkup" and getattr(row, "chart_json", None) is not None
+    if as_point:
+        cov = np.diag(std**2)
+    else:
+        cov = np.array([[np.nan if v is None else v for v in r] for r in json.loads(row.covariance_json)], dtype=float)
+    checkup_text = row.chart_json if as_point else getattr(row, "checkup_json", None)
+    setup_text = None if as_point else getattr(row, "setup_json", None)
+    checkup = chart if as_point and chart is not None else None if checkup_text is None else json.loads(checkup_text)
     return RunRecord(row.id, row.machine_id, row.file_name, row.file_sha256, row.measured_at, row.time_source,
-                     row.added_at, row.machine_code, row.method, params, json.loads(row.units),
-                     _floats(row.values_json), _floats(row.std_json), cov.reshape(len(params), len(params)),
-                     int(row.dof), row.rms_um, json.loads(row.effects_json), row.verdict,
+                     row.added_at, row.machine_code, row.method, params, dict(_shared(row.units)),
+                     values, std, cov.reshape(len(params), len(params)),
+                     int(row.dof), row.rms_um, list(_shared(row.effects_json)), row.verdict,
                      None if row.check_json is None else json.loads(row.check_json), row.kind,
-                     None if row.setup_json is None else json.loads(row.setup_json),
-                     None if row.checkup_json is None else json.loads(row.checkup_json))
+                     None if setup_text is None else json.loads(setup_text), checkup)
 
 
 def measurement_time(path: Path, metadata: dict[str, str], given: str | None) -> tuple[str, str]:
@@ -352,22 +373,35 @@ def machine_ids(engine: sa.Engine) -> list[str]:
         return sorted(conn.execute(sa.select(T.machines.c.machine_id)).scalars())
 
 
-def list_runs(engine: sa.Engine, machine_id: str) -> list[RunRecord]:
-    """Runs of a machine in measurement order (time, then insertion).
+def list_runs(engine: sa.Engine, machine_id: str, *, light: bool = False) -> list[RunRecord]:
+    """Runs of a machine in measurement order (time, then insertion); ``light``: check-ups as chart points
+    (:func:`run_record`), what ``pige checkup`` reads of a long history.
 
     Raises
     ------
     InputError
         No such machine id (the message lists the known ones).
     """
+    columns = [c for c in T.runs.c if not light or c.name != "checkup_json"]
     with engine.connect() as conn:
-        rows = conn.execute(sa.select(T.runs).where(T.runs.c.machine_id == machine_id)
+        rows = conn.execute(sa.select(*columns).where(T.runs.c.machine_id == machine_id)
                             .order_by(T.runs.c.measured_at, T.runs.c.id)).all()
     if not rows:
         known = machine_ids(engine)
         raise InputError(f"no machine {machine_id!r} in the history {engine.url.render_as_string(hide_password=True)}"
                          f"; known: {', '.join(known) or 'none (add a run with pige history add)'}")
-    return [run_record(r) for r in rows]
+    if not light:
+        return [run_record(r) for r in rows]
+    values = _float_rows([r.values_json for r in rows])  # one parse for the whole history
+    std = _float_rows([r.std_json for r in rows])
+    charts = json.loads("[" + ",".join(r.chart_json or "null" for r in rows) + "]")
+    return [run_record(r, light=True, numbers=(v, e), chart=c) for r, v, e, c in zip(rows, values, std, charts,
+                                                                                       strict=True)]
+
+
+def _float_rows(texts: list[str]) -> list[np.ndarray]:
+    """Many JSON arrays of numbers or null (NaN) parsed at once."""
+    return [np.array(row, dtype=float) for row in json.loads("[" + ",".join(texts).replace("null", "NaN") + "]")]
 
 
 def existing_run(engine: sa.Engine, path: Path) -> None:
@@ -385,7 +419,7 @@ def existing_run(engine: sa.Engine, path: Path) -> None:
 
 
 def add_checkup_run(engine: sa.Engine, path: Path, machine_id: str, code: str, measured: tuple[str, str], fit: Any,
-                    setup: dict[str, Any], verdict: str, checkup: dict[str, Any]) -> RunRecord:
+                    setup: dict[str, Any], verdict: str, checkup: dict[str, Any], chart: dict[str, Any]) -> RunRecord:
     """Store a check-up (``kind = checkup``): its PIGEs' estimate (:class:`~pige_sym.identification.subset.SubsetFit`),
     the set-up it was measured with, its verdict and what it found (:mod:`pige_sym.verdict.checkup`).
 
@@ -402,7 +436,7 @@ def add_checkup_run(engine: sa.Engine, path: Path, machine_id: str, code: str, m
         "values_json": _dumps(fit.values), "std_json": _dumps(fit.std), "covariance_json": _dumps(fit.covariance),
         "dof": int(fit.dof), "rms_um": float(fit.rms_um) if math.isfinite(fit.rms_um) else None,
         "effects_json": "[]", "verdict": verdict, "check_json": None, "kind": "checkup",
-        "setup_json": _dumps(setup), "checkup_json": _dumps(checkup),
+        "setup_json": _dumps(setup), "checkup_json": _dumps(checkup), "chart_json": _dumps(chart),
     }
     try:
         return run_record(_insert_run(engine, machine_id, code, now, values, path))
