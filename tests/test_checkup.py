@@ -265,3 +265,40 @@ def test_t_quantile_and_chi_square_tail_against_scipy() -> None:
     for k in (1, 2, 3, 17, 60, 1000):
         for x in (0.01, 1.0, 5.0, 30.0, 300.0, 3000.0):
             assert chi2_sf(k, x) == pytest.approx(chdtrc(k, x), rel=1e-10, abs=1e-300), (k, x)
+
+
+def test_the_sqlite_path_reads_and_writes_what_sqlalchemy_does(machine: dict, tmp_path: Path) -> None:
+    """``pige checkup`` reads an SQLite history with sqlite3 (SQLAlchemy's import is most of its second): the same
+    records, the same stored row (the check-up judged once through each path, on two copies of the history)."""
+    import shutil
+
+    from pige_sym.verdict.checkup.routine import CheckupOptions, run_checkup
+    from pige_sym.verdict.history.migrations import MIGRATIONS
+    from pige_sym.verdict.history.sqlite_fast import SCHEMA_VERSION, SqliteHistory, open_history
+    from pige_sym.verdict.history.store import EngineHistory, connect
+
+    assert SCHEMA_VERSION == max(m.version for m in MIGRATIONS)
+    path = checkup_file(machine["program"], TRUTH, 95, tmp_path / "c.csv")
+    rows = {}
+    for how in ("sqlite3", "sqlalchemy"):
+        db = tmp_path / f"{how}.db"
+        shutil.copy(machine["db"], db)
+        history = open_history(str(db)) if how == "sqlite3" else EngineHistory(connect(str(db)))
+        assert isinstance(history, SqliteHistory) == (how == "sqlite3")
+        res = run_checkup(history, path, "DMU-1", CheckupOptions(date=(T0 + timedelta(days=400)).isoformat()))
+        with sa.create_engine(f"sqlite:///{db}").connect() as conn:
+            row = conn.execute(sa.text("SELECT * FROM runs WHERE id = :i"), {"i": res.run_id}).one()._asdict()
+        rows[how] = {k: v for k, v in row.items() if k not in ("added_at", "checkup_json")}
+        light = {h: list_runs_of(h, db) for h in ("fast", "engine")}
+        assert [r.id for r in light["fast"]] == [r.id for r in light["engine"]]
+        for a, b in zip(light["fast"], light["engine"], strict=True):
+            assert np.array_equal(a.values, b.values, equal_nan=True) and a.checkup == b.checkup and a.kind == b.kind
+    assert rows["sqlite3"] == rows["sqlalchemy"]
+
+
+def list_runs_of(how: str, db: Path) -> list:
+    from pige_sym.verdict.history.sqlite_fast import SqliteHistory
+    from pige_sym.verdict.history.store import EngineHistory, connect
+
+    history = SqliteHistory(db) if how == "fast" else EngineHistory(connect(str(db)))
+    return history.list_runs("DMU-1", light=True)

@@ -33,11 +33,11 @@ def _run(args: argparse.Namespace) -> int:
     from pige_sym.errors import InputError
     from pige_sym.files import to_json
     from pige_sym.verdict.checkup.routine import run_checkup
-    from pige_sym.verdict.history import connect
+    from pige_sym.verdict.history.sqlite_fast import open_history
 
     if not args.machine_id.strip():
         raise InputError("--machine-id must not be empty")
-    result = run_checkup(connect(args.db, create=False), args.file, args.machine_id, _options(args))
+    result = run_checkup(open_history(args.db), args.file, args.machine_id, _options(args))
     print(to_json(result.to_dict()) if args.json else format_checkup(result))
     return result.exit_status
 
@@ -49,7 +49,7 @@ def _num(x: float | None, fmt: str = "+.3f") -> str:
 def _rate(item: Any, per_day: bool) -> str:
     t = item.trend
     if t is None:
-        return "— (fewer than 3 points)"
+        return "— (too few check-ups)"
     f = 24.0 if per_day else 1.0
     sig = "" if t.significant else " n.s."
     over = f" ({t.points} flagged)" if t.episode else ""

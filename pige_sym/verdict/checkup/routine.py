@@ -153,8 +153,10 @@ class CheckupResult:
             "notes": self.notes})
 
 
-def run_checkup(engine: Any, path: str | os.PathLike[str], machine_id: str, opts: CheckupOptions) -> CheckupResult:
+def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opts: CheckupOptions) -> CheckupResult:
     """The check-up of one file (module docstring); stored in the history.
+
+    ``history``: :func:`~pige_sym.verdict.history.sqlite_fast.open_history` of the database, or an SQLAlchemy engine.
 
     Raises
     ------
@@ -166,14 +168,18 @@ def run_checkup(engine: Any, path: str | os.PathLike[str], machine_id: str, opts
     from pige_sym.kernels import load_kernels
     from pige_sym.measurements.rtest import read_measurement
     from pige_sym.verdict.checkup.changes import checkup_changes
-    from pige_sym.verdict.history.store import add_checkup_run, existing_run, list_runs, measurement_time
+    from pige_sym.verdict.history.records import measurement_time
 
     if not 0 < opts.alpha < 1:
         raise InputError(f"--alpha must be between 0 and 1, got {opts.alpha}")
-    existing_run(engine, Path(path))
+    if hasattr(history, "dialect"):  # an SQLAlchemy engine
+        from pige_sym.verdict.history.store import EngineHistory
+
+        history = EngineHistory(history)
+    history.existing(Path(path))
     m = read_measurement(path)
     kern = load_kernels(m.machine)
-    runs = list_runs(engine, machine_id, light=True)
+    runs = history.list_runs(machine_id, light=True)
     _same_machine(m, machine_id, runs, kern.MACHINE_CODE, str(path))
     measured, source = measurement_time(Path(path), m.metadata, opts.date)
     if measured <= runs[-1].measured_at:
@@ -195,8 +201,8 @@ def run_checkup(engine: Any, path: str | os.PathLike[str], machine_id: str, opts
                            fit=fit.to_dict(), notes=list(fit.notes) + _notes(items))
     from pige_sym.measurements.run_setup import setup_of
 
-    record = add_checkup_run(engine, Path(path), machine_id, kern.MACHINE_CODE, (measured, source), fit,
-                             setup_of(m).to_dict(), verdict, result.to_dict(), result.chart())
+    record = history.add_checkup(Path(path), machine_id, kern.MACHINE_CODE, (measured, source), fit,
+                                 setup_of(m).to_dict(), verdict, result.to_dict(), result.chart())
     result.run_id = record.id
     return result
 

@@ -4,11 +4,28 @@
   the versioned schema changes that build them (kept in the repository, applied on connect);
 - :mod:`~pige_sym.verdict.history.store` connect (SQLite file by default, PostgreSQL by URL), add a run,
   list a machine's runs;
+- :mod:`~pige_sym.verdict.history.records` the run record and the database URLs without SQLAlchemy;
+  :mod:`~pige_sym.verdict.history.sqlite_fast` what ``pige checkup`` reads and writes of an SQLite history with the
+  standard library's ``sqlite3`` (SQLAlchemy's import alone is most of the check-up's time budget);
 - :mod:`~pige_sym.verdict.history.changes` the change of each parameter between two runs and its
   significance from both covariances (pure NumPy/SciPy, no database).
+
+The names below are imported when first used (PEP 562), so that importing one light module of the package does not
+import SQLAlchemy.
 """
 
-from pige_sym.verdict.history.changes import Change, Comparison, compare_runs
-from pige_sym.verdict.history.store import RunRecord, add_run, connect, default_url, list_runs
+from __future__ import annotations
+
+from typing import Any
 
 __all__ = ["Change", "Comparison", "RunRecord", "add_run", "compare_runs", "connect", "default_url", "list_runs"]
+_WHERE = {"Change": "changes", "Comparison": "changes", "compare_runs": "changes", "RunRecord": "records",
+          "default_url": "records", "add_run": "store", "connect": "store", "list_runs": "store"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _WHERE:
+        import importlib
+
+        return getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

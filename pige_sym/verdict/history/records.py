@@ -1,0 +1,209 @@
+"""The history's records without SQLAlchemy: database URLs, the run record, the rows a check-up writes.
+
+Everything here is plain Python and NumPy, so that ``pige checkup`` can read an SQLite history with the standard
+library's ``sqlite3`` (:mod:`~pige_sym.verdict.history.sqlite_fast`) without importing SQLAlchemy;
+:mod:`~pige_sym.verdict.history.store` re-exports these names.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pige_sym.errors import FileFormatError, InputError
+
+ENV_URL = "PIGE_HISTORY_DB"
+
+
+def default_url() -> str:
+    """``$PIGE_HISTORY_DB``, else the SQLite file in the user data directory."""
+    env = os.environ.get(ENV_URL)
+    if env:
+        return env
+    import platformdirs
+
+    return f"sqlite:///{Path(platformdirs.user_data_dir('pige_sym')) / 'history.sqlite'}"
+
+
+def normalise_url(text: str | None) -> str:
+    """A SQLAlchemy URL from ``--db`` (module docstring)."""
+    text = text or default_url()
+    if "://" not in text:
+        return f"sqlite:///{Path(text).expanduser().resolve()}"
+    scheme, _, rest = text.partition("://")
+    if scheme in ("postgresql", "postgres", "postgresql+psycopg"):
+        try:
+            import psycopg  # noqa: F401
+        except ImportError:
+            raise InputError("--db postgresql://…: the PostgreSQL driver is not installed: "
+                             "pip install 'pige_sym[postgres]' (psycopg 3)") from None
+        return f"postgresql+psycopg://{rest}"
+    if scheme == "sqlite":
+        return text
+    raise InputError(f"--db {text}: use a file path, sqlite:///PATH or postgresql://user@host/dbname")
+
+
+@dataclass
+class RunRecord:
+    """One stored run (the estimate in the attribute names :func:`~pige_sym.verdict.history.compare_runs` reads).
+
+    Attributes
+    ----------
+    values, std : ndarray, shape=(P,) [µm, µrad]
+        NaN where undetermined.
+    covariance : ndarray, shape=(P, P)
+    effects : list of dict
+        Accepted findings (effect, options, params, std, units).
+    check : dict or None
+        ``pige check`` result when tolerances were given at ``add``.
+    kind : {"full", "checkup"}
+        A calibration (``pige history add``) or a check-up (``pige checkup``).
+    setup : dict or None
+        The set-up the file was measured with (:class:`~pige_sym.measurements.run_setup.RunSetup` as a dict);
+        None for a set of files and for runs stored before schema version 2.
+    checkup : dict or None
+        What a check-up found (:mod:`pige_sym.verdict.checkup`).
+    """
+
+    id: int
+    machine_id: str
+    file_name: str
+    file_sha256: str
+    measured_at: str
+    time_source: str
+    added_at: str
+    machine_code: str
+    method: str
+    parameters: list[str]
+    units: dict[str, str]
+    values: np.ndarray
+    std: np.ndarray
+    covariance: np.ndarray
+    dof: int
+    rms_um: float | None
+    effects: list[dict[str, Any]] = field(default_factory=list)
+    verdict: str | None = None
+    check: dict[str, Any] | None = None
+    kind: str = "full"
+    setup: dict[str, Any] | None = None
+    checkup: dict[str, Any] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        from pige_sym.files import json_ready
+
+        return json_ready({
+            "id": self.id, "machine_id": self.machine_id, "file": self.file_name, "sha256": self.file_sha256,
+            "measured_at": self.measured_at, "time_source": self.time_source, "added_at": self.added_at,
+            "machine": self.machine_code, "method": self.method,
+            "pige": dict(zip(self.parameters, self.values, strict=True)),
+            "std": dict(zip(self.parameters, self.std, strict=True)), "units": self.units,
+            "covariance": {"parameters": self.parameters, "matrix": self.covariance}, "dof": self.dof,
+            "rms_um": self.rms_um, "effects": [f.get("effect") for f in self.effects], "verdict": self.verdict,
+            "check": self.check, "kind": self.kind, "setup": self.setup, "checkup": self.checkup,
+        })
+
+
+def _dumps(x: Any) -> str:
+    from pige_sym.files import to_json
+
+    return to_json(x, indent=None)
+
+
+def _floats(text: str) -> np.ndarray:
+    return np.array([np.nan if v is None else v for v in json.loads(text)], dtype=float)
+
+
+_SHARED: dict[str, Any] = {}
+
+
+def _shared(text: str) -> Any:
+    """``json.loads`` of a text many runs repeat (their parameter names and units), parsed once."""
+    if text not in _SHARED:
+        _SHARED[text] = json.loads(text)
+    return _SHARED[text]
+
+
+def run_record(row: Any, *, light: bool = False, numbers: tuple[np.ndarray, np.ndarray] | None = None,
+               chart: Any = None) -> RunRecord:
+    """The record of a row of ``runs``; ``light`` (a check-up read as a chart point): its ``checkup`` is the small
+    ``chart_json`` (``chart``: parsed already), its covariance the diagonal of its standard errors, its set-up not
+    read; ``numbers``: its values and standard errors parsed already."""
+    params = list(_shared(row.parameters))
+    values, std = numbers if numbers is not None else (_floats(row.values_json), _floats(row.std_json))
+    as_point = light and row.kind == "checkup" and getattr(row, "chart_json", None) is not None
+    if as_point:
+        cov = np.diag(std**2)
+    else:
+        cov = np.array([[np.nan if v is None else v for v in r] for r in json.loads(row.covariance_json)], dtype=float)
+    checkup_text = row.chart_json if as_point else getattr(row, "checkup_json", None)
+    setup_text = None if as_point else getattr(row, "setup_json", None)
+    checkup = chart if as_point and chart is not None else None if checkup_text is None else json.loads(checkup_text)
+    return RunRecord(row.id, row.machine_id, row.file_name, row.file_sha256, row.measured_at, row.time_source,
+                     row.added_at, row.machine_code, row.method, params, dict(_shared(row.units)),
+                     values, std, cov.reshape(len(params), len(params)),
+                     int(row.dof), row.rms_um, list(_shared(row.effects_json)), row.verdict,
+                     None if row.check_json is None else json.loads(row.check_json), row.kind,
+                     None if setup_text is None else json.loads(setup_text), checkup)
+
+
+def measurement_time(path: Path, metadata: dict[str, str], given: str | None) -> tuple[str, str]:
+    """(ISO 8601 UTC time, where it comes from): ``--date``, the file's ``date`` metadata, else its mtime.
+
+    Raises
+    ------
+    InputError, FileFormatError
+        A date that is not ISO 8601.
+    """
+    def parse(text: str) -> datetime:
+        t = datetime.fromisoformat(text.strip())
+        return t.replace(tzinfo=timezone.utc) if t.tzinfo is None else t.astimezone(timezone.utc)
+
+    if given is not None:
+        try:
+            return parse(given).isoformat(timespec="seconds"), "--date"
+        except ValueError:
+            raise InputError(f"--date {given!r}: expected ISO 8601, e.g. 2026-11-23T14:05") from None
+    if "date" in metadata:
+        try:
+            return parse(metadata["date"]).isoformat(timespec="seconds"), "file metadata date"
+        except ValueError:
+            raise FileFormatError(str(path), None, f"metadata date {metadata['date']!r} is not ISO 8601 "
+                                                   "(e.g. 2026-11-23T14:05): fix it or pass --date") from None
+    mtime = datetime.fromtimestamp(path.stat().st_mtime, timezone.utc)
+    return mtime.isoformat(timespec="seconds"), "file modification time"
+
+
+def _sha256(path: Path) -> str:
+    from pige_sym.files import read_input_bytes
+
+    return hashlib.sha256(read_input_bytes(path)).hexdigest()
+
+
+def _float_rows(texts: list[str]) -> list[np.ndarray]:
+    """Many JSON arrays of numbers or null (NaN) parsed at once."""
+    return [np.array(row, dtype=float) for row in json.loads("[" + ",".join(texts).replace("null", "NaN") + "]")]
+
+
+def checkup_values(path: Path, machine_id: str, code: str, measured: tuple[str, str], fit: Any, setup: dict[str, Any],
+                   verdict: str, checkup: dict[str, Any], chart: dict[str, Any]) -> dict[str, Any]:
+    """The ``runs`` row of a check-up (``kind = checkup``): its PIGEs' estimate
+    (:class:`~pige_sym.identification.subset.SubsetFit`), the set-up it was measured with, its verdict, what it found
+    (:mod:`pige_sym.verdict.checkup`) and the part of it later check-ups read (``chart``)."""
+    now = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return {
+        "machine_id": machine_id, "file_sha256": _sha256(path), "file_name": str(path.resolve()),
+        "measured_at": measured[0], "time_source": measured[1], "added_at": now, "machine_code": code,
+        "method": "checkup", "parameters": _dumps(fit.parameters), "units": _dumps(fit.units),
+        "values_json": _dumps(fit.values), "std_json": _dumps(fit.std), "covariance_json": _dumps(fit.covariance),
+        "dof": int(fit.dof), "rms_um": float(fit.rms_um) if math.isfinite(fit.rms_um) else None,
+        "effects_json": "[]", "verdict": verdict, "check_json": None, "kind": "checkup",
+        "setup_json": _dumps(setup), "checkup_json": _dumps(checkup), "chart_json": _dumps(chart),
+    }
