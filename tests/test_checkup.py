@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sqlalchemy as sa
-from checkup_sim import FREE, MACHINE, T0, TRUTH, checkup_file, checkup_program, full_calibration
+from checkup_sim import FREE, MACHINE, T0, TRUTH, checkup_file, checkup_program, full_calibration, pige
 
 from pige_sym.cli.main import main
 from testdata import refused_in_one_line
@@ -302,3 +302,29 @@ def list_runs_of(how: str, db: Path) -> list:
 
     history = SqliteHistory(db) if how == "fast" else EngineHistory(connect(str(db)))
     return history.list_runs("DMU-1", light=True)
+
+
+def test_an_r_test_check_up_from_a_simulated_nest(tmp_path: Path, capsys) -> None:
+    """The R-test way: a full calibration, the check-up's poses as an angle file and its program, the nest's file of
+    those poses; the noise is the calibration's (three poses leave two degrees of freedom of their own)."""
+    db = tmp_path / "h.db"
+    truth = ",".join(f"{k}={v}" for k, v in TRUTH.items())
+    assert pige("simulate", "--machine", MACHINE, "--pige", truth, "--seed", 1, "--out", tmp_path / "full.csv") == 0
+    assert pige("history", "add", tmp_path / "full.csv", "--machine-id", "RT", "--db", db, "--date", "2026-01-01",
+                "--tolerances", TOL, "--method", "gauss-newton") == 0
+    code, out, _ = _run(capsys, "plan", "--checkup", "--machine-id", "RT", "--db", db, "--out", tmp_path / "a.csv",
+                        "--json")
+    assert code == 0 and json.loads(out)["seconds"] <= 120 and len(json.loads(out)["angles_deg"]) == 3
+    code, _, _ = _run(capsys, "program", "--checkup", "--machine-id", "RT", "--db", db, "--dialect", "fanuc", "--out",
+                      tmp_path / "c.nc")
+    assert code == 0 and "G04 X7." in (tmp_path / "c.nc").read_text()
+    verdicts = []
+    for day, shift in ((2, 0.0), (3, 3.0)):
+        moved = truth.replace(f"EX0C={TRUTH['EX0C']}", f"EX0C={TRUTH['EX0C'] + shift}")
+        assert pige("simulate", "--machine", MACHINE, "--pige", moved, "--seed", day, "--trajectory",
+                    tmp_path / "a.csv", "--out", tmp_path / f"c{day}.csv") == 0
+        code, out, _ = _run(capsys, "checkup", tmp_path / f"c{day}.csv", "--machine-id", "RT", "--db", db, "--date",
+                            f"2026-01-0{day}", "--json")
+        verdicts.append((code, json.loads(out)["verdict"], json.loads(out)["items"][2]["std"]))
+    assert verdicts[0][:2] == (0, "ok") and verdicts[1][:2] == (1, "drifted")
+    assert verdicts[0][2] < 0.3  # the calibration's noise, not two residual degrees of freedom

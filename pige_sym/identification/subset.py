@@ -14,7 +14,9 @@ Covariance ``Cov(x_F) = s² N_FF⁻¹``:
   centre's ``σ²(GᵀWG)⁻¹``), so ``s²`` is the scale :mod:`~pige_sym.identification.instruments` divided them by:
   the standard errors do not rest on the few residual degrees of freedom of a three-pose check-up.  ``dof`` is the
   sphere fit's (contacts − 3 per pose − 1 for a fitted radius);
-- **R-test**: ``s² = RSS/(N − |F|)`` as in :func:`~pige_sym.identification.least_squares.identify`.
+- **R-test**: the full calibration's noise per component when given (``noise_um`` on ``noise_dof`` degrees of
+  freedom: a three-pose check-up leaves two degrees of freedom of its own), else ``s² = RSS/(N − |F|)`` as in
+  :func:`~pige_sym.identification.least_squares.identify`.
 
 **Consistency.**  ``χ² = RSS/s²_expected`` on ``N − |F|`` degrees of freedom (probe: the rows' own scale; R-test:
 the full calibration's noise when given) tests whether the check-up's poses agree with the held values; its
@@ -94,7 +96,7 @@ class SubsetFit:
 
 
 def identify_subset(m: Measurement, free: list[str], held: dict[str, float], *,
-                    noise_um: float | None = None) -> SubsetFit:
+                    noise_um: float | None = None, noise_dof: int | None = None) -> SubsetFit:
     """Fit the ``free`` PIGEs of a measurement with every other location PIGE at ``held`` (module docstring).
 
     Parameters
@@ -105,8 +107,8 @@ def identify_subset(m: Measurement, free: list[str], held: dict[str, float], *,
         PIGEs to estimate.
     held : dict of str to float
         Value of every other location PIGE [µm, µrad].
-    noise_um : float, optional
-        R-test: the noise per component the full calibration saw, for the consistency test.
+    noise_um, noise_dof : float, int, optional
+        R-test: the noise per component the full calibration saw and its degrees of freedom (module docstring).
 
     Raises
     ------
@@ -140,7 +142,7 @@ def identify_subset(m: Measurement, free: list[str], held: dict[str, float], *,
     x[f], x[h] = sol.values, xh
     rss = max(float(problem.yy - 2 * x @ problem.rhs + x @ problem.normal @ x), 0.0)
     resid_dof = problem.n_obs - len(f)
-    scale, dof, expected = _scale(m, problem, rss, resid_dof, noise_um)
+    scale, dof, expected = _scale(m, problem, rss, resid_dof, noise_um, noise_dof)
     cov = sol.cov_unit * scale
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     units = {n: kern.UNITS[n] for n in order}
@@ -157,8 +159,8 @@ def identify_subset(m: Measurement, free: list[str], held: dict[str, float], *,
                      sens)
 
 
-def _scale(m: Measurement, problem: Any, rss: float, resid_dof: int,
-           noise_um: float | None) -> tuple[float, int, float | None]:
+def _scale(m: Measurement, problem: Any, rss: float, resid_dof: int, noise_um: float | None,
+           noise_dof: int | None) -> tuple[float, int, float | None]:
     """(covariance scale s², degrees of freedom, expected RSS per degree of freedom or None) (module docstring)."""
     if instrument(m) == "sphere-probe":
         from pige_sym.measurements.probe_import import row_covariances
@@ -170,10 +172,12 @@ def _scale(m: Measurement, problem: Any, rss: float, resid_dof: int,
         fitted = "given" not in m.metadata.get("r_eff_mm", "")
         dof = int(contacts.sum()) - 3 * m.n_rows - int(fitted) if contacts is not None else resid_dof
         return scale, max(dof, 1), scale
+    expected = None if noise_um is None or not (math.isfinite(noise_um) and noise_um > 0) else noise_um**2
+    if expected is not None:
+        return expected, max(int(noise_dof or resid_dof), 1), expected
     if resid_dof <= 0:
         raise IdentificationError(f"{problem.n_obs} observations leave no degree of freedom for the noise of the "
                                   f"check-up's {problem.normal.shape[0]} PIGEs: measure more poses")
-    expected = None if noise_um is None or not (math.isfinite(noise_um) and noise_um > 0) else noise_um**2
     return rss / resid_dof, resid_dof, expected
 
 

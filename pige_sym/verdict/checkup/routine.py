@@ -191,7 +191,7 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
     if state.setup.instrument != instrument(m):
         raise InputError(f"{path} is an {instrument(m)} file, the last full calibration (run {state.full.id}) an "
                          f"{state.setup.instrument} run: a check-up repeats its instrument and set-up")
-    fit = identify_subset(m, free, state.held, noise_um=state.full.rms_um if instrument(m) == "rtest" else None)
+    fit = identify_subset(m, free, state.held, **_rtest_noise(state.full) if instrument(m) == "rtest" else {})
     tol = _tolerances(opts, runs, kern.MACHINE_CODE, free)
     items, verdict = judge(fit, state, tol, opts, hours(measured, state.origin))
     changes = checkup_changes(fit, m, opts)
@@ -205,6 +205,14 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
                                  setup_of(m).to_dict(), verdict, result.to_dict(), result.chart())
     result.run_id = record.id
     return result
+
+
+def _rtest_noise(full: Any) -> dict[str, Any]:
+    """The full calibration's noise per component ``σ = RMS·√(N/ν)`` (``N = ν + P``) and ν, for an R-test check-up."""
+    if full.rms_um is None or not math.isfinite(full.rms_um) or full.dof <= 0:
+        return {}
+    n = full.dof + len(full.parameters)
+    return {"noise_um": float(full.rms_um) * math.sqrt(n / full.dof), "noise_dof": int(full.dof)}
 
 
 def _same_machine(m: Any, machine_id: str, runs: list[Any], code: str, path: str) -> None:
@@ -328,6 +336,8 @@ def _trend(points: list[tuple[float, float, bool]], new: tuple[float, float], li
     else:
         window = [p[:2] for p in points[-(WINDOW - 1):]]
     window.append(new)
+    if not episode and len(window) < 3:  # two quiet check-ups differ by noise in one pair out of ten at 90 %
+        return None
     learned = limit is not None and not limit.provisional and quiet[0] is not None and quiet[1] >= MIN_DOF
     scale, nu = (float(quiet[0] or 0.0), quiet[1]) if learned else own
     return trend(np.array([p[0] for p in window]), np.array([p[1] for p in window]), new[0], tolerance,

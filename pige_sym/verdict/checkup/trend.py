@@ -3,7 +3,7 @@
 **Which check-ups.**  During a drift episode (the new check-up is outside its control limits) the trend is fitted to
 the run of consecutive flagged check-ups that ends with it: the drift, not the quiet days before it (a warm-up of an
 hour checked every ten minutes after weeks of daily check-ups is on another time scale).  Otherwise to the
-segment's check-ups (the last :data:`WINDOW`): a slow drift that has not yet left the limits.
+segment's check-ups (the last :data:`WINDOW`, at least three): a slow drift that has not yet left the limits.
 
 **Fit** (robust: one bad check-up does not tilt it): the Theil–Sen line, slope ``b`` the median of the pairwise
 slopes, level ``a`` the median of ``x_i − b·t_i``.  **Its uncertainty** comes from the run-to-run scatter the chart
