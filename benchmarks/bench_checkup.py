@@ -162,13 +162,14 @@ def main(argv: list[str] | None = None) -> str:
 
 
 def _in_process(db: Path, files: list[Path], day: int) -> list[float]:
+    """Each check-up as ``pige checkup`` runs it (the history opened and checked, the run stored), in this process."""
     from pige_sym.verdict.checkup.routine import CheckupOptions, run_checkup
-    from pige_sym.verdict.history import connect
+    from pige_sym.verdict.history.sqlite_fast import open_history
 
     out = []
     for k, path in enumerate(files):
         t0 = time.perf_counter()
-        run_checkup(connect(str(db), create=False), path, "BENCH",
+        run_checkup(open_history(str(db)), path, "BENCH",
                     CheckupOptions(date=(T0 + timedelta(days=day + k)).isoformat()))
         out.append(time.perf_counter() - t0)
     return out

@@ -2,6 +2,11 @@
 
 import sys
 
-from pige_sym.cli import main
+try:
+    from pige_sym.cli import main
 
-sys.exit(main())
+    status = main()
+except KeyboardInterrupt:  # before main() took over SIGINT, or after it gave it back
+    print("pige: interrupted", file=sys.stderr)
+    status = 130
+sys.exit(status)

@@ -21,6 +21,10 @@ SHIPPED_MACHINES: tuple[str, ...] = (
     "wC'bXYZB(C1)t",
 )
 
+#: The R-test's nominal noise per deviation component [µm]: what ``pige plan`` and ``pige simulate`` assume, and
+#: what ``pige identify``'s model check judges an R-test file's residual against unless ``--noise`` states it.
+RTEST_NOISE_UM = 0.25
+
 #: Largest magnitude of a PIGE, an effect parameter or a map value [µm or µrad]: 10 mm or 10 mrad is far beyond a
 #: machine that runs at all (every file reader refuses more).
 MAX_PIGE = 1e4

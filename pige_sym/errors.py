@@ -78,6 +78,12 @@ class CompensationError(PigeError):
     """The parameters cannot be used for compensation as they are."""
 
 
+class HistoryError(PigeError):
+    """The history database cannot be used as it is: damaged (a page, a table, a stored value), or an estimate no
+    machine has; the message names the database, what is wrong (the run and field when known) and how to recover.
+    pige changes nothing in a database it refuses."""
+
+
 # ---- internal signals: raised and caught inside pige_sym, never shown to a user as such
 
 

@@ -80,15 +80,52 @@ def check_output(path: PathLike, *, force: bool = False, inputs: Iterable[PathLi
     return p
 
 
+def _dangling_link(p: Path) -> str | None:
+    """Why ``p`` cannot be a folder pige creates: a symbolic link whose target does not exist (None otherwise)."""
+    if not p.is_symlink() or p.exists():
+        return None
+    try:
+        target = os.readlink(p)
+    except OSError:
+        target = "?"
+    return (f"{p} is a symbolic link to {target}, which does not exist: pige never creates what a link points "
+            "to; create that folder, or give another")
+
+
 def _check_writable_ancestor(start: Path, path: Path, what: str, noun: str) -> None:
-    """Refuse ``path`` when its nearest existing ancestor (from ``start`` up) is not a writable ``noun``."""
+    """Refuse ``path`` when its nearest existing ancestor (from ``start`` up) is not a writable ``noun``, or when a
+    dangling symbolic link stands on the way (creating the folders would fail, or follow the link)."""
     existing = start
     while not existing.exists() and existing != existing.parent:
+        dangling = _dangling_link(existing)
+        if dangling:
+            raise InputError(f"{what} {path}: {dangling}")
         existing = existing.parent
     if not existing.is_dir():
         raise InputError(f"{what} {path}: {existing} is not a {noun}")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise InputError(f"{what} {path}: the folder {existing} is not writable")
+
+
+def make_folder(folder: PathLike, *, what: str = "--out") -> Path:
+    """Create an output folder and its parents (nothing when it exists; a link to a folder is followed).
+
+    Raises
+    ------
+    InputError
+        A dangling symbolic link on the way (pige never creates what a link points to), or the folder cannot
+        be created; one line naming ``what`` and the folder.
+    """
+    p = Path(folder)
+    for q in (p, *p.parents):
+        dangling = _dangling_link(q)
+        if dangling:
+            raise InputError(f"{what}: {dangling}")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{what}: cannot create the folder {p} ({exc.strerror or exc})") from None
+    return p
 
 
 def check_output_folder(path: PathLike, *, force: bool = False, inputs: Iterable[PathLike] = (),
@@ -150,11 +187,43 @@ def staged_folder(path: PathLike, *, force: bool = False, inputs: Iterable[PathL
                 tmp = _make_stage(host, out, what)
             yield tmp
             with _deferred_interrupts():
+                raise_if_interrupted()
                 _commit(tmp, out, force, list(inputs), what)
         except BaseException:
             if tmp is not None:
                 shutil.rmtree(tmp, ignore_errors=True)
             raise
+
+
+#: Set by pige's interrupt handlers that raise KeyboardInterrupt wherever the program is (SIGINT while a command
+#: runs, SIGTERM while a folder is staged).  Python ignores an exception raised in a finaliser (``__del__``, a weakref
+#: callback: it prints "Exception ignored ... KeyboardInterrupt" and goes on), so an interrupt can be lost on its way
+#: up; the latch keeps it, and nothing is published after one (:func:`raise_if_interrupted`).
+_INTERRUPTED = threading.Event()
+
+
+def note_interrupt() -> None:
+    """Remember that an interrupt reached the process (called by the handlers that raise KeyboardInterrupt)."""
+    _INTERRUPTED.set()
+
+
+def clear_interrupt() -> None:
+    """Forget a noted interrupt: a command starts or ends, or code that catches KeyboardInterrupt on purpose has
+    handled it (the acquisition, which then writes its summary)."""
+    _INTERRUPTED.clear()
+
+
+def interrupt_noted() -> bool:
+    """Whether an interrupt was noted since the command started (its KeyboardInterrupt may have been lost)."""
+    return _INTERRUPTED.is_set()
+
+
+def raise_if_interrupted() -> None:
+    """Raise KeyboardInterrupt (once) when an interrupt was noted: called just before an output is published, so an
+    interrupt whose KeyboardInterrupt was swallowed on the way still stops the output from appearing."""
+    if _INTERRUPTED.is_set():
+        _INTERRUPTED.clear()
+        raise KeyboardInterrupt
 
 
 def _make_stage(host: Path, out: Path, what: str) -> Path:
@@ -179,6 +248,7 @@ def _terminate_as_interrupt() -> Iterator[None]:
         return
 
     def _raise(signum: int, frame: object) -> None:
+        note_interrupt()
         raise KeyboardInterrupt
 
     old = signal.signal(signal.SIGTERM, _raise)
@@ -276,26 +346,43 @@ def atomic_write_text(path: PathLike, text: str | Iterable[str], *, encoding: st
     p = Path(path)
     if p.is_symlink() or (p.exists() and not p.is_file()):
         raise InputError(f"{p} is not a regular file: pige never replaces one")
-    p.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(p.parent if str(p.parent) else Path("."), what=f"cannot write {p}")
     mode = new_file_mode() if not p.exists() else p.stat().st_mode & 0o7777
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+    tmp: Path | None = None
     try:
-        os.fchmod(fd, mode)
-        with os.fdopen(fd, "w", encoding=encoding, newline=newline) as fh:
+        with _deferred_interrupts():  # the temporary file exists only once the clean-up below knows its name
+            fd, name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+            tmp = Path(name)
+            try:
+                fh = os.fdopen(fd, "w", encoding=encoding, newline=newline)
+            except BaseException:
+                os.close(fd)
+                raise
+        with fh:
+            os.fchmod(fh.fileno(), mode)
             for piece in [text] if isinstance(text, str) else text:
                 fh.write(piece)
             fh.flush()
             os.fsync(fh.fileno())
         if verify is not None:
-            verify(Path(tmp_name))
-        os.replace(tmp_name, p)
+            verify(tmp)
+        with _deferred_interrupts():
+            raise_if_interrupted()
+            os.replace(tmp, p)
     except OSError as exc:
-        Path(tmp_name).unlink(missing_ok=True)
+        _remove_quietly(tmp)
         raise InputError(f"cannot write {p}: {exc.strerror or exc}") from exc
     except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
+        _remove_quietly(tmp)
         raise
     return p
+
+
+def _remove_quietly(path: Path | None) -> None:
+    """Remove a temporary file pige made (nothing when None or gone); an interrupt meanwhile waits for it."""
+    if path is not None:
+        with _deferred_interrupts():
+            path.unlink(missing_ok=True)
 
 
 def open_regular_file(path: PathLike) -> IO[bytes]:

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import sqlalchemy as sa
 from checkup_sim import FREE, MACHINE, T0, TRUTH, checkup_file, checkup_program, full_calibration, pige
+from test_history import postgres_url  # noqa: F401 - the throw-away PostgreSQL server fixture
 
 from pige_sym.cli.main import main
 from testdata import refused_in_one_line
@@ -60,6 +61,164 @@ def test_a_history_of_schema_1_is_migrated_and_its_runs_read_as_full_calibration
         from pige_sym.verdict.checkup.reference import run_setup
 
         run_setup(runs[0])
+
+
+def _to_schema_1(db: Path) -> None:
+    """Make a history of this version one of schema version 1 (its check-ups gone, the check-up columns dropped)."""
+    import sqlite3
+
+    with sqlite3.connect(db) as conn:
+        conn.execute("DELETE FROM runs WHERE kind = 'checkup'")
+        for column in ("kind", "setup_json", "checkup_json", "chart_json"):
+            conn.execute(f"ALTER TABLE runs DROP COLUMN {column}")
+        conn.execute("DELETE FROM schema_version WHERE version = 2")
+    conn.close()
+
+
+def _schema(db: Path) -> tuple[list[int], list[str]]:
+    import sqlite3
+
+    with sqlite3.connect(f"file:{db}?mode=ro", uri=True) as conn:
+        versions = sorted(r[0] for r in conn.execute("SELECT version FROM schema_version"))
+        columns = [r[1] for r in conn.execute("PRAGMA table_info(runs)")]
+    conn.close()
+    return versions, columns
+
+
+def test_reading_a_schema_1_history_changes_nothing_and_a_check_up_migrates_it(machine: dict, tmp_path: Path,
+                                                                                capsys) -> None:
+    """Reading never migrates or changes the file (issue 43); writing migrates (issue 42's schema 2): history show,
+    fleet, plan --checkup and the check-up's own reading take a version-1 file as it is (its runs full calibrations,
+    their set-up read from their files); the check-up migrates it when it stores its run, and only then."""
+    import shutil
+
+    db = tmp_path / "v1.db"
+    shutil.copy(machine["db"], db)
+    _to_schema_1(db)
+    assert _schema(db)[0] == [1] and "kind" not in _schema(db)[1]
+    before = db.read_bytes()
+    for argv in (("history", "show", "DMU-1", "--db", db), ("history", "fleet", "--db", db),
+                 ("plan", "--checkup", "--machine-id", "DMU-1", "--db", db, "--json"),
+                 ("report", machine["full"], "--history", "DMU-1", "--db", db, "--out", tmp_path / "r",
+                  "--no-figures")):
+        code, _, err = _run(capsys, *argv)
+        assert code == 0, (argv, err)
+        assert db.read_bytes() == before, argv
+    path = checkup_file(machine["program"], TRUTH, 96, tmp_path / "c.csv")
+    code, _, err = _run(capsys, "checkup", tmp_path / "missing.csv", "--machine-id", "DMU-1", "--db", db)
+    assert code == 2 and db.read_bytes() == before  # refused before storing: nothing migrated
+    code, out, err = _run(capsys, "checkup", path, "--machine-id", "DMU-1", "--db", db, "--date",
+                          (T0 + timedelta(days=1)).isoformat(), "--json")
+    assert code in (0, 1), err
+    versions, columns = _schema(db)
+    assert versions == [1, 2] and {"kind", "setup_json", "checkup_json", "chart_json"} <= set(columns)
+    from pige_sym.verdict.history import connect, list_runs
+
+    runs = list_runs(connect(str(db), create=False), "DMU-1")
+    assert [r.kind for r in runs] == ["full", "checkup"] and runs[-1].id == json.loads(out)["run"]
+
+
+@pytest.mark.parametrize("path", ["sqlite3", "sqlalchemy"])
+def test_a_check_up_is_checked_before_it_is_stored(machine: dict, tmp_path: Path, capsys, monkeypatch,
+                                                    path: str) -> None:
+    """What the history would refuse to read back is never stored, a check-up too (issue 43's rule on issue 42's
+    writes), on both paths: an absurd fit is refused in one line before it is judged, and a check-up row with an
+    absurd estimate or a chart that is not one is refused by the store itself; the file is left as it was."""
+    import shutil
+    from types import SimpleNamespace
+
+    import pige_sym.identification.subset as subset
+    from pige_sym.errors import HistoryError
+    from pige_sym.verdict.checkup.routine import CheckupOptions, run_checkup
+    from pige_sym.verdict.history.sqlite_fast import SqliteHistory
+    from pige_sym.verdict.history.store import EngineHistory, connect
+
+    db = tmp_path / "h.db"
+    shutil.copy(machine["db"], db)
+    checkup = checkup_file(machine["program"], TRUTH, 97, tmp_path / "c.csv")
+    real = subset.identify_subset
+
+    def absurd(*args: object, **kwargs: object) -> object:
+        fit = real(*args, **kwargs)  # type: ignore[arg-type]
+        fit.values[0] = 1e308  # what a faulty fit could hand on
+        return fit
+
+    before = db.read_bytes()
+    when = (T0 + timedelta(days=600)).isoformat()
+    with monkeypatch.context() as patched:
+        patched.setattr(subset, "identify_subset", absurd)
+        if path == "sqlite3":
+            code, _, err = _run(capsys, "checkup", checkup, "--machine-id", "DMU-1", "--db", db, "--date", when)
+            refused_in_one_line(code, err, "c.csv: not added to the history", "EY0A = 1e+308 um is beyond ±10000")
+        else:
+            with pytest.raises(HistoryError, match="not added to the history.*EY0A = 1e\\+308 um is beyond"):
+                run_checkup(EngineHistory(connect(str(db), create=False)), checkup, "DMU-1", CheckupOptions(date=when))
+    assert db.read_bytes() == before
+    history = SqliteHistory(db) if path == "sqlite3" else EngineHistory(connect(str(db), create=False))
+    fit = SimpleNamespace(parameters=FREE, units={n: "um" for n in FREE}, values=np.array([1e308, 0, 0, 0]),
+                          std=np.ones(4), covariance=np.eye(4), dof=3, rms_um=0.3)
+    chart = {"signature": "s", "after_correction": False, "in_control": {}, "outside": {}, "flagged": {},
+             "to_enter": None, "tolerance": {}}
+    store = (checkup, "DMU-1", MACHINE, (when, "--date"))
+    with pytest.raises(HistoryError, match="c.csv: not added to the history.*EY0A = 1e\\+308 um"):
+        history.add_checkup(*store, fit, {}, "ok", {}, chart)
+    fit.values[0] = 1.0
+    with pytest.raises(HistoryError, match="chart_json: in_control: expected flags, got a list"):
+        history.add_checkup(*store, fit, {}, "ok", {}, chart | {"in_control": [True]})
+    assert db.read_bytes() == before
+
+
+def test_a_damaged_check_up_is_refused_where_it_is_read(machine: dict, tmp_path: Path, capsys) -> None:
+    """A check-up's chart (what later check-ups read) is checked with every run whenever the history is opened, by
+    pige checkup as by history show; its findings (long, what show, the report and the fleet print) where they are
+    read.  Both refused in one line naming the run and the column; the file is left as it was."""
+    import shutil
+    import sqlite3
+
+    good = tmp_path / "good.db"
+    shutil.copy(machine["db"], good)
+    first = checkup_file(machine["program"], TRUTH, 98, tmp_path / "c1.csv")
+    code, out, err = _run(capsys, "checkup", first, "--machine-id", "DMU-1", "--db", good, "--date",
+                          (T0 + timedelta(days=700)).isoformat(), "--json")
+    assert code in (0, 1), err
+    run = json.loads(out)["run"]
+    second = checkup_file(machine["program"], TRUTH, 99, tmp_path / "c2.csv")
+    show = ("history", "show", "DMU-1")
+    cases = {"chart_json": ('{"signature": 1}', "chart_json: no item 'after_correction'",
+                            [("checkup", second, "--machine-id", "DMU-1"), show, ("history", "fleet"),
+                             ("plan", "--checkup", "--machine-id", "DMU-1")]),
+             "checkup_json": ('{"items": [', "checkup_json: not valid JSON",
+                              [show, ("history", "fleet"), ("report", machine["full"], "--history", "DMU-1", "--out",
+                                                            tmp_path / "r", "--no-figures")])}
+    for column, (text, said, commands) in cases.items():
+        db = tmp_path / f"{column}.db"
+        shutil.copy(good, db)
+        with sqlite3.connect(db) as conn:
+            conn.execute(f"UPDATE runs SET {column} = ? WHERE id = ?", (text, run))
+        conn.close()
+        before = db.read_bytes()
+        for argv in commands:
+            code, _, err = _run(capsys, *argv, "--db", db)
+            refused_in_one_line(code, err, f"history database {db} is damaged (run {run}, {said}",
+                                "restore the file from a backup")
+            assert db.read_bytes() == before, argv
+    assert not (tmp_path / "r").exists()
+
+
+def test_a_check_up_on_postgresql_reads_read_only_and_stores_its_run(tmp_path: Path, capsys, request) -> None:
+    """On PostgreSQL a check-up reads through a read-only connection (issue 43) and stores its run through one that
+    writes (the SQLAlchemy path: no sqlite3 file to read)."""
+    from pige_sym.verdict.history import connect, list_runs
+
+    url = request.getfixturevalue("postgres_url")  # skips when no server can start
+    full_calibration(tmp_path, url, "PG-1", TRUTH, tolerances=TOL)  # type: ignore[arg-type]
+    program = checkup_program(tmp_path, url, "PG-1")  # type: ignore[arg-type]
+    path = checkup_file(program, TRUTH, 5, tmp_path / "c.csv")
+    code, out, err = _run(capsys, "checkup", path, "--machine-id", "PG-1", "--db", url, "--date",
+                          (T0 + timedelta(days=1)).isoformat(), "--json")
+    assert code in (0, 1), err
+    runs = list_runs(connect(url, create=False), "PG-1")
+    assert [r.kind for r in runs] == ["full", "checkup"] and runs[-1].id == json.loads(out)["run"]
 
 
 def test_the_plan_takes_the_fewest_poses_inside_the_calibrated_range(machine: dict, capsys) -> None:

@@ -164,8 +164,14 @@ def _stock_like(tmp_path: Path, code: str) -> Path:
     return ini
 
 
+def _with_pivots(machine: Machine, pivots: dict[str, tuple[float, float, float]]) -> Machine:
+    """``machine`` with other nominal pivots (those of a configuration)."""
+    return Machine(machine.code, machine.values, {a: np.array(v) for a, v in pivots.items()}, machine.ball,
+                   machine.tool, machine.senses)
+
+
 def test_the_stock_configuration_gets_sets_lines_and_the_wrong_kinematics_is_refused(tmp_path) -> None:
-    machine = random_machine(AC, 9)
+    machine = _with_pivots(random_machine(AC, 9), {"A": (4.0, 20.0, 10.0), "C": (0.0, 0.0, -3.0)})  # the INI's lines
     ini = _stock_like(tmp_path, AC)
     config = read_current(str(ini))
     assert config.module == "xyzac-trt-kins" and config.nets["y-offset"] == ":y-offset"
@@ -182,6 +188,7 @@ def test_the_stock_configuration_gets_sets_lines_and_the_wrong_kinematics_is_ref
     bare = tmp_path / "bare.hal"
     bare.write_text("loadrt xyzac-trt-kins\nnet :zo xyzac-trt-kins.z-offset other.pin\n"
                     "setp xyzac-trt-kins.y-offset 3\n")
+    machine = _with_pivots(machine, {"A": (0.0, 3.0, 10.0), "C": (0.0, 0.0, 0.0)})  # bare.hal's lines
     text = format_controller(machine.params(), "linuxcnc", current=read_current(str(bare)))
     assert "sets :zo" not in text and "connected to signal :zo, which" in text
     assert f"setp xyzac-trt-kins.y-offset {3 + deltas['y-offset']:.7f}" in text
@@ -196,8 +203,9 @@ def test_the_stock_configuration_gets_sets_lines_and_the_wrong_kinematics_is_ref
 def test_cli_reads_the_shipped_configuration(code: str, tmp_path, capsys) -> None:
     params = tmp_path / "p.json"
     params.write_text('{"machine": "%s", "pige": {"EX0C": 4, "EY0C": 2, "EA0C": 0, "EB0C": 0, "%s": 5, "EZ0%s": -3, '
-                      '"%s": 0, "%s": 0}}' % ((code, "EY0A", "A", "EB0A", "EC0A") if code == AC else
-                                             (code, "EX0B", "B", "EA0B", "EC0B")))
+                      '"%s": 0, "%s": 0}, "pivots_mm": {"C": [0, 0, 0], "%s": %s}}'
+                      % ((code, "EY0A", "A", "EB0A", "EC0A", "A", "[0, 20, 10]") if code == AC else
+                         (code, "EX0B", "B", "EA0B", "EC0B", "B", "[-20, 0, -15]")))  # the stock INI's lines
     ini = STOCK / ("xyzac-trt.ini" if code == AC else "xyzbc-trt.ini")
     assert main(["compensate", "--params", str(params), "--controller", "linuxcnc", "--current", str(ini)]) == 0
     out = capsys.readouterr().out

@@ -1,13 +1,20 @@
 """Every shell block of every docs/*.md runs as pasted.
 
 Each page's ```` ```sh ```` (or ```` ```bash ````) blocks are taken from the page itself, in order, and run by
-bash with ``set -e`` as one script (one shell, as a reader pasting them in turn), in a fresh folder laid out
-like the checkout's root: links to ``.venv``, ``examples`` and ``tests``, and ``.venv/bin`` on ``PATH``
-(the pages say: from the checkout's root with ``pige`` on your PATH). Every command must succeed.
+bash as one script (one shell, as a reader pasting them in turn), in a fresh folder laid out like the
+checkout's root: links to ``.venv``, ``examples`` and ``tests``, and ``.venv/bin`` on ``PATH`` (the pages say:
+from the checkout's root with ``pige`` on your PATH). Every command must succeed: the script
+(:func:`testdata.strict_script`) checks the status of every top-level command, so ``a && b`` fails when ``a``
+fails (``set -e`` alone lets it pass), and a failure names the page and line.
 
 A block that cannot run here (it needs a serial port, a controller, another terminal) is marked on the
 line before its fence with ``<!-- not-run: reason -->``; the reason is required. Pages added later are
 covered without touching this file. Plain ```` ``` ```` fences are output or file contents, not run.
+
+Output a page quotes is checked against the run: a plain fence right after a run shell block quotes that
+block's output, and a plain fence whose first line is ``$ command`` quotes that command, run in the page's
+shell at that place. Every number the quote shows must be in what the run printed (a quote may leave lines
+out with ``…``, not change a number).
 """
 
 from __future__ import annotations
@@ -20,6 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+
+from testdata import strict_script
 
 ROOT = Path(__file__).resolve().parents[1]
 NOT_RUN = re.compile(r"^<!--\s*not-run:\s*(\S.*?)\s*-->$")
@@ -52,19 +61,67 @@ def shell_blocks(text: str) -> list[Block]:
     return blocks
 
 
+@dataclass(frozen=True)
+class Quote:
+    """Output a page quotes: its first line, text, and what printed it (``command``: its ``$`` line, run at
+    this place; else ``block``: the line of the shell block just above)."""
+
+    line: int
+    text: str
+    command: str | None
+    block: int | None
+
+
+def quotes(text: str) -> list[Quote]:
+    """The plain fences of a page that quote output (module docstring), in order."""
+    lines = text.splitlines()
+    out: list[Quote] = []
+    i, last_run = 0, None  # last_run: (fence end, first line) of the shell block just closed, when it runs
+    while i < len(lines):
+        if lines[i].startswith("```"):
+            end = next(j for j in range(i + 1, len(lines)) if lines[j].startswith("```"))
+            body = lines[i + 1:end]
+            right_after = last_run is not None and not any(x.strip() for x in lines[last_run[0] + 1:i])
+            if lines[i].strip() == "```" and body and body[0].startswith("$ "):
+                out.append(Quote(i + 2, "\n".join(body[1:]), body[0][2:], None))
+            elif lines[i].strip() == "```" and right_after and last_run is not None:
+                out.append(Quote(i + 2, "\n".join(body), None, last_run[1]))
+            is_run = SHELL_FENCE.match(lines[i]) and not NOT_RUN.match(
+                next((lines[j].strip() for j in range(i - 1, -1, -1) if lines[j].strip()), ""))
+            last_run = (end, i + 2) if is_run else None
+            i = end
+        i += 1
+    return out
+
+
+NUMBER = re.compile(r"(?<![\w.])[-+]?\d+(?:\.\d+)?(?![\w.])")
+
+
+def missing_numbers(quote: str, printed: str) -> list[str]:
+    """The numbers of ``quote`` that ``printed`` does not contain (as whole numbers, not digits of others)."""
+    seen = set(NUMBER.findall(printed))
+    return [n for n in NUMBER.findall(quote) if n not in seen]
+
+
+MARK = "@@pige-docs {}@@"
+
+
 def pages() -> list[Path]:
     """Every docs page that has a shell block."""
     return [p for p in sorted((ROOT / "docs").glob("*.md")) if shell_blocks(p.read_text(encoding="utf-8"))]
 
 
 def run_page(page: Path, folder: Path) -> subprocess.CompletedProcess[str]:
-    """Run a page's runnable blocks in ``folder`` (laid out like the checkout's root)."""
+    """Run a page's runnable blocks and its quoted ``$`` commands in page order in ``folder`` (laid out like the
+    checkout's root); each one's output starts with a line :data:`MARK` of its first line number."""
     venv = Path(sys.executable).parent.parent
     for name, target in ((".venv", venv), ("examples", ROOT / "examples"), ("tests", ROOT / "tests")):
         (folder / name).symlink_to(target)
-    blocks = [b for b in shell_blocks(page.read_text(encoding="utf-8")) if b.not_run is None]
-    script = "set -e\nexport PATH=\"$PWD/.venv/bin:$PATH\"\n" + "\n".join(
-        f"# {page.name} line {b.line}\n{b.text}" for b in blocks) + "\n"
+    text = page.read_text(encoding="utf-8")
+    runs = sorted([(b.line, b.text) for b in shell_blocks(text) if b.not_run is None]
+                  + [(q.line, q.command) for q in quotes(text) if q.command is not None])
+    script = "export PATH=\"$PWD/.venv/bin:$PATH\"\n" + strict_script(
+        [x for line, run in runs for x in ((page.name, line, f"echo '{MARK.format(line)}'"), (page.name, line, run))])
     env = {k: v for k, v in os.environ.items() if k not in {"PIGE_HISTORY_DB", "PIGE_KERNEL_DIR"}}
     env["PIGE_HISTORY_DB"] = str(folder / "history-default.db")  # never the user's own history
     env["PIGE_KERNEL_DIR"] = str(folder / "kernels")
@@ -77,6 +134,32 @@ def test_blocks_and_markers_are_found() -> None:
     blocks = shell_blocks(text)
     assert [(b.line, b.text, b.not_run) for b in blocks] == [(3, "echo one", None),
                                                              (11, "echo two", "needs a serial port")]
+
+
+def _run_script(text: str, tmp_path: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(["bash", "-c", strict_script([("page.md", 10, text)])], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=60)
+
+
+@pytest.mark.parametrize(("text", "line"), [
+    ("false && echo never\necho after", 10),
+    ("echo one; true\nfor i in 1 2; do\n  test $i = 1 && false\ndone\necho after", 11),
+    ("false | cat\necho after", 10),
+    ("cat > f <<'EOF'\nline && not run\nEOF\nfalse\necho after", 13),
+    ("echo a \\\n  && false\necho after", 10)])
+def test_a_failing_command_fails_the_page_even_in_an_and_list(text: str, line: int, tmp_path: Path) -> None:
+    done = _run_script(text, tmp_path)
+    assert done.returncode != 0 and "after" not in done.stdout, done.stdout
+    assert f"page.md line {line}: " in done.stderr, done.stderr  # the page and the line of the command
+
+
+def test_a_handled_failure_and_a_here_document_pass(tmp_path: Path) -> None:
+    text = ("false || echo handled\ncat > f.txt <<'EOF'\na && b\n$(not run)\nEOF\nfor s in x y; do\n"
+            "  echo $s\ndone\necho \"multi\nline\" && echo after")
+    done = _run_script(text, tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["handled", "x", "y", "multi", "line", "after"]
+    assert (tmp_path / "f.txt").read_text() == "a && b\n$(not run)\n"
 
 
 def test_a_not_run_marker_gives_its_reason_and_most_blocks_run() -> None:
@@ -101,3 +184,20 @@ def test_every_shell_block_of_the_page_runs_as_pasted(page: Path, tmp_path: Path
         pytest.skip("needs the pige console script (make venv)")
     done = run_page(page, tmp_path)
     assert done.returncode == 0, done.stdout[-2000:] + "\n--- stderr ---\n" + done.stderr[-3000:]
+    printed = dict(zip(map(int, re.findall(MARK.format(r"(\d+)"), done.stdout)),
+                       re.split(MARK.format(r"\d+"), done.stdout)[1:], strict=True))
+    for q in quotes(page.read_text(encoding="utf-8")):
+        run = printed[q.line if q.command is not None else q.block]
+        assert not missing_numbers(q.text, run), (f"{page.name} line {q.line} quotes numbers the run does not print: "
+                                                  f"{missing_numbers(q.text, run)}\n--- printed ---\n{run[-3000:]}")
+
+
+def test_quotes_are_found_and_their_numbers_checked() -> None:
+    text = ("```sh\necho 1.5\n```\n```\nvalue 1.5\n```\n\nprose\n```\nnot a quote 9\n```\n"
+            "<!-- not-run: needs a serial port here -->\n```sh\necho 2\n```\n```\nnot run 2\n```\n"
+            "```\n$ pige identify run.csv --projection x\nrank 4/8  EA0C - 0.193·EB0C\n```\n")
+    assert [(q.line, q.text, q.command, q.block) for q in quotes(text)] == [
+        (5, "value 1.5", None, 2), (20, "rank 4/8  EA0C - 0.193·EB0C", "pige identify run.csv --projection x", None)]
+    assert missing_numbers("rank 4/8  EA0C - 0.193·EB0C, RMS 1.029 um", "rank 4/8 EA0C - 0.193·EB0C RMS 1.080") == \
+        ["1.029"]
+    assert missing_numbers("held-out 1.08 um", "held-out 11.08 um, 1.080") == ["1.08"]  # whole numbers only

@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 import pytest
+from test_history import postgres_url  # noqa: F401 - the throw-away PostgreSQL server fixture
 
 from pige_sym.cli.main import main
 from pige_sym.errors import FileFormatError
@@ -223,3 +224,230 @@ def test_an_interrupt_while_the_report_is_written_leaves_nothing_partial(inputs,
         assert all(p.read_bytes().endswith(PNG_END) for p in out.rglob("*.png"))
     else:
         assert proc.returncode == 130 and "interrupted" in err, (proc.returncode, err)
+
+
+# ----------------------------------------------------------------------- issue 43: links, interrupts, temporary files
+
+
+@pytest.fixture
+def default_sigint():
+    """SIGINT raises KeyboardInterrupt in this test, as in a terminal (a test runner may have set another handler)."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
+@pytest.mark.skipif(not hasattr(os, "symlink"), reason="no symbolic links")
+def test_a_dangling_link_as_an_output_folder_is_refused_and_never_followed(inputs, tmp_path, capsys) -> None:
+    """Issue 43, 7: gen --out, gen --target linuxcnc --out, diagnose --plots (and report, demo) ended in
+    FileExistsError; now one line naming the link and its target, and the target is never created."""
+    target = tmp_path / "nowhere"
+    link = tmp_path / "link"
+    link.symlink_to(target)
+    ac = "wC'A'bXYZ(C1)t"
+    for argv in (["gen", ac, "--out", str(link)], ["gen", "--target", "linuxcnc", ac, "--out", str(link)],
+                 ["gen", "--target", "linuxcnc", ac, "--out", str(link / "sub")],
+                 ["diagnose", str(inputs / "run.csv"), "--plots", str(link)],
+                 ["report", str(inputs / "run.csv"), "--out", str(link), "--no-figures"],
+                 ["demo", "--out", str(link / "demo")]):
+        refused(*run(capsys, *argv), f"{link} is a symbolic link to {target}, which does not exist")
+        assert link.is_symlink() and not target.exists(), argv
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link"]
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_an_interrupt_as_the_temporary_file_is_made_leaves_none(tmp_path, monkeypatch, default_sigint) -> None:
+    """Issue 43, 12: SIGINT right after the temporary file was created, before the writer held its name, left a
+    0-byte ``.NAME.*.tmp``; the interrupt now waits until the clean-up knows the file."""
+    import tempfile
+
+    from pige_sym.files import atomic_write_text
+
+    real = tempfile.mkstemp
+
+    def made_then_interrupted(*args: object, **kwargs: object) -> tuple[int, str]:
+        made = real(*args, **kwargs)  # type: ignore[call-overload]
+        os.kill(os.getpid(), signal.SIGINT)  # the handler runs before this function returns
+        time.sleep(0.01)
+        return made
+
+    monkeypatch.setattr(tempfile, "mkstemp", made_then_interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write_text(tmp_path / "pige_xyzac_trt.comp", "component pige_xyzac_trt;\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_an_interrupt_lost_in_a_finaliser_still_ends_the_report_with_130(inputs, tmp_path, monkeypatch, capsys,
+                                                                        default_sigint) -> None:
+    """Issue 43, 11: Python drops a KeyboardInterrupt raised in a finaliser ("Exception ignored ... KeyboardInterrupt")
+    and goes on: the report was written and the run ended with status 0.  Now status 130 and no report."""
+    import pige_sym.report.html as html
+
+    lost: list[BaseException | None] = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: lost.append(u.exc_value))
+
+    class Finaliser:
+        def __del__(self) -> None:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.01)
+
+    real = html.render_html
+
+    def render_and_lose_an_interrupt(*args: object, **kwargs: object) -> str:
+        text = real(*args, **kwargs)  # type: ignore[arg-type]
+        Finaliser()  # dropped at once: the SIGINT lands in its __del__
+        return text
+
+    monkeypatch.setattr(html, "render_html", render_and_lose_an_interrupt)
+    out = tmp_path / "rep"
+    code, err = run(capsys, "report", str(inputs / "run.csv"), "--out", str(out), "--no-figures")
+    assert [type(e) for e in lost] == [KeyboardInterrupt]  # the interrupt was indeed swallowed on its way
+    assert code == 130 and err.strip().endswith("interrupted"), (code, err)
+    assert not out.exists() and [p.name for p in tmp_path.iterdir()] == []
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_an_interrupt_while_the_commands_are_loaded_ends_with_130(monkeypatch, capsys, default_sigint) -> None:
+    """Building the parser imports every command's module (seconds on a loaded machine): Ctrl-C there gave a
+    traceback, or NumPy's "PyCapsule_Import could not import module" and status 1."""
+    import importlib
+
+    cli = importlib.import_module("pige_sym.cli.main")  # the module (pige_sym.cli.main is also the function)
+
+    def import_broken_by_the_interrupt() -> None:
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.01)
+        except KeyboardInterrupt:  # what NumPy's C import does with it
+            raise ImportError('PyCapsule_Import could not import module "datetime"') from None
+
+    monkeypatch.setattr(cli, "build_parser", import_broken_by_the_interrupt)
+    assert cli.main(["gen", "--target", "linuxcnc", "wC'A'bXYZ(C1)t"]) == 130
+    assert capsys.readouterr().err == "pige gen: interrupted\n"
+
+
+# ------------------------------------------------------------------------- issue 43, 6: a damaged history database
+
+
+def _history(folder: Path, inputs: Path, db: str) -> None:
+    """Two runs of machine M in ``db`` (the second a simulation with another seed)."""
+    second = folder / "run2.csv"
+    if not second.exists():
+        assert main(["simulate", "--out", str(second), "--seed", "2", "--points", "12"]) == 0
+    for f in (inputs / "run.csv", second):
+        assert main(["history", "add", str(f), "--machine-id", "M", "--db", db, "--method", "gauss-newton"]) == 0
+
+
+def _last_pages(path: Path) -> None:
+    import random
+
+    size = path.stat().st_size
+    with open(path, "r+b") as fh:
+        fh.seek(size - 8192)
+        fh.write(random.Random(43).randbytes(8192))
+
+
+DAMAGES = {  # what damages the file, what the refusal says is damaged
+    "random bytes in the last pages": (_last_pages, "is damaged ("),
+    "runs dropped": ("DROP TABLE runs", "is damaged (the table runs is missing)"),
+    "values_json": ("UPDATE runs SET values_json = '[1.5, 2,' WHERE id = 1",
+                    "is damaged (run 1, values_json: not valid JSON"),
+    "covariance size": ("UPDATE runs SET covariance_json = '[[1, 0], [0, 1]]' WHERE id = 2",
+                        "is damaged (run 2, covariance_json: expected a 8 x 8 matrix"),
+    "dof": ("UPDATE runs SET dof = 'abc' WHERE id = 1",
+            "is damaged (run 1, dof: expected a whole number >= 0, got the text 'abc')"),
+}
+
+
+@pytest.fixture(scope="module")
+def history_file(inputs, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("history")
+    _history(d, inputs, str(d / "h.sqlite"))
+    return d / "h.sqlite"
+
+
+@pytest.mark.parametrize("damage", sorted(DAMAGES))
+def test_a_damaged_history_is_refused_in_one_line_and_left_as_it_was(inputs, history_file, tmp_path, capsys,
+                                                                     damage) -> None:
+    """Issue 43, 6: ``history show`` ended in a traceback.  Now every command that opens the history (show, add,
+    report --history) refuses in one line naming the file, what is damaged and how to recover, and the file's
+    bytes stay as they were (reading opens it read-only; nothing is migrated into a damaged file)."""
+    import sqlite3
+
+    db = tmp_path / "h.sqlite"
+    shutil.copy(history_file, db)
+    how, said = DAMAGES[damage]
+    if callable(how):
+        how(db)
+    else:
+        with sqlite3.connect(db) as conn:
+            conn.execute(how)
+        conn.close()
+    before = db.read_bytes()
+    said_by_show = None
+    for argv in (["history", "show", "M", "--db", str(db)], ["history", "show", "M", "--db", str(db), "--json"],
+                 ["history", "add", str(inputs / "run.csv"), "--machine-id", "N", "--db", str(db)],
+                 ["report", str(inputs / "run.csv"), "--history", "M", "--db", str(db), "--out", str(tmp_path / "r"),
+                  "--no-figures"],
+                 # the check-up's commands (issue 42): pige checkup reads the file with sqlite3, the same checks
+                 ["checkup", str(inputs / "run.csv"), "--machine-id", "M", "--db", str(db)],
+                 ["history", "fleet", "--db", str(db)], ["plan", "--checkup", "--machine-id", "M", "--db", str(db)],
+                 ["program", "--checkup", "--machine-id", "M", "--db", str(db), "--dialect", "linuxcnc", "--out",
+                  str(tmp_path / "c.ngc")]):
+        code, err = run(capsys, *argv)
+        refused(code, err, f"history database {db} {said}", "restore the file from a backup",
+                "pige has changed nothing in it")
+        said_by_show = said_by_show or err.split(": ", 1)[1]
+        assert err.split(": ", 1)[1] == said_by_show, argv  # every command, the same words
+        assert db.read_bytes() == before, argv
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["h.sqlite"]  # no journal, no report, no program
+
+
+def test_a_damaged_postgresql_history_is_refused_by_the_same_reader(inputs, tmp_path, capsys, request) -> None:
+    """The same checks on PostgreSQL (no page check there: the server keeps its pages); the rows are unchanged."""
+    import sqlalchemy as sa
+
+    url = request.getfixturevalue("postgres_url")  # skips when no server can start
+
+    engine = sa.create_engine(url.replace("postgresql://", "postgresql+psycopg://"))
+    cases = {k: v for k, v in DAMAGES.items() if not callable(v[0])}
+    cases["dof"] = ("ALTER TABLE runs ALTER COLUMN dof TYPE text; UPDATE runs SET dof = 'abc'",
+                    DAMAGES["dof"][1])
+    for damage, (how, said) in cases.items():
+        with engine.begin() as conn:
+            for table in ("runs", "machines", "schema_version"):
+                conn.execute(sa.text(f"DROP TABLE IF EXISTS {table} CASCADE"))
+        _history(tmp_path, inputs, url)
+        with engine.begin() as conn:
+            for statement in how.split(";"):
+                conn.execute(sa.text(statement))
+
+        def dump() -> list[object]:
+            with engine.connect() as conn:
+                names = sorted(sa.inspect(conn).get_table_names())
+                return [(t, sorted(map(tuple, conn.execute(sa.text(f"SELECT * FROM {t}")).all()), key=repr))
+                        for t in names]
+
+        before = dump()
+        for argv in (["history", "show", "M", "--db", url],
+                     ["history", "add", str(inputs / "run.csv"), "--machine-id", "N", "--db", url],
+                     ["checkup", str(inputs / "run.csv"), "--machine-id", "M", "--db", url]):
+            code, err = run(capsys, *argv)
+            refused(code, err, said, "restore the database from a backup")
+            assert dump() == before, (damage, argv)
+    engine.dispose()
+
+
+@pytest.mark.parametrize("umask, mode", [(0o002, 0o664), (0o022, 0o644), (0o077, 0o600)])
+def test_a_new_history_file_gets_the_mode_of_every_pige_output(inputs, tmp_path, umask, mode) -> None:
+    """Not a defect in issue 43, decided: SQLite made the file 0644 whatever the umask (0664 was asked for under
+    umask 002, so a shop's group could add runs); it is now created as every pige output is, 0666 less the umask."""
+    db = tmp_path / "sub" / "h.sqlite"
+    old = os.umask(umask)
+    try:
+        assert main(["history", "add", str(inputs / "run.csv"), "--machine-id", "M", "--db", str(db), "--method",
+                     "gauss-newton"]) == 0
+    finally:
+        os.umask(old)
+    assert db.stat().st_mode & 0o777 == mode

@@ -24,6 +24,7 @@ from pige_sym.errors import IdentificationError
 from pige_sym.measurements.measurement import MEASUREMENT_FORMATS
 from pige_sym.measurements.rtest import read_measurement
 from pige_sym.measurements.schema import MAX_PIGE
+from pige_sym.options import strict_float
 from testdata import refused_in_one_line
 
 S = ["--sphere-radius", "12.7", "--stylus-radius", "1.5"]
@@ -62,7 +63,10 @@ def _import(capsys, log: Path, out: Path, *extra: str) -> tuple[int, str, str]:
     (["--sphere", "100,20,58.5"], "from 100, 20, 58.5 where --sphere puts it"),
     (["--units", "inch"], "--units"),
     (["--sphere-radius", "25", "--stylus-radius", "1.5"], "check --sphere-radius and --stylus-radius"),
-    (["--radius", "14.3"], "--radius 14.3 mm, but the contacts lie on a sphere of 14.19"),
+    (["--radius", "14.3"], "--radius 14.3 mm, but the contacts lie on a sphere of 14.2000 mm (-100.0 um)"),
+    # issue 43, 5: a radius far from the data's ended in LinAlgError (the fit with it came before the check)
+    (["--radius", "25"], "--radius 25 mm, but the contacts lie on a sphere of 14.2000 mm"),
+    (["--radius", "1e6"], "--radius 1e+06 mm, but the contacts lie on a sphere of 14.2000 mm"),
     (["--stylus-offset", "1e6"], "--stylus-offset 1e+06 mm"),
 ])
 def test_a_wrong_set_up_is_refused_at_the_import_naming_the_flag(probe_log, tmp_path, capsys, extra, said) -> None:
@@ -90,6 +94,59 @@ def test_damaged_logs_are_refused_with_the_line(probe_log, tmp_path, capsys) -> 
         log = tmp_path / f"{name.replace(' ', '_')}.txt"
         log.write_text("".join(text))
         refused(*_import(capsys, log, tmp_path / "x.csv")[::2], said)
+
+
+LOG_LINES = {  # the second contact of a pose as each controller's DPRNT/WRITE/FN 16 writes it, X made absurd
+    "siemens": "PIGE P0 K1 X{x} Y20.000000 Z63.675200 A0.000000 C0.000000",
+    "fanuc": "PIGE P   0 K 1 X {x}Y  20.0000Z  63.6752 A  0.0000 C  0.0000",
+    "heidenhain": "PIGE P    0 K 1 X +{x} Y  +20.0000 Z  +63.6752 A   +0.0000 C   +0.0000",
+}
+
+
+@pytest.mark.parametrize("fmt", sorted(LOG_LINES))
+@pytest.mark.parametrize("x, said", [("1e300", "X: 1e+300 is beyond ±100000"), ("1E300", "X: 1e+300 is beyond"),
+                                     ("1.2.3", "'.3' is not a field")])
+def test_an_absurd_number_in_a_controller_log_is_named_with_its_field(fmt, x, said) -> None:
+    """Issue 43, 16: ``X1e300`` was refused with "fields P K X Y Z A C; a contact line has P K X Y Z A C": the
+    found and expected lists the same (the exponent was left over, unnamed)."""
+    from pige_sym.errors import FileFormatError
+    from pige_sym.measurements.probe_log import parse_probe_log
+
+    first = LOG_LINES[fmt].replace("K1", "K0").replace("K 1", "K 0").format(x="113.7159")
+    raw = f"{first}\n{LOG_LINES[fmt].format(x=x)}\n".encode()
+    with pytest.raises(FileFormatError) as refusal:
+        parse_probe_log("log.txt", raw, fmt, ("A", "C"))
+    assert str(refusal.value).startswith(f"log.txt:2: {said}"), refusal.value
+
+
+@FEW
+@given(fmt=st.sampled_from(sorted(LOG_LINES)), at=st.integers(0, 80),
+       junk=st.text(alphabet="PKXYZACQe+-. 0123456789n", min_size=1, max_size=6))
+def test_a_field_refusal_never_lists_the_expected_fields_as_found(fmt, at, junk) -> None:
+    from pige_sym.errors import FileFormatError
+    from pige_sym.measurements.probe_log import parse_probe_log
+
+    line = LOG_LINES[fmt].format(x="113.7159")
+    at = min(at, len(line))
+    raw = f"{line[:at]}{junk}{line[at:]}\n".encode()
+    try:
+        parse_probe_log("log.txt", raw, fmt, ("A", "C"))
+    except FileFormatError as exc:
+        assert "fields P K X Y Z A C;" not in str(exc) and "\n" not in str(exc), exc
+
+
+@pytest.mark.parametrize("x", ["99999.000000", "1000.000000", "200.000000", "-110.000000"])
+def test_one_absurd_contact_is_named_by_its_line_not_called_a_degenerate_pattern(probe_log, tmp_path, capsys,
+                                                                                 x) -> None:
+    """Issue 43, 17: one mistyped X in a pose of five contacts was refused as "pose 1: degenerate contact pattern
+    (normals spread 0.000 ...); probe it from more directions"."""
+    lines = probe_log.read_text().splitlines(keepends=True)
+    lines[6] = x + lines[6][lines[6].index(" "):]
+    log = tmp_path / "log.txt"
+    log.write_text("".join(lines))
+    code, _, err = _import(capsys, log, tmp_path / "p.csv")
+    refused(code, err, "log.txt:7: this contact lies", "of its pose's contacts (lines 6-10)", "re-probe the pose")
+    assert "degenerate" not in err and not (tmp_path / "p.csv").exists()
 
 
 def test_a_repeated_pose_may_share_a_contact_with_the_first(probe_log, tmp_path, capsys) -> None:
@@ -150,7 +207,7 @@ def test_import_probe_never_writes_a_file_identify_refuses(probe_log, tmp_path_f
                 lines[i] = lines[i][:k] + str(d) + lines[i][k + 1:]
         elif kind == "junk":
             lines.insert(i, "G38.2 X1 Y2" if d % 2 else "1 2 3")
-        elif kind == "scale":
+        elif kind == "scale" and all(strict_float(v) is not None for v in lines[i].split(" ")):  # not junk
             lines[i] = " ".join(f"{float(v) * (1 + d):f}" for v in lines[i].split(" "))
     d = tmp_path_factory.mktemp("dmg")
     log, out = d / "log.txt", d / "p.csv"
@@ -242,3 +299,178 @@ def test_what_the_reader_would_refuse_is_never_written(probe_log, tmp_path) -> N
     with pytest.raises(InputError, match="not written: pige's reader refuses .* not positive definite"):
         write_measurement(m, tmp_path / "q.csv", verify=verify_written(tmp_path / "q.csv", m))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.csv"]
+
+
+# ------------------------------------------------------------------- issue 43: a head's probing program and its header
+
+
+FORK = "wbXYZCA(C1)t"
+HEAD_SET_UP = ["--machine", FORK, "--sphere", "100,20,60", *S, "--tool", "0,0,-160"]
+CONTROLLER = ["--rtcp-off", "M429", "--rtcp-on", "M428", "--stylus-tool", "99", "--stylus-length", "120"]
+
+
+@pytest.fixture(scope="module")
+def head_probe(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A fork head's probing program (LinuxCNC, tool 0, 0, -160 mm) and the log of a simulated run of it."""
+    d = tmp_path_factory.mktemp("head")
+    prog, log = d / "head.ngc", d / "head.txt"
+    assert main(["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *HEAD_SET_UP, *CONTROLLER,
+                 "--trajectory", "cone-frustum", "--out", str(prog)]) == 0
+    assert main(["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--program", str(prog),
+                 *HEAD_SET_UP, *CONTROLLER, "--seed", "4", "--out", str(log)]) == 0
+    return prog, log
+
+
+@pytest.mark.parametrize("item, value, said", [
+    ("tool_mm", "0, 0, 1e300", "1e300 mm is not physical"),
+    ("tool_mm", "0, 0, nan", "'nan' is not a finite number"),
+    ("sphere_mm", "100, inf, 60", "'inf' is not a finite number"),
+    ("sphere_radius_mm", "NaN", "'NaN' is not a finite number"),
+    ("stylus_radius_mm", "-1.5", "-1.5 mm must be positive"),
+    ("pivot_A_mm", "0, 0, 1e6", "1e6 mm is not physical"),
+])
+def test_a_damaged_program_header_is_refused_with_its_line_and_item(head_probe, tmp_path, capsys, item, value,
+                                                                    said) -> None:
+    """Issue 43, 8 and 20: a header tool_mm of 1e300 ended import-probe in a traceback, a NaN was blamed on the log
+    ("log:1: pose 0: a contact is not a finite point").  Every header number is now checked where it is read."""
+    prog, log = head_probe
+    lines = prog.read_text().splitlines(keepends=True)
+    at = next(i for i, ln in enumerate(lines) if ln.startswith(f"(pige {item}:"))
+    lines[at] = f"(pige {item}: {value})\n"
+    bad = tmp_path / "bad.ngc"
+    bad.write_text("".join(lines))
+    for argv in (["import-probe", str(log), "--format", "linuxcnc", "--program", str(bad), "--out",
+                  str(tmp_path / "p.csv")],
+                 ["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--program", str(bad), "--out",
+                  str(tmp_path / "s.txt")]):
+        code, _, err = run(capsys, *argv)
+        refused(code, err, f"bad.ngc:{at + 1}: header item pige {item}: {said}", "write the program again")
+        assert log.name not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.ngc"]
+
+
+def test_simulate_runs_a_head_program_from_its_header(head_probe, tmp_path, capsys) -> None:
+    """Issue 43, 13: ``simulate --program`` without the set-up options refused every head program ("the program
+    states tool_mm [0. 0. -160.], but this run has None"); the header now gives the tool, as it gives the rest, and
+    an option that disagrees with the header is named."""
+    prog, _ = head_probe
+    log, csv = tmp_path / "log.txt", tmp_path / "p.csv"
+    short = ["simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--program", str(prog)]
+    code, _, err = run(capsys, *short, "--seed", "5", "--out", str(log))
+    assert code == 0, err
+    code, _, err = run(capsys, "import-probe", str(log), "--format", "linuxcnc", "--program", str(prog), "--out",
+                       str(csv))
+    assert code == 0, err
+    np.testing.assert_allclose(read_measurement(csv).tool_mm, [0.0, 0.0, -160.0])
+    # the long form without the radii, the tool and the controller options: the header states them too
+    code, _, err = run(capsys, *short, "--machine", FORK, "--sphere", "100,20,60", "--out", str(tmp_path / "long.txt"))
+    assert code == 0, err
+    code, _, err = run(capsys, *short, *HEAD_SET_UP, "--out", str(tmp_path / "long.txt"), "--force")
+    assert code == 0, err
+    for extra, said in ((["--tool", "0,0,-150"], "states tool_mm 0, 0, -160, but this run has 0, 0, -150 (--tool)"),
+                        (["--sphere-radius", "12"], "states sphere_radius_mm 12.7, but this run has 12 "
+                                                    "(--sphere-radius)")):
+        refused(*run(capsys, *short, *extra, "--out", str(tmp_path / "x.txt"))[::2], said, "give --program alone")
+    assert not (tmp_path / "x.txt").exists()
+
+
+def test_a_program_pige_did_not_write_is_never_pointed_at_by_a_line(tmp_path, capsys) -> None:
+    """Issue 43, 18: a 3 m head --tool was refused as "h3m.ngc:132: probing move ... ends 0.999 mm past its
+    surface", a line of a file that was never written.  Now the refusal says the program made failed its read-back,
+    that nothing was written, and what the 3 m lever does to the 4-decimal angles."""
+    out = tmp_path / "h3m.ngc"
+    far = ["--machine", FORK, "--sphere", "100,20,60", *S, "--tool", "0,0,-3000", *CONTROLLER]
+    code, _, err = run(capsys, "program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *far, "--out",
+                       str(out))
+    refused(code, err, f"the probing program for {out} fails pige's read-back at its line", "nothing was written",
+            "the stylus 3000 mm from its pivot", "up to 2.6 um: check --tool")
+    assert f"{out}:" not in err
+    code, _, err = run(capsys, "simulate", "--instrument", "sphere-probe", "--dialect", "linuxcnc", *far, "--out",
+                       str(tmp_path / "log.txt"))
+    refused(code, err, "the probing program made for these options fails pige's read-back", "check --tool")
+    assert "<program>:" not in err and list(tmp_path.iterdir()) == []
+
+
+def test_the_history_refuses_absurd_estimates_when_adding_and_when_reading(tmp_path, capsys, monkeypatch) -> None:
+    """Issue 43, 4: estimates of NaN or 1e308 in the history were compared as "no significant change", exit 0.
+    Reading refuses them as damage (run and column named); adding never stores what reading would refuse."""
+    import shutil
+    import sqlite3
+
+    import pige_sym.verdict.history.store as store
+
+    runs = [tmp_path / f"run{k}.csv" for k in (1, 2)]
+    for k, f in enumerate(runs, 1):
+        assert main(["simulate", "--out", str(f), "--seed", str(k), "--points", "12"]) == 0
+    db = tmp_path / "h.sqlite"
+    for f in runs:
+        assert main(["history", "add", str(f), "--machine-id", "M", "--db", str(db), "--method", "gauss-newton"]) == 0
+    capsys.readouterr()
+    for first, said in (("NaN", "values_json: not valid JSON (NaN is not allowed"),
+                        ("1e308", "values_json: EY0A = 1e+308 um is beyond ±10000"),
+                        ("-1e308", "values_json: EY0A = -1e+308 um is beyond ±10000"),
+                        ("1e999", "values_json: EY0A: expected a finite number or null")):
+        bad = tmp_path / "bad.sqlite"
+        shutil.copy(db, bad)
+        with sqlite3.connect(bad) as conn:
+            text = conn.execute("SELECT values_json FROM runs WHERE id = 2").fetchone()[0]
+            conn.execute("UPDATE runs SET values_json = ? WHERE id = 2", (f"[{first}," + text.split(",", 1)[1],))
+        conn.close()
+        code, out, err = run(capsys, "history", "show", "M", "--db", str(bad))
+        refused(code, err, f"is damaged (run 2, {said}")
+        assert "no significant change" not in out
+        stored = bad.read_bytes()
+        code, out, err_checkup = run(capsys, "checkup", str(runs[0]), "--machine-id", "M", "--db", str(bad))
+        assert err_checkup.split(": ", 1)[1] == err.split(": ", 1)[1]  # pige checkup (sqlite3): the same refusal
+        assert code == 2 and bad.read_bytes() == stored
+    real = store._estimate_set
+
+    def absurd(paths: list[Path], method: str) -> tuple:
+        read, result, effects, stored = real(paths, method)
+        result.values[0] = 1e308  # what a faulty fit or a damaged input could hand on
+        return read, result, effects, stored
+
+    monkeypatch.setattr(store, "_estimate_set", absurd)
+    third = tmp_path / "run3.csv"
+    assert main(["simulate", "--out", str(third), "--seed", "3", "--points", "12"]) == 0
+    before = db.read_bytes()
+    refused(*run(capsys, "history", "add", str(third), "--machine-id", "M", "--db", str(db), "--method",
+                 "gauss-newton")[::2], "run3.csv: not added to the history", "EY0A = 1e+308 um is beyond ±10000")
+    assert db.read_bytes() == before
+
+
+# ------------------------------------------------------------------- issue 43 item 2: today's configuration, bounded
+
+BOUNDED_INI = """[KINS]
+KINEMATICS = xyzac-trt-kins
+[HAL]
+HALCMD = loadrt xyzac-trt-kins
+HALCMD = net :z-offset xyzac-trt-kins.z-offset
+HALCMD = setp xyzac-trt-kins.x-rot-point 0
+HALCMD = setp xyzac-trt-kins.y-rot-point 0
+HALCMD = setp xyzac-trt-kins.z-rot-point 0
+HALCMD = {line}
+"""
+
+
+@pytest.mark.parametrize("line, said", [
+    ("setp xyzac-trt-kins.y-offset 1e300", "machine.ini:9: y-offset = 1e+300 mm is not a position on a machine"),
+    ("setp xyzac-trt-kins.y-offset 99999999", "machine.ini:9: y-offset = 99999999 mm is not a position"),
+    ("setp xyzac-trt-kins.y-offset -100000.5", "machine.ini:9: y-offset = -100000.5 mm"),
+    ("sets :z-offset 1e300", "machine.ini:9: z-offset = 1e+300 mm (through signal :z-offset)"),
+    ("setp xyzac-trt-kins.tool-offset 1e12", "machine.ini:9: tool-offset = 1e+12 mm"),
+    ("setp xyzac-trt-kins.conventional-directions 7", "machine.ini:9: conventional-directions = 7: the pin is a bit"),
+])
+def test_current_values_no_machine_has_are_refused_at_their_line(tmp_path, capsys, line, said) -> None:
+    """A value of ``--current`` beyond the bound of every position pige reads (``MAX_POSITION_MM``) would be
+    printed back as an absolute line (a 300-digit ``setp``): refused, naming the file, the line and the pin."""
+    params = tmp_path / "params.json"
+    params.write_text('{"machine": "wC\'A\'bXYZ(C1)t", "pige": {"EY0A": 4.5, "EZ0A": 3.1, "EB0A": 0.5, "EC0A": 11.4, '
+                      '"EX0C": -5.9, "EY0C": -14.9, "EA0C": 2.3, "EB0C": 2.5}}')
+    ini = tmp_path / "machine.ini"
+    ini.write_text(BOUNDED_INI.format(line=line))
+    refused(*run(capsys, "compensate", "--params", str(params), "--controller", "linuxcnc", "--current",
+                 str(ini))[::2], said)
+    pins = "y-offset=1e300,x-rot-point=0,y-rot-point=0,z-rot-point=0,z-offset=0"
+    refused(*run(capsys, "compensate", "--params", str(params), "--controller", "linuxcnc", "--current", pins)[::2],
+            "--current PIN=VALUE", "y-offset = 1e+300 mm")

@@ -5,12 +5,17 @@
 - the vectorised LinuxCNC log reader against the strict line-by-line reader (bit for bit; hypothesis), and the
   strict reader's located refusal whenever the fast path declines;
 - the vectorised sphere fits (all poses at once) against one pose at a time;
-- the chunked measurement writer against the row-by-row text.
+- the chunked measurement writer against the row-by-row text;
+- issue 43: every reader of configuration and log text reads a megabyte line in linear time.
 
-Timings live in benchmarks/bench_scale.py, not here.
+Timings live in benchmarks/bench_scale.py; here only the readers' growth with a line's length, with wide margins.
 """
 
 from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -227,3 +232,102 @@ def test_the_written_file_is_checked_exactly_as_the_reader_would(tmp_path_factor
         except FileFormatError as exc:
             outcomes.append(str(exc))
     assert outcomes[0] == outcomes[1]
+
+
+# --------------------------------------- issue 43 item 10: every reader of configuration and log text, megabyte lines
+#
+# A reader that spends more than linear time on a line (``shlex.split`` per HAL line: 79 s for one 2 MB word) hangs
+# on a damaged file.  Each reader reads a file with one hostile line at two lengths, L/4 and L: linear time gives a
+# ratio near 4, quadratic near 16; the bound 6·t(L/4) + 1 s leaves room for a loaded machine, not for a square.
+
+MIB = 2**20
+LOG_LINE = "PIGE P0 K{k} X100.000000 Y0.000000 Z63.999490 A0.000000 C0.000000\n"
+LINUXCNC_LINE = "100.000000 0.000000 63.999490 0.000000 0.000000 0.000000 0.000000 0.000000 0.000000\n"
+RTEST_HEAD = "# pige-rtest 1\n# machine: wC'A'bXYZ(C1)t\n# ball_mm: 120.0, 0.0, 80.0\n"
+RTEST_ROWS = "t_s,A_deg,C_deg,dx_um,dy_um,dz_um\n0.0,0.0,0.0,0.0,0.0,0.0\n1.0,10.0,20.0,1.5,-2.0,0.5\n"
+BALLBAR_HEAD = ("# pige-ballbar 1\n# machine: wC'A'bXYZ(C1)t\n# table_ball_mm: 100.0, 0.0, 50.0\n"
+                "# offset_mm: 100.0, 0.0, 0.0\n# zero: relative\n# setup: radial\n# axis: C\n")
+BALLBAR_ROWS = "t_s,A_deg,C_deg,dL_um\n0.0,0.0,0.0,0.0\n2.0,0.0,10.0,-2.59\n"
+TRT_HAL = "loadrt xyzac-trt-kins\n{line}\nsetp xyzac-trt-kins.y-offset 20\n"
+TRT_INI = "[KINS]\nKINEMATICS = xyzac-trt-kins\n[HAL]\nHALCMD = setp xyzac-trt-kins.x-rot-point 0\n{line}\n"
+
+
+def _readers() -> dict[str, tuple[str, str, Callable[[str], object]]]:
+    """Reader name → (file name, text with ``{line}`` where the long line goes, the reader)."""
+    from pige_sym.compensation.controllers.hal_config import read_current
+    from pige_sym.measurements.ballbar import read_ballbar
+    from pige_sym.measurements.rtest import read_angle_file, read_measurement
+
+    out: dict[str, tuple[str, str, Callable[[str], object]]] = {
+        "hal": ("machine.hal", TRT_HAL, read_current),
+        "ini": ("machine.ini", TRT_INI, read_current),
+        "ini_halcmd": ("machine.ini", TRT_INI.replace("{line}", "HALCMD = {line}"), read_current),
+        "rtest_metadata": ("run.csv", RTEST_HEAD + "# {line}\n" + RTEST_ROWS, read_measurement),
+        "rtest_rows": ("run.csv", RTEST_HEAD + RTEST_ROWS + "{line}\n", read_measurement),
+        "ballbar_metadata": ("bb.csv", BALLBAR_HEAD + "# {line}\n" + BALLBAR_ROWS, read_ballbar),
+        "ballbar_rows": ("bb.csv", BALLBAR_HEAD + BALLBAR_ROWS + "{line}\n", read_ballbar),
+        "angles": ("angles.csv", "A_deg,C_deg\n0,0\n{line}\n10,20\n", read_angle_file),
+        "log_linuxcnc": ("log.txt", LINUXCNC_LINE * 3 + "{line}\n" + LINUXCNC_LINE,
+                         lambda p: probe_log.read_probe_log(p, "linuxcnc", ("A", "C"))),
+    }
+    for fmt in ("fanuc", "siemens", "heidenhain"):
+        text = "".join(LOG_LINE.format(k=k) for k in range(3)) + "{line}\n" + LOG_LINE.format(k=3)
+        out[f"log_{fmt}"] = ("log.txt", text, lambda p, fmt=fmt: probe_log.read_probe_log(p, fmt, ("A", "C")))
+    return out
+
+
+READERS = sorted(_readers())
+#: Lines that cost a careless reader the most (a word, blanks, digits, quotes, comments, separators, fields).
+HOSTILE = {
+    "word": lambda n: "x" * n, "blanks": lambda n: " " * n + "x", "digits": lambda n: "1" * n,
+    "decimal": lambda n: "1." + "0" * n, "exponent": lambda n: "1e" + "9" * n, "open_quote": lambda n: '"' + "x" * n,
+    "quotes": lambda n: "'" * n, "hashes": lambda n: "#" * n, "commas": lambda n: "1," * (n // 2),
+    "fields": lambda n: "X1 " * (n // 3), "brackets": lambda n: "[a" * (n // 2),
+    "letter_digits": lambda n: "X" + "1" * n, "newlines": lambda n: "\n" * n + "x",
+    "pige_fields": lambda n: "PIGE P1 K1 X" + " " * n + "1",
+}
+
+
+def _read_seconds(path: Path, text: str, reader: Callable[[str], object]) -> float:
+    """Seconds to read (or refuse) ``text``; anything but a reading or a PigeError fails the test."""
+    from pige_sym.errors import PigeError
+
+    path.write_text(text, encoding="utf-8")
+    t0 = time.perf_counter()
+    try:
+        reader(str(path))
+    except PigeError as exc:
+        assert "\n" not in str(exc)  # one located line, not a dump of the long line's neighbours
+    return time.perf_counter() - t0
+
+
+def _assert_linear(tmp: Path, reader_name: str, shape: str, length: int) -> float:
+    name, text, reader = _readers()[reader_name]
+    path = tmp / name
+    quarter = min(_read_seconds(path, text.replace("{line}", HOSTILE[shape](length // 4)), reader) for _ in range(2))
+    whole = _read_seconds(path, text.replace("{line}", HOSTILE[shape](length)), reader)
+    assert whole <= 6 * quarter + 1.0, (reader_name, shape, f"{quarter:.3f} s at {length // 4} -> {whole:.3f} s "
+                                        f"at {length} characters")
+    return whole
+
+
+def test_a_two_megabyte_hal_word_is_read_in_linear_time(tmp_path) -> None:
+    """The issue's case: one 2 MB word in a HAL file (79 s with ``shlex.split``; 0.2 s now on a loaded 2-core
+    machine), in a HALCMD line of an INI, and a megabyte of blank lines (``^\\s*`` under re.M was quadratic)."""
+    assert _assert_linear(tmp_path, "hal", "word", 2 * MIB) < 10.0
+    _assert_linear(tmp_path, "ini_halcmd", "word", 2 * MIB)
+    _assert_linear(tmp_path, "hal", "newlines", MIB)
+
+
+@pytest.mark.parametrize("reader", READERS)
+@pytest.mark.parametrize("shape", ["word", "fields", "open_quote"])
+def test_every_reader_of_configuration_and_log_text_reads_a_megabyte_line_in_linear_time(tmp_path, reader,
+                                                                                         shape) -> None:
+    _assert_linear(tmp_path, reader, shape, MIB)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("reader", READERS)
+@pytest.mark.parametrize("shape", sorted(HOSTILE))
+def test_every_reader_is_linear_in_every_hostile_megabyte_line(tmp_path, reader, shape) -> None:
+    _assert_linear(tmp_path, reader, shape, 2 * MIB)

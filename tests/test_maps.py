@@ -210,3 +210,196 @@ def test_a_program_compensated_with_the_maps_lands_within_the_noise(ac_mappable:
     print(f"true tool-point RMS: uncorrected {none:.3f}, PIGEs only {left['pige']:.3f}, with the maps "
           f"{left['maps']:.3f} um")
     assert left["maps"] < 0.6 and left["pige"] > 5 * left["maps"]
+
+
+# ---------------------------------------------------------------- pige's virtual machine: every structure
+
+
+ROUND_TRIPS = {
+    # machine: (tilt axis range [deg], setups as (ball_mm, tool_mm or None))
+    "wC'A'bXYZ(C1)t": ((-90.0, 0.0), [((110, 0, 40), None), ((-50, 95, 90), None), ((-60, -90, 140), None)]),
+    "wC'B'bXYZ(C1)t": ((-90.0, 30.0), [((100, 20, 50), None), ((-60, 80, 100), None), ((-40, -100, 30), None)]),
+    "wbXYZCA(C1)t": ((-60.0, 60.0), [((0, 0, 0), (0, 0, -150)), ((0, 0, 0), (50, 0, -220)),
+                                     ((0, 0, 0), (0, 60, -180))]),
+    "wC'bXYZB(C1)t": ((-60.0, 60.0), [((100, 0, 50), (0, 0, -150)), ((-50, 90, 80), (40, 0, -200)),
+                                      ((-60, -80, 120), (0, 50, -250))]),
+}
+
+
+def _virtual_maps(kern: Any, tilt: tuple[float, float], rng: np.random.Generator) -> Any:
+    from pige_sym.model.error_motions import AxisMaps, ErrorMaps, MapGrid, axis_motions, representative
+
+    out = {}
+    for ax in kern.ROTARY_AXES:
+        full = ax[0] == "C"
+        grid = np.arange(0.0, 360.0, 30.0) if full else np.arange(tilt[0], tilt[1] + 0.1, 30.0)
+        values = {}
+        for m in axis_motions(ax):
+            size = 1.0 if m.unit == "um" else 5.0
+            values[m.name] = representative(m, grid, rng.normal(scale=size, size=grid.size))
+        out[ax] = AxisMaps(MapGrid(ax, grid, full), values)
+    return ErrorMaps(out)
+
+
+@pytest.mark.parametrize("machine", list(ROUND_TRIPS))
+def test_round_trip_on_every_structure(machine: str) -> None:
+    """R-test setups on pige's virtual machine with hidden PIGEs and maps on both axes: every value of every motion
+    within 4 std + 0.5 of the truth (which is its own §10 representative), and the PIGEs within 4 std."""
+    from pige_sym.identification.maps import MapSpec, identify_maps
+    from pige_sym.kernels import load_kernels
+    from pige_sym.model.trajectories import Trajectory
+    from pige_sym.simulation.simulator import random_pige, simulate
+
+    kern = load_kernels(machine)
+    tilt, setups = ROUND_TRIPS[machine]
+    rng = np.random.default_rng(11)
+    truth_maps = _virtual_maps(kern, tilt, rng)
+    pige = random_pige(machine, 4)
+    tilt_axis = next(a for a in kern.ROTARY_AXES if a[0] != "C")
+    grid_t = truth_maps.axes[tilt_axis].grid.angles_deg
+    rows = [(0.0, 0.0)] + [(t, c) for t in grid_t for c in np.arange(0.0, 360.0, 30.0)]
+    order = [kern.ROTARY_AXES.index(tilt_axis), 1 - kern.ROTARY_AXES.index(tilt_axis)]
+    angles = np.array(rows)[:, np.argsort(order)]
+    traj = Trajectory("grid", tuple(kern.ROTARY_AXES), angles, np.arange(len(rows)) * 8.0, "map grid")
+    items = [(f"s{i}", simulate(machine, traj, pige=pige, ball_mm=ball, tool_mm=tool, noise_um=0.1, seed=i,
+                                error_maps=truth_maps).measurement) for i, (ball, tool) in enumerate(setups)]
+    result = identify_maps(items, MapSpec(tuple(kern.ROTARY_AXES), 30.0))
+    for ax, m in result.maps.items():
+        truth = truth_maps.axes[ax]
+        for name, tv in truth.values.items():
+            est, std = m.value[name], m.std[name]
+            assert np.isfinite(est).all(), (machine, name, result.undetermined[:3])
+            assert np.all(np.abs(est - tv) <= 4 * std + 0.5), (machine, name, np.abs(est - tv) / std)
+    r = result.result
+    for n, v, s in zip(r.parameters, r.values, r.std, strict=True):
+        if np.isfinite(v) and n in kern.LOCATION_PARAMETERS:
+            assert abs(v - pige[n]) <= 4 * s + 0.05, (machine, n, v, pige[n], s)
+
+
+def test_a_ballbar_setup_joins_the_map_fit() -> None:
+    """Two R-test setups leave one combination per angle of C unseen; ballbar setups measured at a third point
+    of the table (the table ball) see it: the mix determines what the two setups alone cannot."""
+    from pige_sym.identification.maps import MapSpec, identify_maps
+    from pige_sym.kernels import load_kernels
+    from pige_sym.model.trajectories import Trajectory
+    from pige_sym.simulation.ballbar import ballbar_setup, simulate_ballbar
+    from pige_sym.simulation.simulator import simulate
+
+    kern = load_kernels(AC)
+    truth_maps = _virtual_maps(kern, (-90.0, 0.0), np.random.default_rng(5))
+    grid = np.arange(-90.0, 0.1, 30.0)
+    rows = [(0.0, 0.0)] + [(a, c) for a in grid for c in np.arange(0.0, 360.0, 30.0)]
+    angles = np.array(rows)
+    traj = Trajectory("grid", ("A", "C"), angles, np.arange(len(rows)) * 8.0, "map grid")
+    rtests = [(f"r{i}", simulate(AC, traj, pige={}, ball_mm=b, noise_um=0.05, seed=i,
+                                 error_maps=truth_maps).measurement)
+              for i, b in enumerate(((110, 0, 40), (-50, 95, 90)))]
+    two = identify_maps(rtests, MapSpec(("C", "A"), 30.0))
+    assert any(u.motion.endswith("C") and u.angle_deg is not None for u in two.undetermined)
+    bars = []
+    for k, kind in enumerate(("tangential", "axial", "radial")):
+        setup = ballbar_setup(AC, kind, "C", table_ball_mm=(-60.0, -90.0, 140.0))
+        import dataclasses
+
+        setup = dataclasses.replace(setup, angles_deg=angles)
+        bars.append((f"bb{k}", simulate_ballbar(AC, setup, pige={}, noise_um=0.05, seed=10 + k, zero="absolute",
+                                                error_maps=truth_maps)))
+    mixed = identify_maps(rtests + bars, MapSpec(("C", "A"), 30.0))
+    c = mixed.maps["C"]
+    for name, tv in truth_maps.axes["C"].values.items():
+        assert np.isfinite(c.value[name]).all(), (name, [u for u in mixed.undetermined][:3])
+        assert np.all(np.abs(c.value[name] - tv) <= 4 * c.std[name] + 0.5), name
+
+
+def test_diagnose_says_when_a_map_explains_the_residual(ac_mappable: Any, capsys: Any) -> None:
+    """The held-out gain of the maps, cross-validated by pose: large on a machine with maps, none on one without."""
+    paths, oracle = ac_mappable
+    assert main(["diagnose", *paths, "--map", "C,A", "--map-step", "15", "--json"]) == 0
+    gain = json.loads(capsys.readouterr().out)["map_gain"]
+    assert gain["map_explains_the_residual"] and gain["gain"] > 0.5
+    assert gain["harmonics"] and all(0 <= h["share"] <= 1 for h in gain["harmonics"])
+    flat = OracleMachine(oracle.axes, oracle.side, oracle.pige, {})
+    folder = Path(paths[0]).parent / "flat"
+    folder.mkdir(exist_ok=True)
+    flat_paths = _write(folder, flat, SETUPS, 0.15, 3)
+    assert main(["diagnose", *flat_paths, "--map", "C,A", "--map-step", "15"]) == 0
+    text = capsys.readouterr().out
+    assert "the error maps do not explain the residual" in text
+
+
+def test_a_positioning_map_per_approach_direction() -> None:
+    """C approached from both sides at every angle: ECC+ and ECC- (the reversal kept whole, §10)."""
+    from pige_sym.identification.maps import MapSpec, identify_maps
+    from pige_sym.kernels import load_kernels
+    from pige_sym.model.error_motions import AxisMaps, ErrorMaps, MapGrid
+    from pige_sym.model.trajectories import Trajectory
+    from pige_sym.simulation.simulator import simulate
+
+    kern = load_kernels(AC)
+    rng = np.random.default_rng(9)
+    c_grid = np.arange(0.0, 360.0, 30.0)
+    mean = _projected("ECC", c_grid, rng.normal(scale=8.0, size=c_grid.size))
+    reversal = 12.0 + rng.normal(scale=3.0, size=c_grid.size)  # backlash of 12 urad, varying with the angle
+    maps = ErrorMaps({"C": AxisMaps(MapGrid("C", c_grid, True), {"ECC+": mean + reversal / 2,
+                                                                  "ECC-": mean - reversal / 2})})
+    rows = [(0.0, 0.0)]
+    for a in (0.0, -30.0, -60.0, -90.0):
+        up = [(a, c) for c in c_grid]
+        # up, past the last angle, then down: each angle reached from both sides (330° from above too)
+        rows += up + [(a, 350.0)] + [(a, c) for c in c_grid[::-1]]
+    angles = np.array(rows)
+    traj = Trajectory("both ways", ("A", "C"), angles, np.arange(len(rows)) * 8.0, "both ways")
+    items = [(f"s{i}", simulate(AC, traj, pige={}, ball_mm=b, noise_um=0.05, seed=i, error_maps=maps).measurement)
+             for i, b in enumerate(((110, 0, 40), (-50, 95, 90), (-60, -90, 140)))]
+    result = identify_maps(items, MapSpec(("C",), 30.0, ("C",)))
+    c = result.maps["C"]
+    assert not result.undetermined
+    for name, truth in (("ECC+", mean + reversal / 2), ("ECC-", mean - reversal / 2)):
+        est, std = c.value[name], c.std[name]
+        assert np.isfinite(est).all(), name
+        assert np.all(np.abs(est - truth) <= 4 * std + 0.5), (name, np.abs(est - truth) / std)
+    assert np.all(np.abs(c.value["ECC:reversal"] - reversal) <= 4 * c.std["ECC:reversal"] + 0.5)
+    assert "ECC+" in c.to_dict() and kern.MACHINE_CODE == AC
+
+
+def test_an_angle_reached_from_one_side_only_has_no_reversal_value() -> None:
+    """A sweep up and straight back down reaches its top angle from below only: ECC- is not determined there."""
+    from pige_sym.identification.maps import MapSpec, identify_maps
+    from pige_sym.model.trajectories import Trajectory
+    from pige_sym.simulation.simulator import simulate
+
+    c_grid = np.arange(0.0, 360.0, 30.0)
+    rows = [(0.0, 0.0)] + [(a, c) for a in (0.0, -45.0, -90.0) for c in (*c_grid, *c_grid[::-1])]
+    traj = Trajectory("both ways", ("A", "C"), np.array(rows), np.arange(len(rows)) * 8.0, "both ways")
+    items = [(f"s{i}", simulate(AC, traj, pige={}, ball_mm=b, noise_um=0.05, seed=i).measurement)
+             for i, b in enumerate(((110, 0, 40), (-50, 95, 90), (-60, -90, 140)))]
+    result = identify_maps(items, MapSpec(("C",), 30.0, ("C",)))
+    top = [u for u in result.undetermined if u.angle_deg == 330.0]
+    assert {u.motion for u in top} == {"ECC", "ECC:reversal"}
+    assert all("see 6 of its 7 motions" in u.why for u in top)
+    assert np.isnan(result.maps["C"].value["ECC-"][-1]) and np.isfinite(result.maps["C"].value["ECC-"][:-1]).all()
+
+
+def test_the_report_has_a_map_section(ac_case: Any, tmp_path: Path) -> None:
+    """pige report FILES --map C,A: the plots, the table per motion, what the maps leave, the gain."""
+    paths, _ = ac_case
+    out = tmp_path / "report"
+    assert main(["report", *paths, "--map", "C,A", "--out", str(out)]) == 0
+    html = (out / "report.html").read_text(encoding="utf-8")
+    assert 'id="maps"' in html and "Error maps of the rotary axes" in html
+    assert html.count("map_C.png") + html.count("map_A.png") >= 0  # the plots are inlined as data URIs
+    assert "What the maps leave" in html and "held-out by pose" in html
+    assert "Every value of every map is determined" in html
+    assert (out / "figures" / "map_C.png").is_file() or any(out.rglob("map_C.png"))
+
+
+def test_identify_draws_each_map_and_never_replaces_a_plot_without_force(ac_case: Any, capsys: Any,
+                                                                          tmp_path: Path) -> None:
+    paths, _ = ac_case
+    plots = tmp_path / "plots"
+    assert main(["identify", *paths, "--map", "C,A", "--plots", str(plots)]) == 0
+    assert (plots / "map_C.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and (plots / "map_A.png").is_file()
+    capsys.readouterr()
+    assert main(["identify", *paths, "--map", "C,A", "--plots", str(plots)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["identify", *paths, "--map", "C,A", "--plots", str(plots), "--force"]) == 0

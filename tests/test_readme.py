@@ -1,9 +1,10 @@
 """The README runs as written: its "A first session", touch-probe and ballbar shell blocks, in order, in a fresh
 folder.
 
-The blocks are taken from the README itself (so they cannot drift), run by bash with ``set -e`` from a
-folder that holds only links to the checkout's ``.venv`` and ``examples`` (the README says: from the
-checkout's root), and every command must succeed.
+The blocks are taken from the README itself (so they cannot drift), run by bash from a folder that holds only
+links to the checkout's ``.venv`` and ``examples`` (the README says: from the checkout's root), and every
+command must succeed: :func:`testdata.strict_script` checks every top-level command's status (``a && b``
+included, which ``set -e`` lets pass).
 """
 
 from __future__ import annotations
@@ -16,14 +17,18 @@ from pathlib import Path
 
 import pytest
 
+from testdata import strict_script
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _blocks(heading: str) -> list[str]:
+def _blocks(heading: str) -> list[tuple[str, int, str]]:
+    """The ``sh`` blocks of a README section: (page, line of the block's first line, text)."""
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     start = text.index(heading)
     end = text.find("\n## ", start + len(heading))
-    return re.findall(r"```sh\n(.*?)```", text[start:end if end != -1 else len(text)], re.S)
+    return [("README.md", text.count("\n", 0, start + m.start(1)) + 1, m.group(1))
+            for m in re.finditer(r"```sh\n(.*?)```", text[start:end if end != -1 else len(text)], re.S)]
 
 
 def test_the_first_session_and_the_probe_demo_run_as_pasted(tmp_path) -> None:
@@ -35,7 +40,7 @@ def test_the_first_session_and_the_probe_demo_run_as_pasted(tmp_path) -> None:
     blocks = _blocks("## A first session") + _blocks("## Calibrating with a touch probe") + \
         _blocks("## Calibrating with a ballbar")
     assert len(blocks) >= 4
-    script = "set -e\n" + "\n".join(blocks) + "\n"
+    script = strict_script(blocks)
     env = {k: v for k, v in os.environ.items() if k != "PIGE_HISTORY_DB"}
     done = subprocess.run(["bash", "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
     assert done.returncode == 0, done.stderr[-3000:]

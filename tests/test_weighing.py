@@ -102,6 +102,23 @@ def test_uncorrelated_estimates_get_the_closed_form(rows: list[tuple[float, floa
                                rtol=1e-6, atol=1e-6 * s.max() ** 2)
 
 
+@settings(max_examples=60, deadline=None)  # the first example imports scipy.sparse
+@given(st.integers(1, 12), st.floats(0.0, 0.6), st.integers(0, 2**32 - 1))
+def test_the_correlated_groups_are_scipys_connected_components(n: int, density: float, seed: int) -> None:
+    """The groups solved apart (found without scipy.sparse's import) are scipy's connected components, in order."""
+    from scipy.sparse.csgraph import connected_components
+
+    from pige_sym.compensation.weighing import _correlated_groups
+
+    rng = np.random.default_rng(seed)
+    cov = np.where(rng.random((n, n)) < density, rng.normal(size=(n, n)), 0.0)  # not symmetric: either side links
+    cov[rng.random((n, n)) < 0.05] = np.nan  # NaN links nothing, as in scipy's graph
+    _, labels = connected_components(np.abs(cov) > 0, directed=False)
+    expected = [np.flatnonzero(labels == k) for k in range(labels.max(initial=-1) + 1)]
+    found = _correlated_groups(cov)
+    assert [g.tolist() for g in found] == [g.tolist() for g in expected]
+
+
 def test_the_rule_enters_well_determined_values_and_leaves_noise() -> None:
     cov = np.diag([1.0, 4.0, 100.0])
     c = entered_values(np.array([50.0, 1.5, 8.0]), cov)

@@ -7,6 +7,7 @@ conftest.py in a sub-folder (tests/linuxcnc) replaces as the module of that name
 from __future__ import annotations
 
 import json
+import shlex
 import shutil
 import subprocess
 from pathlib import Path
@@ -85,3 +86,41 @@ def simulated_probe_file(folder: Path, seed: int, effect: str, *extra: str) -> P
     assert main(["import-probe", str(folder / "probe_log.txt"), "--format", "linuxcnc", *sphere[2:],
                  "--out", str(folder / "probe.csv")]) == 0
     return folder / "probe.csv"
+
+
+def top_level_commands(text: str) -> list[tuple[int, str]]:
+    """The top-level commands of a shell text, each with its first line (0-based): lines are joined while bash
+    cannot yet parse them whole (an open loop, quote, ``$(``, here-document) or a line ends with ``\\``."""
+    lines = text.splitlines()
+    out, start = [], 0
+    for end in range(len(lines)):
+        chunk = "\n".join(lines[start:end + 1])
+        if end + 1 < len(lines):
+            if lines[end].rstrip().endswith("\\"):
+                continue
+            parsed = subprocess.run(["bash", "-n", "-c", chunk], capture_output=True, text=True, check=False)
+            if parsed.returncode != 0 or "here-document" in parsed.stderr:
+                continue
+        out.append((start, chunk))
+        start = end + 1
+    return out
+
+
+def strict_script(blocks: list[tuple[str, int, str]]) -> str:
+    """A bash script that runs ``blocks`` ((page, line, text): the page, the line number of the text's first
+    line, shell text) in one shell and stops at the first command that fails, naming its page and line on stderr.
+
+    ``set -e`` alone does not stop at ``a && b`` when ``a`` fails (bash leaves every command of an ``&&``/``||``
+    list but the last to the list), so every top-level command's status is checked after it runs: a list fails
+    when its status is not 0 (``a || echo handled`` passes, ``a && b`` with ``a`` failing does not), and
+    ``pipefail`` makes a pipeline fail with any of its commands."""
+    parts = ["set -e -o pipefail",
+             "trap 'echo \"$PIGE_DOCS_AT: failed (exit status $?)\" >&2' ERR"]
+    for page, line, text in blocks:
+        lines = text.splitlines()
+        for first, command in top_level_commands(text):
+            at = f"{page} line {line + first}: {lines[first].strip()[:60]}"
+            parts += [f"PIGE_DOCS_AT={shlex.quote(at)}", command,
+                      'PIGE_DOCS_RC=$?; if [ "$PIGE_DOCS_RC" -ne 0 ]; then echo "$PIGE_DOCS_AT: failed (exit status '
+                      '$PIGE_DOCS_RC: a command of an && list)" >&2; exit "$PIGE_DOCS_RC"; fi']
+    return "\n".join(parts) + "\n"

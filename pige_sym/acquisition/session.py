@@ -23,6 +23,7 @@ from pige_sym.acquisition.poses import PoseEngine
 from pige_sym.acquisition.transport import PortSettings, RawLog, open_port, read_available
 from pige_sym.acquisition.triggers import _StableTrigger, _Stop, _Trigger
 from pige_sym.errors import AcquisitionError
+from pige_sym.files import clear_interrupt
 from pige_sym.nc.rtest_program import TestProgram
 
 
@@ -56,6 +57,8 @@ def run_session(session: Session, started: float, out: Path, say: Callable[[str]
         summary.stop_reason = str(stop)
     except (KeyboardInterrupt, AcquisitionError) as exc:
         interrupted = isinstance(exc, KeyboardInterrupt)
+        if interrupted:  # handled here: the summary records it (a noted interrupt would stop its writing)
+            clear_interrupt()
         summary.stop_reason = "interrupted (Ctrl-C or SIGTERM)" if interrupted else str(exc)
         finish_session(session, started, out)
         if interrupted:

@@ -56,9 +56,20 @@ def _axis_sense(args: argparse.Namespace, params: Any) -> dict[str, int]:
     return reconcile(params.axis_sense, axis_sense_option(args, axes), str(args.params), axes)
 
 
+def _current(args: argparse.Namespace) -> Any:
+    """``--current`` read (:func:`~pige_sym.compensation.controllers.hal_config.read_current`), for a controller."""
+    if args.current is None:
+        return None
+    if not args.controller:
+        raise InputError("--current is today's configuration of a controller: give it with --controller linuxcnc")
+    from pige_sym.compensation.controllers.hal_config import read_current
+
+    return read_current(args.current)
+
+
 def _run(args: argparse.Namespace) -> int:
     from pige_sym import api
-    from pige_sym.compensation.controllers import entered_for_controller, format_controller
+    from pige_sym.compensation.controllers import check_before_writing, entered_for_controller, format_controller
     from pige_sym.compensation.controllers.axis_lines import controller_corrections
     from pige_sym.compensation.parameters import load_parameters
     from pige_sym.nc.program_file import read_program
@@ -70,16 +81,15 @@ def _run(args: argparse.Namespace) -> int:
     for name in params.ignored:
         if "--allow-missing" in name:
             print(f"warning: {name}")
+    current = _current(args)
     if args.controller:
         entered = entered_for_controller(params, args.enter, _travel(args.travel))
         if not args.json:
-            from pige_sym.compensation.controllers.hal_config import read_current
-
-            current = read_current(args.current) if args.current else None
             print(format_controller(entered, args.controller, carrier=args.carrier, current=current,
                                     heidenhain_trans=args.heidenhain_trans))
     if args.controller and not args.program:
         if args.json:
+            check_before_writing(params, args.controller, current)
             print(to_json({"machine": params.machine, "parameters_from": params.source,
                            "axes": controller_corrections(entered)} | _controller_json(entered, args.controller)))
         return 0

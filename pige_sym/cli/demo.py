@@ -34,7 +34,7 @@ from typing import Any
 
 from pige_sym.cli._setup import show_progress
 from pige_sym.constants import DEFAULT_BALL_MM, DEFAULT_MACHINE
-from pige_sym.files import atomic_write_text, to_json
+from pige_sym.files import atomic_write_text, make_folder, to_json
 
 BALL = DEFAULT_BALL_MM
 
@@ -80,7 +80,7 @@ def _prepare(args: argparse.Namespace) -> Path:
     if out.exists() and (not out.is_dir() or any(out.iterdir())) and not args.force:
         raise InputError(f"--out {out} exists and is not an empty folder: pass --force to replace the demo's "
                          "files in it, or choose another --out")
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out, what="--out")
     return out
 
 

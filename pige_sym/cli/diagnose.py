@@ -33,11 +33,35 @@ def _run_several(args: argparse.Namespace) -> int:
     if args.plots:
         raise InputError("--plots draws the residuals of one R-test or probe file: diagnose that file alone")
     result = api.diagnose_files(args.files, progress=show_progress(args.json))
+    gain = _map_gain(args)
     if args.json:
-        print(to_json(result.to_dict()))
+        print(to_json(result.to_dict() | gain))
     else:
         print(format_joint_diagnosis(result) + plan_pointer(result.final, result.joint.files))
+        _print_map_gain(gain)
     return 0
+
+
+def _map_gain(args: argparse.Namespace) -> dict[str, object]:
+    """``--map AXES``: the held-out gain of the error maps (:mod:`pige_sym.diagnosis.map_gain`), as JSON."""
+    if not args.map:
+        if args.map_step is not None:
+            from pige_sym.errors import InputError
+
+            raise InputError("--map-step goes with --map AXES")
+        return {}
+    from pige_sym.diagnosis.map_gain import map_gain
+    from pige_sym.identification.maps import MapSpec
+    from pige_sym.measurements.sets import read_files
+
+    axes = tuple(a.strip().upper() for a in args.map.split(",") if a.strip())
+    gain = map_gain(read_files(args.files), MapSpec(axes, 30.0 if args.map_step is None else args.map_step))
+    return {"map_gain": gain.to_dict() | {"sentences": gain.sentences()}}
+
+
+def _print_map_gain(gain: dict[str, object]) -> None:
+    if gain:
+        print("\n" + "\n".join(gain["map_gain"]["sentences"]))  # type: ignore[index]
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -56,8 +80,9 @@ def _run(args: argparse.Namespace) -> int:
     result = api.diagnose(m, progress=show_progress(args.json))
     if args.plots:
         residual_plots(m, result, args.plots)
+    gain = _map_gain(args)
     if args.json:
-        print(to_json(result.to_dict()))
+        print(to_json(result.to_dict() | gain))
         return 0
     print(f"baseline PIGE fit: residual RMS {result.baseline_rms_um:.3f} um, held-out RMS "
           f"{result.baseline_heldout_rms_um:.3f} um, BIC {result.baseline_bic:.1f}")
@@ -72,6 +97,7 @@ def _run(args: argparse.Namespace) -> int:
     print(format_result(result.final))
     if result.plots:
         print("\nplots: " + ", ".join(result.plots))
+    _print_map_gain(gain)
     return 0
 
 
@@ -92,4 +118,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plots", metavar="DIR", help="write residual plots (PNG) into DIR")
     p.add_argument("--force", action="store_true", help="replace plots already in DIR")
+    p.add_argument("--map", metavar="AXES", help="also fit the error maps of these axes (CONVENTIONS §10) and give "
+                   "their held-out gain over the PIGEs alone, cross-validated by pose (docs/maps.md)")
+    p.add_argument("--map-step", type=float, metavar="DEG", help="grid step of the maps [deg] (default 30)")
     p.set_defaults(handler=_run)

@@ -11,6 +11,8 @@ from pige_sym.files import to_json
 
 def _run(args: argparse.Namespace) -> int:
     from pige_sym import api
+    from pige_sym.cli._setup import finite_option
+    from pige_sym.identification.model_check import check_model
     from pige_sym.identification.result import format_result
     from pige_sym.measurements.ballbar import is_ballbar_file
 
@@ -22,12 +24,16 @@ def _run(args: argparse.Namespace) -> int:
         raise InputError("--plots, --map-step and --map-per-direction go with --map AXES")
     if len(args.files) > 1 or is_ballbar_file(args.files[0]):
         return _run_joint(args)
-    result = api.identify(args.files[0], method=args.method, projection=args.projection, loss=args.loss,
+    if args.noise is not None:
+        finite_option(args.noise, "--noise", positive=True)
+    m = api.read(args.files[0])
+    result = api.identify(m, method=args.method, projection=args.projection, loss=args.loss,
                           with_zero=args.with_zero)
+    check = check_model(m, result, noise_um=args.noise)
     if args.json:
-        print(to_json(result.to_dict()))
+        print(to_json({**result.to_dict(), "model_check": None if check is None else check.to_dict()}))
     else:
-        print(format_result(result))
+        print(format_result(result) + ("" if check is None else "\n\n" + check.text()))
     return 0
 
 
@@ -39,6 +45,9 @@ def _run_joint(args: argparse.Namespace) -> int:
     from pige_sym.identification.joint import format_files
     from pige_sym.identification.result import format_result
 
+    if args.noise is not None:
+        raise InputError("--noise judges one R-test or probe file's residual: several files (or a ballbar file) are "
+                         "each weighed by their own noise in the joint fit; identify that file alone")
     if args.method != "gauss-newton" or args.projection != "xyz" or args.loss != "linear":
         raise InputError("several files (or a ballbar file) are identified jointly: gauss-newton, each file with its "
                          "own projection (no --projection), loss linear")
@@ -98,7 +107,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="identify the PIGEs from R-test, probe or ballbar files (several of one machine jointly)",
         description=("Least-squares identification of the rotary-axis PIGEs with uncertainty and identifiability,\n"
                      "from one file or jointly from several of one machine: R-test runs, probe imports, ballbar\n"
-                     "setups."),
+                     "setups.\n\n"
+                     "model check (one R-test or probe file): chi2 = (residual sigma / noise)^2 * dof of the whitened\n"
+                     "residual against its degrees of freedom; above its 99.9 % quantile the PIGE model misses\n"
+                     "something in the file, and the next step is `pige diagnose FILE`. The noise: --noise, else a\n"
+                     "probe import's centre covariances, else the R-test's nominal 0.25 um. JSON: \"model_check\"."),
         epilog=(
             "examples:\n"
             "  pige identify run.csv\n"
@@ -116,6 +129,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--projection", default="xyz", help="x, y, z, xyz, a vector a,b,c or htm:... (default xyz)")
     p.add_argument("--loss", choices=LOSSES, default="linear", help="robust losses flag outlier rows")
     p.add_argument("--with-zero", action="store_true", help="also estimate the zero-position errors")
+    p.add_argument("--noise", type=float, metavar="UM",
+                   help="the instrument's noise per component [um] for the model check (default: the file's, else "
+                        "the instrument's nominal)")
     p.add_argument("--map", metavar="AXES", help="also identify the error maps of these rotary axes (CONVENTIONS "
                    "§10), jointly from every file: probe setups, R-test runs, ballbar setups (docs/maps.md)")
     p.add_argument("--map-step", type=float, metavar="DEG", help="grid step of the maps [deg] (default 15)")

@@ -33,12 +33,28 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: {message}\n")
 
 
+#: ``pige --help``'s examples: a first session (README.md), in the order a user runs them.
+EXAMPLES = """\
+examples (a first session; every command has --help with more):
+  pige program --machine "wC'A'bXYZ(C1)t" --trajectory cone-frustum --ball 120,0,80 --out rtest.mpf
+  pige simulate --machine "wC'A'bXYZ(C1)t" --pige random --seed 1 --effect angular_error_C --out run.csv
+  pige identify run.csv                         # the PIGEs, and whether the model explains the file
+  pige diagnose run.csv --json > diagnosis.json # what the PIGE model misses, fitted
+  pige check run.csv --tolerances examples/tolerances.json
+  pige compensate rtest.mpf --params diagnosis.json --out rtest_comp.mpf
+  pige report run.csv --out report --program rtest.mpf --tolerances examples/tolerances.json
+  pige demo --instrument sphere-probe --out probe-demo   # the whole story with a touch probe
+
+exit status: 0 success, 1 the command ran but failed (not in tolerance, ...), 2 bad input (one line)."""
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pige`` with every subcommand."""
     parser = _Parser(
         prog="pige",
         description=("Identify and compensate the rotary-axis PIGEs of five-axis machines from an R-test, "
                      "a touch probe on a calibration sphere, or a double ballbar."),
+        epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     from pige_sym.constants import VERSION as __version__
@@ -70,7 +86,10 @@ def tolerant_console() -> None:
 class _Interrupts:
     """While a command runs, SIGINT raises KeyboardInterrupt as usual and is remembered: a C extension
     (matplotlib's renderer, a module being imported) may turn the KeyboardInterrupt into another exception,
-    which is then an interrupt too.  The previous handler is put back afterwards."""
+    which is then an interrupt too, and Python drops one raised in a finaliser (``__del__``: "Exception ignored
+    ... KeyboardInterrupt") and goes on; the command then ends with status 130 all the same, and nothing is
+    published after the interrupt (:func:`pige_sym.files.raise_if_interrupted`).  The previous handler is put
+    back afterwards."""
 
     def __init__(self) -> None:
         self.seen = False
@@ -80,39 +99,55 @@ class _Interrupts:
         import signal
         import threading
 
+        from pige_sym.files import clear_interrupt
+
+        clear_interrupt()
         if threading.current_thread() is threading.main_thread() and \
                 signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             self.old = signal.signal(signal.SIGINT, self._handle)
         return self
 
     def __exit__(self, *exc: object) -> None:
+        from pige_sym.files import clear_interrupt
+
+        clear_interrupt()
         if self.old is not None:
             import signal
 
             signal.signal(signal.SIGINT, self.old)  # type: ignore[arg-type]
 
     def _handle(self, signum: int, frame: object) -> None:
+        from pige_sym.files import note_interrupt
+
         self.seen = True
+        note_interrupt()
         raise KeyboardInterrupt
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``pige``; returns the exit status."""
+    """Entry point of ``pige``; returns the exit status (an interrupt, also while the parser is built: 130)."""
     tolerant_console()
-    parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv:  # `pige` alone: what it can do
-        parser.print_help()
-        return 0
-    args = parser.parse_args(argv)
     with _Interrupts() as interrupts:
+        try:
+            parser = build_parser()  # imports every command's module: seconds on a loaded machine
+            if not argv:  # `pige` alone: what it can do
+                parser.print_help()
+                return 0
+            args = parser.parse_args(argv)
+        except KeyboardInterrupt:
+            return _interrupted(argv[0] if argv else "")
+        except Exception:
+            if interrupts.seen:  # an import the interrupt broke (NumPy's C modules turn it into an ImportError)
+                return _interrupted(argv[0] if argv else "")
+            raise
         return _run(args, interrupts)
 
 
 def _run(args: argparse.Namespace, interrupts: _Interrupts) -> int:
     """The command's handler, its errors turned into exit statuses (module docstring)."""
     try:
-        return int(args.handler(args))
+        status = int(args.handler(args))
     except PigeError as exc:
         print(f"pige {args.command}: {exc}", file=sys.stderr)
         return 2
@@ -120,10 +155,16 @@ def _run(args: argparse.Namespace, interrupts: _Interrupts) -> int:
         sys.stderr.close()
         return 0
     except KeyboardInterrupt:
-        print(f"pige {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted(args.command)
     except Exception:
         if interrupts.seen:  # a KeyboardInterrupt that a C extension turned into another exception
-            print(f"pige {args.command}: interrupted", file=sys.stderr)
-            return 130
+            return _interrupted(args.command)
         raise
+    if interrupts.seen:  # a KeyboardInterrupt dropped in a finaliser: the command went on, but was interrupted
+        return _interrupted(args.command)
+    return status
+
+
+def _interrupted(command: str) -> int:
+    print(f"pige {command}: interrupted" if command else "pige: interrupted", file=sys.stderr)
+    return 130

@@ -1,5 +1,10 @@
 """``pige plan``: plan the R-test before running it, or grade an existing test program.
 
+With ``--map AXES`` it plans a test of the rotary axes' error maps (CONVENTIONS §10) for the sphere
+probe, the R-test or the ballbar: the setups and poses that determine every map value, each value's
+predicted standard error, the machine time, and what fewer setups cannot determine
+(:mod:`pige_sym.planning.map_plan`).
+
 Planning searches trajectory families and (with ``--ball-region``) the ball position for
 the test that determines the PIGEs best within the axis limits, writes it as an angle file
 (first row the reference pose) that ``pige program``, ``pige rtest-sim`` and ``pige
@@ -16,6 +21,7 @@ import math
 from typing import Any
 
 from pige_sym.cli._checkup import add_checkup_arguments
+from pige_sym.cli._maps import add_map_arguments
 from pige_sym.cli._probe import add_probe_program_arguments
 from pige_sym.constants import DEFAULT_DWELL_S, DEFAULT_MACHINE, DEFAULT_MOVE_S
 from pige_sym.errors import InputError
@@ -199,16 +205,114 @@ def _run_checkup(args: argparse.Namespace) -> int:
     return 0
 
 
+def _map_request(args: argparse.Namespace) -> Any:
+    """The map test of the options, for each instrument (docs/maps.md "Planning a map test")."""
+    import numpy as np
+
+    from pige_sym.cli._maps import map_request
+    from pige_sym.cli._probe import probe_setup
+    from pige_sym.cli._setup import parse_pivots, parse_vec3
+    from pige_sym.kernels import load_kernels
+    from pige_sym.simulation.ballbar import DEFAULT_TABLE_BALL_MM
+
+    kern = load_kernels(args.machine)
+    tool = parse_vec3(args.tool, "--tool") if args.tool else None
+    if args.instrument == "sphere-probe":
+        setup = probe_setup(args, kern.MACHINE_CODE)
+        return map_request(args, kern, "sphere-probe", point=setup.sphere_mm, tool=setup.tool_mm, probe=setup,
+                           noise_um=args.noise, pose_s=args.pose_time, contact_s=args.contact_time)
+    if args.instrument == "ballbar":
+        first = args.map_point[0] if args.map_point else ",".join(f"{x:g}" for x in DEFAULT_TABLE_BALL_MM)
+        args.map_point = None  # the table ball of every candidate setup (planning/map_plan.py)
+        return map_request(args, kern, "ballbar", point=np.array(parse_vec3(first, "--map-point")),
+                           noise_um=args.noise, pose_s=args.move + args.dwell)
+    return map_request(args, kern, "rtest", point=parse_vec3(args.ball, "--ball"), tool=tool,
+                       pivots=parse_pivots(args.pivot), noise_um=args.noise, pose_s=args.move + args.dwell)
+
+
+def _run_map(args: argparse.Namespace) -> int:
+    """``--map AXES``: the setups and poses that determine every map value, their predicted standard errors, the
+    machine time and what fewer setups leave undetermined (--out: the plan as JSON and, but for the ballbar, the
+    poses as an angle file beside it)."""
+    from pige_sym.files import atomic_write_text, check_output, to_json
+    from pige_sym.planning.map_ballbar import plan_ballbar_maps
+    from pige_sym.planning.map_plan import format_map_plan, plan_map_test
+
+    if args.grade or args.reveal or args.ball_region:
+        raise InputError("--map plans a map test: leave out --grade, --reveal and --ball-region")
+    request = _map_request(args)
+    out = check_output(args.out, force=args.force, what="--out") if args.out else None
+    poses = None if out is None or request.instrument == "ballbar" else check_output(
+        out.with_name(out.stem + "_poses.csv"), force=args.force, what="poses file")
+    plan = plan_ballbar_maps(request) if request.instrument == "ballbar" else plan_map_test(request)
+    result = plan.to_dict() | {"poses_file": None if poses is None else str(poses)}
+    if out is not None:
+        atomic_write_text(out, to_json(result) + "\n")
+    if poses is not None:
+        _write_poses(poses, plan)
+    if args.json:
+        print(to_json(result | {"out": None if out is None else str(out)}))
+        return 0 if plan.prediction.complete else 1
+    print(format_map_plan(plan))
+    print(_next_commands(args, plan, poses))
+    if out is not None:
+        print(f"\nwrote {out} (the plan as JSON)" + (f" and {poses} (its poses)" if poses is not None else ""))
+    return 0 if plan.prediction.complete else 1
+
+
+def _write_poses(path: Any, plan: Any) -> None:
+    """The poses every setup visits as an angle file (``t_s,<axis>_deg``), read back."""
+    from pige_sym.files import atomic_write_text
+    from pige_sym.measurements.rtest import read_angle_file
+
+    setup = plan.setups[0]
+    axes = tuple(setup.item.rotary_axes)
+    lines = [f"# pige plan --map: the poses of every setup of the map test of {plan.request.machine}",
+             ",".join(["t_s", *(f"{a}_deg" for a in axes)])]
+    per = setup.seconds / setup.angles_deg.shape[0]
+    lines += [",".join([f"{i * per:.10g}", *(f"{v:.10g}" for v in row)]) for i, row in enumerate(setup.angles_deg)]
+    atomic_write_text(path, "\n".join(lines) + "\n")
+    read_axes, angles, _ = read_angle_file(path)
+    if read_axes != axes or angles.shape != setup.angles_deg.shape or abs(angles - setup.angles_deg).max() > 0:
+        raise InputError(f"{path}: the file read back differs from the plan (please report this)")
+
+
+def _next_commands(args: argparse.Namespace, plan: Any, poses: Any) -> str:
+    """What to run next: one program per setup (sphere probe), or each setup's R-test program."""
+    from pige_sym.cli._maps import map_options_text
+
+    r = plan.request
+    if r.instrument == "sphere-probe":
+        return (f"\nnext, one program per setup (map_1.ngc … map_{len(plan.setups)}.ngc): pige program --instrument "
+                f"sphere-probe --machine \"{r.machine}\" {map_options_text(args, len(plan.setups))} "
+                f"--sphere {args.sphere} --sphere-radius {args.sphere_radius:g} --stylus-radius "
+                f"{args.stylus_radius:g}" + (f" --tool {args.tool}" if args.tool else "")
+                + " --dialect linuxcnc --stylus-tool N --stylus-length L --out map.ngc")
+    if r.instrument == "rtest":
+        traj = poses if poses is not None else "POSES.csv (give --out plan.json: it writes plan_poses.csv)"
+        lines = [f"  pige program --machine \"{r.machine}\" --trajectory {traj} --ball "
+                 f"{','.join(f'{x:.10g}' for x in s.point_mm)}"
+                 + ("" if s.tool_mm is None else f" --tool {','.join(f'{x:.10g}' for x in s.tool_mm)}")
+                 + f" --out map_{i}.mpf" for i, s in enumerate(plan.setups, start=1)]
+        return "\nnext, each setup's R-test program:\n" + "\n".join(lines)
+    return "\nnext, each setup: pige program --instrument ballbar --setup KIND --axis AXIS [--tilt DEG] " \
+        "--table-ball x,y,z (the setups above)"
+
+
 def _run(args: argparse.Namespace) -> int:
     from pige_sym.files import to_json
     from pige_sym.planning import parse_limits
 
     if args.checkup:
+        if args.map:
+            raise InputError("--checkup and --map plan different tests: give one of them")
         return _run_checkup(args)
     if args.machine_id or args.pige:
         raise InputError("--machine-id and --pige plan a check-up: give --checkup")
     if args.budget is None:
         args.budget = 1800.0
+    if args.map:
+        return _run_map(args)
     if args.instrument == "ballbar":
         return _run_ballbar(args)
     if args.instrument == "sphere-probe":
@@ -241,6 +345,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "--out plan.csv --json\n"
             "  pige plan --ball-region x=80:150,z=50:120 --criterion D --out plan.csv\n"
             "  pige plan --grade rtest.mpf --noise 0.3\n"
+            "  pige plan --instrument sphere-probe --map C,A --sphere 100,20,60 --sphere-radius 12.7 "
+            "--stylus-radius 1.5\n"
             "  pige plan --checkup --machine-id DMU50-2 --db history.db"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -270,11 +376,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="ballbar: the smallest set of setups; sphere-probe: poses and contacts for a time budget")
     add_probe_program_arguments(p)
     add_checkup_arguments(p)
+    add_map_arguments(p)
     p.add_argument("--budget", type=float, help="sphere-probe: probing time budget [s] (default 1800; with --checkup: "
                                                 "machine time, default 120)")
     p.add_argument("--pose-time", type=float, default=20.0, help="sphere-probe: time per pose (retract, rotate) [s]")
     p.add_argument("--contact-time", type=float, default=8.0, help="sphere-probe: time per contact [s]")
-    p.add_argument("--target", type=float, help="ballbar: largest acceptable predicted std [um or urad] (default 2)")
+    p.add_argument("--target", type=float,
+                   help="ballbar: largest acceptable predicted std [um or urad] (default 2; with --map: none, the "
+                   "fewest setups that determine every value)")
     p.add_argument("--force", action="store_true", help="replace an existing --out file")
     p.add_argument("--json", action="store_true", help="print the figures as one JSON object")
     p.set_defaults(handler=_run)

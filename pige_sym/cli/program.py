@@ -15,6 +15,11 @@ probed along machine axes (G38.2 / G31 / MEAS / TCH PROBE) and logged; the progr
 replayed against the nominal sphere before it is written (:mod:`pige_sym.nc.probe_readback`).
 Heidenhain programs print with FN 16: the format file is written beside the program (``.A``).
 
+With ``--instrument sphere-probe --map AXES`` it writes one probing program per setup of the map test
+``pige plan --map`` plans (``--out map.ngc``: ``map_1.ngc``, ``map_2.ngc``, …), each covering the map grid (every
+grid angle of each rotary axis, the inner axis swept at each outer angle; with ``--map-per-direction`` every
+angle met from both sides), each read back and checked as above.
+
 With ``--instrument ballbar`` it writes one ballbar setup (``--setup``, ``--axis``, ``--tilt``) as an RTCP
 program (Siemens ``TRAORI`` or Fanuc ``G43.4``), checked to keep the nominal bar length at every pose.
 """
@@ -25,6 +30,7 @@ import argparse
 from typing import Any
 
 from pige_sym.cli._ballbar import add_ballbar_arguments
+from pige_sym.cli._maps import add_map_arguments
 from pige_sym.cli._probe import INSTRUMENT_CHOICES, add_probe_program_arguments
 from pige_sym.cli._setup import add_setup_arguments, axis_sense_option, setup_geometry, trajectory_options
 from pige_sym.constants import DEFAULT_DWELL_S
@@ -40,6 +46,8 @@ def _run_probe(args: argparse.Namespace) -> int:
 
     kern = load_kernels(args.machine)
     setup = probe_setup(args, kern.MACHINE_CODE, dialect=args.dialect)
+    if args.map:
+        return _run_probe_maps(args, kern, setup)
     traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
     plan = plan_probing(setup, traj.angles_deg, traj.description)
     return _write_probe(args, setup, plan, [args.trajectory])
@@ -47,11 +55,12 @@ def _run_probe(args: argparse.Namespace) -> int:
 
 def _write_probe(args: argparse.Namespace, setup: Any, plan: Any, inputs: list[str]) -> int:
     """Render a probing plan in ``--dialect``, read it back (proof of safety), write it and say what it holds."""
-    from pige_sym.nc.probe_readback import verify_probe_program
+    from pige_sym.identification.result import per_pose
+    from pige_sym.nc.probe_readback import verify_rendered_program
     from pige_sym.nc.probe_render import heidenhain_format_file, render_probe_program
 
     text = render_probe_program(plan, args.dialect)
-    check = verify_probe_program(text, args.dialect, setup, plan.rotary_axes, path=args.out)
+    check = verify_rendered_program(text, args.dialect, setup, plan.rotary_axes, out=args.out)
     out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
     fmt = check_output(out.with_suffix(".A"), force=args.force, inputs=inputs, what="format file") \
         if args.dialect == "heidenhain" else None
@@ -59,7 +68,7 @@ def _write_probe(args: argparse.Namespace, setup: Any, plan: Any, inputs: list[s
     if fmt is not None:
         atomic_write_text(fmt, heidenhain_format_file(plan))
     print(f"wrote {out}: {check.poses} poses ({plan.description}), {sum(check.contacts)} contacts "
-          f"({min(check.contacts)}-{max(check.contacts)} per pose), {args.dialect}"
+          f"({per_pose(min(check.contacts), max(check.contacts))}), {args.dialect}"
           + (f", format file {fmt}" if fmt is not None else ""))
     print(f"read back: rapid moves at least {check.min_rapid_clearance_mm:.2f} mm from the sphere, rotary moves "
           f"{check.min_rotary_clearance_mm:.1f} mm above it, every probing move {check.min_overtravel_mm:.2f} mm past "
@@ -119,6 +128,48 @@ def _write_rtest_checkup(args: argparse.Namespace, pc: Any, said: str) -> int:
     return 0
 
 
+def _run_probe_maps(args: argparse.Namespace, kern: Any, setup: Any) -> int:
+    """``--map AXES``: one probing program per setup of the map test (``pige plan --map``), each planned, read back
+    and checked as a single program is; nothing is written unless every one passes."""
+    import dataclasses
+
+    from pige_sym.cli._maps import map_request, numbered
+    from pige_sym.nc.probe_readback import verify_probe_program
+    from pige_sym.nc.probe_render import heidenhain_format_file, render_probe_program
+    from pige_sym.planning.map_plan import plan_map_test
+
+    plan = plan_map_test(map_request(args, kern, "sphere-probe", point=setup.sphere_mm, tool=setup.tool_mm,
+                                     probe=setup, noise_um=args.noise, pose_s=args.pose_time,
+                                     contact_s=args.contact_time), fewer=False)
+    outs = numbered(args.out, len(plan.setups))
+    written = []
+    for s, out in zip(plan.setups, outs, strict=True):
+        assert s.probe is not None and s.probe_plan is not None
+        grid = f"{s.label}: maps of {args.map} every {args.map_step:g} deg"
+        probe_plan = dataclasses.replace(s.probe_plan, description=grid)
+        text = render_probe_program(probe_plan, args.dialect)
+        check = verify_probe_program(text, args.dialect, s.probe, probe_plan.rotary_axes, path=str(out))
+        path = check_output(out, force=args.force, what="--out")
+        fmt = check_output(path.with_suffix(".A"), force=args.force, what="format file") \
+            if args.dialect == "heidenhain" else None
+        written.append((s, path, fmt, text, probe_plan, check))
+    for s, path, fmt, text, probe_plan, check in written:
+        atomic_write_text(path, text)
+        if fmt is not None:
+            atomic_write_text(fmt, heidenhain_format_file(probe_plan))
+        where = f"sphere {', '.join(f'{x:g}' for x in s.point_mm)} mm" + (
+            "" if s.tool_mm is None else f", tool {', '.join(f'{x:g}' for x in s.tool_mm)} mm")
+        print(f"wrote {path}: {s.label}, {where}; {check.poses} poses, {sum(check.contacts)} contacts, "
+              f"{args.dialect}, {s.seconds / 60:.0f} min; read back: rapid moves at least "
+              f"{check.min_rapid_clearance_mm:.2f} mm from the sphere, probing moves {check.min_overtravel_mm:.2f} mm "
+              f"past it" + (f"; format file {fmt}" if fmt is not None else ""))
+    done, total = plan.prediction.counts()
+    print(f"together: {done} of {total} map values determined (pige plan --map gives their predicted standard "
+          "errors); run each program in turn and keep its log before the next, then pige import-probe LOG --program "
+          "PROGRAM for each and pige identify ALL.csv --map " + args.map)
+    return 0
+
+
 def _run_ballbar(args: argparse.Namespace) -> int:
     """One ballbar setup as an RTCP program: the tool ball on the nominal table point table_ball + offset."""
     import numpy as np
@@ -158,11 +209,16 @@ def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
     if args.checkup:
+        if args.map:
+            raise InputError("--checkup and --map write different programs: give one of them")
         return _run_checkup(args)
     if args.machine_id or args.pige:
         raise InputError("--machine-id and --pige write a check-up program: give --checkup")
     if args.instrument == "sphere-probe":
         return _run_probe(args)
+    if args.map:
+        raise InputError("--map writes the probing programs of a map test (--instrument sphere-probe); for an R-test "
+                         "or ballbar map test, pige plan --map names each setup's ball and tool")
     if args.instrument == "ballbar":
         return _run_ballbar(args)
     if args.dialect == "heidenhain":
@@ -204,6 +260,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "  pige program --trajectory steps --dialect fanuc --out steps.nc\n"
             "  pige program --instrument sphere-probe --dialect linuxcnc --sphere 100,20,60 --sphere-radius 12.7 \\\n"
             "      --stylus-radius 1.5 --trajectory plan.csv --out probe.ngc\n"
+            "  pige program --instrument sphere-probe --map C,A --dialect linuxcnc --sphere 100,20,60 \\\n"
+            "      --sphere-radius 12.7 --stylus-radius 1.5 --stylus-tool 9 --stylus-length 120 --out map.ngc\n"
             "  pige program --instrument ballbar --setup tangential --axis C --tilt -45 --dialect siemens \\\n"
             "      --out tangential_C45.mpf\n"
             "  pige program --checkup --machine-id DMU50-2 --db history.db --dialect fanuc --out checkup.nc"
@@ -223,7 +281,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from pige_sym.cli._checkup import add_checkup_arguments
 
     add_checkup_arguments(p)
+    add_map_arguments(p)
     p.add_argument("--budget", type=float, help="with --checkup: machine-time budget [s] (default 120)")
-    p.add_argument("--out", required=True, help="program file to write")
+    p.add_argument("--noise", type=float, default=0.5, help="--map: contact scatter the plan weighs [um] (default "
+                   "%(default)s)")
+    p.add_argument("--pose-time", type=float, default=20.0, help="--map: time per pose (retract, rotate) [s]")
+    p.add_argument("--contact-time", type=float, default=8.0, help="--map: time per contact [s]")
+    p.add_argument("--out", required=True, help="program file to write (--map: map.ngc writes map_1.ngc, map_2.ngc, "
+                   "...)")
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.set_defaults(handler=_run)

@@ -32,6 +32,20 @@ def _graded_plan(args: argparse.Namespace, data: Any) -> Any:
                       duration_s=prog.duration_s)
 
 
+def _map_spec(args: argparse.Namespace) -> Any:
+    """``--map AXES [--map-step DEG]`` as a MapSpec (None without --map)."""
+    if not args.map:
+        if args.map_step is not None:
+            from pige_sym.errors import InputError
+
+            raise InputError("--map-step goes with --map AXES")
+        return None
+    from pige_sym.identification.maps import DEFAULT_MAP_STEP_DEG, MapSpec
+
+    axes = tuple(a.strip().upper() for a in args.map.split(",") if a.strip())
+    return MapSpec(axes, DEFAULT_MAP_STEP_DEG if args.map_step is None else args.map_step)
+
+
 def _run(args: argparse.Namespace) -> int:
     from pige_sym.files import check_output_folder
     from pige_sym.report import findings_text, gather_report, write_report
@@ -43,7 +57,7 @@ def _run(args: argparse.Namespace) -> int:
                          sobol_samples=args.samples, seed=args.seed, progress=show_progress(args.json),
                          tolerances=args.tolerances, rule=args.rule, k=args.k,
                          compare=tuple(args.compare) if args.compare else None, history=args.history, db=args.db,
-                         joint=args.joint)
+                         joint=args.joint, maps=_map_spec(args))
     if args.plan:
         data.plan = _graded_plan(args, data)
     path = write_report(data, args.out, force=args.force, inputs=inputs, figures=not args.no_figures)
@@ -123,6 +137,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--joint", action="store_true",
                    help="also identify two or more R-test/probe files of one machine jointly (ballbar files always "
                         "are): one set of PIGEs, whether the files agree")
+    p.add_argument("--map", metavar="AXES", help="also fit the error maps of these rotary axes jointly from every file "
+                   "(conventions §10): plots, what they leave, what the setups do not determine (docs/maps.md)")
+    p.add_argument("--map-step", type=float, metavar="DEG", help="grid step of the maps [deg] (default 15)")
     p.add_argument("--history", metavar="ID", help="machine id: trend plots of its runs (pige history)")
     p.add_argument("--db", metavar="URL", help="history database (default: as pige history)")
     p.add_argument("--plan", metavar="TRAJECTORY",

@@ -21,6 +21,7 @@ from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import missing_tool
 from pige_sym.measurements.schema import MAX_PIGE
 from pige_sym.model.effects import EffectSpec
+from pige_sym.model.error_motions import error_maps_from
 from pige_sym.model.trajectories import approach_directions
 
 COMPENSABLE_KINDS = ("angular_error", "backlash")
@@ -190,19 +191,9 @@ def _parameters(doc: Any) -> CompensationParameters:
     return CompensationParameters(kern.MACHINE_CODE, dict(doc.pige), dict(doc.units), tool, pivots, doc.path,
                                   ignored, extensions, dict(doc.axis_sense), dict(doc.std), cov,
                                   list(doc.set_to_zero), None if doc.ball_mm is None else list(doc.ball_mm),
-                                  error_maps=_error_maps(doc.error_motions),
+                                  error_maps=error_maps_from(doc.error_motions),
                                   error_map_std={ax: {n: tuple(v) for n, v in m["std"].items()}
                                                  for ax, m in (doc.error_motions or {}).items()})
-
-
-def _error_maps(data: dict[str, Any] | None) -> Any:
-    """The validated ``error_motions`` of a parameter file as :class:`~pige_sym.model.error_motions.ErrorMaps`."""
-    from pige_sym.model.error_motions import AxisMaps, ErrorMaps, MapGrid
-
-    if not data:
-        return None
-    return ErrorMaps({ax: AxisMaps(MapGrid(ax, m["angle_deg"], m["full_turn"]), dict(m["value"]))
-                      for ax, m in data.items()})
 
 
 def extension_prefixes(extensions: list[AngleExtension]) -> list[str]:

@@ -15,6 +15,7 @@ import numpy as np
 from pige_sym.compensation.kinematics import compensate_poses, tool_point_error
 from pige_sym.compensation.parameters import AngleExtension
 from pige_sym.constants import DEFAULT_BALL_MM
+from pige_sym.files import make_folder
 from pige_sym.kernels import load_kernels
 from pige_sym.model.trajectories import approach_directions
 
@@ -88,7 +89,7 @@ def plot_compensation(rows: list[CompensationStudyRow], out_dir: str | Path) -> 
     import matplotlib.pyplot as plt
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out, what="--out")
     paths = []
     for i, r in enumerate(rows):
         fig, axs = plt.subplots(1, 2, figsize=(10, 3.6))

@@ -160,29 +160,57 @@ def prior_variances(estimate: np.ndarray, covariance: np.ndarray, *, sweeps: int
     """τ² that maximise the evidence ``N(x̂; 0, Σ + diag τ²)`` one at a time (type-II maximum likelihood), shape=(q,).
 
     Coordinate ascent with each coordinate's exact maximum (Tipping & Faul 2003, "Fast marginal likelihood
-    maximisation for sparse Bayesian models"): with ``C = Σ + T``, ``S = C⁻¹ᵢᵢ``, ``Q = (C⁻¹x̂)ᵢ`` and
-    ``s = S/(1 − τᵢ²S)``, ``q = Q/(1 − τᵢ²S)`` (the same without parameter i), the evidence is largest at
-    ``τᵢ² = (q² − s)/s²`` when ``q² > s``, else at 0.  It starts from ``max(x̂ᵢ² − σᵢ², 0)`` (the exact answer for
-    uncorrelated estimates) and sweeps until no τᵢ² moves by more than 1e-12 of ``x̂ᵢ² + σᵢ²``: a maximum of the
-    evidence in every coordinate.
+    maximisation for sparse Bayesian models"): with ``C₋ᵢ = Σ + T`` without τᵢ², ``s = C₋ᵢ⁻¹ᵢᵢ`` and
+    ``q = (C₋ᵢ⁻¹x̂)ᵢ``, the evidence is largest at ``τᵢ² = (q² − s)/s²`` when ``q² > s``, else at 0.  It starts
+    from ``max(x̂ᵢ² − σᵢ², 0)`` (the exact answer for uncorrelated estimates, used as it is for a value that no
+    other is correlated with) and sweeps until no τᵢ² moves by more than 1e-12 of ``x̂ᵢ² + σᵢ²``: a maximum of
+    the evidence in every coordinate.  Groups of values not correlated with each other are solved apart.
     """
     x = np.asarray(estimate, dtype=float)
     cov = np.asarray(covariance, dtype=float)
-    scale = x**2 + np.diag(cov)
     tau2 = np.clip(x**2 - np.diag(cov), 0.0, None)
+    for group in _correlated_groups(cov):
+        if group.size > 1:
+            tau2[group] = _coordinate_ascent(x[group], cov[np.ix_(group, group)], tau2[group], sweeps)
+    return tau2
+
+
+def _correlated_groups(cov: np.ndarray) -> list[np.ndarray]:
+    """Index groups of the estimates that are correlated (connected through non-zero covariances), each sorted,
+    in the order of their first index (``scipy.sparse.csgraph.connected_components``' groups, without its 0.4 s
+    import on ``pige checkup``'s path: the matrices here are a few dozen rows)."""
+    linked = np.abs(cov) > 0
+    linked |= linked.T
+    seen = np.zeros(len(cov), dtype=bool)
+    groups = []
+    for start in range(len(cov)):
+        if seen[start]:
+            continue
+        member = np.zeros(len(cov), dtype=bool)
+        member[start] = True
+        while True:
+            grown = member | linked[member].any(axis=0)
+            if (grown == member).all():
+                break
+            member = grown
+        seen |= member
+        groups.append(np.flatnonzero(member))
+    return groups
+
+
+def _coordinate_ascent(x: np.ndarray, cov: np.ndarray, tau2: np.ndarray, sweeps: int) -> np.ndarray:
+    tau2 = tau2.copy()
+    scale = x**2 + np.diag(cov)
+    rhs = np.column_stack([np.eye(x.size), x])
     for _ in range(sweeps):
         moved = 0.0
-        c_inv = np.linalg.inv(cov + np.diag(tau2))  # afresh each sweep; rank-one updates within it
         for i in range(x.size):
-            big_s, big_q = c_inv[i, i], c_inv[i] @ x
-            shrink = 1.0 - tau2[i] * big_s
-            s, q = big_s / shrink, big_q / shrink
+            without = tau2.copy()
+            without[i] = 0.0
+            sol = np.linalg.solve(cov + np.diag(without), rhs[:, [i, x.size]])  # C₋ᵢ⁻¹ [eᵢ, x̂]
+            s, q = sol[i, 0], sol[i, 1]
             new = (q * q - s) / (s * s) if q * q > s else 0.0
-            change = new - tau2[i]
-            if change:
-                col = c_inv[:, i].copy()
-                c_inv -= change * np.outer(col, col) / (1.0 + change * col[i])  # Sherman-Morrison
-            moved = max(moved, abs(change) / scale[i])
+            moved = max(moved, abs(new - tau2[i]) / scale[i])
             tau2[i] = new
         if moved <= 1e-12:
             break

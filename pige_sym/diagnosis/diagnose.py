@@ -397,12 +397,11 @@ def _rejections(reasons: dict[str, str], layout: Layout, final: Model) -> list[R
 
 
 def _dbic_of(reason: str) -> float | None:
-    if "ΔBIC " not in reason:
-        return None
-    try:
-        return float(reason.split("ΔBIC ")[1].split(",")[0].split(")")[0])
-    except ValueError:
-        return None
+    """The ΔBIC a rejection reason states (``ΔBIC -3.4``), or None."""
+    import re
+
+    found = re.search(r"ΔBIC (-?\d+(?:\.\d+)?)", reason)
+    return None if found is None else float(found.group(1))
 
 
 def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: float = P_MAX,

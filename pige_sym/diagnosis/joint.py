@@ -97,6 +97,7 @@ class JointDiagnosis:
     notes: list[str] = field(default_factory=list)
     effects: list[Finding] = field(default_factory=list)  # seen jointly in a set of ballbar setups
     extended: JointResult | None = None  # the joint fit with those effects
+    searched: list[str] = field(default_factory=list)  # the effects searched jointly (a set of ballbar setups)
 
     @property
     def final(self) -> IdentificationResult:
@@ -113,7 +114,8 @@ class JointDiagnosis:
         return {"machine": self.machine, "method": "joint-diagnosis",
                 "agreement": None if self.agreement is None else self.agreement.to_dict(),
                 "files": [f.to_dict() for f in self.files], "notes": self.notes,
-                "effects": [f.to_dict() for f in self.effects],
+                "effects": [f.to_dict() for f in self.effects], "effects_searched": self.searched,
+                "joint_effects": self.joint_effects_text(),
                 "pige": final["pige"], "std": final["std"], "covariance": final["covariance"], "units": final["units"],
                 "unidentifiable": final["unidentifiable"], "rank": final["rank"], "condition": final["condition"],
                 "rms_um": final["rms_um"], "ball_mm": final["ball_mm"], "pivots_mm": final["pivots_mm"],
@@ -140,13 +142,31 @@ class JointDiagnosis:
                          "model misses projects differently in each: the joint estimate is not to be trusted.")
         else:
             lines.append(f"The files agree on one set of PIGEs ({self.agreement.text()}).")
+        groups: dict[str, list[str]] = {}  # files with the same own result: one line, not one each
         for fd in self.files:
-            found = ", ".join(f.effect for f in fd.findings) or "nothing beyond the PIGEs"
-            lines.append(f"- {fd.label}: {fd.checked}: {found}")
-        if self.effects:
-            lines.append("Seen jointly in the ballbar setups: " + ", ".join(f.effect for f in self.effects)
-                         + " (the PIGEs below are estimated with them).")
+            found = ", ".join(f.title() for f in fd.findings) or "nothing beyond the PIGEs"
+            alone = fd.checked.startswith("agreement only")  # a ballbar file: no diagnosis of its own
+            groups.setdefault(fd.checked + ("; effects searched jointly (next line)" if alone and
+                                            self.searched else "" if alone else f": {found}"), []).append(fd.label)
+        for what, labels in groups.items():
+            who = labels[0] if len(labels) == 1 else f"{len(labels)} files ({', '.join(labels)})"
+            lines.append(f"- {who}: {what}")
+        joint = self.joint_effects_text()
+        if joint:
+            lines.append(joint)
         return "\n".join(lines)
+
+    def joint_effects_text(self) -> str:
+        """What the joint search of a set of ballbar setups found, in one sentence ("" when none was made)."""
+        if self.effects:
+            return ("Seen jointly in the ballbar setups: " + ", ".join(f.title() for f in self.effects)
+                    + " (the PIGEs below are estimated with them).")
+        if not self.searched:
+            return ""
+        return (f"Searched jointly over the {len(self.files)} setups: none of the {len(self.searched)} catalogue "
+                "effects (angular positioning errors, wobbles and radial run-outs of the swept axes, squareness) "
+                "improves the joint fit enough to be accepted: the PIGEs alone explain the setups (joint residual "
+                f"RMS {self.final.rms_um:.3g} um).")
 
 
 def _rss_rank(blocks: Sequence[Block], sigmas: Sequence[float]) -> tuple[float, int, int]:
@@ -248,6 +268,7 @@ def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *, pro
         files.append(FileDiagnosis(label, b.instrument, b.data.size, sigmas[i], summary.rms_um, findings, checked,
                                    tests[i], i in flagged))
     effects, extended = _ballbar_effects(machine, items, blocks, [f.sigma_um for f in joint.files])
+    searched = _searched(items)
     if effects and overall is not None and overall.p_value < ALPHA:
         notes.append("the agreement test compares PIGE-only models: an effect the setups see differently can "
                      "make them disagree; judge it with the effects found")
@@ -258,7 +279,17 @@ def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *, pro
         notes.append("with two files the test cannot say which one moved")
     if not math.isfinite(joint.result.rms_um):
         notes.append("the joint fit has no residual")
-    return JointDiagnosis(machine, joint, files, overall, notes, effects, extended)
+    return JointDiagnosis(machine, joint, files, overall, notes, effects, extended, searched)
+
+
+def _searched(items: Sequence[tuple[str, Measurement | BallbarRun]]) -> list[str]:
+    """The effects the joint search tries on a set of ballbar setups (none for other sets)."""
+    runs = [x for _, x in items if isinstance(x, BallbarRun)]
+    if len(runs) != len(items):
+        return []
+    from pige_sym.diagnosis.joint_effects import candidates
+
+    return [spec.id + "".join(f" {k}={v:g}" for k, v in spec.options.items()) for spec in candidates(runs)]
 
 
 def _ballbar_effects(machine: str, items: Sequence[tuple[str, Measurement | BallbarRun]], blocks: list[Block],

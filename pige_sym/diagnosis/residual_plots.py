@@ -14,6 +14,7 @@ import numpy as np
 
 from pige_sym.diagnosis.results import DiagnosisResult
 from pige_sym.errors import InputError
+from pige_sym.files import make_folder
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import Measurement
 from pige_sym.model.effects import EffectContext
@@ -81,7 +82,7 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
 
     kern = load_kernels(m.machine)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out, what="--plots")
     resid = result.baseline.residuals_um
     if resid.size == 0:
         raise InputError("no residuals to plot")

@@ -21,7 +21,7 @@ from pige_sym.identification.result import IdentificationResult, value_std
 EVIDENCE = {
     "thermal_drift": "a smooth trend of the residual with time (warm-up), not with the angles",
     "table_drift": "a smooth trend with time that turns with the table: the sphere (nest) creeps on its stand",
-    "angular_error": "a tangential residual about {axis} at harmonic {h} of the {axis} angle",
+    "angular_error": "a tangential residual about {axis} that repeats {h}x per revolution",
     "wobble": "a residual from a tilt of the {axis} axis that repeats {h}x per revolution",
     "radial_runout": "a radial residual of the {axis} axis that repeats {h}x per revolution",
     "backlash": "a residual that changes sign with the direction of approach of {axis}",
@@ -32,6 +32,34 @@ EVIDENCE = {
     "pose_cluster": "rows at one pose deviate together: an effect of that pose outside the catalogue, not outliers",
 }
 
+
+#: What each catalogue effect is, in words: the name ``pige diagnose`` and the report both give it.
+EFFECT_NAMES = {
+    "thermal_drift": "thermal drift of the tool against the table",
+    "table_drift": "the sphere or nest creeping on its stand",
+    "angular_error": "an angular positioning error of {axis}",
+    "wobble": "a wobble of the {axis} axis",
+    "radial_runout": "a radial run-out of the {axis} axis",
+    "backlash": "backlash of {axis}",
+    "squareness": "a squareness error of the linear axes {axis}",
+    "setup_offset": "the instrument set up off its nominal place",
+    "probe_trigger": "the probe's direction-dependent trigger radius",
+    "pose_cluster": "the rows of one pose deviating together",
+    "outliers": "isolated rows far beyond the noise",
+}
+
+
+def effect_title(effect: str, options: dict[str, float]) -> str:
+    """An effect as both ``pige diagnose`` and the report name it: its catalogue id, then what it is, e.g.
+    ``angular_error_C (an angular positioning error of C, 2 per revolution)``."""
+    head, _, axis = effect.rpartition("_")  # angular_error_C: the kind and its axis (or axis pair)
+    kind, axis = (head, axis) if head in EFFECT_NAMES else (effect, "")
+    words = EFFECT_NAMES.get(kind, "").format(axis=axis)
+    if "harmonic" in options:
+        words += f", {int(options['harmonic'])} per revolution"
+    rest = ", ".join(f"{k} {v:.3g}" for k, v in options.items() if k not in ("harmonic", "tau_s"))
+    words = ", ".join(w for w in (words, rest) if w)
+    return f"{effect} ({words})" if words else effect
 
 
 @dataclass
@@ -101,11 +129,14 @@ class Finding:
             "pige_shift": self.pige_shift, "evidence": self.evidence, "explained_fraction": self.explained,
         }
 
+    def title(self) -> str:
+        """What was found, as ``pige diagnose`` and the report both name it (:func:`effect_title`)."""
+        return effect_title(self.effect, self.options)
+
     def sentence(self) -> str:
         """One-line verdict."""
         vals = ", ".join(f"{'τ' if k == 'tau_s' else k}={value_std(v, self.std[k], '±')} {self.units[k]}"
                          for k, v in self.params.items())
-        opts = "".join(f" {k}={v:.3g}" for k, v in self.options.items() if k != "tau_s")  # τ: with the values
         big = max(self.pige_shift.items(), key=lambda kv: abs(kv[1]), default=None)
         # E<direction>0<axis>: a linear direction (X, Y, Z) is a position error in µm, else µrad
         unit = "um" if big and big[0][1:2] in ("X", "Y", "Z") else "urad"
@@ -121,7 +152,7 @@ class Finding:
         else:  # no cross-validation (the joint search of ballbar setups): the fitted residual
             gain = (f"residual RMS {self.rms_um_before:.3g} → {self.rms_um_after:.3g} in units of each file's noise "
                     "σ")
-        return f"{self.effect}{opts}: {self.evidence}; {vals}; {gain} (ΔBIC {self.delta_bic:.1f}){moved}{reduced}"
+        return f"{self.title()}: {self.evidence}; {vals}; {gain} (ΔBIC {self.delta_bic:.1f}){moved}{reduced}"
 
 
 @dataclass

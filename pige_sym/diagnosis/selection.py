@@ -113,6 +113,17 @@ class Comparison:
         return self.delta_bic <= delta_bic_max and self.p_value <= p_max and self.heldout_gain >= min_gain
 
 
+def shortfall(cmp: Comparison, delta_bic_max: float, p_max: float, min_gain: float) -> str:
+    """Why a candidate was not accepted, in words, with each test's value and its threshold (ΔBIC ``(ΔBIC …)``
+    kept in the text: the rejection list reads it back)."""
+    bic = (f"the BIC rises by {cmp.delta_bic:.1f} with it" if cmp.delta_bic > 0 else
+           f"the BIC falls by only {-cmp.delta_bic:.1f} with it")
+    return (f"{bic} (ΔBIC {cmp.delta_bic:.1f}, accepted at {delta_bic_max:g} or less), the F test gives "
+            f"p = {cmp.p_value:.2g} (accepted at {p_max:g} or less), the held-out RMS "
+            f"{'shrinks' if cmp.heldout_gain >= 0 else 'grows'} by {abs(cmp.heldout_gain):.1%} (accepted when it "
+            f"shrinks by {min_gain:.0%} or more)")
+
+
 def compare(small: Model, big: Model) -> Comparison:
     """ΔBIC, F-test and held-out gain of ``big`` over the nested ``small``."""
     return compare_fits(small.fit, big.fit, small.extra, big.extra)
@@ -282,8 +293,7 @@ def _grow(selector: Selector, current: Model, pool: list[Candidate], reasons: di
         for c, red in confounded:
             reasons[c.label] = "unidentifiable with the PIGEs: " + "; ".join(red.removed)
         for c, _, cmp in scored:
-            reasons[c.label] = (f"not supported (ΔBIC {cmp.delta_bic:.1f}, p {cmp.p_value:.2g}, "
-                                f"held-out gain {cmp.heldout_gain:.1%})")
+            reasons[c.label] = "not supported: " + shortfall(cmp, *crit)
             if cmp.delta_bic < best_dbic.get(c.key, (math.inf, c))[0]:
                 best_dbic[c.key] = (cmp.delta_bic, c)
         if not scored or not scored[0][2].supported(*crit):

@@ -157,11 +157,13 @@ def identify_blocks(machine: str, names: list[str], blocks: list[Block], sigmas:
     return _assemble(machine, names, all_names, blocks, sigmas, a, y, items)
 
 
-def common_machine(items: Sequence[tuple[str, Measurement | BallbarRun]]) -> str:
-    """The canonical code of the one machine every file measures; refused when they differ."""
+def common_machine(items: Sequence[tuple[str, Measurement | BallbarRun]], *,
+                   apart: str = "identify them apart") -> str:
+    """The canonical code of the one machine every file measures; refused when they differ (``apart`` says what to
+    do instead: the check is the same for every command that fits files jointly)."""
     machines = {load_kernels(x.machine).MACHINE_CODE for _, x in items}
     if len(machines) != 1:
-        raise InputError(f"the files measure different machines ({', '.join(sorted(machines))}): identify them apart")
+        raise InputError(f"the files measure different machines ({', '.join(sorted(machines))}): {apart}")
     common_axis_sense(items)
     return machines.pop()
 

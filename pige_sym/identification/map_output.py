@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from pige_sym.identification.maps import MapResult
 
@@ -38,29 +39,38 @@ def plot_paths(axes: Sequence[str], folder: str) -> list[Path]:
     return [Path(folder) / f"map_{ax}.png" for ax in axes]
 
 
-def plot_maps(result: MapResult, folder: str) -> list[str]:
-    """One figure per axis: each motion's map with its ±2σ band (PNG), written into ``folder`` (checked by the
-    caller with :func:`pige_sym.files.check_output`)."""
+def map_figure(result: MapResult, axis: str) -> Any:
+    """One axis' maps with their ±2σ bands: translations [µm] above, rotations [µrad] below (a figure)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    m = result.maps[axis]
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
+    for panel, unit in zip(axes, ("um", "urad"), strict=True):
+        for mo in (x for x in m.motions if x.unit == unit):
+            v, s = m.value[mo.name], m.std[mo.name]
+            line = panel.plot(m.grid.angles_deg, v, marker="o", ms=3, label=mo.name)[0]
+            panel.fill_between(m.grid.angles_deg, v - 2 * s, v + 2 * s, color=line.get_color(), alpha=0.2)
+        panel.set_ylabel(f"[{unit}]")
+        panel.grid(alpha=0.3)
+        if panel.get_legend_handles_labels()[0]:
+            panel.legend(fontsize=8, ncol=3)
+    axes[0].set_title(f"error motions of {axis} (CONVENTIONS §10, ±2σ bands)")
+    axes[1].set_xlabel(f"{axis} [deg]")
+    return fig
+
+
+def plot_maps(result: MapResult, folder: str) -> list[str]:
+    """:func:`map_figure` of each axis as PNG in ``folder`` (checked by the caller with
+    :func:`pige_sym.files.check_output`)."""
+    import matplotlib.pyplot as plt
+
     Path(folder).mkdir(parents=True, exist_ok=True)
     written = []
-    for ax, m in result.maps.items():
-        fig, axes = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
-        for panel, unit in zip(axes, ("um", "urad"), strict=True):
-            for mo in (x for x in m.motions if x.unit == unit):
-                v, s = m.value[mo.name], m.std[mo.name]
-                line = panel.plot(m.grid.angles_deg, v, marker="o", ms=3, label=mo.name)[0]
-                panel.fill_between(m.grid.angles_deg, v - 2 * s, v + 2 * s, color=line.get_color(), alpha=0.2)
-            panel.set_ylabel(f"[{unit}]")
-            panel.grid(alpha=0.3)
-            if panel.get_legend_handles_labels()[0]:
-                panel.legend(fontsize=8, ncol=3)
-        axes[0].set_title(f"error motions of {ax} (CONVENTIONS §10, ±2σ bands)")
-        axes[1].set_xlabel(f"{ax} [deg]")
+    for ax in result.maps:
+        fig = map_figure(result, ax)
         path = Path(folder) / f"map_{ax}.png"
         fig.savefig(path, format="png", dpi=110, bbox_inches="tight")
         plt.close(fig)

@@ -49,9 +49,9 @@ from pige_sym.identification.joint import (
     own_sigma,
     whitened_system,
 )
+from pige_sym.identification.map_check import MapLayout, Undetermined, local_check
 from pige_sym.identification.problem import ExtraColumns
 from pige_sym.identification.result import IdentificationResult, json_float
-from pige_sym.identification.spectrum import solve_scaled
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.ballbar import BallbarRun, bar_directions
 from pige_sym.measurements.measurement import Measurement
@@ -78,19 +78,6 @@ class MapSpec:
     axes: tuple[str, ...]
     step_deg: float = DEFAULT_MAP_STEP_DEG
     per_direction: tuple[str, ...] = ()
-
-
-@dataclass
-class Undetermined:
-    """A map value (or a whole motion) the data do not determine, why, and what would determine it."""
-
-    motion: str
-    angle_deg: float | None
-    why: str
-    remedy: str
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"motion": self.motion, "angle_deg": self.angle_deg, "why": self.why, "remedy": self.remedy}
 
 
 @dataclass
@@ -150,20 +137,37 @@ class MapResult:
         }
 
 
-@dataclass
-class _Layout:
-    """The map's unknowns before the projection: per axis its grid and motions, per column (motion, node)."""
-
-    grids: dict[str, MapGrid]
-    motions: dict[str, list[Motion]]
-    columns: list[tuple[Motion, int]]
-
-    def names(self) -> list[str]:
-        return [f"{m.name}@{self.grids[m.axis].angles_deg[g]:g}" for m, g in self.columns]
-
-
 def identify_maps(items: Sequence[tuple[str, Measurement | BallbarRun]], spec: MapSpec) -> MapResult:
     """The joint fit of PIGEs, zero-position errors and maps (module docstring).
+
+    Raises
+    ------
+    InputError
+        An axis the machine does not have, or files of different machines.
+    """
+    machine, names, layout, blocks = map_blocks(items, spec)
+    p = len(names)
+    pige_only = [_without_maps(b, p) for b in blocks]
+    sigmas = [own_sigma(b) for b in pige_only]
+    zeros = identify_blocks(machine, names, pige_only, sigmas, items).result
+    fitted_zero = [j for j in range(p) if j < n_location(machine) or np.isfinite(zeros.values[j])]
+    design = design_maps(names, layout, blocks, sigmas, fitted_zero)
+    joint = identify_blocks(machine, design.shared, design.blocks, sigmas, items)
+    sigmas = _refined_sigmas(joint, design.blocks)
+    joint = identify_blocks(machine, design.shared, design.blocks, sigmas, items)
+    maps, more = map_values(joint.result.values, joint.result.covariance, layout, design.groups)
+    return MapResult(_pige_part(joint, names, fitted_zero, zeros), maps, design.undetermined + more, spec)
+
+
+def n_location(machine: str) -> int:
+    """How many PIGEs (location errors) the machine has: the first columns of :func:`map_blocks`' names."""
+    return len(load_kernels(machine).LOCATION_PARAMETERS)
+
+
+def map_blocks(items: Sequence[tuple[str, Measurement | BallbarRun]],
+               spec: MapSpec) -> tuple[str, list[str], MapLayout, list[Block]]:
+    """The machine, the names of the PIGEs and zero-position errors, the maps' layout and every file's block
+    (those columns, then the map columns) of the joint map fit.
 
     Raises
     ------
@@ -176,28 +180,51 @@ def identify_maps(items: Sequence[tuple[str, Measurement | BallbarRun]], spec: M
     if bad or not spec.axes:
         raise InputError(f"--map {','.join(spec.axes) or '(none)'}: give rotary axes of {machine} "
                          f"({', '.join(kern.ROTARY_AXES)})")
-    layout = _layout(items, spec, tuple(kern.ROTARY_AXES))
+    layout = _layout(items, spec, tuple(kern.ROTARY_AXES), tuple(kern.TOOL_ROTARY))
     names = list(kern.LOCATION_PARAMETERS) + list(kern.ZERO_PARAMETERS)
-    blocks = [_block(x, lab, layout, kern) for lab, x in items]
+    return machine, names, layout, [_block(x, lab, layout, kern) for lab, x in items]
+
+
+@dataclass
+class MapDesign:
+    """The joint map fit's system before anything is solved: what :func:`identify_maps` fits and the planner
+    predicts from (:mod:`pige_sym.identification.map_design`).
+
+    Attributes
+    ----------
+    shared : list of str
+        The fitted columns: the PIGEs and zero-position errors fitted, z per motion, the left-out functions,
+        the held values.
+    blocks : list of Block
+        Every file's block in those columns (projected, the left-out functions orthogonalised).
+    groups : dict
+        Per motion its reported grid indices, Q and z columns (:func:`_projection`).
+    undetermined : list of Undetermined
+        What the per-angle check refused (:func:`_local_check`).
+    """
+
+    shared: list[str]
+    blocks: list[Block]
+    groups: dict[str, Any]
+    undetermined: list[Undetermined]
+
+
+def design_maps(names: list[str], layout: MapLayout, blocks: list[Block], sigmas: list[float],
+                fitted_zero: list[int]) -> MapDesign:
+    """The per-angle check, the §10 projection and the orthogonalised left-out functions (module docstring) of
+    :func:`map_blocks`' blocks weighted by ``sigmas`` [µm], with the PIGE and zero-position columns
+    ``fitted_zero``."""
     p = len(names)
-    pige_only = [_without_maps(b, p) for b in blocks]
-    sigmas = [own_sigma(b) for b in pige_only]
-    zeros = identify_blocks(machine, names, pige_only, sigmas, items).result
-    fitted_zero = [j for j, n in enumerate(names) if j < len(kern.LOCATION_PARAMETERS) or np.isfinite(zeros.values[j])]
-    undetermined, kept = _local_check(blocks, sigmas, p, layout)
+    undetermined, kept = local_check(blocks, sigmas, p, layout)
     transform, new_names, groups = _projection(layout, kept, p, fitted_zero)
     fitted = [Block(b.label, b.instrument, b.design @ transform, b.data, b.nuisance, b.nuisance_names) for b in blocks]
     shared = [names[j] for j in fitted_zero] + new_names
     nuisance = [j for j, n in enumerate(shared) if n.endswith(":left-out")]
-    fitted = _orthogonalised(fitted, sigmas, nuisance, len(fitted_zero))
-    joint = identify_blocks(machine, shared, fitted, sigmas, items)
-    sigmas = _refined_sigmas(joint, fitted)
-    joint = identify_blocks(machine, shared, fitted, sigmas, items)
-    maps, more = _maps(joint.result, layout, groups)
-    return MapResult(_pige_part(joint, names, fitted_zero, zeros), maps, undetermined + more, spec)
+    return MapDesign(shared, _orthogonalised(fitted, sigmas, nuisance, len(fitted_zero)), groups, undetermined)
 
 
-def _layout(items: Sequence[tuple[str, Any]], spec: MapSpec, axes: tuple[str, ...]) -> _Layout:
+def _layout(items: Sequence[tuple[str, Any]], spec: MapSpec, axes: tuple[str, ...],
+            tool_side: tuple[str, ...] = ()) -> MapLayout:
     grids: dict[str, MapGrid] = {}
     motions: dict[str, list[Motion]] = {}
     columns: list[tuple[Motion, int]] = []
@@ -207,10 +234,10 @@ def _layout(items: Sequence[tuple[str, Any]], spec: MapSpec, axes: tuple[str, ..
         grids[ax] = make_grid(ax, spec.step_deg, measured)
         motions[ax] = axis_motions(ax, per_direction=ax in spec.per_direction)
         columns += [(m, g) for m in motions[ax] for g in range(grids[ax].n)]
-    return _Layout(grids, motions, columns)
+    return MapLayout(grids, motions, columns, tuple(a for a in spec.axes if a in tool_side))
 
 
-def map_columns(kern: Any, layout: _Layout, angles_deg: np.ndarray, raw: np.ndarray,
+def map_columns(kern: Any, layout: MapLayout, angles_deg: np.ndarray, raw: np.ndarray,
                 approach: np.ndarray) -> np.ndarray:
     """Un-zeroed deviation per unit map value at every pose, shape=(n, 3, M) [µm per µm or µrad]."""
     axes = tuple(kern.ROTARY_AXES)
@@ -223,7 +250,7 @@ def map_columns(kern: Any, layout: _Layout, angles_deg: np.ndarray, raw: np.ndar
     return cols
 
 
-def _block(x: Measurement | BallbarRun, label: str, layout: _Layout, kern: Any) -> Block:
+def _block(x: Measurement | BallbarRun, label: str, layout: MapLayout, kern: Any) -> Block:
     """The file's block with the PIGE and zero-position columns, then the map columns."""
     angles = np.asarray(x.angles_deg, dtype=float)
     approach = approach_directions(angles)
@@ -246,58 +273,7 @@ def _without_maps(b: Block, p: int) -> Block:
     return Block(b.label, b.instrument, b.design[:, :p], b.data, b.nuisance, b.nuisance_names)
 
 
-def _local_check(blocks: list[Block], sigmas: list[float], p: int,
-                 layout: _Layout) -> tuple[list[Undetermined], np.ndarray]:
-    """Per grid angle, the motions its rows see alone (module docstring); returns the refusals and a mask
-    (M,) of the map columns that stay reported."""
-    a = np.vstack([b.design[:, p:] / s for b, s in zip(blocks, sigmas, strict=True)])
-    kept = np.ones(len(layout.columns), dtype=bool)
-    out: list[Undetermined] = []
-    for ax, grid in layout.grids.items():
-        for g in range(grid.n):
-            idx = [j for j, (m, gg) in enumerate(layout.columns) if m.axis == ax and gg == g]
-            cols = a[:, idx]
-            if not np.any(cols):
-                kept[idx] = False
-                out.append(Undetermined(f"{ax} maps", float(grid.angles_deg[g]),
-                                        f"no measured pose within {_step(grid):g}° of {ax} {grid.angles_deg[g]:g}°",
-                                        f"measure poses at {ax} {grid.angles_deg[g]:g}° (pige plan --map {ax})"))
-                continue
-            sol = solve_scaled(cols.T @ cols, np.zeros(len(idx)), 0.0)
-            if sol.rank == len(idx):
-                continue
-            motions = [layout.columns[j][0] for j in idx]
-            unseen = np.abs(sol.null_vectors).max(axis=1) > 1e-3
-            said = "; ".join(_combination(sol.null_vectors[:, c], motions) for c in range(sol.null_vectors.shape[1]))
-            for j, m, off in zip(idx, motions, unseen, strict=True):
-                if off:
-                    kept[j] = False
-                    out.append(Undetermined(m.name, float(grid.angles_deg[g]), f"the poses near {ax} "
-                                            f"{grid.angles_deg[g]:g}° see {sol.rank} of its {len(idx)} motions; "
-                                            f"not seen: {said}", _remedy(ax, sol.rank, len(idx))))
-    return out, kept
-
-
-def _combination(vec: np.ndarray, motions: list[Motion]) -> str:
-    order = np.argsort(-np.abs(vec))
-    lead = vec[order[0]]
-    terms = [f"{'-' if vec[j] / lead < 0 else '+'} {abs(vec[j] / lead):.3g}·{motions[j].name}" for j in order
-             if abs(vec[j]) > 1e-3]
-    text = " ".join(terms)
-    return text[2:] if text.startswith("+ ") else text
-
-
-def _remedy(axis: str, rank: int, full: int) -> str:
-    points = "one measured point" if rank <= 3 else "two measured points" if rank < full else "the points"
-    return (f"{points} per angle: measure at three points per angle, not on one line (for the axis nearest the "
-            f"workpiece, the sphere or ball at three positions on the table; pige plan --map {axis})")
-
-
-def _step(grid: MapGrid) -> float:
-    return float(np.diff(grid.angles_deg).min()) if grid.n > 1 else 360.0
-
-
-def _projection(layout: _Layout, kept: np.ndarray, p: int,
+def _projection(layout: MapLayout, kept: np.ndarray, p: int,
                 fitted_zero: list[int]) -> tuple[np.ndarray, list[str], dict[str, Any]]:
     """The column transform from (PIGEs, map values) to (the PIGEs fitted, z per motion, the left-out functions
     of each motion, the held values), the new names, and per motion its reported grid indices, Q and z columns.
@@ -370,9 +346,10 @@ def _refined_sigmas(joint: JointResult, blocks: list[Block]) -> list[float]:
     return out
 
 
-def _maps(result: IdentificationResult, layout: _Layout,
-          groups: dict[str, Any]) -> tuple[dict[str, AxisMap], list[Undetermined]]:
-    """Each axis' maps from the fitted z (``v = Q z``, ``Σ_v = Q Σ_z Qᵀ``)."""
+def map_values(values: np.ndarray, covariance: np.ndarray, layout: MapLayout,
+               groups: dict[str, Any]) -> tuple[dict[str, AxisMap], list[Undetermined]]:
+    """Each axis' maps from the fitted z (``v = Q z``, ``Σ_v = Q Σ_z Qᵀ``): ``values`` (NaN: undetermined) and
+    ``covariance`` of :class:`MapDesign`'s shared columns [µm, µrad]."""
     maps: dict[str, AxisMap] = {}
     more: list[Undetermined] = []
     for ax, grid in layout.grids.items():
@@ -383,10 +360,10 @@ def _maps(result: IdentificationResult, layout: _Layout,
             s = np.full(grid.n, np.nan)
             c = np.full((grid.n, grid.n), np.nan)
             cols = gr["columns"]
-            z = result.values[cols]
+            z = values[cols]
             if gr["nodes"] and cols and np.isfinite(z).all():
                 q = gr["q"]
-                sz = result.covariance[np.ix_(cols, cols)]
+                sz = covariance[np.ix_(cols, cols)]
                 nodes = gr["nodes"]
                 v[nodes] = q @ z
                 cv = q @ sz @ q.T
@@ -399,16 +376,18 @@ def _maps(result: IdentificationResult, layout: _Layout,
             elif gr["nodes"]:
                 more.append(Undetermined(m.name, None, f"only {len(gr['nodes'])} grid angle(s) have a value: after "
                                          f"leaving out the {m.left_out} functions of §10 nothing is left",
+                                         "determine its other angles first (their reasons are given)"
+                                         if len(gr["nodes"]) < grid.n else
                                          f"measure more angles of {ax} (pige plan --map {ax})"))
             value[m.name], std[m.name], cov[m.name] = v, s, c
         for m in layout.motions[ax]:
             if m.kind == "reversal":
-                _per_direction(result, groups, m, value, std)
+                _per_direction(covariance, groups, m, value, std)
         maps[ax] = AxisMap(grid, layout.motions[ax], value, std, cov)
     return maps, more
 
 
-def _per_direction(result: IdentificationResult, groups: dict[str, Any], reversal: Motion,
+def _per_direction(cov: np.ndarray, groups: dict[str, Any], reversal: Motion,
                    value: dict[str, np.ndarray], std: dict[str, np.ndarray]) -> None:
     """``φ± = φ ± r/2`` with their standard errors (the two maps' cross-covariance included)."""
     mean_name = reversal.name.split(":")[0]
@@ -421,7 +400,6 @@ def _per_direction(result: IdentificationResult, groups: dict[str, Any], reversa
     cm, cr = gm["columns"], gr["columns"]
     if not common or not cm or not cr:
         return
-    cov = result.covariance
     var_m = np.einsum("ij,jk,ik->i", qm, cov[np.ix_(cm, cm)], qm)
     var_r = np.einsum("ij,jk,ik->i", qr, cov[np.ix_(cr, cr)], qr)
     cross = np.einsum("ij,jk,ik->i", qm, cov[np.ix_(cm, cr)], qr)

@@ -220,6 +220,11 @@ def value_std(value: float, std: float, sep: str = " ± ") -> str:
     return f"{value:.{decimals}f}{sep}{std:.{decimals}f}"
 
 
+def per_pose(lo: int, hi: int) -> str:
+    """A count per pose for a reader: ``5 per pose`` when every pose has the same, else ``4–9 per pose``."""
+    return f"{lo} per pose" if lo == hi else f"{lo}–{hi} per pose"
+
+
 def json_float(x: float) -> float | None:
     x = float(x)
     return None if not math.isfinite(x) else x

@@ -114,13 +114,12 @@ def solve_scaled(normal: np.ndarray, rhs: np.ndarray, yy: float) -> Solution:
 
 def combination_text(vec: np.ndarray, names: Sequence[str], units: dict[str, str]) -> str:
     order = np.argsort(-np.abs(vec))
+    lead = float(vec[order[0]])
     terms = []
-    for j in order:
-        if abs(vec[j]) < 1e-3:
-            continue
-        coef = vec[j] / vec[order[0]]
+    for j in order[np.abs(vec[order]) >= 1e-3].tolist():
+        coef = float(vec[j]) / lead
         sign = "-" if coef < 0 else "+"
-        mag = f"{abs(coef):.3g}·" if not np.isclose(abs(coef), 1.0) else ""
+        mag = f"{abs(coef):.3g}·" if abs(abs(coef) - 1.0) > 1e-8 + 1e-5 else ""  # np.isclose's tolerances
         terms.append(f"{sign} {mag}{names[j]} [{units.get(names[j], '')}]")
     text = " ".join(terms)
     return text[2:] if text.startswith("+ ") else text

@@ -113,17 +113,28 @@ def read_axis_sense(text: str, rotary_axes: Sequence[str], path: str, line: int 
 
 
 def reconcile(recorded: Mapping[str, int], given: Mapping[str, int] | None, source: str,
-              rotary_axes: Sequence[str]) -> AxisSense:
-    """The sense of an input (``recorded``), checked against ``--axis-sense`` (``given``, None: not given).
+              rotary_axes: Sequence[str], *, given_by: str = "--axis-sense", fix: str | None = None) -> AxisSense:
+    """The sense of an input (``recorded``), checked against ``given`` (None: not given).
+
+    ``given`` is ``--axis-sense`` unless ``given_by`` names where it comes from (a parameter file, for a program
+    compensated with it); ``fix`` then says what to do (a refusal never blames an option that was not given).
 
     Raises
     ------
     InputError
-        The option and the input disagree: they would be mixed up.
+        The two disagree: they would be mixed up.
     """
     rec = {a: -1 for a in rotary_axes if recorded.get(a, 1) == -1}
     if given is None:
         return rec
+    giv = {a: -1 for a in rotary_axes if given.get(a, 1) == -1}
+    if giv != rec:
+        said = "says" if given_by == "--axis-sense" else "records"
+        raise InputError(f"{source} records the commanded axis sense {describe_axis_sense(rec, rotary_axes)}, but "
+                         f"{given_by} {said} {describe_axis_sense(giv, rotary_axes)}: "
+                         + (fix or "give the sense the file was made with (or leave --axis-sense out to take the "
+                                   "file's)"))
+    return rec
     giv = {a: -1 for a in rotary_axes if given.get(a, 1) == -1}
     if giv != rec:
         raise InputError(f"{source} records the commanded axis sense {describe_axis_sense(rec, rotary_axes)}, but "

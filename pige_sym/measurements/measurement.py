@@ -54,6 +54,17 @@ LIMITS: dict[str, float] = {"t_s": 1e9, "deg": 1e5, "um": 1e5, "mm": 1e5, "temp_
                             "sd_um": 1e5}
 
 
+def unphysical(names: list[str], values: Any, std: Any, bound: float) -> tuple[str, float] | None:
+    """The first (name, value) of an estimate beyond ±``bound`` by more than 3 standard errors, or None: the rule
+    identify (:func:`~pige_sym.measurements.schema.refuse_unphysical`) and the history's reader apply (NaN,
+    undetermined, is none)."""
+    for name, v, s in zip(names, values, std, strict=True):
+        v, s = float(v), float(s)
+        if math.isfinite(v) and abs(v) - 3 * (s if math.isfinite(s) else 0.0) > bound:
+            return name, v
+    return None
+
+
 @dataclass
 class Measurement:
     """One R-test measurement: metadata and per-point data.

@@ -11,14 +11,19 @@ import checks, in this order, and refuses with the file, the line and the option
    position, so it is a duplicated line: it would count a contact twice and shrink the contact σ.  Poses
    repeated at the same angles (drift measurements) are not compared contact by contact: a probing axis
    written to 0.1 µm (Heidenhain) can repeat a value.
+   **A contact far from its pose** (:func:`check_far_contacts`): a contact farther from the middle of its pose's
+   contacts (their coordinate-wise median) than any point of the sphere can be, ``(1 + √3)(R + r)`` plus
+   :data:`FAR_MARGIN_MM`, while most of the pose's contacts are within it: that line is wrong (a mistyped or
+   wrongly logged contact), not the pattern the pose was probed with.
 3. **Poses** (:func:`check_pose_count`): the reference pose and enough others that identify can fit the
    machine's location errors (``3(n − 1) > P``), not a file identify then calls "no data rows".
 4. **Contacts on a sphere** (:func:`check_contact_sigma`): the contacts' robust scatter about their own poses'
    spheres below :data:`MAX_CONTACT_SIGMA_UM` (a touch probe repeats to about a micrometre).
 5. **The radius** (:func:`check_radius`): the fitted ``R_eff`` against ``R + r`` (a pre-travel is micrometres:
    more than :data:`RADIUS_TOLERANCE_MM` off is a wrong ``--sphere-radius``/``--stylus-radius`` or ``--units``);
-   a given ``--radius`` against the radius the contacts lie on (the first-order shift of a free radius, from the
-   fit's own least squares): off by more than the faulty-contact limit, the option is wrong, not the pose.
+   a given ``--radius`` against the radius the contacts lie on (the fit with a free radius, made first: a fit with a
+   radius far from the data's has no meaning): off by more than the faulty-contact limit, the option is wrong, not
+   the pose.
    Then the import's screen of faulty contacts (one pose off its own sphere: "re-probe the pose").
 6. **The reference centre** (:func:`check_reference`): with the program's sphere position (``--program`` or
    ``--sphere``), the fitted ``c(0)`` within :data:`REFERENCE_TOLERANCE_MM` of it (``--sphere``, ``--units``,
@@ -50,6 +55,8 @@ MAX_CONTACT_SIGMA_UM = 20.0
 MAX_DEVIATION_UM = 1000.0
 #: Largest ``--stylus-offset`` [mm]: the stylus centre is a stylus radius or so from the controlled point.
 MAX_STYLUS_OFFSET_MM = 100.0
+#: Added to the farthest a contact of a pose can lie from the middle of the others [mm] (set-up, pre-travel).
+FAR_MARGIN_MM = 1.0
 SETUP_FLAGS = "--pivot, --axis-sense, --kinematics, --units, --stylus-offset and --tool"
 
 
@@ -114,32 +121,63 @@ def check_pose_count(path: str, poses: int, parameters: int, first_line: int) ->
                               f"and at least {need - 1} more to fit the {parameters} location errors; probe more poses")
 
 
-def check_radius(path: str, line: int, fit: Any, radius_shift_mm: float, nominal_mm: float, given: bool,
-                 limit_um: float) -> None:
-    """Refuse an effective radius that cannot be the set-up's (module docstring, 3).
+def check_far_contacts(path: str, pts: np.ndarray, starts: np.ndarray, lines: np.ndarray, nominal_mm: float) -> None:
+    """Refuse a lone contact no sphere of radius ``nominal_mm`` (R + r) could hold with the others (module
+    docstring, 2).
+
+    The coordinate-wise median of a pose's contacts lies in the cube around the sphere, so every contact on the
+    sphere is within ``(1 + √3)(R + r)`` of it.  Only contacts that are a minority of their pose are named: when
+    most are beyond, the set-up is wrong (``--units``, the radii), which the radius check names.
 
     Parameters
     ----------
-    fit : SphereFit
-        The import's fit (its ``radius_mm`` fitted, or ``--radius``).
-    radius_shift_mm : float
-        How far a free radius would move from ``fit.radius_mm`` (0 when it was fitted).
+    pts : ndarray, shape=(N, 3) [mm]
+        The stylus-tip centres of the contacts, pose by pose (``starts``).
+    lines : ndarray, shape=(N,) of int
+        Each contact's line in the log.
+    """
+    counts = np.diff(starts)
+    pose = np.repeat(np.arange(counts.size), counts)
+    middle = starts[:-1] + (counts - 1) // 2
+    median = np.empty((counts.size, 3))
+    for k in range(3):  # a pose's contacts sorted by coordinate k, poses in order: the middle one is its median
+        median[:, k] = pts[np.lexsort((pts[:, k], pose))[middle], k]
+    dist = np.linalg.norm(pts - median[pose], axis=1)
+    reach = (1.0 + np.sqrt(3.0)) * nominal_mm + FAR_MARGIN_MM
+    far = ~(dist <= reach)
+    lone = far & (2 * np.bincount(pose, weights=far, minlength=counts.size)[pose] < counts[pose])
+    if lone.any():
+        i = int(np.flatnonzero(lone)[0])
+        first, last = int(starts[pose[i]]), int(starts[pose[i] + 1]) - 1
+        raise FileFormatError(path, int(lines[i]), f"this contact lies {dist[i]:.1f} mm from the middle of its pose's "
+                              f"contacts (lines {lines[first]}-{lines[last]}), farther than a sphere of R + r = "
+                              f"{nominal_mm:g} mm lets it ({reach:.1f} mm): a mistyped or wrongly logged contact; "
+                              "re-probe the pose")
+
+
+def check_radius(path: str, line: int, data_radius_mm: float, given_mm: float | None, nominal_mm: float,
+                 limit_um: float) -> None:
+    """Refuse an effective radius that cannot be the set-up's (module docstring, 5).
+
+    Parameters
+    ----------
+    data_radius_mm : float
+        The radius the contacts lie on (the fit with a free radius).
+    given_mm : float or None
+        ``--radius`` when given.
     nominal_mm : float
         ``R + r`` from ``--sphere-radius`` and ``--stylus-radius``.
-    given : bool
-        ``--radius`` was given.
     limit_um : float
         The faulty-contact limit [µm].
     """
-    data_radius = fit.radius_mm + radius_shift_mm
-    if given and abs(radius_shift_mm) * 1e3 > limit_um:
-        raise FileFormatError(path, line, f"--radius {fit.radius_mm:g} mm, but the contacts lie on a sphere of "
-                              f"{data_radius:.4f} mm ({radius_shift_mm * 1e3:+.1f} um): check --radius (the "
-                              "calibrated R + r - pre-travel), or leave it out to fit it")
-    if abs(data_radius - nominal_mm) > RADIUS_TOLERANCE_MM:
-        which = "--radius" if given and abs(fit.radius_mm - nominal_mm) > RADIUS_TOLERANCE_MM else \
+    if given_mm is not None and not abs(data_radius_mm - given_mm) * 1e3 <= limit_um:
+        raise FileFormatError(path, line, f"--radius {given_mm:g} mm, but the contacts lie on a sphere of "
+                              f"{data_radius_mm:.4f} mm ({(data_radius_mm - given_mm) * 1e3:+.1f} um): check --radius "
+                              "(the calibrated R + r - pre-travel), or leave it out to fit it")
+    if abs(data_radius_mm - nominal_mm) > RADIUS_TOLERANCE_MM:
+        which = "--radius" if given_mm is not None and abs(given_mm - nominal_mm) > RADIUS_TOLERANCE_MM else \
             "--sphere-radius and --stylus-radius"
-        raise FileFormatError(path, line, f"the contacts lie on a sphere of radius {data_radius:.4f} mm, but "
+        raise FileFormatError(path, line, f"the contacts lie on a sphere of radius {data_radius_mm:.4f} mm, but "
                               f"--sphere-radius + --stylus-radius = {nominal_mm:g} mm (a pre-travel is micrometres): "
                               f"check {which}, and --units (an inch log read as mm, or the reverse, scales it by "
                               "25.4)")

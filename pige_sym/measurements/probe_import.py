@@ -45,6 +45,7 @@ from pige_sym.measurements.probe_checks import (
     SETUP_FLAGS,
     check_contact_sigma,
     check_deviations,
+    check_far_contacts,
     check_options,
     check_pose_count,
     check_radius,
@@ -57,10 +58,8 @@ from pige_sym.measurements.probe_trigger import sensitivity_columns, trigger_sen
 from pige_sym.measurements.sphere_fit import (
     MIN_CONTACTS,
     SphereFit,
-    contact_weights,
     fit_centres,
     fit_own_radius,
-    linear_response,
 )
 
 INSTRUMENT = "sphere-probe"
@@ -147,19 +146,21 @@ def _pose_points(log: ProbeLog, starts: np.ndarray, offset_mm: float, head_mm: n
 
 
 def _fit(log: ProbeLog, starts: np.ndarray, pts: np.ndarray, spec: ProbeImport, frames: np.ndarray | None) -> SphereFit:
-    try:
-        fit = fit_centres((pts, starts), radius_mm=spec.radius_mm, moves=spec.moves, stylus_rotations=frames)
-    except InputError as exc:
-        i = int(str(exc).split(":")[0].split()[-1]) if str(exc).startswith("pose ") else 0
-        raise FileFormatError(log.path, int(log.lines[starts[i]]), str(exc)) from None
+    """The shared-radius fit of the import (``--radius`` when given), after the checks on the contacts and the radius.
+
+    The radius the contacts lie on comes first, from the fit with a free radius: a given radius far from it (25 mm
+    for a 14.2 mm sphere) is refused before a fit with it is tried, which has no meaning and can fail outright.
+    """
+    free = _fit_centres(log, starts, pts, None, spec, frames)
     # each pose against the best sphere through its own contacts (own radius: a fault cannot leak into the
     # other poses through the shared one); the worst contact is named from the shared-radius fit
-    own = fit_own_radius((pts, starts), moves=spec.moves, stylus_rotations=frames, start=fit)
+    own = fit_own_radius((pts, starts), moves=spec.moves, stylus_rotations=frames, start=free)
     robust = 1.4826 * float(np.median(np.abs(own[own != 0]))) if (own != 0).any() else 0.0
     limit = max(OUTLIER_SIGMAS * robust, OUTLIER_FLOOR_UM)
     check_contact_sigma(log.path, robust)
-    check_radius(log.path, int(log.lines[0]), fit, _free_radius_shift(fit, pts, spec, frames),
-                 spec.sphere_radius_mm + spec.stylus_radius_mm, spec.radius_mm is not None, limit)
+    check_radius(log.path, int(log.lines[0]), free.radius_mm, spec.radius_mm,
+                 spec.sphere_radius_mm + spec.stylus_radius_mm, limit)
+    fit = free if spec.radius_mm is None else _fit_centres(log, starts, pts, spec.radius_mm, spec, frames)
     own_max = np.maximum.reduceat(np.abs(own), starts[:-1])
     shared_max = np.maximum.reduceat(np.abs(fit.residual_flat_um), starts[:-1])
     bad = np.flatnonzero((own_max > limit) | (shared_max > 3 * limit))
@@ -176,16 +177,14 @@ def _fit(log: ProbeLog, starts: np.ndarray, pts: np.ndarray, spec: ProbeImport, 
     return fit
 
 
-def _free_radius_shift(fit: SphereFit, pts: np.ndarray, spec: ProbeImport, frames: np.ndarray | None) -> float:
-    """How far the shared radius would move if it were fitted [mm] (0 when it was): one step of the fit's own
-    least squares from the given radius."""
-    if fit.radius_fitted:
-        return 0.0
-    v = pts - np.repeat(fit.centres_mm, np.diff(fit.starts), axis=0)
-    normals = v / np.linalg.norm(v, axis=1, keepdims=True)
-    weights = np.asarray(contact_weights(normals, spec.moves, frames, fit.starts))
-    shift = linear_response(normals, weights, fit.residual_flat_um[:, None] * 1e-3, True, fit.starts)[1]
-    return float(shift[0])
+def _fit_centres(log: ProbeLog, starts: np.ndarray, pts: np.ndarray, radius_mm: float | None, spec: ProbeImport,
+                 frames: np.ndarray | None) -> SphereFit:
+    """:func:`~pige_sym.measurements.sphere_fit.fit_centres`, its refusals located at the pose's first line."""
+    try:
+        return fit_centres((pts, starts), radius_mm=radius_mm, moves=spec.moves, stylus_rotations=frames)
+    except InputError as exc:
+        i = int(str(exc).split(":")[0].split()[-1]) if str(exc).startswith("pose ") else 0
+        raise FileFormatError(log.path, int(log.lines[starts[i]]), str(exc)) from None
 
 
 def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
@@ -209,6 +208,7 @@ def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
     pts = _pose_points(log, starts, spec.stylus_offset_mm, head)
     if spec.kinematics == "tcp":
         pts = _machine_points(kern, pts, starts, angles, spec)
+    check_far_contacts(log.path, pts, starts, log.lines, spec.sphere_radius_mm + spec.stylus_radius_mm)
     fit = _fit(log, starts, pts, spec, frames)
     check_reference(log.path, int(log.lines[0]), fit.centres_mm[0], spec.sphere_mm,
                     "the program's header (sphere_mm)" if spec.program else "--sphere")
@@ -272,7 +272,7 @@ def _measurement(kern: Any, log: ProbeLog, spec: ProbeImport, starts: np.ndarray
     n = len(starts) - 1
     cov = fit.covariance_um2
     numbers = {c: np.array(fit.centres_mm[:, k]) for k, c in enumerate(CENTRE_COLUMNS)}
-    numbers |= {c: np.array(cov[:, i, j]) for c, (i, j) in zip(COV_COLUMNS, _UPPER, strict=True)}
+    numbers |= covariance_columns(cov)
     extra = {"log_line": list(map(str, log.lines[starts[:-1]].tolist()))}
     meta = {
         "instrument": INSTRUMENT,
@@ -305,6 +305,11 @@ def import_probe_log(path: str | os.PathLike[str], fmt: str, spec: ProbeImport) 
     """Read a probe log and return its measurement (:func:`probe_measurement`)."""
     kern = load_kernels(spec.machine)
     return probe_measurement(read_probe_log(path, fmt, tuple(kern.ROTARY_AXES), units=spec.units), spec)
+
+
+def covariance_columns(cov: np.ndarray) -> dict[str, np.ndarray]:
+    """The per-row centre covariances (n, 3, 3) [µm²] as the file's columns ``cov_xx_um2 … cov_zz_um2``."""
+    return {c: np.array(cov[:, i, j]) for c, (i, j) in zip(COV_COLUMNS, _UPPER, strict=True)}
 
 
 def row_covariances(m: Measurement) -> np.ndarray:

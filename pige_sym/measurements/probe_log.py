@@ -38,7 +38,7 @@ from pige_sym.options import strict_float
 PROBE_FORMATS = ("linuxcnc", "fanuc", "siemens", "heidenhain")
 LINUXCNC_AXES = ("X", "Y", "Z", "A", "B", "C", "U", "V", "W")
 INCH_MM = 25.4
-_NUMBER = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)"
+_NUMBER = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?"  # an exponent too: the value is then checked (bounds)
 _PIGE_FIELD = re.compile(rf"([A-Z])\s*({_NUMBER})")
 
 
@@ -126,7 +126,11 @@ def _read_pige(path: str, fmt: str, lines: list[str], rotary_axes: tuple[str, ..
                                             f"{' '.join(a + '..' for a in rotary_axes)}'): {body[:60]!r}")
         rest = body[4:]
         fields = _PIGE_FIELD.findall(rest)
-        if _PIGE_FIELD.sub("", rest).strip() or [f for f, _ in fields] != want:
+        left = _PIGE_FIELD.sub(" ", rest).split()
+        if left:
+            raise FileFormatError(path, no, f"{left[0]!r} is not a field (a letter and an ASCII decimal); a contact "
+                                            f"line has {' '.join(want)} in this order")
+        if [f for f, _ in fields] != want:
             got = " ".join(f for f, _ in fields) or "nothing"
             raise FileFormatError(path, no, f"fields {got}; a contact line has {' '.join(want)} in this order")
         vals = {f: _number(v, path, no, f, LIMITS["deg"] if f in rotary_axes else LIMITS["mm"]) for f, v in fields}

@@ -1,12 +1,11 @@
 """One strict validator for every JSON file pige reads: dataclasses describe the documents.
 
-Reading (:func:`load_json`)
----------------------------
-Only regular files (no FIFO or device), at most :data:`MAX_JSON_BYTES`, UTF-8 (a BOM is
-allowed), strict JSON: ``NaN``/``Infinity`` tokens, repeated keys and nesting deeper
-than :data:`MAX_DEPTH` are refused.  Every refusal is a
-:class:`~pige_sym.errors.FileFormatError` naming the file, the line when known, and the
-field as a path (``pige.EX0C``).
+Reading (:func:`~pige_sym.measurements.strict_json.load_json`)
+---------------------------------------------------------------
+Strict JSON text (:mod:`pige_sym.measurements.strict_json`: regular files only, bounded size and depth, no
+``NaN``, no repeated keys, over-long integers as the float they denote).  Every refusal is a
+:class:`~pige_sym.errors.FileFormatError` naming the file, the line when known, and the field as a path
+(``pige.EX0C``).
 
 Schemas (:func:`from_json`)
 ---------------------------
@@ -40,7 +39,6 @@ is refused unless ``allow_missing`` (then it is set to 0 and named in
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import types
 import typing
@@ -52,10 +50,9 @@ import numpy as np
 
 from pige_sym.constants import MAX_PIGE as _MAX_PIGE
 from pige_sym.errors import FileFormatError, InputError, PigeError, SchemaRefusal
-from pige_sym.files import PathLike, open_regular_file
+from pige_sym.files import PathLike
+from pige_sym.measurements.strict_json import MAX_DEPTH, MAX_INT_DIGITS, MAX_JSON_BYTES, load_json, strict_loads
 
-MAX_JSON_BYTES = 16 * 2**20
-MAX_DEPTH = 16
 #: Largest magnitude of a PIGE [µm or µrad] (:data:`pige_sym.constants.MAX_PIGE`).
 MAX_PIGE = _MAX_PIGE
 #: Largest magnitude of a position in a parameter file [mm].
@@ -63,59 +60,7 @@ MAX_POSITION_MM = 1e5
 
 T = TypeVar("T")
 
-
-def _reject_constant(token: str) -> float:
-    raise ValueError(f"{token} is not allowed in pige JSON (use null for 'no value')")
-
-
-def _no_repeats(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for k, v in pairs:
-        if k in out:
-            raise ValueError(f"duplicate key {k!r}: it appears twice in one object")
-        out[k] = v
-    return out
-
-
-def _depth(x: Any, limit: int, level: int = 1) -> int:
-    if level > limit:
-        return level
-    if isinstance(x, dict):
-        return max([_depth(v, limit, level + 1) for v in x.values()], default=level)
-    if isinstance(x, list):
-        return max([_depth(v, limit, level + 1) for v in x], default=level)
-    return level
-
-
-def load_json(path: PathLike, what: str = "JSON file") -> Any:
-    """Parse a JSON file strictly (module docstring); returns plain Python values.
-
-    Raises
-    ------
-    FileFormatError
-        Not a regular file, too large, not UTF-8, not strict JSON, or nested too deeply.
-    """
-    p = str(path)
-    with open_regular_file(path) as fh:
-        raw = fh.read(MAX_JSON_BYTES + 1)
-    if len(raw) > MAX_JSON_BYTES:
-        raise FileFormatError(p, None, f"{what} larger than {MAX_JSON_BYTES // 2**20} MiB")
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(p, None, f"{what} is not UTF-8 text ({exc.reason} at byte {exc.start}): save it as "
-                              "UTF-8") from None
-    try:
-        data = json.loads(text, parse_constant=_reject_constant, object_pairs_hook=_no_repeats)
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(p, exc.lineno, f"not valid JSON: {exc.msg}") from None
-    except ValueError as exc:
-        raise FileFormatError(p, None, f"not valid pige JSON: {exc}") from None
-    except RecursionError:
-        raise FileFormatError(p, None, f"nested deeper than {MAX_DEPTH} levels") from None
-    if _depth(data, MAX_DEPTH) > MAX_DEPTH:
-        raise FileFormatError(p, None, f"nested deeper than {MAX_DEPTH} levels")
-    return data
+__all__ = ["MAX_DEPTH", "MAX_INT_DIGITS", "MAX_JSON_BYTES", "load_json", "strict_loads"]  # read here, used by many
 
 
 def _type_name(x: Any) -> str:
@@ -155,7 +100,7 @@ def _check(tp: Any, value: Any, where: str, meta: Mapping[str, Any]) -> Any:
             raise SchemaRefusal(where, f"expected a number, got {_type_name(value)}")
         v = float(value)
         if not math.isfinite(v):
-            raise SchemaRefusal(where, "expected a finite number")
+            raise SchemaRefusal(where, "expected a finite number, got one beyond ±1.8e308")
         limit = meta.get("max_abs")
         if limit is not None and abs(v) > limit:
             raise SchemaRefusal(where, f"{v:g} is not physical (|value| <= {limit:g})")
@@ -258,6 +203,7 @@ class ParamsDocument:
                                                                               "max_abs": MAX_POSITION_MM})
     findings: list[Any] | None = None
     axis_sense: dict[str, int] | None = None
+    effects: list[Any] | None = None  # several files' diagnosis: the effects seen jointly (findings, alike)
     std: dict[str, float | None] | None = field(default=None, metadata={"max_abs": MAX_PIGE})
     covariance: CovarianceDocument | None = None
     error_motions: dict[str, dict[str, Any]] | None = None
@@ -267,7 +213,8 @@ class ParamsDocument:
         "method", "projection", "loss", "ci95", "rank", "n_parameters", "condition", "rms_um", "sigma_um",
         "dof", "n_rows", "n_obs", "observability", "unidentifiable", "outlier_rows", "vif", "baseline", "options",
         "plots", "rejected", "params", "bic", "heldout_rms_um", "unobservable", "identifiable", "warnings",
-        "unobserved", "clusters", "files", "map_step_deg", "map_undetermined",
+        "unobserved", "clusters", "files", "map_step_deg", "map_undetermined", "model_check", "effects_searched",
+        "joint_effects", "agreement", "notes",
     })
 
 
@@ -332,16 +279,16 @@ def refuse_unphysical(names: list[str], values: Any, std: Any, units: dict[str, 
     ------
     IdentificationError
     """
-    import math
-
     from pige_sym.errors import IdentificationError
+    from pige_sym.measurements.measurement import unphysical
 
-    for name, v, s in zip(names, values, std, strict=True):
-        if math.isfinite(v) and abs(v) - 3 * (s if math.isfinite(s) else 0.0) > MAX_PIGE:
-            raise IdentificationError(f"{source}: {name} = {v:.1f} {units.get(name, '')} is beyond ±{MAX_PIGE:g}, "
-                                      "more than any machine that runs: the set-up in the file is wrong (ball_mm, "
-                                      "pivot_<axis>_mm, tool_mm, axis_sense; for a probe import --pivot, --units, "
-                                      "--axis-sense) or the data are another machine's")
+    found = unphysical(names, values, std, MAX_PIGE)
+    if found is not None:
+        name, v = found
+        raise IdentificationError(f"{source}: {name} = {v:.1f} {units.get(name, '')} is beyond ±{MAX_PIGE:g}, "
+                                  "more than any machine that runs: the set-up in the file is wrong (ball_mm, "
+                                  "pivot_<axis>_mm, tool_mm, axis_sense; for a probe import --pivot, --units, "
+                                  "--axis-sense) or the data are another machine's")
 
 
 def read_params_file(path: PathLike, *, machine: str | None = None, allow_missing: bool = False) -> ParamsFile:
@@ -416,7 +363,8 @@ def params_document(data: Any, path: PathLike, *, machine: str | None = None,
         path=p, machine=kern.MACHINE_CODE, pige=values, effect_values={k: float(v or 0.0) for k, v in effects.items()},
         set_to_zero=tuple(missing), units=dict(doc.units or kern.UNITS),
         tool_mm=None if doc.tool_mm is None else (doc.tool_mm[0], doc.tool_mm[1], doc.tool_mm[2]),
-        pivots_mm={a: (v[0], v[1], v[2]) for a, v in (doc.pivots_mm or {}).items()}, findings=list(doc.findings or []),
+        pivots_mm={a: (v[0], v[1], v[2]) for a, v in (doc.pivots_mm or {}).items()},
+        findings=list(doc.findings or []) + list(doc.effects or []),
         axis_sense=sense, std=std, covariance_names=tuple(doc.covariance.parameters) if doc.covariance and cov else (),
         covariance=cov, ball_mm=None if doc.ball_mm is None else (doc.ball_mm[0], doc.ball_mm[1], doc.ball_mm[2]),
         error_motions=maps,

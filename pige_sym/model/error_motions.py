@@ -325,3 +325,13 @@ class ErrorMaps:
         raw = self.raw_deviation(kernels, angles_deg, point_mm, pivots_mm, tool_mm, approach)
         rot = kernels.workpiece_rotation(np.atleast_2d(np.asarray(angles_deg, dtype=float)))
         return np.asarray(raw - np.einsum("nij,j->ni", rot, raw[0]))
+
+
+def error_maps_from(data: dict[str, Any] | None) -> ErrorMaps | None:
+    """The validated ``error_motions`` of a file (:func:`pige_sym.measurements.error_motions_file.read_error_motions`:
+    axis → ``{"angle_deg", "full_turn", "value", "std"}``) as :class:`ErrorMaps`; None when there are none."""
+    if not data:
+        return None
+    return ErrorMaps({ax: AxisMaps(MapGrid(ax, np.asarray(m["angle_deg"], dtype=float), bool(m["full_turn"])),
+                                   {n: np.asarray(v, dtype=float) for n, v in m["value"].items()})
+                      for ax, m in data.items()})

@@ -39,8 +39,8 @@ from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
 from pige_sym.measurements.axis_sense import format_axis_sense, to_commanded, to_conventions
 from pige_sym.nc.detect import detect_dialect
 from pige_sym.nc.dialects import Dialect, get_dialect
+from pige_sym.nc.dialects.base import kinematics_switch_codes
 from pige_sym.nc.interpreter import Program, interpret
-from pige_sym.nc.lexer import LexError, tokenize
 from pige_sym.nc.program_header import program_axis_sense
 from pige_sym.nc.rewrite import Rewrite, header_position, rewrite_program
 from pige_sym.nc.state import Block
@@ -119,17 +119,8 @@ class CompensationResult:
 
 
 def with_rtcp_codes(dialect: Dialect, on: tuple[str, ...] = (), off: tuple[str, ...] = ()) -> Dialect:
-    """The dialect with controller-specific RTCP codes (``M428``) declared."""
-    extra: dict[str, str] = {}
-    for codes, action in ((on, "rtcp:on"), (off, "rtcp:off")):
-        for c in codes:
-            try:
-                toks = tokenize(c.strip(), siemens=dialect.siemens)
-            except LexError:
-                toks = []
-            if len(toks) != 1 or toks[0].kind not in ("word", "name"):
-                raise InputError(f"--rtcp-on/--rtcp-off {c!r}: give one G/M code or keyword, e.g. M428")
-            extra[toks[0].code] = action
+    """The dialect with controller-specific RTCP codes (``M428``) declared (:func:`kinematics_switch_codes`)."""
+    extra = kinematics_switch_codes(dialect, on, off)
     return dialect.with_codes(extra) if extra else dialect
 
 
@@ -182,6 +173,8 @@ def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: s
         A block that cannot be read or is refused (with its line).
     CompensationError
         A correction beyond the limits, or a failed read-back.
+    InputError
+        Parameters beyond physical bounds (:func:`~pige_sym.compensation.controllers.entry_checks.check_parameters`).
     """
     was_enabled = gc.isenabled()
     gc.disable()  # ~10^6 short-lived objects, no cycles: the collector would only rescan them (~20 %)
@@ -201,9 +194,15 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
 
     if not (max_change_mm > 0 and max_change_deg > 0 and np.isfinite([max_change_mm, max_change_deg]).all()):
         raise InputError("--max-change: both limits must be positive finite numbers")
+    from pige_sym.compensation.controllers.entry_checks import check_parameters
+
+    check_parameters(params)  # a program is written for a controller too: the same bounds before anything is made
     kern = load_kernels(params.machine)
     axes = tuple(kern.ROTARY_AXES)
-    program_axis_sense(text, axes, path, params.axis_sense)  # a pige program's header must agree
+    program_axis_sense(text, axes, path, params.axis_sense, given_by=f"the parameter file {params.source}",
+                       fix="a program is compensated with parameters of the same commanded sense (CONVENTIONS §9): "
+                           "use parameters identified from measurements made in the program's sense, or write the "
+                           "program again in theirs")  # a pige program's header must agree
     d = with_rtcp_codes(get_dialect(dialect or detect_dialect(text, path)), rtcp_on, rtcp_off)
     program = interpret(text, d, axes, path=path, pass_through=pass_through)
     chosen, passed = plan(program)

@@ -7,6 +7,11 @@ the stylus centre from the head's pivot on a head machine (``tool_mm``), and the
 command needs (``import-probe --program``, ``simulate --program``) and :func:`header_agrees` refuses a
 program whose header disagrees with the options a command was given, so a program, its log and its import
 cannot be mixed up.  Numbers are compared to the header's six significant digits.
+
+Every number of the header (the ``*_mm`` items and the work offset's) must be a finite ASCII decimal within the
+readers' physical bound (:data:`~pige_sym.measurements.measurement.LIMITS`), and radii, the stylus length and the
+window positive: anything else is a damaged header, refused with its line and item before any number is used (a
+``tool_mm`` of 1e300 ended the import in a traceback, a NaN was blamed on the log).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
 from pige_sym.measurements.axis_sense import describe_axis_sense, parse_axis_sense
 from pige_sym.nc.probe_program import ProbeSetup
 from pige_sym.nc.probe_safety import ProbeController, controller_from_header
-from pige_sym.nc.program_header import read_header
+from pige_sym.nc.program_header import read_header_lines
 
 PROBE_FORMAT = "pige-probe 1"
 
@@ -63,10 +68,12 @@ def header_setup(text: str, path: str) -> HeaderSetup:
     """
     from pige_sym.kernels import load_kernels
 
-    items = read_header(text, path)
+    lines = read_header_lines(text, path)
+    items = {key: value for key, (value, _) in lines.items()}
     if items.get("format") != PROBE_FORMAT:
         raise NCProgramError(path, None, f"not a pige probing program (no 'pige format: {PROBE_FORMAT}' header "
                                          "line): the program must be the one pige program wrote")
+    check_header_numbers(lines, path)
     try:
         kern = load_kernels(items["machine"])
         axes = tuple(kern.ROTARY_AXES)
@@ -78,6 +85,38 @@ def header_setup(text: str, path: str) -> HeaderSetup:
     except (KeyError, ValueError, InputError) as exc:
         raise NCProgramError(path, None, f"the probing program's header is incomplete or malformed ({exc}): write "
                                          "it again with pige program") from None
+
+
+#: Header numbers that must be positive [mm].
+POSITIVE_ITEMS = ("sphere_radius_mm", "stylus_radius_mm", "stylus_length_mm", "window_mm")
+
+
+def check_header_numbers(lines: Mapping[str, tuple[str, int]], path: str) -> None:
+    """Refuse a header number that is not a finite ASCII decimal within the physical bound (module docstring).
+
+    Raises
+    ------
+    NCProgramError
+        Naming the line and the item, and what to do.
+    """
+    from pige_sym.measurements.measurement import LIMITS
+    from pige_sym.options import strict_float
+
+    for key, (value, line) in lines.items():
+        if key == "work_offset":
+            numbers = value.partition(" ")[2]
+        elif key.endswith("_mm"):
+            numbers = value
+        else:
+            continue
+        for part in (p.strip() for p in numbers.split(",")):
+            v = strict_float(part)
+            problem = (f"{part!r} is not a finite number (an ASCII decimal)" if v is None else
+                       f"{part} mm is not physical (|value| <= {LIMITS['mm']:g} mm)" if abs(v) > LIMITS["mm"] else
+                       f"{part} mm must be positive" if key in POSITIVE_ITEMS and not v > 0 else None)
+            if problem:
+                raise NCProgramError(path, line, f"header item pige {key}: {problem}: the program's header is "
+                                                 "damaged; write the program again with pige program")
 
 
 def _vec(text: str) -> np.ndarray:
@@ -117,9 +156,30 @@ def header_agrees(text: str, setup: ProbeSetup, rotary_axes: tuple[str, ...], pa
     checks.append(("tool_mm", h.tool_mm, setup.tool_mm, same_tool))
     for name, stated, given, ok in checks:
         if not ok:
-            raise NCProgramError(path, None, f"the program states {name} {stated}, but this run has {given}: give "
-                                             "the options the program was written with (or write it again)")
+            option = _OPTIONS.get(name, "--pivot" if name.startswith("pivot_") else name)
+            run = f"{option} is not given" if given is None else f"this run has {_shown(given)} ({option})"
+            raise NCProgramError(path, None, f"the program states {name} {_shown(stated)}, but {run}: give {option} "
+                                             "as the program states it, or leave out what its header states (give "
+                                             "--program alone), or write the program again")
     return h
+
+
+#: The option that gives each header item (the controller state is several).
+_OPTIONS = {"machine": "--machine", SENSE_KEY: "--axis-sense", "sphere_mm": "--sphere",
+            "sphere_radius_mm": "--sphere-radius", "stylus_radius_mm": "--stylus-radius", "tool_mm": "--tool",
+            "controller state": "--kinematics/--rtcp-off/--rtcp-on/--stylus-tool/--stylus-length/--work-offset/"
+                                "--window"}
+
+
+def _shown(value: object) -> str:
+    """A header value as a person reads it: ``0, 0, -160`` for a vector, ``none`` for None."""
+    if value is None:
+        return "none"
+    if isinstance(value, np.ndarray):
+        return ", ".join(f"{float(v):g}" for v in value)
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
 
 
 def _canonical(code: str) -> str:

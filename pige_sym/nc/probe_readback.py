@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pige_sym.errors import NCProgramError
+from pige_sym.errors import InputError, NCProgramError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.axis_sense import to_commanded, to_conventions
 from pige_sym.measurements.probe_head import head_offsets
@@ -269,6 +269,37 @@ def verify_probe_program(text: str, dialect: str, setup: ProbeSetup, rotary_axes
     return replay.result()
 
 
+#: The read-back's allowance for the 4-decimal coordinates of a program [mm].
+WRITTEN_MM = 2e-4
+#: Half the last written decimal of an angle [deg].
+WRITTEN_DEG = 5e-5
+
+
+def verify_rendered_program(text: str, dialect: str, setup: ProbeSetup, rotary_axes: tuple[str, ...], *,
+                            out: str | None = None) -> ProbeProgramCheck:
+    """:func:`verify_probe_program` on a program pige has just made and not yet written (``out``: where it would go).
+
+    A refusal says so and names the line of that text, never a line of a file that does not exist; on a head it
+    also says how far the written angles' last decimal moves the stylus, when that is beyond the read-back's
+    allowance (a stylus metres from its pivot).
+
+    Raises
+    ------
+    InputError
+    """
+    try:
+        return verify_probe_program(text, dialect, setup, rotary_axes, path="<program>")
+    except NCProgramError as exc:
+        made = f"the probing program for {out}" if out else "the probing program made for these options"
+        lever = 0.0 if setup.tool_mm is None else float(np.linalg.norm(setup.tool_mm))
+        blur = lever * np.radians(WRITTEN_DEG)
+        why = (f"; the head turns the stylus {lever:g} mm from its pivot, where rounding the angles to 0.0001 deg "
+               f"moves it up to {blur * 1e3:.1f} um: check --tool" if blur > WRITTEN_MM else
+               ": check the set-up options")
+        raise InputError(f"{made} fails pige's read-back at its line {exc.line}, so nothing was written: "
+                         f"{exc.problem}{why}") from None
+
+
 class _Replay:
     """The state of a replay: position, angles, the nominal centre, and what was found (module docstring)."""
 
@@ -361,7 +392,7 @@ class _Replay:
             raise NCProgramError(self.path, op.line, f"probing move starts {start_gap:.3f} mm outside the sphere "
                                                      "and never reaches it: is the sphere (--sphere, --pivot) where "
                                                      "the program probes?")
-        if start_gap <= 0 or over < need - 2e-4:  # 4-decimal coordinates
+        if start_gap <= 0 or over < need - WRITTEN_MM:  # 4-decimal coordinates
             raise NCProgramError(self.path, op.line, f"probing move starts {start_gap:.3f} mm outside the sphere "
                                                      f"and ends {over:.3f} mm past its surface (needs > 0 and "
                                                      f"≥ {need:g})")

@@ -96,6 +96,11 @@ class ProbeController:
         for code, flag in ((self.rtcp_off, "--rtcp-off"), (self.rtcp_on, "--rtcp-on")):
             if code is not None and not re.fullmatch(r"[MG]\d{1,4}(\.\d)?", code):
                 raise InputError(f"{flag} {code!r}: give one M or G code, e.g. M428")
+        from pige_sym.nc.dialects import get_dialect
+        from pige_sym.nc.dialects.base import kinematics_switch_codes
+
+        table = None if dialect == "heidenhain" else get_dialect(dialect)  # no code table for HEIDENHAIN here
+        kinematics_switch_codes(table, [self.rtcp_on] if self.rtcp_on else [], [self.rtcp_off] if self.rtcp_off else [])
         if dialect == "linuxcnc" and self.kinematics == "identity" and (self.rtcp_off is None or self.rtcp_on is None):
             raise InputError("LinuxCNC keeps its kinematics between programs: a probing program in identity "
                              "kinematics must switch to them and back; give the configuration's codes "

@@ -44,8 +44,12 @@ def read_header(text: str, path: str = "<program>") -> dict[str, str]:
     NCProgramError
         A key given twice with different values (names both lines).
     """
-    out: dict[str, str] = {}
-    where: dict[str, int] = {}
+    return {key: value for key, (value, _) in read_header_lines(text, path).items()}
+
+
+def read_header_lines(text: str, path: str = "<program>") -> dict[str, tuple[str, int]]:
+    """:func:`read_header` with the 1-based line of each item (its first line), for messages."""
+    out: dict[str, tuple[str, int]] = {}
     for no, line in enumerate(text.splitlines(), 1):
         m = _PAREN.match(line) or _SEMI.match(line)
         if not m:
@@ -53,17 +57,17 @@ def read_header(text: str, path: str = "<program>") -> dict[str, str]:
         key, value = m.group(1), m.group(2).strip()
         if key == "machine":
             value = value.replace("[", "(").replace("]", ")")
-        if key in out and out[key] != value:
-            raise NCProgramError(path, no, f"header item 'pige {key}: {value}' contradicts line {where[key]} "
-                                           f"('{out[key]}')")
-        out.setdefault(key, value)
-        where.setdefault(key, no)
+        if key in out and out[key][0] != value:
+            raise NCProgramError(path, no, f"header item 'pige {key}: {value}' contradicts line {out[key][1]} "
+                                           f"('{out[key][0]}')")
+        out.setdefault(key, (value, no))
     return out
 
 
-def program_axis_sense(text: str, rotary_axes: Sequence[str], path: str,
-                       given: Mapping[str, int] | None) -> dict[str, int]:
-    """The commanded axis sense of a program: its header's, checked against ``--axis-sense`` (``given``).
+def program_axis_sense(text: str, rotary_axes: Sequence[str], path: str, given: Mapping[str, int] | None, *,
+                       given_by: str = "--axis-sense", fix: str | None = None) -> dict[str, int]:
+    """The commanded axis sense of a program: its header's, checked against ``given`` (``--axis-sense`` unless
+    ``given_by`` names another source, :func:`~pige_sym.measurements.axis_sense.reconcile`).
 
     A program without the header item (a CAM program) takes ``given`` (None: CONVENTIONS' sense).
     """
@@ -76,4 +80,4 @@ def program_axis_sense(text: str, rotary_axes: Sequence[str], path: str,
         recorded = parse_axis_sense(header[METADATA_KEY], rotary_axes, f"{path}: pige {METADATA_KEY}")
     except InputError as exc:
         raise NCProgramError(path, None, str(exc)) from None
-    return reconcile(recorded, given, path, rotary_axes)
+    return reconcile(recorded, given, path, rotary_axes, given_by=given_by, fix=fix)

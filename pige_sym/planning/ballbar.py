@@ -65,7 +65,7 @@ def candidate_setups(machine: str, tilt_deg: float = -45.0) -> list[BallbarSetup
     return out
 
 
-def _label(s: BallbarSetup) -> str:
+def setup_label(s: BallbarSetup) -> str:
     held = [f"{a}={v:g}" for a, v in zip(s.rotary_axes, s.angles_deg[0], strict=True) if a != s.axis]
     return f"{s.kind} {s.axis}" + (f" ({', '.join(held)})" if s.axis[0] == "C" else "")
 
@@ -74,7 +74,7 @@ def evaluate(machine: str, setups: list[BallbarSetup], noise_um: float = 1.0) ->
     """Rank and predicted standard errors of a set of setups (module docstring)."""
     kern = load_kernels(machine)
     names = list(kern.LOCATION_PARAMETERS)
-    blocks = [ballbar_block(simulate_ballbar(machine, s, pige={}, noise_um=0.0), _label(s), False) for s in setups]
+    blocks = [ballbar_block(simulate_ballbar(machine, s, pige={}, noise_um=0.0), setup_label(s), False) for s in setups]
     q = len(blocks)
     rows = []
     for i, b in enumerate(blocks):

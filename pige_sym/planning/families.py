@@ -82,7 +82,8 @@ class Limits:
         return max(lo, start), min(hi, start + 360.0)
 
 
-def _range(text: str, what: str) -> tuple[float, float]:
+def parse_range(text: str, what: str) -> tuple[float, float]:
+    """``lo:hi`` as two finite numbers with lo < hi; InputError naming ``what`` otherwise."""
     lo_s, colon, hi_s = text.partition(":")
     try:
         lo, hi = float(lo_s), float(hi_s)
@@ -104,9 +105,9 @@ def parse_limits(items: list[str] | None, kern: Any) -> Limits:
         if not eq:
             raise InputError(f"--limits: expected AXIS=lo:hi, got {item!r}")
         if axis in axes:
-            rotary[axis] = _range(rng, f"--limits {axis}")
+            rotary[axis] = parse_range(rng, f"--limits {axis}")
         elif axis in LINEAR_AXES:
-            linear[axis] = _range(rng, f"--limits {axis}")
+            linear[axis] = parse_range(rng, f"--limits {axis}")
         else:
             raise InputError(f"--limits: {axis!r} is not an axis of {kern.MACHINE_CODE} "
                              f"(rotary {', '.join(axes)}; linear X, Y, Z)")

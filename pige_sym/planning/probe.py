@@ -23,7 +23,7 @@ from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.sphere_fit import contact_weights
 from pige_sym.model.trajectories import make_trajectory
-from pige_sym.nc.probe_program import ROUNDING_MARGIN_MM, ProbeSetup, plan_probing
+from pige_sym.nc.probe_program import ROUNDING_MARGIN_MM, ProbePlan, ProbeSetup, plan_probing
 
 POSE_COUNTS = (6, 8, 12, 16, 24, 32, 45, 60)
 
@@ -54,12 +54,7 @@ def predict_probe(setup: ProbeSetup, angles_deg: np.ndarray, *, contact_sigma_um
     idx = [kern.PARAMETERS.index(n) for n in names]
     ball = setup.sphere_mm - setup.pivot_mm
     jac = kern.jacobian(plan.angles_deg, None, ball, None, setup.tool_mm)[1:, :, idx].reshape(-1, len(names))
-    normals = []
-    for centre, contacts in zip(plan.centres_mm, plan.contacts, strict=True):
-        g = np.array([c.target - c.direction * (setup.overtravel_mm + ROUNDING_MARGIN_MM) - centre for c in contacts])
-        normals.append(g / np.linalg.norm(g, axis=1, keepdims=True))
-    weights = contact_weights(normals, "axes", plan.frames)
-    covs = [np.linalg.inv((g * w[:, None]).T @ g) * contact_sigma_um**2 for g, w in zip(normals, weights, strict=True)]
+    covs = centre_covariances(plan, contact_sigma_um)
     rot = kern.workpiece_rotation(plan.angles_deg)[1:].reshape(-1, 3)
     diag = np.zeros((jac.shape[0], jac.shape[0]))
     for i, c in enumerate(covs[1:]):
@@ -70,6 +65,18 @@ def predict_probe(setup: ProbeSetup, angles_deg: np.ndarray, *, contact_sigma_um
     n, k = plan.angles_deg.shape[0], len(plan.contacts[0])
     return ProbePrediction(n, k, n * (pose_s + k * contact_s), dict(zip(names, std.tolist(), strict=True)),
                            dict(zip(names, naive.tolist(), strict=True)), plan.angles_deg, kern.MACHINE_CODE)
+
+
+def centre_covariances(plan: ProbePlan, contact_sigma_um: float) -> list[np.ndarray]:
+    """Each pose's centre covariance ``σ_c² (GᵀWG)⁻¹`` from its planned contacts, shape (3, 3) each [µm²]
+    (module docstring: the normals and weights ``pige import-probe`` uses)."""
+    s = plan.setup
+    normals = []
+    for centre, contacts in zip(plan.centres_mm, plan.contacts, strict=True):
+        g = np.array([c.target - c.direction * (s.overtravel_mm + ROUNDING_MARGIN_MM) - centre for c in contacts])
+        normals.append(g / np.linalg.norm(g, axis=1, keepdims=True))
+    weights = contact_weights(normals, "axes", plan.frames)
+    return [np.linalg.inv((g * w[:, None]).T @ g) * contact_sigma_um**2 for g, w in zip(normals, weights, strict=True)]
 
 
 def plan_probe(setup: ProbeSetup, *, budget_s: float, contact_sigma_um: float = 0.5, pose_s: float = 20.0,

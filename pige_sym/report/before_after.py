@@ -129,10 +129,12 @@ def compensation_before_after(p: Path, label: str, m: Measurement, truth: Truth 
     # the model-predicted machine carries what was identified, extensions included
     machine_extensions = truth.extensions if truth is not None else rep.extensions
     pivots = m.pivots_mm or None
+    entered = weighed_parameters(rep, m.angles_deg, np.tile(m.ball_mm, (m.n_rows, 1)))
     rep.compensation = compensation_study(kern.MACHINE_CODE, [measured_trajectory(m)], truth=machine_values,
-                                          identified=identified, covariance=covariance, ball_mm=m.ball_mm,
+                                          identified=entered.values, covariance=covariance, ball_mm=m.ball_mm,
                                           tool_mm=m.tool_mm, pivots_mm=pivots, truth_extensions=machine_extensions,
-                                          extensions=rep.extensions)
+                                          extensions=entered.extensions)
+    _expected_from_weighing(rep.compensation[0], entered)
     if not rep.not_compensated:
         vec = np.array([identified.get(n, 0.0) for n in kern.PARAMETERS])
         rep.model_um = kern.deviation(m.angles_deg, vec, m.ball_mm, pivots, m.tool_mm)
@@ -150,26 +152,59 @@ def program_section(rep: MeasurementReport, program: Path, text: str) -> None:
     angles, xyz, rtcp, _lines = poses_from_program(prog)
     if angles.shape[0] == 0:
         raise InputError(f"{program}: no pose with every axis programmed (X, Y, Z, {', '.join(kern.ROTARY_AXES)})")
-    res = rep.primary
     identified, _missing, covariance = rep.estimate()
     machine_values = rep.truth.values if rep.truth is not None else identified
     machine_extensions = rep.truth.extensions if rep.truth is not None else rep.extensions
     pivots = m.pivots_mm or None
-    row = program_before_after(rep.machine, machine_values, identified, angles, xyz, rtcp,
+    points = np.array(xyz, dtype=float)
+    if (~np.asarray(rtcp, dtype=bool)).any():
+        from pige_sym.compensation.kinematics import workpiece_points
+
+        off = ~np.asarray(rtcp, dtype=bool)
+        points[off] = workpiece_points(kern, angles[off], points[off], pivots, m.tool_mm)
+    params = weighed_parameters(rep, angles, points)
+    row = program_before_after(rep.machine, machine_values, params.values, angles, xyz, rtcp,
                                description=f"NC program {program.name} ({angles.shape[0]} poses)", pivots_mm=pivots,
                                tool_mm=m.tool_mm, covariance=covariance, truth_extensions=machine_extensions,
-                               extensions=rep.extensions)
+                               extensions=params.extensions)
+    _expected_from_weighing(row, params)
     if angles.shape == m.angles_deg.shape and np.allclose(angles, m.angles_deg, atol=1e-6) and rep.compensation:
         # the program is the measured test itself: one row, not the same numbers twice
         row.trajectory = f"{row.trajectory}, the measured test"
         rep.compensation[0] = row
     else:
         rep.compensation.append(row)
-    params = CompensationParameters(
+    rep.compensated_program_text = compensate_program(text, estimate_parameters(rep), path=str(program))
+
+
+def estimate_parameters(rep: MeasurementReport) -> CompensationParameters:
+    """The primary estimate as compensation reads it: values, standard errors and covariance, extensions."""
+    res, m = rep.primary, rep.measurement
+    identified, missing, _ = rep.estimate()
+    cov = res.covariance_dict()
+    return CompensationParameters(
         machine=rep.machine, values=identified, units={k: res.units.get(k, "") for k in identified},
         tool_mm=None if m.tool_mm is None else [float(x) for x in m.tool_mm],
         pivots_mm={k: [float(x) for x in v] for k, v in m.pivots_mm.items()},
         source=f"{rep.path.name} ({rep.primary_method})",
         ignored=list(rep.not_compensated) + list(rep.extensions_not_compensated), extensions=list(rep.extensions),
-    )
-    rep.compensated_program_text = compensate_program(text, params, path=str(program))
+        std={n: float(v) for n, v in zip(res.parameters, res.std, strict=True) if math.isfinite(v)},
+        covariance=None if cov is None else (tuple(cov["parameters"]), np.asarray(cov["matrix"], dtype=float)),
+        set_to_zero=list(missing), ball_mm=[float(x) for x in m.ball_mm])
+
+
+def weighed_parameters(rep: MeasurementReport, angles: np.ndarray, points: np.ndarray) -> CompensationParameters:
+    """What compensation enters of the primary estimate, weighed by its uncertainty on these poses
+    (:mod:`pige_sym.compensation.weighing`); the weighing is kept in ``rep.weighing`` (the last poses judged)."""
+    from pige_sym.compensation.weighing import program_poses, weigh, with_entered
+
+    params = estimate_parameters(rep)
+    rep.weighing = weigh(params, program_poses(angles, points))
+    return with_entered(params, rep.weighing)
+
+
+def _expected_from_weighing(row: CompensationStudyRow, entered: CompensationParameters) -> None:
+    """The row's expected error after compensation from the weighing (uncertainty and what is not entered)."""
+    w = entered.weighing
+    if w is not None and "entered" in w.predicted and w.covariance_from != "none":
+        row.predicted_after_um = w.predicted["entered"].expected_um

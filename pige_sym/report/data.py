@@ -20,6 +20,7 @@ from pige_sym.diagnosis.diagnose import DiagnosisResult
 from pige_sym.diagnosis.joint import JointDiagnosis
 from pige_sym.files import json_ready
 from pige_sym.identification.least_squares import METHODS
+from pige_sym.identification.model_check import ModelCheck
 from pige_sym.identification.result import IdentificationResult
 from pige_sym.identification.studies import ProjectionStudy, SobolStudy
 from pige_sym.kernels import load_kernels
@@ -125,6 +126,9 @@ class MeasurementReport:
         The NC program compensated with the primary estimate.
     compensated_program : Path or None
         Where :func:`write_report` wrote it (beside the figures).
+    weighing : Weighing or None
+        The values compensation enters, weighed by their uncertainty (:mod:`pige_sym.compensation.weighing`),
+        judged on the NC program's poses when one is given, else on the measured poses.
     projection : ProjectionStudy or None
     sobol : SobolStudy or None
     figures : list of ReportFigure
@@ -158,6 +162,8 @@ class MeasurementReport:
     check: CheckResult | None = None
     measured_at: str = ""
     time_source: str = ""
+    model_check: ModelCheck | None = None  # of the Gauss–Newton PIGE-only fit (pige identify's)
+    weighing: Any = None  # what compensation enters of the primary estimate (compensation.weighing.Weighing)
 
     @property
     def primary(self) -> IdentificationResult:
@@ -203,6 +209,7 @@ class MeasurementReport:
             "projection": None if self.projection is None else self.projection.to_dict(),
             "sobol": None if self.sobol is None else {**self.sobol.to_dict(), "half_ranges": self.sobol_ranges},
             "check": None if self.check is None else self.check.to_dict(),
+            "model_check": None if self.model_check is None else self.model_check.to_dict(),
             "measured_at": self.measured_at, "time_source": self.time_source,
             "figures": [str(f.path) for f in self.figures],
             "notes": self.notes,
@@ -276,10 +283,12 @@ class ReportData:
     plan: Any = None  # a graded test plan (pige_sym.planning.Plan), shown by report.plan_section
     plan_html: str = ""
     joints: list[JointReport] = field(default_factory=list)  # joint sections (pige_sym.report.joint_section)
+    maps: Any = None  # the error maps of the files (pige_sym.report.map_section.MapReport), with --map
 
     def to_dict(self) -> dict[str, Any]:
         return json_ready({
             "joint": [j.to_dict() for j in self.joints],
+            "maps": None if self.maps is None else self.maps.to_dict(),
             "report": None if self.html_path is None else str(self.html_path),
             "created": self.created, "version": __version__, "settings": self.settings,
             "studies": list(self.studies), "program": None if self.program is None else str(self.program),
@@ -304,6 +313,8 @@ class HistoryData:
         Consecutive runs.
     limits : dict of str to float
         Tolerance band per parameter [µm, µrad] (from ``--tolerances``, else the last run's check).
+    check : CheckResult or None
+        The last run judged against ``--tolerances`` (None without them: the verdict stored with the run).
     """
 
     machine_id: str
@@ -311,7 +322,9 @@ class HistoryData:
     runs: list[Any]
     comparisons: list[Any]
     limits: dict[str, float] = field(default_factory=dict)
+    check: CheckResult | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"machine_id": self.machine_id, "database": self.database, "runs": [r.to_dict() for r in self.runs],
-                "comparisons": [c.to_dict() for c in self.comparisons], "limits": self.limits}
+                "comparisons": [c.to_dict() for c in self.comparisons], "limits": self.limits,
+                "check": None if self.check is None else self.check.to_dict()}

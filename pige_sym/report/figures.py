@@ -172,7 +172,8 @@ def identification_figure(results: dict[str, IdentificationResult], truth: Truth
     first = next(iter(results.values()))
     groups = [("position errors", "um"), ("orientation / zero-position errors", "urad")]
     fig, axs = plt.subplots(1, 2, figsize=(11, 3.8))
-    markers = {"gauss-newton": ("o", "tab:blue"), "double-differential": ("s", "tab:purple")}
+    markers = {"gauss-newton": ("o", "tab:blue"), "double-differential": ("s", "tab:purple"),
+               "used for compensation (diagnosis)": ("D", "tab:green")}
     for ax, (title, unit) in zip(axs, groups, strict=True):
         names = [n for n in first.parameters if first.units.get(n) == unit and "." not in n]
         x = np.arange(len(names))
@@ -246,9 +247,15 @@ def draw_figures(rep: MeasurementReport, out_dir: Path) -> list[ReportFigure]:
         figs.append(ReportFigure("polar", _save(polar_figure(m, rep.model_um, k), out_dir / "deviation_polar.png"),
                                  f"Deviation components against the {m.rotary_axes[k]} angle, magnified about a "
                                  f"nominal circle (dashed line = zero deviation; radial labels in µm)."))
-    figs.append(ReportFigure("identification", _save(identification_figure(rep.identification, rep.truth),
+    shown = dict(rep.identification)
+    if rep.primary is not rep.identification.get(rep.primary_method):  # the diagnosis' fit, with its effects
+        shown = {"used for compensation (diagnosis)": rep.primary, **shown}
+    figs.append(ReportFigure("identification", _save(identification_figure(shown, rep.truth),
                                                      out_dir / "identification.png"),
-                             "Identified PIGEs with 95 % confidence intervals, both methods"
+                             "Identified PIGEs with 95 % confidence intervals: "
+                             + ("the estimate used for compensation (green: the diagnosis' final fit) and the "
+                                "PIGE-only fits of both methods" if len(shown) > 2 else
+                                f"both methods; the estimate used for compensation is the {rep.primary_method} fit")
                              + ("; red crosses: truth from the sidecar." if rep.truth is not None else ".")))
     paths: list[str] = []
     if rep.diagnosis is not None:
@@ -442,6 +449,14 @@ def draw_report_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
         from pige_sym.report.checkup_section import checkup_figures
 
         figs += checkup_figures(data, out_dir)
+    if data.maps is not None:
+        from pige_sym.identification.map_output import map_figure
+
+        out_dir.mkdir(parents=True, exist_ok=True)
+        for axis in data.maps.result.maps:
+            figs.append(ReportFigure("maps", _save(map_figure(data.maps.result, axis), out_dir / f"map_{axis}.png"),
+                                     f"The error motions of {axis} (conventions §10) with ±2σ bands: translations "
+                                     "[µm] above, rotations [µrad] below."))
     for i, jr in enumerate(data.joints):
         if jr.curves:
             out_dir.mkdir(parents=True, exist_ok=True)

@@ -41,7 +41,9 @@ from pige_sym.compensation.parameters import angle_extensions
 from pige_sym.diagnosis.diagnose import DiagnosisResult, diagnose
 from pige_sym.diagnosis.joint import JointDiagnosis, diagnose_joint
 from pige_sym.errors import FileFormatError, InputError
+from pige_sym.identification.joint import common_machine
 from pige_sym.identification.least_squares import METHODS, IdentificationError, identify
+from pige_sym.identification.model_check import check_model
 from pige_sym.identification.studies import projection_study, sobol_study
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.ballbar import BallbarRun
@@ -49,7 +51,7 @@ from pige_sym.measurements.measurement import Measurement
 from pige_sym.measurements.sets import read_files
 from pige_sym.nc.program_file import read_program
 from pige_sym.simulation.simulator import normalise_parameter_name
-from pige_sym.verdict.check import Tolerances, check, estimates_from_result, read_tolerances
+from pige_sym.verdict.check import Estimates, Tolerances, check, estimates_from_result, read_tolerances
 
 if TYPE_CHECKING:
     pass
@@ -162,7 +164,8 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
                   seed: int = 0, progress: bool = False, tolerances: str | os.PathLike[str] | None = None,
                   rule: str = "guard", k: float = 2.0,
                   compare: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None,
-                  history: str | None = None, db: str | None = None, joint: bool = False) -> ReportData:
+                  history: str | None = None, db: str | None = None, joint: bool = False,
+                  maps: Any = None) -> ReportData:
     """Compute everything a report shows (no files written).
 
     Parameters
@@ -172,7 +175,9 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
         read (and their truth sidecars checked) before any computation, so a bad file fails fast, and a
         file given twice is refused.  Each R-test/probe file gets its own section; the files of a
         machine with a ballbar file (or, with ``joint``, two files or more) also get a joint section
-        (:mod:`~pige_sym.report.joint_section`).  May be empty with ``compare`` or ``history``.
+        (:mod:`~pige_sym.report.joint_section`).  Files fitted jointly (a ballbar file among them, or ``joint``)
+        must measure one machine, as ``identify`` requires of them (the same check): an AC and a BC ballbar file
+        are refused, not reported side by side.  May be empty with ``compare`` or ``history``.
     studies : iterable of {"projection", "sobol"}
     program : path-like, optional
         An 840D-style NC program compensated with each measurement's estimate.
@@ -198,6 +203,8 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
         Machine id and database URL: the trend section.
     joint : bool
         Also identify two or more R-test/probe files of one machine jointly (ballbar files always are).
+    maps : MapSpec, optional
+        Fit the error maps of these axes jointly from every file (:mod:`~pige_sym.report.map_section`).
 
     Returns
     -------
@@ -211,7 +218,7 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     study_set = parse_studies(studies)
     paths = [Path(p) for p in measurement_paths]
     _check_options(method, presets, sobol_samples, paths, compare is not None or history is not None)
-    loaded, every = _read_inputs(paths)
+    loaded, every = _read_inputs(paths, joint)
     tol = read_tolerances(tolerances) if tolerances is not None else None
     program_text = read_program(program) if program is not None else None
     steps_per_file = 4 + len(study_set) + (program is not None)
@@ -227,13 +234,23 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     data = ReportData(reports, study_set, options.program, _settings_shown(options), created)
     data.joints = gather_joints(every, tolerances=tol, rule=rule, k=k, every_group=joint,
                                 diagnoses={rep.path: rep.diagnosis for rep in reports})
+    _gather_beyond_files(data, every, compare, history, db, tol, maps)
+    return data
+
+
+def _gather_beyond_files(data: ReportData, every: list[tuple[Path, Any, Truth | None]], compare: Any,
+                         history: str | None, db: str | None, tol: Any, maps: Any) -> None:
+    """The sections that are not one file's: measured before/after, the history's trend, the error maps."""
     if compare is not None:
         from pige_sym.verdict.compare import compare_measurements
 
         data.comparison = compare_measurements(*compare)
     if history is not None:
         data.history = gather_history(history, db, tol)
-    return data
+    if maps is not None:
+        from pige_sym.report.map_section import gather_maps
+
+        data.maps = gather_maps([(str(p), x) for p, x, _ in every], maps)
 
 
 def _common_truth(truths: Sequence[Truth | None], diag: JointDiagnosis) -> dict[str, float] | None:
@@ -301,15 +318,18 @@ def gather_joints(items: Sequence[tuple[Path, Measurement | BallbarRun, Truth | 
     return out
 
 
-def _read_inputs(paths: list[Path]) -> tuple[list[tuple[Path, Measurement, Truth | None]],
-                                             list[tuple[Path, Measurement | BallbarRun, Truth | None]]]:
-    """(R-test/probe files with their truth, every file with its truth), each read and checked once."""
+def _read_inputs(paths: list[Path], joint: bool) -> tuple[list[tuple[Path, Measurement, Truth | None]],
+                                                         list[tuple[Path, Measurement | BallbarRun, Truth | None]]]:
+    """(R-test/probe files with their truth, every file with its truth), each read and checked once; files fitted
+    jointly (a ballbar file among them, or ``joint``) must measure one machine, as identify asks (the same check)."""
     loaded, every = [], []
     for p, item in read_files(paths) if paths else []:
         truth = read_truth(p, item.machine)
         every.append((Path(p), item, truth))
         if isinstance(item, Measurement):
             loaded.append((Path(p), item, truth))
+    if joint or any(isinstance(x, BallbarRun) for _, x, _ in every):
+        common_machine([(p.name, x) for p, x, _ in every], apart="report them apart (one report per machine)")
     return loaded, every
 
 
@@ -355,7 +375,7 @@ class _Options:
 
 def _gather_one(p: Path, label: str, m: Measurement, truth: Truth | None, opt: _Options, bar: Any) -> MeasurementReport:
     """Identification, diagnosis, compensation, program, verdict and studies of one file."""
-    from pige_sym.verdict.history.store import measurement_time
+    from pige_sym.verdict.history.records import measurement_time
 
     bar.set_postfix_str(f"{p.name}: identification")
     results = {meth: identify(m, method=meth, projection=opt.projection, with_zero=opt.with_zero) for meth in METHODS}
@@ -370,6 +390,7 @@ def _gather_one(p: Path, label: str, m: Measurement, truth: Truth | None, opt: _
     bar.update(1)
     primary = opt.method if diag is not None or opt.method != "diagnosis" else "gauss-newton"
     rep = compensation_before_after(p, label, m, truth, results, diag, primary, bar)
+    rep.model_check = check_model(m, results["gauss-newton"])
     rep.measured_at, rep.time_source = measurement_time(p, m.metadata, None)
     if diag_error is not None:
         rep.diagnosis_error = diag_error
@@ -446,12 +467,25 @@ def gather_history(machine_id: str, db: str | None, tol: Tolerances | None) -> H
     engine = connect(db, create=False)
     runs = list_runs(engine, machine_id)
     comps = [compare_runs(a, b, from_run=a.id, to_run=b.id) for a, b in zip(runs, runs[1:], strict=False)]
+    judged = None
     if tol is not None:
         limits = tol.resolve(runs[-1].machine_code)
+        judged = check(_run_estimates(runs[-1]), tol)  # the last run against the tolerances of this report
     else:
         last = next((r.check for r in reversed(runs) if r.check), None)
         limits = {str(i["name"]): float(i["limit"]) for i in (last or {}).get("items", [])}
-    return HistoryData(machine_id, engine.url.render_as_string(hide_password=True), runs, comps, limits)
+    return HistoryData(machine_id, engine.url.render_as_string(hide_password=True), runs, comps, limits, judged)
+
+
+def _run_estimates(run: Any) -> Estimates:
+    """The stored estimate of a history run, to be judged (:func:`pige_sym.verdict.check.check`)."""
+    def number(x: float) -> float | None:
+        return float(x) if math.isfinite(float(x)) else None
+
+    values = {p: number(v) for p, v in zip(run.parameters, run.values, strict=True)}
+    std = {p: number(s) if values[p] is not None else None for p, s in zip(run.parameters, run.std, strict=True)}
+    return Estimates(run.machine_code, run.method, f"run {run.id} ({Path(run.file_name).name})", values, std,
+                     dict(run.units), [str(f.get("effect")) for f in run.effects])
 
 
 def findings_text(rep: MeasurementReport) -> str:

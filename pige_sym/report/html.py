@@ -15,6 +15,7 @@ from pige_sym.constants import VERSION as __version__
 from pige_sym.files import atomic_write_text, staged_folder
 from pige_sym.report.checkup_section import checkup_html
 from pige_sym.report.data import MeasurementReport, ReportData
+from pige_sym.report.estimate_used import estimate_used_html
 from pige_sym.report.figures import draw_figures, draw_report_figures
 from pige_sym.report.gather import findings_text, gather_report
 from pige_sym.report.html_blocks import CSS, esc, figs, img, num, path_html, table
@@ -46,7 +47,7 @@ def write_report(data: ReportData, out_dir: str | os.PathLike[str], *, force: bo
     out = Path(out_dir)
     with staged_folder(out, force=force, inputs=inputs) as stage, \
             tempfile.TemporaryDirectory(prefix="pige-figures-") as scratch:
-        _write_into(data, stage, stage if figures else Path(scratch))
+        _write_into(data, stage, stage if figures else Path(scratch), out)
         if not figures:  # the PNGs are gone with the scratch folder: none is listed
             for rep in data.measurements:
                 rep.figures = []
@@ -55,8 +56,9 @@ def write_report(data: ReportData, out_dir: str | os.PathLike[str], *, force: bo
     return out / "report.html"
 
 
-def _write_into(data: ReportData, out: Path, drawn: Path) -> None:
-    """``write_report`` into the staged folder ``out``, the figures drawn under ``drawn`` (``out`` or scratch)."""
+def _write_into(data: ReportData, out: Path, drawn: Path, final: Path) -> None:
+    """``write_report`` into the staged folder ``out``, the figures drawn under ``drawn`` (``out`` or scratch);
+    ``final`` is where the folder will be: the page names the compensated programs there, never in the stage."""
     for rep in data.measurements:
         sub = out / rep.label
         rep.figures = draw_figures(rep, drawn / rep.label)
@@ -65,7 +67,7 @@ def _write_into(data: ReportData, out: Path, drawn: Path) -> None:
             sub.mkdir(parents=True, exist_ok=True)
             target = sub / f"{data.program.stem}_compensated{data.program.suffix or '.mpf'}"
             atomic_write_text(target, text, newline="")
-            rep.compensated_program = target
+            rep.compensated_program = final / target.relative_to(out)
     data.figures = draw_report_figures(data, drawn / "_report")
     if data.plan is not None:
         from pige_sym.report.plan_section import plan_section
@@ -112,7 +114,7 @@ def _measurement_html(i: int, rep: MeasurementReport, base: Path | None) -> str:
               f'<section data-section="deviations" id="{sid}-deviations"><h3>Measured deviations</h3>',
               figs(rep, "deviation", base), figs(rep, "polar", base), "</section>",
               f'<section data-section="identification" id="{sid}-identification"><h3>Identified PIGEs</h3>',
-              figs(rep, "identification", base), identification_html(rep), "</section>",
+              estimate_used_html(rep), figs(rep, "identification", base), identification_html(rep), "</section>",
               f'<section data-section="diagnosis" id="{sid}-diagnosis"><h3>Diagnosis</h3>',
               diagnosis_html(rep, base), "</section>",
               f'<section data-section="compensation" id="{sid}-compensation"><h3>Compensation before/after</h3>',
@@ -170,7 +172,8 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
                    + [f'<a href="#m{i + 1}">{esc(r.path.name)}</a>' for i, r in enumerate(data.measurements)]
                    + (['<a href="#compare">measured before/after</a>'] if data.comparison is not None else [])
                    + (['<a href="#history">history</a>'] if data.history is not None else [])
-                   + (['<a href="#plan">test plan</a>'] if data.plan_html or data.plan is not None else []))
+                   + (['<a href="#plan">test plan</a>'] if data.plan_html or data.plan is not None else [])
+                   + (['<a href="#maps">error maps</a>'] if data.maps is not None else []))
     settings = "; ".join(f"{k}: {v}" for k, v in data.settings.items())
     parts = [
         "<!DOCTYPE html>",
@@ -198,6 +201,10 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
                   history_html(data, base), "</section>", checkup_html(data, base)]
     parts += [joint_html(i, j, "".join(img(f, base) for f in data.figures if f.key == f"joint-{i + 1}"))
               for i, j in enumerate(data.joints)]
+    if data.maps is not None:
+        from pige_sym.report.map_section import maps_html
+
+        parts.append(maps_html(data.maps, "".join(img(f, base) for f in data.figures if f.key == "maps")))
     parts += [_measurement_html(i, rep, base) for i, rep in enumerate(data.measurements)]
     if data.plan_html:
         parts.append(data.plan_html)

@@ -16,7 +16,7 @@ from pige_sym.identification.result import IdentificationResult
 from pige_sym.kernels import load_kernels
 from pige_sym.report.data import SOBOL_EFFECT_UM, MeasurementReport
 from pige_sym.report.html_blocks import badge, esc, figs, kvs, num, path_html, table, units
-from pige_sym.report.words import PROBE, Vocabulary, count, value_std, vocabulary
+from pige_sym.report.words import PROBE, Vocabulary, count, per_pose, value_std, vocabulary
 
 
 def summary_html(rep: MeasurementReport) -> str:
@@ -38,8 +38,8 @@ def summary_html(rep: MeasurementReport) -> str:
         (words.reference_point, esc(", ".join(num(x, "g") for x in m.ball_mm) + " mm")),
     ]
     if m.tool_mm is not None:
-        items.append(("tool (ball from the last tool-side pivot)", esc(", ".join(num(x, "g") for x in m.tool_mm)
-                                                                      + " mm")))
+        items.append((f"tool ({words.tool_point} from the last tool-side pivot)",
+                      esc(", ".join(num(x, "g") for x in m.tool_mm) + " mm")))
     for ax, pv in m.pivots_mm.items():
         items.append((f"nominal pivot of {ax}", esc(", ".join(num(x, "g") for x in pv) + " mm")))
     items += [
@@ -66,7 +66,7 @@ def _rows_text(m: Any, words: Vocabulary) -> str:
     """How many rows, and over what: seconds for an R-test, contacts for a probe import (its log has no clock)."""
     if words is PROBE:
         contacts = m.optional.get("n_samples")
-        touched = f", {int(contacts.sum())} contacts ({int(contacts.min())}–{int(contacts.max())} per pose)" \
+        touched = f", {int(contacts.sum())} contacts ({per_pose(int(contacts.min()), int(contacts.max()))})" \
             if contacts is not None else ""
         return f"{count(m.n_rows, 'pose')}: the reference pose and {count(m.n_rows - 1, 'more pose')}{touched}"
     return (f"{count(m.n_rows, 'row')}: the reference pose and {count(m.n_rows - 1, 'measured point')} over "
@@ -280,10 +280,31 @@ def compensation_html(rep: MeasurementReport, base: Path | None) -> str:
         parts.append(f'<p class="note"><span class="unid">Not compensated (no value): '
                      f"{esc(', '.join(rep.not_compensated))}</span> — set to 0.{esc(unknown)}</p>")
     parts.append(_compensation_table(rep))
+    parts.append(_weighing_html(rep))
     if rep.compensated_program is not None:
         parts.append(f"<p>Compensated NC program written to <code>{esc(rep.compensated_program)}</code>.</p>")
     parts.append(figs(rep, "compensation", base))
     return "\n".join(parts)
+
+
+def _weighing_html(rep: MeasurementReport) -> str:
+    """What compensation enters of the estimate, weighed by its uncertainty, and what it is predicted to leave."""
+    from pige_sym.compensation.weighing import weighing_rows
+
+    w = rep.weighing
+    if w is None:
+        return ""
+    units = {**rep.primary.units}
+    rows = weighing_rows(w, units) if w.covariance_from != "none" else []
+    said = ("Every value is entered as estimated: each lies many standard errors from 0." if not rows else
+            "Entered, weighed by its uncertainty (docs/algorithms.md, \"Corrections weighed by their uncertainty\"):")
+    items = "".join(f"<li>{esc(r)}</li>" for r in rows)
+    pred = w.predicted.get("entered")
+    none = w.predicted.get("none")
+    predicted = (f" Predicted tool-point RMS error over {esc(w.judged_on)}: {num(none.expected_um, '.2f')} µm "
+                 f"uncorrected, {num(pred.expected_um, '.2f')} µm after compensation (95 % ≤ "
+                 f"{num(pred.p95_um, '.2f')} µm), from the estimate's covariance.") if pred and none else ""
+    return f"<p>{esc(said)}{predicted}</p>" + (f"<ul>{items}</ul>" if items else "")
 
 
 def _compensation_table(rep: MeasurementReport) -> str:
@@ -330,8 +351,9 @@ def projection_html(rep: MeasurementReport) -> str:
 def sobol_html(rep: MeasurementReport, base: Path | None) -> str:
     st = rep.sobol
     assert st is not None
+    words = vocabulary(rep.measurement)
     if rep.sobol_same_as is not None:
-        return (f'<p>Same trajectory, ball and tool as <a href="#m{rep.sobol_same_as}">measurement '
+        return (f'<p>Same trajectory, {words.table_point} and tool as <a href="#m{rep.sobol_same_as}">measurement '
                 f"{rep.sobol_same_as}</a>: the Sobol indices depend on nothing else and are shown there.</p>")
     head = ["parameter"] + [f"{p} {k}" for p in st.projections for k in ("S1", "ST")]
     rows = [[esc(name)] + [num(v, ".3f") for i in range(len(st.projections))
@@ -339,7 +361,7 @@ def sobol_html(rep: MeasurementReport, base: Path | None) -> str:
             for j, name in enumerate(st.parameters)]
     return (f"<p>First-order (S1) and total (ST) indices of the mean-square projected deviation over the measured "
             f"trajectory, {esc(st.method)}. The parameters are scaled like the identification's "
-            f"columns: each PIGE is uniform on ±h, h chosen so that its RMS effect on the ball is "
+            f"columns: each PIGE is uniform on ±h, h chosen so that its RMS effect on the {words.table_point} is "
             f"{SOBOL_EFFECT_UM:g} µm ({esc(_ranges_text(rep))}), so position and orientation errors compete on "
             "equal terms.</p>"
             + table(head, rows, num_cols=range(1, 1 + 2 * len(st.projections))) + figs(rep, "sobol", base))
@@ -368,7 +390,7 @@ def _rejected_item(r: Any, time_unit: str = "s") -> str:
     """One plain sentence per rejected candidate; the statistics folded in a <details>."""
     opts = options_text(r.options, time_unit)
     name = f"{r.effect}" + (f" ({opts})" if opts else "")
-    numbers = f"{r.reason}; ΔBIC {num(r.delta_bic, '.1f')}, p {num(r.p_value, '.2g')}"
+    numbers = r.reason  # the tests' values and thresholds in words (pige_sym.diagnosis.selection.shortfall)
     if r.effect == "outliers":
         return (f"<li>{esc('No row was dropped as an outlier.')} <details><summary>why</summary><small>"
                 f"{esc(numbers)}</small></details></li>")

@@ -9,8 +9,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from pige_sym.report.data import MeasurementReport, ReportData
+from pige_sym.report.estimate_used import differs_short
 from pige_sym.report.html_blocks import esc, img, kvs, num, table, units
 from pige_sym.report.lead import improvement, main_finding, pige_rows
+from pige_sym.report.next_step import compare_next, history_next, measurement_next, next_html
 from pige_sym.report.words import value_std
 from pige_sym.verdict.check import CheckResult
 
@@ -60,19 +62,30 @@ def _answer_one(i: int, rep: MeasurementReport, data: ReportData) -> str:
         ("verdict", verdict_html(rep)),
         ("main finding", esc(main_finding(rep))),
         (f"improvement ({imp.label})", f'<span class="basis {esc(imp.basis)}">{esc(imp.label)}</span> {esc(imp.text)}'),
+        ("next step", next_html(measurement_next(rep, data))),
     ]
+    differs = differs_short(rep)
     return (f'<div class="answer" id="answer-m{i + 1}"><div class="facts">{kvs(facts)}</div>'
             f'<div class="used"><p class="cap">PIGEs used for compensation ({esc(_estimate_label(rep))})</p>'
-            f"{pige_used_html(rep)}</div></div>")
+            f"{pige_used_html(rep)}" + (f'<p class="cap" data-differs="pige-only">{esc(differs)}</p>' if differs
+                                        else "") + "</div></div>")
 
 
 def _answer_history(data: ReportData) -> str:
     h = data.history
     assert h is not None
     last = h.runs[-1]
-    verdict = (f'<span data-verdict="{esc(last.verdict)}" class="badge {esc(last.verdict)}">'
-               f"{_BADGE.get(last.verdict, last.verdict)}</span> <small>stored with run {last.id}</small>"
-               if last.verdict else '<span data-verdict="none" class="badge none">not judged</span>')
+    if h.check is not None:  # judged now against the report's --tolerances
+        odd = [f"{i.name} {i.status}" for i in h.check.items if i.status != "pass"]
+        verdict = (f'<span data-verdict="{esc(h.check.verdict)}" class="badge {esc(h.check.verdict)}">'
+                   f"{_BADGE[h.check.verdict]}</span> <small>run {last.id} against {esc(h.check.tolerances)}"
+                   f"{esc(': ' + ', '.join(odd) if odd else f': all {len(h.check.items)} items pass')}</small>")
+    elif last.verdict:
+        verdict = (f'<span data-verdict="{esc(last.verdict)}" class="badge {esc(last.verdict)}">'
+                   f"{_BADGE.get(last.verdict, last.verdict)}</span> <small>stored with run {last.id}</small>")
+    else:
+        verdict = ('<span data-verdict="none" class="badge none">not judged</span> <small>no tolerances stored with '
+                   "the run or given (pige report --history ID --tolerances TOL.json)</small>")
     moved = [f"{c.parameter} {num(c.change, '+.3g')} ± {num(c.std, '.2g')} {units(c.unit)} "
              f"(run {c.from_run} → {c.to_run})"
              for comp in h.comparisons for c in comp.changes if c.significant]
@@ -80,7 +93,8 @@ def _answer_history(data: ReportData) -> str:
              ("runs", esc(f"{len(h.runs)}, last measured {last.measured_at}")),
              ("verdict of the last run", verdict),
              ("what changed", esc("; ".join(moved) if moved else "no significant change between consecutive runs "
-                                 "(family-wise false-alarm rate 1 % per comparison)"))]
+                                 "(family-wise false-alarm rate 1 % per comparison)")),
+             ("next step", next_html(history_next(data)))]
     return f'<div class="answer"><div class="facts">{kvs(facts)}</div></div>'
 
 
@@ -92,7 +106,8 @@ def _answer_compare(data: ReportData) -> str:
                          "measurement files and --tolerances for a verdict</small>"),
              ("improvement (measured)", f'<span class="basis measured">measured</span> '
                                         f"{esc(f'RMS |d| {c.rms_before_um:.3g} → {c.rms_after_um:.3g} µm ')}"
-                                        f"{esc(f'({c.improvement:.0%} less)')}")]
+                                        f"{esc(f'({c.improvement:.0%} less)')}"),
+             ("next step", next_html(compare_next(data)))]
     return f'<div class="answer"><div class="facts">{kvs(facts)}</div></div>'
 
 

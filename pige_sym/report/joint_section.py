@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from pige_sym.diagnosis.joint import JointDiagnosis
 from pige_sym.report.data import JointReport
 from pige_sym.report.html_blocks import esc, kvs, num, path_html, table, units
@@ -31,7 +33,8 @@ from pige_sym.report.words import count, value_std
 
 
 def _agreement_sentence(d: JointDiagnosis) -> tuple[str, str]:
-    """(badge class, plain sentence) of the agreement test."""
+    """(agree, disagree or none; plain sentence) of the agreement test.  Shown as a plain line, never as a
+    badge: it says whether the files are consistent, not whether the machine is in tolerance (the verdict)."""
     status, a = d.agreement_status, d.agreement
     if a is None:
         if len(d.files) == 1:
@@ -41,16 +44,34 @@ def _agreement_sentence(d: JointDiagnosis) -> tuple[str, str]:
     if status == "disagree":
         bad = [f.label for f in d.files if f.disagrees]
         who = f" — the file that disagrees: {', '.join(bad)}" if bad else " — no single file stands out"
-        return "fail", (f"the files do not agree on one set of PIGEs (p = {a.p_value:.2g}){who}; the "
-                        "machine changed between the setups or an effect the model misses shows differently in "
-                        "each: do not use the joint estimate")
-    return "pass", f"the files agree on one set of PIGEs (p = {a.p_value:.2g})"
+        return "disagree", (f"the files do not agree on one set of PIGEs (F test p = {a.p_value:.2g}){who}; the "
+                            "machine changed between the setups or an effect the model misses shows differently in "
+                            "each: do not use the joint estimate")
+    return "agree", (f"the files agree on one set of PIGEs (F test p = {a.p_value:.2g}): they can be identified "
+                     "together")
+
+
+def _agreement_line(d: JointDiagnosis) -> str:
+    """The agreement as a plain line (no badge: the verdict is the only badge)."""
+    kind, sentence = _agreement_sentence(d)
+    text = esc(sentence[0].upper() + sentence[1:]) + "."
+    return f'<span data-agreement="{esc(kind)}"' + (' class="bad">' if kind == "disagree" else ">") + text + "</span>"
+
+
+def _seen_jointly(d: JointDiagnosis) -> str:
+    """The effects the setups show together, or what was searched and not found."""
+    if d.effects:
+        return "; ".join(f.title() + ": " + ", ".join(f"{p} = {value_std(v, f.std[p])} {units(f.units[p])}"
+                                                      for p, v in f.params.items()) for f in d.effects)
+    if d.searched:
+        return (f"nothing beyond the PIGEs: none of the {len(d.searched)} catalogue effects searched on the joint "
+                "rows of the setups is accepted")
+    return "nothing searched jointly (the joint search is for sets of ballbar setups)"
 
 
 def answer_joint_html(i: int, jr: JointReport) -> str:
     """The first-screen answer of a joint section: machine, files, agreement, verdict, largest PIGE."""
     d = jr.diagnosis
-    kind, sentence = _agreement_sentence(d)
     if jr.check is None:
         verdict = ('<span data-verdict="none" class="badge none">not judged</span> <small>no tolerances given '
                    "(pige report --tolerances TOL.json)</small>")
@@ -62,20 +83,17 @@ def answer_joint_html(i: int, jr: JointReport) -> str:
     res = d.final
     piges = [n for n in res.parameters if "." not in n]  # effect parameters are named <effect>.<parameter>
     known = [n for n, v in zip(res.parameters, res.values, strict=True) if n in piges and math.isfinite(float(v))]
-    seen = "; ".join(f.effect + "".join(f" {k}={v:.3g}" for k, v in f.options.items()) + ": "
-                     + ", ".join(f"{p} = {value_std(v, f.std[p])} {units(f.units[p])}" for p, v in f.params.items())
-                     for f in d.effects)
     facts = [("machine", f"<code>{esc(jr.machine)}</code>"),
              ("files", esc(f"{count(len(jr.paths), 'file')} identified jointly: ")
               + ", ".join(f'<span class="file">{path_html(p.name)}</span>' for p in jr.paths)),
-             ("agreement", f'<span class="badge {esc(kind)}">{esc(kind.upper() if kind != "none" else "—")}'
-                           f"</span> {esc(sentence)}"),
              ("verdict (joint estimate)", verdict),
-             ("seen jointly", esc(seen or "nothing beyond the PIGEs")),
+             ("do the files agree?", _agreement_line(d) + " <small>(a consistency check of the setups, not the "
+                                     "verdict)</small>"),
+             ("seen jointly", esc(_seen_jointly(d))),
              ("determined", esc(f"{len(known)} of {len(piges)} PIGEs"
                                 + (f"; not determined by these setups: {', '.join(res.unidentifiable)}"
                                    if res.unidentifiable else ""))),
-             ("next", esc(_next_step(jr)))]
+             ("next step", esc(_next_step(jr)))]
     return (f'<div class="answer" id="answer-j{i + 1}"><div class="facts">{kvs(facts)}</div>'
             f'<div class="used"><p class="cap">PIGEs of the joint estimate</p>{_pige_table(jr, compact=True)}'
             "</div></div>")
@@ -93,8 +111,30 @@ def _next_step(jr: JointReport) -> str:
                 "that determines every PIGE")
     if jr.check is not None and jr.check.verdict == "pass":
         return "in tolerance: nothing to correct; keep the run (pige history add) to see drift later"
+    if jr.check is not None and jr.check.verdict == "undecided":
+        return _undecided_step(jr)
     return ("correct the machine: pige compensate PROGRAM --params joint.json (with pige diagnose FILES --json > "
             "joint.json), or --controller STYLE for the kinematic description; then measure again")
+
+
+def _undecided_step(jr: JointReport) -> str:
+    """An undecided joint verdict: per item the standard uncertainty that decides it, how many times the points
+    per setup reach it (u falls as 1/√points), and the ballbar plan whose worst std is that target."""
+    assert jr.check is not None
+    und = [i for i in jr.check.items if i.status == "undecided"]
+    parts, needs = [], []
+    for i in und:
+        if i.value is None or i.std is None:
+            parts.append(f"{i.name} has no value (no setup here determines it)")
+            continue
+        need = abs(i.limit - abs(i.value)) / jr.check.k
+        needs.append(need)
+        parts.append(f"{i.name} needs u ≤ {need:.2g} {i.unit} (now {i.std:.2g}): "
+                     + (f"{(i.std / need) ** 2:.2g}× the points per setup" if need > 0 else "it lies on its limit"))
+    sigma = float(np.median([f.sigma_um for f in jr.diagnosis.files]))
+    target = f" --target {min(needs):.2g}" if needs and min(needs) > 0 else ""
+    return (f"undecided: {'; '.join(parts)} (u falls as 1/√points), or setups that see it better: pige plan "
+            f"--instrument ballbar --machine \"{jr.machine}\" --noise {sigma:.2g}{target} --out setups.json")
 
 
 def _files_table(jr: JointReport) -> str:
@@ -154,11 +194,9 @@ def _pige_table(jr: JointReport, *, compact: bool = False) -> str:
 def joint_html(i: int, jr: JointReport, figures: str = "") -> str:
     """The joint section (module docstring); ``figures`` is its figures' HTML."""
     d = jr.diagnosis
-    kind, sentence = _agreement_sentence(d)
     parts = [f'<section data-section="joint" id="joint-{i + 1}">',
              f"<h2>Joint identification — {count(len(jr.paths), 'file')} of <code>{esc(jr.machine)}</code></h2>",
-             f'<p><span class="badge {esc(kind)}">{esc(kind.upper() if kind != "none" else "—")}</span> '
-             f"{esc(sentence[0].upper() + sentence[1:])}.</p>",
+             f"<p>Agreement of the files (a consistency check, not the verdict): {_agreement_line(d)}</p>",
              "<p>Every file's rows are divided by its own noise σ and fitted with one set of PIGEs (a free "
              "constant per relative ballbar file, whose zero is unknown). A ballbar file is one projection per "
              "pose, along the bar: it is checked for agreement only; R-test and probe files also get their own "

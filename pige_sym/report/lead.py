@@ -7,7 +7,7 @@ What the first screen says, per measurement (rendered by :mod:`~pige_sym.report.
   final fit, i.e. the PIGEs estimated jointly with the accepted effects);
 - the main finding in one sentence: the effects found beyond the PIGEs (or that there are
   none) and the PIGE that matters most: with tolerances the one closest to its limit, else the
-  one with the largest effect at the ball (value × the RMS sensitivity of the ball to it over
+  one with the largest effect at the ball or sphere (value × the RMS sensitivity of that point to it over
   the trajectory, the identification's column scale);
 - the improvement, labelled with its basis: *measured* (``--compare``), *simulated on a known
   truth* (truth sidecar) or *model-predicted*.  A model-predicted "after" is never shown as the
@@ -23,10 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pige_sym.diagnosis.results import Finding
 from pige_sym.kernels import load_kernels
 from pige_sym.report.data import UNIT_TEXT, MeasurementReport, ReportData
 from pige_sym.report.gather import sobol_half_ranges
+from pige_sym.report.words import vocabulary
 
 
 @dataclass
@@ -69,11 +69,8 @@ def pige_rows(rep: MeasurementReport) -> list[PigeRow]:
     return out
 
 
-#: Effects of the test set-up, not of the machine: what the first screen calls them.
-SETUP_EFFECTS = {"table_drift": "the sphere or nest creeping on its stand",
-                 "probe_trigger": "the probe's direction-dependent trigger radius",
-                 "setup_offset": "the instrument set up off its nominal place",
-                 "pose_cluster": "the rows of one pose deviating together"}
+#: Effects of the test set-up, not of the machine (named by :func:`pige_sym.diagnosis.results.effect_title`).
+SETUP_EFFECTS = ("table_drift", "probe_trigger", "setup_offset", "pose_cluster")
 
 
 def _effects_clause(rep: MeasurementReport) -> str:
@@ -84,11 +81,8 @@ def _effects_clause(rep: MeasurementReport) -> str:
     if not found:
         return (f"The PIGE model explains the measurement down to the noise (residual RMS "
                 f"{d.final.rms_um:.2g} µm)")
-    def name(f: Finding) -> str:
-        return f.effect + ("" if "harmonic" not in f.options else f" ({int(f.options['harmonic'])} per rev)")
-
-    machine = [name(f) for f in found if f.effect not in SETUP_EFFECTS]
-    setup = [f"{name(f)} ({SETUP_EFFECTS[f.effect]})" for f in found if f.effect in SETUP_EFFECTS]
+    machine = [f.title() for f in found if f.effect not in SETUP_EFFECTS]
+    setup = [f.title() for f in found if f.effect in SETUP_EFFECTS]
     parts = ([f"the machine shows {', '.join(machine)}"] if machine else []) + \
         ([f"the test set-up shows {', '.join(setup)}, fitted and kept out of the PIGEs"] if setup else [])
     return "Beyond the PIGEs " + "; ".join(parts)
@@ -107,7 +101,8 @@ def main_finding(rep: MeasurementReport) -> str:
     else:
         scale = {k: 1.0 / v for k, v in sobol_half_ranges(rep.measurement, 1.0).items()}
         worst = max(rows, key=lambda r: abs(r.value or 0.0) * scale.get(r.name, 1.0))
-        tail = f", about {abs(worst.value or 0.0) * scale.get(worst.name, 1.0):.2g} µm RMS at the ball"
+        tail = (f", about {abs(worst.value or 0.0) * scale.get(worst.name, 1.0):.2g} µm RMS at the "
+                f"{vocabulary(rep.measurement).table_point}")
     what = "closest to its limit" if any(r.limit for r in rows) else "with the largest effect"
     return (f"{clause}; the PIGE {what} is {worst.name} = {worst.value:.3g} ± {worst.std or float('nan'):.2g} "
             f"{worst.unit}{tail}.")

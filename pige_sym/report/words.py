@@ -4,7 +4,7 @@
   records the ball's deviation from the nest at timed points (seconds); a probe import records, per pose,
   the sphere centre's deviation from its nominal motion, fitted from contacts, with the pose's order as
   its only clock (docs/conventions.md §7).
-- :func:`count`: ``1 file``, ``9 files`` (never ``file(s)``).
+- :func:`count`: ``1 file``, ``9 files`` (never ``file(s)``); :func:`per_pose`: ``5 per pose``, ``4–9 per pose``.
 - :func:`value_std` (from :mod:`pige_sym.identification.result`): a value and its standard error with the
   same decimals (the std to two significant digits): ``11.95 ± 0.42``, never ``12 ± 0.42``.
 - :func:`small_um`: an RMS that is numerically zero reads ``< 0.001 µm``, not ``1.52e-11 µm``.
@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from pige_sym.identification.result import per_pose as per_pose
 from pige_sym.identification.result import value_std as value_std
 from pige_sym.measurements.measurement import Measurement
 
@@ -31,13 +32,16 @@ class Vocabulary:
     reference_point: str  # what sits at the reference pose
     time_axis: str  # x label of a time plot
     time_unit: str  # unit of t and of a drift's time constant
+    tool_point: str  # the point the spindle carries: the R-test's ball, the probe's stylus tip
+    table_point: str  # the point on the table: the R-test's ball (in its nest), the calibration sphere
 
 
 RTEST = Vocabulary("R-test", "point", "points", "R-test deviation d = ball − nest", "deviation ball − nest [µm]",
-                   "ball at the reference pose", "t [s]", "s")
+                   "ball at the reference pose", "t [s]", "s", "ball", "ball")
 PROBE = Vocabulary("touch probe", "pose", "poses", "probe deviation d = −(sphere centre − its nominal motion)",
                    "deviation d = −(c − c_nom) [µm]", "sphere centre at the reference pose",
-                   "pose (its order in the log: a probe log holds no clock)", "poses")
+                   "pose (its order in the log: a probe log holds no clock)", "poses", "stylus tip centre",
+                   "sphere")
 
 
 def vocabulary(m: Measurement) -> Vocabulary:

@@ -13,14 +13,16 @@ length exactly, ``|T − P| − L0`` with ``T`` the commanded tool ball (the nom
 ``table_ball + offset``, linear axes perfect) and ``P`` the true table ball
 (:mod:`pige_sym.simulation.exact_table`), plus Gaussian noise; ``zero: relative`` subtracts the first reading.
 
-Effects beyond the PIGEs (:mod:`pige_sym.model.effects`) are added to first order: the R-test deviation
-they cause at the tool ball's table point ``Q = table_ball + offset`` (ball minus table point, zeroed at the
-reference pose as R-test data are), projected on the bar direction ``n_i = R_w(θ_i)·offset/L0``.  To first
-order the bar sees ``n_i·(δT − δP)`` and ``T − P = d(Q) + (Q − P)`` turned by the table, whose length a
-rotation does not change; zeroing at the reference pose removes ``n_i·R_w(θ_i)·d_raw(0) = n_0·d_raw(0)``,
-the same constant at every pose, so a ``relative`` file is exact to first order and an ``absolute`` file
-counts the effects from the reference pose (where the bar was set).  ``outliers`` add their size along a
-random direction, projected.
+Error maps (CONVENTIONS §10) are added to first order un-zeroed, as the PIGEs' exact length is (an absolute
+file's bar knows its length at the reference pose too; a relative file subtracts its first reading).  Effects
+beyond the PIGEs (:mod:`pige_sym.model.effects`) are added to first order: the R-test deviation they cause at
+the tool ball's table point ``Q = table_ball + offset`` (ball minus table point, zeroed at the reference pose
+as R-test data are), projected on the bar direction
+``n_i = R_w(θ_i)·offset/L0``.  To first order the bar sees ``n_i·(δT − δP)`` and ``T − P = d(Q) + (Q − P)``
+turned by the table, whose length a rotation does not change; zeroing at the reference pose removes
+``n_i·R_w(θ_i)·d_raw(0) = n_0·d_raw(0)``, the same constant at every pose, so a ``relative`` file is exact to
+first order and an ``absolute`` file counts the effects from the reference pose (where the bar was set).
+``outliers`` add their size along a random direction, projected.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.ballbar import SETUPS, BallbarRun, bar_directions
 from pige_sym.model.effects import EffectContext, EffectInstance
+from pige_sym.model.error_motions import ErrorMaps
 from pige_sym.simulation.exact_table import nominal_table_point, table_point
 from pige_sym.simulation.simulator import add_effects
 
@@ -107,18 +110,19 @@ def effect_lengths(machine: str, setup: BallbarSetup, effects: list[EffectInstan
 
 def simulate_ballbar(machine: str, setup: BallbarSetup, *, pige: dict[str, float], noise_um: float = 0.2,
                      seed: int | None = None, zero: str = "relative",
-                     effects: list[EffectInstance] | None = None) -> BallbarRun:
-    """The file a setup produces on a machine with errors ``pige`` [µm, µrad] and ``effects``.
+                     effects: list[EffectInstance] | None = None, error_maps: ErrorMaps | None = None) -> BallbarRun:
+    """The file a setup produces on a machine with errors ``pige`` [µm, µrad], ``effects`` and ``error_maps``.
 
-    The PIGEs' length is exact (``|T − P| − L0``), the effects' first order (module docstring).
+    The PIGEs' length is exact (``|T − P| − L0``), the effects' and the maps' first order (module docstring).
     """
     return simulate_ballbar_with_outliers(machine, setup, pige=pige, noise_um=noise_um, seed=seed, zero=zero,
-                                          effects=effects)[0]
+                                          effects=effects, error_maps=error_maps)[0]
 
 
 def simulate_ballbar_with_outliers(machine: str, setup: BallbarSetup, *, pige: dict[str, float],
                                    noise_um: float = 0.2, seed: int | None = None, zero: str = "relative",
-                                   effects: list[EffectInstance] | None = None) -> tuple[BallbarRun, list[int]]:
+                                   effects: list[EffectInstance] | None = None,
+                                   error_maps: ErrorMaps | None = None) -> tuple[BallbarRun, list[int]]:
     """:func:`simulate_ballbar` and the rows that received an ``outliers`` effect (for the truth sidecar)."""
     kern = load_kernels(machine)
     rng = np.random.default_rng(seed)
@@ -132,6 +136,10 @@ def simulate_ballbar_with_outliers(machine: str, setup: BallbarSetup, *, pige: d
     if effects:
         extra, outlier_rows = effect_lengths(kern.MACHINE_CODE, setup, effects, t, rng)
         dl = dl + extra
+    if error_maps is not None:  # un-zeroed, as the PIGEs' exact length: an absolute file counts the reference pose
+        point = setup.table_ball_mm + setup.offset_mm
+        dev = error_maps.raw_deviation(kern, setup.angles_deg, point)
+        dl = dl + np.einsum("ni,ni->n", bar_directions(kern.workpiece_rotation(setup.angles_deg), setup.offset_mm), dev)
     dl = dl + rng.normal(0.0, noise_um, n)
     if zero == "relative":
         dl = dl - dl[0]

@@ -4,8 +4,9 @@ The machine reads the program's statements (:func:`pige_sym.nc.probe_readback.pr
 exactly what pige wrote) and moves its axes.  The true sphere centre at a pose is
 ``c(θ) = pivot + R_w(θ)(c₀ − pivot) − d(θ)`` (CONVENTIONS §7: the probe sees ``e = −d``), ``d`` the
 deviation the R-test simulator gives for a ball at ``c₀ − pivot`` with the PIGEs and effects
-(:func:`pige_sym.simulation.simulator.simulate`, noise-free), and ``c₀`` the nominal sphere plus a set-up
-offset.  A probing move stops where the stylus centre reaches the *trigger radius*
+(:func:`pige_sym.simulation.simulator.simulate`, noise-free) — with ``error_maps``, the rotary axes' error motions
+too (CONVENTIONS §10, first order, each pose approached as the program moves to it) — and ``c₀`` the nominal sphere
+plus a set-up offset.  A probing move stops where the stylus centre reaches the *trigger radius*
 ``R + r − pre-travel(v)`` from the true centre:
 
 - ``pretravel_um``: constant pre-travel (a calibrated ``R_eff`` absorbs it);
@@ -38,6 +39,7 @@ from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.axis_sense import to_conventions
 from pige_sym.measurements.probe_head import head_offsets, stylus_frames
+from pige_sym.model.error_motions import ErrorMaps
 from pige_sym.model.trajectories import Trajectory
 from pige_sym.nc.probe_program import ProbeSetup, nominal_centres, table_frames
 from pige_sym.nc.probe_readback import probe_operations
@@ -62,6 +64,8 @@ class ProbeMachine:
     seed : int or None
     tool_error_um : (3,) [µm]
         Head machines: the true stylus centre minus ``setup.tool_mm`` (module docstring).
+    error_maps : ErrorMaps or None
+        Error motions of the rotary axes (CONVENTIONS §10).
     """
 
     setup: ProbeSetup
@@ -74,6 +78,7 @@ class ProbeMachine:
     vertical_um: float = 0.0
     seed: int | None = None
     tool_error_um: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    error_maps: ErrorMaps | None = None
 
     @property
     def centre0_mm(self) -> np.ndarray:
@@ -98,7 +103,7 @@ def true_centres(machine: ProbeMachine, angles_deg: np.ndarray) -> np.ndarray:
     delta = np.asarray(machine.tool_error_um, dtype=float) * 1e-3
     tool = None if s.tool_mm is None else np.asarray(s.tool_mm, dtype=float) + delta
     sim = simulate(kern.MACHINE_CODE, traj, pige=machine.pige, ball_mm=ball, pivots_mm=per_axis, tool_mm=tool,
-                   effects=machine.effects, noise_um=0.0, seed=0)
+                   effects=machine.effects, noise_um=0.0, seed=0, error_maps=machine.error_maps)
     centres = nominal_centres(s.machine, a, machine.centre0_mm, pivots) - sim.measurement.deviation_um * 1e-3
     if s.tool_mm is None:
         return centres

@@ -150,7 +150,8 @@ def _limit(value: Any, path: str, where: str) -> float:
         raise FileFormatError(path, None, f"{where}: expected a positive number, got {json.dumps(value)}")
     x = float(value)
     if not math.isfinite(x) or x <= 0:
-        raise FileFormatError(path, None, f"{where}: a limit must be a positive finite number, got {value!r}")
+        said = "a number beyond ±1.8e308" if math.isinf(x) else repr(value)
+        raise FileFormatError(path, None, f"{where}: a limit must be a positive finite number, got {said}")
     return x
 
 
@@ -311,7 +312,7 @@ class CheckResult:
                 else "simple acceptance (uncertainty not used)")
         source = f"{self.source}: " if self.source else ""
         given = self.tolerances in ("", "tolerances")  # a dict in a script: no file to name
-        limits = "the tolerances given" if given else f"tolerances {self.tolerances}"
+        limits = "limits set by the calling script (no tolerance file)" if given else f"tolerances {self.tolerances}"
         lines = [f"{source}{self.method} estimate of {self.machine}, {limits}, {rule}",
                  f"{'parameter':28s} {'value':>9s} {'std':>7s} {'limit':>8s} unit  status     why"]
         for it in self.items:

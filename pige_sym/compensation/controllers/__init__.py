@@ -7,9 +7,14 @@ module holds one controller's kinematic chain, its entries and the manuals it fo
     representable(params) -> list[str]               the parameters its entries carry (CONVENTIONS §3 names)
     render(params, options) -> str                   the entries as text (ControllerOptions below)
 
+A controller that reads today's configuration (LinuxCNC's ``--current``) also defines::
+
+    check_current(params, current) -> None            refuses a configuration that contradicts the parameters
+
 The modules that are not controllers (:data:`NOT_CONTROLLERS`) hold what they share: the corrected axis
-lines (:mod:`.axis_lines`) and what a controller leaves at the tool (:mod:`.scope`).  Units, signs and
-sources of every controller: docs/controller-corrections.md.
+lines (:mod:`.axis_lines`), what a controller leaves at the tool (:mod:`.scope`), the checks made before
+anything is written (:mod:`.entry_checks`) and the reader of a LinuxCNC configuration (:mod:`.hal_config`).
+Units, signs and sources of every controller: docs/controller-corrections.md.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from typing import Any
 from pige_sym.errors import InputError
 
 #: Modules of this package that are not controllers.
-NOT_CONTROLLERS = frozenset({"axis_lines", "hal_config", "scope"})
+NOT_CONTROLLERS = frozenset({"axis_lines", "entry_checks", "hal_config", "scope"})
 
 
 @dataclass(frozen=True)
@@ -67,15 +72,43 @@ def get_controller(name: str) -> ModuleType:
     return importlib.import_module(f"{__name__}.{name}")
 
 
+def check_before_writing(params: Any, style: str, current: Any = None) -> None:
+    """Check what controller ``style`` would enter before anything is written (module docstring).
+
+    The parameters against physical bounds (:func:`.entry_checks.check_parameters`), and today's
+    configuration ``current`` against the parameters by the controller that reads one (``check_current``).
+
+    Raises
+    ------
+    InputError
+        A value beyond its bound, a configuration for a controller that reads none, or a contradiction
+        (both values and their sources named).
+    """
+    from pige_sym.compensation.controllers.entry_checks import check_parameters
+
+    module = get_controller(style)
+    check_parameters(params)
+    if current is None:
+        return
+    check_current = getattr(module, "check_current", None)
+    if check_current is None:
+        readers = [n for n in controller_names() if hasattr(get_controller(n), "check_current")]
+        raise InputError(f"--current: the {style} entries are changes to add; today's configuration is read for "
+                         f"--controller {', '.join(readers)} only")
+    check_current(params, current)
+
+
 def format_controller(params: Any, style: str = "table", *, carrier: int = 1,
                       current: Any = None, heidenhain_trans: str | None = None, enter: str = "weighed") -> str:
     """The corrections of ``params`` in the words of controller ``style`` (docs/controller-corrections.md).
 
     The values are weighed by their uncertainty over the axes' travel (:func:`entered_for_controller`).  Every
     controller also says what it enters, what it cannot represent and the tool-point error each choice leaves,
-    with a 95 % bound (:mod:`~pige_sym.compensation.controllers.scope`).
+    with a 95 % bound (:mod:`~pige_sym.compensation.controllers.scope`).  Nothing is rendered before
+    :func:`check_before_writing` has passed.
     """
     module = get_controller(style)
+    check_before_writing(params, style, current)
     options = ControllerOptions(carrier=carrier, current=current, heidenhain_trans=heidenhain_trans)
     return str(module.render(entered_for_controller(params, enter), options))
 

@@ -40,6 +40,17 @@ TRT_MODULES = {"A": "xyzac-trt-kins", "B": "xyzbc-trt-kins"}
 #: Their HAL input pins (trtfuncs.c, trtKinematicsSetup).
 TRT_PINS = ("x-rot-point", "y-rot-point", "z-rot-point", "x-offset", "y-offset", "z-offset", "tool-offset",
             "conventional-directions")
+#: The axis lines the trt pins hold (trtfuncs.c, module docstring): per module and axis, each coordinate
+#: across the axis as the sum of pins.
+TRT_LINES: dict[str, dict[str, dict[str, tuple[str, ...]]]] = {
+    "xyzac-trt-kins": {"C": {"x": ("x-rot-point",), "y": ("y-rot-point",)},
+                       "A": {"y": ("y-rot-point", "y-offset"), "z": ("z-rot-point", "z-offset")}},
+    "xyzbc-trt-kins": {"C": {"x": ("x-rot-point",), "y": ("y-rot-point",)},
+                       "B": {"x": ("x-rot-point", "x-offset"), "z": ("z-rot-point", "z-offset")}},
+}
+#: How far a configured axis line may lie from the parameter file's pivot and still be the same line [mm]:
+#: their rounding, pige writes pivots to 1 nm (program headers, the component's pins) and trt pins to 0.1 nm.
+PIVOT_AGREEMENT_MM = 2e-6
 VERSION = ("# requires LinuxCNC >= 2.9: the rot-point pins came with commit 135b0ce522 (switchable kinematics, "
            "first in 2.9.0-pre1); 2.8's trt modules turn C about the machine origin")
 
@@ -79,8 +90,10 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
     Raises
     ------
     InputError
-        Neither the stock trt kinematics nor pige's component can describe the machine.
+        Neither the stock trt kinematics nor pige's component can describe the machine, or today's
+        configuration contradicts the parameters (:func:`check_current`).
     """
+    check_current(params, options.current)
     try:
         linuxcnc_trt_deltas(params)
     except InputError as exc:
@@ -103,12 +116,6 @@ def _render_trt(params: CompensationParameters, options: ControllerOptions) -> s
     """Absolute ``setp``/``sets`` lines from today's values (``options.current``), else each change as a comment."""
     module, deltas = linuxcnc_trt_deltas(params)
     config = _config(options.current)
-    if config is not None and config.module is not None and config.module != module:
-        raise InputError(f"--current {config.source}: its kinematics are {config.module} ({config.module_where}), "
-                         f"but {params.machine} needs {module}: give this machine's configuration")
-    unknown = sorted(set(config.pins if config else {}) - set(TRT_PINS))
-    if unknown:
-        raise InputError(f"--current {unknown[0]}: not a pin of {module} ({', '.join(TRT_PINS)})")
     out = [f"# LinuxCNC {module} (src/emc/kinematics/trtfuncs.c): HAL pins [mm], parameters from {params.source}",
            VERSION, *scope_lines(params, "linuxcnc", "# ")]
     if config is not None and config.unread:
@@ -118,11 +125,82 @@ def _render_trt(params: CompensationParameters, options: ControllerOptions) -> s
     return "\n".join(out)
 
 
+def check_current(params: CompensationParameters, current: object) -> None:
+    """Refuse today's configuration (``--current``) when it contradicts the parameters, before anything is printed.
+
+    The configuration must be of LinuxCNC's trt kinematics for this machine (a table C on an A or B tilt
+    axis: not a head or mixed machine, not the other tilt axis), name only their pins, hold bounded values
+    (:meth:`~.hal_config.HalConfig.pin_value`), and place each axis line where the parameter file's pivot is
+    (within :data:`PIVOT_AGREEMENT_MM`): else the trt pins and pige's component would be printed for two
+    different machines.
+
+    Raises
+    ------
+    InputError
+        Naming both values and where each comes from.
+    """
+    config = _config(current)
+    if config is None:
+        return
+    try:
+        module = linuxcnc_trt_deltas(params)[0]
+    except InputError:
+        kins = f"a configuration of {config.module} ({config.module_where})" if config.module else "trt pins"
+        raise InputError(f"--current {config.name}: {kins}, LinuxCNC's kinematics of a tilting rotary table (C on an "
+                         f"A or B tilt axis), but {params.source} holds the parameters of {params.machine}, whose "
+                         f"rotary axes are {_sides(params)}: give the parameters and the configuration of one "
+                         "machine") from None
+    if config.module is not None and config.module != module:
+        raise InputError(f"--current {config.name}: its kinematics are {config.module} ({config.module_where}), "
+                         f"but {params.source} holds the parameters of {params.machine}, which needs {module}: give "
+                         "this machine's configuration")
+    unknown = sorted(set(config.pins) - set(TRT_PINS))
+    if unknown:
+        raise InputError(f"--current {config.pin_where.get(unknown[0], config.name)}: {unknown[0]} is not a pin of "
+                         f"{module} ({', '.join(TRT_PINS)})")
+    for pin in TRT_PINS:
+        config.pin_value(pin)  # bounded where it is set
+    for axis, coordinates in TRT_LINES[module].items():
+        _check_axis(params, config, axis, coordinates)
+
+
+def _sides(params: CompensationParameters) -> str:
+    kern = load_kernels(params.machine)
+    return ", ".join(f"{a} ({'tool' if a in kern.TOOL_ROTARY else 'table'})" for a in kern.ROTARY_AXES)
+
+
+def _check_axis(params: CompensationParameters, config: HalConfig, axis: str,
+                coordinates: dict[str, tuple[str, ...]]) -> None:
+    """Refuse an axis line of the configuration that is not where the parameter file's pivot puts it."""
+    pivot = [float(x) for x in params.pivots_mm.get(axis, [0.0, 0.0, 0.0])]
+    held: dict[str, tuple[float, str]] = {}
+    for coordinate, pins in coordinates.items():
+        values = [config.pin_value(p) for p in pins]
+        if all(v is not None for v in values):  # else the configuration does not say: comments, not values
+            found = [v for v in values if v is not None]
+            how = " + ".join(f"{p} {v.value:.10g} ({v.source})" for p, v in zip(pins, found, strict=True))
+            held[coordinate] = (sum(v.value for v in found), how)
+    wrong = [c for c, (line, _) in held.items() if abs(line - pivot["xyz".index(c)]) > PIVOT_AGREEMENT_MM]
+    if not wrong:
+        return
+    coordinate, (line, how) = wrong[0], held[wrong[0]]
+    stated = (f"pivots_mm.{axis}" if axis in params.pivots_mm else
+              f"no pivots_mm.{axis}: the axis line through the origin, CONVENTIONS §2")
+    nominal = pivot["xyz".index(coordinate)]
+    suggested = ",".join(f"{held[c][0] if c in held else x:.10g}" for c, x in zip("xyz", pivot, strict=True))
+    raise InputError(f"--current {config.name}: the {axis} axis line is at {coordinate} = {line:.10g} mm there "
+                     f"({how}), but {params.source} puts it at {coordinate} = {nominal:.10g} mm ({stated}): they "
+                     f"contradict each other by {abs(line - nominal):.4g} mm; give the configuration of the machine "
+                     "the parameters were identified on, or identify from a test written with its axis lines "
+                     f"(pige program --pivot {axis}={suggested})")
+
+
 def _config(current: object) -> HalConfig | None:
     if current is None or isinstance(current, HalConfig):
         return current
     if isinstance(current, dict):
-        return HalConfig(None, pins={str(k): float(v) for k, v in current.items()})
+        pins = {str(k): float(v) for k, v in current.items()}
+        return HalConfig(None, pins=pins, pin_where=dict.fromkeys(pins, "PIN=VALUE"))
     raise InputError(f"--current: expected PIN=VALUE,... or a configuration file, not {type(current).__name__}")
 
 

@@ -1,6 +1,8 @@
 """What a controller's kinematic description can hold, what it cannot, and what that leaves at the tool.
 
-Per style, the controller module's ``representable`` names the PIGEs its entries carry (CONVENTIONS §3):
+Per style, the controller module's ``representable`` names the PIGEs its entries carry (CONVENTIONS §3), and
+its optional ``map_motions(params)`` the error maps (``<axis>:<motion>``, CONVENTIONS §10) its tables carry;
+every other map is named as not representable:
 
 - ``linuxcnc`` (``xyzac-trt-kins`` / ``xyzbc-trt-kins``, ``src/emc/kinematics/trtfuncs.c``): the rotary
   table's C line is at ``(x-rot-point, y-rot-point)``; the tilt axis (A about X, B about Y) turns about the
@@ -80,6 +82,12 @@ def tool_point_summary(params: CompensationParameters, style: str) -> Controller
     missing += [f"{e.spec.id} ({', '.join(f'{k}={v:.3g}' for k, v in e.params.items())} urad: depends on the pose)"
                 for e in params.extensions]
     missing += list(params.ignored)
+    if params.error_maps is not None:
+        tables = set(getattr(get_controller(style), "map_motions", lambda _p: [])(params))
+        left = [f"{ax}:{name}" for ax, m in params.error_maps.axes.items() for name in m.values
+                if f"{ax}:{name}" not in tables]
+        if left:
+            missing.append(f"the error maps {', '.join(left)} (CONVENTIONS §10; the NC rewrite compensates them)")
     w = weighing_of(params)
     return ControllerScope(entered, missing, w.predicted_for({}), w.predicted_for({n: values[n] for n in entered}),
                            w.predicted_for(estimate_of(params)), w.judged_on)

@@ -5,6 +5,7 @@ The action vocabulary is documented in :mod:`pige_sym.nc.dialects`.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 
@@ -52,6 +53,47 @@ class Dialect:
         if self.comment_close:
             text = text.replace("(", "[").replace(")", "]")
         return f"{self.comment_open}{text}{self.comment_close}"
+
+
+def kinematics_switch_codes(dialect: Dialect | None, on: Iterable[str] = (),
+                            off: Iterable[str] = ()) -> dict[str, str]:
+    """Normalised code → ``rtcp:on`` / ``rtcp:off`` for the controller's own switch codes (``--rtcp-on M428``).
+
+    Codes are compared as the lexer reads them (``M0429`` and ``m429`` are ``M429``).  One code cannot
+    switch both ways (the program would leave the machine in whichever kinematics the controller gives
+    it), nor one the dialect already gives another meaning (``M2`` ends the program, ``G1`` moves);
+    ``dialect`` None: a language without a table here (HEIDENHAIN), only the first check.
+
+    Raises
+    ------
+    InputError
+        Not one G/M code or keyword, a code given for both switches, or a code that already means
+        something else in the dialect; naming the options.
+    """
+    from pige_sym.errors import InputError, LexError
+    from pige_sym.nc.lexer import tokenize
+
+    out: dict[str, str] = {}
+    given: dict[str, str] = {}
+    for codes, action, flag in ((on, "rtcp:on", "--rtcp-on"), (off, "rtcp:off", "--rtcp-off")):
+        for c in codes:
+            try:
+                toks = tokenize(c.strip(), siemens=dialect is not None and dialect.siemens)
+            except LexError:
+                toks = []
+            if len(toks) != 1 or toks[0].kind not in ("word", "name"):
+                raise InputError(f"{flag} {c!r}: give one G/M code or keyword, e.g. M428")
+            code = toks[0].code
+            if out.get(code, action) != action:
+                raise InputError(f"{given[code]} {code} and {flag} {c}: one code cannot switch the kinematics both "
+                                 "on and off; give the configuration's two codes (the shipped trt sims: --rtcp-on M428 "
+                                 "--rtcp-off M429)")
+            meaning = dialect.codes.get(code) if dialect is not None else None
+            if dialect is not None and meaning is not None and meaning != action:
+                raise InputError(f"{flag} {c}: {code} already means {meaning} in {dialect.name} programs; give the "
+                                 "configuration's own kinematics switch code")
+            out[code], given[code] = action, flag
+    return out
 
 
 def common_codes() -> dict[str, str]:

@@ -79,24 +79,15 @@ def fleet_row(runs: list[Any], now: datetime) -> FleetRow:
 
 
 def fleet(engine: Any, now: datetime) -> list[FleetRow]:
-    """Every machine of the history, sorted by id (one query)."""
-    import json
+    """Every machine of the history, sorted by id (one query, and one per machine for its last check-up's forecast);
+    every run read strictly (:func:`~pige_sym.verdict.history.decode.decode_run`)."""
+    from pige_sym.verdict.history.store import all_runs, run_by_id
 
-    import sqlalchemy as sa
-
-    from pige_sym.verdict.history import tables as T
-    from pige_sym.verdict.history.store import run_record
-
-    with engine.connect() as conn:
-        rows = conn.execute(sa.select(T.runs).order_by(T.runs.c.machine_id, T.runs.c.measured_at, T.runs.c.id)).all()
     by_machine: dict[str, list[Any]] = {}
-    last_text: dict[str, str | None] = {}
-    for row in rows:
-        by_machine.setdefault(row.machine_id, []).append(run_record(row, light=True))
-        if row.kind == "checkup":
-            last_text[row.machine_id] = row.checkup_json
-    for machine, runs in by_machine.items():  # the last check-up's forecast: its whole record
-        last = [r for r in runs if r.kind == "checkup"]
-        if last and last_text.get(machine):
-            last[-1].checkup = json.loads(str(last_text[machine]))
+    for run in all_runs(engine, light=True):
+        by_machine.setdefault(run.machine_id, []).append(run)
+    for runs in by_machine.values():  # the last check-up's forecast: its whole record
+        last = [k for k, r in enumerate(runs) if r.kind == "checkup"]
+        if last:
+            runs[last[-1]] = run_by_id(engine, runs[last[-1]].id)
     return [fleet_row(runs, now) for _, runs in sorted(by_machine.items())]

@@ -192,6 +192,7 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
         raise InputError(f"{path} is an {instrument(m)} file, the last full calibration (run {state.full.id}) an "
                          f"{state.setup.instrument} run: a check-up repeats its instrument and set-up")
     fit = identify_subset(m, free, state.held, **_rtest_noise(state.full) if instrument(m) == "rtest" else {})
+    _storable(fit, path)
     tol = _tolerances(opts, runs, kern.MACHINE_CODE, free)
     items, verdict = judge(fit, state, tol, opts, hours(measured, state.origin))
     changes = checkup_changes(fit, m, opts)
@@ -205,6 +206,18 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
                                  setup_of(m).to_dict(), verdict, result.to_dict(), result.chart())
     result.run_id = record.id
     return result
+
+
+def _storable(fit: Any, path: str | os.PathLike[str]) -> None:
+    """A fit the history would refuse to store is refused before it is judged (no limits, trend or changes made of
+    an absurd estimate); the history checks the whole row again before it stores it."""
+    from pige_sym.errors import SchemaRefusal
+    from pige_sym.verdict.history.decode import check_estimate, not_stored
+
+    try:
+        check_estimate(list(fit.parameters), fit.units, fit.values, fit.std)
+    except SchemaRefusal as exc:
+        raise not_stored(path, exc) from None
 
 
 def _rtest_noise(full: Any) -> dict[str, Any]:

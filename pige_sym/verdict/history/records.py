@@ -1,14 +1,14 @@
-"""The history's records without SQLAlchemy: database URLs, the run record, the rows a check-up writes.
+"""The history's records without SQLAlchemy: database URLs, the run record, the row a check-up writes.
 
 Everything here is plain Python and NumPy, so that ``pige checkup`` can read an SQLite history with the standard
-library's ``sqlite3`` (:mod:`~pige_sym.verdict.history.sqlite_fast`) without importing SQLAlchemy;
-:mod:`~pige_sym.verdict.history.store` re-exports these names.
+library's ``sqlite3`` (:mod:`~pige_sym.verdict.history.sqlite_fast`) without importing SQLAlchemy.  A stored row
+becomes a :class:`RunRecord` only through :func:`~pige_sym.verdict.history.decode.decode_run`, which checks every
+field first.
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -111,47 +111,11 @@ class RunRecord:
         })
 
 
-def _dumps(x: Any) -> str:
+def dumps(x: Any) -> str:
+    """The JSON text a column holds (one line, ``null`` for NaN: :func:`~pige_sym.files.to_json`)."""
     from pige_sym.files import to_json
 
     return to_json(x, indent=None)
-
-
-def _floats(text: str) -> np.ndarray:
-    return np.array([np.nan if v is None else v for v in json.loads(text)], dtype=float)
-
-
-_SHARED: dict[str, Any] = {}
-
-
-def _shared(text: str) -> Any:
-    """``json.loads`` of a text many runs repeat (their parameter names and units), parsed once."""
-    if text not in _SHARED:
-        _SHARED[text] = json.loads(text)
-    return _SHARED[text]
-
-
-def run_record(row: Any, *, light: bool = False, numbers: tuple[np.ndarray, np.ndarray] | None = None,
-               chart: Any = None) -> RunRecord:
-    """The record of a row of ``runs``; ``light`` (a check-up read as a chart point): its ``checkup`` is the small
-    ``chart_json`` (``chart``: parsed already), its covariance the diagonal of its standard errors, its set-up not
-    read; ``numbers``: its values and standard errors parsed already."""
-    params = list(_shared(row.parameters))
-    values, std = numbers if numbers is not None else (_floats(row.values_json), _floats(row.std_json))
-    as_point = light and row.kind == "checkup" and getattr(row, "chart_json", None) is not None
-    if as_point:
-        cov = np.diag(std**2)
-    else:
-        cov = np.array([[np.nan if v is None else v for v in r] for r in json.loads(row.covariance_json)], dtype=float)
-    checkup_text = row.chart_json if as_point else getattr(row, "checkup_json", None)
-    setup_text = None if as_point else getattr(row, "setup_json", None)
-    checkup = chart if as_point and chart is not None else None if checkup_text is None else json.loads(checkup_text)
-    return RunRecord(row.id, row.machine_id, row.file_name, row.file_sha256, row.measured_at, row.time_source,
-                     row.added_at, row.machine_code, row.method, params, dict(_shared(row.units)),
-                     values, std, cov.reshape(len(params), len(params)),
-                     int(row.dof), row.rms_um, list(_shared(row.effects_json)), row.verdict,
-                     None if row.check_json is None else json.loads(row.check_json), row.kind,
-                     None if setup_text is None else json.loads(setup_text), checkup)
 
 
 def measurement_time(path: Path, metadata: dict[str, str], given: str | None) -> tuple[str, str]:
@@ -181,15 +145,11 @@ def measurement_time(path: Path, metadata: dict[str, str], given: str | None) ->
     return mtime.isoformat(timespec="seconds"), "file modification time"
 
 
-def _sha256(path: Path) -> str:
+def file_sha256(path: Path) -> str:
+    """The SHA-256 of a file's bytes (hex): how the history knows a file it holds."""
     from pige_sym.files import read_input_bytes
 
     return hashlib.sha256(read_input_bytes(path)).hexdigest()
-
-
-def _float_rows(texts: list[str]) -> list[np.ndarray]:
-    """Many JSON arrays of numbers or null (NaN) parsed at once."""
-    return [np.array(row, dtype=float) for row in json.loads("[" + ",".join(texts).replace("null", "NaN") + "]")]
 
 
 def checkup_values(path: Path, machine_id: str, code: str, measured: tuple[str, str], fit: Any, setup: dict[str, Any],
@@ -199,11 +159,11 @@ def checkup_values(path: Path, machine_id: str, code: str, measured: tuple[str, 
     (:mod:`pige_sym.verdict.checkup`) and the part of it later check-ups read (``chart``)."""
     now = datetime.now(timezone.utc).isoformat(timespec="seconds")
     return {
-        "machine_id": machine_id, "file_sha256": _sha256(path), "file_name": str(path.resolve()),
+        "machine_id": machine_id, "file_sha256": file_sha256(path), "file_name": str(path.resolve()),
         "measured_at": measured[0], "time_source": measured[1], "added_at": now, "machine_code": code,
-        "method": "checkup", "parameters": _dumps(fit.parameters), "units": _dumps(fit.units),
-        "values_json": _dumps(fit.values), "std_json": _dumps(fit.std), "covariance_json": _dumps(fit.covariance),
+        "method": "checkup", "parameters": dumps(fit.parameters), "units": dumps(fit.units),
+        "values_json": dumps(fit.values), "std_json": dumps(fit.std), "covariance_json": dumps(fit.covariance),
         "dof": int(fit.dof), "rms_um": float(fit.rms_um) if math.isfinite(fit.rms_um) else None,
         "effects_json": "[]", "verdict": verdict, "check_json": None, "kind": "checkup",
-        "setup_json": _dumps(setup), "checkup_json": _dumps(checkup), "chart_json": _dumps(chart),
+        "setup_json": dumps(setup), "checkup_json": dumps(checkup), "chart_json": dumps(chart),
     }

@@ -1,23 +1,18 @@
-"""Connect to the history database, add a run, list a machine's runs.
+"""Add a run to the history, list a machine's runs, store a check-up: through SQLAlchemy (any database).
 
-Database URLs (``--db``):
-
-- default: an SQLite file ``history.sqlite`` in the user data directory (platformdirs;
-  ``$PIGE_HISTORY_DB`` overrides), embedded, nothing to start;
-- a plain path or ``sqlite:///PATH``: that SQLite file;
-- ``postgresql://user@host:port/dbname``: a PostgreSQL server (shops with many machines and
-  users; needs ``pip install 'pige_sym[postgres]'``, i.e. psycopg 3).
-
-The schema is created and migrated on connect (:mod:`~pige_sym.verdict.history.migrations`).  A file
-is identified by the SHA-256 of its bytes and is added once (a second add is refused).  The
-stored estimate is the one used for compensation: the diagnosis' final fit (PIGEs jointly with
-the accepted effects) by default, with its full covariance.
+The database is opened by :func:`~pige_sym.verdict.history.connection.connect` (checked first; read-only to read,
+migrated to write; re-exported here).  A file is identified by the SHA-256 of its bytes and is added once (a second
+add is refused).  The stored estimate is the one used for compensation: the diagnosis' final fit (PIGEs jointly
+with the accepted effects) by default, with its full covariance, and the set-up the file was measured with (what a
+check-up repeats).  Every run is checked before it is stored
+(:func:`~pige_sym.verdict.history.decode.check_new_run`: what the history would refuse to read back is never
+stored) and read strictly (:func:`~pige_sym.verdict.history.decode.decode_run`); a damaged one is refused in one
+line naming the database, the run and the column.
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
 from collections.abc import Sequence
@@ -28,60 +23,25 @@ from typing import Any
 
 import sqlalchemy as sa
 
-from pige_sym.errors import InputError
+from pige_sym.errors import InputError, SchemaRefusal
 from pige_sym.measurements.measurement import Measurement
 from pige_sym.measurements.run_setup import setup_of
 from pige_sym.verdict.history import tables as T
-from pige_sym.verdict.history.migrations import migrate
-from pige_sym.verdict.history.records import (  # noqa: F401 - re-exported: the store's names as before
+from pige_sym.verdict.history.connection import connect, raw_columns, reason, where, writable
+from pige_sym.verdict.history.decode import check_new_run, decode_run, not_stored
+from pige_sym.verdict.history.integrity import COLUMNS, check_runs, damaged, no_machine
+from pige_sym.verdict.history.records import (
     ENV_URL,
     RunRecord,
-    _dumps,
-    _float_rows,
-    _sha256,
     checkup_values,
     default_url,
+    dumps,
+    file_sha256,
     measurement_time,
-    normalise_url,
-    run_record,
 )
 
-
-def connect(url: str | None = None, *, create: bool = True) -> sa.Engine:
-    """Engine of the history database, schema migrated.
-
-    ``create=False`` (reading: ``history show``, ``report --history``) refuses an SQLite file that does not
-    exist instead of creating an empty database there.
-
-    Raises
-    ------
-    InputError
-        The database cannot be opened or reached (message with the URL, password hidden), or (``create=False``)
-        the SQLite file does not exist.
-    """
-    full = normalise_url(url)
-    if full.startswith("sqlite:///"):
-        path = Path(full.removeprefix("sqlite:///"))
-        if not create and str(path) not in ("", ":memory:") and not path.is_file():
-            raise InputError(f"no history database at {path} (pige history add creates one; --db or "
-                             f"$PIGE_HISTORY_DB name another)")
-        if str(path) not in ("", ":memory:"):
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise InputError(f"--db {path}: cannot create {path.parent} ({exc.strerror or exc})") from None
-    engine = sa.create_engine(full)
-    if engine.dialect.name == "sqlite":
-        @sa.event.listens_for(engine, "connect")
-        def _fk(dbapi_conn: Any, _record: Any) -> None:
-            dbapi_conn.execute("PRAGMA foreign_keys=ON")
-    try:
-        migrate(engine)
-    except sa.exc.SQLAlchemyError as exc:
-        shown = engine.url.render_as_string(hide_password=True)
-        raise InputError(f"history database {shown}: {str(exc.orig if hasattr(exc, 'orig') else exc).strip()}"
-                         .splitlines()[0]) from None
-    return engine
+__all__ = ["ENV_URL", "EngineHistory", "RunRecord", "add_checkup_run", "add_run", "connect", "default_url",
+           "existing_run", "list_runs", "machine_ids", "measurement_time", "run_by_id"]
 
 
 @dataclass
@@ -150,16 +110,19 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.
     InputError
         The same file or set (same SHA-256) is already stored, the machine id holds another machine
         structure, or the machine id is empty.
+    HistoryError
+        The estimate is not one pige stores (:func:`~pige_sym.verdict.history.decode.check_new_run`).
     """
     from pige_sym.kernels import load_kernels
     from pige_sym.verdict.check import check, estimates_from_result, read_tolerances
 
     if not machine_id.strip():
         raise InputError("--machine-id must not be empty")
+    engine = writable(engine)
     paths = [Path(path)] if isinstance(path, (str, os.PathLike)) else [Path(x) for x in path]
     if not paths:
         raise InputError("give at least one file")
-    shas = [_sha256(x) for x in paths]
+    shas = [file_sha256(x) for x in paths]
     sha = shas[0] if len(paths) == 1 else hashlib.sha256("\n".join(sorted(shas)).encode()).hexdigest()
     p = paths[0] if len(paths) == 1 else Path("; ".join(str(x) for x in paths))
     what = "file" if len(paths) == 1 else "set of files"
@@ -180,13 +143,14 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.
         "machine_id": machine_id, "file_sha256": sha,
         "file_name": "; ".join(str(x.resolve()) for x in paths), "measured_at": measured,
         "time_source": source, "added_at": now, "machine_code": code, "method": method,
-        "parameters": _dumps(final.parameters), "units": _dumps(final.units), "values_json": _dumps(final.values),
-        "std_json": _dumps(final.std), "covariance_json": _dumps(final.covariance), "dof": int(final.dof),
-        "rms_um": float(final.rms_um) if math.isfinite(final.rms_um) else None, "effects_json": _dumps(effects),
-        "verdict": None if chk is None else chk.verdict, "check_json": None if chk is None else _dumps(chk.to_dict()),
-        "kind": "full", "setup_json": _dumps(setup_of(m.items[0]).to_dict())
+        "parameters": dumps(final.parameters), "units": dumps(final.units), "values_json": dumps(final.values),
+        "std_json": dumps(final.std), "covariance_json": dumps(final.covariance), "dof": int(final.dof),
+        "rms_um": float(final.rms_um) if math.isfinite(final.rms_um) else None, "effects_json": dumps(effects),
+        "verdict": None if chk is None else chk.verdict, "check_json": None if chk is None else dumps(chk.to_dict()),
+        "kind": "full", "setup_json": dumps(setup_of(m.items[0]).to_dict())
         if len(m.items) == 1 and isinstance(m.items[0], Measurement) else None,
     }
+    _check_new(values, p)
     for attempt in range(3):
         try:
             row = _insert_run(engine, machine_id, code, now, values, p)
@@ -196,11 +160,19 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.
                 if _existing(conn, sha) is not None or attempt == 2:  # another user added the same file meanwhile
                     raise InputError(f"{p}: this file is already in the history: a run is added once") from None
             # else: another process created the machine at the same moment; its row is there now
-    return run_record(row)
+    return decode_run(row)
+
+
+def _check_new(values: dict[str, Any], p: Path) -> None:
+    """Refuse to store what the history would refuse to read back (a check-up's estimate too)."""
+    try:
+        check_new_run(values)
+    except SchemaRefusal as exc:
+        raise not_stored(p, exc) from None
 
 
 def _insert_run(engine: sa.Engine, machine_id: str, code: str, now: str, values: dict[str, Any], p: Path) -> Any:
-    """Insert the machine (when new) and the run in one transaction; the stored row."""
+    """Insert the machine (when new) and the run in one transaction; the stored row (as stored: no conversion)."""
     with engine.begin() as conn:
         known = conn.execute(sa.select(T.machines.c.machine_code).where(T.machines.c.machine_id == machine_id)).scalar()
         if known is None:
@@ -209,39 +181,71 @@ def _insert_run(engine: sa.Engine, machine_id: str, code: str, now: str, values:
             raise InputError(f"machine id {machine_id!r} is a {known} in the history, {p} measures a {code}: "
                              "use the right --machine-id")
         run_id = conn.execute(sa.insert(T.runs).values(**values)).inserted_primary_key[0]  # type: ignore[index]
-        return conn.execute(sa.select(T.runs).where(T.runs.c.id == run_id)).one()
+        return conn.execute(sa.select(*raw_columns(c.name for c in T.runs.columns)).select_from(T.runs)
+                            .where(T.runs.c.id == run_id)).one()
 
 
 def machine_ids(engine: sa.Engine) -> list[str]:
-    """Every machine id in the history, sorted."""
-    with engine.connect() as conn:
-        return sorted(conn.execute(sa.select(T.machines.c.machine_id)).scalars())
+    """Every machine id in the history, sorted.
+
+    Raises
+    ------
+    HistoryError
+        The database cannot be read (damaged).
+    """
+    try:
+        with engine.connect() as conn:
+            ids: list[Any] = list(conn.execute(sa.select(sa.literal_column("machines.machine_id"))
+                                               .select_from(T.machines)).scalars())
+    except sa.exc.SQLAlchemyError as exc:
+        w = where(engine)
+        raise damaged(w.shown, reason(exc), w.sqlite) from None
+    return sorted(str(x) for x in ids)
+
+
+def _rows(engine: sa.Engine, select: Any, light: bool) -> list[RunRecord]:
+    """The runs of a query, each read strictly; the database's errors as damage."""
+    w = where(engine)
+    names = [c for c in COLUMNS[w.version]["runs"] if not light or c != "checkup_json"]
+    try:
+        with engine.connect() as conn:
+            rows = conn.execute(select.with_only_columns(*raw_columns(names)).select_from(T.runs)).all()
+    except sa.exc.SQLAlchemyError as exc:
+        raise damaged(w.shown, reason(exc), w.sqlite) from None
+    return check_runs((r._mapping for r in rows), w.shown, w.sqlite, light=light)
 
 
 def list_runs(engine: sa.Engine, machine_id: str, *, light: bool = False) -> list[RunRecord]:
-    """Runs of a machine in measurement order (time, then insertion); ``light``: check-ups as chart points
-    (:func:`run_record`), what ``pige checkup`` reads of a long history.
+    """Runs of a machine in measurement order (time, then insertion), each read strictly
+    (:func:`~pige_sym.verdict.history.decode.decode_run`; ``light``: check-ups as chart points, what ``pige
+    checkup`` reads of a long history).  A file of schema version 1 is read as it is (no check-up columns).
 
     Raises
     ------
     InputError
         No such machine id (the message lists the known ones).
+    HistoryError
+        A run or the database is damaged (the message names the run and the column).
     """
-    columns = [c for c in T.runs.c if not light or c.name != "checkup_json"]
-    with engine.connect() as conn:
-        rows = conn.execute(sa.select(*columns).where(T.runs.c.machine_id == machine_id)
-                            .order_by(T.runs.c.measured_at, T.runs.c.id)).all()
-    if not rows:
-        known = machine_ids(engine)
-        raise InputError(f"no machine {machine_id!r} in the history {engine.url.render_as_string(hide_password=True)}"
-                         f"; known: {', '.join(known) or 'none (add a run with pige history add)'}")
-    if not light:
-        return [run_record(r) for r in rows]
-    values = _float_rows([r.values_json for r in rows])  # one parse for the whole history
-    std = _float_rows([r.std_json for r in rows])
-    charts = json.loads("[" + ",".join(r.chart_json or "null" for r in rows) + "]")
-    return [run_record(r, light=True, numbers=(v, e), chart=c) for r, v, e, c in zip(rows, values, std, charts,
-                                                                                       strict=True)]
+    runs = _rows(engine, sa.select(T.runs.c.id).where(T.runs.c.machine_id == machine_id)
+                 .order_by(T.runs.c.measured_at, T.runs.c.id), light)
+    if not runs:
+        raise no_machine(machine_id, where(engine).shown, machine_ids(engine))
+    return runs
+
+
+def all_runs(engine: sa.Engine, *, light: bool = True) -> list[RunRecord]:
+    """Every run of every machine, by machine id, then in measurement order (``history fleet``)."""
+    return _rows(engine, sa.select(T.runs.c.id).order_by(T.runs.c.machine_id, T.runs.c.measured_at, T.runs.c.id),
+                 light)
+
+
+def run_by_id(engine: sa.Engine, run_id: int) -> RunRecord:
+    """One run, all of it (a check-up's findings too), read strictly."""
+    found = _rows(engine, sa.select(T.runs.c.id).where(T.runs.c.id == run_id), False)
+    if not found:
+        raise InputError(f"no run {run_id} in the history {where(engine).shown}")
+    return found[0]
 
 
 def existing_run(engine: sa.Engine, path: Path) -> None:
@@ -252,7 +256,7 @@ def existing_run(engine: sa.Engine, path: Path) -> None:
     InputError
     """
     with engine.connect() as conn:
-        dup = _existing(conn, _sha256(path))
+        dup = _existing(conn, file_sha256(path))
     if dup is not None:
         raise InputError(f"{path}: this file is already in the history (run {dup.id} of machine {dup.machine_id}, "
                          f"added as {dup.file_name}): a run is added once")
@@ -260,22 +264,26 @@ def existing_run(engine: sa.Engine, path: Path) -> None:
 
 def add_checkup_run(engine: sa.Engine, path: Path, machine_id: str, code: str, measured: tuple[str, str], fit: Any,
                     setup: dict[str, Any], verdict: str, checkup: dict[str, Any], chart: dict[str, Any]) -> RunRecord:
-    """Store a check-up (``kind = checkup``): the row of :func:`~.records.checkup_values`.
+    """Store a check-up (``kind = checkup``): the row of :func:`~.records.checkup_values`, checked first; the
+    database migrated to the current schema first when it is older (writing migrates, reading never does).
 
     Raises
     ------
     InputError
         The file is already stored (also when another user stored it meanwhile).
+    HistoryError
+        The check-up's estimate is not one pige stores.
     """
     values = checkup_values(path, machine_id, code, measured, fit, setup, verdict, checkup, chart)
+    _check_new(values, path)
     try:
-        return run_record(_insert_run(engine, machine_id, code, values["added_at"], values, path))
+        return decode_run(_insert_run(writable(engine), machine_id, code, values["added_at"], values, path))
     except sa.exc.IntegrityError:
         raise InputError(f"{path}: this file is already in the history: a run is added once") from None
 
 
 class EngineHistory:
-    """What a check-up reads and writes of a history, through SQLAlchemy (any database)."""
+    """What a check-up reads and writes of a history, through SQLAlchemy (any database, any schema version)."""
 
     def __init__(self, engine: sa.Engine) -> None:
         self.engine = engine

@@ -1,0 +1,97 @@
+"""Options of a map test (``pige plan --map``, ``pige program --instrument sphere-probe --map``): the grid, the
+ranges and the setups (:mod:`pige_sym.planning.map_setups`)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from pige_sym.cli._setup import finite_option, parse_vec3
+from pige_sym.errors import InputError
+
+
+def add_map_arguments(p: argparse.ArgumentParser) -> None:
+    """The map options shared by ``plan`` and ``program``."""
+    g = p.add_argument_group("error maps of the rotary axes (CONVENTIONS §10; docs/maps.md)")
+    g.add_argument("--map", metavar="AXES", help="plan (or write) the test of these axes' error maps, e.g. C,A")
+    g.add_argument("--map-step", type=float, default=15.0, metavar="DEG", help="grid step [deg] (default %(default)s)")
+    g.add_argument("--map-per-direction", metavar="AXES",
+                   help="map these axes' positioning error per approach direction: every angle met from both sides")
+    g.add_argument("--map-range", action="append", metavar="AXIS=lo:hi",
+                   help="range of an axis that does not turn fully [deg] (default 0:90 on a table, -45:45 on a head)")
+    g.add_argument("--map-point", action="append", metavar="x,y,z",
+                   help="measured point of a setup on the workpiece side [mm]: sphere centre, R-test ball or table "
+                        "ball (repeatable, one per setup; default: the given one turned by 120 and 240 deg)")
+    g.add_argument("--map-tool", action="append", metavar="x,y,z",
+                   help="stylus (ball) centre from the last tool-side pivot of a setup [mm] (repeatable; default: "
+                        "--tool, one --map-extension longer, one --map-offset across)")
+    g.add_argument("--map-extension", type=float, default=100.0, metavar="MM",
+                   help="head axes: the proposed longer tool [mm] (default %(default)s)")
+    g.add_argument("--map-offset", type=float, default=50.0, metavar="MM",
+                   help="head axes: the proposed offset stylus across the spindle axis [mm] (default %(default)s)")
+    g.add_argument("--map-setups", type=int, metavar="N",
+                   help="use exactly N setups (default: the fewest that determine every value)")
+
+
+def axes_option(text: str | None, what: str) -> tuple[str, ...]:
+    """``C,A`` as ("C", "A"); InputError for an empty list."""
+    axes = tuple(a.strip().upper() for a in (text or "").split(",") if a.strip())
+    if text is not None and not axes:
+        raise InputError(f"{what} {text!r}: give rotary axes, e.g. C,A")
+    return axes
+
+
+def map_request(args: argparse.Namespace, kern: Any, instrument: str, *, point: Any, tool: Any = None,
+                probe: Any = None, pivots: Any = None, noise_um: float, pose_s: float,
+                contact_s: float = 0.0) -> Any:
+    """The :class:`~pige_sym.planning.map_setups.MapTestRequest` of the options."""
+    import numpy as np
+
+    from pige_sym.identification.maps import MapSpec
+    from pige_sym.planning.map_setups import MapTestRequest, map_ranges
+
+    axes = axes_option(args.map, "--map")
+    per_direction = axes_option(args.map_per_direction, "--map-per-direction")
+    bad = [a for a in axes + per_direction if a not in kern.ROTARY_AXES]
+    if bad:
+        raise InputError(f"--map {','.join(bad)}: give rotary axes of {kern.MACHINE_CODE} "
+                         f"({', '.join(kern.ROTARY_AXES)})")
+    extra = [a for a in per_direction if a not in axes]
+    if extra:
+        raise InputError(f"--map-per-direction {','.join(extra)}: map the axis too "
+                         f"(--map {','.join(axes + tuple(extra))})")
+    if args.map_setups is not None and args.map_setups < 1:
+        raise InputError(f"--map-setups {args.map_setups}: give 1 or more")
+    points = tuple(np.array(parse_vec3(x, "--map-point")) for x in args.map_point or [])
+    tools = tuple(np.array(parse_vec3(x, "--map-tool")) for x in args.map_tool or [])
+    return MapTestRequest(
+        kern.MACHINE_CODE, instrument, MapSpec(axes, finite_option(args.map_step, "--map-step", positive=True),
+                                               per_direction),
+        map_ranges(kern, args.map_range), np.asarray(point, dtype=float),
+        None if tool is None else np.asarray(tool, dtype=float), noise_um, points, tools,
+        finite_option(args.map_extension, "--map-extension", positive=True),
+        finite_option(args.map_offset, "--map-offset", positive=True), probe,
+        {a: np.asarray(v, dtype=float) for a, v in (pivots or {}).items()}, pose_s, contact_s, args.map_setups,
+        getattr(args, "target", None))
+
+
+def numbered(out: str, count: int) -> list[Path]:
+    """``map.ngc`` → ``map_1.ngc`` … ``map_<count>.ngc``: one program per setup."""
+    path = Path(out)
+    return [path.with_name(f"{path.stem}_{i}{path.suffix}") for i in range(1, count + 1)]
+
+
+def map_options_text(args: argparse.Namespace, setups: int) -> str:
+    """The map options as given, for the next command (``pige program``) to write the same setups."""
+    parts = [f"--map {args.map}", f"--map-step {args.map_step:g}", f"--map-setups {setups}"]
+    if args.map_per_direction:
+        parts.append(f"--map-per-direction {args.map_per_direction}")
+    parts += [f"--map-range {r}" for r in args.map_range or []]
+    parts += [f"--map-point {x}" for x in args.map_point or []]
+    parts += [f"--map-tool {x}" for x in args.map_tool or []]
+    if args.map_extension != 100.0:
+        parts.append(f"--map-extension {args.map_extension:g}")
+    if args.map_offset != 50.0:
+        parts.append(f"--map-offset {args.map_offset:g}")
+    return " ".join(parts)

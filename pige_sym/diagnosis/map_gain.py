@@ -1,0 +1,145 @@
+"""Does a map explain what the PIGE model misses? The held-out gain of the error maps (CONVENTIONS §10).
+
+``pige diagnose FILES --map C,A``: the files' rows are fitted twice, with the PIGEs (and zero-position errors,
+and each file's constants) alone, and with the maps too (the model of :mod:`pige_sym.identification.maps`:
+same columns, same §10 projection, same weights).  Both are cross-validated by pose: the poses of every file
+are dealt into ``FOLDS`` folds; each fold's rows are predicted from a fit of the others (least squares, the
+minimum-norm solution where a combination is not determined, as a user of the fit would get).  The held-out
+RMS of the two, in units of each file's noise σ, and the gain ``1 − map/PIGEs`` say whether the map explains
+the residual.  A probe file's rows are its whitened rows (they share the reference pose's error, so a pose's
+rows are not independent of the others': the folds are by pose all the same).
+
+**What the one-harmonic candidates explain.** The diagnosis' catalogue holds one harmonic h of an error
+motion at a time (``angular_error`` = φ, ``wobble`` = ρ, ``radial_runout`` = radial τ).  For each motion of the
+fitted map, the share of its sum of squares that the best single harmonic 2–4 holds (least squares of cos hθ,
+sin hθ over the determined grid angles, where at least three values remain beside the left-out functions) is
+reported with the candidate that carries that harmonic, when the map explains the residual: where the share
+is near 1 the diagnosis' effect already describes the map, where it is small only the map does.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pige_sym.identification.joint import Block, whitened_system
+from pige_sym.identification.maps import MapResult, MapSpec, design_maps, identify_maps, map_blocks, n_location
+from pige_sym.measurements.ballbar import BallbarRun
+from pige_sym.measurements.measurement import Measurement
+
+#: Folds of the cross-validation by pose.
+FOLDS = 5
+#: The catalogue effect that holds one harmonic of each kind of motion.
+CANDIDATE = {"positioning": "angular_error", "tilt": "wobble", "radial": "radial_runout"}
+
+
+@dataclass
+class HarmonicShare:
+    """How much of one motion's map a single harmonic holds."""
+
+    motion: str
+    harmonic: int
+    share: float
+    candidate: str | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"motion": self.motion, "harmonic": self.harmonic, "share": self.share, "candidate": self.candidate}
+
+
+@dataclass
+class MapGain:
+    """Held-out RMS [σ] of the PIGE model and of the PIGE + map model, and what single harmonics explain."""
+
+    heldout_pige: float
+    heldout_map: float
+    folds: int
+    harmonics: list[HarmonicShare] = field(default_factory=list)
+
+    @property
+    def gain(self) -> float:
+        return 1.0 - self.heldout_map / self.heldout_pige if self.heldout_pige > 0 else 0.0
+
+    def explains(self) -> bool:
+        """The map explains the residual: it lowers the held-out RMS by ≥ 10 % and to ≤ 1.5 σ."""
+        return self.gain >= 0.10 and self.heldout_map <= 1.5
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"heldout_rms_pige_sigma": self.heldout_pige, "heldout_rms_map_sigma": self.heldout_map,
+                "gain": self.gain, "folds": self.folds, "map_explains_the_residual": self.explains(),
+                "harmonics": [h.to_dict() for h in self.harmonics]}
+
+    def sentences(self) -> list[str]:
+        verdict = ("the error maps explain what the PIGE model misses" if self.explains() else
+                   "the error maps do not explain the residual" if self.gain < 0.10 else
+                   "the error maps explain part of the residual")
+        change = f"{abs(self.gain):.0%} {'less' if self.gain >= 0 else 'more'}"
+        out = [f"maps (held-out by pose, {self.folds} folds): {verdict}: held-out RMS {self.heldout_pige:.2f} σ with "
+               f"the PIGEs alone, {self.heldout_map:.2f} σ with the maps ({change})"]
+        if self.explains():
+            for h in self.harmonics:
+                said = (f": the diagnosis' one-harmonic candidate {h.candidate} (harmonic={h.harmonic}) describes that "
+                        "part" if h.candidate else ": no one-harmonic candidate of the diagnosis describes it")
+                out.append(f"  {h.motion}: its strongest single harmonic, {h.harmonic}, holds {h.share:.0%} of the "
+                           f"map{said}")
+        return out
+
+
+def map_gain(items: Sequence[tuple[str, Measurement | BallbarRun]], spec: MapSpec,
+             result: MapResult | None = None) -> MapGain:
+    """The held-out gain of the maps and the single harmonics' shares (module docstring)."""
+    fitted = result if result is not None else identify_maps(items, spec)
+    machine, names, layout, raw = map_blocks(items, spec)
+    sigmas = [f.sigma_um for f in fitted.joint.files]
+    fitted_zero = [j for j in range(len(names)) if j < n_location(machine) or np.isfinite(fitted.result.values[j])]
+    blocks = design_maps(names, layout, raw, sigmas, fitted_zero).blocks
+    a, y = whitened_system(blocks, sigmas)
+    pose = np.concatenate([_pose_of_rows(b, k) for k, b in enumerate(blocks)])
+    folds = np.full(pose.size, -1)
+    for f, group in enumerate(np.array_split(np.unique(pose), FOLDS)):
+        folds[np.isin(pose, group)] = f
+    n_shared = blocks[0].design.shape[1]
+    pige_cols = list(range(len(fitted_zero))) + list(range(n_shared, a.shape[1]))
+    held = {"pige": _heldout(a[:, pige_cols], y, folds), "map": _heldout(a, y, folds)}
+    return MapGain(held["pige"], held["map"], FOLDS, _harmonics(fitted))
+
+
+def _pose_of_rows(block: Block, file_index: int) -> np.ndarray:
+    """A pose key per row of a block: (file, pose) packed in one integer (3 rows per pose, 1 for a ballbar)."""
+    per = 1 if block.instrument == "ballbar" else 3
+    return file_index * 1_000_000 + np.arange(block.data.size) // per
+
+
+def _heldout(a: np.ndarray, y: np.ndarray, folds: np.ndarray) -> float:
+    """RMS of the rows of each fold predicted from a least-squares fit of the other folds."""
+    resid = np.empty_like(y)
+    for f in np.unique(folds):
+        test = folds == f
+        coef = np.linalg.lstsq(a[~test], y[~test], rcond=None)[0]
+        resid[test] = y[test] - a[test] @ coef
+    return float(np.sqrt(np.mean(resid**2)))
+
+
+def _harmonics(result: MapResult) -> list[HarmonicShare]:
+    out = []
+    for ax, m in result.maps.items():
+        for motion in m.motions:
+            v = m.value[motion.name]
+            ok = np.isfinite(v)
+            total = float(np.sum(v[ok] ** 2))
+            if motion.kind == "reversal" or ok.sum() - motion.left_out < 3 or total <= 0:
+                continue  # fewer than 3 values beside the left-out functions: a harmonic's share says nothing
+            t = np.radians(m.grid.angles_deg[ok])
+            best = max(((h, _share(v[ok], t, h, total)) for h in (2, 3, 4)), key=lambda x: x[1])
+            kind = CANDIDATE.get(motion.kind)
+            out.append(HarmonicShare(motion.name, best[0], best[1], f"{kind}_{ax}" if kind else None))
+    return out
+
+
+def _share(v: np.ndarray, t: np.ndarray, h: int, total: float) -> float:
+    basis = np.column_stack([np.cos(h * t), np.sin(h * t)])
+    fit = basis @ np.linalg.lstsq(basis, v, rcond=None)[0]
+    return min(1.0, float(np.sum(fit**2)) / total) if math.isfinite(total) else 0.0

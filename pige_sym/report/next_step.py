@@ -1,0 +1,182 @@
+"""What to do next: the report's "next step", in every verdict state, computed from the result.
+
+- no tolerances: judge the estimate (``pige check``);
+- PASS: nothing to correct; keep the run in the machine's history to see drift;
+- FAIL: correct the machine with the estimate the report used (``pige diagnose --json`` then ``pige compensate``),
+  measure again, compare;
+- UNDECIDED: which items are undecided and why, and what would decide them.  An item is undecided when
+  ``|v| − k·u ≤ L < |v| + k·u``; it is decided by a standard uncertainty ``u ≤ u_req = | L − |v| | / k``.  The
+  same test repeated with ``n`` poses scales ``u`` by ``√(n_now / n)`` (the normal matrix grows with the poses),
+  so ``n = ⌈n_now · (u / u_req)²⌉`` poses of this test decide it; an orientation error (µrad) is also decided by a
+  longer lever arm (a larger tilt range, a ball farther from the axis, a longer tool on a head), which ``pige
+  plan`` searches.  The ``pige plan`` command is written out with the file's machine, ball or sphere, tool, noise
+  and that number of poses (a probe plan: its time budget, 20 s per pose and 8 s per contact, ``pige plan``'s
+  defaults).  An item without a value (not identifiable) needs a test that determines it.
+- a diagnosis that failed: look at the file (its identification stands alone).
+
+The history and the measured before/after pages get their own (:func:`history_next`, :func:`compare_next`).
+"""
+
+from __future__ import annotations
+
+import math
+import shlex
+from dataclasses import dataclass, field
+from typing import Any
+
+from pige_sym.report.data import MeasurementReport, ReportData
+from pige_sym.report.html_blocks import esc
+from pige_sym.verdict.check import CheckItem
+
+#: pige plan's probe schedule (its --pose-time and --contact-time defaults) [s].
+PROBE_POSE_S, PROBE_CONTACT_S = 20.0, 8.0
+
+
+@dataclass
+class NextStep:
+    """What to do next: one sentence, the reasons per item, the commands in order."""
+
+    what: str
+    commands: list[str] = field(default_factory=list)
+    reasons: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"what": self.what, "reasons": self.reasons, "commands": self.commands}
+
+
+def next_html(step: NextStep) -> str:
+    """The step as HTML: the sentence, the reasons as a list, each command on its own line."""
+    reasons = ("<ul>" + "".join(f"<li>{esc(r)}</li>" for r in step.reasons) + "</ul>") if step.reasons else ""
+    commands = "".join(f'<br><code class="cmd">{esc(c)}</code>' for c in step.commands)
+    return f'<span data-next-step="1">{esc(step.what)}</span>{reasons}{commands}'
+
+
+def shell_word(text: str) -> str:
+    """``text`` as one shell word a user can read: a machine code in double quotes (``"wC'A'bXYZ(C1)t"``, as the
+    docs write it) when that is safe, else :func:`shlex.quote`."""
+    if shlex.quote(text) == text or any(c in text for c in '"$`\\!'):
+        return shlex.quote(text)
+    return f'"{text}"'
+
+
+def _vec(values: Any) -> str:
+    return ",".join(f"{float(x):g}" for x in values)
+
+
+def _decide(item: CheckItem, k: float, poses: int, instrument: str) -> tuple[str, int | None]:
+    """Why one item is undecided and how many poses of this test would decide it (None: no number of poses)."""
+    if item.value is None or item.std is None:
+        return (f"{item.name} has no value: this test cannot determine it (pige plan names one that does)", None)
+    need = abs(item.limit - abs(item.value)) / k
+    if need <= 0:
+        return (f"{item.name} = {item.value:.3g} {item.unit} lies on its limit {item.limit:g}: no measurement "
+                "decides it; correct the machine first", None)
+    n = math.ceil(poses * (item.std / need) ** 2)
+    lever = ("; or a longer lever arm: a larger tilt range, a " + ("sphere" if instrument == "sphere-probe" else
+                                                                   "ball") + " farther from the axis, a longer tool"
+             if item.unit == "urad" else "")
+    return (f"{item.name} = {item.value:.3g} ± {item.std:.2g} {item.unit} against its limit {item.limit:g}: "
+            f"|v| ± {k:g}u straddles it; deciding needs u ≤ {need:.2g} {item.unit} ({item.std / need:.2g}× "
+            f"smaller): {n} poses of this test instead of {poses} (u falls as 1/√poses){lever}", n)
+
+
+def _plan_command(rep: MeasurementReport, poses: int) -> str:
+    """``pige plan`` for this file's machine, set-up and noise, with ``poses`` poses (a probe: their budget)."""
+    m = rep.measurement
+    tool = f" --tool {_vec(m.tool_mm)}" if m.tool_mm is not None else ""
+    if m.metadata.get("instrument") == "sphere-probe":
+        contacts = m.optional.get("n_samples")
+        per_pose = PROBE_POSE_S + PROBE_CONTACT_S * (float(contacts.mean()) if contacts is not None else 5.0)
+        return (f"pige plan --instrument sphere-probe --machine {shell_word(rep.machine)} --sphere "
+                f"{_vec(m.ball_mm)} --sphere-radius {m.metadata.get('sphere_radius_mm', 'R')} --stylus-radius "
+                f"{m.metadata.get('stylus_radius_mm', 'r')} --noise "
+                f"{float(m.metadata.get('contact_sigma_um', 0.5)):.2g}{tool} --budget {math.ceil(poses * per_pose)}")
+    pivots = "".join(f" --pivot {a}={_vec(v)}" for a, v in m.pivots_mm.items() if any(float(x) for x in v))
+    return (f"pige plan --machine {shell_word(rep.machine)} --points {poses} --noise {rep.primary.sigma_um:.2g} "
+            f"--ball {_vec(m.ball_mm)}{tool}{pivots} --out plan.csv   # and --limits AXIS=lo:hi: your machine's "
+            "travel")
+
+
+def _correct(rep: MeasurementReport, data: ReportData) -> list[str]:
+    """Commands that correct the machine with the estimate the report used, then measure again."""
+    q = shlex.quote(str(rep.path))
+    if rep.primary_method == "diagnosis":
+        fit, params = f"pige diagnose {q} --json > diagnosis.json", "diagnosis.json"
+    else:
+        fit, params = f"pige identify {q} --method {rep.primary_method} --json > identify.json", "identify.json"
+    program = data.program
+    if program is None:
+        compensate = f"pige compensate PROGRAM --params {params} --out PROGRAM_comp"
+    else:
+        out = program.with_name(f"{program.stem}_comp{program.suffix}")
+        compensate = f"pige compensate {shlex.quote(str(program))} --params {params} --out {shlex.quote(str(out))}"
+    return [fit, compensate, f"pige compare {q} AFTER.csv   # the same test measured after the correction"]
+
+
+def measurement_next(rep: MeasurementReport, data: ReportData) -> NextStep:
+    """The next step of one R-test or probe file (module docstring)."""
+    q = shlex.quote(str(rep.path))
+    if rep.diagnosis is None:
+        return NextStep("The diagnosis failed on these data: look at the file (its Measured deviations) before "
+                        "using the PIGE-only fit; a file the PIGE model explains gives a diagnosis.",
+                        [f"pige identify {q}"])
+    chk = rep.check
+    if chk is None:
+        return NextStep("Judge the estimate against your tolerances, then correct the machine if it is out.",
+                        [f"pige check {q} --tolerances TOL.json", *_correct(rep, data)[:2]])
+    if chk.verdict == "pass":
+        return NextStep("In tolerance: nothing to correct. Keep the run in the machine's history, to see a change "
+                        "in the next one.", [f"pige history add {q} --machine-id MACHINE --tolerances "
+                                             f"{shlex.quote(chk.tolerances)}"])
+    poses = rep.measurement.n_rows - 1
+    decided = [_decide(i, chk.k, poses, str(rep.measurement.metadata.get("instrument", "rtest")))
+               for i in chk.items if i.status == "undecided"]
+    reasons = [r for r, _ in decided]
+    if chk.verdict == "fail":
+        bad = ", ".join(i.name for i in chk.items if i.status == "fail")
+        program = (f" (the test program corrected with it is already written: {rep.compensated_program})"
+                   if rep.compensated_program is not None else "")
+        also = f" Undecided as well: {', '.join(r.split(' ')[0] for r in reasons)} (why below)." if reasons else ""
+        return NextStep(f"Out of tolerance ({bad}): correct the machine with the estimate this report used"
+                        f"{program}, then measure the same test again and compare.{also}", _correct(rep, data),
+                        reasons)
+    counts = [n for _, n in decided if n is not None]
+    plan = _plan_command(rep, max(counts)) if counts else _plan_command(rep, poses)
+    names = [i.name for i in chk.items if i.status == "undecided"]
+    return NextStep(f"Undecided: {', '.join(names)} cannot be called in or out of tolerance with this uncertainty. "
+                    f"A test that decides {'it' if len(names) == 1 else 'them'}:", [plan], reasons)
+
+
+def history_next(data: ReportData) -> NextStep:
+    """The next step of a machine's history: act on a change or on the last verdict, else measure as planned."""
+    h = data.history
+    assert h is not None
+    changed = [c.parameter for comp in h.comparisons[-1:] for c in comp.changes if c.significant]
+    verdict = h.check.verdict if h.check is not None else (h.runs[-1].verdict or "none")
+    last = shlex.quote(h.runs[-1].file_name)
+    if verdict == "fail":
+        return NextStep("The last run is out of tolerance: correct the machine from it, then add the run after the "
+                        "correction.", [f"pige diagnose {last} --json > diagnosis.json",
+                                        "pige compensate PROGRAM --params diagnosis.json --out PROGRAM_comp",
+                                        f"pige history add AFTER.csv --machine-id {shlex.quote(h.machine_id)}"])
+    add = f"pige history add NEXT.csv --machine-id {shlex.quote(h.machine_id)}"
+    if changed:
+        return NextStep(f"{', '.join(changed)} changed in the last run: measure again to confirm before acting (a "
+                        "real change repeats).", [add])
+    if verdict == "none":
+        return NextStep("Nothing changed significantly; judge the last run against your tolerances.",
+                        [f"pige report --history {shlex.quote(h.machine_id)} --tolerances TOL.json --out REPORT"])
+    state = " and the last run is in tolerance" if verdict == "pass" else f"; the last run is {verdict}"
+    return NextStep(f"Nothing changed significantly{state}: measure again as planned.", [add])
+
+
+def compare_next(data: ReportData) -> NextStep:
+    """The next step of a measured before/after."""
+    c = data.comparison
+    assert c is not None
+    after = shlex.quote(c.after)
+    if c.improvement > 0:
+        return NextStep(f"The correction removed {c.improvement:.0%} of the RMS deviation: judge what is left.",
+                        [f"pige check {after} --tolerances TOL.json"])
+    return NextStep("The deviation did not shrink: find out why before correcting again (what is left, by cause).",
+                    [f"pige diagnose {after}"])
