@@ -10,6 +10,7 @@ faster one; the migrations themselves for the columns each schema version has.
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable
 from typing import Any
 from unittest import mock
@@ -58,8 +59,9 @@ def outcome(rows: list[dict[str, Any]], light: bool) -> Any:
 
 def element_by_element(fn: Callable[[], Any]) -> Any:
     """``fn()`` with every fast path of the reader switched off."""
-    with mock.patch.object(decode, "_plain", lambda *a: None), \
-            mock.patch.object(decode, "_plain_numbers", lambda rows: [None] * len(rows)):
+    with mock.patch.object(decode, "plain_array", lambda *a: None), \
+            mock.patch.object(decode, "plain_numbers", lambda rows, sizes: [None] * len(rows)), \
+            mock.patch.object(decode, "plain_charts", lambda rows: [None] * len(rows)):
         return fn()
 
 
@@ -106,13 +108,49 @@ def number_text(draw: st.DrawFn, depth: int) -> str:
     return text
 
 
+_CHART_DAMAGES = [('"EX0C": false}', '"EX0C": false, "EX0C": true}'), ('"EX0C": false}', '"EY0C": false}'),
+                  (', "tolerance"', ', "extra": 1, "tolerance"'), ('"signature": "EX0C|0.0,0.0", ', ""),
+                  ('"EX0C|0.0,0.0"', '"EX0C|\\u0030"'), ('"EX0C|0.0,0.0"', "1"), (": ", ":"), (", ", ","),
+                  ("null", "{}"), ("}", "}}"), ("{", "[{"), ("true", "1"), ("false", '"false"'),
+                  ('"to_enter": {', '"to_enter": {"EX0C": 0, '), ('"tolerance": {', '"tolerance": {"EX0C": 0, ')]
+_NUMBER_IN_TEXT = re.compile(r"(?<=: )-?[0-9][0-9.eE+-]*")
+
+
+@st.composite
+def chart_text(draw: st.DrawFn) -> str:
+    """A check-up's chart as pige writes it (names, order, numbers drawn), with at most two damages."""
+    names = draw(st.lists(st.sampled_from(["EX0C", "EY0C", "EA0C", "angular_error_C.cos_urad"]), min_size=1,
+                          max_size=3, unique=True))
+    number = st.floats(-20, 20)
+    chart = {"signature": draw(st.sampled_from(["EX0C|0.0,0.0", "", "-1.5;ü"])),
+             "after_correction": draw(st.booleans()),
+             **{k: {n: draw(st.booleans()) for n in names} for k in ("in_control", "outside", "flagged")},
+             "to_enter": draw(st.one_of(st.none(), st.fixed_dictionaries({n: st.one_of(st.none(), number)
+                                                                         for n in names}))),
+             "tolerance": {n: draw(st.one_of(number, st.integers(-5, 5))) for n in names}}
+    if draw(st.booleans()):
+        chart = dict(reversed(list(chart.items())))  # sound, not in pige's order: the element-by-element reader
+    text = json.dumps(chart if draw(st.integers(0, 3)) else CHART)
+    for _ in range(draw(st.integers(0, 2))):
+        numbers = list(_NUMBER_IN_TEXT.finditer(text))
+        if numbers and draw(st.booleans()):  # a number of to_enter or tolerance
+            at = draw(st.sampled_from(numbers))
+            text = text[:at.start()] + draw(_SPECIAL) + text[at.end():]
+        else:
+            old, new = draw(st.sampled_from(_CHART_DAMAGES))
+            text = text.replace(old, new, 1)
+    return text
+
+
 @st.composite
 def damaged_rows(draw: st.DrawFn) -> list[dict[str, Any]]:
     rows = []
     for i in range(draw(st.integers(1, 4))):
         changed: dict[str, Any] = {}
+        if draw(st.booleans()):
+            changed |= {"kind": "checkup", "chart_json": draw(chart_text())}
         for column, depth in (("values_json", 1), ("std_json", 1), ("covariance_json", 2)):
-            if draw(st.booleans()):
+            if draw(st.integers(0, 3 if changed else 1)) == 0:  # a row with a chart: its numbers mostly sound
                 changed[column] = draw(number_text(depth))
         rows.append(row(i + 1, **changed))
     if len(rows) > 1 and draw(st.booleans()):  # two texts that are one list only when joined
@@ -142,13 +180,23 @@ def test_the_fast_reader_accepts_and_refuses_what_the_element_by_element_reader_
 
 def test_the_fast_reader_is_used_and_can_be_told_apart() -> None:
     """The oracle differs from the fast reader where it must: it reads a sound history element by element."""
-    rows = [row(i) for i in range(1, 6)]
+    rows = [row(i) for i in range(1, 4)] + [row(i, kind="checkup", chart_json=json.dumps(CHART)) for i in (4, 5)]
     alone = AssertionError("a column read alone")
     with mock.patch.object(decode, "_vector", side_effect=alone), \
-            mock.patch.object(decode, "_matrix", side_effect=alone):
-        assert len(decode_runs(rows, _refused)) == 5  # the whole history's numbers read together
+            mock.patch.object(decode, "_matrix", side_effect=alone), \
+            mock.patch.object(decode, "_chart", side_effect=alone):
+        assert len(decode_runs(rows, _refused)) == 5  # the whole history's numbers and charts read together
         with pytest.raises(AssertionError, match="read alone"):
             element_by_element(lambda: decode_runs(rows, _refused))
+
+
+def test_the_plain_chart_is_the_one_pige_writes() -> None:
+    """The chart's grammar (plain_rows) names the items the strict reader checks, in the order pige writes them."""
+    from pige_sym.verdict.history.plain_rows import CHART_KEYS, PLAIN_CHART
+    from pige_sym.verdict.history.records import dumps
+
+    assert CHART_KEYS == tuple(decode.CHART_ITEMS)
+    assert PLAIN_CHART.fullmatch(dumps(CHART)) and PLAIN_CHART.fullmatch(dumps(CHART | {"to_enter": None}))
 
 
 @pytest.mark.parametrize("column, text, said", [
@@ -194,6 +242,10 @@ def test_an_estimate_beyond_the_bound_by_less_than_3_std_is_kept() -> None:
      "chart_json: to_enter: expected numbers or null"),
     ({"kind": "checkup", "chart_json": json.dumps(CHART | {"signature": None})}, "chart_json: signature: expected"),
     ({"kind": "checkup", "chart_json": json.dumps(CHART).replace("1.5", "NaN")}, "NaN is not allowed"),
+    ({"kind": "checkup", "chart_json": json.dumps(CHART).replace("1.5", "1e999")},
+     "chart_json: to_enter: expected numbers or null"),
+    ({"kind": "checkup", "chart_json": json.dumps(CHART).replace('"EX0C": true', '"EX0C": true, "EX0C": false')},
+     "chart_json: not valid JSON (duplicate key 'EX0C'"),
     ({"setup_json": "[1]"}, "setup_json: expected an object or null, got a list"),
 ])
 def test_the_check_up_columns_are_read_strictly(changed: dict[str, Any], said: str) -> None:

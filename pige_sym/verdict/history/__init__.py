@@ -9,7 +9,8 @@
 - :mod:`~pige_sym.verdict.history.store` add a run, list a machine's runs, store a check-up (SQLAlchemy);
 - :mod:`~pige_sym.verdict.history.records` the run record, the database URLs and a check-up's row, without
   SQLAlchemy; :mod:`~pige_sym.verdict.history.decode` a stored run read strictly (every column checked), and the
-  same checks before a run is added;
+  same checks before a run is added; :mod:`~pige_sym.verdict.history.plain_rows` the plain text pige writes, read
+  for a whole history at once (what the strict reader accepts, faster);
 - :mod:`~pige_sym.verdict.history.sqlite_fast` what ``pige checkup`` reads and writes of an SQLite history with the
   standard library's ``sqlite3``, with the same checks (SQLAlchemy's import alone is most of the check-up's time
   budget);

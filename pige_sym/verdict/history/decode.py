@@ -27,18 +27,17 @@ diagonal of its standard errors as covariance (its covariance is still checked),
 ``checkup_json`` are not read — those two are checked where a command reads them (``history show``, the report,
 the fleet's last check-up).
 
-Speed: the number columns of a row are first matched against the plain grammar pige writes (numbers and ``null``
-in brackets, a regular expression) and parsed by ``json`` in C; only a row that does not match, or whose numbers
-break a rule, is read again by the element-by-element reader, which accepts or refuses it and says why.  The fast
-reader accepts nothing the element-by-element one refuses (``tests/test_history_decode.py`` checks it on damaged
-rows), so 1,000 runs are checked in a few hundredths of a second.
+Speed: a whole history is read at once first (:mod:`~pige_sym.verdict.history.plain_rows`): the number columns
+and a check-up's chart are matched against the plain grammar pige writes (regular expressions) and parsed by
+``json`` in C, all rows' texts together; only a row that does not match, or whose values break a rule, is read
+again by the element-by-element reader here, which accepts or refuses it and says why.  The fast reader accepts
+nothing the element-by-element one refuses and gives the same values (``tests/test_history_decode.py`` checks it
+on damaged rows and charts), so 1,000 runs are checked in a few hundredths of a second.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import re
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
@@ -48,6 +47,7 @@ from pige_sym.constants import MAX_PIGE
 from pige_sym.errors import HistoryError, SchemaRefusal
 from pige_sym.measurements.measurement import unphysical
 from pige_sym.measurements.strict_json import strict_loads
+from pige_sym.verdict.history.plain_rows import PLAIN_MATRIX, PLAIN_VECTOR, plain_array, plain_charts, plain_numbers
 from pige_sym.verdict.history.records import RunRecord
 
 TEXT_COLUMNS = ("machine_id", "file_name", "file_sha256", "measured_at", "time_source", "added_at", "machine_code",
@@ -56,12 +56,6 @@ KINDS = ("full", "checkup")
 #: The items of a check-up's chart (``chart_json``) and what each holds.
 CHART_ITEMS = {"signature": "text", "after_correction": "boolean", "in_control": "flags", "outside": "flags",
                "flagged": "flags", "to_enter": "numbers or null", "tolerance": "numbers"}
-
-_WS = r"[ \t\n\r]*"
-_ITEM = r"(?:-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?:[eE][-+]?[0-9]+)?|null)"
-_LIST = rf"\[{_WS}(?:{_ITEM}(?:{_WS},{_WS}{_ITEM})*)?{_WS}\]"
-_PLAIN_VECTOR = re.compile(_LIST)
-_PLAIN_MATRIX = re.compile(rf"\[{_WS}(?:{_LIST}(?:{_WS},{_WS}{_LIST})*)?{_WS}\]")
 
 
 def _kind(x: Any) -> str:
@@ -97,20 +91,8 @@ def _number(x: Any, column: str, where: str, *, non_negative: bool = False) -> f
     return float(x)
 
 
-def _plain(text: Any, grammar: re.Pattern[str], shape: tuple[int, ...]) -> np.ndarray | None:
-    """The numbers of a column in pige's plain grammar, all finite or null, of ``shape``; None: read it element by
-    element (module docstring)."""
-    if type(text) is not str or grammar.fullmatch(text) is None:
-        return None
-    try:
-        out = np.array(json.loads(text), dtype=float)
-    except (ValueError, OverflowError):  # ragged rows; an integer beyond the float range
-        return None
-    return out if out.shape == shape and not np.isinf(out).any() else None
-
-
 def _vector(row: Mapping[str, Any], column: str, names: list[str], *, non_negative: bool = False) -> np.ndarray:
-    fast = _plain(row[column], _PLAIN_VECTOR, (len(names),))
+    fast = plain_array(row[column], PLAIN_VECTOR, (len(names),))
     if fast is not None and not (non_negative and (fast < 0).any()):
         return fast
     data = _json(row, column)
@@ -122,7 +104,7 @@ def _vector(row: Mapping[str, Any], column: str, names: list[str], *, non_negati
 
 def _matrix(row: Mapping[str, Any], column: str, names: list[str]) -> np.ndarray:
     p = len(names)
-    fast = _plain(row[column], _PLAIN_MATRIX, (p, p))
+    fast = plain_array(row[column], PLAIN_MATRIX, (p, p))
     if fast is not None and not (np.diagonal(fast) < 0).any():
         return fast
     data = _json(row, column)
@@ -215,7 +197,7 @@ def decode_run(row: Any, *, light: bool = False) -> RunRecord:
     SchemaRefusal
         Naming the column and what is wrong with it (module docstring).
     """
-    return _decode(row._mapping if hasattr(row, "_mapping") else row, light, None)
+    return _decode(row._mapping if hasattr(row, "_mapping") else row, light, None, None)
 
 
 def decode_runs(rows: Iterable[Mapping[Any, Any]], refused: Callable[[Mapping[Any, Any], SchemaRefusal], Exception],
@@ -223,18 +205,25 @@ def decode_runs(rows: Iterable[Mapping[Any, Any]], refused: Callable[[Mapping[An
     """Many rows decoded as :func:`decode_run` decodes each, their numbers read together (module docstring); the
     first row it refuses, in the given order, raises ``refused(row, refusal)``."""
     rows = list(rows)
-    out = []
-    for row, numbers in zip(rows, _plain_numbers(rows), strict=True):
+    sizes: list[int | None] = []
+    for row in rows:
         try:
-            out.append(_decode(row, light, numbers))
+            sizes.append(len(_names(row)[0]))
+        except (SchemaRefusal, KeyError):  # refused below, in its turn
+            sizes.append(None)
+    out = []
+    for row, numbers, chart in zip(rows, plain_numbers(rows, sizes), plain_charts(rows), strict=True):
+        try:
+            out.append(_decode(row, light, numbers, chart))
         except SchemaRefusal as exc:
             raise refused(row, exc) from None
     return out
 
 
-def _decode(get: Mapping[str, Any], light: bool, numbers: tuple[np.ndarray, np.ndarray, np.ndarray] | None
-            ) -> RunRecord:
-    """:func:`decode_run`; ``numbers``: the values, standard errors and covariance already checked."""
+def _decode(get: Mapping[str, Any], light: bool, numbers: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+            plain_chart: dict[str, Any] | None = None) -> RunRecord:
+    """:func:`decode_run`; ``numbers``: the values, standard errors and covariance already checked; ``plain_chart``:
+    the chart already checked."""
     for column in TEXT_COLUMNS:
         if not isinstance(get[column], str):
             raise SchemaRefusal(column, f"expected text, got {_kind(get[column])}")
@@ -261,7 +250,7 @@ def _decode(get: Mapping[str, Any], light: bool, numbers: tuple[np.ndarray, np.n
     if numbers is None:
         check_estimate(params, units, values, std)
     kind = _kind_of(get)
-    chart = _chart(get) if kind == "checkup" else None
+    chart = None if kind != "checkup" else plain_chart if plain_chart is not None else _chart(get)
     setup: dict[str, Any] | None = None
     checkup: dict[str, Any] | None
     if light and chart is not None:
@@ -271,62 +260,6 @@ def _decode(get: Mapping[str, Any], light: bool, numbers: tuple[np.ndarray, np.n
     return RunRecord(int(get["id"]), get["machine_id"], get["file_name"], get["file_sha256"], get["measured_at"],
                      get["time_source"], get["added_at"], get["machine_code"], get["method"], params, units, values,
                      std, cov, dof, rms_um, effects, get["verdict"], check, kind, setup, checkup)
-
-
-def _plain_texts(rows: list[Mapping[Any, Any]]) -> tuple[list[int], list[int]]:
-    """(rows whose names are sound and whose three number columns are in the plain grammar, their sizes P)."""
-    picked, sizes = [], []
-    for k, row in enumerate(rows):
-        try:
-            p = len(_names(row)[0])
-        except (SchemaRefusal, KeyError):
-            continue
-        v, s, c = row["values_json"], row["std_json"], row["covariance_json"]
-        if type(v) is str and type(s) is str and type(c) is str and _PLAIN_VECTOR.fullmatch(v) \
-                and _PLAIN_VECTOR.fullmatch(s) and _PLAIN_MATRIX.fullmatch(c):
-            picked.append(k)
-            sizes.append(p)
-    return picked, sizes
-
-
-def _plain_numbers(rows: list[Mapping[Any, Any]]) -> list[tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
-    """Per row its (values, std, covariance) when they break no rule, else None (the row is read element by
-    element).  Each text is one whole list in the plain grammar, so the texts joined in one list parse to exactly
-    their own values: one ``json`` parse and a few array operations for the whole history."""
-    out: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = [None] * len(rows)
-    picked, sizes = _plain_texts(rows)
-    try:
-        lists = [json.loads("[" + ",".join(rows[k][c] for k in picked) + "]")
-                 for c in ("values_json", "std_json", "covariance_json")]
-    except ValueError:  # pragma: no cover - the grammar admits only what json reads
-        return out
-    keep = [i for i, p in enumerate(sizes) if len(lists[0][i]) == p and len(lists[1][i]) == p
-            and len(lists[2][i]) == p and all(len(r) == p for r in lists[2][i])]
-    if not keep:
-        return out
-    try:
-        v = np.array([x for i in keep for x in lists[0][i]], dtype=float)
-        s = np.array([x for i in keep for x in lists[1][i]], dtype=float)
-        c = np.array([x for i in keep for r in lists[2][i] for x in r], dtype=float)
-    except OverflowError:  # an integer beyond the float range: element by element
-        return out
-    p = np.array([sizes[i] for i in keep])
-    ends, cends = np.cumsum(p), np.cumsum(p * p)
-    starts, cstarts = ends - p, cends - p * p
-    owner, cowner = np.repeat(np.arange(len(keep)), p), np.repeat(np.arange(len(keep)), p * p)
-    diagonal = np.concatenate([np.arange(n) * (n + 1) + o for n, o in zip(p.tolist(), cstarts.tolist(), strict=True)])
-    s0 = np.where(np.isfinite(s), s, 0.0)
-    bad = np.zeros(len(keep), dtype=bool)
-    with np.errstate(over="ignore"):  # 3 std beyond the float range: inf, as in Python's arithmetic
-        absurd = np.isfinite(v) & (np.abs(v) - 3 * s0 > MAX_PIGE)
-    bad[owner[np.isinf(v) | np.isinf(s) | (s < 0) | absurd]] = True
-    bad[cowner[np.isinf(c)]] = True
-    bad[cowner[diagonal[c[diagonal] < 0]]] = True
-    for j, i in enumerate(keep):
-        if not bad[j]:
-            a, b, n = int(starts[j]), int(ends[j]), int(p[j])
-            out[picked[i]] = (v[a:b], s[a:b], c[int(cstarts[j]):int(cends[j])].reshape(n, n))
-    return out
 
 
 def check_estimate(parameters: list[str], units: Mapping[str, str], values: Any, std: Any) -> None:
