@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from datetime import timedelta
 from pathlib import Path
 
@@ -250,6 +251,28 @@ def test_the_predicted_standard_errors_are_those_of_the_check_up_fits(machine: d
                             FREE, held) for i in range(10)]
     stated = np.mean([f.std for f in fits], axis=0)
     assert np.all(np.abs(stated / predicted - 1) < 0.35), (stated, predicted)  # contact scatter 0.3 vs the full's
+
+
+def test_plan_and_program_plan_the_same_check_up_and_refuse_a_noise_that_is_no_positive_number(
+        machine: dict, tmp_path: Path, capsys) -> None:
+    """Both plan the same poses with the same predicted standard errors (program's --noise default is --map's alone);
+    a --noise that is not a positive number is refused, also where the history's noise is used."""
+    from pige_sym.nc.program_header import read_header
+
+    _, out, _ = _run(capsys, "plan", "--checkup", "--machine-id", "DMU-1", "--db", machine["db"], "--json")
+    code, text, err = _run(capsys, "program", "--checkup", "--machine-id", "DMU-1", "--db", machine["db"], "--out",
+                        tmp_path / "c.ngc")
+    assert code == 0, err
+    header = read_header((tmp_path / "c.ngc").read_text())
+    plan = json.loads(out)
+    assert header["checkup"] == ",".join(plan["free"]) and f": {len(plan['angles_deg'])} poses" in text, text
+    stated = dict(re.findall(r"(\w+) ([0-9.]+)", text.split("predicted: ")[1].split("std ")[1].splitlines()[0]))
+    assert stated == {n: f"{plan['std'][n]:.3g}" for n in plan["free"]}, (stated, plan["std"])
+    for command, value in (("plan", "nan"), ("program", "-1")):
+        code, _, err = _run(capsys, command, "--checkup", "--machine-id", "DMU-1", "--db", machine["db"], "--noise",
+                            value, "--out", tmp_path / f"bad.{command}")
+        refused_in_one_line(code, err, "--noise")
+        assert not (tmp_path / f"bad.{command}").exists()
 
 
 @pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc", "siemens", "heidenhain"])

@@ -60,7 +60,10 @@ def plan_from_history(args: argparse.Namespace, *, budget_s: float | None, contr
     probe = None
     if setup.instrument == "sphere-probe":
         probe = probe_setup_of(setup, controller, **_probe_options(args))
-    noise = setup.noise_um if setup.noise_um is not None else (full.rms_um or getattr(args, "noise", None) or 0.25)
+    given = getattr(args, "noise", None)
+    if given is not None:
+        finite_option(given, "--noise", positive=True)
+    noise = setup.noise_um if setup.noise_um is not None else (full.rms_um or given or 0.25)
     req = CheckupRequest(setup, free, DEFAULT_BUDGET_S if budget_s is None else budget_s, float(noise), probe, speeds,
                          move_s=getattr(args, "move", 5.0), dwell_s=getattr(args, "dwell", 7.0), dialect=dialect)
     return PlannedCheckup(args.machine_id, plan_checkup(req), setup, probe, full.id)

@@ -32,10 +32,19 @@ from typing import Any
 from pige_sym.cli._ballbar import add_ballbar_arguments
 from pige_sym.cli._maps import add_map_arguments
 from pige_sym.cli._probe import INSTRUMENT_CHOICES, add_probe_program_arguments
-from pige_sym.cli._setup import add_setup_arguments, axis_sense_option, setup_geometry, trajectory_options
+from pige_sym.cli._setup import (
+    add_setup_arguments,
+    axis_sense_option,
+    finite_option,
+    setup_geometry,
+    trajectory_options,
+)
 from pige_sym.constants import DEFAULT_DWELL_S
 from pige_sym.errors import InputError
 from pige_sym.files import atomic_write_text, check_output
+
+#: The contact scatter a map test's programs are planned with when ``--noise`` is not given [µm].
+MAP_NOISE_UM = 0.5
 
 
 def _run_probe(args: argparse.Namespace) -> int:
@@ -128,6 +137,11 @@ def _write_rtest_checkup(args: argparse.Namespace, pc: Any, said: str) -> int:
     return 0
 
 
+def _map_noise(args: argparse.Namespace) -> float:
+    """``--noise`` of a map test (> 0), :data:`MAP_NOISE_UM` when not given [µm]."""
+    return MAP_NOISE_UM if args.noise is None else finite_option(args.noise, "--noise", positive=True)
+
+
 def _run_probe_maps(args: argparse.Namespace, kern: Any, setup: Any) -> int:
     """``--map AXES``: one probing program per setup of the map test (``pige plan --map``), each planned, read back
     and checked as a single program is; nothing is written unless every one passes."""
@@ -139,7 +153,7 @@ def _run_probe_maps(args: argparse.Namespace, kern: Any, setup: Any) -> int:
     from pige_sym.planning.map_plan import plan_map_test
 
     plan = plan_map_test(map_request(args, kern, "sphere-probe", point=setup.sphere_mm, tool=setup.tool_mm,
-                                     probe=setup, noise_um=args.noise, pose_s=args.pose_time,
+                                     probe=setup, noise_um=_map_noise(args), pose_s=args.pose_time,
                                      contact_s=args.contact_time), fewer=False)
     outs = numbered(args.out, len(plan.setups))
     written = []
@@ -283,8 +297,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_checkup_arguments(p)
     add_map_arguments(p)
     p.add_argument("--budget", type=float, help="with --checkup: machine-time budget [s] (default 120)")
-    p.add_argument("--noise", type=float, default=0.5, help="--map: contact scatter the plan weighs [um] (default "
-                   "%(default)s)")
+    p.add_argument("--noise", type=float, help=f"--map: contact scatter the plan weighs [um] (default {MAP_NOISE_UM}); "
+                   "--checkup: only when the history holds none for the last full calibration")
     p.add_argument("--pose-time", type=float, default=20.0, help="--map: time per pose (retract, rotate) [s]")
     p.add_argument("--contact-time", type=float, default=8.0, help="--map: time per contact [s]")
     p.add_argument("--out", required=True, help="program file to write (--map: map.ngc writes map_1.ngc, map_2.ngc, "
