@@ -6,7 +6,7 @@
   tolerance, with an interval;
 - :mod:`~pige_sym.verdict.checkup.reference` the machine's runs read as a chart: the last full calibration, the held
   PIGEs, segments, points;
-- :mod:`~pige_sym.verdict.checkup.changes` the changes to enter;
+- :mod:`~pige_sym.verdict.checkup.to_enter` the changes to enter;
 - :mod:`~pige_sym.verdict.checkup.routine` ``pige checkup``: fit, judge, store;
 - :mod:`~pige_sym.verdict.checkup.fleet` ``pige history fleet``: every machine's last calibration, last check-up,
   verdict and next due.

@@ -10,7 +10,7 @@
 3. **Verdict**: ``out`` when a PIGE is not shown within its tolerance (``fail`` or, under the guard rule,
    ``undecided``), else ``drifted`` when one is outside its control limits, else ``ok``.  Exit status 0 for ``ok``,
    1 for ``drifted`` and ``out``, 2 for bad input.
-4. **Changes to enter** (:mod:`~pige_sym.verdict.checkup.changes`): the check-up's PIGEs weighed by their uncertainty,
+4. **Changes to enter** (:mod:`~pige_sym.verdict.checkup.to_enter`): the check-up's PIGEs weighed by their uncertainty,
    within ``--max-change``; with ``--controller`` as ``pige compensate --controller`` prints them.
 5. The run is stored with ``kind = checkup`` and what was found (``runs.checkup_json``).
 """
@@ -167,7 +167,7 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
     from pige_sym.identification.subset import identify_subset
     from pige_sym.kernels import load_kernels
     from pige_sym.measurements.rtest import read_measurement
-    from pige_sym.verdict.checkup.changes import checkup_changes
+    from pige_sym.verdict.checkup.to_enter import checkup_changes
     from pige_sym.verdict.history.records import measurement_time
 
     if not 0 < opts.alpha < 1:
