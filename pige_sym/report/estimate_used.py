@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 from pige_sym.kernels import load_kernels
 from pige_sym.report.data import UNIT_TEXT, MeasurementReport
-from pige_sym.report.html_blocks import esc, num, table
+from pige_sym.report.html_blocks import esc, num, path_html, table
 
 
 @dataclass
@@ -86,13 +86,14 @@ def differs_sentence(rep: MeasurementReport) -> str:
             + "; ".join(parts) + ": the PIGE-only fit is biased by what it does not model.")
 
 
-def differs_short(rep: MeasurementReport) -> str:
-    """The first screen's line: which PIGEs the estimate used moved from the PIGE-only fit ("" when none)."""
+def differs_short_html(rep: MeasurementReport) -> str:
+    """The first screen's line, HTML: which PIGEs the estimate used moved from the PIGE-only fit ("" when none); the
+    file name may wrap after ``_ - /`` (a long name must not widen the page)."""
     moved = [s.name for s in shifts(rep) if s.moved]
     if not moved:
         return ""
-    return (f"Differs from the PIGE-only fit (pige identify) in {', '.join(moved)}, by more than their combined "
-            f"uncertainty (section {rep.path.name}, Identified PIGEs).")
+    return (esc(f"Differs from the PIGE-only fit (pige identify) in {', '.join(moved)}, by more than their combined "
+                "uncertainty (section ") + path_html(rep.path.name) + ", Identified PIGEs).")
 
 
 def estimate_used_html(rep: MeasurementReport) -> str:

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pige_sym.report.data import MeasurementReport, ReportData
-from pige_sym.report.estimate_used import differs_short
+from pige_sym.report.estimate_used import differs_short_html
 from pige_sym.report.html_blocks import esc, img, kvs, num, table, units
 from pige_sym.report.lead import improvement, main_finding, pige_rows
 from pige_sym.report.next_step import compare_next, history_next, measurement_next, next_html
@@ -64,10 +64,10 @@ def _answer_one(i: int, rep: MeasurementReport, data: ReportData) -> str:
         (f"improvement ({imp.label})", f'<span class="basis {esc(imp.basis)}">{esc(imp.label)}</span> {esc(imp.text)}'),
         ("next step", next_html(measurement_next(rep, data))),
     ]
-    differs = differs_short(rep)
+    differs = differs_short_html(rep)
     return (f'<div class="answer" id="answer-m{i + 1}"><div class="facts">{kvs(facts)}</div>'
             f'<div class="used"><p class="cap">PIGEs used for compensation ({esc(_estimate_label(rep))})</p>'
-            f"{pige_used_html(rep)}" + (f'<p class="cap" data-differs="pige-only">{esc(differs)}</p>' if differs
+            f"{pige_used_html(rep)}" + (f'<p class="cap" data-differs="pige-only">{differs}</p>' if differs
                                         else "") + "</div></div>")
 
 
