@@ -385,14 +385,23 @@ def test_a_damaged_history_is_refused_in_one_line_and_left_as_it_was(inputs, his
             conn.execute(how)
         conn.close()
     before = db.read_bytes()
+    said_by_show = None
     for argv in (["history", "show", "M", "--db", str(db)], ["history", "show", "M", "--db", str(db), "--json"],
                  ["history", "add", str(inputs / "run.csv"), "--machine-id", "N", "--db", str(db)],
                  ["report", str(inputs / "run.csv"), "--history", "M", "--db", str(db), "--out", str(tmp_path / "r"),
-                  "--no-figures"]):
-        refused(*run(capsys, *argv), f"history database {db} {said}", "restore the file from a backup",
+                  "--no-figures"],
+                 # the check-up's commands (issue 42): pige checkup reads the file with sqlite3, the same checks
+                 ["checkup", str(inputs / "run.csv"), "--machine-id", "M", "--db", str(db)],
+                 ["history", "fleet", "--db", str(db)], ["plan", "--checkup", "--machine-id", "M", "--db", str(db)],
+                 ["program", "--checkup", "--machine-id", "M", "--db", str(db), "--dialect", "linuxcnc", "--out",
+                  str(tmp_path / "c.ngc")]):
+        code, err = run(capsys, *argv)
+        refused(code, err, f"history database {db} {said}", "restore the file from a backup",
                 "pige has changed nothing in it")
+        said_by_show = said_by_show or err.split(": ", 1)[1]
+        assert err.split(": ", 1)[1] == said_by_show, argv  # every command, the same words
         assert db.read_bytes() == before, argv
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["h.sqlite"]  # no journal, no report
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["h.sqlite"]  # no journal, no report, no program
 
 
 def test_a_damaged_postgresql_history_is_refused_by_the_same_reader(inputs, tmp_path, capsys, request) -> None:
@@ -422,7 +431,8 @@ def test_a_damaged_postgresql_history_is_refused_by_the_same_reader(inputs, tmp_
 
         before = dump()
         for argv in (["history", "show", "M", "--db", url],
-                     ["history", "add", str(inputs / "run.csv"), "--machine-id", "N", "--db", url]):
+                     ["history", "add", str(inputs / "run.csv"), "--machine-id", "N", "--db", url],
+                     ["checkup", str(inputs / "run.csv"), "--machine-id", "M", "--db", url]):
             code, err = run(capsys, *argv)
             refused(code, err, said, "restore the database from a backup")
             assert dump() == before, (damage, argv)

@@ -419,6 +419,10 @@ def test_the_history_refuses_absurd_estimates_when_adding_and_when_reading(tmp_p
         code, out, err = run(capsys, "history", "show", "M", "--db", str(bad))
         refused(code, err, f"is damaged (run 2, {said}")
         assert "no significant change" not in out
+        stored = bad.read_bytes()
+        code, out, err_checkup = run(capsys, "checkup", str(runs[0]), "--machine-id", "M", "--db", str(bad))
+        assert err_checkup.split(": ", 1)[1] == err.split(": ", 1)[1]  # pige checkup (sqlite3): the same refusal
+        assert code == 2 and bad.read_bytes() == stored
     real = store._estimate_set
 
     def absurd(paths: list[Path], method: str) -> tuple:

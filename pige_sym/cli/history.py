@@ -3,7 +3,8 @@
 ``pige history add FILE --machine-id ID`` identifies and diagnoses the file and stores the run
 (several files of one machine, e.g. ballbar setups, as one joint run);
 ``pige history show ID`` lists the runs and, between consecutive runs, each parameter's change
-with its significance (joint Wald test + Bonferroni follow-up, family-wise false alarm ≤ 1 %).
+with its significance (joint Wald test + Bonferroni follow-up, family-wise false alarm ≤ 1 %);
+``pige history fleet`` lists the machines: last full calibration, last check-up, verdict, next due.
 """
 
 from __future__ import annotations
@@ -84,6 +85,28 @@ def _show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fleet(args: argparse.Namespace) -> int:
+    from datetime import datetime, timezone
+
+    from pige_sym.files import to_json
+    from pige_sym.verdict.checkup.fleet import fleet
+    from pige_sym.verdict.history import connect
+
+    rows = fleet(connect(args.db, create=False), datetime.now(timezone.utc))
+    if args.json:
+        print(to_json({"machines": [r.to_dict() for r in rows]}))
+        return 0
+    print(f"{'machine id':<16}{'structure':<16}{'runs':>5}  {'last full calibration':<27}{'last check-up':<27}"
+          f"{'verdict':<9}next due")
+    for r in rows:
+        full = f"{(r.last_full or '—')[:16]} {r.last_full_verdict or ''}".strip()
+        print(f"{r.machine_id:<16}{r.machine:<16}{r.runs:>5}  {full:<27}{(r.last_checkup or '—')[:16]:<27}"
+              f"{r.verdict or '—':<9}{r.next_due[:16]} ({r.why})")
+    if not rows:
+        print("no machine in the history yet (pige history add FILE --machine-id ID)")
+    return 0
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "history",
@@ -94,7 +117,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "  pige history add run.csv --machine-id DMU50-2\n"
             "  pige history add run.csv --machine-id DMU50-2 --tolerances tolerances.json --date 2026-11-23T14:05\n"
             "  pige history show DMU50-2\n"
-            "  pige history show DMU50-2 --json --db postgresql://pige@dbhost/calibration"
+            "  pige history show DMU50-2 --json --db postgresql://pige@dbhost/calibration\n"
+            "  pige history fleet --db history.db"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -138,3 +162,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     show.add_argument("--json", action="store_true",
                       help='print {"runs": [...], "comparisons": [...], "changes": [...]}')
     show.set_defaults(handler=_show)
+    fl = sub.add_parser(
+        "fleet", help="every machine: last full calibration, last check-up, its verdict, when the next is due",
+        description="One line per machine of the history: its structure, its runs, the last full calibration (and\n"
+                    "its check), the last check-up and its verdict, and when the next check-up is due: now after a\n"
+                    "drifted or out check-up, else the last run plus the machine's usual interval (the median gap\n"
+                    "between its check-ups, 7 days before it has two), earlier when the last check-up's forecast\n"
+                    "says a PIGE may leave its tolerance sooner.",
+        epilog="examples:\n"
+               "  pige history fleet --db history.db\n"
+               "  pige history fleet --json --db postgresql://pige@dbhost/calibration",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    fl.add_argument("--db", metavar="URL", help=DB_HELP)
+    fl.add_argument("--json", action="store_true", help='print {"machines": [...]}')
+    fl.set_defaults(handler=_fleet)

@@ -20,6 +20,7 @@ import argparse
 import math
 from typing import Any
 
+from pige_sym.cli._checkup import add_checkup_arguments
 from pige_sym.cli._maps import add_map_arguments
 from pige_sym.cli._probe import add_probe_program_arguments
 from pige_sym.constants import DEFAULT_DWELL_S, DEFAULT_MACHINE, DEFAULT_MOVE_S
@@ -184,6 +185,26 @@ def _run_probe(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_checkup(args: argparse.Namespace) -> int:
+    """The check-up of a machine in the history (:mod:`pige_sym.planning.checkup`), optionally its poses as a file."""
+    from pige_sym.cli._checkup import format_plan, plan_from_history
+    from pige_sym.files import atomic_write_text, check_output, to_json
+
+    out = check_output(args.out, force=args.force, what="--out") if args.out else None
+    pc = plan_from_history(args, budget_s=args.budget)
+    if out is not None:
+        atomic_write_text(out, pc.plan.angle_file_text(f"pige plan --checkup --machine-id {pc.machine_id}: "
+                                                       f"{pc.plan.poses} poses, {pc.plan.seconds:.0f} s"))
+    if args.json:
+        print(to_json(pc.plan.to_dict() | {"machine_id": pc.machine_id, "full_run": pc.full_id,
+                                           "out": None if out is None else str(out)}))
+        return 0
+    print(format_plan(pc))
+    print(f"\nnext: pige program --checkup --machine-id {pc.machine_id} --dialect DIALECT --out checkup.ngc"
+          + (f"   (wrote the poses to {out})" if out is not None else ""))
+    return 0
+
+
 def _map_request(args: argparse.Namespace) -> Any:
     """The map test of the options, for each instrument (docs/maps.md "Planning a map test")."""
     import numpy as np
@@ -282,6 +303,14 @@ def _run(args: argparse.Namespace) -> int:
     from pige_sym.files import to_json
     from pige_sym.planning import parse_limits
 
+    if args.checkup:
+        if args.map:
+            raise InputError("--checkup and --map plan different tests: give one of them")
+        return _run_checkup(args)
+    if args.machine_id or args.pige:
+        raise InputError("--machine-id and --pige plan a check-up: give --checkup")
+    if args.budget is None:
+        args.budget = 1800.0
     if args.map:
         return _run_map(args)
     if args.instrument == "ballbar":
@@ -318,6 +347,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "  pige plan --grade rtest.mpf --noise 0.3\n"
             "  pige plan --instrument sphere-probe --map C,A --sphere 100,20,60 --sphere-radius 12.7 "
             "--stylus-radius 1.5\n"
+            "  pige plan --checkup --machine-id DMU50-2 --db history.db"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -345,8 +375,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--instrument", choices=["rtest", "ballbar", "sphere-probe"], default="rtest",
                    help="ballbar: the smallest set of setups; sphere-probe: poses and contacts for a time budget")
     add_probe_program_arguments(p)
+    add_checkup_arguments(p)
     add_map_arguments(p)
-    p.add_argument("--budget", type=float, default=1800.0, help="sphere-probe: probing time budget [s]")
+    p.add_argument("--budget", type=float, help="sphere-probe: probing time budget [s] (default 1800; with --checkup: "
+                                                "machine time, default 120)")
     p.add_argument("--pose-time", type=float, default=20.0, help="sphere-probe: time per pose (retract, rotate) [s]")
     p.add_argument("--contact-time", type=float, default=8.0, help="sphere-probe: time per contact [s]")
     p.add_argument("--target", type=float,

@@ -32,19 +32,26 @@ from typing import Any
 from pige_sym.cli._ballbar import add_ballbar_arguments
 from pige_sym.cli._maps import add_map_arguments
 from pige_sym.cli._probe import INSTRUMENT_CHOICES, add_probe_program_arguments
-from pige_sym.cli._setup import add_setup_arguments, axis_sense_option, setup_geometry, trajectory_options
+from pige_sym.cli._setup import (
+    add_setup_arguments,
+    axis_sense_option,
+    finite_option,
+    setup_geometry,
+    trajectory_options,
+)
 from pige_sym.constants import DEFAULT_DWELL_S
+from pige_sym.errors import InputError
 from pige_sym.files import atomic_write_text, check_output
+
+#: The contact scatter a map test's programs are planned with when ``--noise`` is not given [µm].
+MAP_NOISE_UM = 0.5
 
 
 def _run_probe(args: argparse.Namespace) -> int:
     from pige_sym.cli._probe import probe_setup
-    from pige_sym.identification.result import per_pose
     from pige_sym.kernels import load_kernels
     from pige_sym.model.trajectories import make_trajectory
     from pige_sym.nc.probe_program import plan_probing
-    from pige_sym.nc.probe_readback import verify_rendered_program
-    from pige_sym.nc.probe_render import heidenhain_format_file, render_probe_program
 
     kern = load_kernels(args.machine)
     setup = probe_setup(args, kern.MACHINE_CODE, dialect=args.dialect)
@@ -52,9 +59,17 @@ def _run_probe(args: argparse.Namespace) -> int:
         return _run_probe_maps(args, kern, setup)
     traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
     plan = plan_probing(setup, traj.angles_deg, traj.description)
+    return _write_probe(args, setup, plan, [args.trajectory])
+
+
+def _write_probe(args: argparse.Namespace, setup: Any, plan: Any, inputs: list[str]) -> int:
+    """Render a probing plan in ``--dialect``, read it back (proof of safety), write it and say what it holds."""
+    from pige_sym.identification.result import per_pose
+    from pige_sym.nc.probe_readback import verify_rendered_program
+    from pige_sym.nc.probe_render import heidenhain_format_file, render_probe_program
+
     text = render_probe_program(plan, args.dialect)
     check = verify_rendered_program(text, args.dialect, setup, plan.rotary_axes, out=args.out)
-    inputs = [args.trajectory]
     out = check_output(args.out, force=args.force, inputs=inputs, what="--out")
     fmt = check_output(out.with_suffix(".A"), force=args.force, inputs=inputs, what="format file") \
         if args.dialect == "heidenhain" else None
@@ -71,6 +86,62 @@ def _run_probe(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_checkup(args: argparse.Namespace) -> int:
+    """The check-up program of a machine (``--checkup``): poses planned from its last full calibration, its set-up."""
+    from dataclasses import replace
+
+    from pige_sym.cli._checkup import checkup_controller, plan_from_history
+    from pige_sym.nc.probe_program import plan_probing
+
+    if args.instrument != "rtest" or args.trajectory != "cone-frustum":
+        raise InputError("--checkup takes the instrument and the poses from the history: leave out --instrument and "
+                         "--trajectory")
+    pc = plan_from_history(args, budget_s=args.budget, controller=checkup_controller(args, args.dialect),
+                           dialect=args.dialect)
+    p = pc.plan
+    said = f"check-up of {pc.machine_id}, {p.poses} poses, {', '.join(p.free)}"
+    if pc.probe is not None:
+        setup = replace(pc.probe, contacts=p.contacts, checkup=tuple(p.free), machine_id=pc.machine_id)
+        code = _write_probe(args, setup, plan_probing(setup, p.angles_deg, said), [])
+    else:
+        code = _write_rtest_checkup(args, pc, said)
+    print(f"predicted: {p.seconds:.0f} s of machine time; std " + ", ".join(f"{n} {s:.3f}" for n, s in p.std.items()))
+    return code
+
+
+def _write_rtest_checkup(args: argparse.Namespace, pc: Any, said: str) -> int:
+    """An R-test check-up program: the plan's poses with the full calibration's ball, pivots, tool and sense."""
+    import tempfile
+    from pathlib import Path
+
+    import numpy as np
+
+    from pige_sym.nc.program import make_rtest_program
+    from pige_sym.nc.rtest_program import load_test_program
+
+    if args.dialect == "heidenhain":
+        raise InputError("R-test programs are written for siemens, fanuc or linuxcnc (heidenhain: sphere-probe)")
+    out = check_output(args.out, force=args.force, what="--out")
+    s = pc.setup
+    with tempfile.TemporaryDirectory() as tmp:
+        angles = Path(tmp) / "checkup.csv"
+        angles.write_text(pc.plan.angle_file_text(said))
+        program = load_test_program(s.machine, str(angles), ball_mm=s.ball_mm, pivots_mm=s.pivots_mm or None,
+                                    tool_mm=s.tool_mm, dwell_s=args.dwell, axis_sense=s.axis_sense)
+    xyz = np.tile(program.ball_mm, (program.n_poses, 1)) if args.rtcp else program.linear_mm()
+    text = make_rtest_program(program.angles_deg, xyz, tuple(pc.plan.rotary_axes), rtcp=args.rtcp, dwell_s=args.dwell,
+                              feed=args.feed, title=f"R-test {said}, {s.machine}", dialect=args.dialect,
+                              axis_sense=program.axis_sense)
+    atomic_write_text(out, text)
+    print(f"wrote {out}: {program.n_poses} poses ({said}), {'TRAORI' if args.rtcp else 'TRAFOOF'}, {args.dialect}")
+    return 0
+
+
+def _map_noise(args: argparse.Namespace) -> float:
+    """``--noise`` of a map test (> 0), :data:`MAP_NOISE_UM` when not given [µm]."""
+    return MAP_NOISE_UM if args.noise is None else finite_option(args.noise, "--noise", positive=True)
+
+
 def _run_probe_maps(args: argparse.Namespace, kern: Any, setup: Any) -> int:
     """``--map AXES``: one probing program per setup of the map test (``pige plan --map``), each planned, read back
     and checked as a single program is; nothing is written unless every one passes."""
@@ -82,7 +153,7 @@ def _run_probe_maps(args: argparse.Namespace, kern: Any, setup: Any) -> int:
     from pige_sym.planning.map_plan import plan_map_test
 
     plan = plan_map_test(map_request(args, kern, "sphere-probe", point=setup.sphere_mm, tool=setup.tool_mm,
-                                     probe=setup, noise_um=args.noise, pose_s=args.pose_time,
+                                     probe=setup, noise_um=_map_noise(args), pose_s=args.pose_time,
                                      contact_s=args.contact_time), fewer=False)
     outs = numbered(args.out, len(plan.setups))
     written = []
@@ -151,18 +222,20 @@ def _run_ballbar(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    if args.checkup:
+        if args.map:
+            raise InputError("--checkup and --map write different programs: give one of them")
+        return _run_checkup(args)
+    if args.machine_id or args.pige:
+        raise InputError("--machine-id and --pige write a check-up program: give --checkup")
     if args.instrument == "sphere-probe":
         return _run_probe(args)
     if args.map:
-        from pige_sym.errors import InputError
-
         raise InputError("--map writes the probing programs of a map test (--instrument sphere-probe); for an R-test "
                          "or ballbar map test, pige plan --map names each setup's ball and tool")
     if args.instrument == "ballbar":
         return _run_ballbar(args)
     if args.dialect == "heidenhain":
-        from pige_sym.errors import InputError
-
         raise InputError("R-test programs are written for siemens, fanuc or linuxcnc (heidenhain: sphere-probe)")
 
     from pige_sym.kernels import load_kernels
@@ -204,7 +277,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "  pige program --instrument sphere-probe --map C,A --dialect linuxcnc --sphere 100,20,60 \\\n"
             "      --sphere-radius 12.7 --stylus-radius 1.5 --stylus-tool 9 --stylus-length 120 --out map.ngc\n"
             "  pige program --instrument ballbar --setup tangential --axis C --tilt -45 --dialect siemens \\\n"
-            "      --out tangential_C45.mpf"
+            "      --out tangential_C45.mpf\n"
+            "  pige program --checkup --machine-id DMU50-2 --db history.db --dialect fanuc --out checkup.nc"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -218,9 +292,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--instrument", choices=INSTRUMENT_CHOICES, default="rtest", help="the test's instrument")
     add_probe_program_arguments(p)
     add_ballbar_arguments(p)
+    from pige_sym.cli._checkup import add_checkup_arguments
+
+    add_checkup_arguments(p)
     add_map_arguments(p)
-    p.add_argument("--noise", type=float, default=0.5, help="--map: contact scatter the plan weighs [um] (default "
-                   "%(default)s)")
+    p.add_argument("--budget", type=float, help="with --checkup: machine-time budget [s] (default 120)")
+    p.add_argument("--noise", type=float, help=f"--map: contact scatter the plan weighs [um] (default {MAP_NOISE_UM}); "
+                   "--checkup: only when the history holds none for the last full calibration")
     p.add_argument("--pose-time", type=float, default=20.0, help="--map: time per pose (retract, rotate) [s]")
     p.add_argument("--contact-time", type=float, default=8.0, help="--map: time per contact [s]")
     p.add_argument("--out", required=True, help="program file to write (--map: map.ngc writes map_1.ngc, map_2.ngc, "

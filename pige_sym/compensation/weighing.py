@@ -163,8 +163,12 @@ def prior_variances(estimate: np.ndarray, covariance: np.ndarray, *, sweeps: int
     maximisation for sparse Bayesian models"): with ``C₋ᵢ = Σ + T`` without τᵢ², ``s = C₋ᵢ⁻¹ᵢᵢ`` and
     ``q = (C₋ᵢ⁻¹x̂)ᵢ``, the evidence is largest at ``τᵢ² = (q² − s)/s²`` when ``q² > s``, else at 0.  It starts
     from ``max(x̂ᵢ² − σᵢ², 0)`` (the exact answer for uncorrelated estimates, used as it is for a value that no
-    other is correlated with) and sweeps until no τᵢ² moves by more than 1e-12 of ``x̂ᵢ² + σᵢ²``: a maximum of
-    the evidence in every coordinate.  Groups of values not correlated with each other are solved apart.
+    other is correlated with) and sweeps until no τᵢ² moves by more than 1e-12 of ``x̂ᵢ² + σᵢ²``, or the
+    evidence's slope in each τᵢ² (upwards only where τᵢ² = 0) is below 1e-9 per ``x̂ᵢ² + σᵢ²``: a maximum of the
+    evidence in every coordinate.  After each sweep the step it made is taken again, doubled while the evidence
+    grows (two correlated values make a ridge that coordinate steps crawl along: without it, 3 of 20,000 drawn
+    estimates stopped after 500 sweeps with τ² = 8.3 where the maximum is at 0).  Groups of values not correlated
+    with each other are solved apart.
     """
     x = np.asarray(estimate, dtype=float)
     cov = np.asarray(covariance, dtype=float)
@@ -176,18 +180,54 @@ def prior_variances(estimate: np.ndarray, covariance: np.ndarray, *, sweeps: int
 
 
 def _correlated_groups(cov: np.ndarray) -> list[np.ndarray]:
-    """Index groups of the estimates that are correlated (connected through non-zero covariances)."""
-    from scipy.sparse.csgraph import connected_components
+    """Index groups of the estimates that are correlated (connected through non-zero covariances), each sorted,
+    in the order of their first index (``scipy.sparse.csgraph.connected_components``' groups, without its 0.4 s
+    import on ``pige checkup``'s path: the matrices here are a few dozen rows)."""
+    linked = np.abs(cov) > 0
+    linked |= linked.T
+    seen = np.zeros(len(cov), dtype=bool)
+    groups = []
+    for start in range(len(cov)):
+        if seen[start]:
+            continue
+        member = np.zeros(len(cov), dtype=bool)
+        member[start] = True
+        while True:
+            grown = member | linked[member].any(axis=0)
+            if (grown == member).all():
+                break
+            member = grown
+        seen |= member
+        groups.append(np.flatnonzero(member))
+    return groups
 
-    _, labels = connected_components(np.abs(cov) > 0, directed=False)
-    return [np.flatnonzero(labels == k) for k in range(labels.max(initial=-1) + 1)]
+
+def _log_evidence(x: np.ndarray, cov: np.ndarray, tau2: np.ndarray) -> float:
+    """``log N(x̂; 0, Σ + diag τ²)`` without its constant."""
+    c = cov + np.diag(tau2)
+    return float(-0.5 * (np.linalg.slogdet(c)[1] + x @ np.linalg.solve(c, x)))
+
+
+def _extrapolated(x: np.ndarray, cov: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """``start + f (end − start)`` for f = 2, 4, 8, … (clipped at 0) while the evidence grows; ``end`` if it does
+    not at f = 2."""
+    best, best_ev, f = end, _log_evidence(x, cov, end), 2.0
+    while f <= 2.0**40:
+        trial = np.clip(start + f * (end - start), 0.0, None)
+        ev = _log_evidence(x, cov, trial)
+        if not ev > best_ev:
+            break
+        best, best_ev, f = trial, ev, 2 * f
+    return best
 
 
 def _coordinate_ascent(x: np.ndarray, cov: np.ndarray, tau2: np.ndarray, sweeps: int) -> np.ndarray:
+    """:func:`prior_variances` for one group of correlated values."""
     tau2 = tau2.copy()
     scale = x**2 + np.diag(cov)
     rhs = np.column_stack([np.eye(x.size), x])
     for _ in range(sweeps):
+        start = tau2.copy()
         moved = 0.0
         for i in range(x.size):
             without = tau2.copy()
@@ -197,9 +237,18 @@ def _coordinate_ascent(x: np.ndarray, cov: np.ndarray, tau2: np.ndarray, sweeps:
             new = (q * q - s) / (s * s) if q * q > s else 0.0
             moved = max(moved, abs(new - tau2[i]) / scale[i])
             tau2[i] = new
-        if moved <= 1e-12:
+        if moved <= 1e-12 or _slope_left(x, cov, tau2, scale) <= 1e-9:
             break
+        tau2 = _extrapolated(x, cov, start, tau2)
     return tau2
+
+
+def _slope_left(x: np.ndarray, cov: np.ndarray, tau2: np.ndarray, scale: np.ndarray) -> float:
+    """How far τ² is from a maximum of the evidence: its largest slope ``∂ log N / ∂τᵢ² = ½ (αᵢ² − (C⁻¹)ᵢᵢ)``
+    (α = C⁻¹ x̂, C = Σ + diag τ²) times ``x̂ᵢ² + σᵢ²``, where τᵢ² > 0 and, upwards only, where τᵢ² = 0."""
+    inv = np.linalg.inv(cov + np.diag(tau2))
+    slope = 0.5 * ((inv @ x) ** 2 - np.diag(inv)) * scale
+    return float(np.max(np.where(tau2 > 0, np.abs(slope), slope)))
 
 
 def error_moments(params: CompensationParameters, names: list[str], poses: JudgedPoses) -> np.ndarray:

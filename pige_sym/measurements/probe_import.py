@@ -69,7 +69,8 @@ _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # the entries COV_COL
 OUTLIER_SIGMAS = 8.0
 OUTLIER_FLOOR_UM = 20.0
 #: Header items of the probing program kept in the measurement's metadata (as ``program_<key>``).
-PROGRAM_KEYS = ("dialect", "kinematics_codes", "stylus_tool", "stylus_length_mm", "work_offset", "window_mm")
+PROGRAM_KEYS = ("dialect", "kinematics_codes", "stylus_tool", "stylus_length_mm", "work_offset", "window_mm",
+                "checkup", "machine_id")
 
 
 @dataclass(frozen=True)
@@ -197,7 +198,8 @@ def probe_measurement(log: ProbeLog, spec: ProbeImport) -> Measurement:
     check_options(spec.stylus_offset_mm)
     starts = pose_starts(log)
     check_repeated_contacts(log.path, log.xyz_mm, log.angles_deg, log.lines, starts)
-    check_pose_count(log.path, len(starts) - 1, len(kern.LOCATION_PARAMETERS), int(log.lines[-1]))
+    fitted = spec.program.get("checkup", "").split(",") if spec.program.get("checkup") else kern.LOCATION_PARAMETERS
+    check_pose_count(log.path, len(starts) - 1, len(fitted), int(log.lines[-1]))
     angles = to_conventions(log.angles_deg[starts[:-1]], spec.axis_sense, kern.ROTARY_AXES)
     if np.abs(angles[0]).max() > 1e-9:
         raise FileFormatError(log.path, int(log.lines[0]), "the first pose must be the reference pose (every rotary "

@@ -30,11 +30,13 @@ def _json_int(text: str) -> int | float:
 
 
 def _no_repeats(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for k, v in pairs:
-        if k in out:
-            raise ValueError(f"duplicate key {k!r}: it appears twice in one object")
-        out[k] = v
+    out = dict(pairs)
+    if len(out) != len(pairs):  # the first key that repeats, named
+        seen: set[str] = set()
+        for k, _ in pairs:
+            if k in seen:
+                raise ValueError(f"duplicate key {k!r}: it appears twice in one object")
+            seen.add(k)
     return out
 
 
@@ -80,6 +82,7 @@ def strict_loads(text: str) -> Any:
         data = json.loads(text, parse_constant=_reject_constant, parse_int=_json_int, object_pairs_hook=_no_repeats)
     except RecursionError:
         raise ValueError(f"nested deeper than {MAX_DEPTH} levels") from None
-    if _depth(data, MAX_DEPTH) > MAX_DEPTH:
+    # a value nests at most one level deeper than the text opens brackets: most texts need no walk
+    if text.count("[") + text.count("{") + 1 > MAX_DEPTH and _depth(data, MAX_DEPTH) > MAX_DEPTH:
         raise ValueError(f"nested deeper than {MAX_DEPTH} levels")
     return data

@@ -105,6 +105,11 @@ class ProbeSetup:
         (CONVENTIONS §7); the contacts turn with the head.
     stem : Stem
         The sphere's stem and the stylus shank checked against it (:mod:`pige_sym.nc.probe_reach`).
+    checkup : tuple of str
+        A check-up program (``pige program --checkup``): the PIGEs it re-measures, stated in the header so that the
+        import expects only as many poses as they need; empty for a full calibration.
+    machine_id : str or None
+        The shop's name of the machine (check-ups), stated in the header; ``pige checkup`` refuses another one.
     """
 
     machine: str
@@ -126,6 +131,8 @@ class ProbeSetup:
     controller: ProbeController = field(default_factory=ProbeController)
     tool_mm: np.ndarray | None = None
     stem: Stem = field(default_factory=Stem)
+    checkup: tuple[str, ...] = ()
+    machine_id: str | None = None
 
     @property
     def r_eff_mm(self) -> float:

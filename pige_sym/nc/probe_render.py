@@ -73,6 +73,10 @@ def header_items(plan: ProbePlan, dialect: str) -> dict[str, str]:
               "stylus_radius_mm": f"{s.stylus_radius_mm:.12g}"}
     if s.tool_mm is not None:
         items["tool_mm"] = _vec(s.tool_mm)
+    if s.checkup:
+        items["checkup"] = ",".join(s.checkup)
+    if s.machine_id is not None:
+        items["machine_id"] = s.machine_id
     return items | s.controller.header_items()
 
 

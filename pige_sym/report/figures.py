@@ -446,6 +446,9 @@ def draw_report_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
         figs.append(ReportFigure("trend", _save(trend_figure(data.history), out_dir / "history_trend.png"),
                                  f"History of machine {data.history.machine_id}: each PIGE per run with ± 2 std, "
                                  "the tolerance band and the significant changes."))
+        from pige_sym.report.checkup_section import checkup_figures
+
+        figs += checkup_figures(data, out_dir)
     if data.maps is not None:
         from pige_sym.identification.map_output import map_figure
 

@@ -375,7 +375,7 @@ class _Options:
 
 def _gather_one(p: Path, label: str, m: Measurement, truth: Truth | None, opt: _Options, bar: Any) -> MeasurementReport:
     """Identification, diagnosis, compensation, program, verdict and studies of one file."""
-    from pige_sym.verdict.history.store import measurement_time
+    from pige_sym.verdict.history.records import measurement_time
 
     bar.set_postfix_str(f"{p.name}: identification")
     results = {meth: identify(m, method=meth, projection=opt.projection, with_zero=opt.with_zero) for meth in METHODS}

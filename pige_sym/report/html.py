@@ -13,6 +13,7 @@ from typing import Any
 
 from pige_sym.constants import VERSION as __version__
 from pige_sym.files import atomic_write_text, staged_folder
+from pige_sym.report.checkup_section import checkup_html
 from pige_sym.report.data import MeasurementReport, ReportData
 from pige_sym.report.estimate_used import estimate_used_html
 from pige_sym.report.figures import draw_figures, draw_report_figures
@@ -197,7 +198,7 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
                   compare_html(data, base), "</section>"]
     if data.history is not None:
         parts += ['<section data-section="history" id="history"><h2>Machine history</h2>',
-                  history_html(data, base), "</section>"]
+                  history_html(data, base), "</section>", checkup_html(data, base)]
     parts += [joint_html(i, j, "".join(img(f, base) for f in data.figures if f.key == f"joint-{i + 1}"))
               for i, j in enumerate(data.joints)]
     if data.maps is not None:

@@ -25,7 +25,6 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
-from scipy.special import fdtrc, stdtr  # F and Student t survival functions (scipy.stats' without its ~1 s import)
 
 ALPHA = 0.01
 TEST = ("joint Wald test T² = dᵀ(Ca+Cb)⁺d vs F(r, min ν), then per-parameter two-sided t "
@@ -114,6 +113,9 @@ def compare_runs(a: Estimate, b: Estimate, *, alpha: float = ALPHA, from_run: in
     Comparison
         ``changes`` in the parameter order of ``a`` (then parameters only ``b`` has).
     """
+    from scipy.special import fdtrc, stdtr  # F and Student t (scipy.stats' without its ~1 s import; here, not at the
+    # package's import: pige checkup reads the history without them)
+
     names = list(a.parameters) + [p for p in b.parameters if p not in a.parameters]
     tested: list[str] = []
     for p in names:

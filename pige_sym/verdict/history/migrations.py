@@ -58,8 +58,18 @@ def _v1(conn: sa.Connection) -> None:
     md.create_all(conn)
 
 
+def _v2(conn: sa.Connection) -> None:
+    """Check-ups: the kind of a run, the set-up it was measured with, what the check-up found, what later ones read."""
+    for ddl in ("ALTER TABLE runs ADD COLUMN kind VARCHAR(20) DEFAULT 'full' NOT NULL",
+                "ALTER TABLE runs ADD COLUMN setup_json TEXT",
+                "ALTER TABLE runs ADD COLUMN checkup_json TEXT",
+                "ALTER TABLE runs ADD COLUMN chart_json TEXT"):
+        conn.execute(sa.text(ddl))
+
+
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "machines and runs (estimate with full covariance, effects, verdict)", _v1),
+    Migration(2, "check-ups: runs.kind (full or checkup), runs.setup_json, runs.checkup_json, runs.chart_json", _v2),
 )
 
 

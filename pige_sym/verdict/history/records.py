@@ -1,38 +1,54 @@
-"""Stored runs read strictly: every field of a ``runs`` row is checked before one of its numbers is used.
+"""The history's records without SQLAlchemy: database URLs, the run record, the row a check-up writes.
 
-A run keeps its estimate as JSON text (parameter names, units, values, standard errors, covariance) beside a few
-plain columns.  A row is decoded (:func:`decode_run`) only when it is what
-:func:`~pige_sym.verdict.history.store.add_run` writes:
-
-- the text columns (machine id, file, times, machine code, method) are text, ``verdict`` text or null;
-- ``parameters``: a non-empty list of distinct names; ``units``: an object of name: unit;
-- ``values_json`` and ``std_json``: P numbers or ``null`` (undetermined) in strict JSON (no ``NaN`` token),
-  finite, standard errors ≥ 0; ``covariance_json``: P lists of P such numbers, with a diagonal ≥ 0;
-- ``dof``: a whole number ≥ 0; ``rms_um``: null or a finite number ≥ 0; ``effects_json``: a list of objects;
-  ``check_json``: null or an object;
-- no estimate beyond ±:data:`~pige_sym.measurements.schema.MAX_PIGE` by more than 3 standard errors
-  (:func:`~pige_sym.measurements.measurement.unphysical`, what identify refuses): no machine that runs has one.
-
-Anything else raises :class:`~pige_sym.errors.SchemaRefusal` naming the column; the store turns it into a
-one-line refusal naming the database, the run and how to recover.  The same checks run on a run before it is added
-(:func:`check_new_run`), so the history never holds what it would refuse to read.
+Everything here is plain Python and NumPy, so that ``pige checkup`` can read an SQLite history with the standard
+library's ``sqlite3`` (:mod:`~pige_sym.verdict.history.sqlite_fast`) without importing SQLAlchemy.  A stored row
+becomes a :class:`RunRecord` only through :func:`~pige_sym.verdict.history.decode.decode_run`, which checks every
+field first.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
-from collections.abc import Mapping
+import os
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pige_sym.errors import SchemaRefusal
-from pige_sym.measurements.measurement import unphysical
-from pige_sym.measurements.schema import MAX_PIGE, strict_loads
+from pige_sym.errors import FileFormatError, InputError
 
-TEXT_COLUMNS = ("machine_id", "file_name", "file_sha256", "measured_at", "time_source", "added_at", "machine_code",
-                "method")
+ENV_URL = "PIGE_HISTORY_DB"
+
+
+def default_url() -> str:
+    """``$PIGE_HISTORY_DB``, else the SQLite file in the user data directory."""
+    env = os.environ.get(ENV_URL)
+    if env:
+        return env
+    import platformdirs
+
+    return f"sqlite:///{Path(platformdirs.user_data_dir('pige_sym')) / 'history.sqlite'}"
+
+
+def normalise_url(text: str | None) -> str:
+    """A SQLAlchemy URL from ``--db`` (module docstring)."""
+    text = text or default_url()
+    if "://" not in text:
+        return f"sqlite:///{Path(text).expanduser().resolve()}"
+    scheme, _, rest = text.partition("://")
+    if scheme in ("postgresql", "postgres", "postgresql+psycopg"):
+        try:
+            import psycopg  # noqa: F401
+        except ImportError:
+            raise InputError("--db postgresql://…: the PostgreSQL driver is not installed: "
+                             "pip install 'pige_sym[postgres]' (psycopg 3)") from None
+        return f"postgresql+psycopg://{rest}"
+    if scheme == "sqlite":
+        return text
+    raise InputError(f"--db {text}: use a file path, sqlite:///PATH or postgresql://user@host/dbname")
 
 
 @dataclass
@@ -48,6 +64,13 @@ class RunRecord:
         Accepted findings (effect, options, params, std, units).
     check : dict or None
         ``pige check`` result when tolerances were given at ``add``.
+    kind : {"full", "checkup"}
+        A calibration (``pige history add``) or a check-up (``pige checkup``).
+    setup : dict or None
+        The set-up the file was measured with (:class:`~pige_sym.measurements.run_setup.RunSetup` as a dict);
+        None for a set of files and for runs stored before schema version 2.
+    checkup : dict or None
+        What a check-up found (:mod:`pige_sym.verdict.checkup`).
     """
 
     id: int
@@ -69,6 +92,9 @@ class RunRecord:
     effects: list[dict[str, Any]] = field(default_factory=list)
     verdict: str | None = None
     check: dict[str, Any] | None = None
+    kind: str = "full"
+    setup: dict[str, Any] | None = None
+    checkup: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         from pige_sym.files import json_ready
@@ -81,118 +107,63 @@ class RunRecord:
             "std": dict(zip(self.parameters, self.std, strict=True)), "units": self.units,
             "covariance": {"parameters": self.parameters, "matrix": self.covariance}, "dof": self.dof,
             "rms_um": self.rms_um, "effects": [f.get("effect") for f in self.effects], "verdict": self.verdict,
-            "check": self.check,
+            "check": self.check, "kind": self.kind, "setup": self.setup, "checkup": self.checkup,
         })
 
 
-def _kind(x: Any) -> str:
-    if x is None:
-        return "null"
-    if isinstance(x, bool):
-        return "a boolean"
-    if isinstance(x, (int, float)):
-        return f"the number {x!r}"
-    if isinstance(x, str):
-        return f"the text {x[:20]!r}"
-    return f"a {type(x).__name__}"
+def dumps(x: Any) -> str:
+    """The JSON text a column holds (one line, ``null`` for NaN: :func:`~pige_sym.files.to_json`)."""
+    from pige_sym.files import to_json
+
+    return to_json(x, indent=None)
 
 
-def _json(row: Mapping[str, Any], column: str) -> Any:
-    text = row[column]
-    if not isinstance(text, str):
-        raise SchemaRefusal(column, f"expected JSON text, got {_kind(text)}")
-    try:
-        return strict_loads(text)
-    except ValueError as exc:
-        raise SchemaRefusal(column, f"not valid JSON ({str(exc).splitlines()[0][:80]})") from None
-
-
-def _number(x: Any, column: str, where: str, *, non_negative: bool = False) -> float:
-    """A stored number (None: undetermined, NaN)."""
-    if x is None:
-        return math.nan
-    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-        raise SchemaRefusal(column, f"{where}: expected a finite number or null, got {_kind(x)}")
-    if non_negative and x < 0:
-        raise SchemaRefusal(column, f"{where}: {x!r} is negative")
-    return float(x)
-
-
-def _vector(row: Mapping[str, Any], column: str, names: list[str], *, non_negative: bool = False) -> np.ndarray:
-    data = _json(row, column)
-    if not isinstance(data, list) or len(data) != len(names):
-        got = f"{len(data)} values" if isinstance(data, list) else _kind(data)
-        raise SchemaRefusal(column, f"expected {len(names)} values (one per parameter), got {got}")
-    return np.array([_number(x, column, n, non_negative=non_negative) for x, n in zip(data, names, strict=True)])
-
-
-def _matrix(row: Mapping[str, Any], column: str, names: list[str]) -> np.ndarray:
-    data = _json(row, column)
-    p = len(names)
-    if not isinstance(data, list) or len(data) != p or any(not isinstance(r, list) or len(r) != p for r in data):
-        raise SchemaRefusal(column, f"expected a {p} x {p} matrix (one row and column per parameter)")
-    out = np.array([[_number(x, column, f"[{i}][{j}]") for j, x in enumerate(r)] for i, r in enumerate(data)])
-    negative = [names[i] for i in range(p) if out[i, i] < 0]
-    if negative:
-        raise SchemaRefusal(column, f"the variance of {negative[0]} is negative")
-    return out.reshape(p, p)
-
-
-def _names(row: Mapping[str, Any]) -> tuple[list[str], dict[str, str]]:
-    params = _json(row, "parameters")
-    if not isinstance(params, list) or not params or not all(isinstance(x, str) for x in params) \
-            or len(set(params)) != len(params):
-        raise SchemaRefusal("parameters", "expected a non-empty list of distinct parameter names")
-    units = _json(row, "units")
-    if not isinstance(units, dict) or not all(isinstance(v, str) for v in units.values()):
-        raise SchemaRefusal("units", "expected an object of parameter: unit")
-    return params, units
-
-
-def decode_run(row: Any) -> RunRecord:
-    """The :class:`RunRecord` of a stored row (a SQLAlchemy row or a mapping of the ``runs`` columns).
+def measurement_time(path: Path, metadata: dict[str, str], given: str | None) -> tuple[str, str]:
+    """(ISO 8601 UTC time, where it comes from): ``--date``, the file's ``date`` metadata, else its mtime.
 
     Raises
     ------
-    SchemaRefusal
-        Naming the column and what is wrong with it (module docstring).
+    InputError, FileFormatError
+        A date that is not ISO 8601.
     """
-    get: Mapping[str, Any] = row._mapping if hasattr(row, "_mapping") else row
-    for column in TEXT_COLUMNS:
-        if not isinstance(get[column], str):
-            raise SchemaRefusal(column, f"expected text, got {_kind(get[column])}")
-    if get["verdict"] is not None and not isinstance(get["verdict"], str):
-        raise SchemaRefusal("verdict", f"expected text or null, got {_kind(get['verdict'])}")
-    params, units = _names(get)
-    values = _vector(get, "values_json", params)
-    std = _vector(get, "std_json", params, non_negative=True)
-    cov = _matrix(get, "covariance_json", params)
-    dof = get["dof"]
-    if isinstance(dof, bool) or not isinstance(dof, int) or dof < 0:
-        raise SchemaRefusal("dof", f"expected a whole number >= 0, got {_kind(dof)}")
-    rms = get["rms_um"]
-    rms_um = None if rms is None else _number(rms, "rms_um", "the RMS", non_negative=True)
-    effects = _json(get, "effects_json")
-    if not isinstance(effects, list) or not all(isinstance(f, dict) for f in effects):
-        raise SchemaRefusal("effects_json", "expected a list of objects")
-    check = None if get["check_json"] is None else _json(get, "check_json")
-    if check is not None and not isinstance(check, dict):
-        raise SchemaRefusal("check_json", "expected an object or null")
-    absurd = unphysical(params, values, std, MAX_PIGE)
-    if absurd is not None:
-        name, v = absurd
-        raise SchemaRefusal("values_json", f"{name} = {v:g} {units.get(name, '')} is beyond ±{MAX_PIGE:g}, more "
-                                           "than any machine that runs")
-    return RunRecord(int(get["id"]), get["machine_id"], get["file_name"], get["file_sha256"], get["measured_at"],
-                     get["time_source"], get["added_at"], get["machine_code"], get["method"], params, units, values,
-                     std, cov, dof, rms_um, effects, get["verdict"], check)
+    def parse(text: str) -> datetime:
+        t = datetime.fromisoformat(text.strip())
+        return t.replace(tzinfo=timezone.utc) if t.tzinfo is None else t.astimezone(timezone.utc)
+
+    if given is not None:
+        try:
+            return parse(given).isoformat(timespec="seconds"), "--date"
+        except ValueError:
+            raise InputError(f"--date {given!r}: expected ISO 8601, e.g. 2026-11-23T14:05") from None
+    if "date" in metadata:
+        try:
+            return parse(metadata["date"]).isoformat(timespec="seconds"), "file metadata date"
+        except ValueError:
+            raise FileFormatError(str(path), None, f"metadata date {metadata['date']!r} is not ISO 8601 "
+                                                   "(e.g. 2026-11-23T14:05): fix it or pass --date") from None
+    mtime = datetime.fromtimestamp(path.stat().st_mtime, timezone.utc)
+    return mtime.isoformat(timespec="seconds"), "file modification time"
 
 
-def check_new_run(values: Mapping[str, Any]) -> None:
-    """Refuse a run that :func:`decode_run` would refuse to read back, before it is stored.
+def file_sha256(path: Path) -> str:
+    """The SHA-256 of a file's bytes (hex): how the history knows a file it holds."""
+    from pige_sym.files import read_input_bytes
 
-    Raises
-    ------
-    SchemaRefusal
-    """
-    decode_run({**values, "id": 0})
+    return hashlib.sha256(read_input_bytes(path)).hexdigest()
+
+
+def checkup_values(path: Path, machine_id: str, code: str, measured: tuple[str, str], fit: Any, setup: dict[str, Any],
+                   verdict: str, checkup: dict[str, Any], chart: dict[str, Any]) -> dict[str, Any]:
+    """The ``runs`` row of a check-up (``kind = checkup``): its PIGEs' estimate
+    (:class:`~pige_sym.identification.subset.SubsetFit`), the set-up it was measured with, its verdict, what it found
+    (:mod:`pige_sym.verdict.checkup`) and the part of it later check-ups read (``chart``)."""
+    now = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return {
+        "machine_id": machine_id, "file_sha256": file_sha256(path), "file_name": str(path.resolve()),
+        "measured_at": measured[0], "time_source": measured[1], "added_at": now, "machine_code": code,
+        "method": "checkup", "parameters": dumps(fit.parameters), "units": dumps(fit.units),
+        "values_json": dumps(fit.values), "std_json": dumps(fit.std), "covariance_json": dumps(fit.covariance),
+        "dof": int(fit.dof), "rms_um": float(fit.rms_um) if math.isfinite(fit.rms_um) else None,
+        "effects_json": "[]", "verdict": verdict, "check_json": None, "kind": "checkup",
+        "setup_json": dumps(setup), "checkup_json": dumps(checkup), "chart_json": dumps(chart),
+    }

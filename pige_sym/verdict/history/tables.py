@@ -4,7 +4,13 @@
 ``runs``: one calibration run: the measurement file's SHA-256 (unique: a file is added once),
 when it was measured, the estimate (parameter names, units, values, standard errors and full
 covariance as JSON text, ``null`` where undetermined), the accepted effects, and the verdict
-of ``pige check`` when tolerances were given.  ``schema_version``: applied migrations.
+of ``pige check`` when tolerances were given (of a check-up: ``ok``, ``drifted`` or ``out``); ``kind``: ``full``
+(a calibration, ``pige history add``) or ``checkup`` (``pige checkup``); ``setup_json``: the set-up the file was
+measured with (:mod:`~pige_sym.measurements.run_setup`: instrument, sphere or ball, pivots, sense, tool, the
+probing program's controller state), null for runs stored before schema version 2; ``checkup_json``: what a
+check-up found (control limits, trend, verdict, the changes to enter); ``chart_json``: the few items of it later
+check-ups read (signature, flags, correction, tolerance), small so that a long history reads fast.
+``schema_version``: applied migrations.
 Times are ISO 8601 UTC text so that SQLite and PostgreSQL store them alike.
 """
 
@@ -49,4 +55,8 @@ runs = sa.Table(
     sa.Column("effects_json", sa.Text, nullable=False),
     sa.Column("verdict", sa.String(20), nullable=True),
     sa.Column("check_json", sa.Text, nullable=True),
+    sa.Column("kind", sa.String(20), nullable=False, server_default="full"),
+    sa.Column("setup_json", sa.Text, nullable=True),
+    sa.Column("checkup_json", sa.Text, nullable=True),
+    sa.Column("chart_json", sa.Text, nullable=True),
 )

@@ -1,0 +1,174 @@
+"""The check-ups of a machine in the report (``pige report --history ID``): a trend plot and the last verdict.
+
+The plot has one panel per PIGE the check-ups re-measure: each check-up's value ± 2 standard errors coloured by what
+was found for that PIGE (ok, outside its control limits, not within its tolerance), the full calibrations' values,
+the control limits each check-up was judged by (centre ± half-width), the tolerance, the corrections entered
+(dashed lines) and, in the panel titles, the last check-up's drift rate and when the PIGE leaves its tolerance with
+the forecast's interval.  The runs are spaced in their order (days of check-ups and a warm-up checked every ten
+minutes both stay readable).  The table lists the check-ups and the last one's figures per PIGE.  A history without
+check-ups shows nothing here.
+"""
+
+from __future__ import annotations
+
+import math
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from pige_sym.report.data import ReportData, ReportFigure
+from pige_sym.report.html_blocks import esc, img, num, table
+
+COLOURS = {"ok": "tab:blue", "drifted": "tab:orange", "out": "crimson"}
+KEY = "checkup-trend"
+
+
+def checkups(data: ReportData) -> list[Any]:
+    """The history's check-ups (empty without a history)."""
+    return [] if data.history is None else [r for r in data.history.runs if r.kind == "checkup"]
+
+
+def _at(iso: str) -> datetime:
+    return datetime.fromisoformat(iso)
+
+
+def _item(run: Any, name: str) -> dict[str, Any] | None:
+    return next((x for x in (run.checkup or {}).get("items", []) if x["name"] == name), None)
+
+
+def _colour(item: dict[str, Any] | None) -> str:
+    """Red: not shown within its tolerance; orange: outside its control limits; blue: neither."""
+    if item is None:
+        return COLOURS["ok"]
+    if item.get("status") in ("fail", "undecided"):
+        return COLOURS["out"]
+    return COLOURS["drifted"] if (item.get("limit") or {}).get("outside") else COLOURS["ok"]
+
+
+def _panel(ax: Any, name: str, runs: list[Any]) -> None:
+    """One PIGE against the run order (check-ups and the full calibrations between them)."""
+    for x, r in enumerate(runs):
+        if name not in r.parameters:
+            continue
+        i = r.parameters.index(name)
+        value, std = float(r.values[i]), float(r.std[i])
+        if r.kind == "full":
+            ax.plot(x, value, "kD", ms=5)
+            continue
+        item = _item(r, name)
+        lim = (item or {}).get("limit")
+        if lim:
+            for sign in (1, -1):
+                ax.plot([x - 0.35, x + 0.35], [lim["centre"] + sign * lim["half_width"]] * 2, color="0.55", lw=0.9)
+        if (r.checkup or {}).get("after_correction"):
+            ax.axvline(x - 0.5, color="k", ls="--", lw=0.8)
+        ax.errorbar(x, value, yerr=2 * std if math.isfinite(std) else 0, fmt="o", ms=4, capsize=2,
+                    color=_colour(item))
+        if item and item.get("tolerance"):
+            ax.plot([x - 0.5, x + 0.5], [item["tolerance"]] * 2, color="tab:green", lw=1.2)
+            ax.plot([x - 0.5, x + 0.5], [-item["tolerance"]] * 2, color="tab:green", lw=1.2)
+
+
+def _forecast_text(last: Any, name: str) -> str:
+    """The last check-up's drift and when it leaves the tolerance, for the panel's title."""
+    tr = (_item(last, name) or {}).get("trend")
+    if not tr:
+        return ""
+    rate = f"drift {tr['rate_per_h']:+.3g}/h"
+    if not tr.get("significant") or not tr.get("leaves_at"):
+        return f"; {rate} (not shown)" if not tr.get("significant") else f"; {rate}"
+    high = tr.get("leaves_high")
+    return (f"; {rate}, leaves {tr['leaves_at'][5:16].replace('T', ' ')} ({tr['leaves_low'][5:16].replace('T', ' ')}"
+            f" .. {high[5:16].replace('T', ' ') if high else 'not bounded'})")
+
+
+def checkup_figure(data: ReportData) -> Any:
+    """The check-ups' trend plot (module docstring); matplotlib Figure."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    assert data.history is not None
+    runs = [r for r in data.history.runs if r.kind == "checkup" or r.kind == "full"]
+    last = checkups(data)[-1]
+    names = list(last.parameters)
+    cols = 2 if len(names) > 1 else 1
+    rows = math.ceil(len(names) / cols)
+    fig, axs = plt.subplots(rows, cols, figsize=(11, 2.9 * rows), squeeze=False, sharex=True)
+    for ax, name in zip(axs.ravel(), names, strict=False):
+        _panel(ax, name, runs)
+        unit = last.units.get(name, "").replace("um", "µm").replace("urad", "µrad")
+        ax.set_title(f"{name} [{unit}]{_forecast_text(last, name)}", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=7)
+    for ax in axs.ravel()[len(names):]:
+        ax.set_visible(False)
+    step = max(1, len(runs) // 16)
+    for ax in axs[-1]:
+        ax.set_xticks(range(0, len(runs), step))
+        ax.set_xticklabels([r.measured_at[5:16].replace("T", " ") for r in runs[::step]], rotation=45, ha="right",
+                           fontsize=7)
+    fig.suptitle(f"{data.history.machine_id}: each check-up ± 2 std in run order (blue ok, orange outside its control "
+                 "limits, red not within its tolerance),\nfull calibrations (black), the limits each was judged by "
+                 "(grey), tolerance (green), corrections entered (dashed)", fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def checkup_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
+    """The check-ups' figure written into ``out_dir`` (none without check-ups)."""
+    if not checkups(data):
+        return []
+    import matplotlib.pyplot as plt
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "checkup_trend.png"
+    fig = checkup_figure(data)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    assert data.history is not None
+    return [ReportFigure(KEY, path, f"Check-ups of machine {data.history.machine_id}: each re-measured PIGE against "
+                                    "time with its control limits, tolerance and forecast.")]
+
+
+def checkup_html(data: ReportData, base: Path | None) -> str:
+    """The section: the plot, the check-ups, the last one's figures (empty without check-ups)."""
+    runs = checkups(data)
+    if not runs:
+        return ""
+    rows = []
+    for r in runs:
+        info = r.checkup or {}
+        flagged = [f"{i['name']} ({i['limit']['by']})" for i in info.get("items", [])
+                   if i.get("limit") and i["limit"].get("by")]
+        rows.append([esc(r.id), esc(r.measured_at[:16]), f"<b>{esc(r.verdict or '—')}</b>",
+                     esc(", ".join(flagged) or "—"), "yes" if info.get("after_correction") else "",
+                     "provisional" if info.get("provisional") else "learned"])
+    last = runs[-1].checkup or {}
+    per = [[esc(i["name"]), num(i["value"], "+.3f"), num(i["std"]), num((i.get("limit") or {}).get("centre"), "+.3f"),
+            num((i.get("limit") or {}).get("half_width")), num(i.get("tolerance"), "g"), esc(i["status"]),
+            _rate(i.get("trend")), esc(_leaves(i.get("trend")))] for i in last.get("items", [])]
+    return "\n".join([
+        '<section data-section="checkup" id="checkup"><h2>Check-ups</h2>',
+        f"<p>{len(runs)} check-up{'s' if len(runs) != 1 else ''}; the last, run {esc(runs[-1].id)}: "
+        f"<b>{esc(runs[-1].verdict)}</b>. Method: {esc(last.get('method', ''))}.</p>",
+        "".join(img(f, base) for f in data.figures if f.key == KEY),
+        table(["run", "measured (UTC)", "verdict", "outside its limits (test)", "after a correction", "limits"], rows,
+              num_cols=[0]),
+        "<h4>The last check-up</h4>",
+        table(["PIGE", "value", "std", "centre", "limit ±", "tolerance", "status", "drift per hour [90 %]",
+               "leaves its tolerance"], per, num_cols=[1, 2, 3, 4, 5]),
+        "</section>"])
+
+
+def _rate(tr: dict[str, Any] | None) -> str:
+    if not tr:
+        return "—"
+    return f"{num(tr['rate_per_h'], '+.3g')} [{num(tr['rate_low'], '+.3g')}, {num(tr['rate_high'], '+.3g')}]"
+
+
+def _leaves(tr: dict[str, Any] | None) -> str:
+    if not tr or not tr.get("significant") or not tr.get("leaves_at"):
+        return "—"
+    return f"{tr['leaves_at']} ({tr.get('leaves_low') or '?'} .. {tr.get('leaves_high') or 'not bounded'})"
