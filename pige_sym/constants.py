@@ -54,3 +54,7 @@ DEFAULT_MAX_CHANGE_DEG = 0.1
 #: Travel of a rotary axis that does not turn fully (A, B) on which controller entries are judged, unless
 #: ``pige compensate --travel`` gives it [deg, CONVENTIONS angle].  A full-turn C axis is judged on 0-360 deg.
 DEFAULT_TILT_TRAVEL_DEG: tuple[float, float] = (-90.0, 90.0)
+#: The dialects pige writes probing programs in (``--dialect``).
+PROBE_DIALECTS = ("linuxcnc", "fanuc", "siemens", "heidenhain")
+#: The touch-probe log layouts ``pige import-probe --format`` reads: the log each dialect's program writes.
+PROBE_FORMATS = PROBE_DIALECTS

@@ -130,7 +130,7 @@ def _same(value: object, stated: object, flag: str) -> bool:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from pige_sym.measurements.probe_log import PROBE_FORMATS
+    from pige_sym.constants import PROBE_FORMATS
 
     p = subparsers.add_parser(
         "import-probe",

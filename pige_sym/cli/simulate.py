@@ -21,9 +21,9 @@ from pige_sym.cli._setup import (
     setup_geometry,
     trajectory_options,
 )
+from pige_sym.constants import PROBE_DIALECTS
 from pige_sym.errors import InputError
 from pige_sym.files import atomic_write_text, check_output, to_json
-from pige_sym.nc.probe_program import PROBE_DIALECTS
 
 
 def _error_maps(args: argparse.Namespace, kern: Any) -> Any:

@@ -29,13 +29,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pige_sym.constants import PROBE_FORMATS
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.files import read_input_bytes
 from pige_sym.measurements.decimal_fields import parse_decimal_fields
 from pige_sym.measurements.measurement import LIMITS
 from pige_sym.options import strict_float
 
-PROBE_FORMATS = ("linuxcnc", "fanuc", "siemens", "heidenhain")
 LINUXCNC_AXES = ("X", "Y", "Z", "A", "B", "C", "U", "V", "W")
 INCH_MM = 25.4
 _NUMBER = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?"  # an exponent too: the value is then checked (bounds)

@@ -57,7 +57,6 @@ from pige_sym.measurements.probe_head import head_offsets
 from pige_sym.nc.probe_reach import Stem, blocked, refusal, stylus_elevation_deg
 from pige_sym.nc.probe_safety import ProbeController
 
-PROBE_DIALECTS = ("linuxcnc", "fanuc", "siemens", "heidenhain")
 #: A nominal pivot: one intersection of the axis lines (3,) [mm], or one per axis.
 Pivots = np.ndarray | Mapping[str, np.ndarray]
 HEIDENHAIN_LOG = "TNC:\\PIGE\\PROBE.TXT"

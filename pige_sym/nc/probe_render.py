@@ -13,6 +13,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from pige_sym.constants import PROBE_DIALECTS
 from pige_sym.errors import InputError
 from pige_sym.measurements.axis_sense import METADATA_KEY as SENSE_KEY
 from pige_sym.measurements.axis_sense import format_axis_sense, to_commanded
@@ -20,7 +21,6 @@ from pige_sym.nc.probe_header import PROBE_FORMAT
 from pige_sym.nc.probe_program import (
     HEIDENHAIN_FORMAT,
     HEIDENHAIN_LOG,
-    PROBE_DIALECTS,
     Contact,
     ProbePlan,
     table_frames,
