@@ -37,7 +37,7 @@ def _modules_after(args: list[str], cwd: Path) -> set[str]:
 def test_help_imports_nothing_heavy(tmp_path: Path) -> None:
     loaded = _modules_after(["--help"], tmp_path)
     assert not {m for m in loaded if m.split(".")[0] in HEAVY}, sorted(loaded)
-    assert "numpy" not in loaded  # the parser's choices come from pige_sym.constants, not from the modules that use them
+    assert "numpy" not in loaded  # the parser's choices come from pige_sym.constants, not the modules using them
 
 
 @pytest.fixture(scope="module")
