@@ -27,17 +27,18 @@ from __future__ import annotations
 
 import json
 import shutil
-import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from timing import median_seconds  # noqa: E402
 
 from pige_sym.codegen.c_model import render_model_c  # noqa: E402
 from pige_sym.kernels import load_kernels  # noqa: E402
@@ -196,12 +197,7 @@ def numpy_per_call(code: str, repeats: int = 200) -> float:
         r = kin.deviation(th, e, ball) + kin.workpiece_rotation(th)[0] @ kin.reference_jacobian(ball) @ e
         return kin.linear_commands(th, ball) - 1e-3 * r
 
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        one()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return median_seconds(one, repeats)
 
 
 def _us(seconds: float) -> str:

@@ -22,11 +22,8 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
 import sys
 import tempfile
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +31,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from timing import median_seconds  # noqa: E402
 
 from pige_sym import load_kernels  # noqa: E402
 from pige_sym.identification.least_squares import identify  # noqa: E402
@@ -44,14 +44,6 @@ from pige_sym.simulation.simulator import random_pige, simulate  # noqa: E402
 TOOL = (0.0, 0.0, -250.0)
 BALL = (120.0, 30.0, 80.0)
 
-
-def median_time(fn: Callable[[], object], repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 @dataclass
@@ -88,7 +80,7 @@ def bench_generation(rows: list[Row]) -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         for code in SHIPPED_MACHINES:
-            t = median_time(lambda c=code: write_module(c, tmp), 3)
+            t = median_seconds(lambda c=code: write_module(c, tmp), 3)
             rows.append(Row("generation", code, None, t, note="SymPy derivation + emission"))
 
 
@@ -134,9 +126,9 @@ def bench_jacobian(rows: list[Row], sizes: list[int], machine: str) -> None:
 
         target = np.empty((n, 3, p))
         target.fill(0.0)  # allocated and touched: the floor measures writing only
-        t_floor = median_time(lambda t=target: t.fill(1.0), reps)
-        t_cf = median_time(lambda a=ang, t=target: kern.jacobian(a, None, BALL, None, tool, out=t), reps)
-        t_alloc = median_time(lambda a=ang: kern.jacobian(a, None, BALL, None, tool), reps)
+        t_floor = median_seconds(lambda t=target: t.fill(1.0), reps)
+        t_cf = median_seconds(lambda a=ang, t=target: kern.jacobian(a, None, BALL, None, tool, out=t), reps)
+        t_alloc = median_seconds(lambda a=ang: kern.jacobian(a, None, BALL, None, tool), reps)
         closed = kern.jacobian(ang, None, BALL, None, tool)
 
         def fd(a: np.ndarray = ang) -> np.ndarray:
@@ -148,7 +140,7 @@ def bench_jacobian(rows: list[Row], sizes: list[int], machine: str) -> None:
                                 - kern.deviation(a, params - e, BALL, None, tool)) / 2e-3
             return out
 
-        t_fd = median_time(fd, reps)
+        t_fd = median_seconds(fd, reps)
         err_fd = float(np.abs(fd() - closed).max() / np.abs(closed).max())
         rows.append(Row("jacobian", "memory floor (write output)", n, t_floor, "1.0x", "preallocated array"))
         rows.append(Row("jacobian", "closed form (generated)", n, t_cf, f"{t_cf / t_floor:.1f}x floor",
@@ -159,7 +151,7 @@ def bench_jacobian(rows: list[Row], sizes: list[int], machine: str) -> None:
                         f"{t_fd / t_floor:.1f}x floor, {t_fd / t_cf:.0f}x closed", f"max rel diff {err_fd:.1e}"))
         if n <= 100_000:
             sub = ang[: min(n, 20_000)]
-            t_lam = median_time(lambda s=sub: lam(s, BALL, tool), 1 if n > 1000 else 3) * (n / sub.shape[0])
+            t_lam = median_seconds(lambda s=sub: lam(s, BALL, tool), 1 if n > 1000 else 3) * (n / sub.shape[0])
             err = float(np.abs(lam(sub[:200], BALL, tool) - closed[:200]).max() / np.abs(closed).max())
             note = f"max rel diff {err:.1e}" + (f"; timed on {sub.shape[0]} points, scaled" if sub.shape[0] < n else "")
             rows.append(Row("jacobian", "naive sympy.lambdify", n, t_lam,
@@ -182,7 +174,7 @@ def bench_identification(rows: list[Row], sizes: list[int], machine: str) -> Non
         m = simulate(machine, traj, pige=random_pige(machine, 1), ball_mm=BALL, noise_um=0.25, seed=1).measurement
         for method in ("gauss-newton", "double-differential"):
             reps = 7 if n <= 1000 else 3
-            t = median_time(lambda meth=method, m=m: identify(m, method=meth), reps)
+            t = median_seconds(lambda meth=method, m=m: identify(m, method=meth), reps)
             rows.append(Row("identification", method, n, t, note="whole identify() call"))
 
 
@@ -200,7 +192,7 @@ def _command_time(args: list[str], repeats: int, cwd: Path) -> float:
         subprocess.run(args, cwd=cwd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
 
     run()  # warm the file cache and write the bytecode
-    return median_time(run, repeats)
+    return median_seconds(run, repeats)
 
 
 def bench_startup(rows: list[Row], machine: str, repeats: int) -> None:
@@ -339,7 +331,7 @@ def main() -> int:
     kern = load_kernels(machine)
     ang = np.random.default_rng(0).uniform(-90, 90, (sizes[-1], 2))
     rows.append(Row("jacobian", "  of which: basis (cos/sin + products)", sizes[-1],
-                    median_time(lambda: kern.basis(ang), 3)))
+                    median_seconds(lambda: kern.basis(ang), 3)))
     bench_identification(rows, id_sizes, machine)
     text = render(rows, machine_info() + [f"- machine code benchmarked: {machine}"], evaluate_targets(rows))
     if not args.no_extra:
