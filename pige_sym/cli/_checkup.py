@@ -9,6 +9,21 @@ from typing import Any
 from pige_sym.errors import InputError
 
 
+def checkup_requested(args: argparse.Namespace, tests: str, checkup: str) -> bool:
+    """Whether ``--checkup`` was given, its options consistent: refuses it beside ``--map`` ("--checkup and --map
+    ``tests``") and ``--machine-id``/``--pige`` without it ("... ``checkup``: give --checkup").
+
+    Raises
+    ------
+    InputError
+    """
+    if args.checkup and args.map:
+        raise InputError(f"--checkup and --map {tests}: give one of them")
+    if not args.checkup and (args.machine_id or args.pige):
+        raise InputError(f"--machine-id and --pige {checkup}: give --checkup")
+    return bool(args.checkup)
+
+
 def add_checkup_arguments(p: argparse.ArgumentParser) -> None:
     """``--checkup --machine-id ID [--db URL] [--pige LIST] [--rapid] [--rotary-speed]``."""
     from pige_sym.cli.history import DB_HELP

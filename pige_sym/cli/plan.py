@@ -20,7 +20,7 @@ import argparse
 import math
 from typing import Any
 
-from pige_sym.cli._checkup import add_checkup_arguments
+from pige_sym.cli._checkup import add_checkup_arguments, checkup_requested
 from pige_sym.cli._maps import add_map_arguments
 from pige_sym.cli._probe import add_probe_program_arguments
 from pige_sym.constants import DEFAULT_DWELL_S, DEFAULT_MACHINE, DEFAULT_MOVE_S
@@ -303,12 +303,8 @@ def _run(args: argparse.Namespace) -> int:
     from pige_sym.files import to_json
     from pige_sym.planning import parse_limits
 
-    if args.checkup:
-        if args.map:
-            raise InputError("--checkup and --map plan different tests: give one of them")
+    if checkup_requested(args, "plan different tests", "plan a check-up"):
         return _run_checkup(args)
-    if args.machine_id or args.pige:
-        raise InputError("--machine-id and --pige plan a check-up: give --checkup")
     if args.budget is None:
         args.budget = 1800.0
     if args.map:

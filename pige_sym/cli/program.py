@@ -222,12 +222,10 @@ def _run_ballbar(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    if args.checkup:
-        if args.map:
-            raise InputError("--checkup and --map write different programs: give one of them")
+    from pige_sym.cli._checkup import checkup_requested
+
+    if checkup_requested(args, "write different programs", "write a check-up program"):
         return _run_checkup(args)
-    if args.machine_id or args.pige:
-        raise InputError("--machine-id and --pige write a check-up program: give --checkup")
     if args.instrument == "sphere-probe":
         return _run_probe(args)
     if args.map:
