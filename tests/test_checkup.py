@@ -510,3 +510,18 @@ def test_an_r_test_check_up_from_a_simulated_nest(tmp_path: Path, capsys) -> Non
         verdicts.append((code, json.loads(out)["verdict"], json.loads(out)["items"][2]["std"]))
     assert verdicts[0][:2] == (0, "ok") and verdicts[1][:2] == (1, "drifted")
     assert verdicts[0][2] < 0.3  # the calibration's noise, not two residual degrees of freedom
+
+
+@pytest.mark.parametrize(("argv", "said"), [
+    (["plan", "--checkup", "--map", "C,A", "--machine-id", "M"], "--checkup and --map plan different tests"),
+    (["plan", "--machine-id", "M"], "--machine-id and --pige plan a check-up: give --checkup"),
+    (["program", "--checkup", "--map", "C,A", "--machine-id", "M", "--out", "x.ngc"],
+     "--checkup and --map write different programs"),
+    (["program", "--pige", "EX0C", "--out", "x.ngc"], "--machine-id and --pige write a check-up program"),
+])
+def test_the_check_up_options_come_together(capsys: pytest.CaptureFixture[str], tmp_path: Path, argv: list[str],
+                                             said: str) -> None:
+    out = tmp_path / "x.ngc"
+    code, _, err = _run(capsys, *[str(out) if a == "x.ngc" else a for a in argv])
+    assert code == 2 and said in err, err
+    assert not out.exists()
