@@ -58,12 +58,13 @@ class CycleSim:
 
 
 def component_lines(m: Machine, name: str) -> list[str]:
-    """pige's component with the stock lines as its nominal pivots and σ = −1 (its PIGE pins not set: 0)."""
+    """pige's component with the stock lines as its nominal pivots, σ = −1, its PIGE pins at 0 (the lines ``pige
+    compensate --controller linuxcnc`` prints for a machine without errors)."""
     tilt = m.outer.lower()
     lines = [f"setp {name}.sense-{tilt} -1", f"setp {name}.sense-c -1"]
     for axis, xyz in m.pivots_mm.items():
         lines += [f"setp {name}.pivot-{axis.lower()}-{c} {v:g}" for c, v in zip("xyz", xyz, strict=True)]
-    return lines
+    return lines + [f"setp {name}.{n.lower()} 0" for n in m.pige]
 
 
 def install_options(m: Machine, poses: int) -> list[str]:
