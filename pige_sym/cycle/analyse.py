@@ -66,11 +66,9 @@ def radius_guard(ctx: Context, m: Any) -> tuple[float, float]:
     found = float(m.metadata["r_eff_mm"].split()[0])
     stated = s.sphere_radius_mm + s.stylus_radius_mm
     if abs(found - stated) > s.limits.sphere_radius_mm:
-        raise Stopped(f"the sphere radius the probe finds, {found:.4f} mm, is {found - stated:+.4f} mm from the "
-                      f"stated {stated:g} (R {s.sphere_radius_mm:g} + r {s.stylus_radius_mm:g}; limit "
-                      f"±{s.limits.sphere_radius_mm:g}): dirt on the sphere, a wrong stylus or sphere; clean the "
-                      "sphere and the stylus, check sphere_radius_mm and stylus_radius_mm in pige_cycle/settings.json, "
-                      "then call the cycle again")
+        raise Stopped(f"sphere radius found {found:.4f} mm, {found - stated:+.4f} from R + r = {stated:g} (limit "
+                      f"±{s.limits.sphere_radius_mm:g}): dirt on the sphere or stylus, or a wrong one; clean them or "
+                      "correct the radii in settings.json")
     return found, stated
 
 

@@ -36,7 +36,7 @@ def enter(ctx: Context, req: Request, run: Path, log: RunLog) -> RunMessages:
     if why is not None or proposal is None:
         _journal(ctx, req, run, info, "refused")
         log.add("refused", str(why))
-        return RunMessages(error=f"PIGE M451 P2 refused: {why}; nothing was changed; log {relative_log(run)}")
+        return RunMessages(error=f"PIGE M451 P2 refused, nothing changed (log {relative_log(run)}): {why}")
     if not ctx.live:
         raise InputError("halcmd does not reach the running HAL: the values cannot take effect now")
     status(run, "enter")

@@ -21,8 +21,9 @@ def _run(argv: Sequence[str]) -> subprocess.CompletedProcess[str]:
     return subprocess.run(list(argv), capture_output=True, text=True, timeout=30, stdin=subprocess.DEVNULL)
 
 
-def hal_running(run: Runner = _run) -> bool:
+def hal_running(run: Runner | None = None) -> bool:
     """Whether a HAL is running that ``halcmd`` reaches."""
+    run = run or _run
     if shutil.which("halcmd") is None:
         return False
     try:
@@ -31,7 +32,7 @@ def hal_running(run: Runner = _run) -> bool:
         return False
 
 
-def read_live(setup: KinematicsSetup, run: Runner = _run) -> dict[str, float]:
+def read_live(setup: KinematicsSetup, run: Runner | None = None) -> dict[str, float]:
     """The value of every pin of ``setup`` in the running HAL (a netted pin: its signal).
 
     Raises
@@ -39,6 +40,7 @@ def read_live(setup: KinematicsSetup, run: Runner = _run) -> dict[str, float]:
     InputError
         halcmd refuses (the pin or signal does not exist), naming it.
     """
+    run = run or _run
     out = {}
     for p in setup.pins:
         verb = "gets" if p.signal else "getp"
@@ -52,10 +54,11 @@ def read_live(setup: KinematicsSetup, run: Runner = _run) -> dict[str, float]:
     return out
 
 
-def set_live(changes: list[tuple[ValuePin, float, float]], run: Runner = _run) -> list[str]:
+def set_live(changes: list[tuple[ValuePin, float, float]], run: Runner | None = None) -> list[str]:
     """Set each pin from its old value to its new one (``(pin, old, new)``); on a refusal, the ones already set are
     put back to their old values and InputError is raised.  Returns the halcmd lines run.
     """
+    run = run or _run
     done: list[tuple[ValuePin, float]] = []
     lines = []
     for p, old, new in changes:

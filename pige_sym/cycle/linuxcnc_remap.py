@@ -167,8 +167,8 @@ def _step(self, code, mode, step):
     if proc.poll() is None:
         proc.kill()
         proc.wait()
-        yield _fail(self, f"PIGE {code}: pige's {step} step took longer than {timeout:g} s and was stopped; nothing "
-                          f"was changed; log {os.path.relpath(run, CONFIG)}/{step}.out")
+        yield _fail(self, f"PIGE {code}: pige's {step} step took longer than {timeout:g} s and was stopped, nothing "
+                          f"changed (log {os.path.relpath(run, CONFIG)}/{step}.out)")
         return
     error = _error(run) if step == "prepare" else None
     if error:  # a refusal before anything moved: pige's own message
@@ -176,8 +176,8 @@ def _step(self, code, mode, step):
         return
     if proc.returncode != 0 and not os.path.isfile(os.path.join(run, "messages.json")):
         why = f"ended by signal {-proc.returncode}" if proc.returncode < 0 else f"exit status {proc.returncode}"
-        yield _fail(self, f"PIGE {code}: pige's {step} step failed ({why}); nothing was changed; "
-                          f"{_first_line(run, step)}log {os.path.relpath(run, CONFIG)}/{step}.out")
+        yield _fail(self, f"PIGE {code}: pige's {step} step failed ({why}), nothing changed (log "
+                          f"{os.path.relpath(run, CONFIG)}/{step}.out){_first_line(run, step)}")
         return
 
 
@@ -197,7 +197,7 @@ def _first_line(run, step):
             lines = [ln.strip() for ln in f if ln.strip()]
     except OSError:
         return ""
-    return (lines[-1][:160] + "; ") if lines else ""
+    return (": " + lines[-1][:160]) if lines else ""
 
 
 def _finish(self, code, mode):
@@ -211,8 +211,8 @@ def _finish(self, code, mode):
             messages = json.load(f)
         lines, error = list(messages["lines"]), messages.get("error")
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        return f"PIGE {code}: the run left no readable result ({exc}); nothing was changed; log " + \
-            os.path.relpath(run, CONFIG)
+        where = os.path.relpath(run, CONFIG)
+        return f"PIGE {code}: the run left no readable result, nothing changed (log {where}): {exc}"
     for line in lines:
         _message(line)
     if error:

@@ -86,8 +86,7 @@ def render_run(r: RunResult, run_path: str, hours: float) -> RunMessages:
 
 def render_stopped(code: str, mode: str, why: str, run: str) -> RunMessages:
     """A run a guard stopped: the operator error (nothing was changed, nothing stored)."""
-    return RunMessages(error=f"PIGE {code} {MODE_WORDS.get(mode, mode)} stopped: {why}; nothing was changed; log "
-                             f"{run}")
+    return RunMessages(error=f"PIGE {code} {MODE_WORDS.get(mode, mode)} stopped, nothing changed (log {run}): {why}")
 
 
 def log_path(run: object) -> str:

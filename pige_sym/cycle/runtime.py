@@ -70,7 +70,7 @@ def run_step(step: str, run: Path, *, live: bool = True) -> int:
         messages = _dispatch(step, run, config, log, live)
     except PigeError as exc:
         code = (run.name.split("-")[2] if len(run.name.split("-")) > 2 else "M451")
-        messages = RunMessages(error=f"PIGE {code} refused: {exc}; nothing was changed; log {relative_log(run)}")
+        messages = RunMessages(error=f"PIGE {code} refused, nothing changed (log {relative_log(run)}): {exc}")
         log.add("refused", str(exc))
     status(run, f"{step} done")
     write_messages(run, messages)

@@ -180,17 +180,21 @@ class Driver:
         return {}
 
     def files(self, step: dict) -> dict:
-        """SHA-256 of every file under ``root`` (relative paths), leaving out those under ``exclude``."""
+        """SHA-256 of every file under ``root`` (relative paths), leaving out those under ``exclude`` and the
+        temporary files LinuxCNC's interpreter writes its parameter file through (``*.new``, renamed at once)."""
         out = {}
         skip = tuple(step.get("exclude", []))
         for folder, _, names in os.walk(step["root"]):
             for name in names:
                 path = os.path.join(folder, name)
                 rel = os.path.relpath(path, step["root"])
-                if rel.startswith(skip):
+                if rel.startswith(skip) or name.endswith(".new"):
                     continue
-                with open(path, "rb") as f:
-                    out[rel] = hashlib.sha256(f.read()).hexdigest()
+                try:
+                    with open(path, "rb") as f:
+                        out[rel] = hashlib.sha256(f.read()).hexdigest()
+                except FileNotFoundError:  # renamed meanwhile: read what replaced it
+                    continue
         return {"files": out}
 
     def hal(self, step: dict) -> dict:
