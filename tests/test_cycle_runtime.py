@@ -76,13 +76,13 @@ def probe(run: Path, truth: str = TRUTH, seed: int = 3, pretravel_um: float = 0.
                  "--out", str(run / "probe_log.txt")]) == 0
 
 
-def messages(run: Path) -> dict:
-    return json.loads((run / "messages.json").read_text())
+def messages(run: Path, step: str = "analyse") -> dict:
+    return json.loads((run / f"{step}.messages.json").read_text())
 
 
 def measure(layout: Layout, name: str, mode: str, *, live: bool = False, **kw: object) -> Path:
     run = request(layout, name, mode)
-    assert run_step("prepare", run, live=live) == 0, messages(run)
+    assert run_step("prepare", run, live=live) == 0, messages(run, "prepare")
     probe(run, **kw)  # type: ignore[arg-type]
     run_step("analyse", run, live=live)
     return run
@@ -104,7 +104,7 @@ def test_optimise_then_enter_then_check(config, hal):
                                                           ":y-offset", ":z-offset"}
     before = config.values.read_text()
     enter = request(config, "p2", "enter", switchkins_type=1)  # from TCP kinematics
-    assert run_step("prepare", enter) == 0 and run_step("enter", enter) == 0, messages(enter)
+    assert run_step("prepare", enter) == 0 and run_step("enter", enter) == 0, messages(enter, "enter")
     assert "M429" in (config.current / "pige_cycle_probe.ngc").read_text()  # entered in identity kinematics
     sets = [c for c in hal.commands if c[1] in ("setp", "sets")]
     assert [c[2] for c in sets] == [e["target"] for e in proposal["entries"]]
@@ -114,7 +114,7 @@ def test_optimise_then_enter_then_check(config, hal):
     assert not config.proposal.exists() and (enter / "proposal.entered.json").is_file()
     again = request(config, "p2b", "enter")
     assert run_step("prepare", again) == 0 and run_step("enter", again) == 1
-    assert "no proposal to enter" in messages(again)["error"]
+    assert "no proposal to enter" in messages(again, "enter")["error"]
     # the next run is written for the moved lines; the virtual machine's PIGEs are relative to the program's
     # lines, so the same physical machine has its offsets less what was entered (trtfuncs.c's lines)
     d = {e["target"].split(".")[-1].lstrip(":"): (e["new"] - e["old"]) * 1e3 for e in proposal["entries"]}
@@ -161,7 +161,7 @@ def test_enter_refuses_and_changes_nothing(config, hal, case):
     why = {"old": "h old, older than 8 h", "edited": "the configuration changed since the proposal",
            "limit": r"an entry exceeds the change limit: :y-offset \+0\.5\d* mm \(limit 0\.2 mm\)",
            "pins": r"the configuration changed since the proposal of p1 \(values in force\)"}[case]
-    assert re.search(why, messages(run)["error"]), messages(run)
+    assert re.search(why, messages(run, "enter")["error"]), messages(run, "enter")
     assert {k: v for k, v in record(config).items() if k != "journal.jsonl"} == \
         {k: v for k, v in before.items() if k != "journal.jsonl"}
     assert hal.values == pins
@@ -183,7 +183,7 @@ def test_a_change_beyond_the_limit_is_named_in_the_proposal(config, hal):
 def test_prepare_refuses_before_anything_moves(config, state, why):
     run = request(config, "x", "check", **state)
     assert run_step("prepare", run, live=False) == 1
-    m = messages(run)
+    m = messages(run, "prepare")
     assert why in m["error"] and not (run / "program.ngc").exists()
     assert "abort" in (config.current / "pige_cycle_probe.ngc").read_text()  # the placeholder: nothing prepared
 

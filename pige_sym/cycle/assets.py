@@ -56,9 +56,10 @@ def restore_procedure(switch: Switch | None) -> str:
 
 
 def on_abort_procedure() -> str:
-    """``[RS274NGC]ON_ABORT_COMMAND``: after Esc or an E-stop, the kinematics mode the cycle found."""
-    return "\n".join([HEADER.format(what="after an abort"), f"o<{ON_ABORT_SUB}> sub", f"o<{RESTORE_SUB}> call",
-                      f"o<{ON_ABORT_SUB}> endsub", "M2", ""])
+    """``[RS274NGC]ON_ABORT_COMMAND``: after Esc or an E-stop, no step of pige still running, and the kinematics mode
+    the cycle found."""
+    return "\n".join([HEADER.format(what="after an abort"), f"o<{ON_ABORT_SUB}> sub", "o<pige_cycle_abort> call",
+                      f"o<{RESTORE_SUB}> call", f"o<{ON_ABORT_SUB}> endsub", "M2", ""])
 
 
 def placeholder_procedure() -> str:
@@ -69,7 +70,14 @@ def placeholder_procedure() -> str:
 
 
 def toplevel_text() -> str:
-    return "\n".join(["# pige cycle: written by pige cycle install; LinuxCNC's [PYTHON]TOPLEVEL", "import remap", ""])
+    return "\n".join(["# pige cycle: written by pige cycle install; LinuxCNC's [PYTHON]TOPLEVEL", "import oword",
+                      "import remap", ""])
+
+
+def oword_text() -> str:
+    """``oword.py``: the O-word procedures LinuxCNC looks up (``o<pige_cycle_abort> call``)."""
+    return "\n".join([f"# pige cycle: written by pige cycle install; the procedures are in {MODULE}.py",
+                      f"from {MODULE} import pige_cycle_abort  # noqa: F401", ""])
 
 
 def remap_text() -> str:
@@ -91,6 +99,7 @@ def asset_files(layout: Layout, settings: CycleSettings) -> dict[Path, str]:
     out[layout.ngc / f"{ON_ABORT_SUB}.ngc"] = on_abort_procedure()
     out[layout.python / "toplevel.py"] = toplevel_text()
     out[layout.python / "remap.py"] = remap_text()
+    out[layout.python / "oword.py"] = oword_text()
     out[layout.python / f"{MODULE}.py"] = remap_module_text()
     return out
 

@@ -22,9 +22,11 @@ in the middle of the cycle leaves the kinematics mode as it was found once the m
 The prepare and analyse steps run in the *epilog* of the inner call, as a generator that yields
 ``INTERP_EXECUTE_FINISH`` while pige's process runs: the interpreter stays responsive (Esc, E-stop, the GUI's
 status) and no line after it is read before pige is done (LinuxCNC's restartable Python handlers).  Each step has a
-timeout (``settings.json`` ``timeouts_s``): a process that runs longer is killed.  A step that fails (a refusal,
-a crash, a kill, a timeout) ends the cycle with an operator error naming the run's log; the outer epilog shows the
-run's messages (``messages.json``) as operator messages, or its error.
+timeout (``settings.json`` ``timeouts_s``): a process that runs longer is killed, and so is one still running when
+LinuxCNC drops the cycle (Esc, E-stop: the generator is closed, and ``pige_on_abort`` calls ``o<pige_cycle_abort>``).
+A step that fails (a refusal, a crash, a kill, a timeout) ends the cycle with an operator error naming the run's log;
+the outer epilog shows the last step's messages (``analyse.messages.json``, ``enter.messages.json``) as operator
+messages, or its error.
 
 In the AXIS preview (``self.task`` 0) every handler returns at once and the NGC procedure skips its body.
 """
@@ -149,44 +151,69 @@ def _step(self, code, mode, step):
     except Exception as exc:
         yield _fail(self, f"PIGE {code}: the cycle cannot start ({exc}); run pige cycle install again")
         return
-    output = open(os.path.join(run, f"{step}.out"), "w")
     try:
-        proc = subprocess.Popen(command, cwd=CONFIG, stdout=output, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, start_new_session=True)
+        proc = _start(command, run, step)
     except OSError as exc:
-        output.close()
         yield _fail(self, f"PIGE {code}: cannot start pige ({exc}); run pige cycle install again")
         return
-    with open(os.path.join(run, f"{step}.pid"), "w") as f:
-        f.write(f"{proc.pid}\n")
-    end = time.monotonic() + timeout
-    while proc.poll() is None and time.monotonic() < end:
-        time.sleep(0.02)
-        yield INTERP_EXECUTE_FINISH
-    output.close()
-    if proc.poll() is None:
-        proc.kill()
-        proc.wait()
+    end, timed_out = time.monotonic() + timeout, False
+    try:
+        while proc.poll() is None:
+            if time.monotonic() >= end:
+                timed_out = True
+                break
+            time.sleep(0.02)
+            yield INTERP_EXECUTE_FINISH
+    finally:  # a timeout, or LinuxCNC dropping the cycle (Esc, E-stop: GeneratorExit): the step never outlives it
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        RUNNING.pop("proc", None)
+    if timed_out:
         yield _fail(self, f"PIGE {code}: pige's {step} step took longer than {timeout:g} s and was stopped, nothing "
                           f"changed (log {os.path.relpath(run, CONFIG)}/{step}.out)")
         return
-    error = _error(run) if step == "prepare" else None
-    if error:  # a refusal before anything moved: pige's own message
-        yield _fail(self, error)
+    result = _read_messages(run, step)
+    if step == "prepare" and result and result.get("error"):  # a refusal before anything moved: pige's own message
+        yield _fail(self, result["error"])
         return
-    if proc.returncode != 0 and not os.path.isfile(os.path.join(run, "messages.json")):
+    if result is None:  # a crash, a kill: no result written
         why = f"ended by signal {-proc.returncode}" if proc.returncode < 0 else f"exit status {proc.returncode}"
         yield _fail(self, f"PIGE {code}: pige's {step} step failed ({why}), nothing changed (log "
                           f"{os.path.relpath(run, CONFIG)}/{step}.out){_first_line(run, step)}")
         return
 
 
-def _error(run):
-    """The error a step wrote into the run's messages.json, or None."""
+#: the step process now running (at most one): pige_cycle_abort stops it after an abort
+RUNNING: dict = {}
+
+
+def _start(command, run, step):
+    """pige's step as a process of its own (its own session: a signal to LinuxCNC does not reach it)."""
+    with open(os.path.join(run, f"{step}.out"), "w") as output:
+        proc = subprocess.Popen(command, cwd=CONFIG, stdout=output, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, start_new_session=True)
+    RUNNING["proc"] = proc
+    with open(os.path.join(run, f"{step}.pid"), "w") as f:
+        f.write(f"{proc.pid}\n")
+    return proc
+
+
+def pige_cycle_abort(self, *args):
+    """O-word procedure ``o<pige_cycle_abort>`` (pige_on_abort.ngc): stop a step still running after an abort."""
+    proc = RUNNING.pop("proc", None)
+    if proc is not None and proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+def _read_messages(run, step):
+    """What a step wrote (``<step>.messages.json``: lines and error), or None."""
     try:
-        with open(os.path.join(run, "messages.json"), encoding="utf-8") as f:
-            return json.load(f).get("error")
-    except (OSError, ValueError, AttributeError):
+        with open(os.path.join(run, f"{step}.messages.json"), encoding="utf-8") as f:
+            out = json.load(f)
+        return out if isinstance(out, dict) and isinstance(out.get("lines"), list) else None
+    except (OSError, ValueError):
         return None
 
 
@@ -201,22 +228,19 @@ def _first_line(run, step):
 
 
 def _finish(self, code, mode):
-    """The run's messages (messages.json) as operator messages, or its error."""
+    """The messages of the run's last step (``analyse`` or ``enter``) as operator messages, or its error."""
     run = getattr(self, "pige_run", None)
     self.pige_run = None
     if run is None:
         return f"PIGE {code}: the cycle did not run (no run folder)"
-    try:
-        with open(os.path.join(run, "messages.json"), encoding="utf-8") as f:
-            messages = json.load(f)
-        lines, error = list(messages["lines"]), messages.get("error")
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        where = os.path.relpath(run, CONFIG)
-        return f"PIGE {code}: the run left no readable result, nothing changed (log {where}): {exc}"
-    for line in lines:
-        _message(line)
+    result = _read_messages(run, "enter" if mode == "enter" else "analyse")
+    if result is None:
+        return f"PIGE {code}: the run left no readable result, nothing changed (log {os.path.relpath(run, CONFIG)})"
+    for line in result["lines"]:
+        _message(str(line))
+    error = result.get("error")
     if error:
-        return error.encode("utf-8")[:MAX_MESSAGE].decode("utf-8", "ignore")
+        return str(error).encode("utf-8")[:MAX_MESSAGE].decode("utf-8", "ignore")
     return INTERP_OK
 
 

@@ -1,4 +1,4 @@
-"""What the operator reads: the run's operator messages (``messages.json``) and its log (``log.txt``).
+"""What the operator reads: a step's operator messages (``<step>.messages.json``) and the run's log (``log.txt``).
 
 LinuxCNC carries an operator message of at most 254 bytes (``LINELEN``, NUL included), so a result is a few lines,
 each :func:`pack`-ed under that, most important first; the log holds everything (the stages' own output).  The
@@ -56,13 +56,14 @@ def value_text(value: float, std: float | None = None, decimals: int = 2) -> str
     return text if std is None or not math.isfinite(std) else f"{text}±{std:.{decimals}f}"
 
 
-def write_messages(run: Path, messages: RunMessages) -> None:
-    """``messages.json`` of the run (written last: the remap reads it once the step has ended)."""
+def write_messages(run: Path, step: str, messages: RunMessages) -> None:
+    """``<step>.messages.json`` of the run (written last: the remap reads it once the step has ended; a step killed
+    before leaves none)."""
     from pige_sym.files import atomic_write_text
 
     lines = [fits(line) for line in messages.lines]
     error = None if messages.error is None else fits(messages.error)
-    atomic_write_text(run / "messages.json", json.dumps({"lines": lines, "error": error}, indent=1) + "\n")
+    atomic_write_text(run / f"{step}.messages.json", json.dumps({"lines": lines, "error": error}, indent=1) + "\n")
 
 
 def relative_log(run: Path) -> str:

@@ -4,7 +4,7 @@ A step reads the configuration (:mod:`~pige_sym.cycle.context`) and the run's re
 (:mod:`~pige_sym.cycle.prepare`, :mod:`~pige_sym.cycle.analyse`, :mod:`~pige_sym.cycle.checkup_step`,
 :mod:`~pige_sym.cycle.enter`) and writes, last, the run's ``messages.json`` (:mod:`~pige_sym.cycle.messages`).  A
 refusal (any :class:`~pige_sym.errors.PigeError`: a guard, bad settings, a stage's own refusal) is written there as
-the operator error, exit status 1; a crash leaves no ``messages.json`` (the remap then names the step's output).
+the operator error, exit status 1; a crash or a kill leaves none (the remap then names the step's output).
 
 Every step changes nothing before its end: the values, the values file, the proposal, the journal and the history
 are written only once everything they hold has been computed.  ``status.txt`` says which stage is running (the
@@ -73,7 +73,7 @@ def run_step(step: str, run: Path, *, live: bool = True) -> int:
         messages = RunMessages(error=f"PIGE {code} refused, nothing changed (log {relative_log(run)}): {exc}")
         log.add("refused", str(exc))
     status(run, f"{step} done")
-    write_messages(run, messages)
+    write_messages(run, step, messages)
     return 1 if messages.error else 0
 
 

@@ -44,7 +44,7 @@ class CycleSim:
     @property
     def runs(self) -> list[Path]:
         """The run folders in the order they were made."""
-        return sorted((self.sim.cfg / "pige_cycle" / "runs").iterdir(), key=lambda p: p.stat().st_mtime)
+        return sorted((self.sim.cfg / "pige_cycle" / "runs").iterdir())  # named by their start time
 
     def run_of(self, index: int) -> dict[str, Any]:
         """The run's files: request, result, messages (what exists)."""
@@ -74,7 +74,7 @@ def install_options(m: Machine, poses: int) -> list[str]:
 
 
 def cycle_sim(root: Path, key: str, *, kinematics: str = "stock", poses: int = 8,
-              table: TrueTable | None = None) -> CycleSim:
+              table: TrueTable | None = None, extra: list[str] | None = None) -> CycleSim:
     """A simulation of machine ``key`` with the cycle installed (module docstring)."""
     from pige_sym.codegen.targets.linuxcnc_pins import default_name
 
@@ -90,7 +90,7 @@ def cycle_sim(root: Path, key: str, *, kinematics: str = "stock", poses: int = 8
     compile_component(sim, component_source(m.code), COMPONENT_NAME)
     for name, source in components.items():
         compile_component(sim, source, name)
-    pige("cycle", "install", str(sim.ini), *install_options(m, poses), "--force", cwd=sim.cfg)
+    pige("cycle", "install", str(sim.ini), *install_options(m, poses), *(extra or []), "--force", cwd=sim.cfg)
     module = default_name(m.code) if kinematics == "pige" else TRT_MODULE[m.kind]
     if kinematics == "pige":
         pins = [f"{module}.{n.lower()}" for n in m.pige]

@@ -22,6 +22,15 @@ idle again; ``hal`` runs ``halcmd`` commands; ``read`` reads pins.  ``clock`` (a
 that counts simulated seconds: the step's simulated time is its change.  A step that raises an error
 message stops the job.  The result holds per step its wall time, the error channel's messages (kind,
 text), the readings, and the final joint and axis positions.
+
+Steps for runs that are meant to be interrupted or refused (tests/linuxcnc/test_linuxcnc_cycle.py):
+``mdi_start`` issues one MDI line and returns once the interpreter has taken it; ``wait_for`` waits until a file
+exists (and holds ``contains``) or a pin reaches ``at_least``; ``abort`` is the GUI's Esc (task abort), ``estop``
+the E-stop button and ``machine_on`` its reset (the joints stay homed); ``kill`` sends SIGKILL to the process whose
+id a file holds; ``idle`` waits for the interpreter and motion to rest; ``files`` returns the SHA-256 of every file
+under a folder.  A ``glob`` finds only files written since the last ``mdi_start``.  A step with ``"allow_error":
+true`` records the errors that arrive while it runs instead of stopping the job; errors outside such steps make the
+job fail.  ``label`` (any step) comes back with its result.
 """
 
 from __future__ import annotations
@@ -51,6 +60,7 @@ class Driver:
         self.err = linuxcnc.error_channel()
         self.messages: list[list[str]] = []
         self.tolerate = False  # a step that expects errors records them instead of stopping the job
+        self.started = 0.0  # when the last mdi_start was issued: a glob finds only files written since
         self.hal_component = hal.component("pige-driver")  # hal.get_value needs a component of this process
         self.hal_component.ready()
 
@@ -121,6 +131,7 @@ class Driver:
     def mdi_start(self, step: dict) -> dict:
         """One MDI line, not waited for: returns once the interpreter has left idle (or 10 s)."""
         self.mode(linuxcnc.MODE_MDI)
+        self.started = time.time()
         self.cmd.mdi(step["line"])
         self.cmd.wait_complete(10)
         try:
@@ -134,7 +145,7 @@ class Driver:
         ``at_least``."""
         def done(_s) -> bool:
             if "file" in step or "glob" in step:
-                path = step["file"] if "file" in step else _newest(step["glob"])
+                path = step["file"] if "file" in step else _newest(step["glob"], self.started)
                 if path is None or not os.path.isfile(path):
                     return False
                 with open(path, errors="replace") as f:
@@ -169,7 +180,7 @@ class Driver:
     def kill(self, step: dict) -> dict:
         """SIGKILL to the process whose id the file ``pid_file`` (or the newest match of ``pid_glob``) holds: a
         process of this run, named by its id."""
-        path = step["pid_file"] if "pid_file" in step else _newest(step["pid_glob"])
+        path = step["pid_file"] if "pid_file" in step else _newest(step["pid_glob"], self.started)
         with open(path) as f:
             pid = int(f.read().split()[0])
         os.kill(pid, signal.SIGKILL)
@@ -214,8 +225,9 @@ class Driver:
                 "current_line": self.stat.current_line}
 
 
-def _newest(pattern: str) -> str | None:
-    found = glob.glob(pattern)
+def _newest(pattern: str, since: float) -> str | None:
+    """The newest file matching ``pattern`` written since ``since`` (seconds since the epoch), or None."""
+    found = [f for f in glob.glob(pattern) if os.path.getmtime(f) >= since - 0.5]
     return max(found, key=os.path.getmtime) if found else None
 
 
@@ -238,7 +250,7 @@ def run(job: dict) -> dict:
                 res = getattr(drv, "idle_step" if step["op"] == "idle" else step["op"])(step)
             drv.drain()
             res |= {"op": step["op"], "wall_s": time.monotonic() - t,
-                    "messages": drv.messages[first:]}
+                    "messages": drv.messages[first:], "label": step.get("label")}
             if not drv.tolerate:
                 unexpected += [m for m in drv.messages[first:] if m[0] == "error"]
             drv.tolerate = False
