@@ -96,7 +96,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sub = p.add_subparsers(dest="cycle_command", metavar="ACTION", parser_class=type(p))
     sub.required = True
     _register_install(sub)
-    st = sub.add_parser("step", help="one step of a running cycle (LinuxCNC calls it; not for the command line)")
+    st = sub.add_parser("step", help="one step of a running cycle (LinuxCNC calls it; not for the command line)",
+                        description="One step of a running cycle: LinuxCNC's remap runs it in a process of its own "
+                                    "(docs/linuxcnc-cycle.md); --no-hal runs it at a desk on the values file.",
+                        epilog="example: a dry run of a run folder the remap made\nexamples:\n"
+                               "  pige cycle step prepare --run pige_cycle/runs/20261128-120000-M451-check --no-hal",
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
     st.add_argument("step", choices=("prepare", "analyse", "enter"))
     st.add_argument("--run", required=True, help="the run's folder (pige_cycle/runs/<id>)")
     st.add_argument("--no-hal", action="store_true", help="read the values file, not the running HAL, and set no "
@@ -110,7 +115,14 @@ def _register_install(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("install", help="add M451/M452 to a LinuxCNC configuration (a diff; --force writes)",
                        description="Add the cycle to the LinuxCNC configuration INI: the remaps, their procedures "
                                    "and Python, the values file, the settings, the history's location "
-                                   "(docs/linuxcnc-cycle.md).  Without --force: the diff, nothing written.")
+                                   "(docs/linuxcnc-cycle.md).  Without --force: the diff, nothing written.",
+                       epilog="examples:\n"
+                              "  pige cycle install xyzac-trt.ini --sphere 20,10,15 --sphere-radius 6.35 \\\n"
+                              "      --stylus-radius 1.5 --stylus-tool 9 --stylus-length 30\n"
+                              "  pige cycle install my.ini --sphere 100,20,60 --sphere-radius 12.7 --stylus-radius 1.5 "
+                              "\\\n      --stylus-tool 99 --stylus-length 120 --kinematics pige --machine-id DMU50-2 "
+                              "--force",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("ini", metavar="INI", help="the configuration's INI file")
     p.add_argument("--sphere", required=True, metavar="X,Y,Z",
                    help="the sphere centre in machine coordinates, every rotary axis at 0 [mm]")

@@ -115,6 +115,7 @@ def plan_install(ini: Path, opts: InstallOptions) -> InstallPlan:
     """
     from pige_sym.files import read_input_text
 
+    ini = Path(ini).absolute()
     text = read_input_text(ini, what="INI file")
     doc = parse_ini(text, str(ini))
     if "RS274NGC" not in doc.sections:

@@ -80,13 +80,13 @@ def cycle_sim(root: Path, key: str, *, kinematics: str = "stock", poses: int = 8
 
     m = MACHINES[key]
     table = table or m.true_table()
-    extra, components = [], {}
+    changes, components = [], {}
     if kinematics == "pige":
         name = default_name(m.code)
         pige("gen", "--target", "linuxcnc", m.code, "--out", str(root / "kins"), "--force", cwd=root)
         components[name] = (root / "kins" / f"{name}.comp").read_text()
-        extra = kinematics_changes(m.kind, name, component_lines(m, name))
-    sim = make_sim(root, m.kind, table.hal_lines(), extra)
+        changes = kinematics_changes(m.kind, name, component_lines(m, name))
+    sim = make_sim(root, m.kind, table.hal_lines(), changes)
     compile_component(sim, component_source(m.code), COMPONENT_NAME)
     for name, source in components.items():
         compile_component(sim, source, name)
