@@ -86,8 +86,10 @@ def analyse_checkup(ctx: Context, req: Request, run: Path, log: RunLog) -> RunMe
                     None if i.limit is None else i.limit.half_width, bool(i.limit and i.limit.outside))
             for i in result.items]
     flagged = [i.name for i in result.items if i.limit is not None and i.limit.outside]
-    on = (f"({', '.join(flagged)} outside their control limits)" if flagged else "against the control limits and the "
-          "tolerances")
+    out = [i.name for i in result.items if i.status in ("fail", "undecided")]
+    on = (f"({', '.join(out)} not shown within the tolerance)" if result.verdict == "out" else
+          f"({', '.join(flagged)} outside their control limits)" if flagged else
+          "against the control limits and the tolerances")
     res = RunResult(req.code, req.mode, run.name, ctx.setup.module, m.n_rows, int(m.optional["n_samples"].sum()),
                     r_eff, stated, rows, result.verdict, on, in_force_list(ctx), result.run_id, proposal,
                     beyond_limit(proposal.entries, ctx.settings.limits) if proposal else [],

@@ -61,6 +61,7 @@ class Driver:
         self.messages: list[list[str]] = []
         self.tolerate = False  # a step that expects errors records them instead of stopping the job
         self.started = 0.0  # when the last mdi_start was issued: a glob finds only files written since
+        self.at_start: dict[str, float] = {}  # the pins it was told to watch, as they were then
         self.hal_component = hal.component("pige-driver")  # hal.get_value needs a component of this process
         self.hal_component.ready()
 
@@ -132,6 +133,7 @@ class Driver:
         """One MDI line, not waited for: returns once the interpreter has left idle (or 10 s)."""
         self.mode(linuxcnc.MODE_MDI)
         self.started = time.time()
+        self.at_start = {pin: hal.get_value(pin) for pin in step.get("watch", [])}
         self.cmd.mdi(step["line"])
         self.cmd.wait_complete(10)
         try:
@@ -142,7 +144,7 @@ class Driver:
 
     def wait_for(self, step: dict) -> dict:
         """Until ``file`` (or the newest match of ``glob``) exists, holding ``contains`` when given, or ``pin`` >=
-        ``at_least``."""
+        ``at_least``, or ``pin`` has grown by ``increase`` since the last ``mdi_start`` (which ``watch``-ed it)."""
         def done(_s) -> bool:
             if "file" in step or "glob" in step:
                 path = step["file"] if "file" in step else _newest(step["glob"], self.started)
@@ -150,6 +152,8 @@ class Driver:
                     return False
                 with open(path, errors="replace") as f:
                     return step.get("contains", "") in f.read()
+            if "increase" in step:
+                return hal.get_value(step["pin"]) >= self.at_start[step["pin"]] + step["increase"]
             return hal.get_value(step["pin"]) >= step["at_least"]
         what = step.get("file", step.get("glob", step.get("pin")))
         self.wait(done, step.get("timeout", 600), f"wait for {what}")

@@ -43,6 +43,8 @@ from lcnc_harness import RunResult, run_sim
 pytestmark = pytest.mark.linuxcnc
 LOOPS = [("AC", "stock"), ("BC", "stock"), ("AC", "pige"), ("BC", "pige")]
 WARM = {"EX0C": 5.0, "EZ0A": 5.0}
+#: the probe's trips until the second logged contact: the three confirming contacts before the log opens, then two
+LOGGED = 5
 
 
 def loop_steps(cs: CycleSim, from_program: bool) -> list[dict[str, Any]]:
@@ -88,11 +90,11 @@ def guard_steps(cs: CycleSim) -> list[dict[str, Any]]:
                   {"op": "kill", "pid_glob": runs + "/analyse.pid", "allow_error": True},
                   {"op": "idle", "timeout": 300, "allow_error": True}),
             {"op": "mdi", "lines": ["G0 Z61"], "label": "alive"},
-            *case("esc", {"op": "mdi_start", "line": "M451 P0"},
-                  {"op": "wait_for", "glob": runs + "/probe_log.txt", "timeout": 600},
+            *case("esc", {"op": "mdi_start", "line": "M451 P0", "watch": ["ptt.trips"]},
+                  {"op": "wait_for", "pin": "ptt.trips", "increase": LOGGED, "timeout": 600},
                   {"op": "abort", "allow_error": True}, {"op": "idle", "timeout": 300, "allow_error": True}),
-            *case("estop", {"op": "mdi_start", "line": "M451 P0"},
-                  {"op": "wait_for", "glob": runs + "/probe_log.txt", "timeout": 600},
+            *case("estop", {"op": "mdi_start", "line": "M451 P0", "watch": ["ptt.trips"]},
+                  {"op": "wait_for", "pin": "ptt.trips", "increase": LOGGED, "timeout": 600},
                   {"op": "estop", "allow_error": True}, {"op": "machine_on", "allow_error": True},
                   {"op": "idle", "timeout": 300, "allow_error": True}),
             {"op": "mdi", "lines": ["G0 Z61"], "label": "alive"}]
