@@ -367,6 +367,9 @@ def test_the_nc_rewrite_refuses_the_controllers_options(tmp_path, capsys) -> Non
     code, _, err = run(capsys, "compensate", program, "--params", params_file(tmp_path), "--out", tmp_path / "o.ngc",
                        "--machine-axis", "C=C1")
     refused_in_one_line(code, err, "--machine-axis goes with --controller")
+    code, _, err = run(capsys, "compensate", program, "--params", params_file(tmp_path), "--out", tmp_path / "o.ngc",
+                       "--travel", "A=-30:30")
+    refused_in_one_line(code, err, "--travel goes with --controller")
     assert not (tmp_path / "o.ngc").exists()
 
 

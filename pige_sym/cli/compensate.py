@@ -85,7 +85,7 @@ def _run(args: argparse.Namespace) -> int:
     current = _current(args)
     max_mm, max_deg = _max_change(args.max_change)
     if args.controller:
-        options = _controller_options(args, params, current, (max_mm, max_deg))
+        options = _controller_options(args, current, (max_mm, max_deg))
         check_before_writing(params, args.controller, options=options)  # before the values are weighed
         entered = entered_for_controller(params, args.enter, _travel(args.travel, params.machine))
         check_before_writing(entered, args.controller, options=options)
@@ -134,14 +134,15 @@ def _given(args: argparse.Namespace) -> list[str]:
 
 
 def _no_controller_options(args: argparse.Namespace) -> None:
-    """The NC rewrite reads none of the controllers' options (``--current``, ``--comp-dir``: their own messages)."""
-    extra = [o for o in _given(args) if o not in ("--current", "--comp-dir")]
+    """The NC rewrite reads none of the controllers' options (``--current``, ``--comp-dir``: their own messages), nor
+    ``--travel`` (it judges the program's own poses)."""
+    extra = [o for o in _given(args) if o not in ("--current", "--comp-dir")] + (["--travel"] if args.travel else [])
     if extra:
         raise InputError(f"{extra[0]} goes with --controller (the controller's entries), not with the NC rewrite: "
                          "leave it out, or give --controller")
 
 
-def _controller_options(args: argparse.Namespace, params: Any, current: Any, max_change: tuple[float, float]) -> Any:
+def _controller_options(args: argparse.Namespace, current: Any, max_change: tuple[float, float]) -> Any:
     """The options of ``--controller`` checked (each read by that controller, given once, within its bounds)."""
     from pige_sym.compensation.controllers import ControllerOptions, check_options
     from pige_sym.compensation.controllers.entry_checks import ChangeLimits

@@ -26,7 +26,8 @@ The trim of a rotary joint is ``−e`` (:mod:`.positioning`: the axis stands at 
 joint's commanded angle increasing.  Joints: 0 X, 1 Y, 2 Z, then the rotary axes in letter order, as in
 ``xyzac-trt-kins`` / ``xyzbc-trt-kins`` (``[TRAJ]COORDINATES = XYZAC``) and in pige's kinematics component.
 A full-turn axis' table covers as many whole turns around 0 as 256 entries allow (its map repeats every
-360°); a tilt axis' table is its grid.
+360°); a tilt axis' table is its grid.  The 256 entries are checked before any value is weighed
+(:func:`check_format`), every trim against ``--max-change`` before a file is written (:mod:`..entry_checks`).
 """
 
 from __future__ import annotations

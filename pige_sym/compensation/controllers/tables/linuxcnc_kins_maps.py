@@ -9,7 +9,9 @@ its reversal; the direction of approach comes from the joint's velocity command,
 Every slot of every node used gets a line: a motion the file has no map of, or a grid angle without a value, is
 set to 0 with a comment (nothing corrected there, as the NC rewrite does), so no value set before stays in force.
 The grid is set to 0 nodes first and to its size last, so a running machine never sees half a map.  A grid that is
-not uniform, or larger than the component's ``MAP_NODES``, is refused with the reason.
+not uniform, or larger than the component's ``MAP_NODES``, is refused with the reason, before any value is weighed
+(:func:`check_format`); every value is held to ``--max-change`` in its unit (µm, µrad) before a line is printed
+(:mod:`..entry_checks`).
 """
 
 from __future__ import annotations
