@@ -103,7 +103,7 @@ def parse_axis_ranges(items: list[str] | None, what: str, axes: tuple[str, ...],
         axis = axis.upper()
         lo_text, colon, hi_text = span.partition(":")
         if not eq or axis not in axes:
-            raise InputError(f"{what} {item!r}: give AXIS=MIN:MAX for a rotary axis ({', '.join(axes)}), e.g. "
+            raise InputError(f"{what} {item!r}: give AXIS=lo:hi for a rotary axis ({', '.join(axes)}), e.g. "
                              f"{example}")
         if axis in out:
             raise InputError(f"{what} {axis} is given twice: give each axis once")
@@ -111,7 +111,7 @@ def parse_axis_ranges(items: list[str] | None, what: str, axes: tuple[str, ...],
         if not colon or low is None or high is None or not (-max_abs <= low < high <= max_abs) or (
                 max_span is not None and high - low > max_span):
             span_text = f", at most {max_span:g} apart" if max_span is not None else ""
-            raise InputError(f"{what} {item!r}: give AXIS=MIN:MAX in degrees, MIN < MAX within ±{max_abs:g}"
+            raise InputError(f"{what} {item!r}: give AXIS=lo:hi in degrees, lo < hi within ±{max_abs:g}"
                              f"{span_text}, e.g. {example}")
         out[axis] = (low, high)
     return out

@@ -272,11 +272,16 @@ def test_the_weighing_of_a_singular_covariance_is_the_limit_of_regular_ones() ->
 
 
 def test_a_map_range_beyond_a_turn_is_refused(capsys) -> None:
+    """plan --map-range A=0:1e308 raised ValueError ("Maximum allowed size exceeded"); an axis given twice kept the
+    last (--limits likewise)."""
     sphere = ["--instrument", "sphere-probe", "--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius",
               "1.5", "--map", "C,A"]
     for given, said in (("A=0:1e308", "within ±360"), ("A=0:30,A=0:60", "--map-range A is given twice")):
         code, _, err = run(capsys, "plan", *sphere, "--map-range", given)
         refused_in_one_line(code, err, "--map-range", said)
+    for given, said in (("A=0:1e308", "within ±720"), ("A=0:30,A=0:60", "--limits A is given twice")):
+        code, _, err = run(capsys, "plan", "--points", "10", "--limits", given, "--out", "never.csv")
+        refused_in_one_line(code, err, "--limits", said)
 
 
 # -------------------------------------------------------------------------------------- 3. bad input refused
