@@ -166,8 +166,11 @@ def full_proposal(ctx: Context, req: Request, run: Path, result: Any, log: RunLo
                  "after": after.to_dict() if after else None,
                  "probed": probed_prediction(params, m_angles, {n: v for n, v in entered.values.items() if n in held})}
     if ctx.setup.kinematics == "stock":
-        log.add("pige compensate --controller linuxcnc (the values in force as --current)",
-                format_controller(entered, "linuxcnc", current=hal_config(ctx)))
+        try:
+            text = format_controller(entered, "linuxcnc", current=hal_config(ctx))
+        except InputError as exc:  # a change beyond --max-change: the proposal says so, M451 P2 refuses it
+            text = f"refused: {exc}"
+        log.add("pige compensate --controller linuxcnc (the values in force as --current)", text)
     entries = proposed_values(ctx.setup, ctx.in_force, value_changes(ctx, entered))
     not_entered = [f"{n} {entered.values.get(n, 0.0):+.3g}" for n in result.parameters if n not in held]
     created = datetime.now(timezone.utc).isoformat(timespec="seconds")
