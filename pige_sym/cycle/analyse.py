@@ -46,9 +46,13 @@ def prepared_info(ctx: Context, run: Path) -> dict[str, Any]:
     return dict(info)
 
 
-def import_log(run: Path, log: RunLog) -> Any:
-    """``pige import-probe`` of the run's probe log: the measurement."""
+def import_log(run: Path, req: Request, log: RunLog) -> Any:
+    """``pige import-probe`` of the run's probe log: the measurement, dated when the run started and named by the run
+    (``date``, ``cycle_run`` metadata: the history's time of the run, and two runs that logged the same contacts, as
+    an exact simulation does, are still two files)."""
+    from pige_sym.measurements.probe_import import verify_written
     from pige_sym.measurements.rtest import read_measurement
+    from pige_sym.measurements.rtest_writer import write_measurement
 
     status(run, "import")
     argv = ["import-probe", str(run / "probe_log.txt"), "--format", "linuxcnc", "--program", str(run / "program.ngc"),
@@ -57,7 +61,11 @@ def import_log(run: Path, log: RunLog) -> Any:
     log.add("pige " + " ".join(argv), out)
     if code != 0:
         raise InputError(f"pige import-probe refused the probe log: {out.strip().splitlines()[-1] if out else code}")
-    return read_measurement(run / "probe.csv")
+    csv = run / "probe.csv"
+    m = read_measurement(csv)
+    m.metadata["date"], m.metadata["cycle_run"] = req.started, run.name
+    write_measurement(m, csv, verify=verify_written(csv, m))
+    return read_measurement(csv)
 
 
 def radius_guard(ctx: Context, m: Any) -> tuple[float, float]:
@@ -197,7 +205,7 @@ def analyse(ctx: Context, req: Request, run: Path, log: RunLog) -> RunMessages:
     from pige_sym.cycle.render import render_stopped
 
     info = prepared_info(ctx, run)
-    m = import_log(run, log)
+    m = import_log(run, req, log)
     try:
         r_eff, stated = radius_guard(ctx, m)
     except Stopped as exc:
@@ -260,10 +268,4 @@ def record(ctx: Context, req: Request, run: Path, info: dict[str, Any], res: Run
 
 
 def record_stopped(ctx: Context, req: Request, run: Path, info: dict[str, Any], why: str, log: RunLog) -> None:
-    from datetime import datetime, timezone
-
-    from pige_sym.cycle.journal import JournalEntry, append_entry
-
-    log.add("stopped", why)
-    append_entry(ctx.layout, JournalEntry(datetime.now(timezone.utc).isoformat(timespec="seconds"), run.name, req.code,
-                                          req.mode, "stopped", info["fingerprint"]["all"]))
+    log.add("stopped", why)  # the run's folder holds it; the journal, the history and the proposal stay as they were

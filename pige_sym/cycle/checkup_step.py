@@ -74,7 +74,7 @@ def analyse_checkup(ctx: Context, req: Request, run: Path, log: RunLog) -> RunMe
     from pige_sym.cycle.render import render_run, render_stopped
 
     info = prepared_info(ctx, run)
-    m = import_log(run, log)
+    m = import_log(run, req, log)
     try:
         r_eff, stated = radius_guard(ctx, m)
     except Stopped as exc:

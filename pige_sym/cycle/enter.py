@@ -34,8 +34,7 @@ def enter(ctx: Context, req: Request, run: Path, log: RunLog) -> RunMessages:
     why = refusal(proposal, datetime.now(timezone.utc), ctx.fingerprint(), ctx.settings.limits, ctx.setup,
                   ctx.in_force)
     if why is not None or proposal is None:
-        _journal(ctx, req, run, info, "refused")
-        log.add("refused", str(why))
+        log.add("refused", str(why))  # nothing written but the run's own folder
         return RunMessages(error=f"PIGE M451 P2 refused, nothing changed (log {relative_log(run)}): {why}")
     if not ctx.live:
         raise InputError("halcmd does not reach the running HAL: the values cannot take effect now")

@@ -1,10 +1,11 @@
-"""``pige_cycle/journal.jsonl``: one JSON object per line, one line per run of the cycle and per entry.
+"""``pige_cycle/journal.jsonl``: one JSON object per line, one line per measuring run of the cycle and per entry.
 
-A line is appended at the end of a step that measured (``outcome: measured``, with the history's run id), stopped
-(``stopped``: a guard, nothing stored) or entered values (``entered``, with the run whose proposal was entered and
-the configuration's fingerprint after).  The journal says what the history cannot: which configuration each run
-was measured with.  ``M452`` reads it (:func:`checkup_basis`): a check-up compares with the last full calibration
-only while the configuration is the one that calibration was made with, less the check-ups' own entries.
+A line is appended at the end of a step that measured (``outcome: measured``, with the history's run id) or entered
+values (``entered``, with the run whose proposal was entered and the configuration's fingerprint after); a run a
+guard stopped or an entry refused leaves its own folder only.  The journal says what the history cannot: which
+configuration each run was measured with.  ``M452`` reads it (:func:`checkup_basis`): a check-up compares with the
+last full calibration only while the configuration is the one that calibration was made with, less the check-ups'
+own entries.
 """
 
 from __future__ import annotations
