@@ -58,8 +58,8 @@ def restore_procedure(switch: Switch | None) -> str:
 def on_abort_procedure() -> str:
     """``[RS274NGC]ON_ABORT_COMMAND``: after Esc or an E-stop, no step of pige still running, and the kinematics mode
     the cycle found."""
-    return "\n".join([HEADER.format(what="after an abort"), f"o<{ON_ABORT_SUB}> sub", "o<pige_cycle_abort> call",
-                      f"o<{RESTORE_SUB}> call", f"o<{ON_ABORT_SUB}> endsub", "M2", ""])
+    return "\n".join([HEADER.format(what="after an abort"), f"o<{ON_ABORT_SUB}> sub", f"o<{RESTORE_SUB}> call",
+                      "o<pige_cycle_abort> call", f"o<{ON_ABORT_SUB}> endsub", "M2", ""])
 
 
 def placeholder_procedure() -> str:

@@ -69,13 +69,16 @@ class Proposal:
 
 def proposed_values(setup: KinematicsSetup, in_force: dict[str, float],
                     changes: dict[str, float]) -> list[ProposedValue]:
-    """The setup's pins with their change (pin -> change in its unit), in the setup's order; zero changes left out."""
+    """The setup's pins with their change (pin -> change in its unit), in the setup's order, each new value as it is
+    written (:func:`~pige_sym.cycle.kinematics.format_value`); changes below that resolution left out."""
     out = []
     for p in setup.pins:
         d = changes.get(p.pin, 0.0)
         if d != 0.0:
             old = in_force[p.pin]
-            out.append(ProposedValue(p.pin, p.target, "sets" if p.signal else "setp", old, old + d, p.unit, p.holds))
+            new = float(format_value(old + d, p.unit))  # the value halcmd and the values file get
+            if new != old:
+                out.append(ProposedValue(p.pin, p.target, "sets" if p.signal else "setp", old, new, p.unit, p.holds))
     return out
 
 
