@@ -1,9 +1,11 @@
 """Every shell block of every docs/*.md runs as pasted.
 
 Each page's ```` ```sh ```` (or ```` ```bash ````) blocks are taken from the page itself, in order, and run by
-bash as one script (one shell, as a reader pasting them in turn), in a fresh folder laid out like the
-checkout's root: links to ``.venv``, ``examples`` and ``tests``, and ``.venv/bin`` on ``PATH`` (the pages say:
-from the checkout's root with ``pige`` on your PATH). Every command must succeed: the script
+bash as one script (one shell, as a reader pasting them in turn), in a scratch folder laid out like the
+checkout's root: a link to ``.venv``, copies of ``examples`` and ``tests``, and ``.venv/bin`` on ``PATH`` (the
+pages say: from the checkout's root with ``pige`` on your PATH); history, kernels and bytecode go to scratch
+folders too (:func:`testdata.scratch_checkout`), so the blocks leave nothing in the checkout, and the test checks
+that they did not. Every command must succeed: the script
 (:func:`testdata.strict_script`) checks the status of every top-level command, so ``a && b`` fails when ``a``
 fails (``set -e`` alone lets it pass), and a failure names the page and line.
 
@@ -19,7 +21,6 @@ out with ``…``, not change a number).
 
 from __future__ import annotations
 
-import os
 import re
 import subprocess
 import sys
@@ -28,7 +29,7 @@ from pathlib import Path
 
 import pytest
 
-from testdata import strict_script
+from testdata import changed_files, checkout_files, scratch_checkout, strict_script
 
 ROOT = Path(__file__).resolve().parents[1]
 NOT_RUN = re.compile(r"^<!--\s*not-run:\s*(\S.*?)\s*-->$")
@@ -111,21 +112,23 @@ def pages() -> list[Path]:
     return [p for p in sorted((ROOT / "docs").glob("*.md")) if shell_blocks(p.read_text(encoding="utf-8"))]
 
 
-def run_page(page: Path, folder: Path) -> subprocess.CompletedProcess[str]:
-    """Run a page's runnable blocks and its quoted ``$`` commands in page order in ``folder`` (laid out like the
-    checkout's root); each one's output starts with a line :data:`MARK` of its first line number."""
-    venv = Path(sys.executable).parent.parent
-    for name, target in ((".venv", venv), ("examples", ROOT / "examples"), ("tests", ROOT / "tests")):
-        (folder / name).symlink_to(target)
+def run_page(page: Path, folder: Path, pycache: Path) -> subprocess.CompletedProcess[str]:
+    """Run a page's runnable blocks and its quoted ``$`` commands in page order in ``folder`` (a scratch layout of
+    the checkout's root, :func:`testdata.scratch_checkout`; bytecode under ``pycache``); each one's output starts
+    with a line :data:`MARK` of its first line number."""
+    env = scratch_checkout(folder, pycache)
     text = page.read_text(encoding="utf-8")
     runs = sorted([(b.line, b.text) for b in shell_blocks(text) if b.not_run is None]
                   + [(q.line, q.command) for q in quotes(text) if q.command is not None])
-    script = "export PATH=\"$PWD/.venv/bin:$PATH\"\n" + strict_script(
+    script = strict_script(
         [x for line, run in runs for x in ((page.name, line, f"echo '{MARK.format(line)}'"), (page.name, line, run))])
-    env = {k: v for k, v in os.environ.items() if k not in {"PIGE_HISTORY_DB", "PIGE_KERNEL_DIR"}}
-    env["PIGE_HISTORY_DB"] = str(folder / "history-default.db")  # never the user's own history
-    env["PIGE_KERNEL_DIR"] = str(folder / "kernels")
     return subprocess.run(["bash", "-c", script], cwd=folder, capture_output=True, text=True, timeout=900, env=env)
+
+
+@pytest.fixture(scope="module")
+def pycache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One bytecode folder for the pages this worker runs (pige compiled once, outside the checkout)."""
+    return tmp_path_factory.mktemp("docs-pycache")
 
 
 def test_blocks_and_markers_are_found() -> None:
@@ -179,11 +182,14 @@ def test_a_not_run_marker_gives_its_reason_and_most_blocks_run() -> None:
 
 
 @pytest.mark.parametrize("page", pages(), ids=lambda p: p.name)
-def test_every_shell_block_of_the_page_runs_as_pasted(page: Path, tmp_path: Path) -> None:
+def test_every_shell_block_of_the_page_runs_as_pasted(page: Path, tmp_path: Path, pycache: Path) -> None:
     if not (Path(sys.executable).parent / "pige").exists():
         pytest.skip("needs the pige console script (make venv)")
-    done = run_page(page, tmp_path)
+    before = checkout_files()
+    done = run_page(page, tmp_path, pycache)
     assert done.returncode == 0, done.stdout[-2000:] + "\n--- stderr ---\n" + done.stderr[-3000:]
+    assert not changed_files(before, checkout_files()), f"{page.name}'s blocks changed the checkout"
+    assert any(pycache.rglob("pige_sym/**/*.pyc")), "the blocks' bytecode did not go to the scratch folder"
     printed = dict(zip(map(int, re.findall(MARK.format(r"(\d+)"), done.stdout)),
                        re.split(MARK.format(r"\d+"), done.stdout)[1:], strict=True))
     for q in quotes(page.read_text(encoding="utf-8")):
