@@ -1,10 +1,8 @@
 """Outputs that do not depend on the processor (issue 46): every combination pige prints is canonical.
 
 Another processor or BLAS returns another basis of the same null space (any rotation within a cluster of equal
-eigenvalues, any signs) from a normal matrix that differs in its last bits.  :func:`another_processor` plays that
-part in-process: it wraps NumPy's ``eigh`` (the one eigen-solver pige's null spaces come from), adds symmetric noise
-of 1e-12 relative to the matrix it is given, flips the eigenvectors' signs at random and turns the eigenvectors
-of every cluster of eigenvalues within 1e-10 of the largest by a random rotation.  The commands must print the
+eigenvalues, any signs) from a normal matrix that differs in its last bits.  :func:`another_processor.another_processor`
+plays that part in-process (its module docstring).  The commands must print the
 same lines and write the same JSON: ``identify --projection x`` (the not-identifiable combinations of
 docs/guide.md), ``plan --map`` (the motions a grid angle does not see, docs/maps.md) and ``diagnose`` (the
 directions a candidate loses to the PIGEs).  On the code before issue 46 all three differ.
@@ -20,8 +18,6 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -30,41 +26,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from another_processor import another_processor
 from pige_sym.cli.main import main
 
 AC = "wC'A'bXYZ(C1)t"
-
-
-@contextmanager
-def another_processor(seed: int) -> Iterator[None]:
-    """NumPy's ``eigh`` as another processor and BLAS could answer (module docstring)."""
-    real = np.linalg.eigh
-    rng = np.random.default_rng(seed)
-
-    def eigh(a: Any, UPLO: str = "L") -> tuple[np.ndarray, np.ndarray]:  # noqa: N803 (NumPy's name)
-        a = np.asarray(a, dtype=float)
-        if a.ndim != 2:  # a stack (the held-out folds): each as one matrix
-            pairs = [eigh(m, UPLO) for m in a.reshape(-1, *a.shape[-2:])]
-            return (np.array([w for w, _ in pairs]).reshape(a.shape[:-1]),
-                    np.array([v for _, v in pairs]).reshape(a.shape))
-        noise = rng.standard_normal(a.shape)
-        w, v = real(a + 1e-12 * float(np.abs(a).max(initial=0.0)) * (noise + noise.T) / 2, UPLO)
-        v = v * rng.choice([-1.0, 1.0], size=w.size)
-        tol = 1e-10 * max(float(np.abs(w).max(initial=0.0)), 1e-300)
-        start = 0
-        for end in range(1, w.size + 1):
-            if end == w.size or w[end] - w[end - 1] > tol:
-                if end - start > 1:
-                    turn, _ = np.linalg.qr(rng.standard_normal((end - start, end - start)))
-                    v[:, start:end] = v[:, start:end] @ turn
-                start = end
-        return w, v
-
-    np.linalg.eigh = eigh  # type: ignore[assignment]
-    try:
-        yield
-    finally:
-        np.linalg.eigh = real
 
 
 @pytest.fixture(scope="module")

@@ -343,6 +343,7 @@ def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, mod
     basis = vec[:, keep] * s[:, None]
     null, traceless, half = _removed_directions(cand, vec[:, ~keep], s, gcc, separation(lam, ~keep))
     absorbed = coef @ null if null.size else np.zeros((model_w.shape[1], 0))
+    absorbed[:, traceless] = 0.0  # a direction without trace in the data: nothing absorbs it (coef·null is round-off)
 
     def describe() -> list[str]:
         return [_removed_sentence(cand, null[:, j], absorbed[:, j], bool(traceless[j]), model_names, model_units,
