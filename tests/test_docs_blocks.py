@@ -140,7 +140,8 @@ def run_page(page: Path, folder: Path, pycache: Path, processor: int | None = No
     answers eigen-problems as another processor could (``tests/processor_site``)."""
     env = scratch_checkout(folder, pycache)
     if processor is not None:
-        env["PYTHONPATH"] = str(folder / "tests" / "processor_site")
+        env["PYTHONPATH"] = os.pathsep.join(x for x in (str(folder / "tests" / "processor_site"),
+                                                         env.get("PYTHONPATH")) if x)
         env["PIGE_TEST_PROCESSOR_SEED"] = str(processor)
     text = page.read_text(encoding="utf-8")
     runs = sorted([(b.line, b.text) for b in shell_blocks(text) if b.not_run is None]
