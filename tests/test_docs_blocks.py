@@ -153,8 +153,10 @@ def run_page(page: Path, folder: Path, pycache: Path, processor: int | None = No
 
 @pytest.fixture(scope="module")
 def pycache(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One bytecode folder for the pages this worker runs (pige compiled once, outside the checkout)."""
-    return tmp_path_factory.mktemp("docs-pycache")
+    """One bytecode folder for the pages this worker runs (pige compiled once, outside the checkout): the
+    session's scratch ``PYTHONPYCACHEPREFIX`` when conftest set one, else a folder of this module's."""
+    session = os.environ.get("PYTHONPYCACHEPREFIX")
+    return Path(session) if session and Path(session).is_dir() else tmp_path_factory.mktemp("docs-pycache")
 
 
 def test_blocks_and_markers_are_found() -> None:

@@ -10,6 +10,7 @@ included, which ``set -e`` lets pass).  They must leave the checkout as it was.
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -35,7 +36,7 @@ def test_the_first_session_and_the_probe_demo_run_as_pasted(tmp_path) -> None:
     venv = Path(sys.executable).parent.parent
     if not (venv / "bin" / "pige").exists():
         pytest.skip("needs the pige console script (make venv)")
-    env = scratch_checkout(tmp_path, tmp_path / "pycache")
+    env = scratch_checkout(tmp_path, Path(os.environ.get("PYTHONPYCACHEPREFIX") or tmp_path / "pycache"))
     blocks = _blocks("## A first session") + _blocks("## Calibrating with a touch probe") + \
         _blocks("## Calibrating with a ballbar")
     assert len(blocks) >= 4
