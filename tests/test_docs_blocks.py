@@ -209,6 +209,22 @@ def test_a_not_run_marker_gives_its_reason_and_most_blocks_run() -> None:
                 assert SHELL_FENCE.match(after), (page.name, i + 1)
 
 
+def test_the_scratch_layout_keeps_what_the_blocks_write_out_of_the_checkout(tmp_path: Path) -> None:
+    if not (Path(sys.executable).parent / "pige").exists():
+        pytest.skip("needs the pige console script (make venv)")
+    before = checkout_files()
+    (tmp_path / "root").mkdir()
+    env = scratch_checkout(tmp_path / "root", tmp_path / "pycache")
+    text = ("echo x >> examples/tolerances.json\necho y > tests/new_file.txt\nrm tests/testdata.py\n"
+            "python -c 'import pige_sym.cli.main'\npige --help > /dev/null")
+    done = subprocess.run(["bash", "-c", strict_script([("page.md", 1, text)])], cwd=tmp_path / "root", env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert not changed_files(before, checkout_files())
+    assert (tmp_path / "root" / "tests" / "new_file.txt").exists()  # written into the copy
+    assert any((tmp_path / "pycache").rglob("pige_sym/cli/main.*.pyc"))  # the bytecode in the scratch prefix
+
+
 @pytest.mark.parametrize("page", pages(), ids=lambda p: p.name)
 def test_every_shell_block_of_the_page_runs_as_pasted(page: Path, tmp_path: Path, pycache: Path) -> None:
     if not (Path(sys.executable).parent / "pige").exists():

@@ -37,9 +37,13 @@ of the differences between processors, BLAS and summation orders in that matrix.
 *Rounding to what is determined.* Each coefficient keeps at most :data:`SIGNIFICANT` significant digits, and no
 digit that the round-off above could change by more than 1/:data:`MARGIN` of its unit (the bound of the angle
 carried through ``B = Q·Q_p⁻¹``: ``|δB| ≤ θ·(1 + |B|)·|Q_p⁻¹|``).  The printer shows 3 significant digits of
-these.  The text is then the same on every processor unless a number sits within round-off of a rounding or a
-threshold boundary (a singular value at ``NULL_RTOL``, a weight at ``PIVOT_RTOL``, a coefficient at a half
-unit of its last digit): about 1e-12 relative, so that a pair of runs differs once in ~10⁸ coefficients.
+these.  The text is then the same on every processor unless a number sits within round-off of a boundary: a
+singular value at ``NULL_RTOL`` or ``RANK_RTOL``, a weight at :data:`PIVOT_RTOL`, a term at :data:`DROP_RTOL`, or
+a coefficient at half a unit of its last kept digit.  With round-off of the assumed 1e-12 a kept digit changes
+with a probability below 2/:data:`MARGIN` per coefficient, and the 3 printed digits (rounded from the kept ones)
+about a thousand times less often; real differences between BLAS are nearer 1e-15.  An exact tie at such a
+boundary (a coefficient exactly ``x.xxxxx5`` in its 7th digit) is decided by round-off: no fixed rounding avoids
+that, and the structures of real machines (ratios of lever arms) have not produced one.
 """
 
 from __future__ import annotations
@@ -171,7 +175,7 @@ def canonical_basis(vectors: np.ndarray, scale: np.ndarray | None = None, *,
     b = q @ qp_inv  # (P, r): identity on the pivot rows
     b[pivots] = np.eye(len(pivots))
     b[np.abs(b) < DROP_RTOL * np.abs(b).max(axis=0)] = 0.0
-    theta = ROUNDOFF / max(separation, 1e-300)
+    theta = min(ROUNDOFF / max(separation, 1e-300), 1.0)  # the angle round-off may turn the subspace by [rad]
     delta = theta * (1.0 + np.linalg.norm(b, 2)) * np.linalg.norm(qp_inv, 2)
     ratio = scale[:, None] / scale[pivots][None, :]  # (P, r): parameter units of row k per unit of the pivot
     coef = b * ratio
