@@ -181,8 +181,9 @@ def test_optimise_enter_check_brings_the_tool_point_within_the_noise(cycle_runs,
     bound = after["expected"] + 4.0 * (after["p95"] - after["expected"]) / 1.645
     residuals = _held_residuals(cs, cs.run_of(3)["result"])
     print(f"{key}: true tool-point error at the {len(e_after)} probed poses: RMS {rms['before']:.3f} -> "
-          f"{rms['after']:.3f} um (max {e_before.max():.3f} -> {e_after.max():.3f}); predicted after {after['expected']:.3f} "
-          f"(95 % {after['p95']:.3f}), bound (4 std) {bound:.3f} um; remeasured held PIGEs in std: "
+          f"{rms['after']:.3f} um (max {e_before.max():.3f} -> {e_after.max():.3f}); predicted after "
+          f"{after['expected']:.3f} (95 % {after['p95']:.3f}), bound (4 std) {bound:.3f} um; remeasured held PIGEs in "
+          "std: "
           + ", ".join(f"{k} {v:+.2f}" for k, v in residuals.items())
           + f"; M451 P1 {optimise['wall_s']:.0f} s, P2 {enter['wall_s']:.1f} s, P0 {check['wall_s']:.0f} s wall")
     assert rms["after"] <= bound and rms["after"] < rms["before"] / 5
