@@ -10,7 +10,7 @@ Everything the cycle adds lives in one folder beside the INI, ``pige_cycle/``::
     pige_cycle/run/                 the current run's generated procedures (pige_cycle_probe/_restore.ngc)
     pige_cycle/runs/<id>/           one folder per run: request, program, probe log, results, messages, log
     pige_cycle/proposal.json        the last proposal (M451 P1, M452), entered by M451 P2
-    pige_cycle/journal.jsonl        one line per run and per entry
+    pige_cycle/journal.jsonl        one line per measuring run and per entry
     pige_cycle/history.db           the machine's history (default; ``--db`` names another)
 
 The configuration's own files are the INI, its HAL files, ``settings.json``, ``values.hal`` and the remap code;
