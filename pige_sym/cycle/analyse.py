@@ -25,12 +25,8 @@ from pige_sym.cycle.context import Context, Request
 from pige_sym.cycle.messages import RunMessages, relative_log
 from pige_sym.cycle.proposal import Proposal
 from pige_sym.cycle.results import PigeRow, RunResult
-from pige_sym.cycle.runtime import RunLog, pige_command, status
-from pige_sym.errors import InputError, PigeError
-
-
-class Stopped(PigeError):
-    """A guard stopped the run (nothing stored, nothing proposed)."""
+from pige_sym.cycle.steplog import RunLog, pige_command, status
+from pige_sym.errors import GuardStopped, InputError
 
 
 def prepared_info(ctx: Context, run: Path) -> dict[str, Any]:
@@ -69,12 +65,13 @@ def import_log(run: Path, req: Request, log: RunLog) -> Any:
 
 
 def radius_guard(ctx: Context, m: Any) -> tuple[float, float]:
-    """(radius found, radius stated) [mm]; :class:`Stopped` beyond the limit (module docstring)."""
+    """(radius found, radius stated) [mm]; :class:`~pige_sym.errors.GuardStopped` beyond the limit (module
+    docstring)."""
     s = ctx.settings
     found = float(m.metadata["r_eff_mm"].split()[0])
     stated = s.sphere_radius_mm + s.stylus_radius_mm
     if abs(found - stated) > s.limits.sphere_radius_mm:
-        raise Stopped(f"sphere radius found {found:.4f} mm, {found - stated:+.4f} from R + r = {stated:g} (limit "
+        raise GuardStopped(f"sphere radius found {found:.4f} mm, {found - stated:+.4f} from R + r = {stated:g} (limit "
                       f"±{s.limits.sphere_radius_mm:g}): dirt on the sphere or stylus, or a wrong one; clean them or "
                       "correct the radii in settings.json")
     return found, stated
@@ -208,7 +205,7 @@ def analyse(ctx: Context, req: Request, run: Path, log: RunLog) -> RunMessages:
     m = import_log(run, req, log)
     try:
         r_eff, stated = radius_guard(ctx, m)
-    except Stopped as exc:
+    except GuardStopped as exc:
         record_stopped(ctx, req, run, info, str(exc), log)
         return render_stopped(req.code, req.mode, str(exc), relative_log(run))
     result = identify(m, run, log)

@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 from pige_sym.cycle.analyse import (
-    Stopped,
     import_log,
     in_force_list,
     prepared_info,
@@ -29,7 +28,8 @@ from pige_sym.cycle.context import Context, Request
 from pige_sym.cycle.messages import RunMessages, relative_log
 from pige_sym.cycle.proposal import Proposal
 from pige_sym.cycle.results import PigeRow, RunResult
-from pige_sym.cycle.runtime import RunLog, status
+from pige_sym.cycle.steplog import RunLog, status
+from pige_sym.errors import GuardStopped
 
 
 def run_the_checkup(ctx: Context, req: Request, run: Path, corrected: bool, log: RunLog) -> Any:
@@ -77,7 +77,7 @@ def analyse_checkup(ctx: Context, req: Request, run: Path, log: RunLog) -> RunMe
     m = import_log(run, req, log)
     try:
         r_eff, stated = radius_guard(ctx, m)
-    except Stopped as exc:
+    except GuardStopped as exc:
         record_stopped(ctx, req, run, info, str(exc), log)
         return render_stopped(req.code, req.mode, str(exc), relative_log(run))
     result = run_the_checkup(ctx, req, run, bool(info["basis"]["corrected"]), log)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from pige_sym.cycle.context import Context, Request, read_context
 from pige_sym.cycle.messages import RunMessages, pack, relative_log
-from pige_sym.cycle.runtime import RunLog, status
+from pige_sym.cycle.steplog import RunLog, status
 from pige_sym.errors import InputError
 
 

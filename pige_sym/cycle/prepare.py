@@ -23,7 +23,7 @@ from pathlib import Path
 
 from pige_sym.cycle.context import Context, Request
 from pige_sym.cycle.messages import RunMessages
-from pige_sym.cycle.runtime import RunLog, pige_command, status
+from pige_sym.cycle.steplog import RunLog, pige_command, status
 from pige_sym.errors import InputError
 
 TOLERANCE_DEG = 5e-4
