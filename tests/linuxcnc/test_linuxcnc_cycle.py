@@ -225,7 +225,8 @@ def _unchanged(case: list[dict[str, Any]]) -> list[str]:
     """A guard case's files, pins and record (three steps before it, three after) the same; its errors."""
     before, after = case[:3], case[-3:]
     assert before[0]["files"] == after[0]["files"], "the configuration's files changed"
-    values = [{k: v for k, v in x["readings"][0].items() if k != "motion.switchkins-type"} for x in (before[1], after[1])]
+    values = [{k: v for k, v in x["readings"][0].items() if k != "motion.switchkins-type"}
+              for x in (before[1], after[1])]
     assert values[0] == values[1], "the pins changed"
     assert before[2]["files"] == after[2]["files"], "the cycle's record (proposal, journal, history) changed"
     return [t for x in case for kind, t in x["messages"] if kind == "error"]
@@ -271,8 +272,8 @@ def test_esc_or_e_stop_while_probing_changes_nothing(cycle_runs, label):
     print(f"{label}:", errors)
 
 
-@pytest.mark.xfail(strict=False, reason="pige_on_abort's M429 after an abort: the kinematics came back in every case of "
-                   "one full run and in none of the next (a race with task's abort?); docs/linuxcnc-cycle.md §6")
+@pytest.mark.xfail(strict=False, reason="pige_on_abort's M429 after an abort: the kinematics came back in every case "
+                   "of one full run and in none of the next (a race with task's abort?); docs/linuxcnc-cycle.md §6")
 @pytest.mark.parametrize("label", ["kill", "esc", "estop"])
 def test_after_an_abort_the_kinematics_mode_is_the_one_found(cycle_runs, label):
     _, run = cycle_runs["guards"]
