@@ -35,12 +35,12 @@ from pige_sym.constants import DEFAULT_BALL_MM, DEFAULT_MACHINE
 
 if TYPE_CHECKING:
     from pige_sym.compensation.parameters import CompensationParameters
+    from pige_sym.compensation.program import CompensationResult
     from pige_sym.diagnosis.joint import JointDiagnosis
     from pige_sym.diagnosis.results import DiagnosisResult
     from pige_sym.identification.joint import JointResult
     from pige_sym.identification.result import IdentificationResult
     from pige_sym.measurements.measurement import Measurement
-    from pige_sym.nc.compensate import CompensationResult
     from pige_sym.planning.plan import Plan
     from pige_sym.verdict.check import CheckResult
 
@@ -249,7 +249,7 @@ def identify_files(paths: Sequence[PathLike], *, with_zero: bool = False) -> Joi
     return identify_joint(read_files(paths), with_zero=with_zero)
 
 
-def diagnose_files(paths: Sequence[PathLike], *, progress: bool = False) -> JointDiagnosis:
+def diagnose_files(paths: Sequence[PathLike], *, progress: bool = False, exclude: Sequence[str] = ()) -> JointDiagnosis:
     """Diagnose several files of one machine (``pige diagnose F1 F2 ...``).
 
     Each R-test or probe file gets its own catalogue diagnosis; ballbar setups are checked for
@@ -262,6 +262,8 @@ def diagnose_files(paths: Sequence[PathLike], *, progress: bool = False) -> Join
     paths : sequence of path-like
     progress : bool
         Progress bars of the per-file diagnoses on stderr.
+    exclude : sequence of str
+        Catalogue ids the per-file diagnoses leave out (``pige diagnose --map``: the mapped axes' error motions).
 
     Returns
     -------
@@ -288,11 +290,11 @@ def diagnose_files(paths: Sequence[PathLike], *, progress: bool = False) -> Join
     from pige_sym.diagnosis.joint import diagnose_joint
     from pige_sym.measurements.sets import read_files
 
-    return diagnose_joint(read_files(paths), progress=progress)
+    return diagnose_joint(read_files(paths), progress=progress, exclude=exclude)
 
 
 def diagnose(data: Measurement | PathLike, *, candidates: Sequence[str] | None = None,
-             progress: bool = False) -> DiagnosisResult:
+             progress: bool = False, exclude: Sequence[str] = ()) -> DiagnosisResult:
     """Find, name and fit what the PIGE model misses (``pige diagnose``).
 
     Parameters
@@ -302,6 +304,8 @@ def diagnose(data: Measurement | PathLike, *, candidates: Sequence[str] | None =
         Restrict the search to these catalogue ids (default: the whole catalogue).
     progress : bool
         Show a progress bar on stderr.
+    exclude : sequence of str
+        Catalogue ids to leave out (``pige diagnose --map``: the mapped axes' one-harmonic error motions).
 
     Returns
     -------
@@ -319,7 +323,8 @@ def diagnose(data: Measurement | PathLike, *, candidates: Sequence[str] | None =
     """
     from pige_sym.diagnosis.diagnose import diagnose as run
 
-    return run(_measurement(data), candidates=None if candidates is None else list(candidates), progress=progress)
+    return run(_measurement(data), candidates=None if candidates is None else list(candidates), progress=progress,
+               exclude=exclude)
 
 
 def check(estimate: IdentificationResult | DiagnosisResult | JointDiagnosis | PathLike,
@@ -431,8 +436,8 @@ def compensate(program: PathLike,
     (1, 1)
     """
     from pige_sym.compensation.parameters import CompensationParameters, load_parameters, parameters_from_result
+    from pige_sym.compensation.program import compensate_nc
     from pige_sym.constants import DEFAULT_MAX_CHANGE_DEG, DEFAULT_MAX_CHANGE_MM
-    from pige_sym.nc.compensate import compensate_nc
     from pige_sym.nc.program_file import read_program
 
     text = read_program(program)

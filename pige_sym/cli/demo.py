@@ -165,9 +165,9 @@ def _analyse(args: argparse.Namespace, kern: Any, csv: Path, out: Path, pige: di
 def _compensate_and_report(args: argparse.Namespace, code: str, csv: Path, nc_path: Path, diag_json: Path,
                            out: Path) -> None:
     """Stages 7-8: the compensated test program, the controller corrections and the report."""
-    from pige_sym.compensation.controllers import format_controller
     from pige_sym.compensation.parameters import load_parameters
-    from pige_sym.nc.compensate import compensate_program
+    from pige_sym.compensation.program import compensate_program
+    from pige_sym.compensation.stage import format_controller
     from pige_sym.report import gather_report, write_report
 
     _stage(7, "compensation of the test program")

@@ -11,6 +11,18 @@ A controller that reads today's configuration (LinuxCNC's ``--current``) also de
 
     check_current(params, current) -> None            refuses a configuration that contradicts the parameters
 
+A controller whose printed lines carry more than its kinematic entries (the error maps' tables), or that can be
+entered in more than one way, defines::
+
+    entries(params, options) -> list[(label, values)]  each way of entering, fewest values first: exactly the
+                                                       values its printed lines carry (as printed), in the
+                                                       weighing's names (EX0C, C:ECC+@30)
+
+and one whose lines go into several files (LinuxCNC: HAL, INI, compensation files)::
+
+    sections(params, options) -> list[Section]         the same lines by target file (pasted whole, or written by
+                                                       pige compensate --out-dir)
+
 The modules that are not controllers (:data:`NOT_CONTROLLERS`) hold what they share: the corrected axis
 lines (:mod:`.axis_lines`), what a controller leaves at the tool (:mod:`.scope`), the checks made before
 anything is written (:mod:`.entry_checks`) and the reader of a LinuxCNC configuration (:mod:`.hal_config`).
@@ -49,6 +61,9 @@ class ControllerOptions:
         The controller's name of each rotary axis where its tables need it (SINUMERIK machine axis names).
     isg_unit_deg : float, optional
         The angle [deg] of one unit of an ISG ``kw.ssfk`` list of a rotary axis (:mod:`.tables.isg_ssfk`).
+    scope : ControllerScope, optional
+        What the entries carry and leave, as the compensation stage computed it (:mod:`.scope`); rendered, not
+        computed again.
     """
 
     carrier: int = 1
@@ -56,6 +71,7 @@ class ControllerOptions:
     heidenhain_trans: str | None = None
     machine_axes: dict[str, str] | None = None
     isg_unit_deg: float | None = None
+    scope: Any = None
 
 
 def controller_names() -> tuple[str, ...]:
@@ -102,23 +118,6 @@ def check_before_writing(params: Any, style: str, current: Any = None) -> None:
         raise InputError(f"--current: the {style} entries are changes to add; today's configuration is read for "
                          f"--controller {', '.join(readers)} only")
     check_current(params, current)
-
-
-def format_controller(params: Any, style: str = "table", *, carrier: int = 1,
-                      current: Any = None, heidenhain_trans: str | None = None, enter: str = "weighed",
-                      machine_axes: dict[str, str] | None = None, isg_unit_deg: float | None = None) -> str:
-    """The corrections of ``params`` in the words of controller ``style`` (docs/controller-corrections.md).
-
-    The values are weighed by their uncertainty over the axes' travel (:func:`entered_for_controller`).  Every
-    controller also says what it enters, what it cannot represent and the tool-point error each choice leaves,
-    with a 95 % bound (:mod:`~pige_sym.compensation.controllers.scope`).  Nothing is rendered before
-    :func:`check_before_writing` has passed.
-    """
-    module = get_controller(style)
-    check_before_writing(params, style, current)
-    options = ControllerOptions(carrier=carrier, current=current, heidenhain_trans=heidenhain_trans,
-                                machine_axes=machine_axes, isg_unit_deg=isg_unit_deg)
-    return str(module.render(entered_for_controller(params, enter), options))
 
 
 def entered_for_controller(params: Any, enter: str = "weighed", travel: Any = None) -> Any:
