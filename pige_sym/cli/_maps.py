@@ -95,3 +95,29 @@ def map_options_text(args: argparse.Namespace, setups: int) -> str:
     if args.map_offset != 50.0:
         parts.append(f"--map-offset {args.map_offset:g}")
     return " ".join(parts)
+
+
+def identify_map_options(spec: Any) -> str:
+    """``--map C,A --map-step 30 [--map-per-direction C]``: the options ``pige identify`` fits ``spec`` with."""
+    out = f"--map {','.join(spec.axes)} --map-step {spec.step_deg:g}"
+    return out + (f" --map-per-direction {','.join(spec.per_direction)}" if spec.per_direction else "")
+
+
+def map_next_commands(paths: list[str], items: list[tuple[str, Any]], spec: Any, explains: bool) -> list[str]:
+    """What to run next after ``pige diagnose --map``, as commands that run as printed in order: the parameter file
+    of the maps (or of the PIGEs alone, when the maps do not explain the residual) and the controller's entries
+    (for the controller the probing programs were written for, else the controller-neutral axis lines)."""
+    import shlex
+
+    files = " ".join(shlex.quote(str(p)) for p in paths)
+    dialects = {str(x.metadata.get("program_dialect")) for _, x in items if getattr(x, "metadata", None)}
+    controller = next(iter(dialects)) if len(dialects) == 1 and dialects <= {"linuxcnc", "siemens"} else "table"
+    if explains:
+        return ["next: the maps explain what the PIGEs miss; write them as a parameter file and correct with them "
+                "(the second command corrects an NC program too: give it the program and --out):",
+                f"  pige identify {files} {identify_map_options(spec)} --json > maps.json",
+                f"  pige compensate --params maps.json --controller {controller}"]
+    return ["next: the maps do not explain enough to be worth entering; write the PIGEs as a parameter file and "
+            "correct with them:",
+            f"  pige identify {files} --json > pige.json",
+            f"  pige compensate --params pige.json --controller {controller}"]
