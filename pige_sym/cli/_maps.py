@@ -104,20 +104,33 @@ def identify_map_options(spec: Any) -> str:
 
 
 def map_next_commands(paths: list[str], items: list[tuple[str, Any]], spec: Any, explains: bool) -> list[str]:
-    """What to run next after ``pige diagnose --map``, as commands that run as printed in order: the parameter file
-    of the maps (or of the PIGEs alone, when the maps do not explain the residual) and the controller's entries
-    (for the controller the probing programs were written for, else the controller-neutral axis lines)."""
-    import shlex
+    """What to run next after ``pige diagnose --map`` (:func:`pige_sym.report.map_section.next_commands`, the same
+    commands the map report gives), with the sentence before them."""
+    from pige_sym.report.map_section import next_commands
 
-    files = " ".join(shlex.quote(str(p)) for p in paths)
-    dialects = {str(x.metadata.get("program_dialect")) for _, x in items if getattr(x, "metadata", None)}
-    controller = next(iter(dialects)) if len(dialects) == 1 and dialects <= {"linuxcnc", "siemens"} else "table"
-    if explains:
-        return ["next: the maps explain what the PIGEs miss; write them as a parameter file and correct with them "
-                "(the second command corrects an NC program too: give it the program and --out):",
-                f"  pige identify {files} {identify_map_options(spec)} --json > maps.json",
-                f"  pige compensate --params maps.json --controller {controller}"]
-    return ["next: the maps do not explain enough to be worth entering; write the PIGEs as a parameter file and "
-            "correct with them:",
-            f"  pige identify {files} --json > pige.json",
-            f"  pige compensate --params pige.json --controller {controller}"]
+    commands = next_commands([(str(p), x) for p, (_, x) in zip(paths, items, strict=True)], spec, explains)
+    said = ("the maps explain what the PIGEs miss; write them as a parameter file and correct with them" if explains
+            else "the maps do not explain enough to be worth entering; write the PIGEs as a parameter file and "
+            "correct with them")
+    return [f"next: {said} (the second command corrects an NC program too: give it the program and --out):",
+            *(f"  {c}" for c in commands)]
+
+
+def map_spec_option(args: argparse.Namespace, default_step_deg: float) -> Any:
+    """``--map AXES [--map-step DEG] [--map-per-direction AXES]`` of a command that fits maps from files (diagnose,
+    report) as a MapSpec, None without ``--map``."""
+    from pige_sym.identification.maps import MapSpec
+
+    if not args.map:
+        if args.map_step is not None:
+            raise InputError("--map-step goes with --map AXES")
+        if getattr(args, "map_per_direction", None):
+            raise InputError("--map-per-direction goes with --map AXES")
+        return None
+    axes = axes_option(args.map, "--map")
+    per_direction = axes_option(getattr(args, "map_per_direction", None), "--map-per-direction")
+    extra = [a for a in per_direction if a not in axes]
+    if extra:
+        raise InputError(f"--map-per-direction {','.join(extra)}: map the axis too "
+                         f"(--map {','.join(axes + tuple(extra))})")
+    return MapSpec(axes, default_step_deg if args.map_step is None else args.map_step, per_direction)

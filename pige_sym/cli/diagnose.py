@@ -46,23 +46,9 @@ def _run_several(args: argparse.Namespace) -> int:
 
 def _map_spec(args: argparse.Namespace) -> Any:
     """``--map AXES [--map-step DEG] [--map-per-direction AXES]`` as a MapSpec (None without --map)."""
-    from pige_sym.cli._maps import axes_option
-    from pige_sym.errors import InputError
-    from pige_sym.identification.maps import MapSpec
+    from pige_sym.cli._maps import map_spec_option
 
-    if not args.map:
-        if args.map_step is not None:
-            raise InputError("--map-step goes with --map AXES")
-        if args.map_per_direction:
-            raise InputError("--map-per-direction goes with --map AXES")
-        return None
-    axes = axes_option(args.map, "--map")
-    per_direction = axes_option(args.map_per_direction, "--map-per-direction")
-    extra = [a for a in per_direction if a not in axes]
-    if extra:
-        raise InputError(f"--map-per-direction {','.join(extra)}: map the axis too "
-                         f"(--map {','.join(axes + tuple(extra))})")
-    return MapSpec(axes, DIAGNOSE_MAP_STEP_DEG if args.map_step is None else args.map_step, per_direction)
+    return map_spec_option(args, DIAGNOSE_MAP_STEP_DEG)
 
 
 #: The default grid of ``pige diagnose --map`` [deg] (a coarse map answers "does a map explain the residual").
@@ -70,12 +56,9 @@ DIAGNOSE_MAP_STEP_DEG = 30.0
 
 
 def _mapped_effects(spec: Any) -> list[str]:
-    """The catalogue's one-harmonic error motions of the mapped axes (and the backlash of an axis mapped per
-    direction): the map holds every harmonic of them, so the per-file diagnoses do not search them again."""
-    if spec is None:
-        return []
-    out = [f"{kind}_{ax}" for ax in spec.axes for kind in ("angular_error", "wobble", "radial_runout")]
-    return out + [f"backlash_{ax}" for ax in spec.per_direction]
+    from pige_sym.diagnosis.map_gain import mapped_effects
+
+    return mapped_effects(spec)
 
 
 def _map_gain(args: argparse.Namespace, spec: Any) -> dict[str, object]:

@@ -33,17 +33,11 @@ def _graded_plan(args: argparse.Namespace, data: Any) -> Any:
 
 
 def _map_spec(args: argparse.Namespace) -> Any:
-    """``--map AXES [--map-step DEG]`` as a MapSpec (None without --map)."""
-    if not args.map:
-        if args.map_step is not None:
-            from pige_sym.errors import InputError
+    """``--map AXES [--map-step DEG] [--map-per-direction AXES]`` as a MapSpec (None without --map)."""
+    from pige_sym.cli._maps import map_spec_option
+    from pige_sym.identification.maps import DEFAULT_MAP_STEP_DEG
 
-            raise InputError("--map-step goes with --map AXES")
-        return None
-    from pige_sym.identification.maps import DEFAULT_MAP_STEP_DEG, MapSpec
-
-    axes = tuple(a.strip().upper() for a in args.map.split(",") if a.strip())
-    return MapSpec(axes, DEFAULT_MAP_STEP_DEG if args.map_step is None else args.map_step)
+    return map_spec_option(args, DEFAULT_MAP_STEP_DEG)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -140,6 +134,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--map", metavar="AXES", help="also fit the error maps of these rotary axes jointly from every file "
                    "(conventions §10): plots, what they leave, what the setups do not determine (docs/maps.md)")
     p.add_argument("--map-step", type=float, metavar="DEG", help="grid step of the maps [deg] (default 15)")
+    p.add_argument("--map-per-direction", metavar="AXES",
+                   help="map these axes' positioning error per approach direction, as pige identify does")
     p.add_argument("--history", metavar="ID", help="machine id: trend plots of its runs (pige history)")
     p.add_argument("--db", metavar="URL", help="history database (default: as pige history)")
     p.add_argument("--plan", metavar="TRAJECTORY",

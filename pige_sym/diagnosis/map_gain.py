@@ -81,8 +81,8 @@ class HarmonicShare:
         if not self.harmonic_significant:
             return (f"{self.motion}: beyond its noise ({test}), but no single harmonic 2-4 stands out of it (the "
                     f"strongest, {self.harmonic}, holds {self.share:.0%}): only the map describes it")
-        said = (f": the diagnosis' one-harmonic candidate {self.candidate} (harmonic={self.harmonic}) describes that "
-                "part" if self.candidate else ": no one-harmonic candidate of the diagnosis describes it")
+        said = (f": the diagnosis' one-harmonic effect {_plain(self.candidate, self.harmonic)} describes that part"
+                if self.candidate else ": no one-harmonic effect of the diagnosis describes it")
         return (f"{self.motion}: beyond its noise ({test}); its strongest single harmonic, {self.harmonic}, holds "
                 f"{self.share:.0%} of the map{said}")
 
@@ -119,6 +119,15 @@ class MapGain:
         if self.explains():
             out += [f"  {h.sentence()}" for h in self.harmonics]
         return out
+
+
+def mapped_effects(spec: MapSpec | None) -> list[str]:
+    """The catalogue's one-harmonic error motions of the mapped axes (and the backlash of an axis mapped per
+    direction): a map holds every harmonic of them, so a diagnosis beside the maps does not search them again."""
+    if spec is None:
+        return []
+    out = [f"{kind}_{ax}" for ax in spec.axes for kind in ("angular_error", "wobble", "radial_runout")]
+    return out + [f"backlash_{ax}" for ax in spec.per_direction]
 
 
 def map_gain(items: Sequence[tuple[str, Measurement | BallbarRun]], spec: MapSpec,
@@ -173,6 +182,15 @@ def _harmonics(result: MapResult) -> list[HarmonicShare]:
             out.append(HarmonicShare(motion.name, best[0], best[1], f"{kind}_{ax}" if kind else None, chi2, dof, p,
                                      _harmonic_p(v[ok], cov, t, best[0])))
     return out
+
+
+def _plain(effect: str, harmonic: int) -> str:
+    """``a radial run-out of the C axis, 4 per revolution (radial_runout_C)``: the words first, the symbol after."""
+    from pige_sym.diagnosis.results import effect_title
+
+    title = effect_title(effect, {"harmonic": harmonic})
+    words = title[len(effect) + 2:-1] if title.startswith(effect + " (") else ""
+    return f"{words} ({effect})" if words else effect
 
 
 def _against_zero(v: np.ndarray, cov: np.ndarray) -> tuple[float, int, float]:

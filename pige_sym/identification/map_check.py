@@ -112,6 +112,16 @@ def direction_notes(items: Sequence[tuple[str, Any]], layout: MapLayout, spec: A
     return out
 
 
+def range_notes(layout: MapLayout) -> list[str]:
+    """A note per mapped axis that does not turn fully: over its range, a motion's constant and first harmonic are
+    the PIGEs' (and the set-up's), and what the true maps hold of them is in the PIGEs, not in the maps."""
+    return [f"{ax} is mapped over {grid.angles_deg[0]:g}..{grid.angles_deg[-1]:g}° only: over that range, the part of "
+            f"each of its motions that is a constant or a first harmonic is not separable from the PIGEs (CONVENTIONS "
+            f"§10), so the PIGEs hold it (of {ax}, and of the axis {ax} carries) and differ from a fit without maps by "
+            "it; over a full turn, harmonics 2 and up are separable (docs/maps.md, 'What the PIGEs hold')"
+            for ax, grid in layout.grids.items() if not grid.full_turn and grid.n > 1]
+
+
 def measured_step(angles_deg: np.ndarray, step_deg: float, full_turn: bool) -> float | None:
     """The coarsest multiple of ``step_deg`` that every measured angle is a multiple of [deg] (the grid the files were
     measured on), when it is coarser than ``step_deg``; else None."""

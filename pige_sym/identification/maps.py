@@ -49,7 +49,7 @@ from pige_sym.identification.joint import (
     own_sigma,
     whitened_system,
 )
-from pige_sym.identification.map_check import MapLayout, Undetermined, direction_notes, local_check
+from pige_sym.identification.map_check import MapLayout, Undetermined, direction_notes, local_check, range_notes
 from pige_sym.identification.map_reasons import NotIdentifiable, explain, held_axes, measured_points
 from pige_sym.identification.map_statistics import pige_statistics, value_covariance
 from pige_sym.identification.problem import ExtraColumns
@@ -175,8 +175,8 @@ def identify_maps(items: Sequence[tuple[str, Measurement | BallbarRun]], spec: M
     reasons = explain(load_kernels(machine), names, part.result.values, part.result.unidentifiable,
                       held_axes(layout, design.undetermined), measured_points(items, load_kernels(machine)))
     part.result.unidentifiable = [r.text() for r in reasons]
-    return MapResult(part, maps, design.undetermined + more, spec, covariance, reasons,
-                     direction_notes(items, layout, spec, tuple(load_kernels(machine).ROTARY_AXES)))
+    notes = range_notes(layout) + direction_notes(items, layout, spec, tuple(load_kernels(machine).ROTARY_AXES))
+    return MapResult(part, maps, design.undetermined + more, spec, covariance, reasons, notes)
 
 
 def n_location(machine: str) -> int:
