@@ -219,12 +219,18 @@ def _print_weighing(result: Any) -> None:
               f"{p['entered'].text()}")
 
 
+#: The comment marker of each controller's lines: what is said after its entries stays a comment when pasted.
+COMMENT = {"linuxcnc": "# ", "isg": "# ", "siemens": "; "}
+
+
 def _print_after(result: Any) -> None:
-    """What the stage says beyond the entries: values not corrected, advice."""
+    """What the stage says beyond the entries: values not corrected, advice (as comments of the controller's
+    lines, so that a section pasted whole stays valid)."""
+    mark = COMMENT.get(result.controller.name, "") if result.controller is not None else ""
     for u in result.undetermined:
-        print(f"not corrected: {u.name}: {u.why}; {u.remedy}")
+        print(f"{mark}not corrected: {u.name}: {u.why}; {u.remedy}")
     for a in result.advice:
-        print(f"advice: {a}")
+        print(f"{mark}advice: {a}")
 
 
 def _print_report(result: Any, out: str, units: dict[str, str]) -> None:

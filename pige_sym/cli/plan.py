@@ -295,13 +295,18 @@ def _next_commands(args: argparse.Namespace, plan: Any, poses: Any) -> str:
         "--table-ball x,y,z (the setups above)"
 
 
+def _word(value: Any) -> str:
+    """An option's value as the user would type it (``120``, not ``120.0``)."""
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
 def _probe_program_command(args: argparse.Namespace, machine: str, map_options: str, setups: int) -> str:
     """``pige program`` writing one probing program per setup, with every option given here that it takes (it runs
     as printed); without the probe's tool number and length (which a program states) and the dialect, what to add."""
     ext = {"siemens": ".mpf", "fanuc": ".nc", "heidenhain": ".h"}.get(args.dialect or "", ".ngc")
     parts = [f"--instrument sphere-probe --machine \"{machine}\" {map_options}", f"--sphere {args.sphere}",
              f"--sphere-radius {args.sphere_radius:g}", f"--stylus-radius {args.stylus_radius:g}"]
-    parts += [f"--{name.replace('_', '-')} {getattr(args, name)}" for name in (
+    parts += [f"--{name.replace('_', '-')} {_word(getattr(args, name))}" for name in (
         "tool", "dialect", "kinematics", "rtcp_off", "rtcp_on", "stylus_tool", "stylus_length")
         if getattr(args, name, None) is not None]
     if args.work_offset != "G54":

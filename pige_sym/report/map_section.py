@@ -115,13 +115,15 @@ def _left_html(rep: MapReport) -> str:
 def _undetermined_html(r: MapResult) -> str:
     from pige_sym.identification.map_output import group_undetermined
 
+    head = "" if r.undetermined else "<p>Every value of every map is determined by these setups.</p>"
     if not r.undetermined and not r.not_identifiable:
-        return "<p>Every value of every map is determined by these setups.</p>"
+        return head
     items = [f"<li><b>{esc(g.axis)}: {esc(', '.join(g.motions))}</b>{esc(g.where())}: {esc(g.why)}. "
              f"To determine {'it' if g.count == 1 else 'them'}: {esc(g.remedy)}.</li>" for g in group_undetermined(r)]
     items += [f"<li><b>{esc(', '.join(n.parameters))}</b>: {esc(n.why)}. To determine "
               f"{'it' if len(n.parameters) == 1 else 'them'}: {esc(n.remedy)}.</li>" for n in r.not_identifiable]
-    return ("<h3>Not determined (no value given, nothing corrected there)</h3><ul>" + "".join(items) + "</ul>")
+    return (head + "<h3>Not determined (no value given, nothing corrected there)</h3><ul>" + "".join(items)
+            + "</ul>")
 
 
 def map_answer_html(rep: MapReport) -> str:
@@ -144,9 +146,7 @@ def map_answer_html(rep: MapReport) -> str:
         parts.append("<p><b>Next.</b> Write the parameter file and the controller's entries (an NC program is "
                      "corrected by the second command too, given the program and --out):"
                      + "".join(f'<br><code class="cmd">{esc(c)}</code>' for c in rep.next_commands) + "</p>")
-    undetermined = len(r.undetermined) + len(r.not_identifiable)
-    parts.append(f"<p><b>Not determined.</b> {'Every value is determined.' if not undetermined else ''}</p>"
-                 + (_undetermined_html(r) if undetermined else ""))
+    parts.append("<p><b>Not determined.</b></p>" + _undetermined_html(r))
     parts.append("</div>")
     return "\n".join(parts)
 

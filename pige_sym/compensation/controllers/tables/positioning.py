@@ -168,14 +168,17 @@ def positioning_names(params: CompensationParameters) -> list[str]:
 
 
 def entered_map_values(params: CompensationParameters, pm: PositioningMap,
-                       printed: Callable[[np.ndarray, int], np.ndarray]) -> dict[str, float]:
+                       printed: Callable[[np.ndarray, int], np.ndarray], zero_elsewhere: bool = False,
+                       ) -> dict[str, float]:
     """The map values a positioning table enters, as printed, in the weighing's names (``C:ECC+@30``) [µrad].
 
     ``printed(theta_cmd_deg, direction_cmd)`` gives the table's value e [deg] at commanded angles for a commanded
     direction of motion (+1, −1; 0 for a table that holds one value for both), as the table prints it (rounded to
     its unit).  From ``e = σ·(E + φ^{σd}(σ·θ_cmd))`` (module docstring) the entered ``φ^d(θ) = σ·e − E``, E the
     zero-position error the table carries with the map (0 when the file has none).  A map per direction in a table
-    that holds one value for both directions enters that value as φ⁺ and φ⁻ alike (their mean).
+    that holds one value for both directions enters that value as φ⁺ and φ⁻ alike (their mean).  With
+    ``zero_elsewhere`` the controller's other entries enter E too (SINUMERIK's offset angle): the table's whole value
+    is counted as φ then (``φ = σ·e``), so that the two entries together count what they enter, E twice.
     """
     maps = params.error_maps
     if maps is None or pm.axis not in maps.axes:
@@ -184,7 +187,7 @@ def entered_map_values(params: CompensationParameters, pm: PositioningMap,
     s = pm.sense
     phi = next(m.name for m in axis_motions(axis) if m.kind == "positioning")
     theta = np.asarray(pm.grid.angles_deg, dtype=float)
-    zero = pm.zero_urad or 0.0
+    zero = 0.0 if zero_elsewhere else (pm.zero_urad or 0.0)
 
     def entered(direction_theta: int) -> np.ndarray:
         e = printed(s * theta, s * direction_theta)
@@ -198,6 +201,6 @@ def entered_map_values(params: CompensationParameters, pm: PositioningMap,
             out |= {f"{axis}:{name}@{g:g}": float(v) for g, v in zip(theta, vals, strict=True)}
     elif phi in names:
         out |= {f"{axis}:{phi}@{g:g}": float(v) for g, v in zip(theta, entered(0), strict=True)}
-    if pm.zero_urad is not None:
+    if pm.zero_urad is not None and not zero_elsewhere:
         out[f"E{axis[0]}0{axis}"] = float(pm.zero_urad)
     return out

@@ -119,5 +119,5 @@ def entered_values(params: CompensationParameters, machine_axes: dict[str, str] 
             idx = np.argmin(np.abs(positions[None, :] - at[:, None]), axis=1)
             return np.asarray(vals[idx], dtype=float)
 
-        out |= entered_map_values(params, pm, printed)
+        out |= entered_map_values(params, pm, printed, zero_elsewhere=True)  # the offset angle enters E too
     return out
