@@ -100,7 +100,9 @@ def _run(args: argparse.Namespace) -> int:
     m = api.read(args.file)
     if args.plots:
         _check_plot_folder(args, m.rotary_axes)
-    result = api.diagnose(m, progress=show_progress(args.json), exclude=_mapped_effects(spec))
+    from pige_sym.diagnosis.diagnose import diagnose
+
+    result = diagnose(m, progress=show_progress(args.json), exclude=_mapped_effects(spec))
     if args.plots:
         residual_plots(m, result, args.plots)
     gain = _map_gain(args, spec)

@@ -52,14 +52,15 @@ class PosesRequest:
 
 @dataclasses.dataclass(frozen=True)
 class ProgramRequest:
-    """An NC program to correct and the guards of its rewrite (as ``pige compensate PROGRAM``)."""
+    """An NC program to correct and the guards of its rewrite (as ``pige compensate PROGRAM``; a limit None: the
+    default)."""
 
     text: str
     path: str = "<program>"
     dialect: str | None = None
     pass_through: bool = False
-    max_change_mm: float = DEFAULT_MAX_CHANGE_MM
-    max_change_deg: float = DEFAULT_MAX_CHANGE_DEG
+    max_change_mm: float | None = DEFAULT_MAX_CHANGE_MM
+    max_change_deg: float | None = DEFAULT_MAX_CHANGE_DEG
     rtcp_on: tuple[str, ...] = ()
     rtcp_off: tuple[str, ...] = ()
     header: bool = True
@@ -169,7 +170,9 @@ def _program(params: CompensationParameters, req: ProgramRequest, enter: str,
 
     decide = (lambda w: _decide(w, enter, decided)) if decided is not None else None
     result = compensate_nc(req.text, params, path=req.path, dialect=req.dialect, pass_through=req.pass_through,
-                           max_change_mm=req.max_change_mm, max_change_deg=req.max_change_deg, rtcp_on=req.rtcp_on,
+                           max_change_mm=DEFAULT_MAX_CHANGE_MM if req.max_change_mm is None else req.max_change_mm,
+                           max_change_deg=DEFAULT_MAX_CHANGE_DEG if req.max_change_deg is None else req.max_change_deg,
+                           rtcp_on=req.rtcp_on,
                            rtcp_off=req.rtcp_off, header=req.header, enter=enter, decide=decide)
     return ProgramCorrection(result.text, result.report, result.poses)
 
