@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 from typing import Any
 
@@ -65,7 +66,6 @@ def _current(args: argparse.Namespace) -> Any:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pige_sym.compensation.controllers import ControllerOptions
     from pige_sym.compensation.parameters import load_parameters
     from pige_sym.compensation.stage import ProgramRequest, compensate
     from pige_sym.nc.program_file import read_program
@@ -75,10 +75,16 @@ def _run(args: argparse.Namespace) -> int:
     params = load_parameters(args.params, machine, allow_missing=args.allow_missing)
     params.axis_sense = _axis_sense(args, params)
     current = _current(args)
-    if args.comp_dir and not args.controller:
+    max_mm, max_deg = _max_change(args.max_change)
+    options = None
+    if args.controller:
+        options = _controller_options(args, current, (max_mm, max_deg))
+    elif args.comp_dir:
         raise InputError("--comp-dir writes LinuxCNC compensation files: give it with --controller linuxcnc")
-    if args.out_dir and not args.controller:
+    elif args.out_dir:
         raise InputError("--out-dir writes the controller's entries, one file per target: give it with --controller")
+    else:
+        _no_controller_options(args)
     if not args.program and not args.controller:
         raise InputError("give a PROGRAM to compensate (or --controller to print the corrected kinematics)")
     if args.program and not args.out:
@@ -87,13 +93,11 @@ def _run(args: argparse.Namespace) -> int:
         if args.program else None
     request = None
     if text is not None:
-        max_mm, max_deg = _max_change(args.max_change)
         request = ProgramRequest(text, str(args.program), args.dialect, args.pass_through, max_mm, max_deg,
                                  tuple(args.rtcp_on or ()), tuple(args.rtcp_off or ()))
-    options = ControllerOptions(carrier=args.carrier, current=current, heidenhain_trans=args.heidenhain_trans,
-                                machine_axes=_machine_axes(args), isg_unit_deg=args.isg_unit_deg)
-    result = compensate(params, program=request, controller=args.controller, options=options,
-                        travel=_travel(args.travel), enter=args.enter)
+    travel = _travel(args.travel, params.machine) if args.controller else None
+    result = compensate(params, program=request, controller=args.controller, options=options, travel=travel,
+                        enter=args.enter)
     written = _write_controller_files(args, result) if args.controller else []
     if out is not None and result.program is not None:
         atomic_write_text(out, result.program.text, newline="")
@@ -135,13 +139,49 @@ def _json(args: argparse.Namespace, params: Any, result: Any, out: Path | None) 
     return doc
 
 
-def _machine_axes(args: argparse.Namespace) -> dict[str, str]:
-    """``--machine-axis C=C1`` (repeatable): the controller's name of each rotary axis."""
+#: The options only some controllers read, and the attribute of ``args`` each is in.
+CONTROLLER_OPTIONS = {"--carrier": "carrier", "--heidenhain-trans": "heidenhain_trans",
+                      "--machine-axis": "machine_axis", "--isg-unit-deg": "isg_unit_deg", "--current": "current",
+                      "--comp-dir": "comp_dir"}
+
+
+def _given(args: argparse.Namespace) -> list[str]:
+    return [option for option, attr in CONTROLLER_OPTIONS.items() if getattr(args, attr) is not None]
+
+
+def _no_controller_options(args: argparse.Namespace) -> None:
+    """The NC rewrite reads none of the controllers' options (``--current``, ``--comp-dir``: their own messages), nor
+    ``--travel`` (it judges the program's own poses)."""
+    extra = [o for o in _given(args) if o not in ("--current", "--comp-dir")] + (["--travel"] if args.travel else [])
+    if extra:
+        raise InputError(f"{extra[0]} goes with --controller (the controller's entries), not with the NC rewrite: "
+                         "leave it out, or give --controller")
+
+
+def _controller_options(args: argparse.Namespace, current: Any, max_change: tuple[float, float]) -> Any:
+    """The options of ``--controller`` checked (each read by that controller, given once, within its bounds)."""
+    from pige_sym.compensation.controllers import ControllerOptions, check_options
+    from pige_sym.compensation.controllers.entry_checks import ChangeLimits
+
+    check_options(args.controller, _given(args))
+    return ControllerOptions(carrier=1 if args.carrier is None else args.carrier, current=current,
+                             heidenhain_trans=args.heidenhain_trans, machine_axes=_machine_axes(args),
+                             isg_unit_deg=args.isg_unit_deg, limits=ChangeLimits(*max_change))
+
+
+def _machine_axes(args: argparse.Namespace) -> dict[str, str] | None:
+    """``--machine-axis C=C1`` (repeatable, each axis once): the controller's name of each rotary axis."""
+    if not args.machine_axis:
+        return None
     out: dict[str, str] = {}
-    for item in args.machine_axis or []:
+    for item in args.machine_axis:
         axis, sep, name = (x.strip() for x in item.partition("="))
-        if not sep or not axis or not name or not name.replace("_", "").isalnum():
-            raise InputError(f"--machine-axis {item!r}: give AXIS=NAME, e.g. C=C1 (letters, digits, '_')")
+        if not sep or not axis or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+            raise InputError(f"--machine-axis {item!r}: give AXIS=NAME, e.g. C=C1 (a letter, then letters, digits, "
+                             "'_')")
+        if axis.upper() in out:
+            raise InputError(f"--machine-axis {axis.upper()} is given twice ({out[axis.upper()]} and {name}): give "
+                             "each axis once")
         out[axis.upper()] = name
     return out
 
@@ -186,23 +226,13 @@ def _folder(text: str, what: str) -> Path:
     return folder
 
 
-def _travel(items: list[str] | None) -> dict[str, tuple[float, float]]:
-    """``--travel A=-120:30`` (repeatable) as axis → (min, max) [deg]."""
-    import math
+def _travel(items: list[str] | None, machine: str) -> dict[str, tuple[float, float]]:
+    """``--travel A=-120:30`` (repeatable, each rotary axis of ``machine`` once) as axis → (min, max) [deg]."""
+    from pige_sym.kernels import load_kernels
+    from pige_sym.options import parse_axis_ranges
 
-    out: dict[str, tuple[float, float]] = {}
-    for item in items or []:
-        axis, _, span = item.partition("=")
-        lo, sep, hi = span.partition(":")
-        try:
-            low, high = float(lo), float(hi)
-        except ValueError:
-            low = high = math.nan
-        if not sep or not axis.strip() or not (math.isfinite(low) and math.isfinite(high) and low < high
-                                               and high - low <= 720):
-            raise InputError(f"--travel {item!r}: give AXIS=MIN:MAX in degrees, MIN < MAX, e.g. A=-120:30")
-        out[axis.strip().upper()] = (low, high)
-    return out
+    return parse_axis_ranges(items, "--travel", tuple(load_kernels(machine).ROTARY_AXES), max_span=720.0,
+                             example="A=-120:30")
 
 
 def _print_weighing(result: Any) -> None:
@@ -308,7 +338,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="set PIGEs without a value (missing, or not identifiable) to 0 and say which")
     p.add_argument("--controller", choices=list(controller_names()), help="print the corrected kinematics "
                    "(see docs/controller-corrections.md)")
-    p.add_argument("--carrier", type=int, default=1, help="Siemens swivel data record number (default %(default)s)")
+    p.add_argument("--carrier", type=int, help="Siemens swivel data record number (default 1)")
     p.add_argument("--current", help="today's LinuxCNC trt pin values: PIN=VALUE,... or the machine's INI or HAL "
                    "file (then absolute setp/sets lines are printed)")
     p.add_argument("--heidenhain-trans", choices=["position", "shift"],

@@ -21,13 +21,14 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 from pige_sym.compensation.advice import advice, undetermined_values
 from pige_sym.compensation.controllers import ControllerOptions, check_before_writing, get_controller
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.compensation.result import Compensation, ControllerEntries, ProgramCorrection
-from pige_sym.compensation.weighing import Weighing, every_estimate, overruled, travel_poses, weigh, with_entered
+from pige_sym.compensation.weighing import Weighing, every_estimate, travel_poses, weigh, with_entered
 from pige_sym.constants import DEFAULT_MAX_CHANGE_DEG, DEFAULT_MAX_CHANGE_MM
 from pige_sym.errors import InputError
 
@@ -120,6 +121,20 @@ def compensate(params: CompensationParameters, *, program: ProgramRequest | None
                         undetermined, advice(weighing, choices), corrected)
 
 
+def overruled(weighing: Weighing, entered: dict[str, float | None], why: dict[str, str]) -> Weighing:
+    """The weighing with the values a later stage decided (module docstring): each value named in
+    ``entered`` takes that value (None: not entered) and its reason; the others stay as weighed.  What it leaves is
+    predicted for the decided values."""
+    chosen = {n: (entered[n] if n in entered else v) for n, v in weighing.entered.items()}
+    chosen |= {n: v for n, v in entered.items() if n not in chosen}
+    reasons = {n: why.get(n, weighing.why.get(n, "decided by the caller")) for n in chosen}
+    predicted = dict(weighing.predicted)
+    after = weighing.predicted_for({n: v for n, v in chosen.items() if v is not None})
+    if after is not None:
+        predicted["entered"] = after
+    return replace(weighing, entered=chosen, why=reasons, predicted=predicted)
+
+
 def _decide(weighing: Weighing, enter: str, decided: Decision | None) -> Weighing:
     if decided is not None:
         return overruled(weighing, dict(decided.entered), dict(decided.why))
@@ -133,9 +148,10 @@ def _controller(params: CompensationParameters, name: str, options: ControllerOp
     from pige_sym.compensation.controllers.scope import controller_scope
 
     module = get_controller(name)
-    check_before_writing(params, name, options.current)
+    check_before_writing(params, name, options=options)  # before the values are weighed
     weighing = _decide(weigh(params, travel_poses(params, dict(travel or {}))), enter, decided)
     entered = with_entered(params, weighing)
+    check_before_writing(entered, name, options=options)  # and the values entered
     scope = controller_scope(entered, name, options)
     rendered = dataclasses.replace(options, scope=scope)
     text = str(module.render(entered, rendered))
@@ -179,17 +195,19 @@ def _program(params: CompensationParameters, req: ProgramRequest, enter: str,
 
 def format_controller(params: Any, style: str = "table", *, carrier: int = 1,
                       current: Any = None, heidenhain_trans: str | None = None, enter: str = "weighed",
-                      machine_axes: dict[str, str] | None = None, isg_unit_deg: float | None = None) -> str:
+                      machine_axes: dict[str, str] | None = None, isg_unit_deg: float | None = None,
+                      limits: Any = None) -> str:
     """The corrections of ``params`` in the words of controller ``style`` (docs/controller-corrections.md).
 
     The text of the compensation stage's entries (:func:`pige_sym.compensation.stage.compensate`): the values
     weighed by their uncertainty over the axes' travel; every controller also says what it enters, what it cannot
     represent and the tool-point error each way of entering leaves, with a 95 % bound
     (:mod:`~pige_sym.compensation.controllers.scope`).  Nothing is rendered before :func:`check_before_writing` has
-    passed.
+    passed, on the values as given and on the values entered; every entry is held to ``limits`` (``--max-change``,
+    :class:`~pige_sym.compensation.controllers.entry_checks.ChangeLimits`; None: its default).
     """
     options = ControllerOptions(carrier=carrier, current=current, heidenhain_trans=heidenhain_trans,
-                                machine_axes=machine_axes, isg_unit_deg=isg_unit_deg)
+                                machine_axes=machine_axes, isg_unit_deg=isg_unit_deg, limits=limits)
     result = compensate(params, controller=style, options=options, enter=enter)
     assert result.controller is not None
     return result.controller.text

@@ -48,6 +48,10 @@ DRAWS = 4000
 MAX_POSES = 20000
 #: Grid step of the travel poses [deg].
 TRAVEL_STEP_DEG = 5.0
+#: What a singular covariance gets added to its diagonal, per unit of each variance (:func:`regular`).
+SINGULAR_RIDGE = 1e-9
+#: A weighing row's start for a value the controller does not hold (:func:`weighing_rows`).
+NOT_HERE = "not representable in this controller (below); weighed for the NC rewrite: "
 #: The rule, as reports and ``--json`` state it.
 RULE = ("posterior mean under a prior N(0, diag(tau^2)) whose variances the estimates and their covariance "
         "determine (tau^2 = max(x^2 - std^2, 0) for an uncorrelated value): what the data do not show is not "
@@ -152,12 +156,22 @@ def entered_values(estimate: np.ndarray, covariance: np.ndarray) -> np.ndarray:
     ----------
     estimate : (q,) [µm, µrad]
     covariance : (q, q)
-        Positive definite (its diagonal positive).
+        Positive semi-definite, its diagonal positive (a singular one as :func:`regular` makes it).
     """
     x = np.asarray(estimate, dtype=float)
-    cov = np.asarray(covariance, dtype=float)
+    cov = regular(np.asarray(covariance, dtype=float))
     tau2 = prior_variances(x, cov)
     return np.where(tau2 > 0, tau2 * np.linalg.solve(np.diag(tau2) + cov, x), 0.0)
+
+
+def regular(covariance: np.ndarray) -> np.ndarray:
+    """``covariance`` if positive definite, else with :data:`SINGULAR_RIDGE` of each variance added to its diagonal:
+    a combination stated as known exactly is taken as known to 3e-5 of its values' standard errors."""
+    try:
+        np.linalg.cholesky(covariance)
+    except np.linalg.LinAlgError:
+        return np.asarray(covariance + np.diag(SINGULAR_RIDGE * np.diag(covariance)))
+    return covariance
 
 
 def prior_variances(estimate: np.ndarray, covariance: np.ndarray, *, sweeps: int = 500) -> np.ndarray:
@@ -397,23 +411,11 @@ def every_estimate(weighing: Weighing) -> Weighing:
         "--enter all: every estimate is entered as it is, whatever its uncertainty"])
 
 
-def overruled(weighing: Weighing, entered: dict[str, float | None], why: dict[str, str]) -> Weighing:
-    """The weighing with the values a later stage decided (:mod:`pige_sym.compensation.stage`): each value named in
-    ``entered`` takes that value (None: not entered) and its reason; the others stay as weighed.  What it leaves is
-    predicted for the decided values."""
-    chosen = {n: (entered[n] if n in entered else v) for n, v in weighing.entered.items()}
-    chosen |= {n: v for n, v in entered.items() if n not in chosen}
-    reasons = {n: why.get(n, weighing.why.get(n, "decided by the caller")) for n in chosen}
-    predicted = dict(weighing.predicted)
-    after = weighing.predicted_for({n: v for n, v in chosen.items() if v is not None})
-    if after is not None:
-        predicted["entered"] = after
-    return replace(weighing, entered=chosen, why=reasons, predicted=predicted)
-
-
-def weighing_rows(weighing: Weighing, units: dict[str, str]) -> list[str]:
+def weighing_rows(weighing: Weighing, units: dict[str, str], carried: set[str] | None = None) -> list[str]:
     """One line per value not entered as estimated: ``EB0A: entered in part (73 % of the estimate): the data show it
-    only weakly (+45.35 ± 35 urad): enter +32.9``; the map values (``C:EXC@30``) in one line per axis and motion."""
+    only weakly (+45.35 ± 35 urad): enter +32.9``; the map values (``C:EXC@30``) in one line per axis and motion; with
+    ``carried`` (what a controller holds: PIGEs, ``<axis>:<motion>`` maps) a value it does not hold is said to be
+    weighed for the NC rewrite only."""
     rows = []
     maps: dict[str, list[str]] = {}
     for n, v in weighing.entered.items():
@@ -423,13 +425,14 @@ def weighing_rows(weighing: Weighing, units: dict[str, str]) -> list[str]:
         if weighing.why[n].startswith("entered as estimated"):
             continue
         value = f": enter {v:+.4g}" if v is not None and weighing.why[n].startswith("entered in part") else ""
-        rows.append(f"{n}: {weighing.why[n]}{value}")
+        rows.append(f"{n}: {'' if carried is None or n in carried else NOT_HERE}{weighing.why[n]}{value}")
     for motion, whys in maps.items():
         whole = sum(w.startswith("entered as estimated") for w in whys)
         none = sum(w.startswith("not entered") for w in whys)
         if whole < len(whys):
-            rows.append(f"map {motion}: {whole} of {len(whys)} values entered as estimated, {none} not entered (within "
-                        f"their uncertainty), {len(whys) - whole - none} in part (weakly determined)")
+            rows.append(f"map {motion}: {'' if carried is None or motion in carried else NOT_HERE}{whole} of "
+                        f"{len(whys)} values entered as estimated, {none} not entered (within their uncertainty), "
+                        f"{len(whys) - whole - none} in part (weakly determined)")
     return rows
 
 

@@ -23,6 +23,14 @@ and one whose lines go into several files (LinuxCNC: HAL, INI, compensation file
     sections(params, options) -> list[Section]         the same lines by target file (pasted whole, or written by
                                                        pige compensate --out-dir)
 
+and one that writes compensation tables (error maps, CONVENTIONS §10) checks their format before any value is
+weighed or computed (the table modules of :mod:`.tables`, each citing the source of its limits)::
+
+    check_tables(params, options) -> None             refuses what the tables cannot hold
+
+``OPTIONS`` names the ``pige compensate`` options a controller reads beyond the parameters (``--carrier``,
+``--machine-axis``, …); another controller refuses them (:func:`check_options`).
+
 The modules that are not controllers (:data:`NOT_CONTROLLERS`) hold what they share: the corrected axis
 lines (:mod:`.axis_lines`), what a controller leaves at the tool (:mod:`.scope`), the checks made before
 anything is written (:mod:`.entry_checks`) and the reader of a LinuxCNC configuration (:mod:`.hal_config`).
@@ -64,6 +72,8 @@ class ControllerOptions:
     scope : ControllerScope, optional
         What the entries carry and leave, as the compensation stage computed it (:mod:`.scope`); rendered, not
         computed again.
+    limits : ChangeLimits, optional
+        ``--max-change`` (:class:`.entry_checks.ChangeLimits`) every entry is held to; None: its default.
     """
 
     carrier: int = 1
@@ -72,6 +82,13 @@ class ControllerOptions:
     machine_axes: dict[str, str] | None = None
     isg_unit_deg: float | None = None
     scope: Any = None
+    limits: Any = None
+
+    def change_limits(self) -> Any:
+        """``limits``, or the default ``--max-change``."""
+        from pige_sym.compensation.controllers.entry_checks import ChangeLimits
+
+        return self.limits if self.limits is not None else ChangeLimits()
 
 
 def controller_names() -> tuple[str, ...]:
@@ -94,22 +111,46 @@ def get_controller(name: str) -> ModuleType:
     return importlib.import_module(f"{__name__}.{name}")
 
 
-def check_before_writing(params: Any, style: str, current: Any = None) -> None:
-    """Check what controller ``style`` would enter before anything is written (module docstring).
-
-    The parameters against physical bounds (:func:`.entry_checks.check_parameters`), and today's
-    configuration ``current`` against the parameters by the controller that reads one (``check_current``).
+def check_options(style: str, given: list[str]) -> None:
+    """Refuse an option ``given`` (``--machine-axis``, …) that controller ``style`` does not read (its ``OPTIONS``).
 
     Raises
     ------
     InputError
-        A value beyond its bound, a configuration for a controller that reads none, or a contradiction
-        (both values and their sources named).
+        Naming the option and the controllers that read it.
+    """
+    module = get_controller(style)
+    for option in given:
+        if option not in getattr(module, "OPTIONS", ()):
+            readers = [n for n in controller_names() if option in getattr(get_controller(n), "OPTIONS", ())]
+            raise InputError(f"{option} does not apply to --controller {style}: it is read by --controller "
+                             f"{', '.join(readers)} only; leave it out")
+
+
+def check_before_writing(params: Any, style: str, current: Any = None, options: ControllerOptions | None = None
+                         ) -> None:
+    """Check what controller ``style`` would enter before anything is written (module docstring).
+
+    The parameters against physical bounds and ``--max-change`` (:func:`.entry_checks.check_parameters`), the
+    format of the controller's tables (``check_tables``), and today's configuration ``current`` (or
+    ``options.current``) against the parameters by the controller that reads one (``check_current``).  Cheap:
+    called before the values are weighed, and again on the weighed values before they are rendered.
+
+    Raises
+    ------
+    InputError
+        A value beyond its bound, a table its format cannot hold, a configuration for a controller that reads
+        none, or a contradiction (both values and their sources named).
     """
     from pige_sym.compensation.controllers.entry_checks import check_parameters
 
     module = get_controller(style)
-    check_parameters(params)
+    opts = options if options is not None else ControllerOptions(current=current)
+    current = current if current is not None else opts.current
+    check_parameters(params, opts.change_limits())
+    check_tables = getattr(module, "check_tables", None)
+    if check_tables is not None:
+        check_tables(params, opts)
     if current is None:
         return
     check_current = getattr(module, "check_current", None)

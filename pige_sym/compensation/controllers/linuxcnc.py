@@ -33,9 +33,10 @@ from __future__ import annotations
 from typing import Any
 
 from pige_sym.compensation.controllers import ControllerOptions
-from pige_sym.compensation.controllers.axis_lines import MM_DECIMALS, signed
+from pige_sym.compensation.controllers.axis_lines import MM_DECIMALS, origin_pivots_note, signed
 from pige_sym.compensation.controllers.hal_config import HalConfig
 from pige_sym.compensation.controllers.scope import scope_lines
+from pige_sym.compensation.controllers.tables import linuxcnc_comp, linuxcnc_kins_maps
 from pige_sym.compensation.controllers.tables.linuxcnc_comp import render_lines as comp_file_lines
 from pige_sym.compensation.controllers.tables.linuxcnc_kins_maps import map_setp_lines
 from pige_sym.compensation.controllers.tables.positioning import positioning_names
@@ -61,6 +62,8 @@ TRT_LINES: dict[str, dict[str, dict[str, tuple[str, ...]]]] = {
 #: How far a configured axis line may lie from the parameter file's pivot and still be the same line [mm]:
 #: their rounding, pige writes pivots to 1 nm (program headers, the component's pins) and trt pins to 0.1 nm.
 PIVOT_AGREEMENT_MM = 2e-6
+#: The options of ``pige compensate`` this controller reads (:func:`~pige_sym.compensation.controllers.check_options`).
+OPTIONS = ("--current", "--comp-dir")
 VERSION = ("# requires LinuxCNC >= 2.9: the rot-point pins came with commit 135b0ce522 (switchable kinematics, "
            "first in 2.9.0-pre1); 2.8's trt modules turn C about the machine origin")
 
@@ -88,7 +91,7 @@ def entries(params: CompensationParameters, options: ControllerOptions | None) -
     else:
         trt = kinematic_values(params, "linuxcnc")
         out.append(("the trt pins", trt))
-        comp = comp_values(params)
+        comp = comp_values(params, options.change_limits() if options is not None else None)
         if comp:
             out.append(("the trt pins and the COMP_FILEs", trt | comp))
     try:
@@ -126,6 +129,13 @@ def linuxcnc_trt_deltas(params: CompensationParameters) -> tuple[str, dict[str, 
     return TRT_MODULES[tilt], deltas
 
 
+def check_tables(params: CompensationParameters, options: ControllerOptions) -> None:
+    """The COMP_FILEs' and the component's map limits (256 entries per joint, ``MAP_NODES`` uniform grid angles),
+    before any value is weighed (:mod:`.tables.linuxcnc_comp`, :mod:`.tables.linuxcnc_kins_maps`)."""
+    linuxcnc_comp.check_format(params)
+    linuxcnc_kins_maps.check_format(params)
+
+
 def render(params: CompensationParameters, options: ControllerOptions) -> str:
     """Every section (:func:`sections`) in turn, each under a line that says what it is and where it goes: the stock
     trt pins, the COMP_FILEs' INI lines, and, beside them, pige's kinematics component with every PIGE and map.
@@ -156,9 +166,10 @@ def sections(params: CompensationParameters, options: ControllerOptions) -> list
         trt_refusal: str | None = str(exc)
     else:  # refusals of --current (another machine's configuration, unknown pins) are the user's to fix
         trt_refusal = None
+    limits = options.change_limits()
     pige_refusal: str | None = None
     try:
-        ini, hal = pige_kinematics_lines(params)
+        ini, hal = pige_kinematics_lines(params, limits)
     except (InputError, UnsupportedMachineError) as exc:
         if trt_refusal is not None:
             raise InputError(f"{trt_refusal}; pige's kinematics component: {exc}") from None
@@ -171,11 +182,11 @@ def sections(params: CompensationParameters, options: ControllerOptions) -> list
         if pige_refusal is not None:
             trt.append(f"# pige's kinematics component cannot describe this machine: {pige_refusal}")
         out.append(Section("the stock trt kinematics: HAL lines", "trt-kins.hal", "hal", "\n".join(trt)))
-        comp = comp_file_lines(params)
+        comp = comp_file_lines(params, limits)
         if comp:
             out.append(Section("with the stock kinematics, the positioning maps as COMP_FILEs: INI lines, each "
                                "under its [JOINT_n] section", "comp-files.ini", "ini", "\n".join(comp)))
-            out += [Section(f"compensation file {n}", n, "comp", t) for n, t in comp_files(params).items()]
+            out += [Section(f"compensation file {n}", n, "comp", t) for n, t in comp_files(params, limits).items()]
     else:
         summary.append(f"# LinuxCNC's stock trt kinematics: {trt_refusal}")
     if pige_refusal is None:
@@ -307,9 +318,10 @@ def _senses(params: CompensationParameters, axes: tuple[str, ...]) -> dict[str, 
     return {a: -1 if params.axis_sense.get(a, 1) < 0 else 1 for a in axes}
 
 
-def pige_kinematics_lines(params: CompensationParameters) -> tuple[list[str], list[str]]:
+def pige_kinematics_lines(params: CompensationParameters, limits: object = None) -> tuple[list[str], list[str]]:
     """pige's kinematics component for ``params.machine``: its INI keys (how to load it), and its HAL lines: how to
-    build it, its ``setp`` lines (absolute) and the nets it needs (the tool length, each rotary joint's velocity).
+    build it, its ``setp`` lines (absolute), the map pins held to ``limits`` (``--max-change``, :mod:`.entry_checks`),
+    and the nets it needs (the tool length, each rotary joint's velocity).
 
     Raises
     ------
@@ -341,6 +353,8 @@ def pige_kinematics_lines(params: CompensationParameters) -> tuple[list[str], li
            f"{tilt:.3g} urad on the default cone) and the pose-dependent extensions: "
            f"{', '.join(e.spec.id for e in params.extensions) or 'none'}"]
     out += [f"setp {name}.sense-{a.lower()} {s}" for a, s in _senses(params, axes).items()]
+    note = origin_pivots_note(params, "--current refuses a configuration whose trt pins put them elsewhere")
+    out += [f"# {note}"] if note else []
     for a in axes:
         pivot = params.pivots_mm.get(a, [0.0, 0.0, 0.0])
         out += [f"setp {name}.pivot-{a.lower()}-{c} {float(v):.6f}" for c, v in zip("xyz", pivot, strict=True)]
@@ -356,7 +370,7 @@ def pige_kinematics_lines(params: CompensationParameters) -> tuple[list[str], li
             out.append(f"# {pin}: not estimated (the parameter file has no {n}; left as it is)")
         else:
             out.append(f"setp {pin} {params.values.get(n, 0.0):.4f}")
-    return ini, out + map_setp_lines(params, name) + component_nets(params, name)
+    return ini, out + map_setp_lines(params, name, limits) + component_nets(params, name)
 
 
 def component_nets(params: CompensationParameters, name: str) -> list[str]:

@@ -148,13 +148,25 @@ def names_text(values: dict[str, float]) -> str:
     return "; ".join(x for x in (said, mapped) if x) or "nothing"
 
 
-def weighing_lines(params: CompensationParameters, comment: str) -> list[str]:
-    """The rule, and per value not entered as estimated: its estimate ± std and what is entered."""
+def _map_motions(params: CompensationParameters, style: str) -> list[str]:
+    """The maps (``<axis>:<motion>``) the style's tables carry."""
+    return list(getattr(get_controller(style), "map_motions", lambda _p: [])(params))
+
+
+def weighing_lines(params: CompensationParameters, comment: str, style: str | None = None,
+                   scope: ControllerScope | None = None) -> list[str]:
+    """The rule, and per value not entered as estimated: its estimate ± std and what is entered (with ``style``: a
+    value that controller does not hold said to be weighed for the NC rewrite only; with ``scope``, what its own
+    ways of entering carry decides it)."""
     w = weighing_of(params)
     if w.covariance_from == "none":
         return [f"{comment}{note}" for note in w.notes]
-    rows = weighing_rows(w, params.units) or ["every estimate is entered as estimated (each many standard errors "
-                                              "from 0)"]
+    if scope is not None:
+        carried: set[str] | None = {n.split("@")[0] for c in scope.choices if c.own for n in c.values}
+    else:
+        carried = None if style is None else set(representable(params, style)) | set(_map_motions(params, style))
+    rows = weighing_rows(w, params.units, carried) or [
+        "every estimate is entered as estimated (each many standard errors from 0)"]
     return [f"{comment}weighed by uncertainty (docs/algorithms.md): {w.rule}", *(f"{comment}{n}" for n in w.notes),
             *(f"{comment}  {r}" for r in rows)]
 
@@ -182,7 +194,7 @@ def scope_lines(params: CompensationParameters, style: str, comment: str, option
         predicted = f"{comment}predicted tool-point error: not predicted (the parameter file states no uncertainty)"
     entered = [f"{comment}entered by {c.label}: {names_text(c.values)}" for c in s.choices] or [
         f"{comment}entered: nothing"]
-    return weighing_lines(params, comment) + note + entered + [
+    return weighing_lines(params, comment, style, s) + note + entered + [
         f"{comment}NOT representable in this controller's kinematics (only the NC rewrite compensates them): "
         f"{'; '.join(s.not_representable) or 'none'}",
         predicted,

@@ -60,8 +60,8 @@ def checkup_changes(fit: Any, m: Any, opts: Any) -> Changes:
             why[name] = ("not entered: within its uncertainty" if c == 0.0 else "entered as estimated"
                          if abs(share - 1.0) < 0.05 else f"entered in part ({share:.0%}): weakly determined")
     out = Changes(entered, why, opts.controller)
-    out.compensation = _compensation(fit, m, entered, why, opts)
-    if opts.controller and out.compensation.controller is not None:
+    if opts.controller:  # the stage writes the entries (without a controller there is nothing more to print)
+        out.compensation = _compensation(fit, m, entered, why, opts)
         out.controller_text = out.compensation.controller.text
     return out
 
@@ -70,6 +70,7 @@ def _compensation(fit: Any, m: Any, entered: dict[str, float | None], why: dict[
     """The compensation stage on the check-up's decision: what it leaves and, with ``--controller``, the entries as
     ``pige compensate --controller`` prints them, the held PIGEs not entered."""
     from pige_sym.compensation.controllers import ControllerOptions
+    from pige_sym.compensation.controllers.entry_checks import ChangeLimits
     from pige_sym.compensation.parameters import CompensationParameters
     from pige_sym.compensation.stage import Decision, compensate
     from pige_sym.kernels import load_kernels
@@ -86,7 +87,8 @@ def _compensation(fit: Any, m: Any, entered: dict[str, float | None], why: dict[
         axis_sense=dict(m.axis_sense), std={n: float(fit.std[fit.parameters.index(n)]) for n in names},
         covariance=(tuple(names), np.asarray(fit.covariance)[np.ix_(idx, idx)]),
         set_to_zero=[n for n in values if n not in names], ball_mm=[float(x) for x in m.ball_mm])
-    options = ControllerOptions(carrier=opts.carrier, current=opts.current, heidenhain_trans=opts.heidenhain_trans)
+    options = ControllerOptions(carrier=opts.carrier, current=opts.current, heidenhain_trans=opts.heidenhain_trans,
+                                limits=ChangeLimits(*opts.max_change))
     held = {n: "held at the last full calibration (the check-up does not estimate it): not entered"
             for n in values if n not in fit.parameters}
     decision = Decision(entered | dict.fromkeys(held), why | held)
