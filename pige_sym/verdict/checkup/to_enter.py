@@ -5,8 +5,9 @@ are weighed as ``pige compensate`` weighs them (:func:`~pige_sym.compensation.we
 data do not show beyond their uncertainty is not entered, a well-determined value is entered as estimated).  A
 change beyond ``--max-change`` (position errors in mm, orientation errors in degrees, as ``pige compensate
 --max-change``) is not entered: a change that large is no drift to correct between calibrations, calibrate fully.
-With ``--controller`` the entries are printed as ``pige compensate --controller`` prints them
-(:func:`~pige_sym.compensation.controllers.format_controller`), the held PIGEs at 0 (not entered).
+The check-up decides which values are entered; the compensation stage (:func:`pige_sym.compensation.stage.compensate`
+with that decision) predicts what they leave and, with ``--controller``, writes the entries as ``pige compensate
+--controller`` does, the held PIGEs at 0 (not entered): :attr:`Changes.compensation` is the stage's result object.
 """
 
 from __future__ import annotations
@@ -30,10 +31,12 @@ class Changes:
     controller: str | None = None
     controller_text: str = ""
     notes: list[str] = field(default_factory=list)
+    compensation: Any = None  # the compensation stage's result (pige_sym.compensation.result.Compensation)
 
     def to_dict(self) -> dict[str, Any]:
         return {"entered": dict(self.entered), "why": dict(self.why), "controller": self.controller,
-                "controller_text": self.controller_text or None, "notes": list(self.notes)}
+                "controller_text": self.controller_text or None, "notes": list(self.notes),
+                "compensation": None if self.compensation is None else self.compensation.to_dict()}
 
 
 def checkup_changes(fit: Any, m: Any, opts: Any) -> Changes:
@@ -57,16 +60,19 @@ def checkup_changes(fit: Any, m: Any, opts: Any) -> Changes:
             why[name] = ("not entered: within its uncertainty" if c == 0.0 else "entered as estimated"
                          if abs(share - 1.0) < 0.05 else f"entered in part ({share:.0%}): weakly determined")
     out = Changes(entered, why, opts.controller)
-    if opts.controller:
-        out.controller_text = _controller_text(fit, m, entered, opts)
+    if opts.controller:  # the stage writes the entries (without a controller there is nothing more to print)
+        out.compensation = _compensation(fit, m, entered, why, opts)
+        out.controller_text = out.compensation.controller.text
     return out
 
 
-def _controller_text(fit: Any, m: Any, entered: dict[str, float | None], opts: Any) -> str:
-    """The entries as ``pige compensate --controller`` prints them, the held PIGEs not entered."""
-    from pige_sym.compensation.controllers import format_controller
+def _compensation(fit: Any, m: Any, entered: dict[str, float | None], why: dict[str, str], opts: Any) -> Any:
+    """The compensation stage on the check-up's decision: what it leaves and, with ``--controller``, the entries as
+    ``pige compensate --controller`` prints them, the held PIGEs not entered."""
+    from pige_sym.compensation.controllers import ControllerOptions
     from pige_sym.compensation.controllers.entry_checks import ChangeLimits
     from pige_sym.compensation.parameters import CompensationParameters
+    from pige_sym.compensation.stage import Decision, compensate
     from pige_sym.kernels import load_kernels
 
     kern = load_kernels(fit.machine)
@@ -81,5 +87,9 @@ def _controller_text(fit: Any, m: Any, entered: dict[str, float | None], opts: A
         axis_sense=dict(m.axis_sense), std={n: float(fit.std[fit.parameters.index(n)]) for n in names},
         covariance=(tuple(names), np.asarray(fit.covariance)[np.ix_(idx, idx)]),
         set_to_zero=[n for n in values if n not in names], ball_mm=[float(x) for x in m.ball_mm])
-    return format_controller(params, opts.controller, carrier=opts.carrier, current=opts.current,
-                             heidenhain_trans=opts.heidenhain_trans, limits=ChangeLimits(*opts.max_change))
+    options = ControllerOptions(carrier=opts.carrier, current=opts.current, heidenhain_trans=opts.heidenhain_trans,
+                                limits=ChangeLimits(*opts.max_change))
+    held = {n: "held at the last full calibration (the check-up does not estimate it): not entered"
+            for n in values if n not in fit.parameters}
+    decision = Decision(entered | dict.fromkeys(held), why | held)
+    return compensate(params, controller=opts.controller, options=options, decided=decision)
