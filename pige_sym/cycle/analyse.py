@@ -157,8 +157,9 @@ def full_proposal(ctx: Context, req: Request, run: Path, result: Any, log: RunLo
     """The proposal of ``P1`` and the predicted tool-point error (module docstring, step 4)."""
     from datetime import datetime, timezone
 
-    from pige_sym.compensation.controllers import entered_for_controller, format_controller
+    from pige_sym.compensation.controllers import entered_for_controller
     from pige_sym.compensation.controllers.scope import tool_point_summary
+    from pige_sym.compensation.stage import format_controller
     from pige_sym.cycle.proposal import FORMAT, proposed_values
 
     status(run, "weigh")
