@@ -191,6 +191,8 @@ def test_a_work_offset_shifts_the_program_and_the_entries_stay_in_machine_coordi
     text = (run / "program.ngc").read_text()
     assert "(pige sphere_mm: -80, 15, 35)" in text and "(pige pivot_A_mm: -100, 25, 30)" in text
     assert "G55" in text.splitlines()
+    # the TCP program ends at the reference pose it must start from (so the cycle runs again as it is)
+    assert [ln for ln in text.splitlines() if ln.startswith("G0 A")][-1] == "G0 A0 C0"
     probe(run)
     assert run_step("analyse", run, live=False) == 0
     p = json.loads(config.proposal.read_text())
