@@ -53,7 +53,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("acquisition", ("acquisition",)),
     ("report", ("report",)),
     ("api", ("api",)),
-    ("cli", ("cli", "__main__")),
+    ("cli", ("cli", "__main__", "cycle")),
 ]
 LEVEL = {top: i for i, (_, tops) in enumerate(LAYERS) for top in tops}
 
