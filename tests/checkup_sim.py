@@ -101,11 +101,18 @@ class ChartSim:
     rng: np.random.Generator
     tolerance: float = 50.0
     extra_scatter: float = 0.0  # run-to-run scatter beyond the measurement noise, in units of the check-up std
+    scatter_um: float = 0.0  # run-to-run std of each axis-line position [µm] (re-clamping, temperature), every run
     alpha: float = 0.01
     runs: list[RunRecord] = field(default_factory=list)
     verdicts: list[str] = field(default_factory=list)
 
+    def moved(self, truth: dict[str, float]) -> dict[str, float]:
+        """The machine at one run: its axis-line positions moved by the run-to-run scatter."""
+        return {n: v + (self.scatter_um * float(self.rng.standard_normal()) if n in FREE else 0.0)
+                for n, v in truth.items()}
+
     def calibrate(self, truth: dict[str, float], when: datetime) -> None:
+        truth = self.moved(truth)
         err = self.rng.multivariate_normal(np.zeros(8), self.design.full_cov)
         values = np.array([truth[n] for n in LOCATION]) + err
         std = np.sqrt(np.diag(self.design.full_cov))
@@ -115,6 +122,7 @@ class ChartSim:
         """Draw the check-up estimate of ``truth`` (the held values off by the last calibration's errors), judge it,
         store it; its verdict."""
         d = self.design
+        truth = self.moved(truth)
         full = [r for r in self.runs if r.kind == "full"][-1]
         held_names = [n for n in LOCATION if n not in FREE]
         held = {n: float(full.values[LOCATION.index(n)]) for n in held_names}
