@@ -280,7 +280,13 @@ def pige_kinematics_lines(params: CompensationParameters) -> list[str]:
                    "tool-offset")
     for n in kern.PARAMETERS:
         pin = pins.error_pin(name, n)
-        if n in unset:
+        if n in params.held:
+            out.append(f"# {pin}: held by the check-up at {params.held[n]:+.4f} (the value in force): leave it as "
+                       "it is")
+        elif params.in_force is not None and n in params.values:
+            out.append(f"# {pin}: add {params.values[n]:+.4f} to the value it holds (the change since the values in "
+                       "force; the pin holds the absolute value)")
+        elif n in unset:
             out.append(f"# {pin}: no value in the parameter file (left as it is)")
         elif n not in params.values:
             out.append(f"# {pin}: not estimated (the parameter file has no {n}; left as it is)")

@@ -1,12 +1,27 @@
-"""The changes a check-up says to enter: its PIGEs weighed by their uncertainty, within ``--max-change``.
+"""The changes a check-up says to enter: each re-measured PIGE's change since the values in force, weighed.
 
-The check-up's estimates ``x̂`` (its PIGEs only: the held ones are the full calibration's and are not re-entered)
-are weighed as ``pige compensate`` weighs them (:func:`~pige_sym.compensation.weighing.entered_values`: what the
-data do not show beyond their uncertainty is not entered, a well-determined value is entered as estimated).  A
-change beyond ``--max-change`` (position errors in mm, orientation errors in degrees, as ``pige compensate
---max-change``) is not entered: a change that large is no drift to correct between calibrations, calibrate fully.
+**The values in force** (:attr:`~.reference.ChartState.in_force`) are what the controller holds as the check-up sees
+it: for a held PIGE the value the check-up held it at (the last full calibration's, less a correction entered right
+after it); for a re-measured one the level its chart starts from (the last full calibration's value, or, after a
+correction, the previous run less what was entered).  A check-up measures ``x``; the change since the values in
+force is ``x − v``, with the check-up's covariance (its held values' error included) plus the level's own variance.
+
+**What is entered.**  The changes of the re-measured PIGEs, weighed as ``pige compensate`` weighs them
+(:func:`~pige_sym.compensation.weighing.entered_values`: a change the data do not show beyond its uncertainty is not
+entered); a change beyond ``--max-change`` (position errors in mm, orientation errors in degrees) is not entered
+(no drift to correct between calibrations: calibrate fully).  The held PIGEs stay at the values in force: never
+entered, never printed as a value.  An entry that adds (``x-rot-point: add …``) adds the change, never the value
+again.
+
+**The prediction** of what the entries leave at the tool counts every PIGE's uncertainty: the joint covariance of
+the changes and of the held values' error (``θ_H``, the full calibration's ``Σ_H``), ``[[C, −KΣ_H], [−Σ_H Kᵀ,
+Σ_H]]``, ``C`` the changes' covariance and ``K`` the check-up's sensitivity to its held values
+(:class:`~pige_sym.identification.subset.SubsetFit`).
+
 With ``--controller`` the entries are printed as ``pige compensate --controller`` prints them
-(:func:`~pige_sym.compensation.controllers.format_controller`), the held PIGEs at 0 (not entered).
+(:func:`~pige_sym.compensation.controllers.format_controller`): entries that add, the changes; absolute entries
+(pige's kinematics component) as the change to add to the value they hold; ``table`` the axis lines as the check-up
+finds them (the values in force plus the changes).
 """
 
 from __future__ import annotations
@@ -23,29 +38,76 @@ URAD_PER_DEG = math.pi / 180.0 * 1e6
 
 @dataclass
 class Changes:
-    """What to enter [µm, µrad]: per PIGE the value (None: not entered), why, and the controller's text."""
+    """What to enter [µm, µrad] (module docstring).
+
+    Attributes
+    ----------
+    entered : dict of str to float or None
+        Per re-measured PIGE the change to enter (None: beyond ``--max-change``, not entered).
+    why : dict of str to str
+    in_force : dict of str to float
+        Every location PIGE's value in force (as the check-up measures it).
+    change : dict of str to float
+        Per re-measured PIGE the measured change since its value in force, ``x − v``.
+    held : dict of str to float
+        The PIGEs the check-up held, at their values in force (never entered).
+    names : list of str
+        The order of ``covariance``: the re-measured PIGEs, then the held.
+    covariance : ndarray, shape=(P, P)
+        Joint covariance of the changes and the held values' error (module docstring).
+    """
 
     entered: dict[str, float | None]
     why: dict[str, str]
+    in_force: dict[str, float] = field(default_factory=dict)
+    change: dict[str, float] = field(default_factory=dict)
+    held: dict[str, float] = field(default_factory=dict)
+    names: list[str] = field(default_factory=list)
+    covariance: np.ndarray | None = field(default=None, repr=False)
     controller: str | None = None
     controller_text: str = ""
     notes: list[str] = field(default_factory=list)
 
+    def std(self, name: str) -> float:
+        """The standard error of a change (or of a held value's error) [µm, µrad]."""
+        if self.covariance is None or name not in self.names:
+            return math.nan
+        i = self.names.index(name)
+        return float(math.sqrt(max(self.covariance[i, i], 0.0)))
+
     def to_dict(self) -> dict[str, Any]:
-        return {"entered": dict(self.entered), "why": dict(self.why), "controller": self.controller,
-                "controller_text": self.controller_text or None, "notes": list(self.notes)}
+        return {"entered": dict(self.entered), "why": dict(self.why), "in_force": dict(self.in_force),
+                "change": dict(self.change), "change_std": {n: self.std(n) for n in self.change},
+                "held": dict(self.held), "held_std": {n: self.std(n) for n in self.held},
+                "controller": self.controller, "controller_text": self.controller_text or None,
+                "notes": list(self.notes)}
 
 
-def checkup_changes(fit: Any, m: Any, opts: Any) -> Changes:
-    """The changes of a check-up fit (module docstring); ``opts`` a :class:`~.routine.CheckupOptions`."""
+def joint_covariance(fit: Any, held_covariance: np.ndarray, level_var: np.ndarray) -> np.ndarray:
+    """``[[C, −KΣ_H], [−Σ_H Kᵀ, Σ_H]]`` (module docstring), ``C`` the fit's covariance plus the levels' variances."""
+    c = np.asarray(fit.covariance, dtype=float) + np.diag(level_var)
+    sigma = np.asarray(held_covariance, dtype=float)
+    if fit.sensitivity is None or sigma.size == 0:
+        return c
+    cross = -np.asarray(fit.sensitivity) @ sigma
+    return np.block([[c, cross], [cross.T, sigma]])
+
+
+def checkup_changes(fit: Any, m: Any, opts: Any, state: Any) -> Changes:
+    """The changes of a check-up fit (module docstring); ``opts`` a :class:`~.routine.CheckupOptions`, ``state`` its
+    :class:`~.reference.ChartState`."""
     from pige_sym.compensation.weighing import entered_values
 
-    values = np.asarray(fit.values, dtype=float)
-    weighed = entered_values(values, np.asarray(fit.covariance, dtype=float))
+    free = list(fit.parameters)
+    level = np.array([state.in_force[n] for n in free])
+    level_var = np.array([state.in_force_var.get(n, 0.0) for n in free])
+    change = np.asarray(fit.values, dtype=float) - level
+    cov = joint_covariance(fit, state.held_covariance, level_var)
+    weighed = entered_values(change, cov[: len(free), : len(free)])
     max_mm, max_deg = opts.max_change
     entered: dict[str, float | None] = {}
     why: dict[str, str] = {}
-    for name, x, c in zip(fit.parameters, values, weighed, strict=True):
+    for name, x, c in zip(free, change, weighed, strict=True):
         bound = max_mm * UM_PER_MM if fit.units[name] == "um" else max_deg * URAD_PER_DEG
         if abs(c) > bound:
             entered[name] = None
@@ -54,31 +116,53 @@ def checkup_changes(fit: Any, m: Any, opts: Any) -> Changes:
         else:
             entered[name] = float(c)
             share = c / x if x else 0.0
-            why[name] = ("not entered: within its uncertainty" if c == 0.0 else "entered as estimated"
+            why[name] = ("not entered: within its uncertainty" if c == 0.0 else "entered as measured"
                          if abs(share - 1.0) < 0.05 else f"entered in part ({share:.0%}): weakly determined")
-    out = Changes(entered, why, opts.controller)
+    out = Changes(entered, why, dict(state.in_force), dict(zip(free, change.tolist(), strict=True)),
+                  dict(state.held), free + list(state.held), cov, opts.controller)
     if opts.controller:
-        out.controller_text = _controller_text(fit, m, entered, opts)
+        out.controller_text = _controller_text(fit, m, out, opts)
     return out
 
 
-def _controller_text(fit: Any, m: Any, entered: dict[str, float | None], opts: Any) -> str:
-    """The entries as ``pige compensate --controller`` prints them, the held PIGEs not entered."""
+def _controller_text(fit: Any, m: Any, changes: Changes, opts: Any) -> str:
+    """The entries as ``pige compensate --controller`` prints them (module docstring)."""
     from pige_sym.compensation.controllers import format_controller
+
+    params = _parameters(fit, m, changes, absolute=opts.controller == "table")
+    return format_controller(params, opts.controller, carrier=opts.carrier, current=opts.current,
+                             heidenhain_trans=opts.heidenhain_trans)
+
+
+def _parameters(fit: Any, m: Any, changes: Changes, *, absolute: bool) -> Any:
+    """The changes as compensation parameters, weighed as :func:`checkup_changes` weighed them (held: 0, not
+    entered); ``absolute``: the values in force plus the changes (the axis lines as the check-up finds them)."""
     from pige_sym.compensation.parameters import CompensationParameters
+    from pige_sym.compensation.weighing import predict, travel_poses, weigh, with_entered
     from pige_sym.kernels import load_kernels
 
     kern = load_kernels(fit.machine)
-    refused = [n for n, v in entered.items() if v is None]
-    names = [n for n in fit.parameters if n not in refused]
-    idx = [fit.parameters.index(n) for n in names]
-    values = {n: float(fit.values[fit.parameters.index(n)]) if n in names else 0.0 for n in kern.LOCATION_PARAMETERS}
+    names = changes.names
+    estimate = {n: changes.change.get(n, 0.0) for n in names}
+    chosen = {n: (changes.entered.get(n) or 0.0) if n in changes.entered else 0.0 for n in names}
     params = CompensationParameters(
-        kern.MACHINE_CODE, values, {n: kern.UNITS[n] for n in values},
+        kern.MACHINE_CODE, dict(estimate), {n: kern.UNITS[n] for n in names},
         None if m.tool_mm is None else [float(x) for x in m.tool_mm],
         {a: [float(x) for x in v] for a, v in m.pivots_mm.items()}, m.path or "the check-up", [],
-        axis_sense=dict(m.axis_sense), std={n: float(fit.std[fit.parameters.index(n)]) for n in names},
-        covariance=(tuple(names), np.asarray(fit.covariance)[np.ix_(idx, idx)]),
-        set_to_zero=[n for n in values if n not in names], ball_mm=[float(x) for x in m.ball_mm])
-    return format_controller(params, opts.controller, carrier=opts.carrier, current=opts.current,
-                             heidenhain_trans=opts.heidenhain_trans)
+        axis_sense=dict(m.axis_sense), std={n: changes.std(n) for n in names},
+        covariance=(tuple(names), np.asarray(changes.covariance)), ball_mm=[float(x) for x in m.ball_mm],
+        held=dict(changes.held), in_force=dict(changes.in_force))
+    w = weigh(params, travel_poses(params))
+    why = {n: ("held by the check-up at its value in force: not entered" if n in changes.held else
+               changes.why.get(n, w.why[n])) for n in names}
+    predicted = dict(w.predicted)
+    if w.moments is not None and w.covariance is not None:
+        est = np.array([estimate[n] for n in names])
+        predicted["entered"] = predict(est, w.covariance, w.moments, np.array([chosen[n] for n in names]))
+    from dataclasses import replace
+
+    w = replace(w, entered=dict(chosen), why=why, predicted=predicted)
+    out = with_entered(params, w)
+    if absolute:
+        out = replace(out, values={n: changes.in_force.get(n, 0.0) + v for n, v in out.values.items()}, in_force=None)
+    return out

@@ -93,6 +93,10 @@ class SqliteHistory:
             return _engine(self.path).list_runs(machine_id, light=light)  # its refusal names the known machines
         return runs
 
+    def fleet(self, machine_code: str, machine_id: str) -> list[list[RunRecord]]:
+        """The runs of every other machine of the structure ``machine_code`` (each in measurement order, light)."""
+        return fleet_of(self.checked.records, machine_code, machine_id)
+
     def existing(self, path: Path) -> None:
         """Refuse a file already in the history (a run is added once)."""
         sha = file_sha256(path)
@@ -137,6 +141,15 @@ class SqliteHistory:
         finally:
             conn.close()
         return decode_run(row)
+
+
+def fleet_of(records: list[RunRecord], machine_code: str, machine_id: str) -> list[list[RunRecord]]:
+    """Per other machine of structure ``machine_code`` its runs in measurement order, by machine id."""
+    by: dict[str, list[RunRecord]] = {}
+    for r in records:
+        if r.machine_code == machine_code and r.machine_id != machine_id:
+            by.setdefault(r.machine_id, []).append(r)
+    return [sorted(v, key=lambda r: (r.measured_at, r.id)) for _, v in sorted(by.items())]
 
 
 def _check(path: Path) -> Checked:

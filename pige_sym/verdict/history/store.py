@@ -291,6 +291,12 @@ class EngineHistory:
     def list_runs(self, machine_id: str, *, light: bool = False) -> list[RunRecord]:
         return list_runs(self.engine, machine_id, light=light)
 
+    def fleet(self, machine_code: str, machine_id: str) -> list[list[RunRecord]]:
+        """The runs of every other machine of the structure ``machine_code`` (each in measurement order, light)."""
+        from pige_sym.verdict.history.sqlite_fast import fleet_of
+
+        return fleet_of(all_runs(self.engine, light=True), machine_code, machine_id)
+
     def existing(self, path: Path) -> None:
         existing_run(self.engine, path)
 
