@@ -70,9 +70,9 @@ def _to_schema_1(db: Path) -> None:
 
     with sqlite3.connect(db) as conn:
         conn.execute("DELETE FROM runs WHERE kind = 'checkup'")
-        for column in ("kind", "setup_json", "checkup_json", "chart_json"):
+        for column in ("kind", "setup_json", "checkup_json", "chart_json", "after_correction"):
             conn.execute(f"ALTER TABLE runs DROP COLUMN {column}")
-        conn.execute("DELETE FROM schema_version WHERE version = 2")
+        conn.execute("DELETE FROM schema_version WHERE version >= 2")
     conn.close()
 
 
@@ -112,7 +112,8 @@ def test_reading_a_schema_1_history_changes_nothing_and_a_check_up_migrates_it(m
                           (T0 + timedelta(days=1)).isoformat(), "--json")
     assert code in (0, 1), err
     versions, columns = _schema(db)
-    assert versions == [1, 2] and {"kind", "setup_json", "checkup_json", "chart_json"} <= set(columns)
+    assert versions == [1, 2, 3] and {"kind", "setup_json", "checkup_json", "chart_json",
+                                      "after_correction"} <= set(columns)
     from pige_sym.verdict.history import connect, list_runs
 
     runs = list_runs(connect(str(db), create=False), "DMU-1")

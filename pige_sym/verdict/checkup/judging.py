@@ -49,12 +49,19 @@ def fleet_series(fleet: list[list[Any]], names: list[str]) -> list[Series]:
 
 def scatter_posteriors(state: ChartState, fleet: list[Series], free: list[str],
                        units: dict[str, str]) -> dict[str, Posterior | None]:
-    """Per judged PIGE its scatter's posterior, None while its unit's population is not worth :data:`MIN_DOF`."""
+    """Per judged PIGE its scatter's posterior, None while its unit's population is not worth :data:`MIN_DOF`.
+
+    The machine's newest check-ups (:attr:`~.scatter.Series.recent`) are left out while the population is worth
+    :data:`MIN_DOF` without them."""
     out: dict[str, Posterior | None] = {}
     for unit in sorted({units[n] for n in free}):
-        group = [s for n, s in state.series.items() if units.get(n) == unit and s.values.size]
-        group += [s for s in fleet if units.get(s.name) == unit]
-        judged = [state.series[n] for n in free if units[n] == unit and n in state.series]
+        fleet_group = [s for s in fleet if units.get(s.name) == unit]
+        own = {n: s for n, s in state.series.items() if units.get(n) == unit and s.values.size}
+        settled = {n: s.settled() for n, s in own.items()}
+        if sum(s.dof for s in [*settled.values(), *fleet_group]) >= MIN_DOF:
+            own = settled
+        group = [*own.values(), *fleet_group]
+        judged = [own[n] for n in free if units[n] == unit and n in own]
         found = posteriors(judged, group) if sum(s.dof for s in group) >= MIN_DOF else {}
         out |= {n: found.get(n) for n in free if units[n] == unit}
     return out

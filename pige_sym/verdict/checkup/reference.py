@@ -175,19 +175,17 @@ def series_of(runs: list[Any], names: list[str], current: int | None = None, lag
     """Per PIGE of ``names`` the runs that measured it, in control, with their segments (the scatter's data).
 
     A check-up the learned limits flagged in a segment before ``current`` (default: the last run's), which a
-    correction closed, leaves: its cause was found and corrected.  The last ``lag`` check-ups are left out (a drift
-    in the making must not widen the limits it is judged by: :data:`LAG`).
+    correction closed, leaves: its cause was found and corrected.  The last ``lag`` check-ups are marked
+    :attr:`~.scatter.Series.recent` (a drift in the making must not widen the limits it is judged by: :data:`LAG`).
     """
     segs = segments_of(runs)
     last = (segs[-1] if segs else 0) if current is None else current
     lagged = {r.id for r in [r for r in runs if r.kind == "checkup"][-lag:]} if lag else set()
     out = {}
     for name in names:
-        values, variances, segments, kinds = [], [], [], []
+        values, variances, segments, kinds, recent = [], [], [], [], []
         for run, seg in zip(runs, segs, strict=True):
             if name not in run.parameters or not _in_control(run, name):
-                continue
-            if run.id in lagged:
                 continue
             if seg < last and run.kind == "checkup" and ((run.checkup or {}).get("flagged") or {}).get(name):
                 continue
@@ -198,8 +196,9 @@ def series_of(runs: list[Any], names: list[str], current: int | None = None, lag
                 variances.append(max(u * u, 1e-18))
                 segments.append(seg)
                 kinds.append(run.kind)
+                recent.append(run.id in lagged)
         out[name] = Series(runs[0].machine_id if runs else "", name, np.array(values), np.array(variances),
-                           np.array(segments, dtype=int), kinds)
+                           np.array(segments, dtype=int), kinds, np.array(recent, dtype=bool))
     return out
 
 

@@ -89,6 +89,7 @@ class CheckupResult:
     correction: dict[str, float]
     changes: Any = None
     run_id: int | None = None
+    run_number: int = 0
     fit: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
@@ -113,6 +114,11 @@ class CheckupResult:
         """Where the limits came from (one sentence)."""
         return limits_source(self.items)
 
+    def next_step(self) -> tuple[str, str]:
+        """What to do now and the command: :func:`next_step` (the CLI and the report print it)."""
+        return next_step(self.verdict, self.notes, None if self.changes is None else self.changes.entered,
+                         self.machine_id)
+
     def chart(self) -> dict[str, Any]:
         """What later check-ups read of this one (:mod:`~pige_sym.verdict.checkup.reference`)."""
         from pige_sym.files import json_ready
@@ -126,7 +132,8 @@ class CheckupResult:
 
         return json_ready({
             "format": FORMAT, "machine_id": self.machine_id, "machine": self.machine, "file": self.file,
-            "measured_at": self.measured_at, "run": self.run_id, "verdict": self.verdict,
+            "measured_at": self.measured_at, "run": self.run_id, "run_number": self.run_number,
+            "verdict": self.verdict, "next_step": list(self.next_step()),
             "exit_status": self.exit_status,
             "free": [i.name for i in self.items], "held": self.held, "provisional": self.provisional,
             "method": METHOD, "alpha": self.alpha, "min_dof": MIN_DOF, "signature": self.signature,
@@ -192,7 +199,7 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
 
     record = history.add_checkup(Path(path), machine_id, kern.MACHINE_CODE, (measured, source), fit,
                                  setup_of(m).to_dict(), verdict, result.to_dict(), result.chart())
-    result.run_id = record.id
+    result.run_id, result.run_number = record.id, len(runs) + 1
     return result
 
 
@@ -263,6 +270,25 @@ def _tolerances(opts: CheckupOptions, runs: list[Any], machine: str, free: list[
             return {n: stored[n] for n in free if n in stored}
     raise InputError(f"no tolerances are stored for machine {runs[0].machine_id}: give --tolerances TOL.json (it is "
                      "kept for the next check-ups)")
+
+
+def next_step(verdict: str, notes: list[str], entered: dict[str, float | None] | None,
+              machine_id: str) -> tuple[str, str]:
+    """What to do after a check-up, and the command (one sentence each; ``pige checkup`` and the report of the
+    machine's history print the same)."""
+    import shlex
+
+    checkup = f"pige checkup NEXT.csv --machine-id {shlex.quote(machine_id)}"
+    if any("calibrate the machine fully" in n for n in notes):
+        return ("calibrate the machine fully: the check-up's poses disagree with the PIGEs it held beyond their "
+                "uncertainty", f"pige history add FULL.csv --machine-id {shlex.quote(machine_id)}")
+    if verdict == "ok":
+        return "nothing to correct: the next check-up as usual (pige history fleet says when)", checkup
+    if not any(v for v in (entered or {}).values()):
+        return (f"{'out of tolerance' if verdict == 'out' else 'drifted'}, but no change is shown beyond its "
+                "uncertainty: run the next check-up now to confirm; calibrate fully if it says so again", checkup)
+    tail = "; if it is still out, calibrate fully" if verdict == "out" else ""
+    return f"enter the changes, then run the next check-up with --corrected{tail}", f"{checkup} --corrected"
 
 
 def _notes(items: list[Item]) -> list[str]:

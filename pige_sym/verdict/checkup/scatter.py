@@ -60,6 +60,9 @@ class Series:
     segments : ndarray, shape=(n,) of int
     kinds : list of str
         ``full`` or ``checkup`` per run.
+    recent : ndarray, shape=(n,) of bool, optional
+        The newest check-ups, left out while the population is worth enough without them
+        (:data:`~pige_sym.verdict.checkup.reference.LAG`).
     """
 
     machine_id: str
@@ -68,6 +71,15 @@ class Series:
     variances: np.ndarray
     segments: np.ndarray
     kinds: list[str] = field(default_factory=list)
+    recent: np.ndarray | None = None
+
+    def settled(self) -> Series:
+        """This series without its :attr:`recent` runs."""
+        if self.recent is None or not self.recent.any():
+            return self
+        keep = ~self.recent
+        return Series(self.machine_id, self.name, self.values[keep], self.variances[keep], self.segments[keep],
+                      [k for k, r in zip(self.kinds, self.recent, strict=True) if not r])
 
     @property
     def dof(self) -> int:
@@ -136,9 +148,12 @@ class Posterior:
         Grid [unit²] and posterior probabilities (sum 1).
     own_runs, own_dof : int
         The machine's own runs of this PIGE (in control) and the degrees of freedom they give.
-    pooled_units, pooled_machines, pooled_runs, pooled_dof : int
-        The population the prior is fitted to: units (other PIGEs of this machine and the fleet's), machines
-        (this one included when its other PIGEs count), runs and degrees of freedom.
+    sibling_units : int
+        The machine's other PIGEs in the population.
+    fleet_machines, fleet_runs : int
+        The other machines of its structure in the population, and their runs.
+    pooled_units, pooled_dof : int
+        The whole population besides this PIGE: units and degrees of freedom.
     prior_dof : float
         The posterior mean of ν₀ (what the prior is worth, in runs).
     """
@@ -147,9 +162,10 @@ class Posterior:
     weights: np.ndarray
     own_runs: int
     own_dof: int
+    sibling_units: int
+    fleet_machines: int
+    fleet_runs: int
     pooled_units: int
-    pooled_machines: int
-    pooled_runs: int
     pooled_dof: int
     prior_dof: float
 
@@ -172,12 +188,25 @@ class Posterior:
 
     def source(self) -> str:
         """Where the scatter was learned (one clause)."""
-        own = f"{self.own_runs} run{'s' if self.own_runs != 1 else ''} of its own ({self.own_dof} dof)"
-        if not self.pooled_units:
-            return own
-        return (f"{own} and {self.pooled_units} other PIGE series of {self.pooled_machines} machine"
-                f"{'s' if self.pooled_machines != 1 else ''} of its structure ({self.pooled_runs} runs, "
-                f"{self.pooled_dof} dof; the prior is worth ~{self.prior_dof:.0f} runs)")
+        parts = [f"{self.own_runs} run{'s' if self.own_runs != 1 else ''} of its own ({self.own_dof} degree"
+                 f"{'s' if self.own_dof != 1 else ''} of freedom)"]
+        if self.sibling_units:
+            parts.append(f"its {self.sibling_units} other PIGE{'s' if self.sibling_units != 1 else ''} of that unit")
+        if self.fleet_machines:
+            parts.append(f"{self.fleet_machines} machine{'s' if self.fleet_machines != 1 else ''} of its structure "
+                         f"in this history ({self.fleet_runs} runs)")
+        text = " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 1 else parts)
+        if self.pooled_units:
+            text += f"; their prior is worth about {self.prior_dof:.0f} runs of its own"
+        return text
+
+
+def _runs(series: list[Series]) -> int:
+    """The runs behind series (a run that measured several PIGEs counted once: the largest series per machine)."""
+    most: dict[str, int] = {}
+    for s in series:
+        most[s.machine_id] = max(most.get(s.machine_id, 0), int(s.values.size))
+    return sum(most.values())
 
 
 def posteriors(targets: list[Series], population: list[Series]) -> dict[str, Posterior]:
@@ -208,7 +237,8 @@ def posteriors(targets: list[Series], population: list[Series]) -> dict[str, Pos
         post = np.log(np.maximum(hyper @ prior, 1e-300)) + (logl[id(t)] if id(t) in logl else 0.0)
         w = np.exp(post - post.max())
         others = [s for s in informative if s is not t]
-        out[t.name] = Posterior(tau2, w / w.sum(), int(t.values.size), t.dof, len(others),
-                                len({s.machine_id for s in others}), sum(int(s.values.size) for s in others),
+        fleet = [s for s in others if s.machine_id != t.machine_id]
+        out[t.name] = Posterior(tau2, w / w.sum(), int(t.values.size), t.dof, len(others) - len(fleet),
+                                len({s.machine_id for s in fleet}), _runs(fleet), len(others),
                                 sum(s.dof for s in others), float(hyper @ nu))
     return out
