@@ -311,7 +311,7 @@ def test_pige_checkup_says_ok_drifted_or_out_and_stores_the_run(machine: dict, t
     db, prog = machine["db"], machine["program"]
     days = iter(range(1, 50))
     status = {}
-    for case, shift in (("ok", 0.0), ("drifted", 2.0), ("out", 7.0)):
+    for case, shift in (("ok", 0.0), ("drifted", 2.0), ("out", 10.0)):
         path = checkup_file(prog, TRUTH | {"EX0C": TRUTH["EX0C"] + shift}, 60 + next(days), tmp_path / f"{case}.csv")
         code, out, _ = _run(capsys, "checkup", path, "--machine-id", "DMU-1", "--db", db, "--date",
                             (T0 + timedelta(days=next(days))).isoformat(), "--json")
@@ -322,7 +322,7 @@ def test_pige_checkup_says_ok_drifted_or_out_and_stores_the_run(machine: dict, t
     runs = json.loads(out)["runs"]
     assert [r["kind"] for r in runs] == ["full", "checkup", "checkup", "checkup"]
     # the change since the values in force (the full calibration's EX0C), never its value again (issue 49)
-    assert runs[-1]["checkup"]["to_enter"]["EX0C"] == pytest.approx(7.0, abs=0.5)
+    assert runs[-1]["checkup"]["to_enter"]["EX0C"] == pytest.approx(10.0, abs=0.5)
     code, out, _ = _run(capsys, "history", "fleet", "--db", db, "--json")
     row = json.loads(out)["machines"][0]
     assert code == 0 and row["verdict"] == "out" and "said out" in row["why"]

@@ -26,7 +26,7 @@ from pige_sym.cli.main import main
 from testdata import CHROMIUM, run_chromium
 
 TOL = Path(__file__).resolve().parents[1] / "examples" / "tolerances.json"
-SHIFT = {"ok": 0.0, "drifted": 2.0, "out": 7.0}
+SHIFT = {"ok": 0.0, "drifted": 2.0, "out": 10.0}
 
 
 def _run(capsys: pytest.CaptureFixture[str], *args: object) -> tuple[int, str]:
@@ -74,8 +74,8 @@ def test_the_cli_numbers_runs_per_machine_and_keeps_one_unit_per_column(historie
     assert "drift [um/day, 90 %]" in text and "/h" not in text
     assert "(by none)" not in text and "* outside its control limits: EX0C by" in text
     rows = [ln for ln in text.splitlines() if re.match(r"(PIGE|E[XYZ]0[AC]) ", ln)]
-    for row in rows:  # nine cells apart, none running into the next (cells hold single blanks only)
-        assert len(re.split(r" {2,}", row.strip())) == 9, row
+    for row in rows:  # ten cells apart, none running into the next (cells hold single blanks only)
+        assert len(re.split(r" {2,}", row.strip())) == 10, row
     assert "no PIGE outside its control limits" in histories["ok"]["text"]
 
 
@@ -126,9 +126,12 @@ window.addEventListener('load', function () {
   var bg = s.backgroundColor, fg = s.color, alpha = (bg.match(/[\\d.]+/g)[3] || '1');
   var l1 = lum(bg), l2 = lum(fg), ratio = (Math.max(l1, l2) + 0.05) / (Math.min(l1, l2) + 0.05);
   var r = b.getBoundingClientRect();
+  var w = document.documentElement.clientWidth;
+  var wide = Array.from(document.querySelectorAll('body *')).filter(function (e) {
+    return e.getBoundingClientRect().right > w + 1; }).length;
   var d = document.createElement('pre'); d.id = 'pige-badge';
   d.textContent = 'text=' + b.textContent.trim() + ' alpha=' + alpha + ' contrast=' + ratio.toFixed(2) +
-    ' width=' + Math.round(r.width) + ' bottom=' + Math.round(r.bottom);
+    ' width=' + Math.round(r.width) + ' bottom=' + Math.round(r.bottom) + ' wide=' + wide;
   document.body.appendChild(d);
 });
 </script>"""
@@ -137,15 +140,17 @@ window.addEventListener('load', function () {
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt-get install chromium)")
 @pytest.mark.parametrize("verdict", list(SHIFT))
 def test_the_verdict_badge_is_visible_in_chromium(histories: dict, verdict: str, tmp_path: Path) -> None:
-    """The first screen's verdict of the history is a coloured badge with readable text (WCAG contrast ≥ 4.5)."""
+    """The first screen's verdict of the history is a coloured badge with readable text (WCAG contrast ≥ 4.5), and
+    the page, its check-up tables too, fits a 1000 px window."""
     page = tmp_path / "page.html"
     page.write_text(histories[verdict]["html"].replace("</body>", BADGE_PROBE + "</body>"), encoding="utf-8")
-    run = run_chromium(tmp_path, "--window-size=1200,800", "--dump-dom", page.as_uri(), timeout_s=180)
+    run = run_chromium(tmp_path, "--window-size=1000,800", "--dump-dom", page.as_uri(), timeout_s=180)
     found = re.search(r'<pre id="pige-badge">([^<]*)</pre>', run.stdout)
     assert found, run.stderr[-2000:]
     got = dict(kv.split("=", 1) for kv in found.group(1).split())
     assert got["text"] == verdict.upper() and float(got["alpha"]) == 1.0, got
     assert float(got["contrast"]) >= 4.5 and int(got["width"]) > 20 and int(got["bottom"]) < 800, got
+    assert got["wide"] == "0", got
 
 
 def test_the_report_s_next_step_for_an_old_check_up_is_computed_as_the_cli_s() -> None:

@@ -88,22 +88,23 @@ def _columns(rows: list[list[str]], right: set[int]) -> list[str]:
 def format_checkup(r: Any) -> str:
     """The check-up as text: verdict, one line per PIGE, where the limits came from, the changes, the next step."""
     unit = ", ".join(sorted({i.unit for i in r.items}))
-    rows = [["PIGE", "value ± std", "centre", "limit ±", "z", "tol", "status", f"drift [{unit}/day, 90 %]",
-             "leaves its tolerance (interval), UTC"]]
+    rows = [["PIGE", "value ± std", "centre", "limit ±", "z", "error left", "tol", "status",
+             f"drift [{unit}/day, 90 %]", "leaves its tolerance (interval), UTC"]]
     for it in r.items:
         lim = it.limit
         rows.append([it.name, f"{_num(it.value)} ± {_num(it.std, '.3f')}", _num(lim and lim.centre),
                      _num(lim and lim.half_width, ".3f"), _num(None if lim is None else lim.z, "+.2f"),
-                     _num(it.tolerance, "g"), it.status + ("*" if lim and lim.outside else ""), _rate(it),
-                     _leaves(it, r.origin)])
+                     _num(it.left), _num(it.tolerance, "g"), it.status + ("*" if lim and lim.outside else ""),
+                     _rate(it), _leaves(it, r.origin)])
     lines = [f"check-up of {r.machine_id} ({r.machine}), its run {r.run_number}, measured "
              f"{r.measured_at[:16].replace('T', ' ')} UTC: verdict {r.verdict.upper()}", f"file {r.file}",
-             *_columns(rows, {1, 2, 3, 4, 5})]
+             *_columns(rows, {1, 2, 3, 4, 5, 6})]
     out = [f"{i.name} by {i.limit.by.replace('+', ' and ')}" for i in r.items if i.limit and i.limit.outside]
     lines.append(f"* outside its control limits: {'; '.join(out)}" if out else
                  "no PIGE outside its control limits")
-    lines.append("(z: distance from the centre in limit widths, |z| > 1 outside; drift over the segment's check-ups, "
-                 "or over the flagged check-ups of a drift; forecast only where the drift is shown)")
+    lines.append("(z: distance from the centre in limit widths, |z| > 1 outside; error left: what the values in force "
+                 "leave, judged against the tolerance; drift of that error over the segment's check-ups, or over the "
+                 "flagged check-ups of a drift; forecast only where the drift is shown)")
     lines += _limits_lines(r)
     held = ", ".join(f"{n} {v:+.3g}" + (f" ± {r.changes.std(n):.2g}" if r.changes is not None else "")
                      for n, v in r.held.items())

@@ -151,8 +151,9 @@ def checkup_html(data: ReportData, base: Path | None) -> str:
                      "provisional" if info.get("provisional") else "learned"])
     last = runs[-1].checkup or {}
     per = [[esc(i["name"]), num(i["value"], "+.3f"), num(i["std"]), num((i.get("limit") or {}).get("centre"), "+.3f"),
-            num((i.get("limit") or {}).get("half_width")), esc(_scatter(i.get("limit"))), num(i.get("tolerance"), "g"),
-            esc(i["status"]), esc(_rate(i.get("trend"))), esc(_leaves(i.get("trend")))] for i in last.get("items", [])]
+            num((i.get("limit") or {}).get("half_width")), esc(_scatter(i.get("limit"))), num(i.get("left"), "+.3f"),
+            num(i.get("tolerance"), "g"), esc(i["status"]), esc(_rate(i.get("trend"))), esc(_leaves(i.get("trend")))]
+           for i in last.get("items", [])]
     source = last.get("limits_source") or ("provisional" if last.get("provisional") else "learned")
     return "\n".join([
         '<section data-section="checkup" id="checkup"><h2>Check-ups</h2>',
@@ -166,8 +167,9 @@ def checkup_html(data: ReportData, base: Path | None) -> str:
         table(["run", "measured (UTC)", "verdict", "outside its limits (test)", "after a correction", "limits"], rows,
               num_cols=[0]),
         "<h4>The last check-up</h4>",
-        table(["PIGE", "value", "std", "centre", "limit ±", "run-to-run scatter (90 %)", "tolerance", "status",
-               "drift per day [90 %]", "leaves its tolerance (UTC)"], per, num_cols=[1, 2, 3, 4, 6]),
+        table(["PIGE", "value", "std", "centre", "limit ±", "run-to-run scatter (90 %)", "error left (values in force)",
+               "tolerance", "status", "drift per day [90 %]", "leaves its tolerance (UTC)"], per,
+              num_cols=[1, 2, 3, 4, 6, 7]),
         "</section>"])
 
 

@@ -5,9 +5,11 @@
    in the same history (the *fleet*, :func:`fleet_series`); the posterior of each judged PIGE's ``τ²``.  While the
    population has fewer than :data:`~.limits.MIN_DOF` degrees of freedom the limits are provisional.
 2. **The limits** (:mod:`~pige_sym.verdict.checkup.limits`) of each PIGE against the current segment's runs.
-3. **The tolerance**: ISO 14253-1 decision rule (:func:`~pige_sym.verdict.check.decide`).
-4. **The trend** (:mod:`~pige_sym.verdict.checkup.trend`), with the run-to-run scatter as its scale; a forecast
-   only where the drift is shown.
+3. **The tolerance**: ISO 14253-1 decision rule (:func:`~pige_sym.verdict.check.decide`) on the error the values in
+   force leave, ``x − level`` (:attr:`~.reference.ChartState.level`: a check-up that measures the machine itself
+   reads the values in force as its level; one that measures what the controller leaves reads 0).
+4. **The trend** (:mod:`~pige_sym.verdict.checkup.trend`) of that error, with the run-to-run scatter as its scale;
+   a forecast only where the drift is shown.
 
 **Verdict**: ``out`` when a PIGE is not shown within its tolerance (``fail`` or, under the guard rule, ``undecided``),
 else ``drifted`` when one is outside its control limits, else ``ok``.
@@ -29,7 +31,8 @@ from pige_sym.verdict.checkup.trend import Trend, trend
 
 @dataclass
 class Item:
-    """One PIGE of a check-up: value, limits, tolerance, trend."""
+    """One PIGE of a check-up: value, limits, tolerance, trend; ``left`` the error the values in force leave
+    (``value − level``, what the tolerance and the trend judge)."""
 
     name: str
     unit: str
@@ -40,6 +43,7 @@ class Item:
     status: str
     reason: str
     trend: Trend | None = None
+    left: float = 0.0
 
 
 def fleet_series(fleet: list[list[Any]], names: list[str]) -> list[Series]:
@@ -80,13 +84,15 @@ def judge(fit: Any, state: ChartState, tol: dict[str, float], opts: Any, t_now: 
         values, variances = state.runs.get(name, (np.zeros(0), np.zeros(0)))
         limit = control_limit(values, variances, posts.get(name), value=value, variance=std * std,
                               run_dof=int(fit.dof), m=len(fit.parameters), alpha=opts.alpha)
+        level = state.level.get(name, 0.0)
         if name in tol:
-            status, reason = decide(value, std, tol[name], rule=opts.rule, k=opts.k)
+            status, reason = decide(value - level, std, tol[name], rule=opts.rule, k=opts.k)
         else:
             status, reason = "no limit", "no tolerance given for it"
-        tr = _trend(state.trend.get(name, []), (t_now, value), limit, posts.get(name), std, tol.get(name),
+        points = [(t, x - level, out) for t, x, out in state.trend.get(name, [])]
+        tr = _trend(points, (t_now, value - level), limit, posts.get(name), std, tol.get(name),
                     opts.alpha / len(fit.parameters))
-        items.append(Item(name, fit.units[name], value, std, limit, tol.get(name), status, reason, tr))
+        items.append(Item(name, fit.units[name], value, std, limit, tol.get(name), status, reason, tr, value - level))
     return items, verdict_of(items)
 
 

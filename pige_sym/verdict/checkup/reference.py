@@ -4,16 +4,27 @@ From a machine's runs in measurement order (:func:`~pige_sym.verdict.history.lis
 
 - **the last full calibration** with its set-up (``runs.setup_json``; for a run stored before schema version 2,
   read again from its file when that is still there): the poses and the sphere of a check-up are planned from it,
-  and the PIGEs a check-up does not re-measure are *held* at its values, less a correction entered right after it;
-- **segments** (:mod:`~pige_sym.verdict.checkup.limits`): a full calibration starts one at its values; a check-up
-  stored with ``--corrected`` (the changes printed for the previous run were entered before it) starts one at the
-  previous run's values less those changes;
-- **points**: the check-ups with the same signature (PIGEs and poses), each with its segment and whether the
-  learned limits flagged it (those of a segment closed by a correction leave the scatter).
+  and the PIGEs a check-up does not re-measure are *held* at its values (less a correction entered right after it,
+  when the check-ups measure what the controller leaves of the errors);
+- **segments**: a run stored after a correction was entered (``--corrected``: ``pige checkup`` and ``pige history
+  add``) starts one; a full calibration alone does not (consecutive calibrations of an unchanged machine show its
+  run-to-run scatter);
+- **the scatter's data** (:func:`series_of`, :mod:`~pige_sym.verdict.checkup.scatter`): per location PIGE every run
+  that measured it, full calibrations and check-ups, in control, with its segment; the newest :data:`LAG` check-ups
+  marked recent;
+- **the current segment's runs** per re-measured PIGE, the limits' centre (:mod:`~pige_sym.verdict.checkup.limits`),
+  started, after a correction, by the previous run (less the correction when the check-ups measure what the
+  controller leaves);
+- **the values in force** (:attr:`ChartState.in_force`) and the level a check-up reads when nothing changed.
 
-A correction is what pige printed to enter: a check-up's ``to_enter`` (its PIGEs, weighed), or for a full calibration
-every PIGE weighed by its uncertainty (:func:`~pige_sym.compensation.weighing.entered_values`, what ``pige compensate
---controller`` enters).
+What a check-up measures (:func:`measures_machine`): probing in identity kinematics (RTCP off) measures the machine's
+own errors, whatever the controller's kinematics hold, so a correction entered does not move what it reads; an
+R-test or probing in TCP kinematics measures what the controller's kinematics leave of them, which a correction
+entered moves by what was entered.
+
+A correction is what pige printed to enter: a check-up's ``to_enter`` (the changes of its PIGEs, weighed), or for a
+full calibration every PIGE weighed by its uncertainty (:func:`~pige_sym.compensation.weighing.entered_values`, what
+``pige compensate --controller`` enters).
 """
 
 from __future__ import annotations
@@ -91,10 +102,15 @@ class ChartState:
         (hours from ``origin``, value, outside its limits when judged) of the current segment's check-ups.
     origin : str
         The time the hours count from (the machine's first run).
-    in_force, in_force_var : dict of str to float
-        Every location PIGE's value in force as the check-up measures it (:mod:`~pige_sym.verdict.checkup.to_enter`):
-        the held values, and per free PIGE the level its segment starts from (the last full calibration's value, or
-        the start a correction gave), with that level's own variance (free PIGEs only).
+    absolute : bool
+        The check-ups measure the machine's own errors (:func:`measures_machine`), not what the controller leaves.
+    in_force : dict of str to float
+        Every location PIGE's value in force: what the controller holds as pige printed it to be entered (the last
+        full calibration's correction, when it was entered or the check-ups measure the machine itself, plus the
+        check-ups' corrections entered since) [µm, µrad].
+    level : dict of str to float
+        Per free PIGE the value a check-up reads when nothing changed since the values in force: the values in force
+        (``absolute``), else 0 (what the controller leaves).
     correction : dict of str to float
         With ``corrected``: what was entered before the new check-up.
     """
@@ -109,8 +125,9 @@ class ChartState:
     trend: dict[str, list[tuple[float, float, bool]]]
     origin: str
     previous: Any
+    absolute: bool = True
     in_force: dict[str, float] = field(default_factory=dict)
-    in_force_var: dict[str, float] = field(default_factory=dict)
+    level: dict[str, float] = field(default_factory=dict)
     correction: dict[str, float] = field(default_factory=dict)
 
 
@@ -202,37 +219,49 @@ def series_of(runs: list[Any], names: list[str], current: int | None = None, lag
     return out
 
 
+def measures_machine(setup: RunSetup) -> bool:
+    """A check-up of this set-up measures the machine's own errors, whatever the controller holds: probing in
+    identity kinematics (RTCP off: the joints are the axes, the controller's kinematics unused).  An R-test, or
+    probing in TCP kinematics, measures what the controller's kinematics leave of them (module docstring)."""
+    return setup.instrument == "sphere-probe" and (setup.probe or {}).get("kinematics", "identity") == "identity"
+
+
+def _entered_since(runs: list[Any], full_at: int, corrected: bool) -> tuple[bool, dict[str, float]]:
+    """(the full calibration's correction was entered, the sum of the check-ups' corrections entered since it): a
+    correction is entered when the run after it says so (``--corrected``; ``corrected``: the new check-up)."""
+    marks = [after_correction(r) for r in runs[full_at + 1:]] + [corrected]
+    total: dict[str, float] = {}
+    for run, entered in zip(runs[full_at + 1:], marks[1:], strict=True):
+        if entered and run.kind == "checkup":
+            for n, v in correction_of(run).items():
+                total[n] = total.get(n, 0.0) + v
+    return marks[0], total
+
+
 def chart_state(runs: list[Any], free: list[str], signature: str, *, corrected: bool,
                 location: list[str]) -> ChartState:
     """Read the machine's runs as a chart for a new check-up of ``free`` (module docstring); ``signature`` is kept
     for the record (every run that measured a PIGE counts)."""
     full = last_full(runs)
     setup = run_setup(full)
+    absolute = measures_machine(setup)
     segs = segments_of(runs)
     segment = (segs[-1] if segs else 0) + int(corrected)
     origin = runs[0].measured_at
-    held_entered: dict[str, float] = {}
-    full_at = runs.index(full)
-    if full_at + 1 < len(runs) and after_correction(runs[full_at + 1]) or corrected and full_at == len(runs) - 1:
-        held_entered = correction_of(full)
+    full_entered, since = _entered_since(runs, runs.index(full), corrected)
+    by_full = correction_of(full) if absolute or full_entered else {}
+    in_force = {n: by_full.get(n, 0.0) + since.get(n, 0.0) for n in location}
     series = series_of(runs, [n for n in location if any(n in r.parameters for r in runs)], segment, LAG)
     current = [k for k, s in enumerate(segs) if s == segment]
-    seg_runs = {n: _segment_runs(runs, current, n) for n in free}
+    seg_runs = {n: _segment_runs(runs, current, n, absolute) for n in free}
     trend = {n: [(hours(runs[k].measured_at, origin), float(runs[k].values[runs[k].parameters.index(n)]),
                   bool(((runs[k].checkup or {}).get("outside") or {}).get(n, False)))
                  for k in current if runs[k].kind == "checkup" and n in runs[k].parameters] for n in free}
     correction = correction_of(runs[-1]) if corrected else {}
-    held, held_cov = _held(full, free, list(location), held_entered)
-    in_force, in_force_var = dict(held), {}
-    for n in free:
-        level = _start(runs, current, n) or _value(full, n) or _first(seg_runs[n])
-        in_force[n], in_force_var[n] = level if level is not None else (math.nan, math.nan)
-    return ChartState(full, setup, held, held_cov, segment, seg_runs, series, trend, origin, runs[-1], in_force,
-                      in_force_var, correction)
-
-
-def _first(pair: tuple[np.ndarray, np.ndarray]) -> tuple[float, float] | None:
-    return (float(pair[0][0]), float(pair[1][0])) if pair[0].size else None
+    held, held_cov = _held(full, free, list(location), {} if absolute else by_full)
+    level = {n: in_force[n] if absolute else 0.0 for n in free}
+    return ChartState(full, setup, held, held_cov, segment, seg_runs, series, trend, origin, runs[-1], absolute,
+                      in_force, level, correction)
 
 
 def _value(run: Any, name: str) -> tuple[float, float] | None:
@@ -244,21 +273,22 @@ def _value(run: Any, name: str) -> tuple[float, float] | None:
     return (x, max(u * u, 1e-18)) if math.isfinite(x) and math.isfinite(u) else None
 
 
-def _start(runs: list[Any], current: list[int], name: str) -> tuple[float, float] | None:
+def _start(runs: list[Any], current: list[int], name: str, absolute: bool) -> tuple[float, float] | None:
     """The start of a segment a correction started: the last run before it that measured ``name``, less what was
-    entered after the run before the segment (``correction_of``); None when no correction started it."""
+    entered after the run before the segment (``correction_of``; nothing when the check-ups measure the machine
+    itself, ``absolute``); None when no correction started it."""
     first = current[0] if current else len(runs)
     if first == 0 or first < len(runs) and not after_correction(runs[first]):
         return None
-    fix = correction_of(runs[first - 1]).get(name, 0.0)
+    fix = 0.0 if absolute else correction_of(runs[first - 1]).get(name, 0.0)
     before = next((p for k in range(first - 1, -1, -1) if (p := _value(runs[k], name)) is not None), None)
     return None if before is None else (before[0] - fix, before[1])
 
 
-def _segment_runs(runs: list[Any], current: list[int], name: str) -> tuple[np.ndarray, np.ndarray]:
+def _segment_runs(runs: list[Any], current: list[int], name: str, absolute: bool) -> tuple[np.ndarray, np.ndarray]:
     """The current segment's runs of ``name`` in control (values, own variances), its start first."""
     pairs = [p for k in current if _in_control(runs[k], name) and (p := _value(runs[k], name)) is not None]
-    start = _start(runs, current, name)
+    start = _start(runs, current, name, absolute)
     if start is not None:
         pairs.insert(0, start)
     return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])

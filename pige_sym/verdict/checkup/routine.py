@@ -57,7 +57,7 @@ def item_dict(item: Item, origin: str) -> dict[str, Any]:
     """One judged PIGE as JSON (times of the forecast as ISO times)."""
     t = None if item.trend is None else item.trend.to_dict() | {
         k: when(origin, getattr(item.trend, k)) for k in ("leaves_at", "leaves_low", "leaves_high")}
-    return {"name": item.name, "unit": item.unit, "value": item.value, "std": item.std,
+    return {"name": item.name, "unit": item.unit, "value": item.value, "std": item.std, "left": item.left,
             "limit": None if item.limit is None else item.limit.to_dict(), "tolerance": item.tolerance,
             "status": item.status, "reason": item.reason, "trend": t}
 

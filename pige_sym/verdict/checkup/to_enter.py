@@ -1,10 +1,12 @@
 """The changes a check-up says to enter: each re-measured PIGE's change since the values in force, weighed.
 
-**The values in force** (:attr:`~.reference.ChartState.in_force`) are what the controller holds as the check-up sees
-it: for a held PIGE the value the check-up held it at (the last full calibration's, less a correction entered right
-after it); for a re-measured one the level its chart starts from (the last full calibration's value, or, after a
-correction, the previous run less what was entered).  A check-up measures ``x``; the change since the values in
-force is ``x − v``, with the check-up's covariance (its held values' error included) plus the level's own variance.
+**The values in force** (:attr:`~.reference.ChartState.in_force`) are what the controller holds, as pige printed
+it to be entered: the last full calibration's correction (``pige compensate``; when it was entered, or when the
+check-ups measure the machine itself) plus the check-ups' corrections entered since (``--corrected``).  A check-up
+measures ``x``: the machine's own error when it probes in identity kinematics (the values in force do not move it:
+the change since them is ``x − v``), what the controller's kinematics leave of it otherwise (an R-test, TCP probing:
+the change is ``x`` itself) (:func:`~.reference.measures_machine`, :attr:`~.reference.ChartState.level`).  Its
+covariance is the check-up's (its held values' error included).
 
 **What is entered.**  The changes of the re-measured PIGEs, weighed as ``pige compensate`` weighs them
 (:func:`~pige_sym.compensation.weighing.entered_values`: a change the data do not show beyond its uncertainty is not
@@ -46,9 +48,9 @@ class Changes:
         Per re-measured PIGE the change to enter (None: beyond ``--max-change``, not entered).
     why : dict of str to str
     in_force : dict of str to float
-        Every location PIGE's value in force (as the check-up measures it).
+        Every location PIGE's value in force (what the controller holds).
     change : dict of str to float
-        Per re-measured PIGE the measured change since its value in force, ``x − v``.
+        Per re-measured PIGE the measured change since its value in force (module docstring).
     held : dict of str to float
         The PIGEs the check-up held, at their values in force (never entered).
     names : list of str
@@ -83,9 +85,10 @@ class Changes:
                 "notes": list(self.notes)}
 
 
-def joint_covariance(fit: Any, held_covariance: np.ndarray, level_var: np.ndarray) -> np.ndarray:
-    """``[[C, −KΣ_H], [−Σ_H Kᵀ, Σ_H]]`` (module docstring), ``C`` the fit's covariance plus the levels' variances."""
-    c = np.asarray(fit.covariance, dtype=float) + np.diag(level_var)
+def joint_covariance(fit: Any, held_covariance: np.ndarray) -> np.ndarray:
+    """``[[C, −KΣ_H], [−Σ_H Kᵀ, Σ_H]]`` (module docstring), ``C`` the fit's covariance (its held values' error
+    included)."""
+    c = np.asarray(fit.covariance, dtype=float)
     sigma = np.asarray(held_covariance, dtype=float)
     if fit.sensitivity is None or sigma.size == 0:
         return c
@@ -99,10 +102,8 @@ def checkup_changes(fit: Any, m: Any, opts: Any, state: Any) -> Changes:
     from pige_sym.compensation.weighing import entered_values
 
     free = list(fit.parameters)
-    level = np.array([state.in_force[n] for n in free])
-    level_var = np.array([state.in_force_var.get(n, 0.0) for n in free])
-    change = np.asarray(fit.values, dtype=float) - level
-    cov = joint_covariance(fit, state.held_covariance, level_var)
+    change = np.asarray(fit.values, dtype=float) - np.array([state.level[n] for n in free])
+    cov = joint_covariance(fit, state.held_covariance)
     weighed = entered_values(change, cov[: len(free), : len(free)])
     max_mm, max_deg = opts.max_change
     entered: dict[str, float | None] = {}
@@ -119,7 +120,7 @@ def checkup_changes(fit: Any, m: Any, opts: Any, state: Any) -> Changes:
             why[name] = ("not entered: within its uncertainty" if c == 0.0 else "entered as measured"
                          if abs(share - 1.0) < 0.05 else f"entered in part ({share:.0%}): weakly determined")
     out = Changes(entered, why, dict(state.in_force), dict(zip(free, change.tolist(), strict=True)),
-                  dict(state.held), free + list(state.held), cov, opts.controller)
+                  {n: state.in_force.get(n, 0.0) for n in state.held}, free + list(state.held), cov, opts.controller)
     if opts.controller:
         out.controller_text = _controller_text(fit, m, out, opts)
     return out
