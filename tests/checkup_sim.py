@@ -104,6 +104,7 @@ class ChartSim:
     tolerance: float = 50.0
     extra_scatter: float = 0.0  # run-to-run scatter beyond the measurement noise, in units of the check-up std
     scatter_um: float = 0.0  # run-to-run std of each axis-line position [µm] (re-clamping, temperature), every run
+    scatter_factor: dict[str, float] = field(default_factory=dict)  # per PIGE, times scatter_um (default 1)
     alpha: float = 0.01
     machine_id: str = "SIM"
     fleet: list[list[RunRecord]] = field(default_factory=list)
@@ -113,8 +114,8 @@ class ChartSim:
 
     def moved(self, truth: dict[str, float]) -> dict[str, float]:
         """The machine at one run: its axis-line positions moved by the run-to-run scatter."""
-        return {n: v + (self.scatter_um * float(self.rng.standard_normal()) if n in FREE else 0.0)
-                for n, v in truth.items()}
+        return {n: v + (self.scatter_um * self.scatter_factor.get(n, 1.0) * float(self.rng.standard_normal())
+                        if n in FREE else 0.0) for n, v in truth.items()}
 
     def calibrate(self, truth: dict[str, float], when: datetime) -> None:
         truth = self.moved(truth)

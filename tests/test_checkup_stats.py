@@ -71,12 +71,15 @@ def still_checkups(sim: ChartSim, count: int) -> np.ndarray:
 
 
 def false_alarms(design: Design, histories: int, *, seed: int, checkups: int = 10,
-                 calibrations: tuple[int, int] = (8, 13), ratio: tuple[float, float] = (1.0, 2.0)) -> np.ndarray:
-    """Alarms per check-up position over drift-free histories, shape=(checkups,)."""
+                 calibrations: tuple[int, int] = (8, 13), ratio: tuple[float, float] = (1.0, 2.0),
+                 factor: dict[str, float] | None = None) -> np.ndarray:
+    """Alarms per check-up position over drift-free histories, shape=(checkups,); ``factor``: a PIGE's scatter that
+    many times the others'."""
     alarms = np.zeros(checkups, dtype=int)
     for h in range(histories):
         rng = np.random.default_rng([seed, h])
-        sim = calibrated(design, rng, int(rng.integers(*calibrations)), NOISE_UM * rng.uniform(*ratio))
+        sim = calibrated(design, rng, int(rng.integers(*calibrations)), NOISE_UM * rng.uniform(*ratio),
+                         scatter_factor=dict(factor or {}))
         alarms += still_checkups(sim, checkups)
     return alarms
 

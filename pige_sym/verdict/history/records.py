@@ -172,3 +172,13 @@ def checkup_values(path: Path, machine_id: str, code: str, measured: tuple[str, 
         "setup_json": dumps(setup), "checkup_json": dumps(checkup), "chart_json": dumps(chart),
         "after_correction": int(bool(chart.get("after_correction"))),
     }
+
+
+def fleet_of(records: list[RunRecord], machine_code: str, machine_id: str) -> list[list[RunRecord]]:
+    """Per other machine of structure ``machine_code`` its runs in measurement order, by machine id (a check-up's
+    fleet, :mod:`pige_sym.verdict.checkup.scatter`)."""
+    by: dict[str, list[RunRecord]] = {}
+    for r in records:
+        if r.machine_code == machine_code and r.machine_id != machine_id:
+            by.setdefault(r.machine_id, []).append(r)
+    return [sorted(v, key=lambda r: (r.measured_at, r.id)) for _, v in sorted(by.items())]

@@ -31,7 +31,7 @@ from urllib.parse import quote
 from pige_sym.errors import InputError, SchemaRefusal
 from pige_sym.verdict.history.decode import check_new_run, decode_run, not_stored
 from pige_sym.verdict.history.integrity import SCHEMA_VERSION, Checked, check_database, damaged
-from pige_sym.verdict.history.records import RunRecord, checkup_values, file_sha256, normalise_url
+from pige_sym.verdict.history.records import RunRecord, checkup_values, file_sha256, fleet_of, normalise_url
 
 __all__ = ["SCHEMA_VERSION", "SqliteHistory", "open_history"]
 
@@ -141,15 +141,6 @@ class SqliteHistory:
         finally:
             conn.close()
         return decode_run(row)
-
-
-def fleet_of(records: list[RunRecord], machine_code: str, machine_id: str) -> list[list[RunRecord]]:
-    """Per other machine of structure ``machine_code`` its runs in measurement order, by machine id."""
-    by: dict[str, list[RunRecord]] = {}
-    for r in records:
-        if r.machine_code == machine_code and r.machine_id != machine_id:
-            by.setdefault(r.machine_id, []).append(r)
-    return [sorted(v, key=lambda r: (r.measured_at, r.id)) for _, v in sorted(by.items())]
 
 
 def _check(path: Path) -> Checked:

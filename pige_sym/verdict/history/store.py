@@ -297,7 +297,7 @@ class EngineHistory:
 
     def fleet(self, machine_code: str, machine_id: str) -> list[list[RunRecord]]:
         """The runs of every other machine of the structure ``machine_code`` (each in measurement order, light)."""
-        from pige_sym.verdict.history.sqlite_fast import fleet_of
+        from pige_sym.verdict.history.records import fleet_of
 
         return fleet_of(all_runs(self.engine, light=True), machine_code, machine_id)
 
