@@ -57,12 +57,15 @@ def _rate(item: Any) -> str:
 
 
 def _at(iso: str | None) -> str:
-    return "not bounded" if iso is None else iso[:16].replace("T", " ")
+    """An ISO time to the minute; ``not bounded`` for None; words (past the year 9999) as they are."""
+    if iso is None:
+        return "not bounded"
+    return iso[:16].replace("T", " ") if iso[:1].isdigit() else iso
 
 
 def _leaves(item: Any, origin: str) -> str:
     """When the PIGE leaves its tolerance: only where its drift is shown (:mod:`~pige_sym.verdict.checkup.trend`)."""
-    from pige_sym.verdict.checkup.routine import when
+    from pige_sym.verdict.checkup.routine import when_text as when
 
     t = item.trend
     if t is None or item.tolerance is None:

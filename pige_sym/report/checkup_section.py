@@ -74,9 +74,14 @@ def _forecast_text(last: Any, name: str) -> str:
     tr = (_item(last, name) or {}).get("trend")
     if not tr:
         return ""
+    from pige_sym.verdict.checkup.routine import BEYOND_CALENDAR
+
     rate = f"drift {tr['rate_per_h'] * 24:+.3g}/day"
-    if not tr.get("shown", tr.get("significant")) or not tr.get("leaves_at"):
-        return f"; {rate} (not shown)" if not tr.get("shown", tr.get("significant")) else f"; {rate}"
+    shown = tr.get("shown", tr.get("significant"))
+    if shown and not tr.get("leaves_at") and tr.get("leaves_at_h") is not None:
+        return f"; {rate}, leaves {BEYOND_CALENDAR}"
+    if not shown or not tr.get("leaves_at"):
+        return f"; {rate} (not shown)" if not shown else f"; {rate}"
     high = tr.get("leaves_high")
     return (f"; {rate}, leaves {tr['leaves_at'][5:16].replace('T', ' ')} ({tr['leaves_low'][5:16].replace('T', ' ')}"
             f" .. {high[5:16].replace('T', ' ') if high else 'not bounded'})")
@@ -194,7 +199,12 @@ def _rate(tr: dict[str, Any] | None) -> str:
 
 
 def _leaves(tr: dict[str, Any] | None) -> str:
-    if not tr or not tr.get("shown", tr.get("significant")) or not tr.get("leaves_at"):
+    from pige_sym.verdict.checkup.routine import BEYOND_CALENDAR
+
+    shown = bool(tr) and tr.get("shown", tr.get("significant"))  # type: ignore[union-attr]
+    if tr and shown and not tr.get("leaves_at") and tr.get("leaves_at_h") is not None:
+        return BEYOND_CALENDAR
+    if not tr or not shown or not tr.get("leaves_at"):
         return "—"
     high = (tr.get("leaves_high") or "not bounded")[:16].replace("T", " ")
     if tr.get("reached"):

@@ -46,6 +46,10 @@ from pige_sym.verdict.checkup.scatter import INTERVAL, Posterior
 
 #: Family-wise false-alarm rate per check-up (all its PIGEs together).
 ALPHA = 0.01
+#: The rates ``--alpha`` may be: below 1e-6 a limit sits beyond 5 sigma even on a learned scatter (no drift short of
+#: a crash is flagged, and the quantile leaves floating point near 1e-16), above 0.5 a still machine is flagged at
+#: every other check-up.
+ALPHA_RANGE = (1e-6, 0.5)
 #: Degrees of freedom of the population below which the limits are provisional (module docstring).
 MIN_DOF = 1
 #: What the posterior of a PIGE's scatter must be worth (degrees of freedom) for a check-up it flags to leave the

@@ -34,8 +34,6 @@ from typing import Any
 
 import numpy as np
 
-UM_PER_MM = 1000.0
-URAD_PER_DEG = math.pi / 180.0 * 1e6
 
 
 @dataclass
@@ -99,17 +97,18 @@ def joint_covariance(fit: Any, held_covariance: np.ndarray) -> np.ndarray:
 def checkup_changes(fit: Any, m: Any, opts: Any, state: Any) -> Changes:
     """The changes of a check-up fit (module docstring); ``opts`` a :class:`~.routine.CheckupOptions`, ``state`` its
     :class:`~.reference.ChartState`."""
+    from pige_sym.compensation.controllers.entry_checks import ChangeLimits
     from pige_sym.compensation.weighing import entered_values
 
     free = list(fit.parameters)
     change = np.asarray(fit.values, dtype=float) - np.array([state.level[n] for n in free])
     cov = joint_covariance(fit, state.held_covariance)
     weighed = entered_values(change, cov[: len(free), : len(free)])
-    max_mm, max_deg = opts.max_change
+    limits = ChangeLimits(*opts.max_change)
     entered: dict[str, float | None] = {}
     why: dict[str, str] = {}
     for name, x, c in zip(free, change, weighed, strict=True):
-        bound = max_mm * UM_PER_MM if fit.units[name] == "um" else max_deg * URAD_PER_DEG
+        bound = limits.bound(fit.units[name])
         if abs(c) > bound:
             entered[name] = None
             why[name] = (f"not entered: {c:+.4g} {fit.units[name]} is beyond --max-change ({bound:.4g}): no drift to "
@@ -129,10 +128,11 @@ def checkup_changes(fit: Any, m: Any, opts: Any, state: Any) -> Changes:
 def _controller_text(fit: Any, m: Any, changes: Changes, opts: Any) -> str:
     """The entries as ``pige compensate --controller`` prints them (module docstring)."""
     from pige_sym.compensation.controllers import format_controller
+    from pige_sym.compensation.controllers.entry_checks import ChangeLimits
 
     params = _parameters(fit, m, changes, absolute=opts.controller == "table")
     return format_controller(params, opts.controller, carrier=opts.carrier, current=opts.current,
-                             heidenhain_trans=opts.heidenhain_trans)
+                             heidenhain_trans=opts.heidenhain_trans, limits=ChangeLimits(*opts.max_change))
 
 
 def _parameters(fit: Any, m: Any, changes: Changes, *, absolute: bool) -> Any:
