@@ -35,7 +35,6 @@ from typing import Any
 import numpy as np
 
 
-
 @dataclass
 class Changes:
     """What to enter [µm, µrad] (module docstring).
