@@ -183,39 +183,62 @@ def segments_of(runs: list[Any]) -> list[int]:
     return out
 
 
-def _in_control(run: Any, name: str) -> bool:
-    """A full calibration always; a check-up unless the learned limits flagged it with trust (:mod:`~.limits`)."""
-    return run.kind != "checkup" or bool(((run.checkup or {}).get("in_control") or {}).get(name, True))
+@dataclass
+class _Table:
+    """A machine's runs as arrays per PIGE (one pass over the runs): value, own variance (NaN where the run did not
+    measure it), in control, flagged by learned limits, outside its limits; per run its segment and kind."""
+
+    segments: np.ndarray
+    checkup: np.ndarray
+    values: dict[str, np.ndarray]
+    variances: dict[str, np.ndarray]
+    in_control: dict[str, np.ndarray]
+    flagged: dict[str, np.ndarray]
+    outside: dict[str, np.ndarray]
+
+    @classmethod
+    def of(cls, runs: list[Any], names: list[str]) -> _Table:
+        n = len(runs)
+        values = {k: np.full(n, np.nan) for k in names}
+        variances = {k: np.full(n, np.nan) for k in names}
+        flags = {key: {k: np.zeros(n, dtype=bool) for k in names} for key in ("in_control", "flagged", "outside")}
+        for i, run in enumerate(runs):
+            info = run.checkup or {} if run.kind == "checkup" else {}
+            for name, x, u in zip(run.parameters, run.values.tolist(), run.std.tolist(), strict=True):
+                if name in values:
+                    values[name][i], variances[name][i] = x, max(u * u, 1e-18)
+                    flags["in_control"][name][i] = bool((info.get("in_control") or {}).get(name, True))
+                    flags["flagged"][name][i] = bool((info.get("flagged") or {}).get(name, False))
+                    flags["outside"][name][i] = bool((info.get("outside") or {}).get(name, False))
+        for name in names:
+            bad = ~(np.isfinite(values[name]) & np.isfinite(variances[name]))
+            values[name][bad], variances[name][bad] = np.nan, np.nan
+        return cls(np.array(segments_of(runs), dtype=int), np.array([r.kind == "checkup" for r in runs]), values,
+                   variances, flags["in_control"], flags["flagged"], flags["outside"])
+
+    def measured(self, name: str) -> np.ndarray:
+        return np.isfinite(self.values[name]) & self.in_control[name]
 
 
-def series_of(runs: list[Any], names: list[str], current: int | None = None, lag: int = 0) -> dict[str, Series]:
+def series_of(runs: list[Any], names: list[str], current: int | None = None, lag: int = 0,
+              table: _Table | None = None) -> dict[str, Series]:
     """Per PIGE of ``names`` the runs that measured it, in control, with their segments (the scatter's data).
 
     A check-up the learned limits flagged in a segment before ``current`` (default: the last run's), which a
     correction closed, leaves: its cause was found and corrected.  The last ``lag`` check-ups are marked
     :attr:`~.scatter.Series.recent` (a drift in the making must not widen the limits it is judged by: :data:`LAG`).
     """
-    segs = segments_of(runs)
-    last = (segs[-1] if segs else 0) if current is None else current
-    lagged = {r.id for r in [r for r in runs if r.kind == "checkup"][-lag:]} if lag else set()
+    t = table if table is not None else _Table.of(runs, names)
+    last = (int(t.segments[-1]) if t.segments.size else 0) if current is None else current
+    recent = np.zeros(len(runs), dtype=bool)
+    if lag:
+        recent[np.flatnonzero(t.checkup)[-lag:]] = True
+    kinds = np.array([r.kind for r in runs])
     out = {}
     for name in names:
-        values, variances, segments, kinds, recent = [], [], [], [], []
-        for run, seg in zip(runs, segs, strict=True):
-            if name not in run.parameters or not _in_control(run, name):
-                continue
-            if seg < last and run.kind == "checkup" and ((run.checkup or {}).get("flagged") or {}).get(name):
-                continue
-            i = run.parameters.index(name)
-            x, u = float(run.values[i]), float(run.std[i])
-            if math.isfinite(x) and math.isfinite(u):
-                values.append(x)
-                variances.append(max(u * u, 1e-18))
-                segments.append(seg)
-                kinds.append(run.kind)
-                recent.append(run.id in lagged)
-        out[name] = Series(runs[0].machine_id if runs else "", name, np.array(values), np.array(variances),
-                           np.array(segments, dtype=int), kinds, np.array(recent, dtype=bool))
+        keep = t.measured(name) & ~((t.segments < last) & t.checkup & t.flagged[name])
+        out[name] = Series(runs[0].machine_id if runs else "", name, t.values[name][keep], t.variances[name][keep],
+                           t.segments[keep], kinds[keep].tolist(), recent[keep])
     return out
 
 
@@ -251,12 +274,13 @@ def chart_state(runs: list[Any], free: list[str], signature: str, *, corrected: 
     full_entered, since = _entered_since(runs, runs.index(full), corrected)
     by_full = correction_of(full) if absolute or full_entered else {}
     in_force = {n: by_full.get(n, 0.0) + since.get(n, 0.0) for n in location}
-    series = series_of(runs, [n for n in location if any(n in r.parameters for r in runs)], segment, LAG)
+    names = [n for n in location if any(n in r.parameters for r in runs)]
+    table = _Table.of(runs, list(dict.fromkeys([*names, *free])))
+    series = series_of(runs, names, segment, LAG, table)
     current = [k for k, s in enumerate(segs) if s == segment]
-    seg_runs = {n: _segment_runs(runs, current, n, absolute) for n in free}
-    trend = {n: [(hours(runs[k].measured_at, origin), float(runs[k].values[runs[k].parameters.index(n)]),
-                  bool(((runs[k].checkup or {}).get("outside") or {}).get(n, False)))
-                 for k in current if runs[k].kind == "checkup" and n in runs[k].parameters] for n in free}
+    seg_runs = {n: _segment_runs(runs, table, current, n, absolute) for n in free}
+    trend = {n: [(hours(runs[k].measured_at, origin), float(table.values[n][k]), bool(table.outside[n][k]))
+                 for k in current if table.checkup[k] and math.isfinite(table.values[n][k])] for n in free}
     correction = correction_of(runs[-1]) if corrected else {}
     held, held_cov = _held(full, free, list(location), {} if absolute else by_full)
     level = {n: in_force[n] if absolute else 0.0 for n in free}
@@ -285,10 +309,13 @@ def _start(runs: list[Any], current: list[int], name: str, absolute: bool) -> tu
     return None if before is None else (before[0] - fix, before[1])
 
 
-def _segment_runs(runs: list[Any], current: list[int], name: str, absolute: bool) -> tuple[np.ndarray, np.ndarray]:
+def _segment_runs(runs: list[Any], table: _Table, current: list[int], name: str,
+                  absolute: bool) -> tuple[np.ndarray, np.ndarray]:
     """The current segment's runs of ``name`` in control (values, own variances), its start first."""
-    pairs = [p for k in current if _in_control(runs[k], name) and (p := _value(runs[k], name)) is not None]
+    idx = np.array(current, dtype=int)
+    idx = idx[table.measured(name)[idx]] if idx.size else idx
+    values, variances = table.values[name][idx], table.variances[name][idx]
     start = _start(runs, current, name, absolute)
     if start is not None:
-        pairs.insert(0, start)
-    return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+        values, variances = np.r_[start[0], values], np.r_[start[1], variances]
+    return values, variances
