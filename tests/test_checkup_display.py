@@ -174,3 +174,22 @@ def test_due_dates_are_marked_overdue() -> None:
     assert _due("2026-04-30T12:00+00:00", now) == "OVERDUE since 2026-04-30 12:00"
     assert _due("2026-05-02T12:00+00:00", now) == "2026-05-02 12:00"
     assert _due("2026-05-01T12:00+00:00", now) == "now"
+
+
+def test_a_full_calibration_after_a_correction_is_said_so_and_starts_a_segment(histories: dict, tmp_path: Path,
+                                                                                 capsys) -> None:
+    """``pige history add --corrected``: stored (schema 3), said by add and show, and it starts a segment."""
+    from pige_sym.verdict.checkup.reference import segments_of
+    from pige_sym.verdict.history import connect, list_runs
+
+    db = tmp_path / "h.db"
+    shutil.copy(histories["ok"]["db"], db)
+    folder = tmp_path / "again"
+    full = full_calibration(folder, tmp_path / "scratch.db", "X", TRUTH, seed=9, when=T0 + timedelta(days=9))
+    code, out = _run(capsys, "history", "add", full, "--machine-id", "DMU-9", "--db", db, "--date",
+                     (T0 + timedelta(days=9)).isoformat(), "--corrected")
+    assert code == 0 and "added run 5 of machine DMU-9" in out and "after a correction" in out, out
+    code, out = _run(capsys, "history", "show", "DMU-9", "--db", db)
+    assert re.search(r"^\s+5\s.*\(after a correction\)$", out, re.M), out
+    runs = list_runs(connect(str(db), create=False), "DMU-9")
+    assert runs[-1].after_correction and segments_of(runs) == [0, 0, 0, 0, 1]
