@@ -109,8 +109,12 @@ def format_checkup(r: Any) -> str:
                  "leave, judged against the tolerance; drift of that error over the segment's check-ups, or over the "
                  "flagged check-ups of a drift; forecast only where the drift is shown)")
     lines += _limits_lines(r)
-    held = ", ".join(f"{n} {v:+.3g}" + (f" ± {r.changes.std(n):.2g}" if r.changes is not None else "")
-                     for n, v in r.held.items())
+    from pige_sym.kernels import load_kernels
+
+    units = load_kernels(r.machine).UNITS
+    shown = r.changes.held if r.changes is not None else r.held
+    held = ", ".join(f"{n} {v:+.3g}" + (f" ± {r.changes.std(n):.2g}" if r.changes is not None else "") +
+                     f" {units.get(n, '')}" for n, v in shown.items())
     less = ", less the correction entered" if r.corrected else ""
     lines.append(f"held at the values in force (the last full calibration's{less}): {held}")
     if r.verdict != "ok" and r.changes is not None:
