@@ -109,7 +109,7 @@ def test_a_pige_entry_is_held_to_max_change_too(tmp_path, capsys) -> None:
                                           ("isg", "ISG kw.ssfk list of C: table[i].pos")])
 def test_every_written_entry_is_checked_not_only_the_values_it_is_made_of(style, where) -> None:
     """E and φ each within --max-change (0.1° = 1745 µrad), their sum, the table's entry, beyond it."""
-    from pige_sym.compensation.controllers import format_controller
+    from pige_sym.compensation.stage import format_controller
 
     params = _maps_params(PIGES | {"EC0C": 1000.0}, np.array(GRID), np.array([1000.0, -1000.0] * 6))
     with pytest.raises(InputError, match=re.escape(where)) as info:

@@ -114,7 +114,11 @@ def _correct(rep: MeasurementReport, data: ReportData) -> list[str]:
 
 
 def measurement_next(rep: MeasurementReport, data: ReportData) -> NextStep:
-    """The next step of one R-test or probe file (module docstring)."""
+    """The next step of one R-test or probe file (module docstring); in a report that fits the files' error maps
+    together, the maps' answer is the next step of every file."""
+    if data.maps is not None:
+        return NextStep("these files are fitted together with their error maps: the maps' answer at the top of the "
+                        "page says what to do next", list(data.maps.next_commands))
     q = shlex.quote(str(rep.path))
     if rep.diagnosis is None:
         return NextStep("The diagnosis failed on these data: look at the file (its Measured deviations) before "

@@ -2,9 +2,9 @@
 simulation, ``pige checkup`` says ``ok`` for a true machine that did not drift and ``drifted`` for one whose pivots
 moved, and the entries it prints for the controller keep what it held.
 
-- **The full calibration** is round one's 13-pose probing run of the AC table in identity kinematics
-  (:mod:`loop_setup`, :mod:`conftest`): its LinuxCNC log imported and stored with ``pige history add`` (machine
-  ``LCNC-AC``, tolerances of 40 µm / 150 µrad, so a drift of a few µm is inside them).
+- **The full calibration** is the 13-pose probing run of the AC table in identity kinematics (:mod:`loop_setup`,
+  :func:`conftest.table_runs`: made once per session): its LinuxCNC log imported and stored with ``pige history
+  add`` (machine ``LCNC-AC``, tolerances of 40 µm / 150 µrad, so a drift of a few µm is inside them).
 - **The correction in force**: the shop enters the full calibration's correction as ``pige compensate --controller
   linuxcnc --current <the shipped pins>`` prints it (the trt pins' ``sets``/``setp`` lines, :mod:`corrections`);
   both simulations run with that configuration.  The check-up probes in identity kinematics, so it measures the
@@ -61,9 +61,9 @@ def _run_checkup(program: Path, root: Path, pige_values: dict[str, float], enter
     return run_sim(sim, steps)
 
 
-@pytest.fixture(scope="session")
-def checkup(probe_runs: dict, tmp_path_factory: pytest.TempPathFactory) -> dict:
-    full: ProbeRun = probe_runs[("AC", "identity")]
+@pytest.fixture(scope="module")
+def checkup(table_runs, tmp_path_factory: pytest.TempPathFactory) -> dict:
+    full: ProbeRun = table_runs(("AC", "identity"))[("AC", "identity")]
     assert full.run.result["ok"], full.run.summary()
     folder = tmp_path_factory.mktemp("lcnc_checkup")
     full.identification_file  # noqa: B018 - imports LinuxCNC's log into probe.csv beside it

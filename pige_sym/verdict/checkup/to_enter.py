@@ -20,10 +20,11 @@ the changes and of the held values' error (``θ_H``, the full calibration's ``Σ
 Σ_H]]``, ``C`` the changes' covariance and ``K`` the check-up's sensitivity to its held values
 (:class:`~pige_sym.identification.subset.SubsetFit`).
 
-With ``--controller`` the entries are printed as ``pige compensate --controller`` prints them
-(:func:`~pige_sym.compensation.controllers.format_controller`): entries that add, the changes; absolute entries
-(pige's kinematics component) as the change to add to the value they hold; ``table`` the axis lines as the check-up
-finds them (the values in force plus the changes).
+The check-up decides which values are entered; the compensation stage (:func:`pige_sym.compensation.stage.compensate`
+with that decision) predicts what they leave and, with ``--controller``, writes the entries as ``pige compensate
+--controller`` does (:attr:`Changes.compensation` is the stage's result object): entries that add, the changes;
+absolute entries (pige's kinematics component) as the change to add to the value they hold, the held pins named;
+``table`` the axis lines as the check-up finds them (the values in force plus the changes).
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ class Changes:
     controller: str | None = None
     controller_text: str = ""
     notes: list[str] = field(default_factory=list)
+    compensation: Any = None  # the compensation stage's result (pige_sym.compensation.result.Compensation)
 
     def std(self, name: str) -> float:
         """The standard error of a change (or of a held value's error) [µm, µrad]."""
@@ -79,7 +81,8 @@ class Changes:
                 "change": dict(self.change), "change_std": {n: self.std(n) for n in self.change},
                 "held": dict(self.held), "held_std": {n: self.std(n) for n in self.held},
                 "controller": self.controller, "controller_text": self.controller_text or None,
-                "notes": list(self.notes)}
+                "notes": list(self.notes),
+                "compensation": None if self.compensation is None else self.compensation.to_dict()}
 
 
 def joint_covariance(fit: Any, held_covariance: np.ndarray) -> np.ndarray:
@@ -119,50 +122,39 @@ def checkup_changes(fit: Any, m: Any, opts: Any, state: Any) -> Changes:
                          if abs(share - 1.0) < 0.05 else f"entered in part ({share:.0%}): weakly determined")
     out = Changes(entered, why, dict(state.in_force), dict(zip(free, change.tolist(), strict=True)),
                   {n: state.in_force.get(n, 0.0) for n in state.held}, free + list(state.held), cov, opts.controller)
-    if opts.controller:
-        out.controller_text = _controller_text(fit, m, out, opts)
+    if opts.controller:  # the stage writes the entries (without a controller there is nothing more to print)
+        out.compensation = _compensation(fit, m, out, opts)
+        out.controller_text = out.compensation.controller.text
     return out
 
 
-def _controller_text(fit: Any, m: Any, changes: Changes, opts: Any) -> str:
-    """The entries as ``pige compensate --controller`` prints them (module docstring)."""
-    from pige_sym.compensation.controllers import format_controller
+def _compensation(fit: Any, m: Any, changes: Changes, opts: Any) -> Any:
+    """The compensation stage on the check-up's decision (module docstring): the changes as parameters with their
+    joint covariance, the re-measured PIGEs entered as decided, the held ones not (``table``: every value the value
+    in force plus the change, the axis lines as the check-up finds them)."""
+    from pige_sym.compensation.controllers import ControllerOptions
     from pige_sym.compensation.controllers.entry_checks import ChangeLimits
-
-    params = _parameters(fit, m, changes, absolute=opts.controller == "table")
-    return format_controller(params, opts.controller, carrier=opts.carrier, current=opts.current,
-                             heidenhain_trans=opts.heidenhain_trans, limits=ChangeLimits(*opts.max_change))
-
-
-def _parameters(fit: Any, m: Any, changes: Changes, *, absolute: bool) -> Any:
-    """The changes as compensation parameters, weighed as :func:`checkup_changes` weighed them (held: 0, not
-    entered); ``absolute``: the values in force plus the changes (the axis lines as the check-up finds them)."""
     from pige_sym.compensation.parameters import CompensationParameters
-    from pige_sym.compensation.weighing import predict, travel_poses, weigh, with_entered
+    from pige_sym.compensation.stage import Decision, compensate
     from pige_sym.kernels import load_kernels
 
     kern = load_kernels(fit.machine)
     names = changes.names
-    estimate = {n: changes.change.get(n, 0.0) for n in names}
-    chosen = {n: (changes.entered.get(n) or 0.0) if n in changes.entered else 0.0 for n in names}
+    absolute = opts.controller == "table"
+    base = {n: changes.in_force.get(n, 0.0) if absolute else 0.0 for n in names}
     params = CompensationParameters(
-        kern.MACHINE_CODE, dict(estimate), {n: kern.UNITS[n] for n in names},
+        kern.MACHINE_CODE, {n: base[n] + changes.change.get(n, 0.0) for n in names}, {n: kern.UNITS[n] for n in names},
         None if m.tool_mm is None else [float(x) for x in m.tool_mm],
         {a: [float(x) for x in v] for a, v in m.pivots_mm.items()}, m.path or "the check-up", [],
         axis_sense=dict(m.axis_sense), std={n: changes.std(n) for n in names},
         covariance=(tuple(names), np.asarray(changes.covariance)), ball_mm=[float(x) for x in m.ball_mm],
-        held=dict(changes.held), in_force=dict(changes.in_force))
-    w = weigh(params, travel_poses(params))
-    why = {n: ("held by the check-up at its value in force: not entered" if n in changes.held else
-               changes.why.get(n, w.why[n])) for n in names}
-    predicted = dict(w.predicted)
-    if w.moments is not None and w.covariance is not None:
-        est = np.array([estimate[n] for n in names])
-        predicted["entered"] = predict(est, w.covariance, w.moments, np.array([chosen[n] for n in names]))
-    from dataclasses import replace
-
-    w = replace(w, entered=dict(chosen), why=why, predicted=predicted)
-    out = with_entered(params, w)
-    if absolute:
-        out = replace(out, values={n: changes.in_force.get(n, 0.0) + v for n, v in out.values.items()}, in_force=None)
-    return out
+        in_force=None if absolute else dict(changes.in_force), held=dict(changes.held))
+    entered: dict[str, float | None] = {}
+    for n in names:
+        v = changes.entered.get(n)
+        entered[n] = base[n] + (v or 0.0) if absolute else v
+    held = {n: "held by the check-up at its value in force: not entered" for n in changes.held}
+    options = ControllerOptions(carrier=opts.carrier, current=opts.current, heidenhain_trans=opts.heidenhain_trans,
+                                limits=ChangeLimits(*opts.max_change))
+    return compensate(params, controller=opts.controller, options=options,
+                      decided=Decision(entered, dict(changes.why) | held))
