@@ -13,19 +13,19 @@ weights ``w_g`` on a grid ``τ_g²``.
 ``τ̂²`` (``a_i ∝ 1/(τ̂² + u_i²)``).  For a machine that holds still, ``x − x̄`` given ``τ²`` is normal with variance
 ``v(τ²) = τ² + u² + Σ a_i² (τ² + u_i²)`` (``u`` the new run's standard error); over the posterior it is the mixture
 ``Σ_g w_g N(0, v(τ_g²))``, the *posterior predictive*.  The new value is outside when ``|x − x̄| > h``, ``h`` the
-mixture's two-sided ``α/(2m)`` point: ``Σ_g w_g P(|N(0, v_g)| > h) = α/(2m)``.  With a vague prior and equal ``u_i``
-this is the Student-t limit ``t_ν(1 − α/(4m))·s·√(1 + 1/n)``; with the fleet's prior it is narrower, as the prior is
-worth runs.
+mixture's two-sided point at the Shewhart test's share ``β_S = SHEWHART_SHARE·α/m``: ``Σ_g w_g P(|N(0, v_g)| > h) =
+β_S``.  With a vague prior and equal ``u_i`` this is close to the Student-t limit ``t_ν(1 − β_S/2)·s·√(1 + 1/n)``;
+with the fleet's prior it is narrower, as the prior is worth runs.
 
 **EWMA test** (a slow drift: a Shewhart test sees a drift of one standard deviation per run only once it has built
 up).  Given ``τ²``, the segment's *innovations* ``e_j = (x_j − x̄_{<j})/√(v_j + Var x̄_{<j})`` (each run against the
 weighted mean of those before it, the new one last) are independent ``N(0, 1)`` for a machine that holds still (the
 recursive residuals of Brown, Durbin & Evans 1975); their exponentially weighted mean ``Z_k = λ e_k + (1 − λ) Z_{k−1}``
 (λ = :data:`LAMBDA`) has variance ``V_k = λ/(2 − λ)·(1 − (1 − λ)^{2k})``.  Its posterior p-value ``Σ_g w_g P(|N(0,
-V_k)| > |Z_k(τ_g²)|)`` below ``α/(2m)`` flags the value.
+V_k)| > |Z_k(τ_g²)|)`` below the rest of the PIGE's share, ``β_E = (1 − SHEWHART_SHARE)·α/m``, flags the value.
 
-Both tests for each of the ``m`` PIGEs at ``α/(2m)`` (Bonferroni): the chance that a check-up of a drift-free machine
-flags any PIGE is at most ``α`` (default 1 %; measured by simulation: docs/checkup.md).
+The two tests of each of the ``m`` PIGEs at ``β_S + β_E = α/m`` (Bonferroni): the chance that a check-up of a
+drift-free machine flags any PIGE is at most ``α`` (default 1 %; measured by simulation: docs/checkup.md).
 
 **Provisional limits.**  While neither the machine nor its fleet has two runs of a PIGE in one segment
 (:data:`MIN_DOF` degrees of freedom over the population), nothing is known of ``τ``: the Shewhart test alone, against
@@ -58,15 +58,15 @@ TRUST_DOF = 10
 #: Weight of the newest innovation in the EWMA.
 LAMBDA = 0.4
 #: The Shewhart test's share of a PIGE's α/m; the EWMA's is the rest (a drift of one standard deviation per run,
-#: which the EWMA sees first, is flagged within five runs in 82 % of the cases with this share, 65 % with half).
+#: which the EWMA sees first, was flagged within five runs in 81.5 % of the cases with this share, 65 % with half).
 SHEWHART_SHARE = 0.2
 #: Innovations the EWMA sums (the older ones weigh less than 0.6^60 ≈ 5e-14).
 EWMA_MEMORY = 60
 METHOD = ("per PIGE a Shewhart test of the value against the weighted mean of its segment's runs (full calibrations "
           f"and check-ups) and an EWMA (lambda {LAMBDA:g}) of the segment's innovations, both from the posterior "
           "predictive of the run-to-run scatter (learned from every run of the machine and, through a hierarchical "
-          "prior, from its other PIGEs and the machine's fleet), each at alpha/(2m) (Bonferroni over the 2m tests: "
-          "at most alpha per check-up)")
+          f"prior, from its other PIGEs and the machine's fleet), at {SHEWHART_SHARE:g} and {1 - SHEWHART_SHARE:g} of "
+          "alpha/m (Bonferroni over the m PIGEs: at most alpha per check-up)")
 
 
 @dataclass

@@ -44,7 +44,7 @@ from pige_sym.verdict.checkup.scatter import Series
 FORMAT = "pige-checkup 1"
 #: The machine's newest check-ups the scatter is not learned from (they are judged, and weigh in the centre and the
 #: EWMA): a drift of one standard deviation per run is flagged within five runs, before its points could widen the
-#: limits that judge it (docs/checkup.md: with them in, 82 % of such drifts were flagged in time, without 92 %).
+#: limits that judge it (docs/checkup.md: with them in, 81.5 % of such drifts were flagged in time, without 92.5 %).
 LAG = 5
 
 
