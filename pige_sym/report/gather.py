@@ -477,7 +477,9 @@ def gather_history(machine_id: str, db: str | None, tol: Tolerances | None) -> H
     else:
         last = next((r.check for r in reversed(runs) if r.check), None)
         limits = {str(i["name"]): float(i["limit"]) for i in (last or {}).get("items", [])}
-    return HistoryData(machine_id, engine.url.render_as_string(hide_password=True), runs, comps, limits, judged)
+    from pige_sym.verdict.history.connection import where
+
+    return HistoryData(machine_id, where(engine).shown, runs, comps, limits, judged)
 
 
 def _run_estimates(run: Any) -> Estimates:

@@ -161,7 +161,11 @@ def _instruments(data: ReportData) -> str:
     """The instruments of the page's files, for its title."""
     names = [str(r.measurement.metadata.get("instrument") or "R-test") for r in data.measurements]
     names += ["ballbar" for j in data.joints for fd in j.diagnosis.files if fd.instrument == "ballbar"]
-    if not names and (data.comparison is not None or data.history is not None):
+    if not names and data.history is not None:  # the history's own runs: their set-ups, else their methods
+        names = [str((r.setup or {}).get("instrument") or ("ballbar" if r.method.startswith("joint") else "run"))
+                 for r in data.history.runs]
+        names = [n for n in names if n != "run"] or ["machine history"]
+    if not names and data.comparison is not None:
         names = ["R-test"]
     shown = {"rtest": "R-test", "sphere-probe": "touch probe"}
     return ", ".join(dict.fromkeys(shown.get(n, n) for n in names)) or "R-test"

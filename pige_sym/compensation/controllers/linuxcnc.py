@@ -257,8 +257,12 @@ def _sides(params: CompensationParameters) -> str:
 
 def _check_axis(params: CompensationParameters, config: HalConfig, axis: str,
                 coordinates: dict[str, tuple[str, ...]]) -> None:
-    """Refuse an axis line of the configuration that is not where the parameter file's pivot puts it."""
+    """Refuse an axis line of the configuration that is not where the parameter file's pivot puts it (a check-up's
+    changes: where the values in force put it, the nominal pivot moved by them)."""
     pivot = [float(x) for x in params.pivots_mm.get(axis, [0.0, 0.0, 0.0])]
+    if params.in_force is not None:
+        pivot = [x + params.in_force.get(f"E{c.upper()}0{axis}", 0.0) * 1e-3 for c, x in zip("xyz", pivot,
+                                                                                                strict=True)]
     held: dict[str, tuple[float, str]] = {}
     for coordinate, pins in coordinates.items():
         values = [config.pin_value(p) for p in pins]
@@ -272,6 +276,9 @@ def _check_axis(params: CompensationParameters, config: HalConfig, axis: str,
     coordinate, (line, how) = wrong[0], held[wrong[0]]
     stated = (f"pivots_mm.{axis}" if axis in params.pivots_mm else
               f"no pivots_mm.{axis}: the axis line through the origin, CONVENTIONS §2")
+    if params.in_force is not None:
+        stated += (" moved by the values in force (the last full calibration's correction and the check-ups' "
+                   "entered since: enter them first, or give the configuration that holds them)")
     nominal = pivot["xyz".index(coordinate)]
     suggested = ",".join(f"{held[c][0] if c in held else x:.10g}" for c, x in zip("xyz", pivot, strict=True))
     raise InputError(f"--current {config.name}: the {axis} axis line is at {coordinate} = {line:.10g} mm there "
@@ -364,7 +371,13 @@ def pige_kinematics_lines(params: CompensationParameters, limits: object = None)
                    "tool-offset")
     for n in kern.PARAMETERS:
         pin = pins.error_pin(name, n)
-        if n in unset:
+        if n in params.held:
+            out.append(f"# {pin}: held by the check-up at {params.held[n]:+.4f} (the value in force): leave it as "
+                       "it is")
+        elif params.in_force is not None and n in params.values:
+            out.append(f"# {pin}: add {params.values[n]:+.4f} to the value it holds (the change since the values in "
+                       "force; the pin holds the absolute value)")
+        elif n in unset:
             out.append(f"# {pin}: no value in the parameter file (left as it is)")
         elif n not in params.values:
             out.append(f"# {pin}: not estimated (the parameter file has no {n}; left as it is)")
