@@ -4,7 +4,7 @@ The layers of :mod:`pige_sym`, lowest first (the README's "How it is built" stat
 module may import from its own layer and from any layer below it, never from one above:
 
 ==============  =====================================================================================
-foundation      ``errors``, ``constants``, ``options``, ``files``: what every layer shares
+foundation      ``errors``, ``constants``, ``options``, ``files``, ``plotting``: what every layer shares
 codegen         code string → symbolic model → kernel source (the only SymPy user)
 kernels         loading the generated kernels (``generated/``, shipped or user cache)
 measurements    file formats, readers and writers of every instrument; the JSON schema
@@ -38,7 +38,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "pige_sym"
 MAX_MODULE_LINES = 500
 
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
-    ("foundation", ("errors", "constants", "options", "files")),
+    ("foundation", ("errors", "constants", "options", "files", "plotting")),
     ("codegen", ("codegen",)),
     ("kernels", ("kernels",)),
     ("measurements", ("measurements",)),

@@ -18,6 +18,7 @@ from pige_sym.files import make_folder
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import Measurement
 from pige_sym.model.effects import EffectContext
+from pige_sym.plotting import fixed_layout, outside_legend_room, save_png
 
 
 def axis_frames(m: Measurement, kern: Any) -> dict[str, np.ndarray]:
@@ -58,12 +59,11 @@ def axis_frames(m: Measurement, kern: Any) -> dict[str, np.ndarray]:
 
 
 def save_figure(fig: Any, path: Path) -> str:
-    """Lay out, write (PNG, 90 dpi) and close a figure; returns the path."""
-    import matplotlib.pyplot as plt
-
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    """Lay out (fixed margins, room for the legends outside the axes), write (PNG, 90 dpi) and close a figure;
+    returns the path."""
+    legends = [ax.get_legend() for ax in fig.axes]
+    fixed_layout(fig, right=outside_legend_room(fig, *legends), top=0.35, bottom=0.55, wspace=0.6)
+    save_png(fig, path, dpi=90)
     return str(path)
 
 

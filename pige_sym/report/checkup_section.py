@@ -16,6 +16,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from pige_sym.plotting import fixed_layout, pyplot, save_png
 from pige_sym.report.data import ReportData, ReportFigure
 from pige_sym.report.html_blocks import esc, img, num, table
 
@@ -89,11 +90,7 @@ def _forecast_text(last: Any, name: str) -> str:
 
 def checkup_figure(data: ReportData) -> Any:
     """The check-ups' trend plot (module docstring); matplotlib Figure."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     assert data.history is not None
     runs = [r for r in data.history.runs if r.kind == "checkup" or r.kind == "full"]
     last = checkups(data)[-1]
@@ -117,7 +114,7 @@ def checkup_figure(data: ReportData) -> Any:
     fig.suptitle(f"{data.history.machine_id}: each check-up ± 2 std in run order (blue ok, orange outside its control "
                  "limits, red not within its tolerance),\nfull calibrations (black), the limits each was judged by "
                  "(grey), tolerance (green), corrections entered (dashed)", fontsize=8)
-    fig.tight_layout()
+    fixed_layout(fig, left=0.6, right=0.15, bottom=0.95, top=0.6, wspace=0.55, hspace=0.45)
     return fig
 
 
@@ -125,13 +122,8 @@ def checkup_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
     """The check-ups' figure written into ``out_dir`` (none without check-ups)."""
     if not checkups(data):
         return []
-    import matplotlib.pyplot as plt
-
     out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / "checkup_trend.png"
-    fig = checkup_figure(data)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    path = save_png(checkup_figure(data), out_dir / "checkup_trend.png", dpi=110)
     assert data.history is not None
     return [ReportFigure(KEY, path, f"Check-ups of machine {data.history.machine_id}: each re-measured PIGE against "
                                     "time with its control limits, tolerance and forecast.")]
