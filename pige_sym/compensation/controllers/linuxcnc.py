@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pige_sym.compensation.controllers import ControllerOptions
+from pige_sym.compensation.controllers import ControllerOptions, built_tables
 from pige_sym.compensation.controllers.axis_lines import MM_DECIMALS, origin_pivots_note, signed
 from pige_sym.compensation.controllers.hal_config import HalConfig
 from pige_sym.compensation.controllers.scope import scope_lines
@@ -83,6 +83,8 @@ def entries(params: CompensationParameters, options: ControllerOptions | None) -
     from pige_sym.compensation.controllers.tables.linuxcnc_comp import entered_values as comp_values
     from pige_sym.compensation.controllers.tables.linuxcnc_kins_maps import entered_map_values
 
+    comp_tables = built_tables(tables, params, options)
+
     out: list[tuple[Any, ...]] = []
     try:
         linuxcnc_trt_deltas(params)
@@ -91,7 +93,7 @@ def entries(params: CompensationParameters, options: ControllerOptions | None) -
     else:
         trt = kinematic_values(params, "linuxcnc")
         out.append(("the trt pins", trt))
-        comp = comp_values(params, options.change_limits() if options is not None else None)
+        comp = comp_values(params, comp_tables)
         if comp:
             out.append(("the trt pins and the COMP_FILEs", trt | comp))
     try:
@@ -129,6 +131,16 @@ def linuxcnc_trt_deltas(params: CompensationParameters) -> tuple[str, dict[str, 
     return TRT_MODULES[tilt], deltas
 
 
+def tables(params: CompensationParameters, options: ControllerOptions) -> list[linuxcnc_comp.CompTable]:
+    """The COMP_FILEs of the stock kinematics, every trim held to ``--max-change`` (:func:`.tables.linuxcnc_comp.
+    comp_tables`); none where the stock trt kinematics cannot describe the machine (nothing loads them)."""
+    try:
+        linuxcnc_trt_deltas(params)
+    except InputError:
+        return []
+    return linuxcnc_comp.comp_tables(params, options.change_limits())
+
+
 def check_tables(params: CompensationParameters, options: ControllerOptions) -> None:
     """The COMP_FILEs' and the component's map limits (256 entries per joint, ``MAP_NODES`` uniform grid angles),
     before any value is weighed (:mod:`.tables.linuxcnc_comp`, :mod:`.tables.linuxcnc_kins_maps`)."""
@@ -146,8 +158,13 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
         Neither the stock trt kinematics nor pige's component can describe the machine, or today's
         configuration contradicts the parameters (:func:`check_current`).
     """
+    return render_sections(sections(params, options))
+
+
+def render_sections(parts: list[Section]) -> str:
+    """The printed text of the sections (:func:`render`): the compensation stage renders the sections it computed."""
     out = []
-    for sec in sections(params, options):
+    for sec in parts:
         if sec.kind == "comp":
             continue  # the compensation files themselves: --comp-dir or --out-dir writes them
         out += [f"# ==== {sec.name} ({sec.kind.upper()}; --out-dir writes it as {sec.file}) ====", sec.text]
@@ -160,6 +177,7 @@ def sections(params: CompensationParameters, options: ControllerOptions) -> list
     from pige_sym.compensation.controllers.tables.linuxcnc_comp import comp_files
 
     check_current(params, options.current)
+    comp_tables = built_tables(tables, params, options)
     try:
         linuxcnc_trt_deltas(params)
     except InputError as exc:
@@ -182,11 +200,11 @@ def sections(params: CompensationParameters, options: ControllerOptions) -> list
         if pige_refusal is not None:
             trt.append(f"# pige's kinematics component cannot describe this machine: {pige_refusal}")
         out.append(Section("the stock trt kinematics: HAL lines", "trt-kins.hal", "hal", "\n".join(trt)))
-        comp = comp_file_lines(params, limits)
+        comp = comp_file_lines(comp_tables)
         if comp:
             out.append(Section("with the stock kinematics, the positioning maps as COMP_FILEs: INI lines, each "
                                "under its [JOINT_n] section", "comp-files.ini", "ini", "\n".join(comp)))
-            out += [Section(f"compensation file {n}", n, "comp", t) for n, t in comp_files(params, limits).items()]
+            out += [Section(f"compensation file {n}", n, "comp", t) for n, t in comp_files(comp_tables).items()]
     else:
         summary.append(f"# LinuxCNC's stock trt kinematics: {trt_refusal}")
     if pige_refusal is None:
