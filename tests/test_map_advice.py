@@ -300,33 +300,37 @@ def test_sinumerik_enters_the_mean_of_a_map_per_direction_and_counts_it(tmp_path
 @pytest.mark.parametrize(("controller", "module", "builder", "options"), [
     ("isg", "isg_ssfk", "ssfk_table", {"isg_unit_deg": 1e-4}),
     ("linuxcnc", "linuxcnc_comp", "comp_table", {}),
+    ("linuxcnc", "linuxcnc_kins_maps", "slot_values", {}),
     ("siemens", "siemens_lec", "lec_table", {"machine_axes": {"C": "C1", "A": "A1"}}),
 ])
 def test_the_compensation_stage_builds_each_table_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                        controller: str, module: str, builder: str,
                                                        options: dict[str, Any]) -> None:
     """One compensate run builds each axis' table once: the printed lines and the prediction read that object
-    (before: ISG built each list twice, LinuxCNC each COMP_FILE five times, SINUMERIK each table twice)."""
+    (before: ISG built each list twice, LinuxCNC each COMP_FILE five times and each axis' component pins three
+    times, SINUMERIK each table twice)."""
     import importlib
 
     from pige_sym.compensation.controllers import ControllerOptions
     from pige_sym.compensation.controllers.tables.positioning import PositioningMap
     from pige_sym.compensation.parameters import load_parameters
     from pige_sym.compensation.stage import compensate
+    from pige_sym.model.error_motions import AxisMaps
 
     tables = importlib.import_module(f"pige_sym.compensation.controllers.tables.{module}")
     real, built = getattr(tables, builder), []
 
     def counting(*args: Any, **kwargs: Any) -> Any:
         if kwargs.get("values", True):  # SINUMERIK's format check lays the grid out without values
-            built.append(next(a for a in args if isinstance(a, PositioningMap)).axis)
+            table = next(a for a in args if isinstance(a, (PositioningMap, AxisMaps)))
+            built.append(table.axis if isinstance(table, PositioningMap) else table.grid.axis)
         return real(*args, **kwargs)
 
     monkeypatch.setattr(tables, builder, counting)
     result = compensate(load_parameters(_params_file(tmp_path)), controller=controller,
                         options=ControllerOptions(**options))
     assert sorted(built) == ["A", "C"], built
-    assert result.controller is not None and sorted(t.axis for t in result.controller.tables) == ["A", "C"]
+    assert result.controller is not None and sorted({t.axis for t in result.controller.tables}) == ["A", "C"]
 
 
 def _zero_and_maps_file(tmp_path: Path, sigma: int) -> tuple[Path, dict[str, float], dict[str, np.ndarray]]:

@@ -78,13 +78,11 @@ def entries(params: CompensationParameters, options: ControllerOptions | None) -
     """Each way of entering the printed lines, with exactly what it carries: the stock trt pins (the four axis-line
     positions), those and the COMP_FILEs (the positioning maps' trims, as printed), and pige's component (every
     PIGE, zero-position error and map value, as its ``setp`` lines print them)."""
-    from pige_sym.codegen.targets import linuxcnc_pins as pins
     from pige_sym.compensation.controllers.scope import kinematic_values
     from pige_sym.compensation.controllers.tables.linuxcnc_comp import entered_values as comp_values
     from pige_sym.compensation.controllers.tables.linuxcnc_kins_maps import entered_map_values
 
-    comp_tables = built_tables(tables, params, options)
-
+    built = built_tables(tables, params, options)
     out: list[tuple[Any, ...]] = []
     try:
         linuxcnc_trt_deltas(params)
@@ -93,19 +91,32 @@ def entries(params: CompensationParameters, options: ControllerOptions | None) -
     else:
         trt = kinematic_values(params, "linuxcnc")
         out.append(("the trt pins", trt))
-        comp = comp_values(params, comp_tables)
+        comp = comp_values(params, [t for t in built if isinstance(t, linuxcnc_comp.CompTable)])
         if comp:
             out.append(("the trt pins and the COMP_FILEs", trt | comp))
-    try:
-        from pige_sym.codegen.machine_code import parse_machine_code
-
-        pins.check_machine(parse_machine_code(params.machine))
-    except (InputError, UnsupportedMachineError):
+    if not _component_describes(params):
         return out
     unset = {s.split()[0] for s in params.ignored}
     kern = load_kernels(params.machine)
     values = {n: round(params.values[n], 4) for n in kern.PARAMETERS if n in params.values and n not in unset}
-    return [*out, ("pige's kinematics component", values | entered_map_values(params), False)]
+    return [*out, ("pige's kinematics component", values | entered_map_values(_component_maps(built)), False)]
+
+
+def _component_describes(params: CompensationParameters) -> bool:
+    """Whether pige's kinematics component can describe the machine (:func:`~pige_sym.codegen.targets.
+    linuxcnc_pins.check_machine`)."""
+    from pige_sym.codegen.machine_code import parse_machine_code
+    from pige_sym.codegen.targets import linuxcnc_pins as pins
+
+    try:
+        pins.check_machine(parse_machine_code(params.machine))
+    except (InputError, UnsupportedMachineError):
+        return False
+    return True
+
+
+def _component_maps(built: list[Any]) -> list[linuxcnc_kins_maps.ComponentMap]:
+    return [t for t in built if isinstance(t, linuxcnc_kins_maps.ComponentMap)]
 
 
 def linuxcnc_trt_deltas(params: CompensationParameters) -> tuple[str, dict[str, float]]:
@@ -131,14 +142,19 @@ def linuxcnc_trt_deltas(params: CompensationParameters) -> tuple[str, dict[str, 
     return TRT_MODULES[tilt], deltas
 
 
-def tables(params: CompensationParameters, options: ControllerOptions) -> list[linuxcnc_comp.CompTable]:
-    """The COMP_FILEs of the stock kinematics, every trim held to ``--max-change`` (:func:`.tables.linuxcnc_comp.
-    comp_tables`); none where the stock trt kinematics cannot describe the machine (nothing loads them)."""
+def tables(params: CompensationParameters, options: ControllerOptions) -> list[Any]:
+    """Built once: the COMP_FILEs of the stock kinematics, every trim held to ``--max-change``
+    (:func:`.tables.linuxcnc_comp.comp_tables`; none where the stock trt kinematics cannot describe the machine), and
+    the maps as pige's component's pins hold them (:func:`.tables.linuxcnc_kins_maps.component_maps`; none where the
+    component cannot)."""
+    out: list[Any] = []
     try:
         linuxcnc_trt_deltas(params)
     except InputError:
-        return []
-    return linuxcnc_comp.comp_tables(params, options.change_limits())
+        pass
+    else:
+        out += linuxcnc_comp.comp_tables(params, options.change_limits())
+    return out + (linuxcnc_kins_maps.component_maps(params) if _component_describes(params) else [])
 
 
 def check_tables(params: CompensationParameters, options: ControllerOptions) -> None:
@@ -177,7 +193,8 @@ def sections(params: CompensationParameters, options: ControllerOptions) -> list
     from pige_sym.compensation.controllers.tables.linuxcnc_comp import comp_files
 
     check_current(params, options.current)
-    comp_tables = built_tables(tables, params, options)
+    built = built_tables(tables, params, options)
+    comp_tables = [t for t in built if isinstance(t, linuxcnc_comp.CompTable)]
     try:
         linuxcnc_trt_deltas(params)
     except InputError as exc:
@@ -187,7 +204,7 @@ def sections(params: CompensationParameters, options: ControllerOptions) -> list
     limits = options.change_limits()
     pige_refusal: str | None = None
     try:
-        ini, hal = pige_kinematics_lines(params, limits)
+        ini, hal = pige_kinematics_lines(params, limits, _component_maps(built))
     except (InputError, UnsupportedMachineError) as exc:
         if trt_refusal is not None:
             raise InputError(f"{trt_refusal}; pige's kinematics component: {exc}") from None
@@ -343,10 +360,11 @@ def _senses(params: CompensationParameters, axes: tuple[str, ...]) -> dict[str, 
     return {a: -1 if params.axis_sense.get(a, 1) < 0 else 1 for a in axes}
 
 
-def pige_kinematics_lines(params: CompensationParameters, limits: object = None) -> tuple[list[str], list[str]]:
+def pige_kinematics_lines(params: CompensationParameters, limits: object = None,
+                          maps: list[linuxcnc_kins_maps.ComponentMap] | None = None) -> tuple[list[str], list[str]]:
     """pige's kinematics component for ``params.machine``: its INI keys (how to load it), and its HAL lines: how to
-    build it, its ``setp`` lines (absolute), the map pins held to ``limits`` (``--max-change``, :mod:`.entry_checks`),
-    and the nets it needs (the tool length, each rotary joint's velocity).
+    build it, its ``setp`` lines (absolute), the map pins (``maps`` as built, None: built here) held to ``limits``
+    (``--max-change``, :mod:`.entry_checks`), and the nets it needs (the tool length, each rotary joint's velocity).
 
     Raises
     ------
@@ -401,7 +419,7 @@ def pige_kinematics_lines(params: CompensationParameters, limits: object = None)
             out.append(f"# {pin}: not estimated (the parameter file has no {n}; left as it is)")
         else:
             out.append(f"setp {pin} {params.values.get(n, 0.0):.4f}")
-    return ini, out + map_setp_lines(params, name, limits) + component_nets(params, name)
+    return ini, out + map_setp_lines(params, name, limits, maps) + component_nets(params, name)
 
 
 def component_nets(params: CompensationParameters, name: str) -> list[str]:
