@@ -29,7 +29,7 @@ from pige_sym.diagnosis.joint import JointDiagnosis
 from pige_sym.report.data import JointReport
 from pige_sym.report.html_blocks import esc, kvs, num, path_html, table, units
 from pige_sym.report.html_verdict import check_table_html
-from pige_sym.report.next_step import CORRECT_WORDS, NextStep, correct_commands, shell_word
+from pige_sym.report.next_step import CORRECT_WORDS, NextStep, commands_html, correct_commands, shell_word
 from pige_sym.report.words import count, value_std
 
 
@@ -120,7 +120,7 @@ def _next_step(jr: JointReport) -> NextStep:
 
 def _step_html(step: NextStep) -> str:
     """The sentence, then each command on its own line (as the files' next step shows them)."""
-    return esc(step.what) + "".join(f'<br><code class="cmd">{esc(c)}</code>' for c in step.commands)
+    return esc(step.what) + commands_html(step.commands)
 
 
 def _undecided_step(jr: JointReport) -> NextStep:

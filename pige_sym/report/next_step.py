@@ -52,8 +52,12 @@ class NextStep:
 def next_html(step: NextStep) -> str:
     """The step as HTML: the sentence, the reasons as a list, each command on its own line."""
     reasons = ("<ul>" + "".join(f"<li>{esc(r)}</li>" for r in step.reasons) + "</ul>") if step.reasons else ""
-    commands = "".join(f'<br><code class="cmd">{esc(c)}</code>' for c in step.commands)
-    return f'<span data-next-step="1">{esc(step.what)}</span>{reasons}{commands}'
+    return f'<span data-next-step="1">{esc(step.what)}</span>{reasons}{commands_html(step.commands)}'
+
+
+def commands_html(commands: list[str]) -> str:
+    """Each command on its own line, as the reports print follow-up commands (``<code class="cmd">``)."""
+    return "".join(f'<br><code class="cmd">{esc(c)}</code>' for c in commands)
 
 
 def shell_word(text: str) -> str:
