@@ -120,6 +120,15 @@ def test_the_before_after_and_history_pages_print_commands_that_run(session: Pat
     page = _report(["--history", "M-5", "--db", db], tmp_path / "history")
     commands = _runs_as_printed(page, tmp_path / "h", capsys, monkeypatch)
     assert commands[0].startswith("pige diagnose ") and "--machine-id M-5" in _words(page)
+    moved = tmp_path / "moved.csv"  # a run out of tolerance whose file is gone: no command names it
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(["simulate", "--machine", AC, "--pige", "EX0C=3,EY0C=30", "--seed", "3", "--out", str(moved)]) == 0
+        assert main(["history", "add", str(moved), "--machine-id", "M-6", "--tolerances", str(TOLERANCES), "--db",
+                     db]) == 0
+    moved.unlink()
+    page = _report(["--history", "M-6", "--db", db], tmp_path / "history6")
+    assert _runs_as_printed(page, tmp_path / "h6", capsys, monkeypatch) == []
+    assert f"added as {moved}, is not there any more" in _words(page)
 
 
 def test_a_probe_report_prints_commands_that_run(tmp_path: Path, capsys: pytest.CaptureFixture[str],

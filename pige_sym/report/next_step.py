@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 import shlex
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from pige_sym.report.data import MeasurementReport, ReportData
@@ -209,6 +210,10 @@ def history_next(data: ReportData) -> NextStep:
     add = f"add it to this history (pige history add, --machine-id {shlex.quote(h.machine_id)})"
     if verdict == "fail":
         files = h.runs[-1].file_name.split("; ")
+        if not all(Path(f).is_file() for f in files):
+            return NextStep(f"The last run is out of tolerance: correct the machine from it (its file, added as "
+                            f"{'; '.join(files)}, is not there any more: pige diagnose it where it is now --json, then "
+                            f"pige compensate --params with that output); then measure again and {add}.")
         return NextStep(f"The last run is out of tolerance: correct the machine from it{CORRECT_WORDS}; then measure "
                         f"again and {add}.", correct_commands(files, "diagnosis"))
     if changed:
