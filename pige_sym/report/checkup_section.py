@@ -101,7 +101,7 @@ def checkup_figure(data: ReportData) -> Any:
     for ax, name in zip(axs.ravel(), names, strict=False):
         _panel(ax, name, runs)
         unit = last.units.get(name, "").replace("um", "µm").replace("urad", "µrad")
-        ax.set_title(f"{name} [{unit}]{_forecast_text(last, name)}", fontsize=8)
+        ax.set_title(f"{name} [{unit}]{_forecast_text(last, name)}", fontsize=8, y=1.0)
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=7)
     for ax in axs.ravel()[len(names):]:

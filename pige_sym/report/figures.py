@@ -53,7 +53,7 @@ def deviation_figure(m: Measurement, model_um: np.ndarray | None) -> Any:
     ax0.axhline(0, color="k", lw=0.6)
     ax0.set_ylabel(words.deviation_axis)
     ax0.set_title(f"{words.measurand}, machine frame" + (" (converted from the table frame)" if m.frame == "table"
-                                                         else ""), fontsize=10)
+                                                         else ""), fontsize=10, y=1.0)
     legends = [_legend_outside(ax0)]
     ax0.grid(alpha=0.3)
     commanded = m.commanded_deg  # as the program and the controller hold them (axis_sense)
@@ -185,7 +185,7 @@ def identification_figure(results: dict[str, IdentificationResult], truth: Truth
         ax.set_xticklabels(names)
         ax.set_xlim(-0.6, len(names) - 0.4)
         ax.set_ylabel(f"value [{UNIT_TEXT.get(unit, unit)}]")
-        ax.set_title(f"{title} (95 % intervals)", fontsize=10)
+        ax.set_title(f"{title} (95 % intervals)", fontsize=10, y=1.0)
         ax.grid(alpha=0.3)
     handles, labels = axs[0].get_legend_handles_labels()
     if handles:  # one legend for both panels, below them: it covers no interval
@@ -211,7 +211,7 @@ def sobol_figure(study: SobolStudy) -> Any:
     ax.set_xticks(x)
     ax.set_xticklabels(study.parameters)
     ax.set_ylabel("total Sobol index [-]")
-    ax.set_title("sensitivity of the mean-square projected deviation to each PIGE", fontsize=10)
+    ax.set_title("sensitivity of the mean-square projected deviation to each PIGE", fontsize=10, y=1.0)
     legend = _legend_outside(ax)
     ax.grid(alpha=0.3, axis="y")
     fixed_layout(fig, right=outside_legend_room(fig, legend), top=0.3, bottom=0.45)
@@ -303,7 +303,7 @@ def before_after_figure(row: CompensationStudyRow, label: str) -> Any:
         ax.plot(idx, np.linalg.norm(err, axis=1), "k.-", lw=1, ms=3, label="|error|")
         ax.axhline(0, color="k", lw=0.5)
         ax.set_ylabel("tool-point error [µm]")
-        ax.set_title(f"{when} compensation ({label}): RMSE {small_um(rms)} µm", fontsize=9)
+        ax.set_title(f"{when} compensation ({label}): RMSE {small_um(rms)} µm", fontsize=9, y=1.0)
         ax.grid(alpha=0.3)
         legends.append(_legend_outside(ax))
     axs[1].set_xlabel("pose of the test")
@@ -334,7 +334,7 @@ def compare_figure(result: Any) -> Any:
             if part.values_um is not None:
                 ax.plot(idx, np.linalg.norm(part.values_um, axis=1), "--", lw=0.9, label=f"|{part.name} part|")
         ax.set_ylabel("|d| [µm]")
-        ax.set_title(f"{when} (measured): RMS {small_um(rms)} µm", fontsize=9)
+        ax.set_title(f"{when} (measured): RMS {small_um(rms)} µm", fontsize=9, y=1.0)
         ax.grid(alpha=0.3)
         legends.append(_legend_outside(ax))
     axs[1].set_xlabel("pose")
@@ -374,7 +374,7 @@ def trend_figure(history: HistoryData) -> Any:
             if (r.id, name) in flagged:
                 ax.plot(x[i], vals[i], "o", ms=11, mfc="none", mec="crimson", mew=1.8)
         ax.axhline(0, color="k", lw=0.5)
-        ax.set_title(f"{name} [{UNIT_TEXT.get(kern.UNITS[name], kern.UNITS[name])}]", fontsize=9)
+        ax.set_title(f"{name} [{UNIT_TEXT.get(kern.UNITS[name], kern.UNITS[name])}]", fontsize=9, y=1.0)
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=7)
     for ax in axs.ravel()[len(names):]:
@@ -408,7 +408,7 @@ def ballbar_figure(curves: list[tuple[str, np.ndarray, np.ndarray]]) -> Any:
         ax.plot(idx, measured, "k.", ms=3, label="ΔL measured")
         ax.plot(idx, fitted, "-", lw=1.2, label="joint fit")
         rms = float(np.sqrt(np.mean((measured - fitted) ** 2)))
-        ax.set_title(f"{label[-30:]}: rest {small_um(rms, '.2g')} µm", fontsize=8)
+        ax.set_title(f"{label[-30:]}: rest {small_um(rms, '.2g')} µm", fontsize=8, y=1.0)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
         ax.set_xlabel("pose", fontsize=7)

@@ -42,7 +42,7 @@ def plan_figure(plan: Plan) -> Any:
     ax_s.set_xticks(x, [f"{n}\n[{plan.prediction.units.get(n, '')}]" for n in names], fontsize=7)
     ax_s.set_yscale("log")
     ax_s.set_ylabel("predicted standard error [µm or µrad]")
-    ax_s.set_title(f"noise {plan.setup.noise_um:g} µm, {plan.points} poses")
+    ax_s.set_title(f"noise {plan.setup.noise_um:g} µm, {plan.points} poses", y=1.0)
     ax_s.legend(fontsize=8)
     _trajectory_axes(ax_t, plan)
     fixed_layout(fig, left=0.8, right=0.2, bottom=0.7, top=0.35, wspace=0.9)
@@ -71,7 +71,7 @@ def _trajectory_axes(ax: Any, plan: Plan) -> None:
             ax.axvspan(lo1, hi1, color="tab:orange", alpha=0.06, label=f"{axes[1]} limits")
     ax.set_xlabel(f"{axes[1]} [deg]")
     ax.set_ylabel(f"{axes[0]} [deg]")
-    ax.set_title("poses in the angle plane (colour: test order)")
+    ax.set_title("poses in the angle plane (colour: test order)", y=1.0)
     ax.legend(fontsize=7, loc="best")
 
 
