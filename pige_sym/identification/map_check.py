@@ -53,9 +53,12 @@ def local_check(blocks: list[Any], sigmas: list[float], p: int,
     a = np.vstack([b.design[:, p:] / s for b, s in zip(blocks, sigmas, strict=True)])
     kept = np.ones(len(layout.columns), dtype=bool)
     out: list[Undetermined] = []
+    at_angle: dict[tuple[str, int], list[int]] = {}  # each grid angle's columns, found in one pass
+    for j, (m, g) in enumerate(layout.columns):
+        at_angle.setdefault((m.axis, g), []).append(j)
     for ax, grid in layout.grids.items():
         for g in range(grid.n):
-            idx = [j for j, (m, gg) in enumerate(layout.columns) if m.axis == ax and gg == g]
+            idx = at_angle.get((ax, g), [])
             cols = a[:, idx]
             if not np.any(cols):
                 kept[idx] = False
