@@ -6,6 +6,8 @@ Grammar::
                    not ``nan``/``inf``, no ``_`` separators, no non-ASCII digits
     vector      := number ("," number)*            e.g. ``120,0,80``
     assignments := item ("," item)*;  item := key "=" value      e.g. ``harmonic=2,cos_urad=10``
+    names       := name ("," name)*                              e.g. ``C,A``, ``EX0C,EY0C`` (each once, none empty)
+    axis range  := axis "=" number ":" number                    e.g. ``A=-120:30`` (repeatable, each axis once)
 
 Every failure raises :class:`~pige_sym.errors.InputError` naming the option (``what``)
 and the offending text, so the command exits with status 2 and one line.
@@ -66,4 +68,50 @@ def parse_number_assignments(text: str, what: str) -> dict[str, float]:
         if key in out:
             raise InputError(f"{what}: {key} is given twice")
         out[key] = parse_number(value, f"{what} {key}")
+    return out
+
+
+def parse_names(text: str | None, what: str, example: str) -> tuple[str, ...]:
+    """Comma-separated names, upper case, in the order given (None: not given, ``()``).
+
+    An empty list, an empty item (``C,A,``) and a name given twice (``C,C``) are refused: a list that says less
+    than it seems to is a typing error, not a request.
+    """
+    if text is None:
+        return ()
+    names = tuple(x.strip().upper() for x in text.split(","))
+    if not any(names):
+        raise InputError(f"{what} {text!r}: give one or more names, e.g. {example}")
+    if not all(names):
+        raise InputError(f"{what} {text!r}: an empty item (two commas, or one at an end): give e.g. {example}")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise InputError(f"{what} {text!r}: {twice[0]} is given twice: give each once, e.g. {example}")
+    return names
+
+
+def parse_axis_ranges(items: list[str] | None, what: str, axes: tuple[str, ...], *, max_abs: float = 720.0,
+                      max_span: float | None = None, example: str = "A=-120:30") -> dict[str, tuple[float, float]]:
+    """``AXIS=lo:hi`` items (repeatable, or comma-separated in one) [deg] as axis → (lo, hi).
+
+    Each axis is one of ``axes`` and given once; lo < hi, both finite within ±``max_abs`` (two turns by default),
+    ``hi − lo`` at most ``max_span`` when given.
+    """
+    out: dict[str, tuple[float, float]] = {}
+    for item in [x for it in items or [] for x in it.split(",")]:
+        axis, eq, span = (x.strip() for x in item.partition("="))
+        axis = axis.upper()
+        lo_text, colon, hi_text = span.partition(":")
+        if not eq or axis not in axes:
+            raise InputError(f"{what} {item!r}: give AXIS=lo:hi for a rotary axis ({', '.join(axes)}), e.g. "
+                             f"{example}")
+        if axis in out:
+            raise InputError(f"{what} {axis} is given twice: give each axis once")
+        low, high = strict_float(lo_text), strict_float(hi_text)
+        if not colon or low is None or high is None or not (-max_abs <= low < high <= max_abs) or (
+                max_span is not None and high - low > max_span):
+            span_text = f", at most {max_span:g} apart" if max_span is not None else ""
+            raise InputError(f"{what} {item!r}: give AXIS=lo:hi in degrees, lo < hi within ±{max_abs:g}"
+                             f"{span_text}, e.g. {example}")
+        out[axis] = (low, high)
     return out

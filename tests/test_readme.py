@@ -1,10 +1,11 @@
 """The README runs as written: its "A first session", touch-probe and ballbar shell blocks, in order, in a fresh
 folder.
 
-The blocks are taken from the README itself (so they cannot drift), run by bash from a folder that holds only
-links to the checkout's ``.venv`` and ``examples`` (the README says: from the checkout's root), and every
+The blocks are taken from the README itself (so they cannot drift), run by bash from a scratch folder laid out
+like the checkout's root (the README says: from the checkout's root; :func:`testdata.scratch_checkout`: a link to
+``.venv``, copies of ``examples`` and ``tests``, history, kernels and bytecode in scratch folders), and every
 command must succeed: :func:`testdata.strict_script` checks every top-level command's status (``a && b``
-included, which ``set -e`` lets pass).
+included, which ``set -e`` lets pass).  They must leave the checkout as it was.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from testdata import strict_script
+from testdata import changed_files, checkout_files, scratch_checkout, strict_script
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -35,15 +36,15 @@ def test_the_first_session_and_the_probe_demo_run_as_pasted(tmp_path) -> None:
     venv = Path(sys.executable).parent.parent
     if not (venv / "bin" / "pige").exists():
         pytest.skip("needs the pige console script (make venv)")
-    (tmp_path / ".venv").symlink_to(venv)
-    (tmp_path / "examples").symlink_to(ROOT / "examples")
+    env = scratch_checkout(tmp_path, Path(os.environ.get("PYTHONPYCACHEPREFIX") or tmp_path / "pycache"))
     blocks = _blocks("## A first session") + _blocks("## Calibrating with a touch probe") + \
         _blocks("## Calibrating with a ballbar")
     assert len(blocks) >= 4
     script = strict_script(blocks)
-    env = {k: v for k, v in os.environ.items() if k != "PIGE_HISTORY_DB"}
+    before = checkout_files()
     done = subprocess.run(["bash", "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
     assert done.returncode == 0, done.stderr[-3000:]
+    assert not changed_files(before, checkout_files()), "the README's blocks changed the checkout"
     session = tmp_path / "session"
     for name in ("rtest.mpf", "run.csv", "diagnosis.json", "rtest_comp.mpf", "after.csv", "history.db",
                  "report/report.html"):

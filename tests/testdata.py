@@ -7,9 +7,11 @@ conftest.py in a sub-folder (tests/linuxcnc) replaces as the module of that name
 from __future__ import annotations
 
 import json
+import os
 import shlex
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -124,3 +126,46 @@ def strict_script(blocks: list[tuple[str, int, str]]) -> str:
                       'PIGE_DOCS_RC=$?; if [ "$PIGE_DOCS_RC" -ne 0 ]; then echo "$PIGE_DOCS_AT: failed (exit status '
                       '$PIGE_DOCS_RC: a command of an && list)" >&2; exit "$PIGE_DOCS_RC"; fi']
     return "\n".join(parts) + "\n"
+
+
+#: Folders of the checkout a test run writes by itself (caches, the venv): not what a pasted command may change.
+CACHES = frozenset({".git", ".venv", "__pycache__", ".pytest_cache", ".hypothesis", ".mypy_cache", ".ruff_cache"})
+
+
+def scratch_checkout(folder: Path, pycache: Path) -> dict[str, str]:
+    """Lay ``folder`` out like the checkout's root for commands pasted from the docs, so that they cannot write
+    into the checkout, and return their environment.
+
+    ``.venv`` is a link to this interpreter's venv (its ``pige``); ``examples`` and ``tests`` are copies (a
+    command writing beside an example writes into the copy).  The environment puts ``.venv/bin`` first on
+    ``PATH``, the history and the generated kernels in ``folder`` (never the user's), and the bytecode of every
+    Python the commands start under ``pycache`` (``PYTHONPYCACHEPREFIX``: never beside the checkout's sources;
+    one folder a test module shares, so its pages compile pige once).
+    """
+    (folder / ".venv").symlink_to(Path(sys.executable).parent.parent)
+    for name in ("examples", "tests"):
+        shutil.copytree(REPO / name, folder / name, ignore=shutil.ignore_patterns(*CACHES))
+    env = {k: v for k, v in os.environ.items() if k not in {"PIGE_HISTORY_DB", "PIGE_KERNEL_DIR",
+                                                              "PYTHONDONTWRITEBYTECODE"}}
+    env["PATH"] = f"{folder / '.venv' / 'bin'}{os.pathsep}{env.get('PATH', '')}"
+    env["PIGE_HISTORY_DB"] = str(folder / "history-default.db")
+    env["PIGE_KERNEL_DIR"] = str(folder / "kernels")
+    env["PYTHONPYCACHEPREFIX"] = str(pycache)
+    return env
+
+
+def checkout_files() -> dict[str, tuple[int, int]]:
+    """Every file of the checkout but the caches (:data:`CACHES`, ``*.egg-info``): relative path → (size, mtime
+    [ns]); what a test compares before and after commands that must leave the checkout as it was."""
+    out: dict[str, tuple[int, int]] = {}
+    for top, dirs, files in os.walk(REPO):
+        dirs[:] = [d for d in dirs if d not in CACHES and not d.endswith(".egg-info")]
+        for name in files:
+            st = os.lstat(os.path.join(top, name))
+            out[os.path.relpath(os.path.join(top, name), REPO)] = (st.st_size, st.st_mtime_ns)
+    return out
+
+
+def changed_files(before: dict[str, tuple[int, int]], after: dict[str, tuple[int, int]]) -> list[str]:
+    """The paths :func:`checkout_files` lists as added, removed or modified between two listings."""
+    return sorted(p for p in before.keys() | after.keys() if before.get(p) != after.get(p))

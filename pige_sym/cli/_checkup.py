@@ -17,9 +17,9 @@ def checkup_requested(args: argparse.Namespace, tests: str, checkup: str) -> boo
     ------
     InputError
     """
-    if args.checkup and args.map:
+    if args.checkup and args.map is not None:
         raise InputError(f"--checkup and --map {tests}: give one of them")
-    if not args.checkup and (args.machine_id or args.pige):
+    if not args.checkup and (args.machine_id is not None or args.pige is not None):
         raise InputError(f"--machine-id and --pige {checkup}: give --checkup")
     return bool(args.checkup)
 
@@ -69,7 +69,7 @@ def plan_from_history(args: argparse.Namespace, *, budget_s: float | None, contr
     full = last_full(runs)
     setup = run_setup(full)
     last = [r for r in runs if r.kind == "checkup"]
-    free = parse_free(args.pige, setup.machine) if args.pige or not last else list(last[-1].parameters)
+    free = parse_free(args.pige, setup.machine) if args.pige is not None or not last else list(last[-1].parameters)
     speeds = MachineSpeeds(rapid_mm_s=finite_option(args.rapid, "--rapid", positive=True),
                            rotary_deg_s=finite_option(args.rotary_speed, "--rotary-speed", positive=True))
     probe = None

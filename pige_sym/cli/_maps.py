@@ -35,11 +35,43 @@ def add_map_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def axes_option(text: str | None, what: str) -> tuple[str, ...]:
-    """``C,A`` as ("C", "A"); InputError for an empty list."""
-    axes = tuple(a.strip().upper() for a in (text or "").split(",") if a.strip())
-    if text is not None and not axes:
-        raise InputError(f"{what} {text!r}: give rotary axes, e.g. C,A")
-    return axes
+    """``C,A`` as ("C", "A") (None: ``()``); an empty list, an empty item or an axis given twice is refused."""
+    from pige_sym.options import parse_names
+
+    return parse_names(text, what, "C,A")
+
+
+def map_axes(args: argparse.Namespace, kern: Any = None) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """``--map`` and ``--map-per-direction`` (every ``pige`` command that maps): the axes, each a rotary axis of the
+    machine when its kernels ``kern`` are given, an axis per direction mapped too.
+
+    Raises
+    ------
+    InputError
+    """
+    axes = axes_option(args.map, "--map")
+    per_direction = axes_option(getattr(args, "map_per_direction", None), "--map-per-direction")
+    bad = [a for a in axes + per_direction if kern is not None and a not in kern.ROTARY_AXES]
+    if bad:
+        raise InputError(f"--map {','.join(bad)}: give rotary axes of {kern.MACHINE_CODE} "
+                         f"({', '.join(kern.ROTARY_AXES)})")
+    extra = [a for a in per_direction if a not in axes]
+    if extra:
+        raise InputError(f"--map-per-direction {','.join(extra)}: map the axis too "
+                         f"(--map {','.join(axes + tuple(extra))})")
+    return axes, per_direction
+
+
+def map_step(step: float | None, axes: tuple[str, ...]) -> float:
+    """``--map-step`` (default 15) checked for every mapped axis by the one check of identify, plan and program
+    (:func:`~pige_sym.model.error_motions.check_map_step`)."""
+    from pige_sym.identification.maps import DEFAULT_MAP_STEP_DEG
+    from pige_sym.model.error_motions import check_map_step
+
+    value = DEFAULT_MAP_STEP_DEG if step is None else step
+    for axis in axes or (None,):
+        check_map_step(value, axis)
+    return float(value)
 
 
 def map_request(args: argparse.Namespace, kern: Any, instrument: str, *, point: Any, tool: Any = None,
@@ -51,29 +83,25 @@ def map_request(args: argparse.Namespace, kern: Any, instrument: str, *, point: 
     from pige_sym.identification.maps import MapSpec
     from pige_sym.planning.map_setups import MapTestRequest, map_ranges
 
-    axes = axes_option(args.map, "--map")
-    per_direction = axes_option(args.map_per_direction, "--map-per-direction")
-    bad = [a for a in axes + per_direction if a not in kern.ROTARY_AXES]
-    if bad:
-        raise InputError(f"--map {','.join(bad)}: give rotary axes of {kern.MACHINE_CODE} "
-                         f"({', '.join(kern.ROTARY_AXES)})")
-    extra = [a for a in per_direction if a not in axes]
-    if extra:
-        raise InputError(f"--map-per-direction {','.join(extra)}: map the axis too "
-                         f"(--map {','.join(axes + tuple(extra))})")
+    axes, per_direction = map_axes(args, kern)
     if args.map_setups is not None and args.map_setups < 1:
         raise InputError(f"--map-setups {args.map_setups}: give 1 or more")
     points = tuple(np.array(parse_vec3(x, "--map-point")) for x in args.map_point or [])
     tools = tuple(np.array(parse_vec3(x, "--map-tool")) for x in args.map_tool or [])
     return MapTestRequest(
-        kern.MACHINE_CODE, instrument, MapSpec(axes, finite_option(args.map_step, "--map-step", positive=True),
-                                               per_direction),
+        kern.MACHINE_CODE, instrument, MapSpec(axes, map_step(args.map_step, axes), per_direction),
         map_ranges(kern, args.map_range), np.asarray(point, dtype=float),
         None if tool is None else np.asarray(tool, dtype=float), noise_um, points, tools,
         finite_option(args.map_extension, "--map-extension", positive=True),
         finite_option(args.map_offset, "--map-offset", positive=True), probe,
         {a: np.asarray(v, dtype=float) for a, v in (pivots or {}).items()}, pose_s, contact_s, args.map_setups,
-        getattr(args, "target", None))
+        _target(args))
+
+
+def _target(args: argparse.Namespace) -> float | None:
+    """``--target``: a positive finite std [µm or µrad], or None."""
+    target = getattr(args, "target", None)
+    return None if target is None else finite_option(target, "--target", positive=True)
 
 
 def numbered(out: str, count: int) -> list[Path]:

@@ -57,7 +57,7 @@ def _rate(item: Any, per_day: bool) -> str:
 
 
 def _leaves(item: Any, origin: str) -> str:
-    from pige_sym.verdict.checkup.routine import when
+    from pige_sym.verdict.checkup.routine import when_text as when
 
     t = item.trend
     if t is None or t.leaves_at is None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -82,19 +83,24 @@ def _run(args: argparse.Namespace) -> int:
         if "--allow-missing" in name:
             print(f"warning: {name}")
     current = _current(args)
+    max_mm, max_deg = _max_change(args.max_change)
     if args.controller:
-        entered = entered_for_controller(params, args.enter, _travel(args.travel))
+        options = _controller_options(args, current, (max_mm, max_deg))
+        check_before_writing(params, args.controller, options=options)  # before the values are weighed
+        entered = entered_for_controller(params, args.enter, _travel(args.travel, params.machine))
+        check_before_writing(entered, args.controller, options=options)
         if not args.json:
-            print(format_controller(entered, args.controller, carrier=args.carrier, current=current,
-                                    heidenhain_trans=args.heidenhain_trans, machine_axes=_machine_axes(args),
-                                    isg_unit_deg=args.isg_unit_deg))
+            print(format_controller(entered, args.controller, carrier=options.carrier, current=current,
+                                    heidenhain_trans=args.heidenhain_trans, machine_axes=options.machine_axes,
+                                    isg_unit_deg=args.isg_unit_deg, limits=options.limits))
         if args.comp_dir:
-            _write_comp_files(args, entered)
+            _write_comp_files(args, entered, options.limits)
     elif args.comp_dir:
         raise InputError("--comp-dir writes LinuxCNC compensation files: give it with --controller linuxcnc")
+    else:
+        _no_controller_options(args)
     if args.controller and not args.program:
         if args.json:
-            check_before_writing(params, args.controller, current)
             print(to_json({"machine": params.machine, "parameters_from": params.source,
                            "axes": controller_corrections(entered)} | _controller_json(entered, args.controller)))
         return 0
@@ -103,7 +109,6 @@ def _run(args: argparse.Namespace) -> int:
     if not args.out:
         raise InputError("give --out NEW_PROGRAM")
     out = check_output(args.out, force=args.force, inputs=[args.program, args.params], what="--out")
-    max_mm, max_deg = _max_change(args.max_change)
     result = api.compensate(args.program, params, dialect=args.dialect, pass_through=args.pass_through,
                             max_change_mm=max_mm, max_change_deg=max_deg, rtcp_on=args.rtcp_on or (),
                             rtcp_off=args.rtcp_off or (), enter=args.enter)
@@ -118,26 +123,59 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _machine_axes(args: argparse.Namespace) -> dict[str, str]:
-    """``--machine-axis C=C1`` (repeatable): the controller's name of each rotary axis."""
+#: The options only some controllers read, and the attribute of ``args`` each is in.
+CONTROLLER_OPTIONS = {"--carrier": "carrier", "--heidenhain-trans": "heidenhain_trans",
+                      "--machine-axis": "machine_axis", "--isg-unit-deg": "isg_unit_deg", "--current": "current",
+                      "--comp-dir": "comp_dir"}
+
+
+def _given(args: argparse.Namespace) -> list[str]:
+    return [option for option, attr in CONTROLLER_OPTIONS.items() if getattr(args, attr) is not None]
+
+
+def _no_controller_options(args: argparse.Namespace) -> None:
+    """The NC rewrite reads none of the controllers' options (``--current``, ``--comp-dir``: their own messages), nor
+    ``--travel`` (it judges the program's own poses)."""
+    extra = [o for o in _given(args) if o not in ("--current", "--comp-dir")] + (["--travel"] if args.travel else [])
+    if extra:
+        raise InputError(f"{extra[0]} goes with --controller (the controller's entries), not with the NC rewrite: "
+                         "leave it out, or give --controller")
+
+
+def _controller_options(args: argparse.Namespace, current: Any, max_change: tuple[float, float]) -> Any:
+    """The options of ``--controller`` checked (each read by that controller, given once, within its bounds)."""
+    from pige_sym.compensation.controllers import ControllerOptions, check_options
+    from pige_sym.compensation.controllers.entry_checks import ChangeLimits
+
+    check_options(args.controller, _given(args))
+    return ControllerOptions(carrier=1 if args.carrier is None else args.carrier, current=current,
+                             heidenhain_trans=args.heidenhain_trans, machine_axes=_machine_axes(args),
+                             isg_unit_deg=args.isg_unit_deg, limits=ChangeLimits(*max_change))
+
+
+def _machine_axes(args: argparse.Namespace) -> dict[str, str] | None:
+    """``--machine-axis C=C1`` (repeatable, each axis once): the controller's name of each rotary axis."""
+    if not args.machine_axis:
+        return None
     out: dict[str, str] = {}
-    for item in args.machine_axis or []:
+    for item in args.machine_axis:
         axis, sep, name = (x.strip() for x in item.partition("="))
-        if not sep or not axis or not name or not name.replace("_", "").isalnum():
-            raise InputError(f"--machine-axis {item!r}: give AXIS=NAME, e.g. C=C1 (letters, digits, '_')")
+        if not sep or not axis or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+            raise InputError(f"--machine-axis {item!r}: give AXIS=NAME, e.g. C=C1 (a letter, then letters, digits, "
+                             "'_')")
+        if axis.upper() in out:
+            raise InputError(f"--machine-axis {axis.upper()} is given twice ({out[axis.upper()]} and {name}): give "
+                             "each axis once")
         out[axis.upper()] = name
     return out
 
 
-def _write_comp_files(args: argparse.Namespace, entered: Any) -> None:
+def _write_comp_files(args: argparse.Namespace, entered: Any, limits: Any) -> None:
     """``--comp-dir DIR``: LinuxCNC's ``[JOINT_n]COMP_FILE`` of every positioning map (never over a file without
     ``--force``)."""
     from pige_sym.compensation.controllers.tables.linuxcnc_comp import comp_files
 
-    if args.controller != "linuxcnc":
-        raise InputError(f"--comp-dir writes LinuxCNC compensation files, not {args.controller}'s: give --controller "
-                         "linuxcnc")
-    files = comp_files(entered)
+    files = comp_files(entered, limits)
     if not files:
         raise InputError(f"--comp-dir: {args.params} holds no positioning map (ECC, EAA, ...): identify with --map")
     folder = Path(args.comp_dir)
@@ -150,23 +188,13 @@ def _write_comp_files(args: argparse.Namespace, entered: Any) -> None:
         print(f"wrote {targets[name]} ({text.count(chr(10))} entries)")
 
 
-def _travel(items: list[str] | None) -> dict[str, tuple[float, float]]:
-    """``--travel A=-120:30`` (repeatable) as axis → (min, max) [deg]."""
-    import math
+def _travel(items: list[str] | None, machine: str) -> dict[str, tuple[float, float]]:
+    """``--travel A=-120:30`` (repeatable, each rotary axis of ``machine`` once) as axis → (min, max) [deg]."""
+    from pige_sym.kernels import load_kernels
+    from pige_sym.options import parse_axis_ranges
 
-    out: dict[str, tuple[float, float]] = {}
-    for item in items or []:
-        axis, _, span = item.partition("=")
-        lo, sep, hi = span.partition(":")
-        try:
-            low, high = float(lo), float(hi)
-        except ValueError:
-            low = high = math.nan
-        if not sep or not axis.strip() or not (math.isfinite(low) and math.isfinite(high) and low < high
-                                               and high - low <= 720):
-            raise InputError(f"--travel {item!r}: give AXIS=MIN:MAX in degrees, MIN < MAX, e.g. A=-120:30")
-        out[axis.strip().upper()] = (low, high)
-    return out
+    return parse_axis_ranges(items, "--travel", tuple(load_kernels(machine).ROTARY_AXES), max_span=720.0,
+                             example="A=-120:30")
 
 
 def _controller_json(params: Any, style: str) -> dict[str, Any]:
@@ -270,7 +298,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="set PIGEs without a value (missing, or not identifiable) to 0 and say which")
     p.add_argument("--controller", choices=list(controller_names()), help="print the corrected kinematics "
                    "(see docs/controller-corrections.md)")
-    p.add_argument("--carrier", type=int, default=1, help="Siemens swivel data record number (default %(default)s)")
+    p.add_argument("--carrier", type=int, help="Siemens swivel data record number (default 1)")
     p.add_argument("--current", help="today's LinuxCNC trt pin values: PIN=VALUE,... or the machine's INI or HAL "
                    "file (then absolute setp/sets lines are printed)")
     p.add_argument("--heidenhain-trans", choices=["position", "shift"],

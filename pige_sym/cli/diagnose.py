@@ -44,18 +44,20 @@ def _run_several(args: argparse.Namespace) -> int:
 
 def _map_gain(args: argparse.Namespace) -> dict[str, object]:
     """``--map AXES``: the held-out gain of the error maps (:mod:`pige_sym.diagnosis.map_gain`), as JSON."""
-    if not args.map:
+    if args.map is None:
         if args.map_step is not None:
             from pige_sym.errors import InputError
 
             raise InputError("--map-step goes with --map AXES")
         return {}
+    from pige_sym.cli._maps import axes_option, map_step
     from pige_sym.diagnosis.map_gain import map_gain
     from pige_sym.identification.maps import MapSpec
     from pige_sym.measurements.sets import read_files
 
-    axes = tuple(a.strip().upper() for a in args.map.split(",") if a.strip())
-    gain = map_gain(read_files(args.files), MapSpec(axes, 30.0 if args.map_step is None else args.map_step))
+    axes = axes_option(args.map, "--map")
+    step = map_step(30.0 if args.map_step is None else args.map_step, axes)
+    gain = map_gain(read_files(args.files), MapSpec(axes, step))
     return {"map_gain": gain.to_dict() | {"sentences": gain.sentences()}}
 
 

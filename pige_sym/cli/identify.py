@@ -16,7 +16,7 @@ def _run(args: argparse.Namespace) -> int:
     from pige_sym.identification.result import format_result
     from pige_sym.measurements.ballbar import is_ballbar_file
 
-    if args.map:
+    if args.map is not None:
         return _run_maps(args)
     if args.plots or args.map_step is not None or args.map_per_direction:
         from pige_sym.errors import InputError
@@ -59,37 +59,26 @@ def _run_joint(args: argparse.Namespace) -> int:
     return 0
 
 
-def _axes(text: str | None, what: str) -> tuple[str, ...]:
-    from pige_sym.errors import InputError
-
-    axes = tuple(a.strip().upper() for a in (text or "").split(",") if a.strip())
-    if text is not None and not axes:
-        raise InputError(f"{what} {text!r}: give rotary axes, e.g. C,A")
-    return axes
-
-
 def _run_maps(args: argparse.Namespace) -> int:
     """``--map AXES``: the PIGEs, the zero-position errors and the error maps, jointly from every file."""
+    from pige_sym.cli._maps import map_axes, map_step
     from pige_sym.errors import InputError
     from pige_sym.files import check_output
     from pige_sym.identification.joint import format_files
     from pige_sym.identification.map_output import format_maps, plot_maps, plot_paths
-    from pige_sym.identification.maps import DEFAULT_MAP_STEP_DEG, MapSpec, identify_maps
+    from pige_sym.identification.maps import MapSpec, identify_maps
     from pige_sym.identification.result import format_result
     from pige_sym.measurements.sets import read_files
 
     if args.method != "gauss-newton" or args.projection != "xyz" or args.loss != "linear" or args.with_zero:
         raise InputError("--map fits every file jointly (gauss-newton, full 3-D, loss linear) and always with the "
                          "zero-position errors: leave out --method, --projection, --loss and --with-zero")
-    axes, per_direction = _axes(args.map, "--map"), _axes(args.map_per_direction, "--map-per-direction")
-    extra = [a for a in per_direction if a not in axes]
-    if extra:
-        raise InputError(f"--map-per-direction {','.join(extra)}: map the axis too "
-                         f"(--map {','.join(axes + tuple(extra))})")
+    axes, per_direction = map_axes(args)
+    step = map_step(args.map_step, axes)
     if args.plots:
         for path in plot_paths(axes, args.plots):
             check_output(path, force=args.force, inputs=args.files, what="--plots")
-    spec = MapSpec(axes, DEFAULT_MAP_STEP_DEG if args.map_step is None else args.map_step, per_direction)
+    spec = MapSpec(axes, step, per_direction)
     result = identify_maps(read_files(args.files), spec)
     written = plot_maps(result, args.plots) if args.plots else []
     if args.json:

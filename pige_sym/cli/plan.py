@@ -128,13 +128,14 @@ def _format(plan: Any, out: str | None) -> str:
 
 def _run_ballbar(args: argparse.Namespace) -> int:
     """The smallest set of ballbar setups that determines every PIGE within --target (--out: as JSON)."""
+    from pige_sym.cli._setup import finite_option
     from pige_sym.files import atomic_write_text, check_output, to_json
     from pige_sym.kernels import load_kernels
     from pige_sym.planning.ballbar import format_setups, plan_setups
 
     code = load_kernels(args.machine).MACHINE_CODE
     out = check_output(args.out, force=args.force, what="--out") if args.out else None
-    target = 2.0 if args.target is None else args.target
+    target = 2.0 if args.target is None else finite_option(args.target, "--target", positive=True)
     chosen, sizes = plan_setups(code, target=target, noise_um=args.noise)
     result = {"machine": code, "noise_um": args.noise, "target": target,
               "chosen": None if chosen is None else chosen.labels,
@@ -303,11 +304,14 @@ def _run(args: argparse.Namespace) -> int:
     from pige_sym.files import to_json
     from pige_sym.planning import parse_limits
 
+    if args.target is not None and (args.checkup or (args.map is None and args.instrument != "ballbar")):
+        raise InputError("--target is the largest predicted std a ballbar plan or a map plan (--map) accepts: leave it "
+                         "out here")
     if checkup_requested(args, "plan different tests", "plan a check-up"):
         return _run_checkup(args)
     if args.budget is None:
         args.budget = 1800.0
-    if args.map:
+    if args.map is not None:
         return _run_map(args)
     if args.instrument == "ballbar":
         return _run_ballbar(args)

@@ -55,7 +55,7 @@ def _run_probe(args: argparse.Namespace) -> int:
 
     kern = load_kernels(args.machine)
     setup = probe_setup(args, kern.MACHINE_CODE, dialect=args.dialect)
-    if args.map:
+    if args.map is not None:
         return _run_probe_maps(args, kern, setup)
     traj = make_trajectory(kern.MACHINE_CODE, args.trajectory, **trajectory_options(args))
     plan = plan_probing(setup, traj.angles_deg, traj.description)
@@ -228,7 +228,7 @@ def _run(args: argparse.Namespace) -> int:
         return _run_checkup(args)
     if args.instrument == "sphere-probe":
         return _run_probe(args)
-    if args.map:
+    if args.map is not None:
         raise InputError("--map writes the probing programs of a map test (--instrument sphere-probe); for an R-test "
                          "or ballbar map test, pige plan --map names each setup's ball and tool")
     if args.instrument == "ballbar":

@@ -34,16 +34,17 @@ def _graded_plan(args: argparse.Namespace, data: Any) -> Any:
 
 def _map_spec(args: argparse.Namespace) -> Any:
     """``--map AXES [--map-step DEG]`` as a MapSpec (None without --map)."""
-    if not args.map:
+    if args.map is None:
         if args.map_step is not None:
             from pige_sym.errors import InputError
 
             raise InputError("--map-step goes with --map AXES")
         return None
-    from pige_sym.identification.maps import DEFAULT_MAP_STEP_DEG, MapSpec
+    from pige_sym.cli._maps import axes_option, map_step
+    from pige_sym.identification.maps import MapSpec
 
-    axes = tuple(a.strip().upper() for a in args.map.split(",") if a.strip())
-    return MapSpec(axes, DEFAULT_MAP_STEP_DEG if args.map_step is None else args.map_step)
+    axes = axes_option(args.map, "--map")
+    return MapSpec(axes, map_step(args.map_step, axes))
 
 
 def _run(args: argparse.Namespace) -> int:

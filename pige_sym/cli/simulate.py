@@ -40,7 +40,27 @@ def _error_maps(args: argparse.Namespace, kern: Any) -> Any:
     if not isinstance(data, dict) or not isinstance(data.get("error_motions"), dict) or not data["error_motions"]:
         raise FileFormatError(args.error_maps, None, 'expected a JSON object with an "error_motions" object (axis: '
                               '{"angle_deg": [...], "EXC": {"value": [...]}, ...}), as identify --map --json writes')
+    _same_machine(args.error_maps, data.get("machine"), kern.MACHINE_CODE)
     return error_maps_from(read_error_motions(data["error_motions"], args.error_maps, kern))
+
+
+def _same_machine(path: str, named: Any, machine: str) -> None:
+    """The machine a maps file names (``machine``, optional) must be the simulated one (CONVENTIONS §10: maps are of
+    one machine's axes, in its frames)."""
+    from pige_sym.codegen.machine_code import parse_machine_code
+    from pige_sym.errors import FileFormatError, PigeError
+
+    if named is None:
+        return
+    try:
+        code = parse_machine_code(named).canonical if isinstance(named, str) else None
+    except PigeError:
+        code = None
+    if code is None:
+        raise FileFormatError(path, None, f"machine: {named!r:.60} is not a machine code (CONVENTIONS §1)")
+    if code != machine:
+        raise FileFormatError(path, None, f"machine: the maps are of {code}, the simulated machine is {machine}: give "
+                              "the maps of this machine (or --machine of theirs)")
 
 
 def _run_probe(args: argparse.Namespace) -> int:

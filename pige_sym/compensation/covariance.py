@@ -96,6 +96,23 @@ class BlockCovariance:
             out[np.ix_(idx, idx)] = block
         return out
 
+    def positive_definite(self) -> bool:
+        """Whether the whole matrix is positive definite (a Cholesky factor of every group, every single variance
+        > 0)."""
+        if not (self.variance > 0).all():
+            return False
+        try:
+            for _, block in self.groups:
+                np.linalg.cholesky(block)
+        except np.linalg.LinAlgError:
+            return False
+        return True
+
+    def ridged(self, ridge: float) -> BlockCovariance:
+        """The same with ``ridge`` of each variance added to it (the diagonal times ``1 + ridge``)."""
+        groups = tuple((idx, block + np.diag(ridge * np.diag(block))) for idx, block in self.groups)
+        return BlockCovariance(self.size, groups, self.single, self.variance + ridge * self.variance)
+
     def solve_shifted(self, shift: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         """``(Σ + diag(shift))⁻¹ rhs`` for a vector ``rhs`` (q,), block by block."""
         out = np.empty(self.size)

@@ -49,6 +49,10 @@ from pige_sym.model.trajectories import approach_directions
 MAX_POSES = 20000
 #: Grid step of the travel poses [deg].
 TRAVEL_STEP_DEG = 5.0
+#: What a singular covariance gets added to its diagonal, per unit of each variance (:func:`regular`).
+SINGULAR_RIDGE = 1e-9
+#: A weighing row's start for a value the controller does not hold (:func:`weighing_rows`).
+NOT_HERE = "not representable in this controller (below); weighed for the NC rewrite: "
 #: The rule, as reports and ``--json`` state it.
 RULE = ("posterior mean under a prior N(0, diag(tau^2)) whose variances the estimates and their covariance "
         "determine (tau^2 = max(x^2 - std^2, 0) for an uncorrelated value): what the data do not show is not "
@@ -134,12 +138,21 @@ def entered_values(estimate: np.ndarray, covariance: np.ndarray | BlockCovarianc
     ----------
     estimate : (q,) [µm, µrad]
     covariance : (q, q) or BlockCovariance
-        Positive definite (its diagonal positive); solved group by group of correlated values.
+        Positive semi-definite, its diagonal positive (a singular one as :func:`regular` makes it); solved group by
+        group of correlated values.
     """
     x = np.asarray(estimate, dtype=float)
-    blocks = as_blocks(covariance)
+    blocks = regular(covariance)
     tau2 = prior_variances(x, blocks)
     return np.where(tau2 > 0, tau2 * blocks.solve_shifted(tau2, x), 0.0)
+
+
+def regular(covariance: np.ndarray | BlockCovariance) -> BlockCovariance:
+    """``covariance`` if positive definite, else with :data:`SINGULAR_RIDGE` of each variance added to its diagonal:
+    a combination stated as known exactly is taken as known to 3e-5 of its values' standard errors (the whole
+    matrix is positive definite when each of its groups is: each group is checked, the ridge goes to every one)."""
+    blocks = as_blocks(covariance)
+    return blocks if blocks.positive_definite() else blocks.ridged(SINGULAR_RIDGE)
 
 
 def prior_variances(estimate: np.ndarray, covariance: np.ndarray | BlockCovariance, *, sweeps: int = 500,
@@ -358,9 +371,10 @@ def _why(value: float, std: float, entered: float) -> str:
     return "entered as its estimate given the values weighed down beside it (they are correlated)"
 
 
-def weighing_rows(weighing: Weighing, units: dict[str, str]) -> list[str]:
+def weighing_rows(weighing: Weighing, units: dict[str, str], carried: set[str] | None = None) -> list[str]:
     """One line per value not entered as estimated: ``EB0A +45.35 ± 35 urad: entered in part (73 % …): +32.9``;
-    the map values (``C:EXC@30``) in one line per axis and motion."""
+    the map values (``C:EXC@30``) in one line per axis and motion; with ``carried`` (what a controller holds:
+    PIGEs, ``<axis>:<motion>`` maps) a value it does not hold is said to be weighed for the NC rewrite only."""
     rows = []
     maps: dict[str, list[str]] = {}
     for n, v in weighing.entered.items():
@@ -372,13 +386,14 @@ def weighing_rows(weighing: Weighing, units: dict[str, str]) -> list[str]:
         unit = units.get(n, "") if "." not in n else "urad"
         said = f"{n} {weighing.estimate[n]:+.4g} ± {weighing.std[n]:.2g} {unit}" if n in weighing.std else n
         value = f": enter {v:+.4g}" if v is not None and v != 0.0 else ""
-        rows.append(f"{said}: {weighing.why[n]}{value}")
+        rows.append(f"{said}: {'' if carried is None or n in carried else NOT_HERE}{weighing.why[n]}{value}")
     for motion, whys in maps.items():
         whole = sum(w.startswith("entered as estimated") for w in whys)
         none = sum(w.startswith("not entered") for w in whys)
         if whole < len(whys):
-            rows.append(f"map {motion}: {whole} of {len(whys)} values entered as estimated, {none} not entered (within "
-                        f"their uncertainty), {len(whys) - whole - none} in part")
+            rows.append(f"map {motion}: {'' if carried is None or motion in carried else NOT_HERE}{whole} of "
+                        f"{len(whys)} values entered as estimated, {none} not entered (within their uncertainty), "
+                        f"{len(whys) - whole - none} in part")
     return rows
 
 

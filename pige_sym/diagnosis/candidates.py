@@ -41,12 +41,14 @@ from typing import Any
 
 import numpy as np
 
+from pige_sym.identification.canonical import canonical_basis, combination, rounded, separation
 from pige_sym.model.effects import DRIFT_KINDS, EffectContext, EffectSpec
 
 HARMONICS = (1, 2, 3, 4)
 TAU_GRID_FRACTIONS = tuple(float(x) for x in np.geomspace(0.03, 5.0, 10))
 NULL_LAMBDA = 1e-7  # 1/VIF below which a direction counts as undetermined (std inflated > ~3000x)
 ZERO_COLUMN = 1e-10  # relative column norm below which a candidate column leaves no trace
+TRACELESS_RTOL = 1e-10  # |C·c₀|² over trace(CᵀC), c₀ of unit scaled norm, at or below which c₀ leaves no trace
 
 
 @dataclass(frozen=True)
@@ -272,7 +274,8 @@ class Reduction:
     basis : ndarray, shape=(q, q')
         Kept directions in the catalogue's parameter units (``c = basis @ θ``).
     null : ndarray, shape=(q, q − q')
-        Removed directions (catalogue units, max |.| = 1).
+        Removed directions in catalogue units: the canonical basis of those without trace, then of the absorbed
+        ones (:func:`_removed_directions`; each 1 on its pivot).
     absorbed : ndarray, shape=(K, q − q')
         Model coefficients reproducing each removed direction (``M·absorbed ≈ C·null``).
     vif : ndarray, shape=(q',)
@@ -289,6 +292,16 @@ class Reduction:
     def removed(self) -> list[str]:
         """One sentence per removed direction, naming what absorbs it (built on first use)."""
         return [] if self._describe is None else list(self._describe())
+
+    def absorbed_terms(self, names: list[str]) -> list[dict[str, float]]:
+        """Per removed direction, the model coefficients that absorb it (``{name: value}``, the JSON form):
+        rounded (:func:`~pige_sym.identification.canonical.rounded`), round-off below 1e-9 of the largest left out."""
+        out = []
+        for j in range(self.null.shape[1]):
+            col = self.absorbed[:, j]
+            floor = 1e-9 * float(np.abs(col).max(initial=0.0))
+            out.append({n: rounded(float(v)) for n, v in zip(names, col, strict=False) if abs(v) > floor})
+        return out
 
 
 def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, model_names: list[str],
@@ -328,44 +341,48 @@ def reduce_candidate(gram: np.ndarray, model_w: np.ndarray, cand: Candidate, mod
     lam, vec = np.linalg.eigh((scaled + scaled.T) / 2)
     keep = lam > null_lambda
     basis = vec[:, keep] * s[:, None]
-    null = vec[:, ~keep] * s[:, None]
-    if null.shape[1] > 1:  # within the null space, separate directions without trace from absorbed ones
-        lam0, rot = np.linalg.eigh(null.T @ gcc @ null)
-        null = null @ rot
-    half = _rotating_half(cand, null) if null.shape[1] == 2 else None
-    if half is not None:  # name the rotating half in its canonical directions
-        sign = 1.0 if half == "+" else -1.0
-        null = np.array([[1.0, 0, 0, sign], [0, 1.0, -sign, 0]]).T
+    null, traceless, half = _removed_directions(cand, vec[:, ~keep], s, gcc, separation(lam, ~keep))
     absorbed = coef @ null if null.size else np.zeros((model_w.shape[1], 0))
-    for j in range(null.shape[1]):
-        scale = np.abs(null[:, j]).max()
-        null[:, j] /= scale
-        absorbed[:, j] /= scale
+    absorbed[:, traceless] = 0.0  # a direction without trace in the data: nothing absorbs it (coef·null is round-off)
 
     def describe() -> list[str]:
-        return [_removed_sentence(cand, null[:, j], absorbed[:, j], gcc, model_names, model_units, half)
-                for j in range(null.shape[1])]
+        return [_removed_sentence(cand, null[:, j], absorbed[:, j], bool(traceless[j]), model_names, model_units,
+                                  half) for j in range(null.shape[1])]
 
     return Reduction(basis, null, absorbed, 1.0 / np.clip(lam[keep], 1e-300, None), describe)
 
 
-def combination(vec: np.ndarray, names: list[str] | tuple[str, ...], units: dict[str, str] | None = None) -> str:
-    """``a·p1 + b·p2 …`` of the non-negligible terms, largest first, normalised to the largest."""
-    order = np.argsort(-np.abs(vec))
-    if not vec.size or abs(vec[order[0]]) == 0:
-        return "0"
-    lead = vec[order[0]]
-    terms = []
-    for j in order:
-        coef = vec[j] / lead
-        if abs(coef) < 1e-3:
-            continue
-        sign = "-" if coef < 0 else "+"
-        mag = "" if np.isclose(abs(coef), 1.0, atol=1e-3) else f"{abs(coef):.3g}·"
-        unit = f" [{units[names[j]]}]" if units and names[j] in units else ""
-        terms.append(f"{sign} {mag}{names[j]}{unit}")
-    text = " ".join(terms)
-    return text[2:] if text.startswith("+ ") else text
+def _removed_directions(cand: Candidate, null_scaled: np.ndarray, s: np.ndarray, gcc: np.ndarray,
+                        gap: float) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """The removed directions in catalogue units, canonical, and which of them leave no trace in the data.
+
+    The null span (``null_scaled``, (q, r) in the unit-diagonal scale ``s``) splits into the directions without
+    trace (``C·c₀ = 0``: the zeroing removes them) and, orthogonal to them in that scale, the ones the model absorbs;
+    each part is given by its canonical basis (:mod:`pige_sym.identification.canonical`), the traceless part
+    first.  A first-harmonic wobble or runout whose null span is a rotating half gets that half's own basis
+    (:func:`_rotating_half`).  Returns the directions (q, r), a (r,) bool of the traceless ones and the half.
+    """
+    q, r = null_scaled.shape
+    if r == 0:
+        return np.zeros((q, 0)), np.zeros(0, dtype=bool), None
+    half = _rotating_half(cand, null_scaled * s[:, None]) if r == 2 else None
+    if half is not None:  # a rotating half: its canonical directions, fixed in the body (1, 0, 0, ±1), (0, 1, ∓1, 0)
+        sign = 1.0 if half == "+" else -1.0
+        null = np.array([[1.0, 0, 0, sign], [0, 1.0, -sign, 0]]).T
+        return null, np.array([_trace(null[:, j], gcc) for j in range(2)]) <= TRACELESS_RTOL, half
+    scaled_gram = gcc * np.outer(s, s)
+    lam0, rot = np.linalg.eigh(null_scaled.T @ scaled_gram @ null_scaled)
+    size = max(float(np.trace(scaled_gram)), 1e-300)
+    none = lam0 <= TRACELESS_RTOL * size
+    inner = (float(lam0[~none].min() - lam0[none].max()) / size) if none.any() and not none.all() else 1.0
+    parts = [(canonical_basis(null_scaled @ rot[:, part], s, separation=min(gap, inner)).coefficients, flag)
+             for part, flag in ((none, True), (~none, False)) if part.any()]
+    return (np.hstack([c for c, _ in parts]), np.concatenate([np.full(c.shape[1], f) for c, f in parts]), None)
+
+
+def _trace(vec: np.ndarray, gcc: np.ndarray) -> float:
+    """``|C·vec|² / trace(CᵀC)``: how much of the data a direction moves, relative to the candidate's columns."""
+    return float(vec @ gcc @ vec) / max(float(np.trace(gcc)), 1e-300)
 
 
 def _rotating_half(cand: Candidate, null: np.ndarray) -> str | None:
@@ -386,16 +403,15 @@ def _rotating_half(cand: Candidate, null: np.ndarray) -> str | None:
     return None
 
 
-def _removed_sentence(cand: Candidate, vec: np.ndarray, absorbed: np.ndarray, gcc: np.ndarray,
+def _removed_sentence(cand: Candidate, vec: np.ndarray, absorbed: np.ndarray, traceless: bool,
                       model_names: list[str], model_units: dict[str, str], half: str | None) -> str:
-    combo = combination(vec, cand.spec.param_names)
-    trace = float(vec @ gcc @ vec)
+    combo = combination(vec, cand.spec.param_names).text()
     prefix = ""
     if half is not None:
         kind = "a tilt" if cand.spec.kind == "wobble" else "an offset"
         prefix = (f"co-rotating half ({kind} that turns with axis {cand.spec.axis}, i.e. fixed in its body: "
                   f"a location or setup error): ")
-    if trace <= 1e-16 * max(float(np.trace(gcc)), 1e-300):
+    if traceless:
         return f"{prefix}{combo} leaves no trace in the zeroed data"
-    what = combination(absorbed, model_names, model_units)
+    what = combination(absorbed, model_names).text(model_units)
     return f"{prefix}{combo} is indistinguishable from {what}"

@@ -103,7 +103,6 @@ from pige_sym.diagnosis.candidates import (
     Layout,
     add_pose_clusters,
     build_layout,
-    combination,
     compact_columns,
     evaluate_rows,
 )
@@ -116,7 +115,7 @@ from pige_sym.identification.instruments import instrument
 from pige_sym.identification.least_squares import identify
 from pige_sym.identification.normal_sums import NormalSums, accumulate, extend, fold_of_rows
 from pige_sym.identification.outliers import Cluster, flag_rows, row_residuals, split_clusters
-from pige_sym.identification.result import IdentificationResult
+from pige_sym.identification.result import IdentificationResult, not_identifiable
 from pige_sym.identification.spectrum import observability
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import Measurement
@@ -259,8 +258,7 @@ def _identification(setup: _Setup, model: Model, resid: np.ndarray) -> Identific
     values = np.where(ident, t @ f.values, np.nan)
     cov = t @ f.cov_unit @ t.T * sigma2
     std = np.where(ident, np.sqrt(np.clip(np.diag(cov), 0, None)), np.nan)
-    combos = [f"{combination(f.null_vectors[:, j], model.names, units)} is not identifiable"
-              for j in range(f.null_vectors.shape[1])]
+    null_space, combos = not_identifiable(f.null_space, list(model.names), units)
     m = setup.m
     k = model.w.shape[1]
     cond = float(f.svals[0] / f.svals[f.rank - 1]) if f.rank == k and f.rank > 0 else float("inf")
@@ -273,7 +271,7 @@ def _identification(setup: _Setup, model: Model, resid: np.ndarray) -> Identific
         outlier_rows=[], residuals_um=resid, ball_mm=[float(x) for x in m.ball_mm],
         pivots_mm={a: [float(x) for x in v] for a, v in m.pivots_mm.items()},
         tool_mm=None if m.tool_mm is None else [float(x) for x in m.tool_mm], vif=None,
-        axis_sense=dict(m.axis_sense),
+        axis_sense=dict(m.axis_sense), null_space=null_space,
     )
 
 
@@ -321,8 +319,7 @@ def _finding(selector: Selector, final: Model, i: int, tau_std: dict[str, float]
     shift = {n: float(final.fit.values[j] - small.fit.values[j]) for j, n in enumerate(selector.layout.pige)}
     explained = 1.0 - f.rss / small.fit.rss if small.fit.rss > 0 else 0.0
     evidence = EVIDENCE[c.spec.kind].format(axis=c.spec.axis, h=int(c.spec.options.get("harmonic", 1)))
-    absorbed = [{n: float(red.absorbed[j, k]) for j, n in enumerate(selector.layout.pige)
-                 if abs(red.absorbed[j, k]) > 1e-12} for k in range(red.null.shape[1])]
+    absorbed = red.absorbed_terms(list(selector.layout.pige))
     return Finding(
         effect=c.spec.id, options=dict(c.spec.options), params=params, std=stds, units=units,
         delta_bic=cmp.delta_bic, f_statistic=cmp.f_statistic, p_value=cmp.p_value,

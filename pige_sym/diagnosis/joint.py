@@ -117,7 +117,8 @@ class JointDiagnosis:
                 "effects": [f.to_dict() for f in self.effects], "effects_searched": self.searched,
                 "joint_effects": self.joint_effects_text(),
                 "pige": final["pige"], "std": final["std"], "covariance": final["covariance"], "units": final["units"],
-                "unidentifiable": final["unidentifiable"], "rank": final["rank"], "condition": final["condition"],
+                "unidentifiable": final["unidentifiable"], "null_space": final["null_space"],
+                "rank": final["rank"], "condition": final["condition"],
                 "rms_um": final["rms_um"], "ball_mm": final["ball_mm"], "pivots_mm": final["pivots_mm"],
                 "tool_mm": final["tool_mm"]}
 

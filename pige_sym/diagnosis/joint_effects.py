@@ -137,8 +137,7 @@ def _finding(red: Reduced, x: np.ndarray, y: np.ndarray, before: tuple[float, in
         evidence=f"{evidence}, seen jointly in the ballbar setups (explains {1 - rss1 / rss0:.0%} of the "
                  "whitened residual)", explained=1 - rss1 / rss0 if rss0 > 0 else 0.0,
         removed=list(red.reduction.removed), basis=red.basis.tolist(), null=red.reduction.null.T.tolist(),
-        absorbed=[{n: float(v) for n, v in zip(names, red.reduction.absorbed[:, j], strict=False) if abs(v) > 1e-12}
-                  for j in range(red.reduction.null.shape[1])],
+        absorbed=red.reduction.absorbed_terms(names),
     )
 
 

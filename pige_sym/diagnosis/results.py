@@ -195,7 +195,8 @@ class DiagnosisResult:
             "findings": [f.to_dict() for f in self.findings],
             "rejected": [r.to_dict() for r in self.rejected],
             "pige": final["pige"], "std": final["std"], "covariance": final["covariance"], "units": final["units"],
-            "unidentifiable": final["unidentifiable"], "rank": final["rank"], "condition": final["condition"],
+            "unidentifiable": final["unidentifiable"], "null_space": final["null_space"],
+            "rank": final["rank"], "condition": final["condition"],
             "rms_um": final["rms_um"], "outlier_rows": self.outlier_rows, "method": "diagnosis",
             "ball_mm": final["ball_mm"], "pivots_mm": final["pivots_mm"], "tool_mm": final["tool_mm"],
             "plots": self.plots, "clusters": self.clusters, **({"axis_sense": final["axis_sense"]}

@@ -29,8 +29,8 @@ import numpy as np
 from pige_sym.errors import IdentificationError, InputError
 from pige_sym.identification.instruments import instrument, whitened_rows
 from pige_sym.identification.problem import ExtraColumns, design_rows
-from pige_sym.identification.result import IdentificationResult, json_float
-from pige_sym.identification.spectrum import combination_text, observability, solve_scaled
+from pige_sym.identification.result import IdentificationResult, json_float, not_identifiable
+from pige_sym.identification.spectrum import observability, solve_scaled
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.axis_sense import describe_axis_sense
 from pige_sym.measurements.ballbar import BallbarRun, bar_directions
@@ -234,8 +234,7 @@ def _assemble(machine: str, names: list[str], all_names: list[str], blocks: list
     values = np.where(ident, sol.values, np.nan)
     std = np.where(ident, np.sqrt(np.clip(np.diag(cov), 0, None)), np.nan)
     units = {n: kern.UNITS.get(n, "um") for n in all_names}
-    combos = [f"{combination_text(sol.null_vectors[:, j], all_names, units)} is not identifiable"
-              for j in range(sol.null_vectors.shape[1])]
+    null_space, combos = not_identifiable(sol.null_space, all_names, units)
     smax = sol.svals[0] if sol.svals.size and sol.svals[0] > 0 else 1.0
     cond = float(smax / sol.svals[sol.rank - 1]) if sol.rank == len(all_names) else float("inf")
     first = next((x for _, x in items if isinstance(x, Measurement)), None)
@@ -253,7 +252,7 @@ def _assemble(machine: str, names: list[str], all_names: list[str], blocks: list
         outlier_rows=[], residuals_um=np.zeros((0, 1)), stages=[], ball_mm=[float(x) for x in ball],
         pivots_mm=common_geometry(items, "pivots_mm") or {}, tool_mm=common_geometry(items, "tool_mm", differ=None),
         vif=sol.vif[:p], unobserved=[all_names[j] for j in sol.unobserved if j < p],
-        axis_sense=common_axis_sense(items),
+        axis_sense=common_axis_sense(items), null_space=null_space,
     )
     refuse_unphysical(list(names), values[:p], std[:p], units, "the joint fit")
     files, offset = [], p

@@ -37,13 +37,15 @@ Methods
 Uncertainty and identifiability
 -------------------------------
 ``σ² = RSS/(N − rank)``; covariance ``σ²·(AᵀA)⁺``; 95 % intervals from Student's t.
-Rank: singular values with ``s_i/s_1 > rank_rtol`` (1e-7).  The condition number is
+Rank: singular values with ``s_i/s_1 > rank_rtol`` (1e-5, above what round-off in the normal matrix makes of a
+structural null, :data:`~pige_sym.identification.spectrum.RANK_RTOL`).  The condition number is
 ``s_1/s_rank`` (``inf`` when rank-deficient).  Observability indices:
 O1 = (∏s_i)^(1/P)/√N (Borm & Menq), O2 = s_P/s_1 (Driels & Pathre), O3 = s_P
 (Nahvi), O4 = s_P²/s_1 (noise amplification, Nahvi & Hollerbach), O5 = 1/Σ(1/s_i)
-(Sun & Hollerbach).  Near-null directions (``s_i/s_1 ≤ null_rtol``, 1e-4) are named
-as parameter combinations; a parameter with weight > 0.05 in one of them has no
-value reported (``None``).
+(Sun & Hollerbach); all 0 when the smallest singular value is round-off.  Near-null directions (``s_i/s_1 ≤
+null_rtol``, 1e-4) are named as parameter combinations, by their canonical basis
+(:mod:`~pige_sym.identification.canonical`: the same on every processor); a parameter whose weight in their span
+(its row's norm in an orthonormal basis of it) exceeds ``NULL_WEIGHT`` (1e-3) has no value reported (``None``).
 """
 
 from __future__ import annotations
@@ -58,8 +60,8 @@ from pige_sym.errors import IdentificationError as IdentificationError
 from pige_sym.errors import InputError
 from pige_sym.identification.instruments import instrument
 from pige_sym.identification.problem import ExtraColumns, Problem, build_problem
-from pige_sym.identification.result import IdentificationResult, Stage
-from pige_sym.identification.spectrum import Solution, combination_text, observability, solve_scaled
+from pige_sym.identification.result import IdentificationResult, Stage, not_identifiable
+from pige_sym.identification.spectrum import Solution, observability, solve_scaled
 from pige_sym.measurements.measurement import Measurement
 from pige_sym.measurements.schema import refuse_unphysical
 from pige_sym.model.projection import Projection, parse_projection
@@ -80,10 +82,7 @@ def _result(problem: Problem, sol: Solution, *, method: str, projection: str, lo
     std = np.where(ident, std, np.nan)
     smax = sol.svals[0] if sol.svals.size and sol.svals[0] > 0 else 1.0
     cond = float(smax / sol.svals[sol.rank - 1]) if sol.rank == p and sol.rank > 0 else float("inf")
-    combos = [
-        f"{combination_text(sol.null_vectors[:, j], names, problem.units)} is not identifiable"
-        for j in range(sol.null_vectors.shape[1])
-    ]
+    null_space, combos = not_identifiable(sol.null_space, list(names), problem.units)
     if problem.design is not None and problem.data is not None:
         model = np.einsum("nmp,p->nm", problem.design, np.nan_to_num(sol.values if values is None else values))
         resid = problem.data - model
@@ -100,6 +99,7 @@ def _result(problem: Problem, sol: Solution, *, method: str, projection: str, lo
         pivots_mm={k: [float(x) for x in v] for k, v in measurement.pivots_mm.items()},
         tool_mm=None if measurement.tool_mm is None else [float(x) for x in measurement.tool_mm],
         vif=sol.vif, unobserved=[names[j] for j in sol.unobserved], axis_sense=dict(measurement.axis_sense),
+        null_space=null_space,
     )
 
 

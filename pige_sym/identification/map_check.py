@@ -3,9 +3,10 @@ grid angle see, and what is refused where they do not.
 
 Before the joint fit, every grid angle's motions are tested alone (the other values held): the combinations
 the rows near that angle do not see (a null direction of their scaled columns, as the PIGEs' rule) take the
-values they touch out of the map.  Those values are ``null``, with the combination and what would determine
-it (CONVENTIONS §10: one measured point per angle gives three numbers, the motions have six).  The planner
-(``pige plan --map``) runs the same test on planned poses.
+values they touch out of the map.  Those values are ``null``, with the combinations (their canonical basis,
+:mod:`~pige_sym.identification.canonical`) and what would determine them (CONVENTIONS §10: one measured point
+per angle gives three numbers, the motions have six).  The planner (``pige plan --map``) runs the same test on
+planned poses.
 """
 
 from __future__ import annotations
@@ -67,32 +68,24 @@ def local_check(blocks: list[Any], sigmas: list[float], p: int,
                                         f"measure poses at {ax} {grid.angles_deg[g]:g}° (pige plan --map {ax})"))
                 continue
             sol = solve_scaled(cols.T @ cols, np.zeros(len(idx)), 0.0)
-            if sol.rank == len(idx):
+            seen = len(idx) - sol.null_space.dimension  # near-null directions are not seen (the PIGEs' rule)
+            if seen == len(idx):
                 continue
             motions = [layout.columns[j][0] for j in idx]
-            unseen = np.abs(sol.null_vectors).max(axis=1) > 1e-3
-            said = "; ".join(_combination(sol.null_vectors[:, c], motions) for c in range(sol.null_vectors.shape[1]))
+            unseen = sol.null_space.involved()
+            said = "; ".join(c.text() for c in sol.null_space.combinations([m.name for m in motions]))
             directions = all(m.kind in ("positioning", "reversal") for m, off in zip(motions, unseen, strict=True)
                              if off)
             remedy = (f"approach {ax} {grid.angles_deg[g]:g}° from both sides, with the angle increasing and "
                       "decreasing (at an end of the travel that means going beyond it)" if directions else
-                      _remedy(ax, sol.rank, len(idx), ax in layout.tool_side))
+                      _remedy(ax, seen, len(idx), ax in layout.tool_side))
             for j, m, off in zip(idx, motions, unseen, strict=True):
                 if off:
                     kept[j] = False
                     out.append(Undetermined(m.name, float(grid.angles_deg[g]), f"the poses near {ax} "
-                                            f"{grid.angles_deg[g]:g}° see {sol.rank} of its {len(idx)} motions; "
+                                            f"{grid.angles_deg[g]:g}° see {seen} of its {len(idx)} motions; "
                                             f"not seen: {said}", remedy))
     return out, kept
-
-
-def _combination(vec: np.ndarray, motions: list[Motion]) -> str:
-    order = np.argsort(-np.abs(vec))
-    lead = vec[order[0]]
-    terms = [f"{'-' if vec[j] / lead < 0 else '+'} {abs(vec[j] / lead):.3g}·{motions[j].name}" for j in order
-             if abs(vec[j]) > 1e-3]
-    text = " ".join(terms)
-    return text[2:] if text.startswith("+ ") else text
 
 
 def _remedy(axis: str, rank: int, full: int, tool_side: bool = False) -> str:

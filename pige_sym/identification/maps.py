@@ -452,14 +452,17 @@ def _pige_part(joint: JointResult, names: list[str], fitted: list[int], zeros: I
     cov = np.full((len(names), len(names)), np.nan)
     values[fitted], std[fitted] = r.values[:k], r.std[:k]
     cov[np.ix_(fitted, fitted)] = r.covariance[:k, :k]
-    combos = [c for c in zeros.unidentifiable if any(names[j] in c for j in range(len(names)) if j not in fitted)]
-    combos += [c for c in r.unidentifiable if ":z" not in c and ":held" not in c and ":left-out" not in c]
+    unfitted = {names[j] for j in range(len(names)) if j not in fitted}
+    said = [(c, text) for c, text in zip(zeros.null_space, zeros.unidentifiable, strict=True)
+            if unfitted.intersection(c.names())]
+    said += [(c, text) for c, text in zip(r.null_space, r.unidentifiable, strict=True)
+             if not any(mark in n for n in c.names() for mark in (":z", ":held", ":left-out"))]
     sub = IdentificationResult(
         machine=r.machine, method="joint-map", projection=r.projection, loss=r.loss, parameters=list(names),
         units=dict(zeros.units), values=values, std=std, covariance=cov, identifiable=np.isfinite(values),
         rms_um=r.rms_um, sigma_um=r.sigma_um, dof=r.dof, n_rows=r.n_rows, n_obs=r.n_obs, rank=r.rank,
         condition=r.condition, singular_values=r.singular_values, observability=r.observability,
-        unidentifiable=combos, outlier_rows=r.outlier_rows, residuals_um=r.residuals_um, ball_mm=r.ball_mm,
-        pivots_mm=r.pivots_mm, tool_mm=r.tool_mm, unobserved=[n for n in r.unobserved if n in names],
-        axis_sense=r.axis_sense)
+        unidentifiable=[text for _, text in said], outlier_rows=r.outlier_rows, residuals_um=r.residuals_um,
+        ball_mm=r.ball_mm, pivots_mm=r.pivots_mm, tool_mm=r.tool_mm, unobserved=[n for n in r.unobserved if n in names],
+        axis_sense=r.axis_sense, null_space=[c for c, _ in said])
     return JointResult(sub, joint.files)

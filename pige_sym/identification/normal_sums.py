@@ -17,9 +17,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pige_sym.identification.canonical import CanonicalBasis, canonical_basis, empty_basis, separation
+
 N_FOLDS = 5
 CHUNK_ROWS = 10000
-RANK_RTOL = 1e-7
+RANK_RTOL = 1e-5  # as :data:`pige_sym.identification.spectrum.RANK_RTOL`: above the normal matrix's round-off
 NULL_RTOL = 1e-4
 NULL_WEIGHT = 0.05
 
@@ -148,8 +150,8 @@ class LinearFit:
         near-null direction, or a column without trace).
     svals : ndarray, shape=(K,)
         Singular values of the column-scaled design.
-    null_vectors : ndarray, shape=(K, r)
-        Near-null directions (parameter units).
+    null_space : CanonicalBasis
+        The near-null span (parameter units), its canonical basis (:mod:`pige_sym.identification.canonical`).
     """
 
     values: np.ndarray
@@ -160,7 +162,7 @@ class LinearFit:
     heldout_rms: float
     vif: np.ndarray
     svals: np.ndarray
-    null_vectors: np.ndarray
+    null_space: CanonicalBasis
 
     @property
     def sigma2(self) -> float:
@@ -179,7 +181,8 @@ class LinearFit:
         return n * math.log(max(self.rss, 1e-300) / n) + (self.rank + extra_params) * math.log(n)
 
 
-def _solve(g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray, np.ndarray]:
+def _solve(g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray,
+                                                  CanonicalBasis]:
     d = np.sqrt(np.clip(np.diag(g), 0, None))
     dmax = float(d.max()) if d.size else 0.0
     s = np.where(d > 1e-12 * max(dmax, 1e-300), 1.0 / np.where(d > 0, d, 1.0), 0.0)
@@ -194,10 +197,11 @@ def _solve(g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, n
     x = s * (pinv_s @ (s * r))
     vif = np.diag(pinv_s).copy()
     near_null = w <= NULL_RTOL**2 * wmax
-    if near_null.any():  # a parameter with weight in a near-null direction is not determined
-        vif[np.abs(v[:, near_null]).max(axis=1) > NULL_WEIGHT] = np.inf
+    if near_null.any():  # a parameter with weight in the near-null span (its row's norm: any basis) is not determined
+        vif[np.linalg.norm(v[:, near_null], axis=1) > NULL_WEIGHT] = np.inf
     vif[s == 0] = np.inf
-    nulls = v[:, near_null] * np.where(s > 0, s, 1.0)[:, None]
+    nulls = (canonical_basis(v[:, near_null], np.where(s > 0, s, 1.0), separation=separation(w, near_null))
+             if near_null.any() else empty_basis(g.shape[0]))
     return x, pinv_s * np.outer(s, s), int(keep.sum()), vif, np.sqrt(w), nulls
 
 

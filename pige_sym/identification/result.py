@@ -15,6 +15,7 @@ import numpy as np
 from pige_sym.constants import LOSSES as LOSSES
 from pige_sym.constants import METHODS as METHODS
 from pige_sym.errors import IdentificationError as IdentificationError
+from pige_sym.identification.canonical import CanonicalBasis, Combination
 
 
 def _t_central(t: float, dof: int) -> float:
@@ -95,6 +96,9 @@ class IdentificationResult:
     axis_sense : dict of str to int
         Axes the measurement's controller commands in the reverse of CONVENTIONS' sense (CONVENTIONS §9);
         the values keep CONVENTIONS' meaning, the sense says how a later command turns them into commanded angles.
+    null_space : list of Combination
+        The canonical basis of the combinations the data do not determine (:mod:`pige_sym.identification.canonical`,
+        coefficients in parameter units, each vector's pivot 1 and first); ``unidentifiable`` says them in words.
     """
 
     machine: str
@@ -126,6 +130,7 @@ class IdentificationResult:
     vif: np.ndarray | None = None
     unobserved: list[str] = field(default_factory=list)
     axis_sense: dict[str, int] = field(default_factory=dict)
+    null_space: list[Combination] = field(default_factory=list)
 
     def value(self, name: str) -> float:
         return float(self.values[self.parameters.index(name)])
@@ -157,6 +162,7 @@ class IdentificationResult:
             "n_obs": self.n_obs,
             "observability": {k: json_float(v) for k, v in self.observability.items()},
             "unidentifiable": self.unidentifiable,
+            "null_space": [c.as_dict() for c in self.null_space],
             "unobserved": self.unobserved,
             "outlier_rows": self.outlier_rows,
             "ball_mm": self.ball_mm,
@@ -206,7 +212,16 @@ class IdentificationResult:
             outlier_rows=list(d.get("outlier_rows", [])), residuals_um=np.zeros((0, 0)),
             ball_mm=list(d.get("ball_mm", [])), pivots_mm=dict(d.get("pivots_mm", {})), tool_mm=d.get("tool_mm"),
             axis_sense=dict(d.get("axis_sense", {})),
+            null_space=[Combination(tuple((str(k), float(v)) for k, v in c.items())) for c in d.get("null_space", [])],
         )
+
+
+def not_identifiable(basis: CanonicalBasis, names: list[str], units: dict[str, str]) -> tuple[list[Combination],
+                                                                                         list[str]]:
+    """A null space as a result holds it: its canonical combinations and one ``… is not identifiable`` line
+    each (the one printer, :meth:`~pige_sym.identification.canonical.Combination.text`)."""
+    combos = basis.combinations(names)
+    return combos, [f"{c.text(units)} is not identifiable" for c in combos]
 
 
 def value_std(value: float, std: float, sep: str = " ± ") -> str:

@@ -12,8 +12,12 @@ Format (what ``pige identify --map --json`` writes, and what a truth sidecar hol
 - a motion is one of CONVENTIONS §10's names of that axis (``EXC EYC EZC EAC EBC ECC`` for C, ``EXA EYA EZA EBA
   ECA EAA`` for A, a number suffix kept: ``EXC2``), the reversal map ``ECC:reversal``, or φ per approach
   direction ``ECC+`` and ``ECC-`` (both or neither);
-- ``value`` has one number or ``null`` (no value) per angle, |v| ≤ MAX_PIGE; ``std`` the same, not negative;
-  ``unit`` and ``kind`` are informational.
+- ``value`` has one number or ``null`` (no value) per angle; ``std`` the same, not negative; both in ``unit``:
+  CONVENTIONS' µm for a translation (``EXC``) and µrad for a rotation (``EAC``, ``ECC``, ``ECC+``, ``ECC:reversal``)
+  when it is left out; a translation may be given in ``"mm"``, a rotation in ``"mrad"``, ``"rad"``, ``"deg"`` or
+  ``"arcsec"`` and is converted (:data:`UNITS`); a length for a rotation, an angle for a translation or any other
+  unit is refused, never taken as µm or µrad.  Converted, |v| ≤ MAX_PIGE;
+- ``kind`` is informational.
 
 The names are checked here by the rule of §10's table (translations E<X|Y|Z><axis>, rotations E<A|B|C><axis>);
 :mod:`pige_sym.model.error_motions` holds the same table for the model.  The result is plain data, turned into
@@ -29,6 +33,12 @@ import numpy as np
 
 from pige_sym.constants import MAX_PIGE
 from pige_sym.errors import FileFormatError
+
+#: The units a map's values may be given in → (what they measure, factor to CONVENTIONS' µm or µrad).
+UNITS: dict[str, tuple[str, float]] = {
+    "um": ("length", 1.0), "µm": ("length", 1.0), "mm": ("length", 1000.0),
+    "urad": ("angle", 1.0), "µrad": ("angle", 1.0), "mrad": ("angle", 1000.0), "rad": ("angle", 1e6),
+    "deg": ("angle", math.pi / 180.0 * 1e6), "arcsec": ("angle", math.pi / 180.0 / 3600.0 * 1e6)}
 
 
 def motion_names(axis: str) -> tuple[set[str], str]:
@@ -81,13 +91,40 @@ def _number(path: str, where: str, value: Any, limit: float) -> float:
     except OverflowError:
         v = math.inf
     if not math.isfinite(v) or abs(v) > limit:
-        raise FileFormatError(path, None, f"{where}: expected a finite number within ±{limit:g}")
+        within = f" within ±{limit:g}" if math.isfinite(limit) else ""
+        raise FileFormatError(path, None, f"{where}: expected a finite number{within}")
+    return v
+
+
+def unit_factor(path: str, where: str, name: str, unit: Any) -> float:
+    """The factor that turns a motion's values in ``unit`` into CONVENTIONS' µm or µrad (module docstring)."""
+    measures = "length" if name[1] in "XYZ" else "angle"
+    default = "um" if measures == "length" else "urad"
+    if unit is None:
+        return 1.0
+    known = [u for u, (m, _) in UNITS.items() if m == measures and u[0] != "µ"]
+    if not isinstance(unit, str) or UNITS.get(unit.strip(), ("", 0.0))[0] != measures:
+        kind = "a translation" if measures == "length" else "a rotation"
+        raise FileFormatError(path, None, f"{where}.unit: {unit!r:.40} is not the unit of {kind} ({name}, "
+                              f"CONVENTIONS §10: {default}); give one of {', '.join(known)}, or leave it out for "
+                              f"{default}")
+    return UNITS[unit.strip()][1]
+
+
+def _converted(path: str, where: str, value: Any, factor: float) -> float:
+    """One value in CONVENTIONS' unit, within ±MAX_PIGE (the bound said in the file's unit too)."""
+    v = _number(path, where, value, math.inf) * factor
+    if not abs(v) <= MAX_PIGE:
+        said = "" if factor == 1.0 else f" ({value!r:.20} x {factor:.6g})"
+        raise FileFormatError(path, None, f"{where}: {v:.6g}{said} is beyond ±{MAX_PIGE:g} um or urad: no machine errs "
+                              "that much; check the value and its unit")
     return v
 
 
 def _motion(path: str, where: str, motion: Any, n: int) -> tuple[np.ndarray, np.ndarray]:
     if not isinstance(motion, dict) or not isinstance(motion.get("value"), list):
         raise FileFormatError(path, None, f"{where}: expected an object with a value list")
+    factor = unit_factor(path, where, where.rsplit(".", 1)[-1], motion.get("unit"))
     out = {}
     for key in ("value", "std"):
         seq = motion.get(key)
@@ -96,7 +133,7 @@ def _motion(path: str, where: str, motion: Any, n: int) -> tuple[np.ndarray, np.
             continue
         if not isinstance(seq, list) or len(seq) != n:
             raise FileFormatError(path, None, f"{where}.{key}: expected {n} entries, one per angle (null: no value)")
-        out[key] = np.array([np.nan if v is None else _number(path, f"{where}.{key}[{i}]", v, MAX_PIGE)
+        out[key] = np.array([np.nan if v is None else _converted(path, f"{where}.{key}[{i}]", v, factor)
                              for i, v in enumerate(seq)])
     if np.any(out["std"] < 0):
         raise FileFormatError(path, None, f"{where}.std: a standard error cannot be negative")

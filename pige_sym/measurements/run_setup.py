@@ -123,20 +123,22 @@ def default_free(machine: str) -> list[str]:
 
 
 def parse_free(text: str | None, machine: str) -> list[str]:
-    """``--pige EX0C,EY0C`` in the kernels' order (the letter O accepted for the digit zero), or the default.
+    """``--pige EX0C,EY0C`` in the kernels' order (the letter O accepted for the digit zero), or the default (None).
 
     Raises
     ------
     InputError
-        A name that is not a location PIGE of the machine.
+        An empty list or item, a name given twice, or a name that is not a location PIGE of the machine.
     """
     from pige_sym.kernels import load_kernels
+    from pige_sym.options import parse_names
 
     kern = load_kernels(machine)
-    if not text:
+    if text is None:
         return default_free(machine)
-    names = [x.strip().upper() for x in text.split(",") if x.strip()]
-    names = [n[:2] + "0" + n[3:] if len(n) >= 4 and n[0] == "E" and n[2] == "O" else n for n in names]
+    zero = [n[:2] + "0" + n[3:] if len(n) >= 4 and n[0] == "E" and n[2] == "O" else n
+            for n in (x.strip().upper() for x in text.split(","))]
+    names = parse_names(",".join(zero), "--pige", "EX0C,EY0C")
     bad = [n for n in names if n not in kern.LOCATION_PARAMETERS]
     if bad or not names:
         raise InputError(f"--pige {text!r}: give location PIGEs of {kern.MACHINE_CODE} "

@@ -214,7 +214,7 @@ class ParamsDocument:
         "dof", "n_rows", "n_obs", "observability", "unidentifiable", "outlier_rows", "vif", "baseline", "options",
         "plots", "rejected", "params", "bic", "heldout_rms_um", "unobservable", "identifiable", "warnings",
         "unobserved", "clusters", "files", "map_step_deg", "map_undetermined", "model_check", "effects_searched",
-        "joint_effects", "agreement", "notes",
+        "joint_effects", "agreement", "notes", "null_space",
     })
 
 

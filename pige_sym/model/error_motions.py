@@ -158,6 +158,30 @@ class MapGrid:
         return np.asarray(self.weights(theta_deg) @ np.asarray(values, dtype=float))
 
 
+#: The grid steps a map may have [deg]: from half a degree to half a turn.
+MAP_STEP_RANGE_DEG = (0.5, 180.0)
+
+
+def check_map_step(step_deg: float, axis: str | None = None, *, full_turn: bool | None = None) -> int | None:
+    """``--map-step``, the one check of ``pige identify``, ``plan`` and ``program`` (a number from 0.5 to 180 deg
+    that, for a full-turn ``axis``, divides 360); returns the number of grid angles of a full turn (else None).
+
+    Raises
+    ------
+    InputError
+    """
+    lo, hi = MAP_STEP_RANGE_DEG
+    if isinstance(step_deg, bool) or not isinstance(step_deg, (int, float)) or not (
+            np.isfinite(step_deg) and lo <= step_deg <= hi):
+        raise InputError(f"--map-step {step_deg:g}: give a step from {lo:g} to {hi:g} degrees")
+    if axis is None or not (is_full_turn(axis) if full_turn is None else full_turn):
+        return None
+    n = 360.0 / step_deg
+    if abs(n - round(n)) > 1e-9:
+        raise InputError(f"--map-step {step_deg:g}: the grid of the full-turn axis {axis} must divide 360 degrees")
+    return int(round(n))
+
+
 def make_grid(axis: str, step_deg: float, measured_deg: np.ndarray, *, full_turn: bool | None = None) -> MapGrid:
     """The grid of ``axis``: every ``step_deg`` from 0, over a full turn or over the measured angles.
 
@@ -165,14 +189,9 @@ def make_grid(axis: str, step_deg: float, measured_deg: np.ndarray, *, full_turn
     multiples of the step from the one at or below the smallest measured angle to the one at or above the
     largest.
     """
-    if not (np.isfinite(step_deg) and 0.5 <= step_deg <= 180.0):
-        raise InputError(f"--map-step {step_deg:g}: give a step from 0.5 to 180 degrees")
-    turn = is_full_turn(axis) if full_turn is None else full_turn
-    if turn:
-        n = 360.0 / step_deg
-        if abs(n - round(n)) > 1e-9:
-            raise InputError(f"--map-step {step_deg:g}: the grid of the full-turn axis {axis} must divide 360 degrees")
-        return MapGrid(axis, np.arange(int(round(n))) * step_deg, True)
+    n = check_map_step(step_deg, axis, full_turn=full_turn)
+    if n is not None:
+        return MapGrid(axis, np.arange(n) * step_deg, True)
     a = np.asarray(measured_deg, dtype=float)
     lo = np.floor(a.min() / step_deg + 1e-9) * step_deg
     hi = np.ceil(a.max() / step_deg - 1e-9) * step_deg

@@ -19,7 +19,7 @@ import numpy as np
 
 from pige_sym.errors import InputError
 from pige_sym.identification.joint import ballbar_block
-from pige_sym.identification.spectrum import combination_text, solve_scaled
+from pige_sym.identification.spectrum import solve_scaled
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.ballbar import SETUPS
 from pige_sym.simulation.ballbar import BallbarSetup, ballbar_setup, simulate_ballbar
@@ -88,7 +88,7 @@ def evaluate(machine: str, setups: list[BallbarSetup], noise_um: float = 1.0) ->
     std = {n: float(np.sqrt(sol.cov_unit[j, j]) * noise_um) if ok[j] else float("inf") for j, n in enumerate(names)}
     all_names = names + [f"zero[{b.label}]" for b in blocks]
     units = dict(kern.UNITS) | {n: "um" for n in all_names[p:]}
-    combos = [combination_text(sol.null_vectors[:, j], all_names, units) for j in range(sol.null_vectors.shape[1])]
+    combos = [c.text(units) for c in sol.null_space.combinations(all_names)]
     rank = sol.rank - int(np.isfinite(sol.vif[p:]).sum())
     return SetupSet([b.label for b in blocks], rank, int(ok.sum()), p, max(std.values()), std, combos, list(setups))
 

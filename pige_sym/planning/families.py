@@ -95,7 +95,10 @@ def parse_range(text: str, what: str) -> tuple[float, float]:
 
 
 def parse_limits(items: list[str] | None, kern: Any) -> Limits:
-    """``AXIS=lo:hi`` items (repeatable, or comma-separated) for the machine's axes."""
+    """``AXIS=lo:hi`` items (repeatable, or comma-separated) for the machine's axes, each once (a rotary one within
+    two turns, :func:`~pige_sym.options.parse_axis_ranges`)."""
+    from pige_sym.options import parse_axis_ranges
+
     axes = tuple(kern.ROTARY_AXES)
     rotary: dict[str, tuple[float, float]] = {}
     linear: dict[str, tuple[float, float]] = {}
@@ -104,8 +107,10 @@ def parse_limits(items: list[str] | None, kern: Any) -> Limits:
         axis = axis.strip().upper()
         if not eq:
             raise InputError(f"--limits: expected AXIS=lo:hi, got {item!r}")
+        if axis in rotary or axis in linear:
+            raise InputError(f"--limits {axis} is given twice: give each axis once")
         if axis in axes:
-            rotary[axis] = parse_range(rng, f"--limits {axis}")
+            rotary |= parse_axis_ranges([item], "--limits", axes, example=f"{axis}=-90:90")
         elif axis in LINEAR_AXES:
             linear[axis] = parse_range(rng, f"--limits {axis}")
         else:

@@ -45,9 +45,8 @@ from pige_sym.kernels import load_kernels
 from pige_sym.measurements.ballbar import BallbarRun
 from pige_sym.measurements.measurement import Measurement, missing_tool
 from pige_sym.measurements.probe_import import INSTRUMENT, covariance_columns
-from pige_sym.model.error_motions import axis_direction, is_full_turn
+from pige_sym.model.error_motions import axis_direction, check_map_step, is_full_turn
 from pige_sym.nc.probe_program import ProbePlan, ProbeSetup, plan_probing
-from pige_sym.planning.families import parse_range
 from pige_sym.planning.probe import centre_covariances
 
 INSTRUMENTS = ("sphere-probe", "rtest", "ballbar")
@@ -171,17 +170,13 @@ def map_ranges(kern: Any, items: list[str] | None) -> dict[str, tuple[float, flo
     InputError
         An axis the machine does not have, a full-turn axis, or a range without 0.
     """
+    from pige_sym.options import parse_axis_ranges
+
     axes = tuple(kern.ROTARY_AXES)
-    out: dict[str, tuple[float, float]] = {}
-    for item in [x for it in items or [] for x in it.split(",") if x.strip()]:
-        axis, eq, text = item.partition("=")
-        axis = axis.strip().upper()
-        if not eq or axis not in axes:
-            raise InputError(f"--map-range {item!r}: give AXIS=lo:hi for a rotary axis of {kern.MACHINE_CODE} "
-                             f"({', '.join(axes)})")
+    out = parse_axis_ranges(items, "--map-range", axes, max_abs=360.0, example="A=0:90")
+    for axis in out:
         if is_full_turn(axis):
             raise InputError(f"--map-range {axis}: {axis} turns fully, its map covers the turn (leave it out)")
-        out[axis] = parse_range(text, f"--map-range {axis}")
     for a in axes:
         if not is_full_turn(a):
             out.setdefault(a, HEAD_TILT_RANGE_DEG if a in kern.TOOL_ROTARY else TABLE_TILT_RANGE_DEG)
@@ -194,13 +189,9 @@ def map_ranges(kern: Any, items: list[str] | None) -> dict[str, tuple[float, flo
 
 def axis_nodes(axis: str, step_deg: float, ranges: Mapping[str, tuple[float, float]]) -> np.ndarray:
     """The grid angles an axis visits [deg] (module docstring), shape=(n,)."""
-    if not (math.isfinite(step_deg) and 0.5 <= step_deg <= 180.0):
-        raise InputError(f"--map-step {step_deg:g}: give a step from 0.5 to 180 degrees")
-    if is_full_turn(axis):
-        n = 360.0 / step_deg
-        if abs(n - round(n)) > 1e-9:
-            raise InputError(f"--map-step {step_deg:g}: the grid of the full-turn axis {axis} must divide 360 degrees")
-        return np.arange(int(round(n))) * step_deg
+    n = check_map_step(step_deg, axis)
+    if n is not None:
+        return np.arange(n) * step_deg
     lo, hi = ranges[axis]
     nodes = np.arange(math.ceil(lo / step_deg - 1e-9), math.floor(hi / step_deg + 1e-9) + 1) * step_deg
     if nodes.size < 2:

@@ -284,7 +284,7 @@ class Estimable:
         null = np.sqrt(np.clip(w, 0, None)) <= NULL_RTOL * smax
         covered = diag > 0
         if null.any():
-            covered &= np.abs(v[:, null]).max(axis=1) <= NULL_WEIGHT
+            covered &= np.linalg.norm(v[:, null], axis=1) <= NULL_WEIGHT  # weight in the null span, any basis
         return cls(scale[:, None] * v[:, ~null], covered)
 
     @classmethod

@@ -99,7 +99,11 @@ def _forecast_text(last: Any, name: str) -> str:
     tr = (_item(last, name) or {}).get("trend")
     if not tr:
         return ""
+    from pige_sym.verdict.checkup.routine import BEYOND_CALENDAR
+
     rate = f"drift {tr['rate_per_h']:+.3g}/h"
+    if tr.get("significant") and not tr.get("leaves_at") and tr.get("leaves_at_h") is not None:
+        return f"; {rate}, leaves {BEYOND_CALENDAR}"
     if not tr.get("significant") or not tr.get("leaves_at"):
         return f"; {rate} (not shown)" if not tr.get("significant") else f"; {rate}"
     high = tr.get("leaves_high")
@@ -194,6 +198,10 @@ def _rate(tr: dict[str, Any] | None) -> str:
 
 
 def _leaves(tr: dict[str, Any] | None) -> str:
+    from pige_sym.verdict.checkup.routine import BEYOND_CALENDAR
+
+    if tr and tr.get("significant") and not tr.get("leaves_at") and tr.get("leaves_at_h") is not None:
+        return BEYOND_CALENDAR
     if not tr or not tr.get("significant") or not tr.get("leaves_at"):
         return "—"
     return f"{tr['leaves_at']} ({tr.get('leaves_low') or '?'} .. {tr.get('leaves_high') or 'not bounded'})"

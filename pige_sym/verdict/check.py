@@ -12,7 +12,8 @@ Tolerance file (``pige-tolerances 1``, JSON, strict)::
 
 Every limit is a positive finite number in the parameter's unit (µm for position errors, µrad
 for orientation and zero-position errors, the unit of an effect parameter as the diagnosis
-reports it) and bounds the *absolute* value: the tolerance zone is ``[-limit, +limit]``.
+reports it), at most ``MAX_PIGE`` (10 mm or 10 mrad: a tolerance no PIGE can exceed accepts anything),
+and bounds the *absolute* value: the tolerance zone is ``[-limit, +limit]``.
 ``limits`` names PIGEs (``EX0C``; letter O accepted for the digit zero) or effect parameters
 as ``<effect id>.<parameter>`` (``angular_error_C.cos_urad``, ``backlash_C.b_urad``).  Unknown
 keys, NaN/Infinity, strings, booleans, non-positive numbers, duplicate keys and names the
@@ -45,6 +46,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pige_sym.constants import MAX_PIGE
 from pige_sym.errors import FileFormatError, InputError
 
 TOLERANCE_FORMAT = "pige-tolerances 1"
@@ -152,6 +154,9 @@ def _limit(value: Any, path: str, where: str) -> float:
     if not math.isfinite(x) or x <= 0:
         said = "a number beyond ±1.8e308" if math.isinf(x) else repr(value)
         raise FileFormatError(path, None, f"{where}: a limit must be a positive finite number, got {said}")
+    if x > MAX_PIGE:
+        raise FileFormatError(path, None, f"{where}: a limit of {x:g} accepts any machine (no PIGE or effect exceeds "
+                              f"{MAX_PIGE:g} um or urad): give the tolerance the machine is held to, e.g. 10")
     return x
 
 

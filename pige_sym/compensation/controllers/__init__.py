@@ -11,6 +11,14 @@ A controller that reads today's configuration (LinuxCNC's ``--current``) also de
 
     check_current(params, current) -> None            refuses a configuration that contradicts the parameters
 
+and one that writes compensation tables (error maps, CONVENTIONS §10) checks their format before any value is
+weighed or computed (the table modules of :mod:`.tables`, each citing the source of its limits)::
+
+    check_tables(params, options) -> None             refuses what the tables cannot hold
+
+``OPTIONS`` names the ``pige compensate`` options a controller reads beyond the parameters (``--carrier``,
+``--machine-axis``, …); another controller refuses them (:func:`check_options`).
+
 The modules that are not controllers (:data:`NOT_CONTROLLERS`) hold what they share: the corrected axis
 lines (:mod:`.axis_lines`), what a controller leaves at the tool (:mod:`.scope`), the checks made before
 anything is written (:mod:`.entry_checks`) and the reader of a LinuxCNC configuration (:mod:`.hal_config`).
@@ -49,6 +57,8 @@ class ControllerOptions:
         The controller's name of each rotary axis where its tables need it (SINUMERIK machine axis names).
     isg_unit_deg : float, optional
         The angle [deg] of one unit of an ISG ``kw.ssfk`` list of a rotary axis (:mod:`.tables.isg_ssfk`).
+    limits : ChangeLimits, optional
+        ``--max-change`` (:class:`.entry_checks.ChangeLimits`) every entry is held to; None: its default.
     """
 
     carrier: int = 1
@@ -56,6 +66,13 @@ class ControllerOptions:
     heidenhain_trans: str | None = None
     machine_axes: dict[str, str] | None = None
     isg_unit_deg: float | None = None
+    limits: Any = None
+
+    def change_limits(self) -> Any:
+        """``limits``, or the default ``--max-change``."""
+        from pige_sym.compensation.controllers.entry_checks import ChangeLimits
+
+        return self.limits if self.limits is not None else ChangeLimits()
 
 
 def controller_names() -> tuple[str, ...]:
@@ -78,22 +95,46 @@ def get_controller(name: str) -> ModuleType:
     return importlib.import_module(f"{__name__}.{name}")
 
 
-def check_before_writing(params: Any, style: str, current: Any = None) -> None:
-    """Check what controller ``style`` would enter before anything is written (module docstring).
-
-    The parameters against physical bounds (:func:`.entry_checks.check_parameters`), and today's
-    configuration ``current`` against the parameters by the controller that reads one (``check_current``).
+def check_options(style: str, given: list[str]) -> None:
+    """Refuse an option ``given`` (``--machine-axis``, …) that controller ``style`` does not read (its ``OPTIONS``).
 
     Raises
     ------
     InputError
-        A value beyond its bound, a configuration for a controller that reads none, or a contradiction
-        (both values and their sources named).
+        Naming the option and the controllers that read it.
+    """
+    module = get_controller(style)
+    for option in given:
+        if option not in getattr(module, "OPTIONS", ()):
+            readers = [n for n in controller_names() if option in getattr(get_controller(n), "OPTIONS", ())]
+            raise InputError(f"{option} does not apply to --controller {style}: it is read by --controller "
+                             f"{', '.join(readers)} only; leave it out")
+
+
+def check_before_writing(params: Any, style: str, current: Any = None, options: ControllerOptions | None = None
+                         ) -> None:
+    """Check what controller ``style`` would enter before anything is written (module docstring).
+
+    The parameters against physical bounds and ``--max-change`` (:func:`.entry_checks.check_parameters`), the
+    format of the controller's tables (``check_tables``), and today's configuration ``current`` (or
+    ``options.current``) against the parameters by the controller that reads one (``check_current``).  Cheap:
+    called before the values are weighed, and again on the weighed values before they are rendered.
+
+    Raises
+    ------
+    InputError
+        A value beyond its bound, a table its format cannot hold, a configuration for a controller that reads
+        none, or a contradiction (both values and their sources named).
     """
     from pige_sym.compensation.controllers.entry_checks import check_parameters
 
     module = get_controller(style)
-    check_parameters(params)
+    opts = options if options is not None else ControllerOptions(current=current)
+    current = current if current is not None else opts.current
+    check_parameters(params, opts.change_limits())
+    check_tables = getattr(module, "check_tables", None)
+    if check_tables is not None:
+        check_tables(params, opts)
     if current is None:
         return
     check_current = getattr(module, "check_current", None)
@@ -106,19 +147,24 @@ def check_before_writing(params: Any, style: str, current: Any = None) -> None:
 
 def format_controller(params: Any, style: str = "table", *, carrier: int = 1,
                       current: Any = None, heidenhain_trans: str | None = None, enter: str = "weighed",
-                      machine_axes: dict[str, str] | None = None, isg_unit_deg: float | None = None) -> str:
+                      machine_axes: dict[str, str] | None = None, isg_unit_deg: float | None = None,
+                      limits: Any = None) -> str:
     """The corrections of ``params`` in the words of controller ``style`` (docs/controller-corrections.md).
 
     The values are weighed by their uncertainty over the axes' travel (:func:`entered_for_controller`).  Every
     controller also says what it enters, what it cannot represent and the tool-point error each choice leaves,
     with a 95 % bound (:mod:`~pige_sym.compensation.controllers.scope`).  Nothing is rendered before
-    :func:`check_before_writing` has passed.
+    :func:`check_before_writing` has passed, on the values as given and on the values entered; every entry is
+    held to ``limits`` (``--max-change``, :class:`.entry_checks.ChangeLimits`; None: its default).
     """
     module = get_controller(style)
-    check_before_writing(params, style, current)
     options = ControllerOptions(carrier=carrier, current=current, heidenhain_trans=heidenhain_trans,
-                                machine_axes=machine_axes, isg_unit_deg=isg_unit_deg)
-    return str(module.render(entered_for_controller(params, enter), options))
+                                machine_axes=machine_axes, isg_unit_deg=isg_unit_deg, limits=limits)
+    check_before_writing(params, style, options=options)
+    entered = entered_for_controller(params, enter)
+    if entered is not params:
+        check_before_writing(entered, style, options=options)
+    return str(module.render(entered, options))
 
 
 def entered_for_controller(params: Any, enter: str = "weighed", travel: Any = None) -> Any:

@@ -20,6 +20,21 @@ from pige_sym.kernels import load_kernels
 NOT_VERIFIED = "NOT verified on a controller: check every value against the machine's documentation"
 
 
+def origin_pivots_note(params: CompensationParameters, current: str = "") -> str | None:
+    """What is assumed of the axes the parameter file gives no ``pivots_mm`` for (a probe import that used the log's
+    coordinates): their lines through the origin of the machine's (joint) coordinates, CONVENTIONS §2; ``current``
+    says how the controller checks it; None when the file gives every axis' pivot."""
+    missing = [a for a in load_kernels(params.machine).ROTARY_AXES if a not in params.pivots_mm]
+    if not missing:
+        return None
+    lines = "line" if len(missing) == 1 else "lines"
+    return (f"{params.source} has no pivots_mm for {', '.join(missing)} (the test was written or imported without "
+            f"--pivot): the nominal axis {lines} of {', '.join(missing)} are taken through the joint origin (0, 0, 0 "
+            "mm, CONVENTIONS §2), where the PIGEs were identified; if the machine's axis lines are elsewhere in its "
+            "joint coordinates, identify from a test written with --pivot AXIS=x,y,z (pige program) before entering "
+            "these values" + (f" ({current})" if current else ""))
+
+
 def controller_corrections(params: CompensationParameters) -> list[dict[str, Any]]:
     """Corrected axis lines: per rotary axis the pivot point [mm] and unit direction, machine frame.
 

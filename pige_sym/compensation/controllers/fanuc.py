@@ -43,6 +43,8 @@ from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 
 TITLE = "FANUC 30i/31i tool centre point control for 5-axis machining (No. 19680 = 12 or 2)"
+#: The options of ``pige compensate`` this controller reads (:func:`~pige_sym.compensation.controllers.check_options`).
+OPTIONS: tuple[str, ...] = ()
 
 
 def _positions(params: CompensationParameters, axis: str) -> list[str]:

@@ -39,6 +39,8 @@ from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
 
 TITLE = "HEIDENHAIN TNC kinematics description table (Trans rows around MachAxis rows)"
+#: The options of ``pige compensate`` this controller reads (:func:`~pige_sym.compensation.controllers.check_options`).
+OPTIONS = ("--heidenhain-trans",)
 TRANS_SENSES = ("position", "shift")
 
 

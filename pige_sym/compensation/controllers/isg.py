@@ -11,12 +11,21 @@ from __future__ import annotations
 
 from pige_sym.compensation.controllers import ControllerOptions
 from pige_sym.compensation.controllers.scope import scope_lines
+from pige_sym.compensation.controllers.tables.isg_ssfk import check_format as ssfk_format
 from pige_sym.compensation.controllers.tables.isg_ssfk import render_lines as ssfk_lines
 from pige_sym.compensation.controllers.tables.positioning import positioning_names
 from pige_sym.compensation.controllers.tables.refused import isg_volumetric_lines
 from pige_sym.compensation.parameters import CompensationParameters
 
 TITLE = "ISG kernel / Beckhoff TwinCAT CNC: leadscrew error compensation lists (kw.ssfk) of the rotary axes"
+#: The options of ``pige compensate`` this controller reads (:func:`~pige_sym.compensation.controllers.check_options`).
+OPTIONS = ("--isg-unit-deg",)
+
+
+def check_tables(params: CompensationParameters, options: ControllerOptions) -> None:
+    """``--isg-unit-deg`` and the lists' layout (SGN32 fields, points, interval), before any value is weighed
+    (:mod:`.tables.isg_ssfk`)."""
+    ssfk_format(params, options.isg_unit_deg, options.change_limits())
 
 
 def representable(params: CompensationParameters) -> list[str]:
@@ -33,7 +42,7 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
     """The lists' notes and bodies, the volumetric refusal and what the lists leave at the tool."""
     out = [f"# ISG kernel / TwinCAT CNC compensation lists of {params.machine}; parameters from {params.source}",
            *scope_lines(params, "isg", "# ")]
-    body = ssfk_lines(params, options.isg_unit_deg)
+    body = ssfk_lines(params, options.isg_unit_deg, options.change_limits())
     if not body:
         out.append("# the parameter file holds no positioning map (identify with --map): no kw.ssfk list")
     return "\n".join(out + body + isg_volumetric_lines(params))

@@ -31,9 +31,10 @@ kinematics (:mod:`.tables.linuxcnc_comp`, written by ``--comp-dir``), and every 
 from __future__ import annotations
 
 from pige_sym.compensation.controllers import ControllerOptions
-from pige_sym.compensation.controllers.axis_lines import MM_DECIMALS, signed
+from pige_sym.compensation.controllers.axis_lines import MM_DECIMALS, origin_pivots_note, signed
 from pige_sym.compensation.controllers.hal_config import HalConfig
 from pige_sym.compensation.controllers.scope import scope_lines
+from pige_sym.compensation.controllers.tables import linuxcnc_comp, linuxcnc_kins_maps
 from pige_sym.compensation.controllers.tables.linuxcnc_comp import render_lines as comp_file_lines
 from pige_sym.compensation.controllers.tables.linuxcnc_kins_maps import map_setp_lines
 from pige_sym.compensation.controllers.tables.positioning import positioning_names
@@ -58,6 +59,8 @@ TRT_LINES: dict[str, dict[str, dict[str, tuple[str, ...]]]] = {
 #: How far a configured axis line may lie from the parameter file's pivot and still be the same line [mm]:
 #: their rounding, pige writes pivots to 1 nm (program headers, the component's pins) and trt pins to 0.1 nm.
 PIVOT_AGREEMENT_MM = 2e-6
+#: The options of ``pige compensate`` this controller reads (:func:`~pige_sym.compensation.controllers.check_options`).
+OPTIONS = ("--current", "--comp-dir")
 VERSION = ("# requires LinuxCNC >= 2.9: the rot-point pins came with commit 135b0ce522 (switchable kinematics, "
            "first in 2.9.0-pre1); 2.8's trt modules turn C about the machine origin")
 
@@ -91,6 +94,13 @@ def linuxcnc_trt_deltas(params: CompensationParameters) -> tuple[str, dict[str, 
     return TRT_MODULES[tilt], deltas
 
 
+def check_tables(params: CompensationParameters, options: ControllerOptions) -> None:
+    """The COMP_FILEs' and the component's map limits (256 entries per joint, ``MAP_NODES`` uniform grid angles),
+    before any value is weighed (:mod:`.tables.linuxcnc_comp`, :mod:`.tables.linuxcnc_kins_maps`)."""
+    linuxcnc_comp.check_format(params)
+    linuxcnc_kins_maps.check_format(params)
+
+
 def render(params: CompensationParameters, options: ControllerOptions) -> str:
     """The stock trt pins (module docstring) and, beside them, pige's kinematics component with every PIGE.
 
@@ -108,15 +118,16 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
         trt = ""
     else:  # refusals of --current (another machine's configuration, unknown pins) are the user's to fix
         trt = _render_trt(params, options)
+    limits = options.change_limits()
     try:
-        pige = pige_kinematics_lines(params)
+        pige = pige_kinematics_lines(params, limits)
     except (InputError, UnsupportedMachineError) as exc:
         if not trt:
             raise InputError(f"{trt_refusal}; pige's kinematics component: {exc}") from None
         return trt + f"\n# pige's kinematics component cannot describe this machine: {exc}"
     if not trt:
         trt = f"# LinuxCNC's stock trt kinematics: {trt_refusal}"
-    return "\n".join([trt, *comp_file_lines(params), *pige])
+    return "\n".join([trt, *comp_file_lines(params, limits), *pige])
 
 
 def _render_trt(params: CompensationParameters, options: ControllerOptions) -> str:
@@ -239,8 +250,9 @@ def _senses(params: CompensationParameters, axes: tuple[str, ...]) -> dict[str, 
     return {a: -1 if params.axis_sense.get(a, 1) < 0 else 1 for a in axes}
 
 
-def pige_kinematics_lines(params: CompensationParameters) -> list[str]:
-    """pige's kinematics component for ``params.machine``: how to load it and its ``setp`` lines (absolute).
+def pige_kinematics_lines(params: CompensationParameters, limits: object = None) -> list[str]:
+    """pige's kinematics component for ``params.machine``: how to load it and its ``setp`` lines (absolute); the
+    map pins held to ``limits`` (``--max-change``, :mod:`.entry_checks`).
 
     Raises
     ------
@@ -271,6 +283,8 @@ def pige_kinematics_lines(params: CompensationParameters) -> list[str]:
            f"{tilt:.3g} urad on the default cone) and the pose-dependent extensions: "
            f"{', '.join(e.spec.id for e in params.extensions) or 'none'}"]
     out += [f"setp {name}.sense-{a.lower()} {s}" for a, s in _senses(params, axes).items()]
+    note = origin_pivots_note(params, "--current refuses a configuration whose trt pins put them elsewhere")
+    out += [f"# {note}"] if note else []
     for a in axes:
         pivot = params.pivots_mm.get(a, [0.0, 0.0, 0.0])
         out += [f"setp {name}.pivot-{a.lower()}-{c} {float(v):.6f}" for c, v in zip("xyz", pivot, strict=True)]
@@ -286,7 +300,7 @@ def pige_kinematics_lines(params: CompensationParameters) -> list[str]:
             out.append(f"# {pin}: not estimated (the parameter file has no {n}; left as it is)")
         else:
             out.append(f"setp {pin} {params.values.get(n, 0.0):.4f}")
-    return out + map_setp_lines(params, name)
+    return out + map_setp_lines(params, name, limits)
 
 
 def map_motions(params: CompensationParameters) -> list[str]:

@@ -83,7 +83,7 @@ def tool_point_summary(params: CompensationParameters, style: str) -> Controller
                 for e in params.extensions]
     missing += list(params.ignored)
     if params.error_maps is not None:
-        tables = set(getattr(get_controller(style), "map_motions", lambda _p: [])(params))
+        tables = set(_map_motions(params, style))
         left = [f"{ax}:{name}" for ax, m in params.error_maps.axes.items() for name in m.values
                 if f"{ax}:{name}" not in tables]
         if left:
@@ -93,13 +93,20 @@ def tool_point_summary(params: CompensationParameters, style: str) -> Controller
                            w.predicted_for(estimate_of(params)), w.judged_on)
 
 
-def weighing_lines(params: CompensationParameters, comment: str) -> list[str]:
-    """The rule, and per value not entered as estimated: its estimate ± std and what is entered."""
+def _map_motions(params: CompensationParameters, style: str) -> list[str]:
+    """The maps (``<axis>:<motion>``) the style's tables carry."""
+    return list(getattr(get_controller(style), "map_motions", lambda _p: [])(params))
+
+
+def weighing_lines(params: CompensationParameters, comment: str, style: str | None = None) -> list[str]:
+    """The rule, and per value not entered as estimated: its estimate ± std and what is entered (with ``style``: a
+    value that controller does not hold said to be weighed for the NC rewrite only)."""
     w = weighing_of(params)
     if w.covariance_from == "none":
         return [f"{comment}{note}" for note in w.notes]
-    rows = weighing_rows(w, params.units) or ["every estimate is entered as estimated (each many standard errors "
-                                              "from 0)"]
+    carried = None if style is None else set(representable(params, style)) | set(_map_motions(params, style))
+    rows = weighing_rows(w, params.units, carried) or [
+        "every estimate is entered as estimated (each many standard errors from 0)"]
     return [f"{comment}weighed by uncertainty (docs/algorithms.md): {w.rule}", *(f"{comment}{n}" for n in w.notes),
             *(f"{comment}  {r}" for r in rows)]
 
@@ -121,7 +128,7 @@ def scope_lines(params: CompensationParameters, style: str, comment: str) -> lis
                      f"kinematics, or the NC rewrite: pige compensate PROGRAM) {s.complete.text()}")
     else:
         predicted = f"{comment}predicted tool-point error: not predicted (the parameter file states no uncertainty)"
-    return weighing_lines(params, comment) + note + [
+    return weighing_lines(params, comment, style) + note + [
         f"{comment}entered: {', '.join(s.entered) or 'nothing'}",
         f"{comment}NOT representable in this controller's kinematics (only the NC rewrite compensates them): "
         f"{'; '.join(s.not_representable) or 'none'}",

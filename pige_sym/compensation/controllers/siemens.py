@@ -50,6 +50,7 @@ from pige_sym.compensation.controllers.axis_lines import (
     structure,
 )
 from pige_sym.compensation.controllers.scope import positions_and_zeros, scope_lines
+from pige_sym.compensation.controllers.tables.siemens_lec import check_format as lec_format
 from pige_sym.compensation.controllers.tables.siemens_lec import map_motions as map_motions
 from pige_sym.compensation.controllers.tables.siemens_lec import render_lines as lec_lines
 from pige_sym.compensation.parameters import CompensationParameters
@@ -57,6 +58,8 @@ from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 
 TITLE = "SINUMERIK 840D sl swivel data record $TC_CARR (fine offsets), kinematics types P, T, M"
+#: The options of ``pige compensate`` this controller reads (:func:`~pige_sym.compensation.controllers.check_options`).
+OPTIONS = ("--carrier", "--machine-axis")
 #: $TC_CARR23 and the transformer type of TRAORI without the swivel data record (IM9 12/2017, p. 572).
 KIND = {"table": ("P", 40), "head": ("T", 24), "mixed": ("M", 56)}
 #: First basic parameter of each offset vector (its fine offset: + 40).
@@ -70,6 +73,12 @@ MACHINE_DATA = {
     "mixed": {"l1": "MD24560 $MC_TRAFO5_JOINT_OFFSET_1", "l2": "MD24550 $MC_TRAFO5_BASE_TOOL_1",
               "l3": "MD24558 $MC_TRAFO5_JOINT_OFFSET_PART_1", "l4": "MD24500 $MC_TRAFO5_PART_OFFSET_1"},
 }
+
+
+def check_tables(params: CompensationParameters, options: ControllerOptions) -> None:
+    """The ``$AA_ENC_COMP`` tables' machine axis names and grids, before any value is weighed (:mod:`.tables.
+    siemens_lec`)."""
+    lec_format(params, options.machine_axes)
 
 
 def representable(params: CompensationParameters) -> list[str]:
@@ -129,7 +138,7 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
                   for k in range(3)]
     lines += [f"$TC_CARR{k}[{carrier}]=$TC_CARR{k}[{carrier}]{signed(v, DEG_DECIMALS)}" for k, v in offsets.items()]
     return "\n".join(lines + _base_and_machine_data(params, st, carrier, vectors)
-                     + lec_lines(params, options.machine_axes))
+                     + lec_lines(params, options.machine_axes, options.change_limits()))
 
 
 def _senses_text(params: CompensationParameters, rows: tuple[dict[str, Any], ...]) -> str:

@@ -8,11 +8,13 @@ identified parameter is carried.
 from __future__ import annotations
 
 from pige_sym.compensation.controllers import ControllerOptions
-from pige_sym.compensation.controllers.axis_lines import controller_corrections
+from pige_sym.compensation.controllers.axis_lines import controller_corrections, origin_pivots_note
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.kernels import load_kernels
 
 TITLE = "corrected axis lines in the machine frame (no controller)"
+#: The options of ``pige compensate`` this controller reads (:func:`~pige_sym.compensation.controllers.check_options`).
+OPTIONS: tuple[str, ...] = ()
 
 
 def representable(params: CompensationParameters) -> list[str]:
@@ -30,4 +32,5 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
         piv = ", ".join(f"{x:.6f}" for x in r["pivot_mm"])
         dirs = ", ".join(f"{x:.9f}" for x in r["direction"])
         lines.append(f"{r['axis']:<5}{r['side']:<11}{piv:<36}{dirs:<40}{r['zero_offset_deg']:.7f}")
-    return "\n".join(lines)
+    note = origin_pivots_note(params)
+    return "\n".join(lines + ([f"note: {note}"] if note else []))

@@ -55,6 +55,10 @@ from pige_sym.identification.distributions import t_quantile
 
 #: Family-wise false-alarm rate per check-up (all its PIGEs together).
 ALPHA = 0.01
+#: The rates ``--alpha`` may be: below 1e-6 a limit sits beyond 5 sigma even on a learned scatter (no drift short of
+#: a crash is flagged, and the quantile leaves floating point near 1e-16), above 0.5 a still machine is flagged at
+#: every other check-up.
+ALPHA_RANGE = (1e-6, 0.5)
 #: Degrees of freedom of the pooled scatter from which the learned limits replace the provisional ones.
 MIN_DOF = 4
 #: Degrees of freedom from which a check-up the learned limits flag leaves the chart (module docstring).

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.errors import InputError
-from pige_sym.verdict.checkup.limits import ALPHA, METHOD, MIN_DOF, Limit, control_limit, pooled_scatter
+from pige_sym.verdict.checkup.limits import ALPHA, ALPHA_RANGE, METHOD, MIN_DOF, Limit, control_limit, pooled_scatter
 from pige_sym.verdict.checkup.reference import FORMAT, ChartState, chart_state, hours
 from pige_sym.verdict.checkup.trend import Trend, trend
 
@@ -77,11 +77,25 @@ class Item:
         return None if self.trend is None else getattr(self.trend, key)
 
 
+#: A forecast time past the calendar's end (year 9999) in words: no crossing within it.
+BEYOND_CALENDAR = "not before 9999-12-31"
+
+
 def when(origin: str, h: float | None) -> str | None:
-    """The ISO time ``h`` hours after ``origin`` (None stays None)."""
+    """The ISO time ``h`` hours after ``origin``; None for None and for a time past the year 9999 (a near-zero drift
+    crosses its tolerance centuries away: no date to give, :data:`BEYOND_CALENDAR` in words)."""
     if h is None or not math.isfinite(h):
         return None
-    return (datetime.fromisoformat(origin) + timedelta(hours=h)).isoformat(timespec="minutes")
+    try:
+        return (datetime.fromisoformat(origin) + timedelta(hours=h)).isoformat(timespec="minutes")
+    except OverflowError:
+        return None
+
+
+def when_text(origin: str, h: float | None) -> str | None:
+    """:func:`when` in words: :data:`BEYOND_CALENDAR` for a time past the year 9999."""
+    at = when(origin, h)
+    return BEYOND_CALENDAR if at is None and h is not None and not math.isnan(h) else at
 
 
 @dataclass
@@ -170,8 +184,9 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
     from pige_sym.verdict.checkup.to_enter import checkup_changes
     from pige_sym.verdict.history.records import measurement_time
 
-    if not 0 < opts.alpha < 1:
-        raise InputError(f"--alpha must be between 0 and 1, got {opts.alpha}")
+    if not ALPHA_RANGE[0] <= opts.alpha <= ALPHA_RANGE[1]:
+        raise InputError(f"--alpha {opts.alpha:g}: give a false-alarm rate per check-up from {ALPHA_RANGE[0]:g} to "
+                         f"{ALPHA_RANGE[1]:g} (default {ALPHA:g}; docs/checkup.md)")
     if hasattr(history, "dialect"):  # an SQLAlchemy engine
         from pige_sym.verdict.history.store import EngineHistory
 
@@ -245,10 +260,10 @@ def _free(m: Any, pige: str | None, runs: list[Any], kern: Any) -> list[str]:
     stated = m.metadata.get("program_checkup")
     if stated:
         named = parse_free(stated, kern.MACHINE_CODE)
-        if pige and parse_free(pige, kern.MACHINE_CODE) != named:
+        if pige is not None and parse_free(pige, kern.MACHINE_CODE) != named:
             raise InputError(f"--pige {pige}: the check-up program re-measures {stated}; leave --pige out")
         return named
-    if pige:
+    if pige is not None:
         return parse_free(pige, kern.MACHINE_CODE)
     last = [r for r in runs if r.kind == "checkup"]
     return list(last[-1].parameters) if last else parse_free(None, kern.MACHINE_CODE)

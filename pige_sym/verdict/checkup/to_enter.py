@@ -65,6 +65,7 @@ def checkup_changes(fit: Any, m: Any, opts: Any) -> Changes:
 def _controller_text(fit: Any, m: Any, entered: dict[str, float | None], opts: Any) -> str:
     """The entries as ``pige compensate --controller`` prints them, the held PIGEs not entered."""
     from pige_sym.compensation.controllers import format_controller
+    from pige_sym.compensation.controllers.entry_checks import ChangeLimits
     from pige_sym.compensation.parameters import CompensationParameters
     from pige_sym.kernels import load_kernels
 
@@ -81,4 +82,4 @@ def _controller_text(fit: Any, m: Any, entered: dict[str, float | None], opts: A
         covariance=(tuple(names), np.asarray(fit.covariance)[np.ix_(idx, idx)]),
         set_to_zero=[n for n in values if n not in names], ball_mm=[float(x) for x in m.ball_mm])
     return format_controller(params, opts.controller, carrier=opts.carrier, current=opts.current,
-                             heidenhain_trans=opts.heidenhain_trans)
+                             heidenhain_trans=opts.heidenhain_trans, limits=ChangeLimits(*opts.max_change))

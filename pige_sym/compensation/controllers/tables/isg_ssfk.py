@@ -23,7 +23,14 @@ kernel's HTML manual, read in 2026):
 encoder increments or "metric (in 0.1 µm)", listed for translatory axes (TwinCAT CNC 15274009995); the ISG
 kernel handles angles at 0.0001° by default (its "Measuring systems" page), but the pages read do not say that
 a rotary axis' ``kw.ssfk`` entries use it.  ``--isg-unit-deg U`` states the angle of one unit of the list
-(``kw.ssfk.unit = 1``); without it no table is written.  The modulo mode (P-COMP-00022) is not described in the
+(``kw.ssfk.unit = 1``); without it no table is written.
+
+**Limits of the format**, checked before anything is weighed (:func:`check_format`): U a positive finite angle no
+larger than ``--max-change``'s degrees (a coarser unit cannot hold one correction); the grid step a whole number of
+units, at least one (P-COMP-00018: ``interval`` 0 means the points are given one by one, another list); at most
+``max_points`` points (P-COMP-00059, default 1500); every position (``kw_startpos``, P-COMP-00019, and the last
+point) and every value (P-COMP-00023/24) an SGN32 integer, −2³¹ … 2³¹ − 1.  Every value is held to ``--max-change``
+(:mod:`..entry_checks`).  The modulo mode (P-COMP-00022) is not described in the
 pages read: a full-turn axis' table is written over ±10 turns without it (its map repeats every 360°; an axis
 whose positions wrap stays inside).
 """
@@ -31,9 +38,11 @@ whose positions wrap stays inside).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
+from pige_sym.compensation.controllers.entry_checks import ChangeLimits, check_entries, check_integer
 from pige_sym.compensation.controllers.tables.positioning import PositioningMap, positioning_maps
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
@@ -43,53 +52,113 @@ SOURCE = ("Beckhoff TF5200 Axis compensation: kw.ssfk (113419147), parameters 30
 #: Default of P-COMP-00059 (kw.ssfk.max_points).
 MAX_POINTS = 1500
 TURNS = 10
+#: SGN32 (P-COMP-00019, P-COMP-00023/24): the range of a position and of a value in the list's unit.
+SGN32 = (-(2**31), 2**31 - 1)
 
 
-def ssfk_table(pm: PositioningMap, unit_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(positions, pos, neg) of one axis in list units (integers): equidistant, a full turn over ±10 turns.
+def check_unit(unit_deg: float | None, limits: ChangeLimits | None = None) -> None:
+    """``--isg-unit-deg``: a positive finite angle no coarser than ``--max-change`` (module docstring); None: not given.
 
     Raises
     ------
     InputError
-        A grid that is not equidistant, a step that is not a whole number of units, or too many points.
+    """
+    if unit_deg is None:
+        return
+    bound = (limits or ChangeLimits()).deg
+    if not (math.isfinite(unit_deg) and 0 < unit_deg <= bound):
+        raise InputError(f"--isg-unit-deg {unit_deg:g}: give the angle [deg] of one unit of the axis' kw.ssfk list, a "
+                         f"positive number no larger than --max-change's {bound:g} deg (read it from your axis' list, "
+                         "e.g. 0.0001)")
+
+
+def check_format(params: CompensationParameters, unit_deg: float | None, limits: ChangeLimits | None = None) -> None:
+    """The unit and every map's list layout (module docstring) before any value is weighed; nothing without a unit."""
+    check_unit(unit_deg, limits)
+    if unit_deg is None:
+        return
+    for pm in positioning_maps(params).values():
+        list_layout(pm, unit_deg)
+
+
+def list_layout(pm: PositioningMap, unit_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """(nodes [deg, commanded], positions [units]) of one axis' list, every field of the layout checked.
+
+    Raises
+    ------
+    InputError
+        A grid that is not equidistant, a step that is not a whole number of units (at least one), too many points,
+        or a position beyond SGN32.
     """
     step = pm.uniform_step_deg()
     if step is None:
         raise InputError(f"{pm.axis}: the map's grid angles are not equidistant (kw.ssfk.interval takes one step)")
     units = step / unit_deg
-    if abs(units - round(units)) > 1e-6:
-        raise InputError(f"{pm.axis}: the grid step {step:g} deg is not a whole number of --isg-unit-deg {unit_deg:g}")
+    if abs(units - round(units)) > 1e-6 or round(units) < 1:
+        raise InputError(f"{pm.axis}: the grid step {step:g} deg is not a whole number of --isg-unit-deg {unit_deg:g} "
+                         "(kw.ssfk.interval, P-COMP-00018: at least 1 unit)")
     nodes = pm.nodes_cmd((-360.0 * TURNS, 360.0 * TURNS)) if pm.full_turn else pm.nodes_cmd()
     if nodes.size > MAX_POINTS:
         raise InputError(f"{pm.axis}: {nodes.size} points; kw.ssfk holds {MAX_POINTS} by default (P-COMP-00059)")
-    positions = np.round(nodes / unit_deg).astype(np.int64)
-    pos = np.round(pm.commanded_error_deg(nodes, +1) / unit_deg).astype(np.int64)
-    neg = np.round(pm.commanded_error_deg(nodes, -1) / unit_deg).astype(np.int64)
-    return positions, pos, neg
+    check_integer(f"ISG kw.ssfk list of {pm.axis}", "kw_startpos (or the last position)",
+                  np.round(np.array([nodes[0], nodes[-1]]) / unit_deg), *SGN32, "P-COMP-00019: SGN32",
+                  f"--isg-unit-deg {unit_deg:g} puts commanded {nodes[0]:g}..{nodes[-1]:g} deg out of range: check the "
+                  "unit of your axis' list")
+    return nodes, np.round(nodes / unit_deg).astype(np.int64)
 
 
-def list_body(pm: PositioningMap, unit_deg: float) -> list[str]:
+def ssfk_table(pm: PositioningMap, unit_deg: float, limits: ChangeLimits | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(positions, pos, neg) of one axis in list units (integers): equidistant, a full turn over ±10 turns; every
+    value held to ``limits`` (``--max-change``) and SGN32.
+
+    Raises
+    ------
+    InputError
+        A layout :func:`list_layout` refuses, or a value beyond ``limits`` or SGN32.
+    """
+    nodes, positions = list_layout(pm, unit_deg)
+    where = f"ISG kw.ssfk list of {pm.axis}"
+    out = []
+    for field, direction in (("table[i].pos", +1), ("table[i].neg", -1)):
+        error = pm.commanded_error_deg(nodes, direction)
+        check_entries(where, field, error, "deg", limits, nodes, f"commanded {pm.axis}")
+        check_integer(where, field, np.round(error / unit_deg), *SGN32, "P-COMP-00023/24: SGN32",
+                      "check --isg-unit-deg")
+        out.append(np.round(error / unit_deg).astype(np.int64))
+    return positions, out[0], out[1]
+
+
+def list_body(pm: PositioningMap, unit_deg: float, limits: ChangeLimits | None = None) -> list[str]:
     """The ``kw.ssfk`` lines of one axis (module docstring)."""
-    positions, pos, neg = ssfk_table(pm, unit_deg)
+    positions, pos, neg = ssfk_table(pm, unit_deg, limits)
     body = ["kw.ssfk.unit 1", f"kw.ssfk.interval {positions[1] - positions[0]}", f"kw.ssfk.kw_startpos {positions[0]}",
             f"kw.ssfk.kw_nr_max {positions.size}", "kw.ssfk.bilateral 1", "kw.ssfk.modulo 0"]
     body += [f"kw.ssfk.table[{i}].pos {v}" for i, v in enumerate(pos)]
     return body + [f"kw.ssfk.table[{i}].neg {v}" for i, v in enumerate(neg)]
 
 
-def render_lines(params: CompensationParameters, unit_deg: float | None) -> list[str]:
-    """Per axis: the notes (``#``, outside the list) and the list body; the refusal when the unit is not given."""
+def render_lines(params: CompensationParameters, unit_deg: float | None, limits: Any = None) -> list[str]:
+    """Per axis: the notes (``#``, outside the list) and the list body; the refusal when the unit is not given.
+
+    Raises
+    ------
+    InputError
+        A unit that is not a positive finite angle within ``--max-change``, a layout or a value the list cannot hold
+        (module docstring).
+    """
+    check_format(params, unit_deg, limits)
     maps = positioning_maps(params)
     if not maps:
         return []
     out = [f"# positioning maps (CONVENTIONS §10) as kw.ssfk lists ({SOURCE}): a value is the axis' error (actual "
            "minus programmed) in its commanded sense, pos/neg by the direction of motion"]
-    if unit_deg is None or not (math.isfinite(unit_deg) and unit_deg > 0):
+    if unit_deg is None:
         return out + ["# not written: the unit of a rotary axis' kw.ssfk entries is not settled by the pages read "
                       "(P-COMP-00017: encoder increments or 0.1 um): give --isg-unit-deg U, the angle [deg] of one "
                       "unit of your axis' list (kw.ssfk.unit 1)"]
     for axis, pm in maps.items():
-        body = list_body(pm, unit_deg)
+        body = list_body(pm, unit_deg, limits)
         out += [f"# {n}" for n in pm.notes()]
         out += [f"# {axis}: list body ({len(body)} lines, no comment inside; values rounded to 1 unit = "
                 f"{unit_deg:g} deg, {unit_deg * math.pi / 180 * 1e6:.3g} urad; outside the table the end values hold)",

@@ -26,15 +26,18 @@ The trim of a rotary joint is ``−e`` (:mod:`.positioning`: the axis stands at 
 joint's commanded angle increasing.  Joints: 0 X, 1 Y, 2 Z, then the rotary axes in letter order, as in
 ``xyzac-trt-kins`` / ``xyzbc-trt-kins`` (``[TRAJ]COORDINATES = XYZAC``) and in pige's kinematics component.
 A full-turn axis' table covers as many whole turns around 0 as 256 entries allow (its map repeats every
-360°); a tilt axis' table is its grid.
+360°); a tilt axis' table is its grid.  The 256 entries are checked before any value is weighed
+(:func:`check_format`), every trim against ``--max-change`` before a file is written (:mod:`..entry_checks`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from pige_sym.compensation.controllers.entry_checks import check_entries
 from pige_sym.compensation.controllers.tables.positioning import PositioningMap, positioning_maps
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
@@ -92,22 +95,46 @@ def full_turn_travel(pm: PositioningMap) -> tuple[float, float]:
     return (-360.0 * turns, 360.0 * turns) if turns else (-180.0, 180.0)
 
 
-def comp_table(machine: str, pm: PositioningMap, travel_cmd_deg: tuple[float, float] | None = None) -> CompTable:
-    """The compensation file of one axis (module docstring).
+def table_nodes(pm: PositioningMap, travel_cmd_deg: tuple[float, float] | None = None) -> np.ndarray:
+    """The nominals of one axis' file [deg, commanded]: ``travel_cmd_deg`` or, for a full turn, the whole turns that
+    fit (:func:`full_turn_travel`), else the grid.
 
     Raises
     ------
     InputError
-        More than 256 entries.
+        More than 256 entries (``EMCMOT_COMP_SIZE``).
     """
     travel = travel_cmd_deg if travel_cmd_deg is not None else (full_turn_travel(pm) if pm.full_turn else None)
     nodes = pm.nodes_cmd(travel)
     if nodes.size > COMP_SIZE:
         raise InputError(f"{pm.axis}: {nodes.size} entries over commanded {nodes[0]:g}..{nodes[-1]:g} deg; LinuxCNC "
                          f"takes at most {COMP_SIZE} per joint (EMCMOT_COMP_SIZE, src/emc/motion/motion.h)")
+    return nodes
+
+
+def check_format(params: CompensationParameters) -> None:
+    """The files' format limits (256 entries per joint), checked before any value is weighed or computed."""
+    for pm in positioning_maps(params).values():
+        table_nodes(pm)
+
+
+def comp_table(machine: str, pm: PositioningMap, travel_cmd_deg: tuple[float, float] | None = None,
+               limits: Any = None) -> CompTable:
+    """The compensation file of one axis (module docstring); every trim held to ``limits``
+    (:class:`~pige_sym.compensation.controllers.entry_checks.ChangeLimits`, ``--max-change``).
+
+    Raises
+    ------
+    InputError
+        More than 256 entries, or a trim beyond ``limits``.
+    """
+    nodes = table_nodes(pm, travel_cmd_deg)
     forward = -pm.commanded_error_deg(nodes, +1)
     reverse = -pm.commanded_error_deg(nodes, -1)
     joint = joint_number(machine, pm.axis)
+    where = f"LinuxCNC COMP_FILE pige_joint{joint}_{pm.axis.lower()}.comp"
+    for field, trims in (("forward trim", forward), ("reverse trim", reverse)):
+        check_entries(where, field, trims, "deg", limits, nodes, f"commanded {pm.axis}")
     span = (f"commanded {pm.axis} {nodes[0]:g}..{nodes[-1]:g} deg, {nodes.size} entries"
             + (" (the map repeats every 360 deg)" if pm.full_turn else ""))
     notes = (*pm.notes(), f"{pm.axis} = joint {joint}: {span}; beyond them the end values hold (command.c, "
@@ -115,19 +142,19 @@ def comp_table(machine: str, pm: PositioningMap, travel_cmd_deg: tuple[float, fl
     return CompTable(pm.axis, joint, nodes, forward, reverse, notes)
 
 
-def comp_tables(params: CompensationParameters) -> list[CompTable]:
+def comp_tables(params: CompensationParameters, limits: Any = None) -> list[CompTable]:
     """The compensation file of every rotary axis whose map holds φ."""
-    return [comp_table(params.machine, pm) for pm in positioning_maps(params).values()]
+    return [comp_table(params.machine, pm, limits=limits) for pm in positioning_maps(params).values()]
 
 
-def comp_files(params: CompensationParameters) -> dict[str, str]:
+def comp_files(params: CompensationParameters, limits: Any = None) -> dict[str, str]:
     """File name → text of every compensation file (what ``pige compensate --comp-dir`` writes)."""
-    return {t.file_name: t.text() for t in comp_tables(params)}
+    return {t.file_name: t.text() for t in comp_tables(params, limits)}
 
 
-def render_lines(params: CompensationParameters) -> list[str]:
+def render_lines(params: CompensationParameters, limits: Any = None) -> list[str]:
     """The INI lines that load the files, with what the files hold (comments); empty without maps."""
-    tables = comp_tables(params)
+    tables = comp_tables(params, limits)
     if not tables:
         return []
     out = [f"# the positioning maps as [JOINT_n]COMP_FILE ({SOURCE}): COMP_FILE_TYPE 1, the trim [deg] is added to "

@@ -9,14 +9,19 @@ its reversal; the direction of approach comes from the joint's velocity command,
 Every slot of every node used gets a line: a motion the file has no map of, or a grid angle without a value, is
 set to 0 with a comment (nothing corrected there, as the NC rewrite does), so no value set before stays in force.
 The grid is set to 0 nodes first and to its size last, so a running machine never sees half a map.  A grid that is
-not uniform, or larger than the component's ``MAP_NODES``, is refused with the reason.
+not uniform, or larger than the component's ``MAP_NODES``, is refused with the reason, before any value is weighed
+(:func:`check_format`); every value is held to ``--max-change`` in its unit (µm, µrad) before a line is printed
+(:mod:`..entry_checks`).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from pige_sym.codegen.targets import linuxcnc_pins as pins
+from pige_sym.compensation.controllers.entry_checks import check_entries
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
 from pige_sym.model.error_motions import AxisMaps, axis_motions
@@ -40,11 +45,22 @@ def slot_values(axis_maps: AxisMaps) -> tuple[list[np.ndarray], list[str]]:
     return out, said
 
 
-def _grid_lines(name: str, axis_maps: AxisMaps) -> tuple[list[str], list[str]]:
-    """(lines before the values, lines after them) that set one axis' grid."""
+def check_format(params: CompensationParameters) -> None:
+    """Every axis' grid against what the component holds (module docstring), before any value is weighed."""
+    for axis_maps in (params.error_maps.axes.values() if params.error_maps is not None else ()):
+        grid_step(axis_maps)
+
+
+def grid_step(axis_maps: AxisMaps) -> float:
+    """The step [deg] of one axis' grid as the component's ``map-<axis>-step`` pin takes it.
+
+    Raises
+    ------
+    InputError
+        More grid angles than ``MAP_NODES``, or a grid that is not uniform.
+    """
     g = axis_maps.grid
     axis = g.axis
-    a = axis.lower()
     angles = np.asarray(g.angles_deg, dtype=float)
     if g.n > pins.MAP_NODES:
         raise InputError(f"{axis}: {g.n} grid angles; pige's LinuxCNC component holds at most {pins.MAP_NODES} per "
@@ -54,19 +70,28 @@ def _grid_lines(name: str, axis_maps: AxisMaps) -> tuple[list[str], list[str]]:
         raise InputError(f"{axis}: grid angles {', '.join(f'{x:g}' for x in angles)} are not equidistant"
                          + (" around the turn" if g.full_turn else "") + "; pige's LinuxCNC component takes a uniform "
                          "grid (start, step, nodes)")
-    step = float(steps[0]) if g.n > 1 else 1.0
+    return float(steps[0]) if g.n > 1 else 1.0
+
+
+def _grid_lines(name: str, axis_maps: AxisMaps) -> tuple[list[str], list[str]]:
+    """(lines before the values, lines after them) that set one axis' grid."""
+    g = axis_maps.grid
+    a = g.axis.lower()
+    angles = np.asarray(g.angles_deg, dtype=float)
+    step = grid_step(axis_maps)
     before = [f"setp {name}.map-{a}-nodes 0", f"setp {name}.map-{a}-start {angles[0]:.10g}",
               f"setp {name}.map-{a}-step {step:.10g}", f"setp {name}.map-{a}-full-turn {int(bool(g.full_turn))}"]
     return before, [f"setp {name}.map-{a}-nodes {g.n}"]
 
 
-def map_setp_lines(params: CompensationParameters, name: str) -> list[str]:
-    """The comments and ``setp``/``net`` lines that enter every map of ``params`` into component ``name``.
+def map_setp_lines(params: CompensationParameters, name: str, limits: Any = None) -> list[str]:
+    """The comments and ``setp``/``net`` lines that enter every map of ``params`` into component ``name``; every
+    value held to ``limits`` (:class:`~pige_sym.compensation.controllers.entry_checks.ChangeLimits`).
 
     Raises
     ------
     InputError
-        A grid the component cannot hold (module docstring).
+        A grid the component cannot hold (module docstring), or a value beyond ``limits``.
     """
     maps = params.error_maps
     if maps is None:
@@ -82,7 +107,10 @@ def map_setp_lines(params: CompensationParameters, name: str) -> list[str]:
                    + (" (full turn, wraps)" if g.full_turn else " (end values hold outside)") + "; "
                    + ", ".join(f"{stem} {s}" for stem, s in zip(stems, said, strict=True)))
         out += before
-        for stem, v in zip(stems, values, strict=True):
+        units = [m.unit for m in axis_motions(axis, per_direction=True)]
+        for stem, v, unit in zip(stems, values, units, strict=True):
+            check_entries(f"pige's LinuxCNC component {name}", f"{stem} pins", np.nan_to_num(v), unit, limits,
+                          g.angles_deg, axis)
             empty = [f"{a:g}" for a, x in zip(g.angles_deg, v, strict=True) if not np.isfinite(x)]
             if empty and len(empty) < g.n:
                 out.append(f"# {stem}: no value at theta = {', '.join(empty)} deg: set to 0 (nothing corrected there)")

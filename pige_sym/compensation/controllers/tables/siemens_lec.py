@@ -20,13 +20,23 @@ What the pages read settle (Function Manual Extended Functions, K3 Compensations
 One table serves both directions of motion: a map per direction enters its mean, and the reversal φ⁺ − φ⁻ is
 named as not entered (the direction-dependent tables of p. 249, ``$AN_CEC_DIRECTION``, are sag compensation
 tables; the pages read do not state the sign of their values).  The machine axis name AXi is the NC's
-(MD10000 ``$MN_AXCONF_MACHAX_NAME_TAB``): given with ``--machine-axis C=<name>``, never assumed.
+(MD10000 ``$MN_AXCONF_MACHAX_NAME_TAB``): given with ``--machine-axis C=<name>``, never assumed; one name per
+machine axis (two rotary axes given one name would write one table mixing both).
+
+**Limits of the format**, checked before anything is weighed (:func:`check_format`): the points are equidistant
+(one ``$AA_ENC_COMP_STEP``), the point index N runs from 0 to MD38000 − 1 (K3 09/2009, 6FC5397-1BP20-0BA0, p. 361:
+"0 ≤ N ≤ MD38000 − 1"; the number printed as required), and "the size of the compensation value is not limited"
+(p. 361; 808D Function Manual 01/2017 p. 106: "not monitored … small compensation values must be selected"), so
+every value is held to ``--max-change`` (:mod:`..entry_checks`).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
+from pige_sym.compensation.controllers.entry_checks import check_entries
 from pige_sym.compensation.controllers.tables.positioning import PositioningMap, positioning_maps
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
@@ -36,9 +46,9 @@ SOURCE = "SINUMERIK K3 Compensations 6FC5397-1BP40-3BA1 pp. 237-242; 808D Functi
 VALUE_DECIMALS = 9
 
 
-def lec_table(pm: PositioningMap) -> tuple[np.ndarray, np.ndarray, bool]:
+def lec_table(pm: PositioningMap, values: bool = True) -> tuple[np.ndarray, np.ndarray, bool]:
     """(positions [deg], values [deg], modulo) of one axis' table: a full turn 0…360° with the modulo function, a
-    tilt axis its grid (module docstring).
+    tilt axis its grid (module docstring); without ``values`` the values are not computed (an empty array).
 
     Raises
     ------
@@ -55,11 +65,39 @@ def lec_table(pm: PositioningMap) -> tuple[np.ndarray, np.ndarray, bool]:
         positions = first + step * np.arange(int(round(360.0 / step)) + 1)
     else:
         positions = pm.nodes_cmd()
-    return positions, pm.commanded_error_deg(positions, 0), pm.full_turn
+    return positions, pm.commanded_error_deg(positions, 0) if values else np.zeros(0), pm.full_turn
 
 
-def render_lines(params: CompensationParameters, machine_axes: dict[str, str] | None) -> list[str]:
-    """The ``;`` notes and the ``$AA_ENC_COMP`` program of every positioning map (empty without maps)."""
+def check_format(params: CompensationParameters, machine_axes: dict[str, str] | None) -> None:
+    """The machine axis names (rotary axes of the machine, one name each) and every map's grid (equidistant),
+    before any value is weighed (module docstring).
+
+    Raises
+    ------
+    InputError
+    """
+    from pige_sym.kernels import load_kernels
+
+    axes = tuple(load_kernels(params.machine).ROTARY_AXES)
+    named: dict[str, str] = {}
+    for axis, name in (machine_axes or {}).items():
+        if axis not in axes:
+            raise InputError(f"--machine-axis {axis}={name}: {axis} is not a rotary axis of {params.machine} (axes: "
+                             f"{', '.join(axes)})")
+        if name.upper() in named:
+            raise InputError(f"--machine-axis {named[name.upper()]}={name} and {axis}={name}: one machine axis name "
+                             "for two rotary axes would write one $AA_ENC_COMP table mixing both; give each axis its "
+                             "own name (MD10000 $MN_AXCONF_MACHAX_NAME_TAB)")
+        named[name.upper()] = axis
+    for pm in positioning_maps(params).values():
+        lec_table(pm, values=False)
+
+
+def render_lines(params: CompensationParameters, machine_axes: dict[str, str] | None,
+                 limits: Any = None) -> list[str]:
+    """The ``;`` notes and the ``$AA_ENC_COMP`` program of every positioning map (empty without maps); every value
+    held to ``limits`` (:class:`~pige_sym.compensation.controllers.entry_checks.ChangeLimits`)."""
+    check_format(params, machine_axes)
     maps = positioning_maps(params)
     if not maps:
         return []
@@ -73,6 +111,8 @@ def render_lines(params: CompensationParameters, machine_axes: dict[str, str] | 
     for axis, pm in maps.items():
         name = machine_axes[axis]  # type: ignore[index]
         positions, values, modulo = lec_table(pm)
+        check_entries(f"SINUMERIK $AA_ENC_COMP of {name}", "compensation value", values, "deg", limits, positions,
+                      f"commanded {axis}")
         out += [f"; {n}" for n in pm.notes()]
         if pm.per_direction:
             out.append(f"; {axis}: one table for both directions: the mean of {axis}'s positioning maps per direction "
