@@ -10,7 +10,8 @@ up to ``--timeout`` seconds.
   at every grid angle (three ball positions on the table; each A angle met with C at twelve angles, C swept fully at
   A 0, −45 and −90°): C and A on 30°, 15°, 6° and 3° grids (96 to 906 map values), and an A map alone on a 0.5°
   grid over −150…0° (301 angles, 1,806 values; one setup, C at six angles per A angle).  Timed:
-  ``pige compensate --params FILE --controller linuxcnc`` (weighed over the axes' travel, with its predictions) and
+  ``pige compensate --params FILE --controller siemens`` (every value weighed over the axes' travel, with its
+  predictions; :data:`CONTROLLER`) and
   the NC rewrite of a 2,000-pose TRAORI program (``pige compensate PROGRAM --params FILE --out NEW``).  The floor:
   the same commands with the file's PIGEs alone (its maps removed): what compensating costs without maps.
 * **identify**: the map test of docs/maps.md as a user runs it — ``pige program --map C,A --map-step 30``, the
@@ -57,6 +58,10 @@ SETUPS = ((110.0, 0.0, 40.0), (-50.0, 95.0, 90.0), (-60.0, -90.0, 140.0))
 GRIDS = ((("C", "A"), 30.0, (-90.0, 0.0)), (("C", "A"), 15.0, (-90.0, 0.0)), (("C", "A"), 6.0, (-90.0, 0.0)),
          (("C", "A"), 3.0, (-90.0, 0.0)), (("A",), 0.5, (-150.0, 0.0)))
 STEPS = (30.0, 15.0, 5.0, 2.0, 1.0, 0.5)
+#: The controller timed: SINUMERIK holds the positioning maps ($AA_ENC_COMP), and every value is weighed and its error
+#: predicted over the axes' travel (pige's LinuxCNC component holds at most 73 grid angles per axis: a 3° C grid is
+#: refused before any work, issue 47 item 1).
+CONTROLLER = "siemens"
 
 
 def _hidden_maps(a_range: tuple[float, float], rng: np.random.Generator) -> ErrorMaps:
@@ -164,12 +169,12 @@ def compensate_rows(folder: Path, grids: tuple[Any, ...], before: Path | None, t
         path, plain, values, fit_s = map_parameters(folder, axes, step, a_range)
         row: dict[str, Any] = {"grid": f"{','.join(axes)} every {step:g}°", "values": values, "fit_s": fit_s}
         for key, params in (("", path), ("floor_", plain)):
-            row[key + "ctl"] = run_pige(["compensate", "--params", str(params), "--controller", "linuxcnc",
+            row[key + "ctl"] = run_pige(["compensate", "--params", str(params), "--controller", CONTROLLER,
                                          "--allow-missing"], folder)
             row[key + "nc"] = run_pige(["compensate", str(program), "--params", str(params), "--allow-missing",
-                                        "--out", str(folder / "out.mpf"), "--force"], folder)
+                                        "--out", str(folder / f"{key}out.mpf"), "--force"], folder)
         if before is not None:
-            row["before_ctl"] = run_pige(["compensate", "--params", str(path), "--controller", "linuxcnc",
+            row["before_ctl"] = run_pige(["compensate", "--params", str(path), "--controller", CONTROLLER,
                                           "--allow-missing"], folder, source=before, timeout=timeout)
             row["before_nc"] = run_pige(["compensate", str(program), "--params", str(path), "--allow-missing", "--out",
                                          str(folder / "out_before.mpf"), "--force"], folder, source=before,
@@ -211,8 +216,8 @@ def _same_json(a: Any, b: Any) -> bool:
 
 
 def _compensate_lines(rows: list[dict[str, Any]], before: bool, timeout: float) -> list[str]:
-    head = ("| map grid | map values | --controller linuxcnc wall [s] | CPU [s] | peak [MB] | without maps CPU [s] | "
-            "NC rewrite (2,000 poses) wall [s] | CPU [s] | peak [MB] | without maps CPU [s] |")
+    head = (f"| map grid | map values | --controller {CONTROLLER} wall [s] | CPU [s] | peak [MB] | without maps CPU "
+            "[s] | NC rewrite (2,000 poses) wall [s] | CPU [s] | peak [MB] | without maps CPU [s] |")
     lines = [head + (" before: --controller CPU [s] | before: NC CPU [s] | same program |" if before else ""),
              "|" + "---|" * (10 + (3 if before else 0))]
     for r in rows:
@@ -268,27 +273,32 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--quick", action="store_true", help="the two coarsest grids only")
     ap.add_argument("--before", type=Path, help="also time each command with this checkout's pige_sym")
     ap.add_argument("--timeout", type=float, default=600.0, help="for --before's commands [s] (default %(default)s)")
+    ap.add_argument("--only", choices=("compensate", "identify"), help="one of the two parts")
     args = ap.parse_args(argv)
     load = os.getloadavg()[0]
     grids = GRIDS[:2] if args.quick else GRIDS
     steps = STEPS[:2] + STEPS[-1:] if args.quick else STEPS
     with tempfile.TemporaryDirectory() as tmp:
-        comp = compensate_rows(Path(tmp), grids, args.before, args.timeout)
-        ident = identify_rows(Path(tmp), steps, args.before, args.timeout)
+        comp = [] if args.only == "identify" else compensate_rows(Path(tmp), grids, args.before, args.timeout)
+        ident = [] if args.only == "compensate" else identify_rows(Path(tmp), steps, args.before, args.timeout)
     before = args.before is not None
     lines = ["## Error maps at scale: compensate and identify --map-step (benchmarks/bench_scale_maps.py)", "",
              f"Each command a fresh process (wall time of `main()`, CPU time, peak resident memory); load average "
              f"{load:.1f} on {os.cpu_count()} cores when the run started (a shared machine: CPU times follow the work, "
              "wall times the load)." + (f" Before: the same commands with the pige_sym of `{args.before}`, up to "
                                          f"{args.timeout:g} s." if before else ""), "",
-             "**pige compensate** (parameter files of `identify --map --json` fits, poses at every grid angle):", ""]
-    lines += _compensate_lines(comp, before, args.timeout)
-    lines += ["", "Fitting those files (`identify_maps` in process, every value determined): "
-              + ", ".join(f"{r['values']:,} values {r['fit_s']:.2f} s CPU" for r in comp)
-              + f" (growth exponent {_exponent([r['values'] for r in comp], [r['fit_s'] for r in comp]):.2f}; the "
-                "joint fit's covariance of every determined value is dense, so it is not linear in them).", "",
-              "**pige identify --map C,A** (docs/maps.md's map test: three probe setups × 48 poses, 30° grid):", ""]
-    lines += _identify_lines(ident, before, args.timeout)
+             ]
+    if comp:
+        lines += ["**pige compensate** (parameter files of `identify --map --json` fits, poses at every grid angle):",
+                  "", *_compensate_lines(comp, before, args.timeout), "",
+                  "Fitting those files (`identify_maps` in process, every value determined): "
+                  + ", ".join(f"{r['values']:,} values {r['fit_s']:.2f} s CPU" for r in comp)
+                  + f" (growth exponent {_exponent([r['values'] for r in comp], [r['fit_s'] for r in comp]):.2f}; "
+                    "the joint fit's covariance of every determined value is dense, so it is not linear in them).",
+                  ""]
+    if ident:
+        lines += ["**pige identify --map C,A** (docs/maps.md's map test: three probe setups × 48 poses, 30° grid):",
+                  "", *_identify_lines(ident, before, args.timeout)]
     text = "\n".join(lines)
     print(text)
     return text

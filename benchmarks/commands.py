@@ -50,9 +50,12 @@ def run_pige(argv: list[str], cwd: Path, *, source: Path = ROOT, timeout: float 
     except subprocess.TimeoutExpired:
         return None
     wall = time.perf_counter() - t0
-    if proc.returncode not in codes:
-        raise RuntimeError(f"pige {' '.join(argv[:3])} … exited {proc.returncode}: {proc.stderr[-2000:]}")
-    stats: dict[str, Any] = json.loads(proc.stderr.strip().splitlines()[-1])
+    try:
+        stats: dict[str, Any] = json.loads(proc.stderr.strip().splitlines()[-1])
+    except (IndexError, ValueError):
+        stats = {"code": proc.returncode}
+    if proc.returncode != 0 or stats["code"] not in codes:
+        raise RuntimeError(f"pige {' '.join(argv[:3])} … exited {stats['code']}: {proc.stderr[-2000:]}")
     stats["wall_s"] = wall
     stats["stdout"] = proc.stdout
     return stats
