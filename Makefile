@@ -6,6 +6,9 @@ STAMP  := $(VENV)/.installed
 MACHINE ?= wC'A'bXYZ(C1)t
 # Test processes (pytest-xdist): one per core; each test file runs whole in one of them (its module fixtures once).
 TEST_JOBS ?= auto
+# LinuxCNC tests: one process per file of tests/linuxcnc, all at once (a simulation's servo thread is paced by the
+# wall clock: it mostly waits, about 6 % of a core each); a new file gets its own (docs/testing.md).
+LCNC_JOBS ?= $(words $(wildcard tests/linuxcnc/test_*.py))
 # Kernels live in generated/ (the shipped machines are tracked there; the list is in pige_sym/constants.py).
 
 .PHONY: help venv gen gen-all check-generated test test-slow test-linuxcnc lint demo bench clean
@@ -36,8 +39,8 @@ test: $(STAMP)  ## run the default test suite (slow studies excluded), one proce
 test-slow: $(STAMP)  ## run the slow studies too (not the LinuxCNC runs: make test-linuxcnc)
 	$(PY) -m pytest -q -m 'not linuxcnc' -n $(TEST_JOBS) --dist loadfile
 
-test-linuxcnc: $(STAMP)  ## the loop on real LinuxCNC 2.9 simulations (tests/linuxcnc; skips without linuxcnc-uspace)
-	$(PY) -m pytest -q -rsP -m linuxcnc tests/linuxcnc
+test-linuxcnc: $(STAMP)  ## the loop on real LinuxCNC 2.9 simulations, side by side (tests/linuxcnc; skips without linuxcnc-uspace)
+	$(PY) -m pytest -q -rsP -m linuxcnc -n $(LCNC_JOBS) --dist loadfile --durations=40 tests/linuxcnc
 
 lint: $(STAMP)  ## ruff + mypy on pige_sym/
 	$(VENV)/bin/ruff check pige_sym tests benchmarks

@@ -37,8 +37,8 @@ def cam_program(n_blocks: int, seed: int = 0) -> str:
 def main(n_blocks: int = 100_000) -> None:
     from pige_sym.compensation.kinematics import compensate_poses, predicted_errors
     from pige_sym.compensation.parameters import CompensationParameters
+    from pige_sym.compensation.program import compensate_nc
     from pige_sym.kernels import load_kernels
-    from pige_sym.nc.compensate import compensate_nc
     from pige_sym.nc.program import parse_program
 
     code = "wC'A'bXYZ(C1)t"

@@ -24,6 +24,7 @@ import os
 import platform
 import sys
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -56,22 +57,45 @@ class Row:
     note: str = ""
 
 
-def machine_info() -> list[str]:
-    cpu = platform.processor() or platform.machine()
+def cpu_model() -> str:
+    """The processor as the kernel names it (``/proc/cpuinfo``: model name, vendor, family/model/stepping; a
+    hypervisor's flag said), else what ``platform`` knows."""
+    fields: dict[str, str] = {}
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
+            key, _, value = line.partition(":")
+            fields.setdefault(key.strip(), value.strip())
     except OSError:
-        pass
+        return platform.processor() or platform.machine()
+    name = fields.get("model name") or platform.processor() or platform.machine()
+    ids = ", ".join(f"{k} {fields[k2]}" for k, k2 in (("family", "cpu family"), ("model", "model"),
+                                                       ("stepping", "stepping")) if k2 in fields)
+    vendor = fields.get("vendor_id", "")
+    virtual = "; virtual machine" if " hypervisor" in f" {fields.get('flags', '')} " else ""
+    details = "; ".join(x for x in (vendor, ids) if x) + virtual
+    return f"{name} ({details})" if details else name
+
+
+def load_average() -> str:
+    """The 1, 5 and 15 minute load averages, as ``os.getloadavg`` gives them."""
+    try:
+        return ", ".join(f"{v:.2f}" for v in os.getloadavg())
+    except OSError:
+        return "unknown"
+
+
+def machine_info(load_before: str, load_after: str) -> list[str]:
+    """The header's lines: processor, cores, load average at the start and the end of the run, versions."""
     blas = "unknown"
     try:
         cfg = np.show_config(mode="dicts")
         blas = cfg["Build Dependencies"]["blas"]["name"]  # type: ignore[index]
     except Exception:  # noqa: BLE001 - informational only
         pass
-    return [f"- CPU: {cpu}", f"- cores: {os.cpu_count()}",
+    return [f"- CPU: {cpu_model()}", f"- cores: {os.cpu_count()}",
+            f"- load average (1, 5, 15 min) at the start of the run: {load_before}; at its end: {load_after} "
+            "(other jobs on a shared machine slow the times; the ratios compare rows of this one run)",
+            f"- run: {time.strftime('%Y-%m-%d %H:%M %Z')}",
             f"- Python {platform.python_version()}, NumPy {np.__version__}, BLAS: {blas}"]
 
 
@@ -321,6 +345,7 @@ def main() -> int:
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "RESULTS.md"))
     ap.add_argument("--no-extra", action="store_true", help="skip the benchmarks/bench_*.py sections")
     args = ap.parse_args()
+    load_before = load_average()
     sizes = [30, 1000] if args.quick else [30, 1000, 100_000, 1_000_000]
     id_sizes = [30, 1000] if args.quick else [30, 1000, 1_000_000]
     rows: list[Row] = []
@@ -333,9 +358,11 @@ def main() -> int:
     rows.append(Row("jacobian", "  of which: basis (cos/sin + products)", sizes[-1],
                     median_seconds(lambda: kern.basis(ang), 3)))
     bench_identification(rows, id_sizes, machine)
-    text = render(rows, machine_info() + [f"- machine code benchmarked: {machine}"], evaluate_targets(rows))
-    if not args.no_extra:
-        text += "\n" + "\n\n".join(extra_sections()) + "\n"
+    extra = [] if args.no_extra else extra_sections()
+    info = machine_info(load_before, load_average()) + [f"- machine code benchmarked: {machine}"]
+    text = render(rows, info, evaluate_targets(rows))
+    if extra:
+        text += "\n" + "\n\n".join(extra) + "\n"
     Path(args.out).write_text(text + "\n")
     print(text)
     return 0

@@ -35,12 +35,12 @@ from pige_sym.constants import DEFAULT_BALL_MM, DEFAULT_MACHINE
 
 if TYPE_CHECKING:
     from pige_sym.compensation.parameters import CompensationParameters
+    from pige_sym.compensation.result import Compensation
     from pige_sym.diagnosis.joint import JointDiagnosis
     from pige_sym.diagnosis.results import DiagnosisResult
     from pige_sym.identification.joint import JointResult
     from pige_sym.identification.result import IdentificationResult
     from pige_sym.measurements.measurement import Measurement
-    from pige_sym.nc.compensate import CompensationResult
     from pige_sym.planning.plan import Plan
     from pige_sym.verdict.check import CheckResult
 
@@ -249,7 +249,7 @@ def identify_files(paths: Sequence[PathLike], *, with_zero: bool = False) -> Joi
     return identify_joint(read_files(paths), with_zero=with_zero)
 
 
-def diagnose_files(paths: Sequence[PathLike], *, progress: bool = False) -> JointDiagnosis:
+def diagnose_files(paths: Sequence[PathLike], *, progress: bool = False, exclude: Sequence[str] = ()) -> JointDiagnosis:
     """Diagnose several files of one machine (``pige diagnose F1 F2 ...``).
 
     Each R-test or probe file gets its own catalogue diagnosis; ballbar setups are checked for
@@ -262,6 +262,8 @@ def diagnose_files(paths: Sequence[PathLike], *, progress: bool = False) -> Join
     paths : sequence of path-like
     progress : bool
         Progress bars of the per-file diagnoses on stderr.
+    exclude : sequence of str
+        Catalogue ids the per-file diagnoses leave out (``--map``: the mapped axes' one-harmonic motions).
 
     Returns
     -------
@@ -288,7 +290,7 @@ def diagnose_files(paths: Sequence[PathLike], *, progress: bool = False) -> Join
     from pige_sym.diagnosis.joint import diagnose_joint
     from pige_sym.measurements.sets import read_files
 
-    return diagnose_joint(read_files(paths), progress=progress)
+    return diagnose_joint(read_files(paths), progress=progress, exclude=exclude)
 
 
 def diagnose(data: Measurement | PathLike, *, candidates: Sequence[str] | None = None,
@@ -384,7 +386,7 @@ def compensate(program: PathLike,
                parameters: IdentificationResult | DiagnosisResult | CompensationParameters | PathLike, *,
                machine: str | None = None, dialect: str | None = None, pass_through: bool = False,
                max_change_mm: float | None = None, max_change_deg: float | None = None, allow_missing: bool = False,
-               rtcp_on: Sequence[str] = (), rtcp_off: Sequence[str] = (), enter: str = "weighed") -> CompensationResult:
+               rtcp_on: Sequence[str] = (), rtcp_off: Sequence[str] = (), enter: str = "weighed") -> Compensation:
     """Rewrite an NC program so the tool lands where the nominal program intended (``pige compensate``).
 
     The output is in the program's own dialect, read back and verified before it is returned;
@@ -416,8 +418,9 @@ def compensate(program: PathLike,
 
     Returns
     -------
-    CompensationResult
-        ``text`` (the compensated program) and ``report`` (changed blocks, largest change, notes).
+    Compensation
+        The compensation stage's result (:mod:`pige_sym.compensation.result`): ``text`` (the compensated program),
+        ``report`` (changed blocks, largest change, notes), ``weighing``, ``undetermined``, ``advice``.
 
     Examples
     --------
@@ -430,9 +433,8 @@ def compensate(program: PathLike,
     >>> out.report.compensated, out.report.moves
     (1, 1)
     """
+    from pige_sym.compensation import stage
     from pige_sym.compensation.parameters import CompensationParameters, load_parameters, parameters_from_result
-    from pige_sym.constants import DEFAULT_MAX_CHANGE_DEG, DEFAULT_MAX_CHANGE_MM
-    from pige_sym.nc.compensate import compensate_nc
     from pige_sym.nc.program_file import read_program
 
     text = read_program(program)
@@ -442,10 +444,8 @@ def compensate(program: PathLike,
         params = load_parameters(parameters, machine, allow_missing=allow_missing)
     else:
         params = parameters_from_result(parameters, machine, allow_missing=allow_missing)
-    return compensate_nc(text, params, path=str(program), dialect=dialect, pass_through=pass_through,
-                         max_change_mm=DEFAULT_MAX_CHANGE_MM if max_change_mm is None else max_change_mm,
-                         max_change_deg=DEFAULT_MAX_CHANGE_DEG if max_change_deg is None else max_change_deg,
-                         rtcp_on=tuple(rtcp_on), rtcp_off=tuple(rtcp_off), enter=enter)
+    return stage.compensate(params, enter=enter, program=stage.ProgramRequest(
+        text, str(program), dialect, pass_through, max_change_mm, max_change_deg, tuple(rtcp_on), tuple(rtcp_off)))
 
 
 def plan(machine: str = DEFAULT_MACHINE, *, points: int = 30, limits: Sequence[str] = (), noise_um: float = 0.25,

@@ -78,6 +78,11 @@ class CompensationError(PigeError):
     """The parameters cannot be used for compensation as they are."""
 
 
+class GuardStopped(PigeError):
+    """A guard of the LinuxCNC cycle stopped a run before it identified (the sphere radius found): nothing is stored
+    or proposed; the message says what to check."""
+
+
 class HistoryError(PigeError):
     """The history database cannot be used as it is: damaged (a page, a table, a stored value), or an estimate no
     machine has; the message names the database, what is wrong (the run and field when known) and how to recover.

@@ -20,9 +20,10 @@ import numpy as np
 
 from pige_sym.cli.main import main
 from pige_sym.identification.subset import SubsetFit
-from pige_sym.verdict.checkup.limits import TRUST_DOF
+from pige_sym.verdict.checkup.judging import flags, fleet_series, judge
 from pige_sym.verdict.checkup.reference import chart_state
-from pige_sym.verdict.checkup.routine import CheckupOptions, judge
+from pige_sym.verdict.checkup.routine import CheckupOptions
+from pige_sym.verdict.checkup.to_enter import checkup_changes
 from pige_sym.verdict.history.store import RunRecord
 
 MACHINE = "wC'A'bXYZ(C1)t"
@@ -95,56 +96,68 @@ class Design:
 
 @dataclass
 class ChartSim:
-    """One machine's history in memory, judged check-up by check-up by the command's own chart code."""
+    """One machine's history in memory, judged check-up by check-up by the command's own code (the chart, the
+    scatter's posterior with the ``fleet``'s runs, the limits, the changes to enter)."""
 
     design: Design
     rng: np.random.Generator
     tolerance: float = 50.0
     extra_scatter: float = 0.0  # run-to-run scatter beyond the measurement noise, in units of the check-up std
+    scatter_um: float = 0.0  # run-to-run std of each axis-line position [µm] (re-clamping, temperature), every run
+    scatter_factor: dict[str, float] = field(default_factory=dict)  # per PIGE, times scatter_um (default 1)
     alpha: float = 0.01
+    machine_id: str = "SIM"
+    fleet: list[list[RunRecord]] = field(default_factory=list)
     runs: list[RunRecord] = field(default_factory=list)
     verdicts: list[str] = field(default_factory=list)
+    results: list[Any] = field(default_factory=list)
+
+    def moved(self, truth: dict[str, float]) -> dict[str, float]:
+        """The machine at one run: its axis-line positions moved by the run-to-run scatter."""
+        return {n: v + (self.scatter_um * self.scatter_factor.get(n, 1.0) * float(self.rng.standard_normal())
+                        if n in FREE else 0.0) for n, v in truth.items()}
 
     def calibrate(self, truth: dict[str, float], when: datetime) -> None:
+        truth = self.moved(truth)
         err = self.rng.multivariate_normal(np.zeros(8), self.design.full_cov)
         values = np.array([truth[n] for n in LOCATION]) + err
         std = np.sqrt(np.diag(self.design.full_cov))
-        self.runs.append(_record(len(self.runs) + 1, when, "full", LOCATION, values, std, self.design.full_cov, 400))
+        self.runs.append(_record(len(self.runs) + 1, when, "full", LOCATION, values, std, self.design.full_cov, 400,
+                                 machine_id=self.machine_id))
 
     def checkup(self, truth: dict[str, float], when: datetime, corrected: bool = False) -> str:
         """Draw the check-up estimate of ``truth`` (the held values off by the last calibration's errors), judge it,
         store it; its verdict."""
         d = self.design
-        full = [r for r in self.runs if r.kind == "full"][-1]
-        held_names = [n for n in LOCATION if n not in FREE]
-        held = {n: float(full.values[LOCATION.index(n)]) for n in held_names}
-        bias = -d.sensitivity @ np.array([held[n] - truth[n] for n in held_names])
+        truth = self.moved(truth)
+        state = chart_state(self.runs, FREE, "sim", corrected=corrected, location=LOCATION)
+        bias = -d.sensitivity @ np.array([state.held[n] - truth[n] for n in state.held])
         extra = self.rng.standard_normal(4) * self.extra_scatter * d.checkup_std
         x = np.array([truth[n] for n in FREE]) + bias + extra + self.rng.multivariate_normal(np.zeros(4),
                                                                                               d.checkup_cov)
         scale = np.sqrt(self.rng.chisquare(d.checkup_dof) / d.checkup_dof)
-        fit = SubsetFit(MACHINE, list(FREE), {n: "um" for n in FREE}, x, d.checkup_std * scale,
-                        d.checkup_cov * scale**2, held, d.checkup_dof, 0.3, 27, sensitivity=d.sensitivity)
-        state = chart_state(self.runs, FREE, "sim", corrected=corrected, location=LOCATION)
+        own = d.checkup_cov * scale**2
+        cov = own + d.sensitivity @ state.held_covariance @ d.sensitivity.T
+        fit = SubsetFit(MACHINE, list(FREE), {n: "um" for n in FREE}, x, np.sqrt(np.diag(cov)), cov, state.held,
+                        d.checkup_dof, 0.3, 27, sensitivity=d.sensitivity, fit_covariance=own)
         opts = CheckupOptions(alpha=self.alpha, corrected=corrected)
         t_now = (when - datetime.fromisoformat(state.origin)).total_seconds() / 3600.0
-        items, verdict = judge(fit, state, dict.fromkeys(FREE, self.tolerance), opts, t_now)
-        outside = {i.name: bool(i.limit is not None and i.limit.outside) for i in items}
-        flagged = {i.name: bool(outside[i.name] and i.limit is not None and not i.limit.provisional) for i in items}
-        in_control = {i.name: not (flagged[i.name] and i.limit is not None and i.limit.dof >= TRUST_DOF)
-                      for i in items}
-        info = {"signature": "sim", "in_control": in_control, "outside": outside, "flagged": flagged,
-                "after_correction": corrected,
-                "to_enter": {n: float(v) for n, v in zip(FREE, x, strict=True)}}
-        rec = _record(len(self.runs) + 1, when, "checkup", FREE, x, fit.std, fit.covariance, fit.dof, info, verdict)
+        items, verdict = judge(fit, state, dict.fromkeys(FREE, self.tolerance), opts, t_now,
+                               fleet_series(self.fleet, LOCATION))
+        changes = checkup_changes(fit, None, opts, state)
+        info = {"signature": "sim", "after_correction": corrected, **flags(items), "to_enter": changes.entered}
+        rec = _record(len(self.runs) + 1, when, "checkup", FREE, x, fit.std, fit.covariance, fit.dof, info, verdict,
+                      machine_id=self.machine_id)
         self.runs.append(rec)
         self.verdicts.append(verdict)
+        self.results.append((items, changes, state))
         return verdict
 
 
 def _record(run_id: int, when: datetime, kind: str, names: list[str], values: np.ndarray, std: np.ndarray,
-            cov: np.ndarray, dof: int, checkup: dict[str, Any] | None = None, verdict: str | None = None) -> RunRecord:
-    return RunRecord(run_id, "SIM", f"run{run_id}", f"{run_id:064x}", when.isoformat(timespec="seconds"), "--date",
+            cov: np.ndarray, dof: int, checkup: dict[str, Any] | None = None, verdict: str | None = None, *,
+            machine_id: str = "SIM") -> RunRecord:
+    return RunRecord(run_id, machine_id, f"run{run_id}", f"{run_id:064x}", when.isoformat(timespec="seconds"), "--date",
                      "", MACHINE, kind, list(names), {n: "um" for n in names}, np.asarray(values, dtype=float),
                      np.asarray(std, dtype=float), np.asarray(cov, dtype=float), dof, 0.3, [], verdict, None, kind,
                      SETUP if kind == "full" else None, checkup)

@@ -9,8 +9,8 @@ codegen         code string → symbolic model → kernel source (the only SymPy
 kernels         loading the generated kernels (``generated/``, shipped or user cache)
 measurements    file formats, readers and writers of every instrument; the JSON schema
 model           the runtime error model: effects beyond the PIGEs, projections, test trajectories
-compensation    compensated kinematics and controller corrections (model side)
 nc              G-code: lexer, dialects, interpreter, rewrite, read-back, test programs
+compensation    the compensation stage: what to enter, the corrected program and controller entries
 simulation      synthetic measurements and instruments on a machine with known errors
 identification  least squares with uncertainty and identifiability; studies
 diagnosis       what the PIGE model misses: candidates, selection, results
@@ -43,8 +43,8 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("kernels", ("kernels",)),
     ("measurements", ("measurements",)),
     ("model", ("model",)),
-    ("compensation", ("compensation",)),
     ("nc", ("nc",)),
+    ("compensation", ("compensation",)),
     ("simulation", ("simulation",)),
     ("identification", ("identification",)),
     ("diagnosis", ("diagnosis",)),
@@ -53,7 +53,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("acquisition", ("acquisition",)),
     ("report", ("report",)),
     ("api", ("api",)),
-    ("cli", ("cli", "__main__")),
+    ("cli", ("cli", "__main__", "cycle")),
 ]
 LEVEL = {top: i for i, (_, tops) in enumerate(LAYERS) for top in tops}
 
@@ -218,3 +218,37 @@ def test_the_readme_names_every_module_of_every_stage() -> None:
                if p.name != "__init__.py" and p.parent.name != "cli" and not _is_generated(p)
                and f"`{p.name}`" not in section]
     assert not missing, f"README's architecture table does not name: {missing}"
+
+
+#: What only the compensation stage does (:mod:`pige_sym.compensation.stage`): weigh the estimates, correct poses,
+#: interpret, rewrite and read back an NC program.  The report prints the stage's result object (issue 50, item 11:
+#: it used to interpret the program four times and weigh again, report → nc → compensation → report → nc).
+STAGE_ONLY = ("pige_sym.compensation.weighing", "pige_sym.compensation.program", "pige_sym.compensation.kinematics",
+              "pige_sym.compensation.controllers", "pige_sym.nc.rewrite", "pige_sym.nc.interpreter",
+              "pige_sym.nc.verify", "pige_sym.nc.program")
+
+
+def _stage_only_imports(graph: dict[str, set[str]], prefix: str) -> dict[str, list[str]]:
+    return {m: sorted(i for i in imports if any(i == s or i.startswith(s + ".") for s in STAGE_ONLY))
+            for m, imports in graph.items() if m == prefix or m.startswith(prefix + ".")}
+
+
+def test_the_report_prints_the_compensation_stage_result() -> None:
+    found = {m: bad for m, bad in _stage_only_imports(_graph(), "pige_sym.report").items() if bad}
+    assert not found, f"the report computes compensation itself (render pige_sym.compensation.result instead): {found}"
+
+
+def test_the_stage_rule_catches_a_report_that_weighs() -> None:
+    graph = {"pige_sym.report.x": {"pige_sym.compensation.weighing", "pige_sym.compensation.result"},
+             "pige_sym.report.y": {"pige_sym.nc.rewrite"}, "pige_sym.cli.z": {"pige_sym.nc.rewrite"}}
+    assert _stage_only_imports(graph, "pige_sym.report") == {"pige_sym.report.x": ["pige_sym.compensation.weighing"],
+                                                             "pige_sym.report.y": ["pige_sym.nc.rewrite"]}
+
+
+def test_the_cli_and_checkup_print_from_the_stage() -> None:
+    """``pige compensate`` and the check-up call the stage; neither weighs nor rewrites itself."""
+    graph = _graph()
+    for module in ("pige_sym.cli.compensate", "pige_sym.verdict.checkup.to_enter"):
+        assert "pige_sym.compensation.stage" in graph[module]
+        assert not {"pige_sym.compensation.program", "pige_sym.nc.rewrite"} & graph[module]
+    assert "pige_sym.compensation.stage" in graph["pige_sym.report.before_after"]

@@ -11,13 +11,13 @@ from pige_sym.cli.main import main
 from pige_sym.compensation.controllers.axis_lines import controller_corrections
 from pige_sym.compensation.kinematics import compensate_poses, tool_point_error
 from pige_sym.compensation.parameters import AngleExtension, CompensationParameters, load_parameters
+from pige_sym.compensation.program import compensate_program
 from pige_sym.compensation.study import compensation_study
 from pige_sym.errors import FileFormatError, InputError
 from pige_sym.identification.least_squares import identify
 from pige_sym.kernels import load_kernels
 from pige_sym.model.effects import EffectSpec
 from pige_sym.model.trajectories import cone_frustum, figure_eight, steps
-from pige_sym.nc.compensate import compensate_program
 from pige_sym.nc.program import NCProgramError, make_rtest_program
 from pige_sym.simulation.simulator import random_pige, simulate
 
@@ -393,7 +393,7 @@ def test_json_output_of_simulate_and_compensate(tmp_path, capsys):
 
 def test_controller_styles_print_the_deltas_with_their_signs():
     """Hand-checked values; every style's chain is rebuilt from its manual in tests/test_controller_<name>.py."""
-    from pige_sym.compensation.controllers import format_controller
+    from pige_sym.compensation.stage import format_controller
 
     values = {"EY0A": 12.0, "EZ0A": -9.0, "EX0C": -14.0, "EY0C": 10.0, "EA0A": 100.0}
     params = _params(AC, values)

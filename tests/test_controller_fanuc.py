@@ -36,8 +36,8 @@ from test_controller_truth import (
     rotation,
 )
 
-from pige_sym.compensation.controllers import format_controller
 from pige_sym.compensation.controllers.scope import representable
+from pige_sym.compensation.stage import format_controller
 from pige_sym.errors import InputError
 
 NUMBER = re.compile(r"No\. (197\d\d) ([+-][\d.]+)")

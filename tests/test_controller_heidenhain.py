@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from test_controller_truth import SHIPPED, UNIT, Machine, assert_follows_model, poses, random_machine, rotation
 
-from pige_sym.compensation.controllers import format_controller
+from pige_sym.compensation.stage import format_controller
 from pige_sym.errors import InputError
 
 GROUP = re.compile(r"^  Trans rows (before|after|between) MachAxis (\w+)(?: and MachAxis (\w+))? .*?: "

@@ -28,11 +28,11 @@ import pytest
 from test_controller_truth import AC, BC, Machine, assert_follows_model, poses, random_machine
 
 from pige_sym.cli.main import main
-from pige_sym.compensation.controllers import format_controller
 from pige_sym.compensation.controllers.hal_config import read_current
 from pige_sym.compensation.controllers.linuxcnc import linuxcnc_trt_deltas
 from pige_sym.compensation.controllers.scope import representable, tool_point_summary
 from pige_sym.compensation.parameters import CompensationParameters
+from pige_sym.compensation.stage import format_controller
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
 

@@ -35,8 +35,8 @@ from test_controller_truth import (
     rotation,
 )
 
-from pige_sym.compensation.controllers import format_controller
 from pige_sym.compensation.controllers.scope import representable
+from pige_sym.compensation.stage import format_controller
 from pige_sym.kernels import load_kernels
 
 #: Basic parameters of the offset vectors (x component) and of v1, v2; fine offset = basic + 40.

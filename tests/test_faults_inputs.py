@@ -362,7 +362,7 @@ def test_one_code_for_both_kinematics_switches_is_refused(tmp_path, capsys, off,
                           "100,0,50", "--sphere-radius", "12.5", "--stylus-radius", "1.5", "--stylus-tool", "9",
                           "--stylus-length", "120", "--rtcp-off", off, "--rtcp-on", on, "--out", str(out))[::2], said)
     assert not out.exists()
-    from pige_sym.nc.compensate import with_rtcp_codes
+    from pige_sym.compensation.program import with_rtcp_codes
     from pige_sym.nc.dialects import get_dialect
 
     with pytest.raises(InputError, match=said):  # the NC rewrite declares the same codes the same way
@@ -399,8 +399,9 @@ def _in_memory(machine: str, **change: object) -> object:
 def test_no_controller_entry_is_made_from_values_beyond_physical_bounds(machine, change, said) -> None:
     """Check before writing: whatever built the parameters (a script, not the file reader), every controller refuses
     values no machine has before it renders a line."""
-    from pige_sym.compensation.controllers import controller_names, format_controller
-    from pige_sym.nc.compensate import compensate_nc
+    from pige_sym.compensation.controllers import controller_names
+    from pige_sym.compensation.program import compensate_nc
+    from pige_sym.compensation.stage import format_controller
 
     params = _in_memory(machine, **change)
     for style in controller_names():

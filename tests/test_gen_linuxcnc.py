@@ -386,8 +386,8 @@ def test_the_pins_pige_compensate_prints_correct_the_exact_machine(models, code:
     """``pige compensate --controller linuxcnc``: its setp lines, entered into the model, put the tool point of
     the exact machine on target (second order apart); an undetermined PIGE gets no line."""
     from pige_sym.codegen.targets import linuxcnc_pins
-    from pige_sym.compensation.controllers import format_controller
     from pige_sym.compensation.parameters import CompensationParameters
+    from pige_sym.compensation.stage import format_controller
 
     m = models[code]
     kin, n = m.kin, 100

@@ -200,3 +200,49 @@ def test_render_model_c_takes_a_c_identifier_as_prefix() -> None:
     with pytest.raises(InputError, match="C identifier"):
         render_model_c(SHIPPED_MACHINES[0], "my-kins")
     assert "my_kins_inverse(const my_kins_params *p" in render_model_c(SHIPPED_MACHINES[0], "my_kins")
+
+
+def test_the_component_section_of_compensate_loads_whole_in_a_hal_session(compiled, tmp_path, request) -> None:
+    """``pige compensate --controller linuxcnc --out-dir``'s ``pige-kins.hal`` pasted whole after the component and
+    motmod are loaded: every ``setp`` names a pin and every net (the tool length, each joint's velocity) links
+    (issue 50, item 9: the nets used to be left to the reader)."""
+    import json
+
+    reason = _smoke_prerequisites()
+    if reason:
+        pytest.skip(reason)
+    code = "wC'A'bXYZ(C1)t"
+    name = linuxcnc_pins.default_name(code)
+    c = [float(a) for a in range(0, 360, 30)]
+    params = tmp_path / "maps.json"
+    params.write_text(json.dumps({
+        "machine": code, "pige": {"EX0C": 4.0, "EY0C": -6.0, "EA0C": 12.0, "EB0C": -9.0, "EY0A": 8.0, "EZ0A": -5.0,
+                                  "EB0A": 20.0, "EC0A": -14.0},
+        "error_motions": {"C": {"angle_deg": c, "full_turn": True,
+                                "ECC+": {"value": [3.0 + (i % 3) for i in range(12)]},
+                                "ECC-": {"value": [-3.0 + (i % 2) for i in range(12)]},
+                                "EXC": {"value": [0.5 * (-1) ** i for i in range(12)]}}}}), encoding="utf-8")
+    out = tmp_path / "lcnc"
+    out.mkdir()
+    assert main(["compensate", "--params", str(params), "--controller", "linuxcnc", "--out-dir", str(out)]) == 0
+    section = (out / "pige-kins.hal").read_text(encoding="utf-8")
+    assert "net :tool-offset motion.tooloffset.z" in section and "net pige-vel-a joint.3.vel-cmd" in section
+    mods = tmp_path / "mods"
+    mods.mkdir()
+    fifo = Path(tempfile.mkdtemp(prefix="pige-hal-"))
+    fifo.chmod(0o1777)
+    request.addfinalizer(lambda: shutil.rmtree(fifo, ignore_errors=True))
+    shutil.copy(compiled[code], mods / f"{name}.so")
+    load = "\n".join(SMOKE_HAL.format(name=name, joints=5).splitlines()[:6])  # the component and motmod, loaded
+    check = f"\nshow sig :tool-offset\nshow sig pige-vel-c\ngetp {name}.exc-01\ngetp {name}.map-c-nodes\n"
+    (tmp_path / "paste.hal").write_text(load + "\n" + section + check, encoding="utf-8")
+    (tmp_path / "smoke.sh").write_text(SMOKE_SH, encoding="utf-8")
+    run = subprocess.run(["unshare", "--ipc", "--pid", "--mount", "--fork", "--mount-proc", "sh",
+                          str(tmp_path / "smoke.sh"), str(mods), str(tmp_path / "paste.hal"), str(fifo)],
+                         capture_output=True, text=True, timeout=120)
+    log = run.stdout + run.stderr
+    if "overlay" in log and "mount" in log and run.returncode != 0:
+        pytest.skip(f"no overlay mount here: {log[-300:]}")
+    assert run.returncode == 0, log
+    assert f"{name}.tool-offset" in log and f"{name}.vel-c" in log and "motion.tooloffset.z" in log
+    assert re.search(r"^\s*-0\.5\s*$", log, flags=re.M) and re.search(r"^\s*12\s*$", log, flags=re.M), log

@@ -258,15 +258,19 @@ def test_the_printed_setp_lines_enter_the_weighed_maps(models, tmp_path, capsys)
     m = models[code]
     rng = np.random.default_rng(9)
 
-    def entry(n: int, kind: str, scale: float) -> dict:
-        return {"value": list(rng.normal(scale=scale, size=n)), "std": [0.2] * n, "unit": "um", "kind": kind}
+    def entry(n: int, kind: str, scale: float, unit: str = "um") -> dict:
+        return {"value": list(rng.normal(scale=scale, size=n)), "std": [0.2] * n, "unit": unit, "kind": kind}
 
     grid_c, grid_a = list(np.arange(12) * 30.0), list(np.arange(0.0, 91.0, 30.0))
-    motions_c = {n: entry(12, "radial", 3.0) for n in ("EXC", "EYC", "EZC", "EAC", "EBC")}
-    motions_a = {n: entry(4, "radial", 3.0) for n in ("EYA", "EZA", "EXA", "EBA", "ECA", "EAA")}
+    def unit(n: str) -> str:  # a rotation's unit is urad (the map file's unit is read, issue 47)
+        return "um" if n[1] in "XYZ" else "urad"
+
+    motions_c = {n: entry(12, "radial", 3.0, unit(n)) for n in ("EXC", "EYC", "EZC", "EAC", "EBC")}
+    motions_a = {n: entry(4, "radial", 3.0, unit(n)) for n in ("EYA", "EZA", "EXA", "EBA", "ECA", "EAA")}
     doc = {"machine": code, "pige": {n: 0.0 for n in m.kin.LOCATION_PARAMETERS}, "axis_sense": {"A": -1, "C": -1},
            "error_motions": {"C": {"angle_deg": grid_c, "full_turn": True, **motions_c,
-                                   "ECC+": entry(12, "positioning", 30.0), "ECC-": entry(12, "positioning", 30.0)},
+                                   "ECC+": entry(12, "positioning", 30.0, "urad"),
+                                   "ECC-": entry(12, "positioning", 30.0, "urad")},
                              "A": {"angle_deg": grid_a, "full_turn": False, **motions_a}}}
     path = tmp_path / "maps.json"
     path.write_text(json.dumps(doc))

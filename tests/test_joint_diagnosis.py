@@ -184,6 +184,7 @@ def test_the_joint_effect_search_keeps_quiet_on_unchanged_machines() -> None:
     assert sum(bool(_unchanged(t).effects) for t in range(60)) <= 2
 
 
+@pytest.mark.slow  # a study: 30 joint diagnoses (9 s of CPU); make test-slow runs it
 def test_the_standard_errors_of_a_joint_effect_hold_up() -> None:
     """Over 30 sets the estimates of an angular error scatter as their reported standard errors say (the
     files' σ re-estimated with the effect: a file that sees it strongly is no longer under-weighted)."""

@@ -170,7 +170,15 @@ def test_the_plan_text_states_the_setups_time_and_what_fewer_setups_miss(capsys:
     assert code == 0
     assert "3 setup(s)" in text and "0, 0, -260" in text and "50, 0, -160" in text and "min" in text
     assert "with setup 1 alone:" in text and "tool-side axis" in text
+    # without the probe's tool and the controller no program command runs as printed: the plan says what to add
+    assert "pige program" not in text and "give --stylus-tool, --stylus-length, --dialect here too" in text
+    probe = ["--stylus-tool", "99", "--stylus-length", "120", "--dialect", "linuxcnc", "--rtcp-off", "M429",
+             "--rtcp-on", "M428"]
+    assert main(["plan", "--instrument", "sphere-probe", "--machine", FORK, *SPHERE, *CASES[FORK][1], "--map", "C,A",
+                 "--map-step", "30", *probe]) == 0
+    text = capsys.readouterr().out
     assert "pige program --instrument sphere-probe" in text and "--map-setups 3" in text
+    assert "--stylus-tool 99 --stylus-length 120" in text and "--out map.ngc" in text
 
 
 def test_a_head_with_one_stylus_cannot_map_its_inner_axis_and_says_why(capsys: pytest.CaptureFixture[str]) -> None:

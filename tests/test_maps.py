@@ -165,7 +165,7 @@ def _true_left(oracle: OracleMachine, program: str, compensated: str) -> float:
     """RMS |tool point − intended point| [µm] of a TRAORI program run on the oracle machine: the controller puts
     the tool where the nominal machine has the commanded workpiece point; the part's point sits where the true
     machine has it."""
-    from pige_sym.nc.compensate import plan
+    from pige_sym.compensation.program import plan
     from pige_sym.nc.dialects import get_dialect
     from pige_sym.nc.interpreter import interpret
 

@@ -16,9 +16,9 @@ from pathlib import Path
 import pytest
 
 from pige_sym.compensation.parameters import CompensationParameters
+from pige_sym.compensation.program import compensate_nc
 from pige_sym.errors import NCProgramError
 from pige_sym.kernels import load_kernels
-from pige_sym.nc.compensate import compensate_nc
 from pige_sym.nc.detect import detect_dialect
 
 CORPUS = Path(__file__).parent / "nc_corpus"

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from pige_sym.compensation.parameters import CompensationParameters
+from pige_sym.compensation.program import compensate_nc
 from pige_sym.kernels import load_kernels
-from pige_sym.nc.compensate import compensate_nc
 from pige_sym.nc.program import make_rtest_program, parse_program
 
 AC = "wC'A'bXYZ(C1)t"

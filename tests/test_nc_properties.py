@@ -9,9 +9,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pige_sym.compensation.parameters import CompensationParameters
+from pige_sym.compensation.program import compensate_nc
 from pige_sym.errors import PigeError
 from pige_sym.kernels import load_kernels
-from pige_sym.nc.compensate import compensate_nc
 from pige_sym.nc.lexer import tokenize
 from pige_sym.nc.program import format_number, parse_program
 

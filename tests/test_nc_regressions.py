@@ -9,9 +9,9 @@ import pytest
 
 from pige_sym.cli.main import main
 from pige_sym.compensation.parameters import CompensationParameters
+from pige_sym.compensation.program import compensate_nc
 from pige_sym.errors import CompensationError, NCProgramError
 from pige_sym.kernels import load_kernels
-from pige_sym.nc.compensate import compensate_nc
 from pige_sym.nc.detect import detect_dialect
 from pige_sym.nc.program import parse_program
 

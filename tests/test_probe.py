@@ -79,10 +79,10 @@ def test_centre_covariance_matches_monte_carlo(moves) -> None:
     else:
         along = np.array([[0.0, 0.0, -1.0]] + [[-n[0], -n[1], 0.0] / np.hypot(n[0], n[1]) for n in normals[1:]])
     kappa = np.abs((along * normals).sum(axis=1))
-    est = []
-    for _ in range(3000):  # s.e. of a covariance entry about 2 % of the largest
-        pts = centre + normals * radius + along * rng.normal(0, sigma, (len(normals), 1))
-        est.append(fit_centres([pts], radius_mm=radius, moves=moves).centres_mm[0])
+    # 3000 poses (s.e. of a covariance entry about 2 % of the largest), fitted in one call: with the radius given
+    # each pose's centre is its own fit; the draws are those of 3000 calls of (6, 1)
+    pts = centre + normals * radius + along * rng.normal(0, sigma, (3000, len(normals), 1))
+    est = fit_centres(list(pts), radius_mm=radius, moves=moves).centres_mm
     predicted = np.linalg.inv((normals / kappa[:, None] ** 2).T @ normals) * (sigma * 1e3) ** 2
     np.testing.assert_allclose(np.cov(np.array(est).T) * 1e6, predicted, rtol=0.1, atol=0.06 * predicted.max())
 
@@ -476,6 +476,7 @@ def test_nine_contacts_at_200_poses_still_end_past_the_overtravel_as_written(dia
     assert setup.overtravel_mm <= check.min_overtravel_mm < setup.overtravel_mm + 0.003
 
 
+@pytest.mark.slow  # a study: 40 diagnoses (19 s of CPU); make test-slow runs it
 def test_the_probe_diagnosis_final_errors_hold_up_with_an_effect(tmp_path) -> None:
     """With an accepted effect the final fit is solved again with the reference pose's correlation and
     τ's own uncertainty (its ∂/∂ln τ column): over 40 runs the PIGE errors / reported std spread ≈ 1

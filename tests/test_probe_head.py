@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -426,19 +427,28 @@ def _program_setup(machine: str, **options):
     return _setup(machine, controller=ctrl, **options)
 
 
-def _vm_log(tmp_path: Path, machine: str, dialect: str, seed: int, *, points: int = 30, pige=None, **wrong):
+def _vm_program(machine: str, dialect: str, points: int, pattern: str = "fixed") -> tuple[Any, str, Any]:
+    """The set-up, pige's probing program of a ``points``-pose cone and its read-back check."""
     from pige_sym.model.trajectories import make_trajectory
     from pige_sym.nc.probe_program import plan_probing
     from pige_sym.nc.probe_readback import verify_probe_program
     from pige_sym.nc.probe_render import render_probe_program
-    from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
 
-    pattern = wrong.pop("pattern", "fixed")
     setup = _program_setup(machine, pattern=pattern)
     traj = make_trajectory(machine, "cone-frustum", points=points)
     plan = plan_probing(setup, traj.angles_deg, traj.description)
     text = render_probe_program(plan, dialect)
-    check = verify_probe_program(text, dialect, setup, plan.rotary_axes)
+    return setup, text, verify_probe_program(text, dialect, setup, plan.rotary_axes)
+
+
+def _vm_log(tmp_path: Path, machine: str, dialect: str, seed: int, *, points: int = 30, pige=None, program=None,
+            **wrong):
+    """pige's program (``program``: one made by :func:`_vm_program` for the same arguments) run on the virtual
+    machine with ``seed``, its log imported."""
+    from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
+
+    pattern = wrong.pop("pattern", "fixed")
+    setup, text, check = program or _vm_program(machine, dialect, points, pattern)
     truth = CASES[machine]["truth"] if pige is None else pige
     vm = ProbeMachine(setup, truth, setup_offset_um=(40.0, -25.0, 15.0), noise_um=wrong.pop("noise_um", 0.5),
                       seed=seed, **wrong)
@@ -465,8 +475,9 @@ def test_the_virtual_machines_standard_errors_are_honest(tmp_path, machine) -> N
     """Over 100 logs of pige's own virtual machine (13-pose cone, 1 µm contact noise) the errors divided by the
     reported standard errors spread 0.94–1.10 (fork head) and 1.01–1.08 (table C + head B)."""
     z = []
+    program = _vm_program(machine, "siemens", 12)  # the same program for every log
     for seed in range(100):
-        _, _, m = _vm_log(tmp_path, machine, "siemens", seed, points=12, noise_um=1.0)
+        _, _, m = _vm_log(tmp_path, machine, "siemens", seed, points=12, noise_um=1.0, program=program)
         r = identify(m)
         truth = CASES[machine]["truth"]
         z.append([(r.value(n) - truth[n]) / r.std[i] for i, n in enumerate(r.parameters)])

@@ -1,5 +1,5 @@
-"""The README runs as written: its "A first session", touch-probe and ballbar shell blocks, in order, in a fresh
-folder.
+"""The README runs as written: its "A first session", check-up, touch-probe and ballbar shell blocks, in order, in a
+fresh folder.
 
 The blocks are taken from the README itself (so they cannot drift), run by bash from a scratch folder laid out
 like the checkout's root (the README says: from the checkout's root; :func:`testdata.scratch_checkout`: a link to
@@ -37,9 +37,9 @@ def test_the_first_session_and_the_probe_demo_run_as_pasted(tmp_path) -> None:
     if not (venv / "bin" / "pige").exists():
         pytest.skip("needs the pige console script (make venv)")
     env = scratch_checkout(tmp_path, Path(os.environ.get("PYTHONPYCACHEPREFIX") or tmp_path / "pycache"))
-    blocks = _blocks("## A first session") + _blocks("## Calibrating with a touch probe") + \
-        _blocks("## Calibrating with a ballbar")
-    assert len(blocks) >= 4
+    blocks = _blocks("## A first session") + _blocks("## The check-up") + \
+        _blocks("## Calibrating with a touch probe") + _blocks("## Calibrating with a ballbar")
+    assert len(blocks) >= 5
     script = strict_script(blocks)
     before = checkout_files()
     done = subprocess.run(["bash", "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
@@ -53,3 +53,5 @@ def test_the_first_session_and_the_probe_demo_run_as_pasted(tmp_path) -> None:
     demo = tmp_path / "probe-demo"
     assert (demo / "probe.csv").exists() and (demo / "report" / "report.html").exists()
     assert "rank 8/8" in done.stdout and (session / "bb_axial_A.csv").exists()
+    assert "check-up of VF2-5AX" in done.stdout and "verdict DRIFTED" in done.stdout  # the C axis line moved 3 um
+    assert "drifted (exit status 1)" in done.stdout

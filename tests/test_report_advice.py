@@ -223,7 +223,7 @@ def test_the_ballbar_next_step_runs(ballbar_report: tuple[list[str], str], tmp_p
     assert main(["diagnose", *files, "--json"]) == 0
     (tmp_path / "joint.json").write_text(capsys.readouterr().out)
     assert main(["compensate", "--params", str(tmp_path / "joint.json"), "--controller", "linuxcnc"]) == 0
-    assert "entered: EY0A, EZ0A, EX0C, EY0C" in capsys.readouterr().out
+    assert "entered by the trt pins: EY0A, EZ0A, EX0C, EY0C" in capsys.readouterr().out
 
 
 def test_an_undecided_ballbar_verdict_says_what_decides_it(ballbar_report: tuple[list[str], str],

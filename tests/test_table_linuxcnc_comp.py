@@ -179,7 +179,7 @@ def test_compensate_writes_the_files_and_prints_the_ini_lines(maps_file, tmp_pat
     assert main(args) == 0, capsys.readouterr().err
     text = capsys.readouterr().out
     assert "[JOINT_4]\nCOMP_FILE = pige_joint4_c.comp\nCOMP_FILE_TYPE = 1" in text
-    assert f"wrote {out / 'pige_joint4_c.comp'} (241 entries)" in text
+    assert f"wrote {out / 'pige_joint4_c.comp'} (241 lines: compensation file pige_joint4_c.comp)" in text
     table = linuxcnc_load((out / "pige_joint4_c.comp").read_text(), comp_type=1)
     assert table[0].size == 241
     assert main(args) == 2  # never over a file without --force

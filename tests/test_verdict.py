@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pige_sym.cli.main import main
+from pige_sym.constants import MAX_PIGE
 from pige_sym.errors import FileFormatError
 from pige_sym.model.trajectories import cone_frustum
 from pige_sym.simulation.simulator import random_pige, simulate
@@ -239,8 +240,8 @@ _values = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(
        defaults=st.dictionaries(st.sampled_from(["um", "urad", "mm"]), _values, max_size=2))
 def test_tolerance_parser_accepts_exactly_positive_finite_numbers(limits: dict[str, object],
                                                                    defaults: dict[str, object]) -> None:
-    def good(v: object) -> bool:
-        return (not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and v > 0)
+    def good(v: object) -> bool:  # a positive finite number, at most MAX_PIGE (issue 47)
+        return (not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= MAX_PIGE)
 
     data = {"format": FMT, "limits": limits, "defaults": defaults}
     valid = all(good(v) for v in limits.values()) and all(good(v) and u != "mm" for u, v in defaults.items()) \

@@ -22,12 +22,12 @@ from pige_sym import api
 from pige_sym.cli.main import main
 from pige_sym.compensation.kinematics import predicted_errors
 from pige_sym.compensation.parameters import CompensationParameters, load_parameters, parameters_from_result
+from pige_sym.compensation.program import compensate_nc, plan
 from pige_sym.compensation.weighing import entered_values, predict, prior_variances
 from pige_sym.errors import FileFormatError
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.axis_sense import to_conventions
 from pige_sym.model.trajectories import make_trajectory
-from pige_sym.nc.compensate import compensate_nc, plan
 from pige_sym.nc.dialects import get_dialect
 from pige_sym.nc.interpreter import interpret
 from pige_sym.nc.program import make_rtest_program

@@ -123,3 +123,38 @@ def map_options_text(args: argparse.Namespace, setups: int) -> str:
     if args.map_offset != 50.0:
         parts.append(f"--map-offset {args.map_offset:g}")
     return " ".join(parts)
+
+
+def identify_map_options(spec: Any) -> str:
+    """``--map C,A --map-step 30 [--map-per-direction C]``: the options ``pige identify`` fits ``spec`` with."""
+    out = f"--map {','.join(spec.axes)} --map-step {spec.step_deg:g}"
+    return out + (f" --map-per-direction {','.join(spec.per_direction)}" if spec.per_direction else "")
+
+
+def map_next_commands(paths: list[str], items: list[tuple[str, Any]], spec: Any, explains: bool) -> list[str]:
+    """What to run next after ``pige diagnose --map`` (:func:`pige_sym.report.map_section.next_commands`, the same
+    commands the map report gives), with the sentence before them."""
+    from pige_sym.report.map_section import next_commands
+
+    commands = next_commands([(str(p), x) for p, (_, x) in zip(paths, items, strict=True)], spec, explains)
+    said = ("the maps explain what the PIGEs miss; write them as a parameter file and correct with them" if explains
+            else "the maps do not explain enough to be worth entering; write the PIGEs as a parameter file and "
+            "correct with them")
+    return [f"next: {said} (the second command corrects an NC program too: give it the program and --out):",
+            *(f"  {c}" for c in commands)]
+
+
+def map_spec_option(args: argparse.Namespace, default_step_deg: float) -> Any:
+    """``--map AXES [--map-step DEG] [--map-per-direction AXES]`` of a command that fits maps from files (diagnose,
+    report) as a MapSpec, None without ``--map`` (the axes and the step checked as identify, plan and program
+    check them: :func:`map_axes`, :func:`map_step`)."""
+    from pige_sym.identification.maps import MapSpec
+
+    if args.map is None:
+        if args.map_step is not None:
+            raise InputError("--map-step goes with --map AXES")
+        if getattr(args, "map_per_direction", None):
+            raise InputError("--map-per-direction goes with --map AXES")
+        return None
+    axes, per_direction = map_axes(args)
+    return MapSpec(axes, map_step(default_step_deg if args.map_step is None else args.map_step, axes), per_direction)

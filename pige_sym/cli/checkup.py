@@ -46,79 +46,101 @@ def _num(x: float | None, fmt: str = "+.3f") -> str:
     return "—" if x is None or not math.isfinite(x) else format(x, fmt)
 
 
-def _rate(item: Any, per_day: bool) -> str:
+def _rate(item: Any) -> str:
+    """The drift per day and its 90 % interval (one unit for the column, whatever the check-ups' spacing)."""
     t = item.trend
     if t is None:
         return "— (too few check-ups)"
-    f = 24.0 if per_day else 1.0
     sig = "" if t.significant else " n.s."
     over = f" ({t.points} flagged)" if t.episode else ""
-    return f"{t.rate * f:+.3g} [{t.rate_low * f:+.3g}, {t.rate_high * f:+.3g}]{sig}{over}"
+    return f"{t.rate * 24:+.3g} [{t.rate_low * 24:+.3g}, {t.rate_high * 24:+.3g}]{sig}{over}"
+
+
+def _at(iso: str | None) -> str:
+    """An ISO time to the minute; ``not bounded`` for None; words (past the year 9999) as they are."""
+    if iso is None:
+        return "not bounded"
+    return iso[:16].replace("T", " ") if iso[:1].isdigit() else iso
 
 
 def _leaves(item: Any, origin: str) -> str:
+    """When the PIGE leaves its tolerance: only where its drift is shown (:mod:`~pige_sym.verdict.checkup.trend`)."""
     from pige_sym.verdict.checkup.routine import when_text as when
 
     t = item.trend
-    if t is None or t.leaves_at is None:
+    if t is None or item.tolerance is None:
         return "—"
-    if not t.significant:
+    if not t.shown:
         return "— (no drift shown)"
-    low, high = when(origin, t.leaves_low), when(origin, t.leaves_high)
-    return f"{when(origin, t.leaves_at)} ({low} .. {high or 'not bounded'})"
+    if t.leaves_at is None:
+        return "— (drifts away from its limit)" if t.rate != 0 else "—"
+    high = _at(when(origin, t.leaves_high))
+    if t.reached:
+        return f"may be outside now (by {high})"
+    return f"{_at(when(origin, t.leaves_at))} ({_at(when(origin, t.leaves_low))} .. {high})"
+
+
+def _columns(rows: list[list[str]], right: set[int]) -> list[str]:
+    """Rows of cells as text, each column as wide as its widest cell (nothing runs into the next)."""
+    widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
+    return ["  ".join(c.rjust(w) if k in right else c.ljust(w) for k, (c, w) in enumerate(zip(r, widths,
+                                                                                             strict=True))).rstrip()
+            for r in rows]
 
 
 def format_checkup(r: Any) -> str:
-    """The check-up as text: verdict, one line per PIGE, what the limits rest on, the changes to enter."""
-    episode = any(p.trend is not None and p.trend.episode for p in r.items)
-    per_day = not episode and _span_hours(r) > 48
-    unit = "day" if per_day else "h"
-    lines = [f"check-up of {r.machine_id} ({r.machine}), run {r.run_id}, measured {r.measured_at}: "
-             f"verdict {r.verdict.upper()}", f"file {r.file}",
-             f"{'PIGE':<6}{'value ± std':>17}{'centre':>9}{'limit ±':>9}{'z':>7}{'tol':>6}  {'status':<10}"
-             f"{'drift /' + unit + ' [90 %]':<34}leaves tolerance (interval)"]
+    """The check-up as text: verdict, one line per PIGE, where the limits came from, the changes, the next step."""
+    unit = ", ".join(sorted({i.unit for i in r.items}))
+    rows = [["PIGE", "value ± std", "centre", "limit ±", "z", "error left", "tol", "status",
+             f"drift [{unit}/day, 90 %]", "leaves its tolerance (interval), UTC"]]
     for it in r.items:
         lim = it.limit
-        lines.append(f"{it.name:<6}{_num(it.value):>9} ± {_num(it.std, '.3f'):<5}{_num(lim and lim.centre):>9}"
-                     f"{_num(lim and lim.half_width, '.3f'):>9}{_num(lim and lim.z and lim.z * 1.0, '+.2f'):>7}"
-                     f"{_num(it.tolerance, 'g'):>6}  {it.status + ('*' if lim and lim.outside else ''):<10}"
-                     f"{_rate(it, per_day):<34}{_leaves(it, r.origin)}")
-    lines.append(f"(z: distance from the centre in limit widths, |z| > 1 outside; * outside its control limits (by "
-                 f"{', '.join(sorted({i.limit.by for i in r.items if i.limit and i.limit.by})) or 'none'}); units "
-                 f"{', '.join(sorted({i.unit for i in r.items}))}; drift over the segment, or over the flagged "
-                 "check-ups of a drift)")
-    lines.append(_limits_line(r))
-    held = ", ".join(f"{n} {v:+.3g}" for n, v in r.held.items())
-    lines.append(f"held at the last full calibration{' less the correction entered' if r.corrected else ''}: {held}")
+        rows.append([it.name, f"{_num(it.value)} ± {_num(it.std, '.3f')}", _num(lim and lim.centre),
+                     _num(lim and lim.half_width, ".3f"), _num(None if lim is None else lim.z, "+.2f"),
+                     _num(it.left), _num(it.tolerance, "g"), it.status + ("*" if lim and lim.outside else ""),
+                     _rate(it), _leaves(it, r.origin)])
+    lines = [f"check-up of {r.machine_id} ({r.machine}), its run {r.run_number}, measured "
+             f"{r.measured_at[:16].replace('T', ' ')} UTC: verdict {r.verdict.upper()}", f"file {r.file}",
+             *_columns(rows, {1, 2, 3, 4, 5, 6})]
+    out = [f"{i.name} by {i.limit.by.replace('+', ' and ')}" for i in r.items if i.limit and i.limit.outside]
+    lines.append(f"* outside its control limits: {'; '.join(out)}" if out else
+                 "no PIGE outside its control limits")
+    lines.append("(z: distance from the centre in limit widths, |z| > 1 outside; error left: what the values in force "
+                 "leave, judged against the tolerance; drift of that error over the segment's check-ups, or over the "
+                 "flagged check-ups of a drift; forecast only where the drift is shown)")
+    lines += _limits_lines(r)
+    from pige_sym.kernels import load_kernels
+
+    units = load_kernels(r.machine).UNITS
+    shown = r.changes.held if r.changes is not None else r.held
+    held = ", ".join(f"{n} {v:+.3g}" + (f" ± {r.changes.std(n):.2g}" if r.changes is not None else "") +
+                     f" {units.get(n, '')}" for n, v in shown.items())
+    less = ", less the correction entered" if r.corrected else ""
+    lines.append(f"held at the values in force (the last full calibration's{less}): {held}")
     if r.verdict != "ok" and r.changes is not None:
-        lines += ["", "changes to enter (weighed by their uncertainty, within --max-change):"]
+        lines += ["", "changes to enter, since the values in force (weighed by their uncertainty, within "
+                      "--max-change; the held PIGEs stay as they are):"]
         lines += [f"  {n:<6}{_num(v, '+.3f') if v is not None else 'not entered':>12}  {r.changes.why[n]}"
                   for n, v in r.changes.entered.items()]
         if r.changes.controller_text:
             lines += ["", f"as pige compensate --controller {r.changes.controller} prints them:",
                       r.changes.controller_text]
-        lines.append("after entering them, run the next check-up with --corrected")
     lines += [f"note: {n}" for n in r.notes]
+    what, command = r.next_step()
+    lines += [f"next step: {what}", f"  {command}"]
     return "\n".join(lines)
 
 
-def _span_hours(r: Any) -> float:
-    from pige_sym.verdict.checkup.reference import hours
-
-    return hours(r.measured_at, r.origin)
-
-
-def _limits_line(r: Any) -> str:
-    lims = [i.limit for i in r.items if i.limit is not None]
-    if not lims:
-        return "limits: none yet (the first check-up of this segment)"
-    lim = lims[0]
-    if lim.provisional:
-        return (f"limits: provisional, from the runs' own standard errors (scatter pooled on {lim.dof} degrees of "
-                f"freedom so far); alpha {r.alpha:g} per check-up over {len(r.items)} PIGEs")
-    return (f"limits: learned, run-to-run scatter pooled on {lim.dof} degrees of freedom, centre of {lim.n_centre} "
-            f"check-up{'s' if lim.n_centre != 1 else ''}; alpha {r.alpha:g} per check-up over {len(r.items)} PIGEs "
-            "(Student t, Bonferroni)")
+def _limits_lines(r: Any) -> list[str]:
+    """Where the limits came from, and each PIGE's run-to-run scatter as learned."""
+    lims = [(i, i.limit) for i in r.items if i.limit is not None]
+    head = f"limits: {r.limits_source()}; alpha {r.alpha:g} per check-up over {len(r.items)} PIGEs"
+    learned = [f"{i.name} {lim.scatter:.2g} ({lim.scatter_low:.2g}..{lim.scatter_high:.2g})" for i, lim in lims
+               if not lim.provisional and lim.scatter is not None]
+    if not learned:
+        return [head]
+    return [head, f"run-to-run scatter [{', '.join(sorted({i.unit for i in r.items}))}] (90 % interval): "
+                  f"{', '.join(learned)}"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from pige_sym.compensation.controllers import controller_names
 from pige_sym.constants import (
@@ -16,9 +16,6 @@ from pige_sym.constants import (
 )
 from pige_sym.errors import InputError
 from pige_sym.files import atomic_write_text, check_output, to_json
-
-if TYPE_CHECKING:
-    from pige_sym.nc.compensate import CompensationReport
 
 
 def _max_change(text: str) -> tuple[float, float]:
@@ -69,58 +66,77 @@ def _current(args: argparse.Namespace) -> Any:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pige_sym import api
-    from pige_sym.compensation.controllers import check_before_writing, entered_for_controller, format_controller
-    from pige_sym.compensation.controllers.axis_lines import controller_corrections
     from pige_sym.compensation.parameters import load_parameters
+    from pige_sym.compensation.stage import ProgramRequest, compensate
     from pige_sym.nc.program_file import read_program
 
     text = read_program(args.program) if args.program else None
     machine = _machine(args, text)
     params = load_parameters(args.params, machine, allow_missing=args.allow_missing)
     params.axis_sense = _axis_sense(args, params)
-    for name in params.ignored:
-        if "--allow-missing" in name:
-            print(f"warning: {name}")
     current = _current(args)
     max_mm, max_deg = _max_change(args.max_change)
+    options = None
     if args.controller:
         options = _controller_options(args, current, (max_mm, max_deg))
-        check_before_writing(params, args.controller, options=options)  # before the values are weighed
-        entered = entered_for_controller(params, args.enter, _travel(args.travel, params.machine))
-        check_before_writing(entered, args.controller, options=options)
-        if not args.json:
-            print(format_controller(entered, args.controller, carrier=options.carrier, current=current,
-                                    heidenhain_trans=args.heidenhain_trans, machine_axes=options.machine_axes,
-                                    isg_unit_deg=args.isg_unit_deg, limits=options.limits))
-        if args.comp_dir:
-            _write_comp_files(args, entered, options.limits)
     elif args.comp_dir:
         raise InputError("--comp-dir writes LinuxCNC compensation files: give it with --controller linuxcnc")
+    elif args.out_dir:
+        raise InputError("--out-dir writes the controller's entries, one file per target: give it with --controller")
     else:
         _no_controller_options(args)
-    if args.controller and not args.program:
-        if args.json:
-            print(to_json({"machine": params.machine, "parameters_from": params.source,
-                           "axes": controller_corrections(entered)} | _controller_json(entered, args.controller)))
-        return 0
-    if not args.program:
+    if not args.program and not args.controller:
         raise InputError("give a PROGRAM to compensate (or --controller to print the corrected kinematics)")
-    if not args.out:
+    if args.program and not args.out:
         raise InputError("give --out NEW_PROGRAM")
-    out = check_output(args.out, force=args.force, inputs=[args.program, args.params], what="--out")
-    result = api.compensate(args.program, params, dialect=args.dialect, pass_through=args.pass_through,
-                            max_change_mm=max_mm, max_change_deg=max_deg, rtcp_on=args.rtcp_on or (),
-                            rtcp_off=args.rtcp_off or (), enter=args.enter)
-    atomic_write_text(out, result.text, newline="")
-    rep = result.report
+    out = check_output(args.out, force=args.force, inputs=[args.program, args.params], what="--out") \
+        if args.program else None
+    request = None
+    if text is not None:
+        request = ProgramRequest(text, str(args.program), args.dialect, args.pass_through, max_mm, max_deg,
+                                 tuple(args.rtcp_on or ()), tuple(args.rtcp_off or ()))
+    travel = _travel(args.travel, params.machine) if args.controller else None
+    result = compensate(params, program=request, controller=args.controller, options=options, travel=travel,
+                        enter=args.enter)
+    written = _write_controller_files(args, result) if args.controller else []
+    if out is not None and result.program is not None:
+        atomic_write_text(out, result.program.text, newline="")
     if args.json:
-        print(to_json(rep.to_dict() | {"out": str(out), "pige": params.values,
-                                       "extensions": [{"effect": e.spec.id, "options": e.spec.options,
-                                                       "params": e.params} for e in params.extensions]}))
+        print(to_json(_json(args, params, result, out)))
         return 0
-    _print_report(rep, str(out), params.units)
+    if result.controller is not None and not args.out_dir:
+        print(result.controller.text)
+    for line in written:
+        print(line)
+    if result.program is not None:
+        _print_report(result, str(out), params.units)
+    else:
+        _print_after(result)
     return 0
+
+
+def _json(args: argparse.Namespace, params: Any, result: Any, out: Path | None) -> dict[str, Any]:
+    """The JSON of ``pige compensate``: the program's change report or the controller's entries, and the stage's
+    result object (``compensation``)."""
+    from pige_sym.compensation.controllers.axis_lines import controller_corrections
+
+    doc: dict[str, Any] = {"compensation": result.to_dict()}
+    if result.controller is not None:
+        c = result.controller
+        w = c.weighing
+        first = c.choices[0].predicted if c.choices else None  # the controller's own kinematic entries
+        doc |= {"machine": params.machine, "parameters_from": params.source,
+                "axes": controller_corrections(c.entered_parameters),
+                "entered": {n: (v if any(n in ch.values for ch in c.choices if ch.own) else None)
+                            for n, v in w.entered.items()},
+                "predicted_after_um": first.to_dict() if first else None,
+                "predicted_complete_um": c.complete.to_dict() if c.complete else None, "weighing": w.to_dict()}
+    if result.program is not None:
+        doc |= result.program.report.to_dict() | {
+            "out": str(out), "pige": params.values,
+            "extensions": [{"effect": e.spec.id, "options": e.spec.options, "params": e.params}
+                           for e in params.extensions]}
+    return doc
 
 
 #: The options only some controllers read, and the attribute of ``args`` each is in.
@@ -170,22 +186,44 @@ def _machine_axes(args: argparse.Namespace) -> dict[str, str] | None:
     return out
 
 
-def _write_comp_files(args: argparse.Namespace, entered: Any, limits: Any) -> None:
-    """``--comp-dir DIR``: LinuxCNC's ``[JOINT_n]COMP_FILE`` of every positioning map (never over a file without
-    ``--force``)."""
-    from pige_sym.compensation.controllers.tables.linuxcnc_comp import comp_files
+def _write_controller_files(args: argparse.Namespace, result: Any) -> list[str]:
+    """``--comp-dir DIR``: LinuxCNC's ``[JOINT_n]COMP_FILE`` of every positioning map; ``--out-dir DIR``: every
+    section of the controller's entries as its own file.  Never over a file without ``--force``, never over an
+    input; nothing is written unless every target may be."""
+    c = result.controller
+    files: dict[Path, str] = {}
+    if args.comp_dir:
+        if args.controller != "linuxcnc":
+            raise InputError(f"--comp-dir writes LinuxCNC compensation files, not {args.controller}'s: give "
+                             "--controller linuxcnc")
+        comp = {s.file: s.text for s in c.sections if s.kind == "comp"}
+        if not comp:
+            raise InputError(f"--comp-dir: {args.params} holds no positioning map (ECC, EAA, ...): identify with "
+                             "--map")
+        files |= {_folder(args.comp_dir, "--comp-dir") / n: t for n, t in comp.items()}
+    if args.out_dir:
+        from pige_sym.compensation.result import Section
 
-    files = comp_files(entered, limits)
-    if not files:
-        raise InputError(f"--comp-dir: {args.params} holds no positioning map (ECC, EAA, ...): identify with --map")
-    folder = Path(args.comp_dir)
+        sections = c.sections or [Section(f"the {c.name} entries", f"pige_{c.name}.txt", "text", c.text)]
+        files |= {_folder(args.out_dir, "--out-dir") / s.file: s.text for s in sections}
+    inputs = [x for x in (args.params, args.program, args.current if args.current and Path(args.current).exists()
+                          else None) if x]
+    targets = {p: check_output(p, force=args.force, inputs=inputs, what="--out-dir file" if args.out_dir else
+                               "--comp-dir file") for p in files}
+    lines = []
+    names = {s.file: s.name for s in c.sections}
+    for p, text in files.items():
+        atomic_write_text(targets[p], text)
+        what = names.get(p.name, "")
+        lines.append(f"wrote {targets[p]} ({text.count(chr(10))} lines{': ' + what if what else ''})")
+    return lines
+
+
+def _folder(text: str, what: str) -> Path:
+    folder = Path(text)
     if not folder.is_dir():
-        raise InputError(f"--comp-dir {folder}: not an existing folder")
-    targets = {name: check_output(folder / name, force=args.force, inputs=[args.params], what="--comp-dir file")
-               for name in files}
-    for name, text in files.items():
-        atomic_write_text(targets[name], text)
-        print(f"wrote {targets[name]} ({text.count(chr(10))} entries)")
+        raise InputError(f"{what} {folder}: not an existing folder")
+    return folder
 
 
 def _travel(items: list[str] | None, machine: str) -> dict[str, tuple[float, float]]:
@@ -197,28 +235,13 @@ def _travel(items: list[str] | None, machine: str) -> dict[str, tuple[float, flo
                              example="A=-120:30")
 
 
-def _controller_json(params: Any, style: str) -> dict[str, Any]:
-    """``entered`` (what this controller's entries carry; null elsewhere) and the predicted errors."""
-    from pige_sym.compensation.controllers.scope import representable, tool_point_summary
-
-    held = set(representable(params, style))
-    w = params.weighing
-    scope = tool_point_summary(params, style)
-    return {"entered": {n: (v if n in held else None) for n, v in w.entered.items()},
-            "predicted_after_um": scope.controller_only.to_dict() if scope.controller_only else None,
-            "predicted_complete_um": scope.complete.to_dict() if scope.complete else None,
-            "weighing": w.to_dict()}
-
-
-def _print_weighing(rep: CompensationReport, units: dict[str, str]) -> None:
+def _print_weighing(result: Any) -> None:
     from pige_sym.compensation.weighing import weighing_rows
 
-    w = rep.weighing
-    if w is None:
-        return
+    w = result.weighing
     for note in w.notes:
         print(f"note: {note}")
-    for row in weighing_rows(w, units) if w.covariance_from != "none" else []:
+    for row in weighing_rows(w, {}) if w.covariance_from != "none" else []:
         print(f"  {row}")
     p = w.predicted
     if p:
@@ -226,10 +249,26 @@ def _print_weighing(rep: CompensationReport, units: dict[str, str]) -> None:
               f"{p['entered'].text()}")
 
 
-def _print_report(rep: CompensationReport, out: str, units: dict[str, str]) -> None:
+#: The comment marker of each controller's lines: what is said after its entries stays a comment when pasted.
+COMMENT = {"linuxcnc": "# ", "isg": "# ", "siemens": "; "}
+
+
+def _print_after(result: Any) -> None:
+    """What the stage says beyond the entries: values not corrected, advice (as comments of the controller's
+    lines, so that a section pasted whole stays valid)."""
+    mark = COMMENT.get(result.controller.name, "") if result.controller is not None else ""
+    for u in result.undetermined:
+        print(f"{mark}not corrected: {u.name}: {u.why}; {u.remedy}")
+    for a in result.advice:
+        print(f"{mark}advice: {a}")
+
+
+def _print_report(result: Any, out: str, units: dict[str, str]) -> None:
+    rep = result.program.report
     print(f"wrote {out} ({rep.dialect}): {rep.compensated} of {rep.moves} linear moves changed; "
           f"parameters from {rep.parameters_from}; read back and verified")
-    _print_weighing(rep, units)
+    if rep.weighing is not None:
+        _print_weighing(result)
     print(f"largest change: {rep.max_change_mm:.4f} mm, {rep.max_change_deg:.4f} deg "
           f"(limits {rep.limits['mm']:g} mm, {rep.limits['deg']:g} deg)")
     for c in rep.changes[:20]:
@@ -251,6 +290,7 @@ def _print_report(rep: CompensationReport, out: str, units: dict[str, str]) -> N
         print(f"note: {note}")
     if rep.not_compensated_parameters:
         print("not compensated: " + ", ".join(rep.not_compensated_parameters))
+    _print_after(result)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -310,6 +350,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--isg-unit-deg", type=float, metavar="U",
                    help="ISG/TwinCAT CNC: the angle [deg] of one unit of a rotary axis' kw.ssfk list (not settled "
                         "by the manual: read it from your axis' list)")
+    p.add_argument("--out-dir", metavar="DIR", help="with --controller: write the entries into DIR, one file per "
+                   "target (LinuxCNC: the trt pins' HAL lines, the COMP_FILE INI lines and files, pige's "
+                   "component's INI and HAL lines), instead of printing them; an existing folder, files replaced "
+                   "only with --force")
     p.add_argument("--comp-dir", metavar="DIR", help="with --controller linuxcnc: write each rotary joint's "
                    "positioning map as a LinuxCNC COMP_FILE into DIR (an existing folder; replaced only with --force)")
     p.add_argument("--json", action="store_true", help="print the change report as one JSON object")

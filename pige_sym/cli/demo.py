@@ -165,18 +165,19 @@ def _analyse(args: argparse.Namespace, kern: Any, csv: Path, out: Path, pige: di
 def _compensate_and_report(args: argparse.Namespace, code: str, csv: Path, nc_path: Path, diag_json: Path,
                            out: Path) -> None:
     """Stages 7-8: the compensated test program, the controller corrections and the report."""
-    from pige_sym.compensation.controllers import format_controller
     from pige_sym.compensation.parameters import load_parameters
-    from pige_sym.nc.compensate import compensate_program
+    from pige_sym.compensation.stage import ProgramRequest, compensate
     from pige_sym.report import gather_report, write_report
 
     _stage(7, "compensation of the test program")
     params = load_parameters(diag_json, code)
     comp_path = nc_path.with_name(f"{nc_path.stem}_comp.mpf")
-    atomic_write_text(comp_path, compensate_program(nc_path.read_text(encoding="utf-8"), params, path=str(nc_path)),
-                      newline="")
+    result = compensate(params, program=ProgramRequest(nc_path.read_text(encoding="utf-8"), str(nc_path)),
+                        controller="table")
+    assert result.program is not None and result.controller is not None
+    atomic_write_text(comp_path, result.program.text, newline="")
     print(f"wrote {comp_path} (parameters from {params.source})")
-    print(format_controller(params, "table"))
+    print(result.controller.text)
     _stage(8, "report: in tolerance?")
     tolerances = out / "tolerances.json"
     generic = to_json({"format": "pige-tolerances 1", "description": "10 um / 20 urad per PIGE",

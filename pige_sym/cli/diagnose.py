@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from pige_sym.cli._setup import show_progress
 
@@ -32,38 +33,57 @@ def _run_several(args: argparse.Namespace) -> int:
 
     if args.plots:
         raise InputError("--plots draws the residuals of one R-test or probe file: diagnose that file alone")
-    result = api.diagnose_files(args.files, progress=show_progress(args.json))
-    gain = _map_gain(args)
+    spec = _map_spec(args)
+    result = api.diagnose_files(args.files, progress=show_progress(args.json), exclude=_mapped_effects(spec))
+    gain = _map_gain(args, spec)
     if args.json:
         print(to_json(result.to_dict() | gain))
     else:
         print(format_joint_diagnosis(result) + plan_pointer(result.final, result.joint.files))
-        _print_map_gain(gain)
+        _print_map_gain(args, spec, gain)
     return 0
 
 
-def _map_gain(args: argparse.Namespace) -> dict[str, object]:
-    """``--map AXES``: the held-out gain of the error maps (:mod:`pige_sym.diagnosis.map_gain`), as JSON."""
-    if args.map is None:
-        if args.map_step is not None:
-            from pige_sym.errors import InputError
+def _map_spec(args: argparse.Namespace) -> Any:
+    """``--map AXES [--map-step DEG] [--map-per-direction AXES]`` as a MapSpec (None without --map)."""
+    from pige_sym.cli._maps import map_spec_option
 
-            raise InputError("--map-step goes with --map AXES")
+    return map_spec_option(args, DIAGNOSE_MAP_STEP_DEG)
+
+
+#: The default grid of ``pige diagnose --map`` [deg] (a coarse map answers "does a map explain the residual").
+DIAGNOSE_MAP_STEP_DEG = 30.0
+
+
+def _mapped_effects(spec: Any) -> list[str]:
+    from pige_sym.diagnosis.map_gain import mapped_effects
+
+    return mapped_effects(spec)
+
+
+def _map_gain(args: argparse.Namespace, spec: Any) -> dict[str, object]:
+    """``--map AXES``: the held-out gain of the error maps (:mod:`pige_sym.diagnosis.map_gain`), as JSON."""
+    if spec is None:
         return {}
-    from pige_sym.cli._maps import axes_option, map_step
+    from pige_sym.cli._maps import map_next_commands
     from pige_sym.diagnosis.map_gain import map_gain
-    from pige_sym.identification.maps import MapSpec
     from pige_sym.measurements.sets import read_files
 
-    axes = axes_option(args.map, "--map")
-    step = map_step(30.0 if args.map_step is None else args.map_step, axes)
-    gain = map_gain(read_files(args.files), MapSpec(axes, step))
-    return {"map_gain": gain.to_dict() | {"sentences": gain.sentences()}}
+    items = read_files(args.files)
+    gain = map_gain(items, spec)
+    nxt = map_next_commands(args.files, items, spec, gain.explains())
+    return {"map_gain": gain.to_dict() | {"sentences": gain.sentences(), "searched_without": _mapped_effects(spec),
+                                          "next": nxt}}
 
 
-def _print_map_gain(gain: dict[str, object]) -> None:
-    if gain:
-        print("\n" + "\n".join(gain["map_gain"]["sentences"]))  # type: ignore[index]
+def _print_map_gain(args: argparse.Namespace, spec: Any, gain: dict[str, Any]) -> None:
+    if not gain:
+        return
+    doc = gain["map_gain"]
+    print("\n" + "\n".join(doc["sentences"]))
+    print(f"(the files' own diagnoses did not search {', '.join(doc['searched_without'])}: the maps hold every "
+          "harmonic of those motions)")
+    print("\n".join(doc["next"]))
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -76,13 +96,16 @@ def _run(args: argparse.Namespace) -> int:
     if len(args.files) > 1 or is_ballbar_file(args.files[0]):
         return _run_several(args)
     args.file = args.files[0]
+    spec = _map_spec(args)
     m = api.read(args.file)
     if args.plots:
         _check_plot_folder(args, m.rotary_axes)
-    result = api.diagnose(m, progress=show_progress(args.json))
+    from pige_sym.diagnosis.diagnose import diagnose
+
+    result = diagnose(m, progress=show_progress(args.json), exclude=_mapped_effects(spec))
     if args.plots:
         residual_plots(m, result, args.plots)
-    gain = _map_gain(args)
+    gain = _map_gain(args, spec)
     if args.json:
         print(to_json(result.to_dict() | gain))
         return 0
@@ -99,7 +122,7 @@ def _run(args: argparse.Namespace) -> int:
     print(format_result(result.final))
     if result.plots:
         print("\nplots: " + ", ".join(result.plots))
-    _print_map_gain(gain)
+    _print_map_gain(args, spec, gain)
     return 0
 
 
@@ -123,4 +146,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--map", metavar="AXES", help="also fit the error maps of these axes (CONVENTIONS §10) and give "
                    "their held-out gain over the PIGEs alone, cross-validated by pose (docs/maps.md)")
     p.add_argument("--map-step", type=float, metavar="DEG", help="grid step of the maps [deg] (default 30)")
+    p.add_argument("--map-per-direction", metavar="AXES",
+                   help="map these axes' positioning error per approach direction, as pige identify does")
     p.set_defaults(handler=_run)

@@ -18,19 +18,28 @@ DB_HELP = ("history database: a file path, sqlite:///PATH or postgresql://user@h
 
 def _add(args: argparse.Namespace) -> int:
     from pige_sym.files import to_json
-    from pige_sym.verdict.history import add_run, connect
+    from pige_sym.verdict.history import add_run, connect, list_runs
 
     engine = connect(args.db)
     run = add_run(engine, args.files[0] if len(args.files) == 1 else args.files, args.machine_id,
-                  method=args.method, tolerances=args.tolerances, rule=args.rule, k=args.k, date=args.date)
+                  method=args.method, tolerances=args.tolerances, rule=args.rule, k=args.k, date=args.date,
+                  corrected=args.corrected)
     if args.json:
         print(to_json(run.to_dict()))
         return 0
     verdict = f", verdict {run.verdict}" if run.verdict is not None else ""
     effects = ", ".join(str(f.get("effect")) for f in run.effects) or "none"
-    print(f"added run {run.id} of machine {run.machine_id} ({run.machine_code}): {run.file_name}, measured "
-          f"{run.measured_at} ({run.time_source}), {run.method} estimate, effects: {effects}{verdict}")
+    number = run_numbers(list_runs(engine, run.machine_id, light=True))[run.id]
+    print(f"added run {number} of machine {run.machine_id} ({run.machine_code}): {run.file_name}, measured "
+          f"{run.measured_at} ({run.time_source}), {run.method} estimate, effects: {effects}{verdict}"
+          f"{', after a correction (a new segment of the check-ups)' if run.after_correction else ''}")
     return 0
+
+
+def run_numbers(runs: list[Any]) -> dict[int, int]:
+    """Per run id its number among its machine's runs (1, 2, … in measurement order): what the CLI and the report
+    call a run (the database's ids count every machine's runs)."""
+    return {r.id: k for k, r in enumerate(runs, start=1)}
 
 
 def history_comparisons(runs: list[Any], alpha: float) -> list[Any]:
@@ -47,14 +56,16 @@ def _num(x: float | None, fmt: str = ".3f") -> str:
 
 
 def _show_text(runs: list[Any], comparisons: list[Any]) -> None:
-    print(f"machine {runs[0].machine_id} ({runs[0].machine_code}): {len(runs)} run{'' if len(runs) == 1 else 's'}")
+    print(f"machine {runs[0].machine_id} ({runs[0].machine_code}): {len(runs)} run{'' if len(runs) == 1 else 's'} "
+          "(numbered in measurement order)")
+    number = run_numbers(runs)
     print(f"{'run':>4s}  {'measured (UTC)':25s} {'method':10s} {'verdict':10s} {'RMS um':>7s}  file")
     for r in runs:
-        print(f"{r.id:4d}  {r.measured_at:25s} {r.method:10s} {r.verdict or '—':10s} {_num(r.rms_um):>7s}  "
-              f"{r.file_name}")
+        print(f"{number[r.id]:4d}  {r.measured_at:25s} {r.method:10s} {r.verdict or '—':10s} {_num(r.rms_um):>7s}  "
+              f"{r.file_name}{'  (after a correction)' if r.after_correction else ''}")
     for c in comparisons:
         head = "DIFFERENT" if c.significant else "no significant change"
-        print(f"\nrun {c.from_run} -> {c.to_run}: {head} (joint p = {_num(c.p_value, '.3g')}, T² = "
+        print(f"\nrun {number[c.from_run]} -> {number[c.to_run]}: {head} (joint p = {_num(c.p_value, '.3g')}, T² = "
               f"{_num(c.statistic, '.1f')}, rank {c.rank}, α = {c.alpha:g})")
         for note in c.notes:
             print(f"  note: {note}")
@@ -77,7 +88,9 @@ def _show(args: argparse.Namespace) -> int:
     runs = list_runs(connect(args.db, create=False), args.machine_id)
     comparisons = history_comparisons(runs, args.alpha)
     if args.json:
-        print(to_json({"machine_id": args.machine_id, "runs": [r.to_dict() for r in runs],
+        number = run_numbers(runs)
+        print(to_json({"machine_id": args.machine_id,
+                       "runs": [r.to_dict() | {"number": number[r.id]} for r in runs],
                        "comparisons": [{k: v for k, v in c.to_dict().items() if k != "changes"} for c in comparisons],
                        "changes": [ch for c in comparisons for ch in c.to_dict()["changes"]]}))
     else:
@@ -92,7 +105,8 @@ def _fleet(args: argparse.Namespace) -> int:
     from pige_sym.verdict.checkup.fleet import fleet
     from pige_sym.verdict.history import connect
 
-    rows = fleet(connect(args.db, create=False), datetime.now(timezone.utc))
+    now = datetime.now(timezone.utc)
+    rows = fleet(connect(args.db, create=False), now)
     if args.json:
         print(to_json({"machines": [r.to_dict() for r in rows]}))
         return 0
@@ -101,10 +115,21 @@ def _fleet(args: argparse.Namespace) -> int:
     for r in rows:
         full = f"{(r.last_full or '—')[:16]} {r.last_full_verdict or ''}".strip()
         print(f"{r.machine_id:<16}{r.machine:<16}{r.runs:>5}  {full:<27}{(r.last_checkup or '—')[:16]:<27}"
-              f"{r.verdict or '—':<9}{r.next_due[:16]} ({r.why})")
+              f"{r.verdict or '—':<9}{_due(r.next_due, now)} ({r.why})")
     if not rows:
         print("no machine in the history yet (pige history add FILE --machine-id ID)")
     return 0
+
+
+def _due(iso: str, now: Any) -> str:
+    """The next due time (UTC, to the minute), ``OVERDUE since …`` when it has passed, ``now`` when it is now."""
+    from datetime import datetime
+
+    due = datetime.fromisoformat(iso)
+    shown = due.astimezone(now.tzinfo).isoformat(timespec="minutes")[:16].replace("T", " ")
+    if abs((due - now).total_seconds()) < 60:
+        return "now"
+    return f"OVERDUE since {shown}" if due < now else shown
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -145,6 +170,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add.add_argument("--k", type=float, default=2.0, help="coverage factor of the verdict (default %(default)s)")
     add.add_argument("--date", metavar="ISO", help="when it was measured (default: the file's date metadata, "
                                                    "else its modification time)")
+    add.add_argument("--corrected", action="store_true",
+                     help="a correction was entered into the controller since the machine's last run (it starts a "
+                          "new segment of the check-ups' limits: docs/checkup.md)")
     add.add_argument("--json", action="store_true", help="print the stored run as JSON")
     add.set_defaults(handler=_add)
     show = sub.add_parser(

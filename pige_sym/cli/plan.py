@@ -284,11 +284,7 @@ def _next_commands(args: argparse.Namespace, plan: Any, poses: Any) -> str:
 
     r = plan.request
     if r.instrument == "sphere-probe":
-        return (f"\nnext, one program per setup (map_1.ngc … map_{len(plan.setups)}.ngc): pige program --instrument "
-                f"sphere-probe --machine \"{r.machine}\" {map_options_text(args, len(plan.setups))} "
-                f"--sphere {args.sphere} --sphere-radius {args.sphere_radius:g} --stylus-radius "
-                f"{args.stylus_radius:g}" + (f" --tool {args.tool}" if args.tool else "")
-                + " --dialect linuxcnc --stylus-tool N --stylus-length L --out map.ngc")
+        return _probe_program_command(args, r.machine, map_options_text(args, len(plan.setups)), len(plan.setups))
     if r.instrument == "rtest":
         traj = poses if poses is not None else "POSES.csv (give --out plan.json: it writes plan_poses.csv)"
         lines = [f"  pige program --machine \"{r.machine}\" --trajectory {traj} --ball "
@@ -298,6 +294,31 @@ def _next_commands(args: argparse.Namespace, plan: Any, poses: Any) -> str:
         return "\nnext, each setup's R-test program:\n" + "\n".join(lines)
     return "\nnext, each setup: pige program --instrument ballbar --setup KIND --axis AXIS [--tilt DEG] " \
         "--table-ball x,y,z (the setups above)"
+
+
+def _word(value: Any) -> str:
+    """An option's value as the user would type it (``120``, not ``120.0``)."""
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _probe_program_command(args: argparse.Namespace, machine: str, map_options: str, setups: int) -> str:
+    """``pige program`` writing one probing program per setup, with every option given here that it takes (it runs
+    as printed); without the probe's tool number and length (which a program states) and the dialect, what to add."""
+    ext = {"siemens": ".mpf", "fanuc": ".nc", "heidenhain": ".h"}.get(args.dialect or "", ".ngc")
+    parts = [f"--instrument sphere-probe --machine \"{machine}\" {map_options}", f"--sphere {args.sphere}",
+             f"--sphere-radius {args.sphere_radius:g}", f"--stylus-radius {args.stylus_radius:g}"]
+    parts += [f"--{name.replace('_', '-')} {_word(getattr(args, name))}" for name in (
+        "tool", "dialect", "kinematics", "rtcp_off", "rtcp_on", "stylus_tool", "stylus_length")
+        if getattr(args, name, None) is not None]
+    if args.work_offset != "G54":
+        parts.append(f"--work-offset {args.work_offset}")
+    missing = [o for o, v in (("--stylus-tool", args.stylus_tool), ("--stylus-length", args.stylus_length),
+                              ("--dialect", args.dialect)) if v is None]
+    if missing:
+        return (f"\nnext: one program per setup; give {', '.join(missing)} here too (a program states its probe and is "
+                "written for one controller) and this plan prints the command that writes them")
+    return (f"\nnext, one program per setup (map_1{ext} … map_{setups}{ext}):\n  pige program " + " ".join(parts)
+            + f" --out map{ext}")
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -377,6 +398,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_probe_program_arguments(p)
     add_checkup_arguments(p)
     add_map_arguments(p)
+    p.add_argument("--dialect", choices=["siemens", "fanuc", "linuxcnc", "heidenhain"],
+                   help="sphere-probe map test: the controller the programs are for (the next command writes them)")
     p.add_argument("--budget", type=float, help="sphere-probe: probing time budget [s] (default 1800; with --checkup: "
                                                 "machine time, default 120)")
     p.add_argument("--pose-time", type=float, default=20.0, help="sphere-probe: time per pose (retract, rotate) [s]")

@@ -27,6 +27,7 @@ program (Siemens ``TRAORI`` or Fanuc ``G43.4``), checked to keep the nominal bar
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from pige_sym.cli._ballbar import add_ballbar_arguments
@@ -178,10 +179,38 @@ def _run_probe_maps(args: argparse.Namespace, kern: Any, setup: Any) -> int:
               f"{check.min_rapid_clearance_mm:.2f} mm from the sphere, probing moves {check.min_overtravel_mm:.2f} mm "
               f"past it" + (f"; format file {fmt}" if fmt is not None else ""))
     done, total = plan.prediction.counts()
-    print(f"together: {done} of {total} map values determined (pige plan --map gives their predicted standard "
-          "errors); run each program in turn and keep its log before the next, then pige import-probe LOG --program "
-          "PROGRAM for each and pige identify ALL.csv --map " + args.map)
+    print(f"together: {done} of {total} map values determined (the map test's plan gives their predicted standard "
+          "errors)")
+    print(map_next_steps(args, [path for _, path, *_ in written]))
     return 0
+
+
+def map_next_steps(args: argparse.Namespace, programs: list[Any]) -> str:
+    """What to run after the map programs, as commands that run as printed: each log's import (LinuxCNC, SINUMERIK
+    and HEIDENHAIN write a log of a fixed name, imported before the next program writes it again), then ``pige
+    identify`` with the map options the programs were written for (grid, per direction)."""
+    from pige_sym.nc.probe_program import HEIDENHAIN_LOG
+    from pige_sym.nc.probe_render import LINUXCNC_LOG, SIEMENS_LOG
+
+    log = {"linuxcnc": LINUXCNC_LOG, "siemens": SIEMENS_LOG, "heidenhain": HEIDENHAIN_LOG.rsplit("\\", 1)[-1]}.get(
+        args.dialect)
+    csvs = [Path(p).with_suffix(".csv") for p in programs]
+    if log is None:
+        lines = [f"next: run each program in turn and import its {args.dialect} output (the file its DPRNT writes, "
+                 "named on the control) with the import command, --format " + args.dialect
+                 + ", --program and --out as below:"]
+        lines += [f"  {p} -> {c}" for p, c in zip(programs, csvs, strict=True)]
+    else:
+        lines = [f"next: run each program in turn; each writes the log {log}: import it before the next program "
+                 "writes it again:"]
+        lines += [f"  pige import-probe {log} --format {args.dialect} --program {p} --out {c}"
+                  for p, c in zip(programs, csvs, strict=True)]
+    options = f"--map {args.map} --map-step {args.map_step:g}"
+    if args.map_per_direction:
+        options += f" --map-per-direction {args.map_per_direction}"
+    lines += ["then identify the maps from every setup:",
+              f"  pige identify {' '.join(str(c) for c in csvs)} {options}"]
+    return "\n".join(lines)
 
 
 def _run_ballbar(args: argparse.Namespace) -> int:

@@ -33,18 +33,11 @@ def _graded_plan(args: argparse.Namespace, data: Any) -> Any:
 
 
 def _map_spec(args: argparse.Namespace) -> Any:
-    """``--map AXES [--map-step DEG]`` as a MapSpec (None without --map)."""
-    if args.map is None:
-        if args.map_step is not None:
-            from pige_sym.errors import InputError
+    """``--map AXES [--map-step DEG] [--map-per-direction AXES]`` as a MapSpec (None without --map)."""
+    from pige_sym.cli._maps import map_spec_option
+    from pige_sym.identification.maps import DEFAULT_MAP_STEP_DEG
 
-            raise InputError("--map-step goes with --map AXES")
-        return None
-    from pige_sym.cli._maps import axes_option, map_step
-    from pige_sym.identification.maps import MapSpec
-
-    axes = axes_option(args.map, "--map")
-    return MapSpec(axes, map_step(args.map_step, axes))
+    return map_spec_option(args, DEFAULT_MAP_STEP_DEG)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -141,6 +134,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--map", metavar="AXES", help="also fit the error maps of these rotary axes jointly from every file "
                    "(conventions §10): plots, what they leave, what the setups do not determine (docs/maps.md)")
     p.add_argument("--map-step", type=float, metavar="DEG", help="grid step of the maps [deg] (default 15)")
+    p.add_argument("--map-per-direction", metavar="AXES",
+                   help="map these axes' positioning error per approach direction, as pige identify does")
     p.add_argument("--history", metavar="ID", help="machine id: trend plots of its runs (pige history)")
     p.add_argument("--db", metavar="URL", help="history database (default: as pige history)")
     p.add_argument("--plan", metavar="TRAJECTORY",

@@ -88,6 +88,19 @@ class BlockCovariance:
             out[idx] = np.diag(block)
         return out
 
+    def row(self, i: int) -> np.ndarray:
+        """Row ``i`` of the matrix, shape=(q,) (the covariances of value ``i`` with every value)."""
+        out = np.zeros(self.size)
+        at = np.flatnonzero(self.single == i)
+        if at.size:
+            out[i] = self.variance[at[0]]
+            return out
+        for idx, block in self.groups:
+            k = np.flatnonzero(idx == i)
+            if k.size:
+                out[idx] = block[k[0]]
+        return out
+
     def toarray(self) -> np.ndarray:
         """The dense matrix (q, q) (for small q: a check, a report)."""
         out = np.zeros((self.size, self.size))

@@ -108,6 +108,12 @@ class CompensationParameters:
         The rotary axes' error maps of the file (CONVENTIONS §10), compensated with the PIGEs.
     error_map_std : dict
         axis → motion → standard errors of the map values (NaN where none).
+    in_force : dict of str to float or None
+        A check-up's entries (:mod:`pige_sym.verdict.checkup.to_enter`): ``values`` are then the changes since the
+        values in force (an entry that adds adds them; an absolute entry is printed as the change to add to the
+        value it holds, never as a value); None: ``values`` are the machine's errors (``pige compensate``).
+    held : dict of str to float
+        PIGEs a check-up held at their values in force: never entered (their ``values`` are 0, no change).
     """
 
     machine: str
@@ -126,6 +132,8 @@ class CompensationParameters:
     weighing: Any = None
     error_maps: Any = None
     error_map_std: dict[str, dict[str, tuple[float, ...]]] = field(default_factory=dict)
+    in_force: dict[str, float] | None = None
+    held: dict[str, float] = field(default_factory=dict)
 
     def covariance_of(self, names: list[str]) -> tuple[np.ndarray | None, str]:
         """The covariance of ``names`` (q, q) and where it comes from: ``covariance``, ``std`` or ``none``.

@@ -81,6 +81,50 @@ def compensation_study(machine: str, trajectories: list[Any], *, truth: dict[str
     return rows
 
 
+def before_after(machine: str, truth: dict[str, float], comp: Any, *, description: str,
+                 pivots_mm: dict | None = None, tool_mm: Any = None,
+                 truth_extensions: list[AngleExtension] | tuple[()] = (),
+                 predicted_after_um: float = float("nan")) -> CompensationStudyRow:
+    """Before/after tool-point error on a machine with errors ``truth`` of poses the compensation stage corrected.
+
+    Parameters
+    ----------
+    machine : str
+    truth : dict of str to float
+        The simulated machine's parameters [µm, µrad].
+    comp : CompensatedPoses
+        The stage's corrected poses (:attr:`pige_sym.compensation.result.Compensation.poses` or the program's):
+        as programmed and as corrected; an RTCP pose's X, Y, Z are workpiece coordinates, which the controller turns
+        into machine positions nominally.
+    description : str
+    predicted_after_um : float
+        What the stage predicts the correction leaves [µm] (its weighing), shown beside the simulated figure.
+
+    Returns
+    -------
+    CompensationStudyRow
+        Errors per pose, shape=(n, 3) [µm], before and after.
+    """
+    kern = load_kernels(machine)
+    a, new_a = np.atleast_2d(comp.angles_deg), np.atleast_2d(comp.new_angles_deg)
+    n = a.shape[0]
+    flags = np.broadcast_to(np.asarray(comp.rtcp, dtype=bool), (n,))
+    cmd_before, cmd_after = np.array(comp.xyz_mm, dtype=float), np.array(comp.new_xyz_mm, dtype=float)
+    for row in np.flatnonzero(flags):  # the controller turns workpiece coordinates into machine positions nominally
+        cmd_before[row] = kern.linear_commands(a[row : row + 1], comp.xyz_mm[row], pivots_mm, tool_mm)[0]
+        cmd_after[row] = kern.linear_commands(new_a[row : row + 1], comp.new_xyz_mm[row], pivots_mm, tool_mm)[0]
+    approach = approach_directions(a)
+    before = tool_point_error(machine, truth, a, cmd_before, comp.points_mm, pivots_mm=pivots_mm, tool_mm=tool_mm,
+                              extensions=truth_extensions, approach=approach)
+    after = tool_point_error(machine, truth, new_a, cmd_after, comp.points_mm, pivots_mm=pivots_mm, tool_mm=tool_mm,
+                             extensions=truth_extensions, approach=approach)
+    rms_b = float(np.sqrt((before**2).sum(axis=1).mean()))
+    rms_a = float(np.sqrt((after**2).sum(axis=1).mean()))
+    change = float(np.sqrt(((cmd_after - cmd_before) ** 2).sum(axis=1).mean()))
+    return CompensationStudyRow(description, rms_b, rms_a, 1 - rms_a / rms_b if rms_b else 0.0, predicted_after_um,
+                                change, before, after)
+
+
 def plot_compensation(rows: list[CompensationStudyRow], out_dir: str | Path) -> list[str]:
     """Deviation per point before/after (paper Figures 9 and 10 style); returns PNG paths."""
     import matplotlib

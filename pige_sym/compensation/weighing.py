@@ -30,7 +30,6 @@ travel (:func:`travel_poses`): a poorly determined PIGE hurts most where the mea
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -39,6 +38,7 @@ import numpy as np
 from pige_sym.compensation.covariance import BlockCovariance, as_blocks
 from pige_sym.compensation.covariance import correlated_groups as _correlated_groups  # noqa: F401 (its tests)
 from pige_sym.compensation.draws import DRAWS, Draws, ErrorPrediction  # noqa: F401 (DRAWS: the rule's constant)
+from pige_sym.compensation.entry_words import why_entered
 from pige_sym.compensation.kinematics import raw_offset
 from pige_sym.compensation.parameters import AngleExtension, CompensationParameters, extension_prefixes
 from pige_sym.constants import DEFAULT_BALL_MM, DEFAULT_TILT_TRAVEL_DEG
@@ -122,6 +122,10 @@ class Weighing:
         names = list(self.estimate)
         est = np.array([self.estimate[n] for n in names])
         return self.draws.left(est - np.array([values.get(n, 0.0) for n in names]))
+
+    def rows(self) -> list[str]:
+        """What is entered other than as estimated, one line per value or map (:func:`weighing_rows`)."""
+        return weighing_rows(self, {})
 
     def to_dict(self) -> dict[str, Any]:
         pred = {k: v.to_dict() for k, v in self.predicted.items()}
@@ -300,10 +304,14 @@ def weigh(params: CompensationParameters, poses: JudgedPoses) -> Weighing:
         variance = cov.diagonal()
         std = {n: float(np.sqrt(variance[i])) for i, n in enumerate(names)}
         entered = entered_values(values, cov)
-        why = {n: _why(values[i], std[n], entered[i]) for i, n in enumerate(names)}
+        why = {n: why_entered(i, names, values, cov, entered, params.units.get(n, "")) for i, n in enumerate(names)}
         if source != "covariance":
             notes.append("the parameter file has standard errors but no covariance: the parameters are weighed as if "
                          "uncorrelated")
+        elif any("@" in n for n in names):
+            notes.append("the PIGEs are weighed with their covariance, each map value by its own standard error (the "
+                         "maps' covariance is singular: the §10 projection leaves their left-out functions no "
+                         "variance)")
     draws = None if moments is None else Draws(cov, moments)
     predicted = {} if draws is None else {"none": draws.left(values), "entered": draws.left(values - entered)}
     if draws is not None and source != "none":
@@ -316,9 +324,11 @@ def weigh(params: CompensationParameters, poses: JudgedPoses) -> Weighing:
 
 
 def _covariance(params: CompensationParameters, names: list[str]) -> tuple[BlockCovariance | None, str]:
-    """The estimates' covariance as blocks: the file's for the PIGEs and effects, the map values' standard errors as
-    uncorrelated ones (the file holds no covariance of a map); None when any value has no uncertainty."""
-    maps = params.error_maps.values() if params.error_maps is not None else {}
+    """The estimates' covariance as blocks: the file's for the PIGEs and effects (``pige identify --map --json`` writes
+    it with the maps), the map values' standard errors as uncorrelated ones (their covariance is singular: the §10
+    projection leaves the left-out functions no variance, and a singular Σ + T has no evidence to maximise); None
+    when any value has no uncertainty."""
+    maps = set(params.error_maps.values()) if params.error_maps is not None else set()
     plain = [n for n in names if n not in maps]
     cov, source = params.covariance_of(plain)
     if cov is None:
@@ -360,21 +370,11 @@ def every_estimate(weighing: Weighing) -> Weighing:
         "--enter all: every estimate is entered as it is, whatever its uncertainty"])
 
 
-def _why(value: float, std: float, entered: float) -> str:
-    if entered == 0.0:
-        return "not entered: the data do not show it beyond its uncertainty"
-    share = entered / value if value else math.inf
-    if abs(share - 1.0) < 0.05:
-        return "entered as estimated"
-    if 0.0 < share < 1.0:
-        return f"entered in part ({share:.0%} of the estimate): weakly determined"
-    return "entered as its estimate given the values weighed down beside it (they are correlated)"
-
-
 def weighing_rows(weighing: Weighing, units: dict[str, str], carried: set[str] | None = None) -> list[str]:
-    """One line per value not entered as estimated: ``EB0A +45.35 ± 35 urad: entered in part (73 % …): +32.9``;
-    the map values (``C:EXC@30``) in one line per axis and motion; with ``carried`` (what a controller holds:
-    PIGEs, ``<axis>:<motion>`` maps) a value it does not hold is said to be weighed for the NC rewrite only."""
+    """One line per value not entered as estimated: ``EB0A: entered in part (73 % of the estimate): the data show it
+    only weakly (+45.35 ± 35 urad): enter +32.9``; the map values (``C:EXC@30``) in one line per axis and motion; with
+    ``carried`` (what a controller holds: PIGEs, ``<axis>:<motion>`` maps) a value it does not hold is said to be
+    weighed for the NC rewrite only."""
     rows = []
     maps: dict[str, list[str]] = {}
     for n, v in weighing.entered.items():
@@ -383,17 +383,15 @@ def weighing_rows(weighing: Weighing, units: dict[str, str], carried: set[str] |
             continue
         if weighing.why[n].startswith("entered as estimated"):
             continue
-        unit = units.get(n, "") if "." not in n else "urad"
-        said = f"{n} {weighing.estimate[n]:+.4g} ± {weighing.std[n]:.2g} {unit}" if n in weighing.std else n
-        value = f": enter {v:+.4g}" if v is not None and v != 0.0 else ""
-        rows.append(f"{said}: {'' if carried is None or n in carried else NOT_HERE}{weighing.why[n]}{value}")
+        value = f": enter {v:+.4g}" if v is not None and weighing.why[n].startswith("entered in part") else ""
+        rows.append(f"{n}: {'' if carried is None or n in carried else NOT_HERE}{weighing.why[n]}{value}")
     for motion, whys in maps.items():
         whole = sum(w.startswith("entered as estimated") for w in whys)
         none = sum(w.startswith("not entered") for w in whys)
         if whole < len(whys):
             rows.append(f"map {motion}: {'' if carried is None or motion in carried else NOT_HERE}{whole} of "
                         f"{len(whys)} values entered as estimated, {none} not entered (within their uncertainty), "
-                        f"{len(whys) - whole - none} in part")
+                        f"{len(whys) - whole - none} in part (weakly determined)")
     return rows
 
 

@@ -35,6 +35,7 @@ the counter-rotating half stays and is fitted.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -139,7 +140,8 @@ def _moves(angles: np.ndarray, k: int) -> bool:
 
 def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: np.ndarray,
                  restrict: list[str] | None = None, table_drift: bool = False,
-                 probe_sensitivity: np.ndarray | None = None, reference_centre: bool = False) -> Layout:
+                 probe_sensitivity: np.ndarray | None = None, reference_centre: bool = False,
+                 exclude: Collection[str] = ()) -> Layout:
     """Every applicable candidate of a measurement, in super-design column order.
 
     Parameters
@@ -151,6 +153,8 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
         Direction of approach per axis (−1, 0, +1).
     restrict : list of str, optional
         Keep only these catalogue ids.
+    exclude : collection of str
+        Leave out these catalogue ids (e.g. the one-harmonic error motions of an axis whose maps are fitted).
     table_drift : bool
         Also the nest/sphere drifting on the table (probe files: a sphere on a stand).
     probe_sensitivity : ndarray, shape=(n, 3, 3), optional
@@ -190,7 +194,7 @@ def build_layout(kern: Any, angles_deg: np.ndarray, t_s: np.ndarray, approach: n
         col += q
         if spec.kind in DRIFT_KINDS:
             drift_cols.setdefault(spec.kind, []).append(cols)
-        if restrict is None or spec.id in restrict:
+        if (restrict is None or spec.id in restrict) and spec.id not in exclude:
             cands.append(Candidate(spec, key, cols, extra))
     return Layout(pige, units, cands, col, taus, drift_cols, probe_sensitivity, nuisance)
 

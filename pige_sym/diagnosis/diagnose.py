@@ -92,7 +92,7 @@ approach, per row, and their autocorrelation in time.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from typing import Any
 
@@ -189,7 +189,7 @@ class _Setup:
         return row_residuals(design, np.eye(len(used)), beta, self.m.deviation_um, rows)
 
 
-def _setup(m: Measurement, candidates: list[str] | None) -> _Setup:
+def _setup(m: Measurement, candidates: list[str] | None, exclude: Collection[str] = ()) -> _Setup:
     kern = load_kernels(m.machine)
     if m.frame == "table":
         m = Measurement(**{**m.__dict__, "deviation_um": m.deviation_machine_um(kern), "frame": "machine"})
@@ -197,7 +197,7 @@ def _setup(m: Measurement, candidates: list[str] | None) -> _Setup:
         raise InputError(f"{m.path or 'measurement'}: {m.n_rows} rows cannot be diagnosed: measure more points")
     approach = approach_directions(m.angles_deg)
     probe = instrument(m) == "sphere-probe"
-    layout = build_layout(kern, m.angles_deg, m.t_s, approach, candidates, table_drift=probe,
+    layout = build_layout(kern, m.angles_deg, m.t_s, approach, candidates, table_drift=probe, exclude=exclude,
                           probe_sensitivity=read_sensitivities(m) if probe else None, reference_centre=probe)
     return _Setup(kern, m, approach, layout, fold_of_rows(m.n_rows), screen_scale(m) if probe else None)
 
@@ -403,7 +403,7 @@ def _dbic_of(reason: str) -> float | None:
 
 def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: float = P_MAX,
              min_heldout_gain: float = MIN_HELDOUT_GAIN, candidates: list[str] | None = None,
-             progress: bool = False) -> DiagnosisResult:
+             progress: bool = False, exclude: Collection[str] = ()) -> DiagnosisResult:
     """Diagnose a measurement (see the module docstring).
 
     Parameters
@@ -413,6 +413,8 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
         Evidence an extension needs (:mod:`pige_sym.diagnosis.selection`).
     candidates : list of str, optional
         Restrict to these catalogue ids.
+    exclude : collection of str
+        Leave out these catalogue ids (``pige diagnose --map``: the maps hold every harmonic of their motions).
     progress : bool
         Show a progress bar (stderr) over the candidate evaluations.
 
@@ -420,7 +422,7 @@ def diagnose(m: Measurement, *, delta_bic_max: float = DELTA_BIC_MAX, p_max: flo
     -------
     DiagnosisResult
     """
-    setup = _setup(m, candidates)
+    setup = _setup(m, candidates, exclude)
     lay, dev = setup.layout, setup.data
     all_rows = np.arange(1, setup.m.n_rows)
     sums = accumulate(setup.design(), dev, all_rows, setup.folds, lay.n_columns)

@@ -26,7 +26,7 @@ note says the joint estimate does not model them.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -227,18 +227,19 @@ def _pooled_sigmas(blocks: Sequence[Block]) -> list[float]:
             for b in blocks]
 
 
-def _own_findings(item: Measurement | BallbarRun, progress: bool,
-                  known: DiagnosisResult | None) -> tuple[list[Finding], str, list[str]]:
+def _own_findings(item: Measurement | BallbarRun, progress: bool, known: DiagnosisResult | None,
+                  exclude: Collection[str] = ()) -> tuple[list[Finding], str, list[str]]:
     if isinstance(item, BallbarRun):
         return [], "agreement only (one projection per pose: the catalogue needs 3-D rows)", []
     from pige_sym.diagnosis.diagnose import diagnose
 
-    diag = known if known is not None else diagnose(item, progress=progress)
+    diag = known if known is not None else diagnose(item, progress=progress, exclude=exclude)
     return diag.findings, "catalogue diagnosis", diag.clusters
 
 
 def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *, progress: bool = False,
-                   diagnoses: Sequence[DiagnosisResult | None] | None = None) -> JointDiagnosis:
+                   diagnoses: Sequence[DiagnosisResult | None] | None = None,
+                   exclude: Collection[str] = ()) -> JointDiagnosis:
     """Diagnose several files of one machine (module docstring).
 
     Parameters
@@ -248,6 +249,8 @@ def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *, pro
         Progress bars of the per-file diagnoses on stderr.
     diagnoses : sequence of DiagnosisResult or None, optional
         Each file's own diagnosis when already made (``pige report``); None: made here.
+    exclude : collection of str
+        Catalogue ids the per-file diagnoses leave out (``pige diagnose --map``: the mapped axes' error motions).
 
     Returns
     -------
@@ -264,7 +267,7 @@ def diagnose_joint(items: Sequence[tuple[str, Measurement | BallbarRun]], *, pro
     files, notes = [], []
     for i, ((label, item), b, summary) in enumerate(zip(items, blocks, joint.files, strict=True)):
         known = None if diagnoses is None else diagnoses[i]
-        findings, checked, clusters = _own_findings(item, progress, known)
+        findings, checked, clusters = _own_findings(item, progress, known, exclude)
         notes += [f"{label}: {c}" for c in clusters]
         files.append(FileDiagnosis(label, b.instrument, b.data.size, sigmas[i], summary.rms_um, findings, checked,
                                    tests[i], i in flagged))

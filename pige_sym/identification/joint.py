@@ -72,10 +72,12 @@ class FileSummary:
 
 @dataclass
 class JointResult:
-    """The joint estimate (PIGEs) and each file's part."""
+    """The joint estimate (PIGEs) and each file's part; ``variance_factor`` the fit's RSS/(N − rank) of the rows
+    divided by each file's σ (the covariance is the unit one times it)."""
 
     result: IdentificationResult
     files: list[FileSummary] = field(default_factory=list)
+    variance_factor: float = 1.0
 
     def to_dict(self) -> dict[str, Any]:
         return self.result.to_dict() | {"files": [f.to_dict() for f in self.files]}
@@ -265,7 +267,7 @@ def _assemble(machine: str, names: list[str], all_names: list[str], blocks: list
             summary.constant_um, summary.constant_std_um = float(values[offset]), float(std[offset])
         files.append(summary)
         offset += q
-    return JointResult(result, files)
+    return JointResult(result, files, vf)
 
 
 def _spread(b: Block, blocks: list[Block]) -> np.ndarray:

@@ -11,7 +11,8 @@ planned poses.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -42,6 +43,7 @@ class MapLayout:
     motions: dict[str, list[Motion]]
     columns: list[tuple[Motion, int]]
     tool_side: tuple[str, ...] = ()
+    measured_deg: dict[str, np.ndarray] = field(default_factory=dict)
 
     def names(self) -> list[str]:
         return [f"{m.name}@{self.grids[m.axis].angles_deg[g]:g}" for m, g in self.columns]
@@ -63,9 +65,7 @@ def local_check(blocks: list[Any], sigmas: list[float], p: int,
             cols = a[:, idx]
             if not np.any(cols):
                 kept[idx] = False
-                out.append(Undetermined(f"{ax} maps", float(grid.angles_deg[g]),
-                                        f"no measured pose within {_step(grid):g}° of {ax} {grid.angles_deg[g]:g}°",
-                                        f"measure poses at {ax} {grid.angles_deg[g]:g}° (pige plan --map {ax})"))
+                out.append(Undetermined(f"{ax} maps", float(grid.angles_deg[g]), *_no_pose(ax, grid, g, layout)))
                 continue
             sol = solve_scaled(cols.T @ cols, np.zeros(len(idx)), 0.0)
             seen = len(idx) - sol.null_space.dimension  # near-null directions are not seen (the PIGEs' rule)
@@ -77,7 +77,8 @@ def local_check(blocks: list[Any], sigmas: list[float], p: int,
             directions = all(m.kind in ("positioning", "reversal") for m, off in zip(motions, unseen, strict=True)
                              if off)
             remedy = (f"approach {ax} {grid.angles_deg[g]:g}° from both sides, with the angle increasing and "
-                      "decreasing (at an end of the travel that means going beyond it)" if directions else
+                      "decreasing (at an end of the travel that means going beyond it; or map it for both directions "
+                      "at once, without --map-per-direction)" if directions else
                       _remedy(ax, seen, len(idx), ax in layout.tool_side))
             for j, m, off in zip(idx, motions, unseen, strict=True):
                 if off:
@@ -88,13 +89,96 @@ def local_check(blocks: list[Any], sigmas: list[float], p: int,
     return out, kept
 
 
+def direction_notes(items: Sequence[tuple[str, Any]], layout: MapLayout, spec: Any,
+                    axes: tuple[str, ...]) -> list[str]:
+    """A note per mapped axis not mapped per direction whose grid angles the files approach from both directions
+    (at least half of them): its positioning map is then the mean of the two, said so."""
+    from pige_sym.model.trajectories import approach_directions
+
+    out = []
+    for ax, grid in layout.grids.items():
+        if ax in spec.per_direction:
+            continue
+        k = axes.index(ax)
+        seen: dict[int, set[int]] = {}
+        for _, x in items:
+            a = np.asarray(x.angles_deg, dtype=float)
+            appr = approach_directions(a)[:, k]
+            at = np.argmax(grid.weights(a[:, k]), axis=1)
+            exact = np.isclose(grid.weights(a[:, k]).max(axis=1), 1.0)
+            for node, d, ok in zip(at, appr, exact, strict=True):
+                if ok and d != 0:
+                    seen.setdefault(int(node), set()).add(int(d))
+        both = sum(len(d) == 2 for d in seen.values())
+        if grid.n and both >= max(2, grid.n // 2):
+            out.append(f"the files approach {both} of {ax}'s {grid.n} grid angles from both directions: its "
+                       f"positioning map is the mean of the two here; --map-per-direction {ax} maps each direction and "
+                       "the reversal")
+    return out
+
+
+def range_notes(layout: MapLayout) -> list[str]:
+    """A note per mapped axis that does not turn fully: over its range, a motion's constant and first harmonic are
+    the PIGEs' (and the set-up's), and what the true maps hold of them is in the PIGEs, not in the maps."""
+    return [f"{ax} is mapped over {grid.angles_deg[0]:g}..{grid.angles_deg[-1]:g}° only: over that range, the part of "
+            f"each of its motions that is a constant or a first harmonic is not separable from the PIGEs (CONVENTIONS "
+            f"§10), so the PIGEs hold it (of {ax}, and of the axis {ax} carries) and differ from a fit without maps by "
+            "it; over a full turn, harmonics 2 and up are separable (docs/maps.md, 'What the PIGEs hold')"
+            for ax, grid in layout.grids.items() if not grid.full_turn and grid.n > 1]
+
+
+def measured_step(angles_deg: np.ndarray, step_deg: float, full_turn: bool) -> float | None:
+    """The coarsest multiple of ``step_deg`` that every measured angle is a multiple of [deg] (the grid the files were
+    measured on), when it is coarser than ``step_deg``; else None."""
+    a = np.asarray(angles_deg, dtype=float)
+    if full_turn:
+        a = np.mod(a, 360.0)
+    best = None
+    for k in range(2, int(360.0 / step_deg) + 1):
+        s = k * step_deg
+        if full_turn and abs(360.0 / s - round(360.0 / s)) > 1e-9:
+            continue
+        r = np.mod(a + 1e-7, s)
+        if np.all(r < 2e-7):
+            best = s
+    return best
+
+
+def _no_pose(ax: str, grid: MapGrid, g: int, layout: MapLayout) -> tuple[str, str]:
+    """Why and remedy of a grid angle no measured pose comes near: the files' own step, when they were measured on a
+    coarser grid (identify on it), else poses at that angle."""
+    angle = float(grid.angles_deg[g])
+    why = f"no measured pose within {_step(grid):g}° of {ax} {angle:g}°"
+    coarse = measured_step(layout.measured_deg[ax], _step(grid), grid.full_turn) if ax in layout.measured_deg else None
+    if coarse is not None:
+        return (f"{why}: the files measure {ax} every {coarse:g}°, the grid is every {_step(grid):g}°",
+                f"identify on the files' grid: --map-step {coarse:g} (or measure poses at {ax} {angle:g}° too)")
+    return why, f"measure poses at {ax} {angle:g}° too (the map test's plan puts poses at every grid angle)"
+
+
+def _combination(vec: np.ndarray, motions: list[Motion]) -> str:
+    order = np.argsort(-np.abs(vec))
+    lead = vec[order[0]]
+    terms = [f"{'-' if vec[j] / lead < 0 else '+'} {abs(vec[j] / lead):.3g}·{motions[j].name}" for j in order
+             if abs(vec[j]) > 1e-3]
+    text = " ".join(terms)
+    return text[2:] if text.startswith("+ ") else text
+
+
 def _remedy(axis: str, rank: int, full: int, tool_side: bool = False) -> str:
-    points = "one measured point" if rank <= 3 else "two measured points" if rank < full else "the points"
-    where = ("a tool-side axis: the stylus or ball at three positions in the spindle, two tool lengths and an "
-             "offset one" if tool_side else "a workpiece-side axis: the sphere or ball at three positions on the "
+    """What would determine the motions the rows near one grid angle do not see (module docstring): more measured
+    points per angle, three not on one line."""
+    where = ("for a tool-side axis: the stylus or ball at three positions in the spindle, two tool lengths and an "
+             "offset one" if tool_side else "for a workpiece-side axis: the sphere or ball at three positions on the "
              "table")
-    return (f"{points} per angle: measure at three points per angle, not on one line (for {where}; pige plan "
-            f"--map {axis})")
+    if rank <= 3:
+        return (f"one measured point sees 3 of the motions at each {axis} angle: measure at three points per angle, "
+                f"not on one line ({where}; the map test's plan proposes them)")
+    if rank < full:
+        return (f"two measured points leave the rotation about the line through them unseen at each {axis} angle: "
+                f"add a third point off that line, three points per angle not on one line ({where}; the map test's "
+                "plan proposes them)")
+    return f"measure at three points per angle, not on one line ({where}; the map test's plan proposes them)"
 
 
 def _step(grid: MapGrid) -> float:

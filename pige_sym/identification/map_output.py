@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -27,11 +29,68 @@ def format_maps(result: MapResult) -> str:
                 cells.append(f"{v:>+12.3f} ± {s:<7.3f}" if math.isfinite(v) else f"{'—':>22}")
             lines.append(f"{angle:>12g}" + "".join(f"{c:>22}" for c in cells))
     if result.undetermined:
-        lines += ["", "not determined by these data (no value is given):"]
-        for u in result.undetermined:
-            where = f" at {u.angle_deg:g} deg" if u.angle_deg is not None else ""
-            lines.append(f"  {u.motion}{where}: {u.why}; to determine it: {u.remedy}")
+        lines += ["", "not determined by these data (no value is given, and none is corrected: a map value without a "
+                      "number corrects nothing at its angle):"]
+        lines += [f"  {group.text()}" for group in group_undetermined(result)]
+    if result.notes:
+        lines += [""] + [f"note: {n}" for n in result.notes]
     return "\n".join(lines)
+
+
+@dataclass
+class UndeterminedGroup:
+    """Map values not determined for the same reason, with the same remedy: one line for many."""
+
+    axis: str
+    motions: list[str]
+    angles_deg: list[float]
+    grid_deg: list[float]
+    why: str
+    remedy: str
+
+    def where(self) -> str:
+        """``at every grid angle (0–330°, 12 angles)`` or ``at 15, 45°``."""
+        if not self.angles_deg:
+            return ""
+        if len(self.angles_deg) == len(self.grid_deg) and len(self.grid_deg) > 2:
+            return (f" at every grid angle ({self.grid_deg[0]:g}–{self.grid_deg[-1]:g}°, {len(self.grid_deg)} "
+                    "angles)")
+        return " at " + ", ".join(f"{a:g}" for a in self.angles_deg) + "°"
+
+    def text(self) -> str:
+        what = ", ".join(self.motions)
+        return f"{what}{self.where()}: {self.why}; to determine {'it' if self.count == 1 else 'them'}: {self.remedy}"
+
+    @property
+    def count(self) -> int:
+        return len(self.motions) * max(len(self.angles_deg), 1)
+
+
+def _angle_free(text: str, axis: str) -> str:
+    return re.sub(rf"\b{re.escape(axis)} -?\d+(\.\d+)?°", f"{axis} θ°", text)
+
+
+def group_undetermined(result: MapResult) -> list[UndeterminedGroup]:
+    """The undetermined map values grouped by axis, reason and remedy (the angle taken out of both; the combination a
+    grid angle does not see kept from its first angle, as an example): one line for what the same setups miss."""
+    axis_of = {mo.name: ax for ax, m in result.maps.items() for mo in m.motions}
+    axis_of |= {name: ax for ax, m in result.maps.items() for name in m.value}
+    groups: dict[tuple[str, str, str], UndeterminedGroup] = {}
+    for u in result.undetermined:
+        axis = u.motion.split()[0] if u.motion.endswith(" maps") else axis_of.get(u.motion, "")
+        base, _, seen = u.why.partition("; not seen: ")
+        key = (axis, _angle_free(base, axis), _angle_free(u.remedy, axis))
+        grid = [float(a) for a in result.maps[axis].grid.angles_deg] if axis in result.maps else []
+        if key not in groups:
+            example = f" (not seen at {axis} {u.angle_deg:g}°: {seen})" if seen and u.angle_deg is not None else ""
+            why = key[1].replace(f"{axis} θ°", "each angle") + example
+            groups[key] = UndeterminedGroup(axis, [], [], grid, why, key[2].replace(f"{axis} θ°", "those angles"))
+        g = groups[key]
+        if u.motion not in g.motions:
+            g.motions.append(u.motion)
+        if u.angle_deg is not None and u.angle_deg not in g.angles_deg:
+            g.angles_deg.append(float(u.angle_deg))
+    return list(groups.values())
 
 
 def plot_paths(axes: Sequence[str], folder: str) -> list[Path]:
@@ -57,7 +116,7 @@ def map_figure(result: MapResult, axis: str) -> Any:
         panel.grid(alpha=0.3)
         if panel.get_legend_handles_labels()[0]:
             panel.legend(fontsize=8, ncol=3)
-    axes[0].set_title(f"error motions of {axis} (CONVENTIONS §10, ±2σ bands)")
+    axes[0].set_title(f"error motions of the {axis} axis (±2σ bands)")
     axes[1].set_xlabel(f"{axis} [deg]")
     return fig
 

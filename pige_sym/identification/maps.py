@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -49,10 +49,11 @@ from pige_sym.identification.joint import (
     own_sigma,
     whitened_system,
 )
-from pige_sym.identification.map_check import MapLayout, Undetermined, local_check
+from pige_sym.identification.map_check import MapLayout, Undetermined, direction_notes, local_check, range_notes
+from pige_sym.identification.map_reasons import NotIdentifiable, explain, held_axes, measured_points
+from pige_sym.identification.map_statistics import pige_statistics, value_covariance
 from pige_sym.identification.problem import ExtraColumns
 from pige_sym.identification.result import IdentificationResult, json_float
-from pige_sym.identification.spectrum import observability
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.ballbar import BallbarRun, bar_directions
 from pige_sym.measurements.measurement import Measurement
@@ -124,17 +125,28 @@ class MapResult:
     maps: dict[str, AxisMap]
     undetermined: list[Undetermined]
     spec: MapSpec
+    covariance: tuple[list[str], np.ndarray] | None = field(default=None, repr=False)
+    not_identifiable: list[NotIdentifiable] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     @property
     def result(self) -> IdentificationResult:
         return self.joint.result
 
     def to_dict(self) -> dict[str, Any]:
+        """The JSON of ``pige identify --map``: the PIGEs (as a PIGE fit writes them), ``error_motions``,
+        ``map_undetermined`` and the ``covariance`` of the PIGEs and the map values when it is small enough
+        (:mod:`~pige_sym.identification.map_statistics`), else of the PIGEs."""
+        cov = ({"parameters": self.covariance[0], "matrix": self.covariance[1].tolist()}
+               if self.covariance is not None else self.joint.result.covariance_dict())
         return self.joint.to_dict() | {
+            "covariance": cov,
             "method": "joint-map",
             "error_motions": {ax: m.to_dict() for ax, m in self.maps.items()},
             "map_step_deg": self.spec.step_deg,
             "map_undetermined": [u.to_dict() for u in self.undetermined],
+            "not_identifiable": [r.to_dict() for r in self.not_identifiable],
+            "map_notes": list(self.notes),
         }
 
 
@@ -157,19 +169,14 @@ def identify_maps(items: Sequence[tuple[str, Measurement | BallbarRun]], spec: M
     sigmas = _refined_sigmas(joint, design.blocks)
     joint = identify_blocks(machine, design.shared, design.blocks, sigmas, items)
     maps, more = map_values(joint.result.values, joint.result.covariance, layout, design.groups)
-    return MapResult(_pige_part(_with_unseen(joint, design.unseen), names, fitted_zero, zeros), maps,
-                     design.undetermined + more, spec)
-
-
-def _with_unseen(joint: JointResult, unseen: int) -> JointResult:
-    """The joint fit's spectrum as if the ``unseen`` values (left out of it: no row sees them) were in it, as they
-    were before issue 47: each a zero singular value, so the system is singular (condition inf)."""
-    if not unseen:
-        return joint
-    r = joint.result
-    svals = np.concatenate([r.singular_values, np.zeros(unseen)])
-    return JointResult(replace(r, singular_values=svals, condition=math.inf,
-                               observability=observability(svals, r.n_obs)), joint.files)
+    stats = pige_statistics(joint, design.blocks, sigmas, len(fitted_zero), len(names))
+    covariance = value_covariance(joint.result, layout, design.groups, maps, names, fitted_zero)
+    part = _pige_part(joint, names, fitted_zero, zeros, stats)
+    reasons = explain(load_kernels(machine), names, part.result.values, part.result.unidentifiable,
+                      held_axes(layout, design.undetermined), measured_points(items, load_kernels(machine)))
+    part.result.unidentifiable = [r.text() for r in reasons]
+    notes = range_notes(layout) + direction_notes(items, layout, spec, tuple(load_kernels(machine).ROTARY_AXES))
+    return MapResult(part, maps, design.undetermined + more, spec, covariance, reasons, notes)
 
 
 def n_location(machine: str) -> int:
@@ -214,15 +221,12 @@ class MapDesign:
         Per motion its reported grid indices, Q and z columns (:func:`_projection`).
     undetermined : list of Undetermined
         What the per-angle check refused (:func:`_local_check`).
-    unseen : int
-        The values no row sees (no measured pose near their angle), left out of the fit (:func:`_projection`).
     """
 
     shared: list[str]
     blocks: list[Block]
     groups: dict[str, Any]
     undetermined: list[Undetermined]
-    unseen: int = 0
 
 
 def design_maps(names: list[str], layout: MapLayout, blocks: list[Block], sigmas: list[float],
@@ -240,8 +244,7 @@ def design_maps(names: list[str], layout: MapLayout, blocks: list[Block], sigmas
               for b in blocks]
     shared = [names[j] for j in fitted_zero] + new_names
     nuisance = [j for j, n in enumerate(shared) if n.endswith(":left-out")]
-    return MapDesign(shared, _orthogonalised(fitted, sigmas, nuisance, len(fitted_zero)), groups, undetermined,
-                     int((~kept & ~live).sum()))
+    return MapDesign(shared, _orthogonalised(fitted, sigmas, nuisance, len(fitted_zero)), groups, undetermined)
 
 
 def _layout(items: Sequence[tuple[str, Any]], spec: MapSpec, axes: tuple[str, ...],
@@ -255,7 +258,9 @@ def _layout(items: Sequence[tuple[str, Any]], spec: MapSpec, axes: tuple[str, ..
         grids[ax] = make_grid(ax, spec.step_deg, measured)
         motions[ax] = axis_motions(ax, per_direction=ax in spec.per_direction)
         columns += [(m, g) for m in motions[ax] for g in range(grids[ax].n)]
-    return MapLayout(grids, motions, columns, tuple(a for a in spec.axes if a in tool_side))
+    measured_all = {ax: np.concatenate([np.asarray(x.angles_deg, dtype=float)[:, axes.index(ax)] for _, x in items])
+                    for ax in spec.axes}
+    return MapLayout(grids, motions, columns, tuple(a for a in spec.axes if a in tool_side), measured_all)
 
 
 def map_columns(kern: Any, layout: MapLayout, angles_deg: np.ndarray, raw: np.ndarray,
@@ -403,13 +408,14 @@ def map_values(values: np.ndarray, covariance: np.ndarray, layout: MapLayout,
             elif gr["nodes"] and cols:
                 more.append(Undetermined(m.name, None, "its map is not determined jointly with the PIGEs and the "
                                          "other maps (a combination of the fit's unknowns is not seen)",
-                                         f"measure with more setups or angles (pige plan --map {ax})"))
+                                         "measure with more setups or angles (the map test's plan says which)"))
             elif gr["nodes"]:
                 more.append(Undetermined(m.name, None, f"only {len(gr['nodes'])} grid angle(s) have a value: after "
                                          f"leaving out the {m.left_out} functions of §10 nothing is left",
                                          "determine its other angles first (their reasons are given)"
                                          if len(gr["nodes"]) < grid.n else
-                                         f"measure more angles of {ax} (pige plan --map {ax})"))
+                                         f"measure more angles of {ax} (the map test's plan puts poses at every "
+                                         "grid angle)"))
             value[m.name], std[m.name], cov[m.name] = v, s, c
         for m in layout.motions[ax]:
             if m.kind == "reversal":
@@ -441,10 +447,15 @@ def _per_direction(cov: np.ndarray, groups: dict[str, Any], reversal: Motion,
         value[mean_name + suffix], std[mean_name + suffix] = v, s
 
 
-def _pige_part(joint: JointResult, names: list[str], fitted: list[int], zeros: IdentificationResult) -> JointResult:
+def _pige_part(joint: JointResult, names: list[str], fitted: list[int], zeros: IdentificationResult,
+               stats: tuple[int, float, dict[str, float], np.ndarray]) -> JointResult:
     """The joint result restricted to the PIGEs and zero-position errors (the map unknowns reported apart); a
     zero-position error the files cannot determine has no value, as in the fit of the PIGEs and zero-position
-    errors alone (``zeros``), whose combinations say why; the PIGEs then hold it (CONVENTIONS §10)."""
+    errors alone (``zeros``), whose combinations say why; the PIGEs then hold it (CONVENTIONS §10).
+
+    ``stats``: the rank, condition, observability and singular values of the PIGEs given the maps
+    (:func:`~.map_statistics.pige_statistics`), not the joint system's, whose held values make it singular by design.
+    """
     r = joint.result
     k = len(fitted)
     values = np.full(len(names), np.nan)
@@ -460,9 +471,9 @@ def _pige_part(joint: JointResult, names: list[str], fitted: list[int], zeros: I
     sub = IdentificationResult(
         machine=r.machine, method="joint-map", projection=r.projection, loss=r.loss, parameters=list(names),
         units=dict(zeros.units), values=values, std=std, covariance=cov, identifiable=np.isfinite(values),
-        rms_um=r.rms_um, sigma_um=r.sigma_um, dof=r.dof, n_rows=r.n_rows, n_obs=r.n_obs, rank=r.rank,
-        condition=r.condition, singular_values=r.singular_values, observability=r.observability,
+        rms_um=r.rms_um, sigma_um=r.sigma_um, dof=r.dof, n_rows=r.n_rows, n_obs=r.n_obs, rank=stats[0],
+        condition=stats[1], singular_values=stats[3], observability=stats[2],
         unidentifiable=[text for _, text in said], outlier_rows=r.outlier_rows, residuals_um=r.residuals_um,
         ball_mm=r.ball_mm, pivots_mm=r.pivots_mm, tool_mm=r.tool_mm, unobserved=[n for n in r.unobserved if n in names],
         axis_sense=r.axis_sense, null_space=[c for c, _ in said])
-    return JointResult(sub, joint.files)
+    return JointResult(sub, joint.files, joint.variance_factor)

@@ -185,8 +185,8 @@ class IdentificationResult:
         if cov.shape != (len(self.parameters),) * 2:
             return None
         keep = [i for i in range(len(self.parameters)) if np.isfinite(self.values[i]) and np.isfinite(self.std[i])
-                and self.std[i] > 0 and np.isfinite(cov[i]).all()]
-        keep = [i for i in keep if all(np.isfinite(cov[i, j]) for j in keep)]
+                and self.std[i] > 0 and np.isfinite(cov[i, i])]
+        keep = [i for i in keep if all(np.isfinite(cov[i, j]) for j in keep)]  # the undetermined rows are NaN
         if not keep:
             return None
         sub = cov[np.ix_(keep, keep)]

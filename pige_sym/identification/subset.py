@@ -18,10 +18,18 @@ Covariance ``Cov(x_F) = s² N_FF⁻¹``:
   freedom: a three-pose check-up leaves two degrees of freedom of its own), else ``s² = RSS/(N − |F|)`` as in
   :func:`~pige_sym.identification.least_squares.identify`.
 
+**The held values' error.**  The held values are estimates (the full calibration's, with covariance ``Σ_H``): a
+held value off by ``δ`` moves the free estimates by ``−K δ`` (``K = N_FF⁻¹N_FH``).  Given ``Σ_H``
+(``held_covariance``), the check-up's covariance includes it, ``s² N_FF⁻¹ + K Σ_H Kᵀ`` (its standard errors hold
+every source of its error), and :attr:`SubsetFit.fit_covariance` keeps the fit's own part.
+
 **Consistency.**  ``χ² = RSS/s²_expected`` on ``N − |F|`` degrees of freedom (probe: the rows' own scale; R-test:
 the full calibration's noise when given) tests whether the check-up's poses agree with the held values; its
 p-value is reported, and below :data:`CONSISTENCY_ALPHA` the fit says so (an orientation error or the set-up
-changed: the held values no longer describe the machine).
+changed: the held values no longer describe the machine).  Given ``Σ_H``, the residual is the least one over the
+held values too, each kept near its value by its uncertainty: ``min_x RSS(x) + s²_expected (x_H − h)ᵀ Σ_H⁻¹
+(x_H − h)`` (on the same ``N − |F|`` degrees of freedom: the held values' prior adds as many rows as parameters), so
+a disagreement the held values' own error explains is no reason to calibrate fully.
 """
 
 from __future__ import annotations
@@ -66,6 +74,8 @@ class SubsetFit:
     notes : list of str
     sensitivity : ndarray, shape=(F, H)
         ``K = N_FF⁻¹ N_FH``: a held value off by ``δ`` moves the free estimates by ``−K δ`` (held in ``held``'s order).
+    fit_covariance : ndarray, shape=(F, F)
+        The fit's own covariance ``s² N_FF⁻¹`` (``covariance`` adds the held values' error when it is given).
     """
 
     machine: str
@@ -81,6 +91,7 @@ class SubsetFit:
     consistency_p: float | None = None
     notes: list[str] = field(default_factory=list)
     sensitivity: np.ndarray | None = None
+    fit_covariance: np.ndarray | None = None
 
     def value_dict(self) -> dict[str, float]:
         return {n: float(v) for n, v in zip(self.parameters, self.values, strict=True)}
@@ -96,7 +107,8 @@ class SubsetFit:
 
 
 def identify_subset(m: Measurement, free: list[str], held: dict[str, float], *,
-                    noise_um: float | None = None, noise_dof: int | None = None) -> SubsetFit:
+                    noise_um: float | None = None, noise_dof: int | None = None,
+                    held_covariance: np.ndarray | None = None) -> SubsetFit:
     """Fit the ``free`` PIGEs of a measurement with every other location PIGE at ``held`` (module docstring).
 
     Parameters
@@ -109,6 +121,8 @@ def identify_subset(m: Measurement, free: list[str], held: dict[str, float], *,
         Value of every other location PIGE [µm, µrad].
     noise_um, noise_dof : float, int, optional
         R-test: the noise per component the full calibration saw and its degrees of freedom (module docstring).
+    held_covariance : ndarray, shape=(H, H), optional
+        The held values' covariance, in ``held``'s order [µm², µrad²] (module docstring).
 
     Raises
     ------
@@ -143,20 +157,50 @@ def identify_subset(m: Measurement, free: list[str], held: dict[str, float], *,
     rss = max(float(problem.yy - 2 * x @ problem.rhs + x @ problem.normal @ x), 0.0)
     resid_dof = problem.n_obs - len(f)
     scale, dof, expected = _scale(m, problem, rss, resid_dof, noise_um, noise_dof)
-    cov = sol.cov_unit * scale
+    own = sol.cov_unit * scale
+    sens = sol.cov_unit @ problem.normal[np.ix_(f, h)]
+    kept = {names[i]: float(held[names[i]]) for i in h}
+    sigma_h = _held_covariance(held_covariance, len(h))
+    cov = own if sigma_h is None else own + sens @ sigma_h @ sens.T
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     units = {n: kern.UNITS[n] for n in order}
     refuse_unphysical(order, sol.values, std, units, m.path or "the measurement")
+    if expected is not None and sigma_h is not None:
+        rss = _rss_with_held(problem, f, h, xh, sigma_h, expected)
     p = None if expected is None or resid_dof <= 0 else chi2_sf(resid_dof, rss / expected)
+    beyond = "their noise" if sigma_h is None else "their noise and the held values' uncertainty"
     notes = [] if p is None or p >= CONSISTENCY_ALPHA else [
-        f"the check-up's poses disagree with the held PIGEs beyond their noise (chi-square p = {p:.2g}): an "
+        f"the check-up's poses disagree with the held PIGEs beyond {beyond} (chi-square p = {p:.2g}): an "
         "orientation error, the set-up or the probe changed since the last full calibration; calibrate the machine "
         "fully"]
     resid = _rms(problem, x)
-    kept = {names[i]: float(held[names[i]]) for i in h}
-    sens = sol.cov_unit @ problem.normal[np.ix_(f, h)]
     return SubsetFit(kern.MACHINE_CODE, order, units, sol.values, std, cov, kept, dof, resid, problem.n_obs, p, notes,
-                     sens)
+                     sens, own)
+
+
+def _held_covariance(given: np.ndarray | None, size: int) -> np.ndarray | None:
+    """The held values' covariance when given with finite values and the right shape (else None)."""
+    if given is None or size == 0:
+        return None
+    sigma = np.asarray(given, dtype=float)
+    if sigma.shape != (size, size):
+        raise InputError(f"the held values' covariance is {sigma.shape}, expected ({size}, {size})")
+    return sigma if np.isfinite(sigma).all() else None
+
+
+def _rss_with_held(problem: Any, f: list[int], h: list[int], xh: np.ndarray, sigma_h: np.ndarray,
+                   expected: float) -> float:
+    """``min_x RSS(x) + s²_expected (x_H − h)ᵀ Σ_H⁻¹ (x_H − h)`` (module docstring), from the normal equations."""
+    idx = f + h
+    normal = problem.normal[np.ix_(idx, idx)].copy()
+    rhs = problem.rhs[idx].copy()
+    prior = expected * np.linalg.pinv(sigma_h, hermitian=True)
+    k = len(f)
+    normal[k:, k:] += prior
+    rhs[k:] += prior @ xh
+    yy = problem.yy + float(xh @ prior @ xh)
+    x = np.linalg.lstsq(normal, rhs, rcond=None)[0]
+    return max(float(yy - rhs @ x), 0.0)
 
 
 def _scale(m: Measurement, problem: Any, rss: float, resid_dof: int, noise_um: float | None,

@@ -179,7 +179,8 @@ class CovarianceDocument:
     """``covariance`` of a parameter file: the estimates' covariance over ``parameters`` [µm², µm·µrad, µrad²].
 
     ``matrix`` is square, symmetric and positive semi-definite, one row per name of ``parameters`` (each a
-    determined parameter of ``pige``); its diagonal is the square of ``std`` where the file gives both.
+    determined parameter of ``pige``, or a map value with a number, named ``<axis>:<motion>@<angle>``, e.g.
+    ``C:EXC@30``); its diagonal is the square of ``std`` (or of the map value's std) where the file gives both.
     """
 
     parameters: list[str]
@@ -207,6 +208,7 @@ class ParamsDocument:
     std: dict[str, float | None] | None = field(default=None, metadata={"max_abs": MAX_PIGE})
     covariance: CovarianceDocument | None = None
     error_motions: dict[str, dict[str, Any]] | None = None
+    not_identifiable: list[Any] | None = None  # identify --map: why a PIGE has no value, what would determine it
 
     #: Keys ``pige identify/diagnose --json`` write that a parameter file does not use.
     IGNORED_KEYS: ClassVar[frozenset[str]] = frozenset({
@@ -214,7 +216,7 @@ class ParamsDocument:
         "dof", "n_rows", "n_obs", "observability", "unidentifiable", "outlier_rows", "vif", "baseline", "options",
         "plots", "rejected", "params", "bic", "heldout_rms_um", "unobservable", "identifiable", "warnings",
         "unobserved", "clusters", "files", "map_step_deg", "map_undetermined", "model_check", "effects_searched",
-        "joint_effects", "agreement", "notes", "null_space",
+        "joint_effects", "agreement", "notes", "null_space", "map_notes",
     })
 
 
@@ -342,7 +344,9 @@ def params_document(data: Any, path: PathLike, *, machine: str | None = None,
     if missing and not allow_missing:
         said = "null (not identifiable)" if all(k in doc.pige for k in missing) else "missing or null"
         raise FileFormatError(p, None, f"pige.{missing[0]}: {said}; every PIGE of {kern.MACHINE_CODE} needs a value "
-                              f"({', '.join(missing)}); pass --allow-missing to set them to 0")
+                              f"({', '.join(missing)}): {_missing_remedy(doc.not_identifiable, missing)}; to "
+                              "compensate with the others and leave these uncorrected, pass --allow-missing (they are "
+                              "entered as 0)")
     for k in missing:
         values[k] = 0.0
     sense = _axis_sense(p, doc.axis_sense, kern.ROTARY_AXES)
@@ -354,11 +358,12 @@ def params_document(data: Any, path: PathLike, *, machine: str | None = None,
     negative = [k for k, v in std.items() if v < 0]
     if negative:
         raise FileFormatError(p, None, f"std.{negative[0]}: a standard error cannot be negative")
-    determined = set(values) - set(missing) | set(effects)
-    cov = _covariance(p, doc.covariance, determined, std)
     from pige_sym.measurements.error_motions_file import read_error_motions
 
     maps = read_error_motions(doc.error_motions, p, kern) if doc.error_motions else None
+    map_values, map_std = _map_names(maps)
+    determined = set(values) - set(missing) | set(effects) | set(map_values)
+    cov = _covariance(p, doc.covariance, determined, std | map_std)
     return ParamsFile(
         path=p, machine=kern.MACHINE_CODE, pige=values, effect_values={k: float(v or 0.0) for k, v in effects.items()},
         set_to_zero=tuple(missing), units=dict(doc.units or kern.UNITS),
@@ -370,6 +375,32 @@ def params_document(data: Any, path: PathLike, *, machine: str | None = None,
         error_motions=maps,
     )
 
+
+
+def _missing_remedy(reasons: list[Any] | None, missing: list[str]) -> str:
+    """What would determine the missing PIGEs: the file's own remedy (``not_identifiable`` of ``pige identify
+    --map``), else measure again so that the identification determines them."""
+    usable = [r for r in reasons or [] if isinstance(r, dict) and isinstance(r.get("remedy"), str)
+              and isinstance(r.get("parameters"), list)]
+    best = max(usable, key=lambda r: len(set(missing) & set(r["parameters"])), default=None)
+    if best is not None and set(missing) & set(best["parameters"]):
+        return f"to determine them, {best['remedy']}"
+    return "measure so that they are determined (pige identify says which combination its data do not see)"
+
+
+def _map_names(maps: dict[str, Any] | None) -> tuple[set[str], dict[str, float]]:
+    """The map values with a number, named ``<axis>:<motion>@<angle>`` (``C:EXC@30``, as a covariance names them),
+    and their standard errors."""
+    names: set[str] = set()
+    stds: dict[str, float] = {}
+    for axis, m in (maps or {}).items():
+        for motion, vals in m["value"].items():
+            for g, v, sd in zip(m["angle_deg"], vals, m["std"].get(motion, [math.nan] * len(vals)), strict=True):
+                if math.isfinite(v):
+                    names.add(f"{axis}:{motion}@{g:g}")
+                    if math.isfinite(sd):
+                        stds[f"{axis}:{motion}@{g:g}"] = float(sd)
+    return names, stds
 
 
 def _covariance(path: str, cov: CovarianceDocument | None, determined: set[str],

@@ -422,12 +422,15 @@ class _Replay:
         self.last_confirm_line = op.line
 
     def result(self) -> ProbeProgramCheck:
-        poses = [p[0] for p in self.poses if p[0] or not p[1]]
+        measured = list(self.poses)
+        if len(measured) > 1 and measured[-1] == [0, 0] and not np.abs(self.angles).max():
+            measured.pop()  # the rotary axes turned back to the reference pose after the last pose: no pose
+        poses = [p[0] for p in measured if p[0] or not p[1]]
         few = [i for i, k in enumerate(poses) if k < 4]
         if few:
             raise NCProgramError(self.path, None, f"pose {few[0]} has {poses[few[0]]} probing moves; a centre needs 4")
         return ProbeProgramCheck(len(poses), poses, float(self.rapid_min), float(self.rot_min), float(self.over_min),
-                                 sum(p[1] for p in self.poses))
+                                 sum(p[1] for p in measured))
 
 
 def _log_opened_after(text: str, dialect: str, line: int, path: str) -> None:

@@ -272,9 +272,14 @@ def _pose_lines_tcp(plan: ProbePlan, i: int, dialect: str) -> list[str]:
 
 
 def _end_tcp(plan: ProbePlan, dialect: str) -> list[str]:
-    """TCP kinematics: the last retract, straight above the sphere at the safe height."""
+    """TCP kinematics: the last retract, straight above the sphere at the safe height, then the rotary axes back to
+    the reference pose in steps above the sphere: the program ends where it must start (its first check), so it
+    runs again as it is (``pige cycle`` calls it again and again)."""
     last = plan.angles_deg[-1]
-    return [_rapid(_xyz(_tcp_retracts(plan, last, last)[0][0], dialect), dialect)]
+    out = [_rapid(_xyz(_tcp_retracts(plan, last, last)[0][0], dialect), dialect)]
+    for wait, theta in _tcp_retracts(plan, last, np.zeros(len(plan.rotary_axes))):
+        out += [_rapid(_xyz(wait, dialect), dialect), _rapid(_rotary_words(plan, theta, dialect), dialect)]
+    return out
 
 
 def render_probe_program(plan: ProbePlan, dialect: str) -> str:

@@ -101,11 +101,12 @@ def _forecast_text(last: Any, name: str) -> str:
         return ""
     from pige_sym.verdict.checkup.routine import BEYOND_CALENDAR
 
-    rate = f"drift {tr['rate_per_h']:+.3g}/h"
-    if tr.get("significant") and not tr.get("leaves_at") and tr.get("leaves_at_h") is not None:
+    rate = f"drift {tr['rate_per_h'] * 24:+.3g}/day"
+    shown = tr.get("shown", tr.get("significant"))
+    if shown and not tr.get("leaves_at") and tr.get("leaves_at_h") is not None:
         return f"; {rate}, leaves {BEYOND_CALENDAR}"
-    if not tr.get("significant") or not tr.get("leaves_at"):
-        return f"; {rate} (not shown)" if not tr.get("significant") else f"; {rate}"
+    if not shown or not tr.get("leaves_at"):
+        return f"; {rate} (not shown)" if not shown else f"; {rate}"
     high = tr.get("leaves_high")
     return (f"; {rate}, leaves {tr['leaves_at'][5:16].replace('T', ' ')} ({tr['leaves_low'][5:16].replace('T', ' ')}"
             f" .. {high[5:16].replace('T', ' ') if high else 'not bounded'})")
@@ -163,45 +164,75 @@ def checkup_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
 
 def checkup_html(data: ReportData, base: Path | None) -> str:
     """The section: the plot, the check-ups, the last one's figures (empty without check-ups)."""
+    from pige_sym.report.html_verdict import run_numbers
+
     runs = checkups(data)
     if not runs:
         return ""
+    assert data.history is not None
+    number = run_numbers(data.history.runs)
     rows = []
     for r in runs:
         info = r.checkup or {}
-        flagged = [f"{i['name']} ({i['limit']['by']})" for i in info.get("items", [])
+        flagged = [f"{i['name']} ({i['limit']['by'].replace('+', ' and ')})" for i in info.get("items", [])
                    if i.get("limit") and i["limit"].get("by")]
-        rows.append([esc(r.id), esc(r.measured_at[:16]), f"<b>{esc(r.verdict or '—')}</b>",
+        rows.append([esc(number[r.id]), esc(r.measured_at[:16].replace("T", " ")), _badge(r.verdict),
                      esc(", ".join(flagged) or "—"), "yes" if info.get("after_correction") else "",
                      "provisional" if info.get("provisional") else "learned"])
     last = runs[-1].checkup or {}
     per = [[esc(i["name"]), num(i["value"], "+.3f"), num(i["std"]), num((i.get("limit") or {}).get("centre"), "+.3f"),
-            num((i.get("limit") or {}).get("half_width")), num(i.get("tolerance"), "g"), esc(i["status"]),
-            _rate(i.get("trend")), esc(_leaves(i.get("trend")))] for i in last.get("items", [])]
+            num((i.get("limit") or {}).get("half_width")), esc(_scatter(i.get("limit"))), num(i.get("left"), "+.3f"),
+            num(i.get("tolerance"), "g"), esc(i["status"]), esc(_rate(i.get("trend"))), esc(_leaves(i.get("trend")))]
+           for i in last.get("items", [])]
+    source = last.get("limits_source") or ("provisional" if last.get("provisional") else "learned")
     return "\n".join([
         '<section data-section="checkup" id="checkup"><h2>Check-ups</h2>',
-        f"<p>{len(runs)} check-up{'s' if len(runs) != 1 else ''}; the last, run {esc(runs[-1].id)}: "
-        f"<b>{esc(runs[-1].verdict)}</b>. Method: {esc(last.get('method', ''))}.</p>",
+        f"<p>{len(runs)} check-up{'s' if len(runs) != 1 else ''}; the last, run {esc(number[runs[-1].id])}: "
+        f"{_badge(runs[-1].verdict)}. Each check-up is judged against control limits from the run-to-run scatter of "
+        "the machine's runs (its full calibrations and check-ups, between the corrections entered), with the "
+        "machines of its structure in this history as a prior, at a false-alarm rate of "
+        f"{esc(format(last.get('alpha', 0.01), 'g'))} per check-up (docs/checkup.md). The last one's limits: "
+        f"{esc(source)}.</p>",
         "".join(img(f, base) for f in data.figures if f.key == KEY),
         table(["run", "measured (UTC)", "verdict", "outside its limits (test)", "after a correction", "limits"], rows,
               num_cols=[0]),
         "<h4>The last check-up</h4>",
-        table(["PIGE", "value", "std", "centre", "limit ±", "tolerance", "status", "drift per hour [90 %]",
-               "leaves its tolerance"], per, num_cols=[1, 2, 3, 4, 5]),
+        table(["PIGE", "value", "std", "centre", "limit ±", "run-to-run scatter (90 %)", "error left (values in force)",
+               "tolerance", "status", "drift per day [90 %]", "leaves its tolerance (UTC)"], per,
+              num_cols=[1, 2, 3, 4, 6, 7]),
         "</section>"])
+
+
+def _badge(verdict: str | None) -> str:
+    from pige_sym.report.html_verdict import _BADGE
+
+    v = verdict or "none"
+    return f'<span data-verdict="{esc(v)}" class="badge {esc(v)}">{esc(_BADGE.get(v, v))}</span>'
+
+
+def _scatter(lim: dict[str, Any] | None) -> str:
+    if not lim or lim.get("scatter") is None:
+        return "not known yet" if lim else "—"
+    low, high = lim.get("scatter_low"), lim.get("scatter_high")
+    return f"{lim['scatter']:.2g}" + (f" ({low:.2g}..{high:.2g})" if low is not None and high is not None else "")
 
 
 def _rate(tr: dict[str, Any] | None) -> str:
     if not tr:
         return "—"
-    return f"{num(tr['rate_per_h'], '+.3g')} [{num(tr['rate_low'], '+.3g')}, {num(tr['rate_high'], '+.3g')}]"
+    return f"{tr['rate_per_h'] * 24:+.3g} [{tr['rate_low'] * 24:+.3g}, {tr['rate_high'] * 24:+.3g}]"
 
 
 def _leaves(tr: dict[str, Any] | None) -> str:
     from pige_sym.verdict.checkup.routine import BEYOND_CALENDAR
 
-    if tr and tr.get("significant") and not tr.get("leaves_at") and tr.get("leaves_at_h") is not None:
+    shown = bool(tr) and tr.get("shown", tr.get("significant"))  # type: ignore[union-attr]
+    if tr and shown and not tr.get("leaves_at") and tr.get("leaves_at_h") is not None:
         return BEYOND_CALENDAR
-    if not tr or not tr.get("significant") or not tr.get("leaves_at"):
+    if not tr or not shown or not tr.get("leaves_at"):
         return "—"
-    return f"{tr['leaves_at']} ({tr.get('leaves_low') or '?'} .. {tr.get('leaves_high') or 'not bounded'})"
+    high = (tr.get("leaves_high") or "not bounded")[:16].replace("T", " ")
+    if tr.get("reached"):
+        return f"may be outside now (by {high})"
+    return (f"{tr['leaves_at'][:16].replace('T', ' ')} ({(tr.get('leaves_low') or '?')[:16].replace('T', ' ')} .. "
+            f"{high})")

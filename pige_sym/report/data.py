@@ -164,6 +164,7 @@ class MeasurementReport:
     time_source: str = ""
     model_check: ModelCheck | None = None  # of the Gauss–Newton PIGE-only fit (pige identify's)
     weighing: Any = None  # what compensation enters of the primary estimate (compensation.weighing.Weighing)
+    compensation_result: Any = None  # the compensation stage's result (compensation.result.Compensation)
 
     @property
     def primary(self) -> IdentificationResult:

@@ -222,8 +222,10 @@ def gather_report(measurement_paths: Sequence[str | os.PathLike[str]], *, studie
     tol = read_tolerances(tolerances) if tolerances is not None else None
     program_text = read_program(program) if program is not None else None
     steps_per_file = 4 + len(study_set) + (program is not None)
+    from pige_sym.diagnosis.map_gain import mapped_effects
+
     options = _Options(method, projection, with_zero, study_set, presets, sobol_samples, seed, tol, rule, k,
-                       None if program is None else Path(program), program_text)
+                       None if program is None else Path(program), program_text, tuple(mapped_effects(maps)))
     from tqdm import tqdm
 
     with tqdm(total=steps_per_file * len(loaded), desc="report", unit="step", disable=not progress) as bar:
@@ -371,6 +373,7 @@ class _Options:
     k: float
     program: Path | None
     program_text: str | None
+    exclude: tuple[str, ...] = ()  # with --map: the mapped axes' one-harmonic motions (the maps hold them)
 
 
 def _gather_one(p: Path, label: str, m: Measurement, truth: Truth | None, opt: _Options, bar: Any) -> MeasurementReport:
@@ -384,7 +387,7 @@ def _gather_one(p: Path, label: str, m: Measurement, truth: Truth | None, opt: _
     diag: DiagnosisResult | None = None
     diag_error = None
     try:
-        diag = diagnose(m)
+        diag = diagnose(m, exclude=opt.exclude)
     except IdentificationError as exc:  # the data are fine; one candidate fit is not: report it, go on
         diag_error = str(exc)
     bar.update(1)
@@ -475,7 +478,9 @@ def gather_history(machine_id: str, db: str | None, tol: Tolerances | None) -> H
     else:
         last = next((r.check for r in reversed(runs) if r.check), None)
         limits = {str(i["name"]): float(i["limit"]) for i in (last or {}).get("items", [])}
-    return HistoryData(machine_id, engine.url.render_as_string(hide_password=True), runs, comps, limits, judged)
+    from pige_sym.verdict.history.connection import where
+
+    return HistoryData(machine_id, where(engine).shown, runs, comps, limits, judged)
 
 
 def _run_estimates(run: Any) -> Estimates:

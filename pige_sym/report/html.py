@@ -147,11 +147,25 @@ def _overview_html(data: ReportData) -> str:
     return table(head, rows, num_cols=[3, 5])
 
 
+def _maps_answer(data: ReportData) -> str:
+    """The error maps' answer, first when the report fits maps (:func:`~pige_sym.report.map_section.map_answer_html`):
+    the files' own answers follow it."""
+    if data.maps is None:
+        return ""
+    from pige_sym.report.map_section import map_answer_html
+
+    return map_answer_html(data.maps) + '<h2 class="per-file">Each file on its own</h2>'
+
+
 def _instruments(data: ReportData) -> str:
     """The instruments of the page's files, for its title."""
     names = [str(r.measurement.metadata.get("instrument") or "R-test") for r in data.measurements]
     names += ["ballbar" for j in data.joints for fd in j.diagnosis.files if fd.instrument == "ballbar"]
-    if not names and (data.comparison is not None or data.history is not None):
+    if not names and data.history is not None:  # the history's own runs: their set-ups, else their methods
+        names = [str((r.setup or {}).get("instrument") or ("ballbar" if r.method.startswith("joint") else "run"))
+                 for r in data.history.runs]
+        names = [n for n in names if n != "run"] or ["machine history"]
+    if not names and data.comparison is not None:
         names = ["R-test"]
     shown = {"rtest": "R-test", "sphere-probe": "touch probe"}
     return ", ".join(dict.fromkeys(shown.get(n, n) for n in names)) or "R-test"
@@ -183,7 +197,7 @@ def render_html(data: ReportData, *, base: Path | None = None) -> str:
         f"<style>{CSS}</style></head><body>",
         f"<header><h1>Five-axis calibration report ({esc(_instruments(data))})</h1>",
         f'<p class="meta">pige_sym {esc(__version__)} — {esc(data.created)}</p></header><main>',
-        '<section data-section="answer" id="answer">',
+        '<section data-section="answer" id="answer">', _maps_answer(data),
         *(answer_joint_html(i, j) for i, j in enumerate(data.joints)), answer_html(data), "</section>",
         (f'<p class="meta">{esc(settings)}'
          + (f" — NC program <code>{esc(data.program)}</code>" if data.program is not None else "") + "</p>"

@@ -39,6 +39,9 @@ padding:8px 14px;margin:8px 0}
 .badge.fail{background:#b00020}
 .badge.undecided{background:#b26a00}
 .badge.none{background:#6b7480}
+.badge.ok{background:#1b7f3a;color:#fff}
+.badge.drifted{background:#a35f00;color:#fff}
+.badge.out{background:#b00020;color:#fff}
 .st.pass{color:#1b7f3a;font-weight:600}
 .st.fail{color:#b00020;font-weight:600}
 .st.undecided{color:#b26a00;font-weight:600}

@@ -289,13 +289,10 @@ def compensation_html(rep: MeasurementReport, base: Path | None) -> str:
 
 def _weighing_html(rep: MeasurementReport) -> str:
     """What compensation enters of the estimate, weighed by its uncertainty, and what it is predicted to leave."""
-    from pige_sym.compensation.weighing import weighing_rows
-
     w = rep.weighing
     if w is None:
         return ""
-    units = {**rep.primary.units}
-    rows = weighing_rows(w, units) if w.covariance_from != "none" else []
+    rows = w.rows() if w.covariance_from != "none" else []
     said = ("Every value is entered as estimated: each lies many standard errors from 0." if not rows else
             "Entered, weighed by its uncertainty (docs/algorithms.md, \"Corrections weighed by their uncertainty\"):")
     items = "".join(f"<li>{esc(r)}</li>" for r in rows)

@@ -7,6 +7,7 @@ Each function takes the gathered data (:mod:`pige_sym.report.gather`) and return
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from pige_sym.report.data import MeasurementReport, ReportData
 from pige_sym.report.estimate_used import differs_short_html
@@ -16,7 +17,7 @@ from pige_sym.report.next_step import compare_next, history_next, measurement_ne
 from pige_sym.report.words import value_std
 from pige_sym.verdict.check import CheckResult
 
-_BADGE = {"pass": "PASS", "fail": "FAIL", "undecided": "UNDECIDED"}
+_BADGE = {"pass": "PASS", "fail": "FAIL", "undecided": "UNDECIDED", "ok": "OK", "drifted": "DRIFTED", "out": "OUT"}
 
 
 def verdict_html(rep: MeasurementReport) -> str:
@@ -78,16 +79,18 @@ def _answer_history(data: ReportData) -> str:
     if h.check is not None:  # judged now against the report's --tolerances
         odd = [f"{i.name} {i.status}" for i in h.check.items if i.status != "pass"]
         verdict = (f'<span data-verdict="{esc(h.check.verdict)}" class="badge {esc(h.check.verdict)}">'
-                   f"{_BADGE[h.check.verdict]}</span> <small>run {last.id} against {esc(h.check.tolerances)}"
+                   f"{_BADGE[h.check.verdict]}</span> <small>run {len(h.runs)} against {esc(h.check.tolerances)}"
                    f"{esc(': ' + ', '.join(odd) if odd else f': all {len(h.check.items)} items pass')}</small>")
     elif last.verdict:
+        what = "its check-up" if last.kind == "checkup" else "stored with it"
         verdict = (f'<span data-verdict="{esc(last.verdict)}" class="badge {esc(last.verdict)}">'
-                   f"{_BADGE.get(last.verdict, last.verdict)}</span> <small>stored with run {last.id}</small>")
+                   f"{_BADGE.get(last.verdict, last.verdict)}</span> <small>run {len(h.runs)}, {what}</small>")
     else:
         verdict = ('<span data-verdict="none" class="badge none">not judged</span> <small>no tolerances stored with '
                    "the run or given (pige report --history ID --tolerances TOL.json)</small>")
+    number = run_numbers(h.runs)
     moved = [f"{c.parameter} {num(c.change, '+.3g')} ± {num(c.std, '.2g')} {units(c.unit)} "
-             f"(run {c.from_run} → {c.to_run})"
+             f"(run {number[c.from_run]} → {number[c.to_run]})"
              for comp in h.comparisons for c in comp.changes if c.significant]
     facts = [("machine", f"id <b>{esc(h.machine_id)}</b> — <code>{esc(last.machine_code)}</code>"),
              ("runs", esc(f"{len(h.runs)}, last measured {last.measured_at}")),
@@ -168,27 +171,32 @@ def compare_html(data: ReportData, base: Path | None) -> str:
     return "\n".join(parts)
 
 
+def run_numbers(runs: list[Any]) -> dict[int, int]:
+    """Per run id its number among the machine's runs (:func:`pige_sym.cli.history.run_numbers`)."""
+    return {r.id: k for k, r in enumerate(runs, start=1)}
+
+
 def history_html(data: ReportData, base: Path | None) -> str:
     h = data.history
     assert h is not None
-    runs = [[esc(r.id), esc(r.measured_at), f'<code class="path">{esc(Path(r.file_name).name)}</code>', esc(r.method),
-             esc(", ".join(str(f.get("effect")) for f in r.effects) or "none"), esc(r.verdict or "—"), num(r.rms_um)]
-            for r in h.runs]
+    number = run_numbers(h.runs)
+    runs = [[esc(number[r.id]), esc(r.measured_at), f'<code class="path">{esc(Path(r.file_name).name)}</code>',
+             esc(r.method), esc(", ".join(str(f.get("effect")) for f in r.effects) or "none"), esc(r.verdict or "—"),
+             num(r.rms_um)] for r in h.runs]
     parts = [f"<p>Machine <b>{esc(h.machine_id)}</b> in <code>{esc(h.database)}</code>.</p>",
              table(["run", "measured (UTC)", "file", "estimate", "effects", "verdict", "residual RMS [µm]"], runs,
                     num_cols=[0, 6]),
              "".join(img(f, base) for f in data.figures if f.key == "trend")]
     for comp in h.comparisons:
         sig = [c for c in comp.changes if c.significant]
-        head = (f"run {comp.from_run} → {comp.to_run}: " + ("<b>changed</b>" if comp.significant else
-                                                           "no significant change")
-                + f" (joint p = {num(comp.p_value, '.3g')})")
+        said = (f"<b>changed: {esc(', '.join(c.parameter for c in sig))}</b>" if sig else "<b>changed</b> (jointly, "
+                "no parameter alone)") if comp.significant else "no significant change"
+        head = f"run {number[comp.from_run]} → {number[comp.to_run]}: {said} (joint p = {num(comp.p_value, '.3g')})"
         rows = [[esc(c.parameter), num(c.change, "+.3f"), num(c.std), esc(units(c.unit)), num(c.z, "+.2f"),
                  "yes" if c.significant else ("not tested" if c.significant is None else "no")]
                 for c in comp.changes]
         notes = "".join(f'<p class="note">{esc(n)}</p>' for n in comp.notes)
         parts.append(f"<h4>{head}</h4>" + notes
-                     + ("<p>" + esc(", ".join(c.parameter for c in sig)) + "</p>" if sig else "")
                      + "<details><summary>every parameter</summary>"
                      + table(["parameter", "change", "std", "unit", "z", "significant"], rows, num_cols=[1, 2, 4])
                      + "</details>")

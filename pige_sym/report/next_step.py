@@ -114,7 +114,11 @@ def _correct(rep: MeasurementReport, data: ReportData) -> list[str]:
 
 
 def measurement_next(rep: MeasurementReport, data: ReportData) -> NextStep:
-    """The next step of one R-test or probe file (module docstring)."""
+    """The next step of one R-test or probe file (module docstring); in a report that fits the files' error maps
+    together, the maps' answer is the next step of every file."""
+    if data.maps is not None:
+        return NextStep("these files are fitted together with their error maps: the maps' answer at the top of the "
+                        "page says what to do next", list(data.maps.next_commands))
     q = shlex.quote(str(rep.path))
     if rep.diagnosis is None:
         return NextStep("The diagnosis failed on these data: look at the file (its Measured deviations) before "
@@ -147,10 +151,27 @@ def measurement_next(rep: MeasurementReport, data: ReportData) -> NextStep:
                     f"A test that decides {'it' if len(names) == 1 else 'them'}:", [plan], reasons)
 
 
+def checkup_next(run: Any) -> NextStep:
+    """The next step of a machine whose last run is a check-up: the one ``pige checkup`` printed
+    (:func:`pige_sym.verdict.checkup.routine.next_step`, stored with the run; for a check-up stored before it was,
+    the same function on what was stored)."""
+    from pige_sym.verdict.checkup.routine import next_step
+
+    info = run.checkup or {}
+    stored = info.get("next_step")
+    if not (isinstance(stored, list) and len(stored) == 2 and all(isinstance(x, str) for x in stored)):
+        stored = next_step(str(run.verdict), [str(x) for x in info.get("notes", [])], info.get("to_enter"),
+                           run.machine_id)
+    return NextStep(f"{stored[0][:1].upper()}{stored[0][1:]}.", [stored[1]])
+
+
 def history_next(data: ReportData) -> NextStep:
-    """The next step of a machine's history: act on a change or on the last verdict, else measure as planned."""
+    """The next step of a machine's history: the last check-up's (as ``pige checkup`` printed it); else act on a
+    change or on the last verdict, else measure as planned."""
     h = data.history
     assert h is not None
+    if h.runs[-1].kind == "checkup" and h.check is None:
+        return checkup_next(h.runs[-1])
     changed = [c.parameter for comp in h.comparisons[-1:] for c in comp.changes if c.significant]
     verdict = h.check.verdict if h.check is not None else (h.runs[-1].verdict or "none")
     last = shlex.quote(h.runs[-1].file_name)

@@ -105,6 +105,10 @@ class Tolerances:
         for name, limit in self.limits.items():
             if "." in name:
                 effect, _, param = name.partition(".")
+                effect, harmonic = split_harmonic(effect)
+                if harmonic is not None and not (harmonic.isdigit() and int(harmonic) >= 1):
+                    raise FileFormatError(self.path, None, f"limits.{name}: @h must be followed by a harmonic 1, 2, "
+                                                           "... (e.g. angular_error_C@h2.cos_urad)")
                 if effect not in effects or effect == "outliers":
                     raise FileFormatError(self.path, None, f"limits.{name}: {effect!r} is not an effect of "
                                                            f"{kern.MACHINE_CODE} (known: {', '.join(effects[:-1])})")
@@ -354,8 +358,8 @@ def check(est: Estimates, tol: Tolerances, *, rule: str = "guard", k: float = DE
     limits = tol.resolve(est.machine)
     items: list[CheckItem] = []
     skipped: dict[str, str] = {}
-    for name, limit in limits.items():
-        if "." in name and name.partition(".")[0] not in est.effects:
+    for name, limit in _per_harmonic(limits, est).items():
+        if "." in name and split_harmonic(name.partition(".")[0])[0] not in est.effects:
             skipped[name] = "effect not accepted by the diagnosis (not in the model): no value to judge"
             continue
         value, std = est.values.get(name), est.std.get(name)
@@ -368,6 +372,30 @@ def check(est: Estimates, tol: Tolerances, *, rule: str = "guard", k: float = DE
         items.append(CheckItem(name, value, std, limit, est.units.get(name, ""), status, reason))
     return CheckResult(overall([i.status for i in items]), rule, k, est.machine, est.method, est.source, tol.path,
                        items, skipped)
+
+
+def split_harmonic(effect: str) -> tuple[str, str | None]:
+    """``angular_error_C@h2`` → (``angular_error_C``, ``2``); an id without ``@h`` → (id, None)."""
+    base, sep, harmonic = effect.partition("@h")
+    return base, (harmonic if sep else None)
+
+
+def _per_harmonic(limits: dict[str, float], est: Estimates) -> dict[str, float]:
+    """The limits by the names the estimate holds (the tolerance-name rule): where the diagnosis accepts one
+    harmonic of an effect its parameters are ``<effect>.<param>``; where it accepts several they are named
+    ``<effect>@h<h>.<param>`` (:func:`pige_sym.diagnosis.diagnose` names them so), and a tolerance
+    ``<effect>.<param>`` applies to the parameter of every accepted harmonic, each judged on its own;
+    ``<effect>@h<h>.<param>`` applies to harmonic h alone (and wins over the general one)."""
+    out: dict[str, float] = {}
+    for name, limit in limits.items():
+        effect, dot, param = name.partition(".")
+        if dot and "@h" not in effect and name not in est.values:
+            harmonics = sorted(n for n in est.values if n.startswith(effect + "@h") and n.endswith("." + param))
+            if harmonics:
+                out |= {n: limit for n in harmonics if n not in limits}
+                continue
+        out[name] = limit
+    return out
 
 
 def _zero_names(machine: str) -> tuple[str, ...]:

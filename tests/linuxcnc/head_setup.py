@@ -1,6 +1,6 @@
 """The head runs of the LinuxCNC tests (:mod:`test_linuxcnc_head`): a table C + head B on the shipped
 ``xyzbc-trt`` simulation and a fork head C + A on ``xyzac-trt``, their true machines (:mod:`true_head`),
-pige's program for each, and the simulation that runs it (two of round one's simulations, :mod:`conftest`).
+pige's program for each, and the simulation that runs it (both at once, :mod:`test_linuxcnc_head`).
 
 The programs probe in identity kinematics (M429, back with M428 at the end), where the joints are the axes,
 so the shipped trt kinematics never turn anything: joints 3 and 4 are driven as the head's axes (and the

@@ -22,12 +22,24 @@ idle again; ``hal`` runs ``halcmd`` commands; ``read`` reads pins.  ``clock`` (a
 that counts simulated seconds: the step's simulated time is its change.  A step that raises an error
 message stops the job.  The result holds per step its wall time, the error channel's messages (kind,
 text), the readings, and the final joint and axis positions.
+
+Steps for runs that are meant to be interrupted or refused (tests/linuxcnc/test_linuxcnc_cycle.py):
+``mdi_start`` issues one MDI line and returns once the interpreter has taken it; ``wait_for`` waits until a file
+exists (and holds ``contains``) or a pin reaches ``at_least``; ``abort`` is the GUI's Esc (task abort), ``estop``
+the E-stop button and ``machine_on`` its reset (the joints stay homed); ``kill`` sends SIGKILL to the process whose
+id a file holds; ``idle`` waits for the interpreter and motion to rest; ``files`` returns the SHA-256 of every file
+under a folder.  A ``glob`` finds only files written since the last ``mdi_start``.  A step with ``"allow_error":
+true`` records the errors that arrive while it runs instead of stopping the job; errors outside such steps make the
+job fail.  ``label`` (any step) comes back with its result.
 """
 
 from __future__ import annotations
 
+import glob
+import hashlib
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -47,6 +59,9 @@ class Driver:
         self.cmd = linuxcnc.command()
         self.err = linuxcnc.error_channel()
         self.messages: list[list[str]] = []
+        self.tolerate = False  # a step that expects errors records them instead of stopping the job
+        self.started = 0.0  # when the last mdi_start was issued: a glob finds only files written since
+        self.at_start: dict[str, float] = {}  # the pins it was told to watch, as they were then
         self.hal_component = hal.component("pige-driver")  # hal.get_value needs a component of this process
         self.hal_component.ready()
 
@@ -65,7 +80,7 @@ class Driver:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             self.stat.poll()
-            if self.drain():
+            if self.drain() and not self.tolerate:
                 raise RuntimeError(f"{what}: {self.messages[-1][1]}")
             if done(self.stat):
                 return
@@ -114,6 +129,89 @@ class Driver:
         self.idle(step.get("timeout", 900), f"program {step['file']}")
         return {}
 
+    def mdi_start(self, step: dict) -> dict:
+        """One MDI line, not waited for: returns once the interpreter has left idle (or 10 s)."""
+        self.mode(linuxcnc.MODE_MDI)
+        self.started = time.time()
+        self.at_start = {pin: hal.get_value(pin) for pin in step.get("watch", [])}
+        self.cmd.mdi(step["line"])
+        self.cmd.wait_complete(10)
+        try:
+            self.wait(lambda s: s.interp_state != linuxcnc.INTERP_IDLE, 10, f"MDI {step['line']!r} start")
+        except RuntimeError:
+            pass  # a line refused at once leaves the interpreter idle: its error is recorded
+        return {}
+
+    def wait_for(self, step: dict) -> dict:
+        """Until ``file`` (or the newest match of ``glob``) exists, holding ``contains`` when given, or ``pin`` >=
+        ``at_least``, or ``pin`` has grown by ``increase`` since the last ``mdi_start`` (which ``watch``-ed it)."""
+        def done(_s) -> bool:
+            if "file" in step or "glob" in step:
+                path = step["file"] if "file" in step else _newest(step["glob"], self.started)
+                if path is None or not os.path.isfile(path):
+                    return False
+                with open(path, errors="replace") as f:
+                    return step.get("contains", "") in f.read()
+            if "increase" in step:
+                return hal.get_value(step["pin"]) >= self.at_start[step["pin"]] + step["increase"]
+            return hal.get_value(step["pin"]) >= step["at_least"]
+        what = step.get("file", step.get("glob", step.get("pin")))
+        self.wait(done, step.get("timeout", 600), f"wait for {what}")
+        return {}
+
+    def abort(self, step: dict) -> dict:
+        """The GUI's Esc: task abort, then wait until the interpreter rests."""
+        self.cmd.abort()
+        self.cmd.wait_complete(10)
+        self.wait(lambda s: s.interp_state == linuxcnc.INTERP_IDLE, 30, "abort")
+        return {}
+
+    def estop(self, step: dict) -> dict:
+        self.cmd.state(linuxcnc.STATE_ESTOP)
+        self.cmd.wait_complete(10)
+        self.wait(lambda s: s.task_state == linuxcnc.STATE_ESTOP, 30, "E-stop")
+        return {}
+
+    def machine_on(self, step: dict) -> dict:
+        """E-stop reset and machine on (the joints stay homed)."""
+        self.cmd.state(linuxcnc.STATE_ESTOP_RESET)
+        self.cmd.wait_complete(10)
+        self.cmd.state(linuxcnc.STATE_ON)
+        self.cmd.wait_complete(10)
+        self.wait(lambda s: s.task_state == linuxcnc.STATE_ON, 30, "machine on")
+        return {}
+
+    def kill(self, step: dict) -> dict:
+        """SIGKILL to the process whose id the file ``pid_file`` (or the newest match of ``pid_glob``) holds: a
+        process of this run, named by its id."""
+        path = step["pid_file"] if "pid_file" in step else _newest(step["pid_glob"], self.started)
+        with open(path) as f:
+            pid = int(f.read().split()[0])
+        os.kill(pid, signal.SIGKILL)
+        return {"pid": pid, "pid_file": path}
+
+    def idle_step(self, step: dict) -> dict:
+        self.idle(step.get("timeout", 600), "idle")
+        return {}
+
+    def files(self, step: dict) -> dict:
+        """SHA-256 of every file under ``root`` (relative paths), leaving out those under ``exclude`` and the
+        temporary files LinuxCNC's interpreter writes its parameter file through (``*.new``, renamed at once)."""
+        out = {}
+        skip = tuple(step.get("exclude", []))
+        for folder, _, names in os.walk(step["root"]):
+            for name in names:
+                path = os.path.join(folder, name)
+                rel = os.path.relpath(path, step["root"])
+                if rel.startswith(skip) or name.endswith(".new"):
+                    continue
+                try:
+                    with open(path, "rb") as f:
+                        out[rel] = hashlib.sha256(f.read()).hexdigest()
+                except FileNotFoundError:  # renamed meanwhile: read what replaced it
+                    continue
+        return {"files": out}
+
     def hal(self, step: dict) -> dict:
         """``halcmd`` commands (``setp``, ``sets``, ...), each must succeed."""
         for command in step["commands"]:
@@ -131,9 +229,16 @@ class Driver:
                 "current_line": self.stat.current_line}
 
 
+def _newest(pattern: str, since: float) -> str | None:
+    """The newest file matching ``pattern`` written since ``since`` (seconds since the epoch), or None."""
+    found = [f for f in glob.glob(pattern) if os.path.getmtime(f) >= since - 0.5]
+    return max(found, key=os.path.getmtime) if found else None
+
+
 def run(job: dict) -> dict:
     drv = Driver()
     out: dict = {"steps": [], "ok": False}
+    unexpected: list[list[str]] = []
     t0 = time.monotonic()
     try:
         drv.start()
@@ -141,16 +246,22 @@ def run(job: dict) -> dict:
         for step in job["steps"]:
             t = time.monotonic()
             clock = hal.get_value(step["clock"]) if "clock" in step else None
+            drv.tolerate = bool(step.get("allow_error"))
+            first = len(drv.messages)
             if step["op"] == "read":
                 res = {"readings": [{p: hal.get_value(p) for p in step["pins"]}]}
             else:
-                res = getattr(drv, step["op"])(step)
-            res |= {"op": step["op"], "wall_s": time.monotonic() - t}
+                res = getattr(drv, "idle_step" if step["op"] == "idle" else step["op"])(step)
+            drv.drain()
+            res |= {"op": step["op"], "wall_s": time.monotonic() - t,
+                    "messages": drv.messages[first:], "label": step.get("label")}
+            if not drv.tolerate:
+                unexpected += [m for m in drv.messages[first:] if m[0] == "error"]
+            drv.tolerate = False
             if clock is not None:
                 res["sim_s"] = hal.get_value(step["clock"]) - clock
             out["steps"].append(res)
-            drv.drain()
-        out["ok"] = not any(kind == "error" for kind, _ in drv.messages)
+        out["ok"] = not unexpected
     except Exception as exc:  # the result must be written whatever happened
         out["exception"] = f"{exc}\n{traceback.format_exc()}"
     try:

@@ -38,6 +38,7 @@ What it takes (each found by trying it on Debian's linuxcnc-uspace 2.9.0~pre1, c
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -46,6 +47,8 @@ import subprocess
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from shared_runs import once
 
 HERE = Path(__file__).resolve().parent
 SAMPLES = Path("/usr/share/doc/linuxcnc/examples/sample-configs/sim/axis/vismach/5axis/table-rotary-tilting")
@@ -183,15 +186,25 @@ def make_sim(root: Path, kind: str, hal_lines: list[str], extra: tuple[IniChange
 
 
 def compile_component(sim: Sim, source: str, name: str) -> Path:
-    """``halcompile --compile`` a realtime component into the run's module folder."""
+    """``halcompile --compile`` a realtime component into the run's module folder; the same source is compiled
+    once per test session (:func:`shared_runs.once`: the first run's module is copied into the others')."""
     src = sim.modules / f"{name}.comp"
     src.write_text(source)
-    proc = subprocess.run(["halcompile", "--compile", src.name], cwd=sim.modules, capture_output=True, text=True,
-                          env=os.environ | {"PATH": SYSTEM_PATH}, timeout=300)
     so = sim.modules / f"{name}.so"
+    built = once(f"halcompile {name} {hashlib.sha256(source.encode()).hexdigest()}", lambda: _halcompile(src))
+    if built != so:
+        shutil.copyfile(built, so)
+    so.chmod(0o755)
+    return so
+
+
+def _halcompile(src: Path) -> Path:
+    """``halcompile --compile`` the component ``src`` in its folder: the module it built."""
+    proc = subprocess.run(["halcompile", "--compile", src.name], cwd=src.parent, capture_output=True, text=True,
+                          env=os.environ | {"PATH": SYSTEM_PATH}, timeout=300)
+    so = src.with_suffix(".so")
     if proc.returncode != 0 or not so.is_file():
         raise AssertionError(f"halcompile failed:\n{proc.stdout}\n{proc.stderr}")
-    so.chmod(0o755)
     return so
 
 

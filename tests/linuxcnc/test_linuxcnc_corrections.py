@@ -19,6 +19,8 @@ Four simulations at once; expected errors compared in units of the second run's 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from corrections import enter_trt_pins, kinematics_changes, pige_kinematics, trt_correction, trt_lines
@@ -61,21 +63,38 @@ def landed(step: dict, pins: list[str]) -> np.ndarray:
     return np.array([[row[p] for p in pins] for row in step["readings"][1:]])
 
 
-@pytest.fixture(scope="session")
-def correction_runs(probe_runs, tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, str], ProbeRun]:
-    """(a) and (b) for both machines, from the identity run's identification, four simulations at once."""
+@pytest.fixture(scope="module")
+def identity_runs(table_runs) -> dict[tuple[str, str], ProbeRun]:
+    """Both machines' identity-kinematics probing runs (:func:`conftest.table_runs`: made once per session)."""
+    return table_runs(*[(k, "identity") for k in sorted(MACHINES)])
+
+
+def trt_pins_run(first: ProbeRun, root: Path) -> ProbeRun:
+    """(a): the stock trt pins ``pige compensate --current`` prints from ``first``'s identification, entered."""
+    m = first.machine
+    _, pins = trt_correction(m, first.identification_file)
+    return probing_run(m, root, "tcp", extra=enter_trt_pins(m.kind, pins), pivots=trt_lines(m.kind, pins))
+
+
+def pige_kinematics_run(first: ProbeRun, root: Path, machine: str) -> ProbeRun:
+    """(b): pige's kinematics component with the lines ``pige compensate`` prints, then the TCP moves."""
+    m = first.machine
+    name, source, lines = pige_kinematics(m, first.identification_file, root / "kins")
+    return probing_run(m, root, "tcp", extra=kinematics_changes(m.kind, name, lines), components={name: source},
+                       after=tcp_move_steps(machine, name))
+
+
+@pytest.fixture(scope="module")
+def correction_runs(table_runs, tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, str], ProbeRun]:
+    """(a) and (b) for both machines, each from its machine's identity run as soon as that is identified: four
+    simulations at once."""
+    def first(k: str) -> ProbeRun:
+        return table_runs((k, "identity"))[(k, "identity")]
+
     jobs = {}
-    for k, m in MACHINES.items():
-        params = probe_runs[(k, "identity")].identification_file
-        _, pins = trt_correction(m, params)
-        jobs[(k, "trt")] = (lambda m=m, k=k, pins=pins: probing_run(
-            m, tmp_path_factory.mktemp(f"lcnc_{k}_trt"), "tcp", extra=enter_trt_pins(m.kind, pins),
-            pivots=trt_lines(m.kind, pins)))
-        root = tmp_path_factory.mktemp(f"lcnc_{k}_pige")
-        name, source, lines = pige_kinematics(m, params, root / "kins")
-        jobs[(k, "pige")] = (lambda m=m, k=k, root=root, name=name, source=source, lines=lines: probing_run(
-            m, root, "tcp", extra=kinematics_changes(m.kind, name, lines), components={name: source},
-            after=tcp_move_steps(k, name)))
+    for k in MACHINES:
+        jobs[(k, "trt")] = lambda k=k: trt_pins_run(first(k), tmp_path_factory.mktemp(f"lcnc_{k}_trt"))
+        jobs[(k, "pige")] = lambda k=k: pige_kinematics_run(first(k), tmp_path_factory.mktemp(f"lcnc_{k}_pige"), k)
     return run_all(jobs)
 
 
@@ -86,8 +105,8 @@ def _errors_in_std(first: dict, second: dict, truth: dict[str, float], entered: 
 
 
 @pytest.mark.parametrize("machine", sorted(MACHINES))
-def test_the_stock_trt_pins_leave_the_offsets_within_noise_and_the_tilts(probe_runs, correction_runs, machine):
-    first, pr = probe_runs[(machine, "identity")].identification, correction_runs[(machine, "trt")]
+def test_the_stock_trt_pins_leave_the_offsets_within_noise_and_the_tilts(identity_runs, correction_runs, machine):
+    first, pr = identity_runs[(machine, "identity")].identification, correction_runs[(machine, "trt")]
     assert pr.run.result["ok"], pr.run.summary()
     second, m = pr.identification, MACHINES[machine]
     offsets = [k for k in m.pige if first["units"][k] == "um"]
@@ -100,8 +119,8 @@ def test_the_stock_trt_pins_leave_the_offsets_within_noise_and_the_tilts(probe_r
 
 
 @pytest.mark.parametrize("machine", sorted(MACHINES))
-def test_pige_kinematics_leave_every_pige_within_noise(probe_runs, correction_runs, machine):
-    first, pr = probe_runs[(machine, "identity")].identification, correction_runs[(machine, "pige")]
+def test_pige_kinematics_leave_every_pige_within_noise(identity_runs, correction_runs, machine):
+    first, pr = identity_runs[(machine, "identity")].identification, correction_runs[(machine, "pige")]
     assert pr.run.result["ok"], pr.run.summary()
     second, m = pr.identification, MACHINES[machine]
     z = _errors_in_std(first, second, m.pige, list(m.pige))

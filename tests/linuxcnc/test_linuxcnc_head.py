@@ -22,10 +22,23 @@ import json
 
 import numpy as np
 import pytest
-from head_setup import HEADS, POSES, PROBE_FEED_MM_MIN, SPHERE_MM, STEP_MM, HeadRun
-from loop_setup import pige
+from head_setup import HEADS, POSES, PROBE_FEED_MM_MIN, SPHERE_MM, STEP_MM, HeadRun, head_probing_run
+from loop_setup import pige, run_all
+
+from conftest import need_started
 
 pytestmark = pytest.mark.linuxcnc
+
+
+@pytest.fixture(scope="module")
+def head_runs(lcnc: None, tmp_path_factory: pytest.TempPathFactory) -> dict[str, HeadRun]:
+    """Both head machines' probing runs, two simulations at once."""
+    runs = run_all({k: (lambda k=k: head_probing_run(HEADS[k], tmp_path_factory.mktemp(f"lcnc_head_{k}")))
+                    for k in HEADS})
+    for run in runs.values():
+        need_started(run.run)
+    return runs
+
 @pytest.mark.parametrize("key", sorted(HEADS))
 def test_linuxcnc_runs_the_head_program_and_every_contact_is_where_pige_meant_it(head_runs, key) -> None:
     hr: HeadRun = head_runs[key]

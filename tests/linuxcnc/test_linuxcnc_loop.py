@@ -24,8 +24,8 @@ missing, or when the simulation cannot start):
   of probing feed (0.83 µm at F50): checked on every logged contact with the NumPy twin (in TCP mode through
   the stock inverse kinematics transcribed in :mod:`stock_trt`).
 - **The runs:** both machines, in identity kinematics (the program switches with M429 and back with M428)
-  and in the stock TCP kinematics (``--kinematics tcp``), four simulations at once (with the three short
-  runs of test_linuxcnc_safety.py).
+  and in the stock TCP kinematics (``--kinematics tcp``), four simulations at once (:func:`conftest.table_runs`:
+  made once per session, the check-up and the corrections start from the identity runs).
 """
 
 from __future__ import annotations

@@ -1,9 +1,10 @@
 """The error maps on real LinuxCNC 2.9 (issue 40): measured, corrected two ways, measured again (:mod:`map_loop`).
 
 Round one measures both machines (xyzac and xyzbc sims, a true machine with hidden maps on both axes, the PIGEs
-of the PIGE loop and a reversal error on C: :mod:`true_map_table`), three sphere setups each, in one simulation
-per machine.  Round two corrects each machine twice, four simulations at once: (a) the COMP_FILEs on the stock
-kinematics, (b) pige's kinematics component with every map, then held-out TCP moves.  What is checked:
+of the PIGE loop and a reversal error on C: :mod:`true_map_table`), three sphere setups each, one simulation per
+setup, six at once.  Round two corrects each machine twice: (a) the COMP_FILEs on the stock kinematics, (b) pige's
+kinematics component with every map, probed again (one simulation per setup), then held-out TCP moves (one more
+simulation): fourteen simulations at once.  What is checked:
 
 - the identification finds the hidden PIGEs and maps from LinuxCNC's own logs (every value within 4 standard
   errors + 0.5 of the truth's §10 representative);
@@ -35,29 +36,33 @@ from map_loop import (
     targets,
 )
 
+from conftest import need_started
 from pige_sym.codegen.targets.linuxcnc_pins import default_name
 
 pytestmark = pytest.mark.linuxcnc
 RAD = np.pi / 180.0
 
 
-@pytest.fixture(scope="session")
-def map_measurements(smoke, tmp_path_factory: pytest.TempPathFactory) -> dict[str, MapRun]:
-    """Round one: both machines measured, then identified (maps, and the PIGEs alone)."""
-    runs = run_all({k: (lambda k=k: measurement_run(MAP_MACHINES[k], tmp_path_factory.mktemp(f"lcnc_map_{k}")))
-                    for k in MAP_MACHINES})
-    for r in runs.values():
-        if r.run.result.get("ok"):
-            _ = r.maps, r.pige_only
-    return runs
+def _measured(k: str, root) -> MapRun:
+    """Machine ``k`` measured, then identified (maps, and the PIGEs alone) when every setup ran."""
+    run = measurement_run(MAP_MACHINES[k], root)
+    if all(r.result.get("ok") for r in run.runs):
+        _ = run.maps, run.pige_only
+    return run
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
+def map_measurements(lcnc, tmp_path_factory: pytest.TempPathFactory) -> dict[str, MapRun]:
+    """Round one: both machines measured (six simulations at once), then identified."""
+    return run_all({k: (lambda k=k: _measured(k, tmp_path_factory.mktemp(f"lcnc_map_{k}"))) for k in MAP_MACHINES})
+
+
+@pytest.fixture(scope="module")
 def map_corrections(map_measurements, tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, str], Any]:
-    """Round two: (a) and (b) for both machines, four simulations at once."""
+    """Round two: (a) and (b) for both machines, fourteen simulations at once."""
     jobs = {}
     for k, first in map_measurements.items():
-        if not first.run.result.get("ok"):
+        if not all(r.result.get("ok") for r in first.runs):
             continue
         mm = MAP_MACHINES[k]
         jobs[(k, "comp")] = (lambda mm=mm, first=first, k=k: comp_file_run(
@@ -99,9 +104,9 @@ def map_errors(found: dict, expected: dict[str, dict[str, np.ndarray]], first: d
 
 
 def _need_ok(run: MapRun) -> None:
-    if "start_s" not in run.run.result:
-        pytest.skip(f"the simulation did not start:\n{run.run.summary()}")
-    assert run.run.result["ok"], run.run.summary()
+    for r in run.runs:
+        need_started(r)
+        assert r.result["ok"], r.summary()
 
 
 @pytest.mark.parametrize("machine", sorted(MAP_MACHINES))
@@ -125,19 +130,20 @@ def test_the_measurement_finds_the_hidden_pige_and_maps(map_measurements, machin
 
 
 def comp_trim_check(run: MapRun, lines: str) -> list[float]:
-    """|LinuxCNC's trim − the file's trim| [deg] of both rotary joints at the end of the run."""
+    """|LinuxCNC's trim − the file's trim| [deg] of both rotary joints at the end of each setup's run."""
     from test_table_linuxcnc_comp import linuxcnc_load, linuxcnc_trim
 
-    last = run.step("read", 2)["readings"][0]
     out = []
-    for joint, axis_pin, trim_pin in ((3, "ptm.approach1", "joint.3.backlash-filt"),
-                                      (4, "ptm.approach2", "joint.4.backlash-filt")):
-        path = next(run.sim.cfg.glob(f"pige_joint{joint}_*.comp"))
-        table = linuxcnc_load(path.read_text(), comp_type=1)
-        trim = last[trim_pin]
-        commanded = last[f"joint.{joint}.motor-pos-fb"] - trim
-        velocity = -float(last[axis_pin])  # sigma = -1: the commanded direction is the opposite of theta's
-        out.append(abs(trim - linuxcnc_trim(table, commanded, velocity)))
+    for setup in run.setups:
+        last = setup.step("read")["readings"][0]
+        for joint, axis_pin, trim_pin in ((3, "ptm.approach1", "joint.3.backlash-filt"),
+                                          (4, "ptm.approach2", "joint.4.backlash-filt")):
+            path = next(setup.sim.cfg.glob(f"pige_joint{joint}_*.comp"))
+            table = linuxcnc_load(path.read_text(), comp_type=1)
+            trim = last[trim_pin]
+            commanded = last[f"joint.{joint}.motor-pos-fb"] - trim
+            velocity = -float(last[axis_pin])  # sigma = -1: the commanded direction is the opposite of theta's
+            out.append(abs(trim - linuxcnc_trim(table, commanded, velocity)))
     assert "COMP_FILE_TYPE = 1" in lines
     return out
 
@@ -209,7 +215,8 @@ def test_held_out_tcp_moves_land_within_a_micrometre_and_pige_alone_leaves_five_
     table = mm.true_table()
     off = {}
     for label, index in (("maps", -4), ("pige only", -1)):
-        rows = run.run.result["steps"][index]["readings"][-len(goal):]
+        assert run.moves is not None
+        rows = run.moves.result["steps"][index]["readings"][-len(goal):]
         tip = np.array([[r[p] for p in TRUE_PINS[:3]] for r in rows])
         motors = np.array([[r[p] for p in MOTOR_PINS] for r in rows])
         approach = np.array([[r["ptm.approach1"], r["ptm.approach2"]] for r in rows])

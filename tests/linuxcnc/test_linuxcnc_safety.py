@@ -2,8 +2,8 @@
 program was not written for stops it, with pige's message on LinuxCNC's error channel, before anything is
 logged.
 
-Three short runs of the AC machine's identity-kinematics program (:mod:`safety_cases`, run with the first
-round of probing runs, tests/linuxcnc/conftest.py): the stylus not loaded (T1 in the spindle), a G54 offset
+Three short runs of the AC machine's identity-kinematics program (:mod:`safety_cases`, three simulations at
+once): the stylus not loaded (T1 in the spindle), a G54 offset
 left over from earlier work (``G10 L2 P1 X5``), and a sphere 0.6 mm from where the program expects it (the
 confirming first contacts accept 0.3 mm).
 """
@@ -11,9 +11,22 @@ confirming first contacts accept 0.3 mm).
 from __future__ import annotations
 
 import pytest
-from safety_cases import CASES
+from loop_setup import run_all
+from safety_cases import CASES, safety_run
+
+from conftest import need_started
 
 pytestmark = pytest.mark.linuxcnc
+
+
+@pytest.fixture(scope="module")
+def refused(lcnc: None, tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """Each case's run, three simulations at once."""
+    runs = run_all({case: (lambda case=case: safety_run(case, tmp_path_factory.mktemp("lcnc_safety")))
+                    for case in CASES})
+    for _, run in runs.values():
+        need_started(run)
+    return runs
 
 
 @pytest.mark.parametrize("case", sorted(CASES))

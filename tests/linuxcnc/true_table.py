@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from shared_runs import once
 
 TEMPLATE = (Path(__file__).resolve().parent / "true_table.comp").read_text()
 COMPONENT_NAME = "pige_true_table"
@@ -25,7 +26,12 @@ MODEL_PREFIX = "ptm"
 
 
 def component_source(code: str) -> str:
-    """The true machine's component for machine ``code``: the template with pige's emitted C model inlined."""
+    """The true machine's component for machine ``code``: the template with pige's emitted C model inlined (made
+    once per test session: SymPy takes seconds, :func:`shared_runs.once`)."""
+    return once(f"true table component {code}", lambda: _component_source(code))
+
+
+def _component_source(code: str) -> str:
     from pige_sym.codegen.c_model import render_model_c
     from pige_sym.kernels import load_kernels
 

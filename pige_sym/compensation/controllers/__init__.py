@@ -11,6 +11,18 @@ A controller that reads today's configuration (LinuxCNC's ``--current``) also de
 
     check_current(params, current) -> None            refuses a configuration that contradicts the parameters
 
+A controller whose printed lines carry more than its kinematic entries (the error maps' tables), or that can be
+entered in more than one way, defines::
+
+    entries(params, options) -> list[(label, values)]  each way of entering, fewest values first: exactly the
+                                                       values its printed lines carry (as printed), in the
+                                                       weighing's names (EX0C, C:ECC+@30)
+
+and one whose lines go into several files (LinuxCNC: HAL, INI, compensation files)::
+
+    sections(params, options) -> list[Section]         the same lines by target file (pasted whole, or written by
+                                                       pige compensate --out-dir)
+
 and one that writes compensation tables (error maps, CONVENTIONS §10) checks their format before any value is
 weighed or computed (the table modules of :mod:`.tables`, each citing the source of its limits)::
 
@@ -57,6 +69,9 @@ class ControllerOptions:
         The controller's name of each rotary axis where its tables need it (SINUMERIK machine axis names).
     isg_unit_deg : float, optional
         The angle [deg] of one unit of an ISG ``kw.ssfk`` list of a rotary axis (:mod:`.tables.isg_ssfk`).
+    scope : ControllerScope, optional
+        What the entries carry and leave, as the compensation stage computed it (:mod:`.scope`); rendered, not
+        computed again.
     limits : ChangeLimits, optional
         ``--max-change`` (:class:`.entry_checks.ChangeLimits`) every entry is held to; None: its default.
     """
@@ -66,6 +81,7 @@ class ControllerOptions:
     heidenhain_trans: str | None = None
     machine_axes: dict[str, str] | None = None
     isg_unit_deg: float | None = None
+    scope: Any = None
     limits: Any = None
 
     def change_limits(self) -> Any:
@@ -143,28 +159,6 @@ def check_before_writing(params: Any, style: str, current: Any = None, options: 
         raise InputError(f"--current: the {style} entries are changes to add; today's configuration is read for "
                          f"--controller {', '.join(readers)} only")
     check_current(params, current)
-
-
-def format_controller(params: Any, style: str = "table", *, carrier: int = 1,
-                      current: Any = None, heidenhain_trans: str | None = None, enter: str = "weighed",
-                      machine_axes: dict[str, str] | None = None, isg_unit_deg: float | None = None,
-                      limits: Any = None) -> str:
-    """The corrections of ``params`` in the words of controller ``style`` (docs/controller-corrections.md).
-
-    The values are weighed by their uncertainty over the axes' travel (:func:`entered_for_controller`).  Every
-    controller also says what it enters, what it cannot represent and the tool-point error each choice leaves,
-    with a 95 % bound (:mod:`~pige_sym.compensation.controllers.scope`).  Nothing is rendered before
-    :func:`check_before_writing` has passed, on the values as given and on the values entered; every entry is
-    held to ``limits`` (``--max-change``, :class:`.entry_checks.ChangeLimits`; None: its default).
-    """
-    module = get_controller(style)
-    options = ControllerOptions(carrier=carrier, current=current, heidenhain_trans=heidenhain_trans,
-                                machine_axes=machine_axes, isg_unit_deg=isg_unit_deg, limits=limits)
-    check_before_writing(params, style, options=options)
-    entered = entered_for_controller(params, enter)
-    if entered is not params:
-        check_before_writing(entered, style, options=options)
-    return str(module.render(entered, options))
 
 
 def entered_for_controller(params: Any, enter: str = "weighed", travel: Any = None) -> Any:

@@ -1,6 +1,6 @@
 """Check before writing: every controller entry against the same physical bounds and ``--max-change``.
 
-Every controller (:mod:`pige_sym.compensation.controllers`) and the NC rewrite (:mod:`pige_sym.nc.compensate`)
+Every controller (:mod:`pige_sym.compensation.controllers`) and the NC rewrite (:mod:`pige_sym.compensation.program`)
 make what they write from the parameters: the PIGEs and zero-position errors [µm, µrad], the error maps [µm, µrad]
 (CONVENTIONS §10), the nominal pivots [mm] the corrected axis lines start from, and on head machines the tool
 vector [mm].  Before anything is rendered they are held to the bounds the parameter file's reader holds them to

@@ -83,7 +83,7 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
             f"{first['axis']}, second (slave) {second['axis']}; rotation direction No. 19684 = "
             f"{rotation[first['axis']]}, No. 19689 = {rotation[second['axis']]} (the senses pige assumes; ordinary "
             "rotation axes, No. 19696 IA1 = IA2 = 0)",
-            *scope_lines(params, "fanuc", "")]
+            *scope_lines(params, "fanuc", "", options)]
     body = _table_type(first, second) if side == "table" else _tool_type(first, second)
     body.append("chain rebuilt from A-79348E in pige's tests (tests/test_controller_fanuc.py), not run on a FANUC "
                 "control: measure again after entering")

@@ -7,6 +7,7 @@ Read from HAL files and from the INI's ``[HAL] HALCMD`` lines (halcmd's own word
     net <signal> [<=|=>|<=>] <pin> ...     the pins connected to a signal (arrows are optional)
     sets <signal> <value>                  the signal's value (what a connected input pin reads)
     loadrt <module> [args]                 the kinematics module loaded
+    source <file.hal>                      that file's commands, there (``pige cycle install``'s values file)
 
 and from the INI: ``[KINS] KINEMATICS = <module> [args]`` and ``[HAL] HALFILE`` / ``POSTGUI_HALFILE``, whose
 files are read when they are ``.hal`` files beside the INI (``[SECTION]KEY`` references substituted);
@@ -89,6 +90,7 @@ class HalConfig:
     unread: list[str] = field(default_factory=list)
     pin_where: dict[str, str] = field(default_factory=dict)
     signal_where: dict[str, str] = field(default_factory=dict)
+    depth: int = 0  # ``source`` nesting while reading
 
     @property
     def name(self) -> str:
@@ -224,8 +226,25 @@ def _read_hal(config: HalConfig, name: str, lines: list[str], ini: dict[tuple[st
         where = f"{name}:{number}"
         line = _SECTION_KEY.sub(lambda m: ini.get((m.group(1), m.group(2)), m.group(0)), raw) if "[" in raw else raw
         words = halcmd_words(line, where)
-        if words:
+        if words and words[0] == "source" and len(words) >= 2:
+            _source(config, words[1], ini)
+        elif words:
             _command(config, words, where)
+
+
+def _source(config: HalConfig, name: str, ini: dict[tuple[str, str], str]) -> None:
+    """halcmd's ``source FILE``: its commands there (a relative path from the configuration's folder, where LinuxCNC
+    runs halcmd; a ``.hal`` file, at most 8 deep), else the file named as unread."""
+    folder = Path(config.source).parent if config.source else Path(".")
+    target = Path(name) if Path(name).is_absolute() else folder / name
+    config.depth += 1
+    try:
+        if config.depth > 8 or target.suffix != ".hal" or not target.is_file():
+            config.unread.append(name)
+            return
+        _read_hal(config, str(target), _read_text(str(target)).splitlines(), ini)
+    finally:
+        config.depth -= 1
 
 
 def _command(config: HalConfig, words: list[str], where: str) -> None:

@@ -71,7 +71,7 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
            f"--heidenhain-trans {options.heidenhain_trans}: a Trans row holds "
            + ("where the next element lies relative to the previous one" if sign > 0 else
               "the shift of the previous elements relative to the next one (the negative of their position)"),
-           *scope_lines(params, "heidenhain", "")]
+           *scope_lines(params, "heidenhain", "", options)]
     for label, rows, start in (("head", head_side, "tool reference point"), ("table", st.table, "machine base")):
         if rows:
             out += _side(label, rows, start, sign)

@@ -12,6 +12,7 @@ from __future__ import annotations
 from pige_sym.compensation.controllers import ControllerOptions
 from pige_sym.compensation.controllers.scope import scope_lines
 from pige_sym.compensation.controllers.tables.isg_ssfk import check_format as ssfk_format
+from pige_sym.compensation.controllers.tables.isg_ssfk import entered_values as ssfk_values
 from pige_sym.compensation.controllers.tables.isg_ssfk import render_lines as ssfk_lines
 from pige_sym.compensation.controllers.tables.positioning import positioning_names
 from pige_sym.compensation.controllers.tables.refused import isg_volumetric_lines
@@ -38,10 +39,17 @@ def map_motions(params: CompensationParameters) -> list[str]:
     return positioning_names(params)
 
 
+def entries(params: CompensationParameters, options: ControllerOptions | None) -> list[tuple[str, dict[str, float]]]:
+    """The lists enter the positioning maps as printed (rounded to the list's unit), nothing else."""
+    if options is None:
+        return [("the kw.ssfk lists", ssfk_values(params, None))]
+    return [("the kw.ssfk lists", ssfk_values(params, options.isg_unit_deg, options.change_limits()))]
+
+
 def render(params: CompensationParameters, options: ControllerOptions) -> str:
     """The lists' notes and bodies, the volumetric refusal and what the lists leave at the tool."""
     out = [f"# ISG kernel / TwinCAT CNC compensation lists of {params.machine}; parameters from {params.source}",
-           *scope_lines(params, "isg", "# ")]
+           *scope_lines(params, "isg", "# ", options)]
     body = ssfk_lines(params, options.isg_unit_deg, options.change_limits())
     if not body:
         out.append("# the parameter file holds no positioning map (identify with --map): no kw.ssfk list")

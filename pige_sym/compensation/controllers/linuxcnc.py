@@ -30,6 +30,8 @@ kinematics (:mod:`.tables.linuxcnc_comp`, written by ``--comp-dir``), and every 
 
 from __future__ import annotations
 
+from typing import Any
+
 from pige_sym.compensation.controllers import ControllerOptions
 from pige_sym.compensation.controllers.axis_lines import MM_DECIMALS, origin_pivots_note, signed
 from pige_sym.compensation.controllers.hal_config import HalConfig
@@ -39,6 +41,7 @@ from pige_sym.compensation.controllers.tables.linuxcnc_comp import render_lines 
 from pige_sym.compensation.controllers.tables.linuxcnc_kins_maps import map_setp_lines
 from pige_sym.compensation.controllers.tables.positioning import positioning_names
 from pige_sym.compensation.parameters import CompensationParameters
+from pige_sym.compensation.result import Section
 from pige_sym.errors import InputError, UnsupportedMachineError
 from pige_sym.kernels import load_kernels
 
@@ -69,6 +72,38 @@ def representable(params: CompensationParameters) -> list[str]:
     """The four axis-line positions [µm]."""
     kern = load_kernels(params.machine)
     return [n for n in kern.LOCATION_PARAMETERS if kern.UNITS[n] == "um"]
+
+
+def entries(params: CompensationParameters, options: ControllerOptions | None) -> list[tuple[Any, ...]]:
+    """Each way of entering the printed lines, with exactly what it carries: the stock trt pins (the four axis-line
+    positions), those and the COMP_FILEs (the positioning maps' trims, as printed), and pige's component (every
+    PIGE, zero-position error and map value, as its ``setp`` lines print them)."""
+    from pige_sym.codegen.targets import linuxcnc_pins as pins
+    from pige_sym.compensation.controllers.scope import kinematic_values
+    from pige_sym.compensation.controllers.tables.linuxcnc_comp import entered_values as comp_values
+    from pige_sym.compensation.controllers.tables.linuxcnc_kins_maps import entered_map_values
+
+    out: list[tuple[Any, ...]] = []
+    try:
+        linuxcnc_trt_deltas(params)
+    except InputError:
+        pass
+    else:
+        trt = kinematic_values(params, "linuxcnc")
+        out.append(("the trt pins", trt))
+        comp = comp_values(params, options.change_limits() if options is not None else None)
+        if comp:
+            out.append(("the trt pins and the COMP_FILEs", trt | comp))
+    try:
+        from pige_sym.codegen.machine_code import parse_machine_code
+
+        pins.check_machine(parse_machine_code(params.machine))
+    except (InputError, UnsupportedMachineError):
+        return out
+    unset = {s.split()[0] for s in params.ignored}
+    kern = load_kernels(params.machine)
+    values = {n: round(params.values[n], 4) for n in kern.PARAMETERS if n in params.values and n not in unset}
+    return [*out, ("pige's kinematics component", values | entered_map_values(params), False)]
 
 
 def linuxcnc_trt_deltas(params: CompensationParameters) -> tuple[str, dict[str, float]]:
@@ -102,7 +137,8 @@ def check_tables(params: CompensationParameters, options: ControllerOptions) -> 
 
 
 def render(params: CompensationParameters, options: ControllerOptions) -> str:
-    """The stock trt pins (module docstring) and, beside them, pige's kinematics component with every PIGE.
+    """Every section (:func:`sections`) in turn, each under a line that says what it is and where it goes: the stock
+    trt pins, the COMP_FILEs' INI lines, and, beside them, pige's kinematics component with every PIGE and map.
 
     Raises
     ------
@@ -110,37 +146,69 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
         Neither the stock trt kinematics nor pige's component can describe the machine, or today's
         configuration contradicts the parameters (:func:`check_current`).
     """
+    out = []
+    for sec in sections(params, options):
+        if sec.kind == "comp":
+            continue  # the compensation files themselves: --comp-dir or --out-dir writes them
+        out += [f"# ==== {sec.name} ({sec.kind.upper()}; --out-dir writes it as {sec.file}) ====", sec.text]
+    return "\n".join(out)
+
+
+def sections(params: CompensationParameters, options: ControllerOptions) -> list[Section]:
+    """The entries by target file, each pasted whole (or written by ``--out-dir``): the stock trt kinematics' HAL
+    lines, the COMP_FILEs' INI lines and the files, pige's component's INI and HAL lines (nets included)."""
+    from pige_sym.compensation.controllers.tables.linuxcnc_comp import comp_files
+
     check_current(params, options.current)
     try:
         linuxcnc_trt_deltas(params)
     except InputError as exc:
-        trt_refusal = str(exc)
-        trt = ""
+        trt_refusal: str | None = str(exc)
     else:  # refusals of --current (another machine's configuration, unknown pins) are the user's to fix
-        trt = _render_trt(params, options)
+        trt_refusal = None
     limits = options.change_limits()
+    pige_refusal: str | None = None
     try:
-        pige = pige_kinematics_lines(params, limits)
+        ini, hal = pige_kinematics_lines(params, limits)
     except (InputError, UnsupportedMachineError) as exc:
-        if not trt:
+        if trt_refusal is not None:
             raise InputError(f"{trt_refusal}; pige's kinematics component: {exc}") from None
-        return trt + f"\n# pige's kinematics component cannot describe this machine: {exc}"
-    if not trt:
-        trt = f"# LinuxCNC's stock trt kinematics: {trt_refusal}"
-    return "\n".join([trt, *comp_file_lines(params, limits), *pige])
+        ini, hal, pige_refusal = [], [], str(exc)
+    summary = [f"# LinuxCNC corrections of {params.machine}, parameters from {params.source}",
+               *scope_lines(params, "linuxcnc", "# ", options)]
+    out = []
+    if trt_refusal is None:
+        trt = [*summary, *_render_trt(params, options)]
+        if pige_refusal is not None:
+            trt.append(f"# pige's kinematics component cannot describe this machine: {pige_refusal}")
+        out.append(Section("the stock trt kinematics: HAL lines", "trt-kins.hal", "hal", "\n".join(trt)))
+        comp = comp_file_lines(params, limits)
+        if comp:
+            out.append(Section("with the stock kinematics, the positioning maps as COMP_FILEs: INI lines, each "
+                               "under its [JOINT_n] section", "comp-files.ini", "ini", "\n".join(comp)))
+            out += [Section(f"compensation file {n}", n, "comp", t) for n, t in comp_files(params, limits).items()]
+    else:
+        summary.append(f"# LinuxCNC's stock trt kinematics: {trt_refusal}")
+    if pige_refusal is None:
+        if trt_refusal is not None:
+            ini = summary + ini
+        out.append(Section("or instead, pige's kinematics component: INI keys, each in its section", "pige-kins.ini",
+                           "ini", "\n".join(ini)))
+        out.append(Section("pige's kinematics component: HAL lines", "pige-kins.hal", "hal", "\n".join(hal)))
+    return out
 
 
-def _render_trt(params: CompensationParameters, options: ControllerOptions) -> str:
+def _render_trt(params: CompensationParameters, options: ControllerOptions) -> list[str]:
     """Absolute ``setp``/``sets`` lines from today's values (``options.current``), else each change as a comment."""
     module, deltas = linuxcnc_trt_deltas(params)
     config = _config(options.current)
     out = [f"# LinuxCNC {module} (src/emc/kinematics/trtfuncs.c): HAL pins [mm], parameters from {params.source}",
-           VERSION, *scope_lines(params, "linuxcnc", "# ")]
+           VERSION]
     if config is not None and config.unread:
         out.append(f"# --current {config.source}: not read: {', '.join(config.unread)} (pins set there are unknown)")
     for pin, d in deltas.items():
         out += _pin_lines(module, pin, d, config)
-    return "\n".join(out)
+    return out
 
 
 def check_current(params: CompensationParameters, current: object) -> None:
@@ -189,8 +257,12 @@ def _sides(params: CompensationParameters) -> str:
 
 def _check_axis(params: CompensationParameters, config: HalConfig, axis: str,
                 coordinates: dict[str, tuple[str, ...]]) -> None:
-    """Refuse an axis line of the configuration that is not where the parameter file's pivot puts it."""
+    """Refuse an axis line of the configuration that is not where the parameter file's pivot puts it (a check-up's
+    changes: where the values in force put it, the nominal pivot moved by them)."""
     pivot = [float(x) for x in params.pivots_mm.get(axis, [0.0, 0.0, 0.0])]
+    if params.in_force is not None:
+        pivot = [x + params.in_force.get(f"E{c.upper()}0{axis}", 0.0) * 1e-3 for c, x in zip("xyz", pivot,
+                                                                                                strict=True)]
     held: dict[str, tuple[float, str]] = {}
     for coordinate, pins in coordinates.items():
         values = [config.pin_value(p) for p in pins]
@@ -204,6 +276,9 @@ def _check_axis(params: CompensationParameters, config: HalConfig, axis: str,
     coordinate, (line, how) = wrong[0], held[wrong[0]]
     stated = (f"pivots_mm.{axis}" if axis in params.pivots_mm else
               f"no pivots_mm.{axis}: the axis line through the origin, CONVENTIONS §2")
+    if params.in_force is not None:
+        stated += (" moved by the values in force (the last full calibration's correction and the check-ups' "
+                   "entered since: enter them first, or give the configuration that holds them)")
     nominal = pivot["xyz".index(coordinate)]
     suggested = ",".join(f"{held[c][0] if c in held else x:.10g}" for c, x in zip("xyz", pivot, strict=True))
     raise InputError(f"--current {config.name}: the {axis} axis line is at {coordinate} = {line:.10g} mm there "
@@ -250,9 +325,10 @@ def _senses(params: CompensationParameters, axes: tuple[str, ...]) -> dict[str, 
     return {a: -1 if params.axis_sense.get(a, 1) < 0 else 1 for a in axes}
 
 
-def pige_kinematics_lines(params: CompensationParameters, limits: object = None) -> list[str]:
-    """pige's kinematics component for ``params.machine``: how to load it and its ``setp`` lines (absolute); the
-    map pins held to ``limits`` (``--max-change``, :mod:`.entry_checks`).
+def pige_kinematics_lines(params: CompensationParameters, limits: object = None) -> tuple[list[str], list[str]]:
+    """pige's kinematics component for ``params.machine``: its INI keys (how to load it), and its HAL lines: how to
+    build it, its ``setp`` lines (absolute), the map pins held to ``limits`` (``--max-change``, :mod:`.entry_checks`),
+    and the nets it needs (the tool length, each rotary joint's velocity).
 
     Raises
     ------
@@ -274,11 +350,12 @@ def pige_kinematics_lines(params: CompensationParameters, limits: object = None)
     angles = make_trajectory(kern.MACHINE_CODE, "cone-frustum").angles_deg
     vector = np.array([0.0 if n in unset else params.values.get(n, 0.0) for n in kern.PARAMETERS])  # µm, µrad
     tilt = float(np.linalg.norm(kern.orientation_jacobian(angles) @ vector, axis=1).max())
+    ini = [f"# pige's kinematics component {name} instead of the stock kinematics: set these keys in their sections "
+           "of the machine's INI (docs/linuxcnc-kinematics.md)", "[KINS]", f"KINEMATICS = {name} sparm=identityfirst",
+           f"JOINTS = {3 + len(axes)}", "[TRAJ]", f"COORDINATES = XYZ{''.join(axes)}"]
     out = [f"# the complete correction: pige's kinematics component {name} carries every PIGE and zero-position "
-           "error (docs/linuxcnc-kinematics.md):",
-           f"#   pige gen --target linuxcnc \"{kern.MACHINE_CODE}\" && halcompile --install {name}.comp",
-           f"#   [KINS] KINEMATICS = {name} sparm=identityfirst, JOINTS = {3 + len(axes)}, "
-           f"[TRAJ] COORDINATES = XYZ{''.join(axes)}; net motion.tooloffset.z to {name}.tool-offset",
+           "error (docs/linuxcnc-kinematics.md); build and install it with:",
+           f"#   pige gen --target linuxcnc \"{kern.MACHINE_CODE}\" && sudo halcompile --install {name}.comp",
            "#   to first order it puts the tool point on target; left: the tool's orientation error (up to "
            f"{tilt:.3g} urad on the default cone) and the pose-dependent extensions: "
            f"{', '.join(e.spec.id for e in params.extensions) or 'none'}"]
@@ -294,13 +371,37 @@ def pige_kinematics_lines(params: CompensationParameters, limits: object = None)
                    "tool-offset")
     for n in kern.PARAMETERS:
         pin = pins.error_pin(name, n)
-        if n in unset:
+        if n in params.held:
+            out.append(f"# {pin}: held by the check-up at {params.held[n]:+.4f} (the value in force): leave it as "
+                       "it is")
+        elif params.in_force is not None and n in params.values:
+            out.append(f"# {pin}: add {params.values[n]:+.4f} to the value it holds (the change since the values in "
+                       "force; the pin holds the absolute value)")
+        elif n in unset:
             out.append(f"# {pin}: no value in the parameter file (left as it is)")
         elif n not in params.values:
             out.append(f"# {pin}: not estimated (the parameter file has no {n}; left as it is)")
         else:
             out.append(f"setp {pin} {params.values.get(n, 0.0):.4f}")
-    return out + map_setp_lines(params, name, limits)
+    return ini, out + map_setp_lines(params, name, limits) + component_nets(params, name)
+
+
+def component_nets(params: CompensationParameters, name: str) -> list[str]:
+    """The nets the component needs: the tool length (``tool-offset``) and each rotary joint's velocity command
+    (``vel-<axis>``: the direction of approach a map per direction acts by)."""
+    kern = load_kernels(params.machine)
+    out = ["# the nets the component needs (if a pin named here already drives a signal of another name, link the "
+           "component's pin to that signal instead):",
+           "# the tool length, as the stock trt kinematics take it (the shipped configurations name the signal "
+           ":tool-offset; remove their net to xyzac-trt-kins.tool-offset)",
+           f"net :tool-offset motion.tooloffset.z => {name}.tool-offset"]
+    for i, a in enumerate(kern.ROTARY_AXES):
+        per = params.error_maps is not None and a in params.error_maps.axes and any(
+            n.endswith(("+", "-", ":reversal")) for n in params.error_maps.axes[a].values)
+        out.append(f"# {a}'s direction of approach from joint {3 + i}'s velocity command"
+                   + (f" ({a}'s map is per direction)" if per else " (used by a map per direction)"))
+        out.append(f"net pige-vel-{a.lower()} joint.{3 + i}.vel-cmd => {name}.vel-{a.lower()}")
+    return out
 
 
 def map_motions(params: CompensationParameters) -> list[str]:

@@ -51,6 +51,7 @@ from pige_sym.compensation.controllers.axis_lines import (
 )
 from pige_sym.compensation.controllers.scope import positions_and_zeros, scope_lines
 from pige_sym.compensation.controllers.tables.siemens_lec import check_format as lec_format
+from pige_sym.compensation.controllers.tables.siemens_lec import entered_values as lec_values
 from pige_sym.compensation.controllers.tables.siemens_lec import map_motions as map_motions
 from pige_sym.compensation.controllers.tables.siemens_lec import render_lines as lec_lines
 from pige_sym.compensation.parameters import CompensationParameters
@@ -111,6 +112,17 @@ def vector_changes(st: Structure) -> dict[str, np.ndarray]:
     return {"l1": -d1, "l2": d1, "l3": d2, "l4": -d2}
 
 
+def entries(params: CompensationParameters, options: ControllerOptions | None) -> list[tuple[str, dict[str, float]]]:
+    """The swivel data record's fine offsets (positions and zero offsets) and, when printed, the $AA_ENC_COMP tables
+    (one value per angle for both directions)."""
+    from pige_sym.compensation.controllers.scope import kinematic_values
+
+    kinematic = kinematic_values(params, "siemens")
+    maps = lec_values(params, options.machine_axes if options is not None else None)
+    out = [("the swivel data record", kinematic)]
+    return out + [("the swivel data record and the $AA_ENC_COMP tables", kinematic | maps)] if maps else out
+
+
 def render(params: CompensationParameters, options: ControllerOptions) -> str:
     """``$TC_CARR<k>[N]=$TC_CARR<k>[N]±value`` lines after ``;`` comments (module docstring)."""
     carrier = options.carrier
@@ -129,7 +141,7 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
              "; offset angle = the axis position of the initial setting: -sigma*E for a zero-position error E; "
              f"commanded senses (CONVENTIONS §9): {_senses_text(params, (one, two))}",
              *_requirements(carrier, vectors, offsets),
-             *scope_lines(params, "siemens", "; "),
+             *scope_lines(params, "siemens", "; ", options),
              "; chain rebuilt from the manuals in pige's tests (tests/test_controller_siemens.py), not run on a "
              "SINUMERIK: enter with the fine-offset limits active and measure again"]
     for name, change in vectors.items():

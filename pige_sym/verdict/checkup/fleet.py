@@ -1,9 +1,10 @@
 """``pige history fleet``: every machine of the history, its last calibration and check-up, when the next is due.
 
-**Next due** (UTC): now when the last check-up said ``drifted`` or ``out`` (or the last calibration failed its
-check); otherwise the last run plus the machine's usual interval — the median gap between its check-ups, or
-:data:`DEFAULT_INTERVAL_DAYS` days before it has two — brought forward to the earliest time the last check-up's
-forecast gives for a PIGE to leave its tolerance (the low end of the interval, :mod:`~pige_sym.verdict.checkup.trend`).
+**Next due** (UTC): right after the last check-up when it said ``drifted`` or ``out`` (or after the last
+calibration when it failed its check: overdue since then); otherwise the last run plus the machine's usual
+interval — the median gap between its check-ups, or :data:`DEFAULT_INTERVAL_DAYS` days before it has two — brought
+forward to the earliest time the last check-up's forecast gives for a PIGE to leave its tolerance (the low end of
+the interval, :mod:`~pige_sym.verdict.checkup.trend`; only a shown drift is forecast).
 """
 
 from __future__ import annotations
@@ -40,9 +41,19 @@ def _interval(checkups: list[Any]) -> tuple[timedelta, str]:
     times = [datetime.fromisoformat(r.measured_at) for r in checkups]
     gaps = [(b - a).total_seconds() for a, b in zip(times, times[1:], strict=False)]
     if not gaps:
-        return timedelta(days=DEFAULT_INTERVAL_DAYS), f"the default interval ({DEFAULT_INTERVAL_DAYS:g} days)"
+        return timedelta(days=DEFAULT_INTERVAL_DAYS), f"the default interval ({_days(DEFAULT_INTERVAL_DAYS)})"
     days = float(np.median(gaps)) / 86400.0
-    return timedelta(days=days), f"its usual interval ({days:.3g} days, median of {len(gaps)})"
+    return timedelta(days=days), f"its usual interval ({_days(days)}, median of {len(gaps)} gap{'s' * (len(gaps) > 1)})"
+
+
+def _minutes(iso: str) -> str:
+    return datetime.fromisoformat(iso).isoformat(timespec="minutes")
+
+
+def _days(days: float) -> str:
+    """``1 day``, ``7 days``, ``0.25 days``."""
+    text = f"{days:.3g}"
+    return f"{text} day" if text == "1" else f"{text} days"
 
 
 def _forecast(run: Any) -> tuple[str, str] | None:
@@ -64,10 +75,10 @@ def fleet_row(runs: list[Any], now: datetime) -> FleetRow:
     row = FleetRow(last.machine_id, last.machine_code, len(runs), f and f.measured_at, f and f.verdict,
                    c and c.measured_at, c and c.verdict, "", "")
     if last.kind == "checkup" and last.verdict in ("drifted", "out"):
-        row.next_due, row.why = now.isoformat(timespec="minutes"), f"the last check-up said {last.verdict}"
+        row.next_due, row.why = _minutes(last.measured_at), f"the last check-up said {last.verdict}"
         return row
     if last.kind == "full" and last.verdict == "fail":
-        row.next_due, row.why = now.isoformat(timespec="minutes"), "the last calibration failed its check"
+        row.next_due, row.why = _minutes(last.measured_at), "the last calibration failed its check"
         return row
     gap, said = _interval([r for r in checks if f is None or r.measured_at > f.measured_at] or checks)
     due = datetime.fromisoformat(last.measured_at) + gap

@@ -1,46 +1,36 @@
-"""Control limits per PIGE learned from the machine's own check-ups: a Shewhart and an EWMA chart.
+"""Control limits per PIGE for the next run: the posterior predictive of the run-to-run scatter, two tests.
 
-**The chart.**  Every check-up of a machine with the same poses and PIGEs (the plan's *signature*) is one point per
-PIGE.  Points fall into *segments*: a segment starts at each full calibration and at each check-up run after the
-controller was corrected (``pige checkup --corrected``); within a segment the machine is expected to hold its level.
-A check-up the learned limits flagged once the scatter had :data:`TRUST_DOF` degrees of freedom leaves the centre, the
-scatter and the EWMA (a drift must not widen the limits it is judged by); one flagged earlier stays (with few degrees
-of freedom the scatter can come out small by chance, and dropping what it flags would keep it small and flag every
-later check-up).  When a segment is closed by a correction or a new calibration (the assignable cause was found),
-every check-up of it the learned limits flagged leaves the scatter: a corrected warm-up does not widen the limits of
-the next weeks.
+**What a new check-up is compared with.**  The runs of the current *segment* (an entered correction starts a new
+one; the full calibrations are in it as well as the check-ups), in time order, in control (a check-up the learned
+limits flagged once they were worth :data:`TRUST_DOF` degrees of freedom leaves them: a drift must not widen the
+limits it is judged by; those of a segment closed by a correction leave it too).  A segment started by a correction
+begins with the previous run less the correction entered (its *start*), as the first of its runs.  Run ``i`` has
+value ``x_i`` and variance ``τ² + u_i²`` (:mod:`~pige_sym.verdict.checkup.scatter`): its own standard error ``u_i``
+and the machine's run-to-run scatter ``τ``, whose posterior (from the machine's history and its fleet) is a set of
+weights ``w_g`` on a grid ``τ_g²``.
 
-**Scatter.**  The run-to-run scatter of PIGE ``p`` is the pooled within-segment standard deviation of the earlier
-in-control check-ups,
+**Shewhart test** (a jump).  The centre ``x̄ = Σ a_i x_i`` is the segment's weighted mean at the posterior median
+``τ̂²`` (``a_i ∝ 1/(τ̂² + u_i²)``).  For a machine that holds still, ``x − x̄`` given ``τ²`` is normal with variance
+``v(τ²) = τ² + u² + Σ a_i² (τ² + u_i²)`` (``u`` the new run's standard error); over the posterior it is the mixture
+``Σ_g w_g N(0, v(τ_g²))``, the *posterior predictive*.  The new value is outside when ``|x − x̄| > h``, ``h`` the
+mixture's two-sided point at the Shewhart test's share ``β_S = SHEWHART_SHARE·α/m``: ``Σ_g w_g P(|N(0, v_g)| > h) =
+β_S``.  With a vague prior and equal ``u_i`` this is close to the Student-t limit ``t_ν(1 − β_S/2)·s·√(1 + 1/n)``;
+with the fleet's prior it is narrower, as the prior is worth runs.
 
-    ``s² = Σ_seg Σ_i (x_i − x̄_seg)² / ν``,   ``ν = Σ_seg (n_seg − 1)``,
+**EWMA test** (a slow drift: a Shewhart test sees a drift of one standard deviation per run only once it has built
+up).  Given ``τ²``, the segment's *innovations* ``e_j = (x_j − x̄_{<j})/√(v_j + Var x̄_{<j})`` (each run against the
+weighted mean of those before it, the new one last) are independent ``N(0, 1)`` for a machine that holds still (the
+recursive residuals of Brown, Durbin & Evans 1975); their exponentially weighted mean ``Z_k = λ e_k + (1 − λ) Z_{k−1}``
+(λ = :data:`LAMBDA`) has variance ``V_k = λ/(2 − λ)·(1 − (1 − λ)^{2k})``.  Its posterior p-value ``Σ_g w_g P(|N(0,
+V_k)| > |Z_k(τ_g²)|)`` below the rest of the PIGE's share, ``β_E = (1 − SHEWHART_SHARE)·α/m``, flags the value.
 
-so it holds everything that moves a PIGE from run to run at a constant level (the probing noise, re-clamping,
-temperature), not only each run's own measurement noise, and a level change between segments does not inflate it.
+The two tests of each of the ``m`` PIGEs at ``β_S + β_E = α/m`` (Bonferroni): the chance that a check-up of a
+drift-free machine flags any PIGE is at most ``α`` (default 1 %; measured by simulation: docs/checkup.md).
 
-**Shewhart test.**  The centre ``x̄`` is the mean of the current segment's ``n_c`` earlier in-control check-ups.  A
-new value ``x`` is outside when ``|x − x̄| > t_ν(1 − α/(4m)) · s · √(1 + 1/n_c)``: ``x − x̄`` and ``s`` are
-independent, so for a machine that holds still the chance is exactly ``α/(2m)`` (Student's t on ν degrees of freedom
-is the small-sample correction).  Before the segment's first check-up the centre is the level it starts from (the
-full calibration's value, or the previous value less the correction entered) with its own standard error ``u_c``;
-the spread is then ``√(s² + max(u_c², s²))``.
-
-**EWMA test** (a slow drift: a Shewhart chart sees a drift of one standard error per run only when it has built up to
-three or four).  The segment's *recursive residuals* ``w_j = (x_j − x̄_{j−1})/√(1 + 1/(j−1))`` (each in-control
-check-up against the mean of those before it, the new one included as the last) are independent ``N(0, σ²)`` for a
-machine that holds still (Brown, Durbin & Evans 1975); their exponentially weighted mean ``Z_k = λ w_k + (1 − λ)
-Z_{k−1}`` (``Z_0 = 0``, λ = :data:`LAMBDA`) is outside when ``|Z_k| > t_ν(1 − α/(4m)) · s · √(λ/(2 − λ)·(1 − (1 −
-λ)^{2k}))``.
-
-Both tests at ``α/(2m)`` for each of the ``m`` PIGEs (Bonferroni): the chance that a check-up of a drift-free machine
-flags any PIGE is at most ``α`` (default 1 %; the EWMA's ``s`` shares points with ``Z``, so that rate is checked by
-simulation: docs/checkup.md).
-
-**Before the limits are learned** (ν < :data:`MIN_DOF`, i.e. fewer than ``MIN_DOF + 1`` check-ups with the same poses
-since …): *provisional* limits from the runs' own standard errors, the Shewhart test alone: ``|x − x̄| > t_d(1 −
-α/(2m))·√(u² + u_c²)`` (``u`` the run's standard error on ``d`` degrees of freedom, ``u_c`` the centre's).  They hold
-the stated rate only when the machine's run-to-run scatter is its measurement noise; the verdict says
-``provisional``.
+**Provisional limits.**  While neither the machine nor its fleet has two runs of a PIGE in one segment
+(:data:`MIN_DOF` degrees of freedom over the population), nothing is known of ``τ``: the Shewhart test alone, against
+the runs' own standard errors, ``|x − x̄| > t_d(1 − α/(2m))·√(u² + Var x̄)`` (``τ = 0``, ``d`` the run's degrees of
+freedom); the verdict says ``provisional``.
 """
 
 from __future__ import annotations
@@ -51,7 +41,8 @@ from typing import Any
 
 import numpy as np
 
-from pige_sym.identification.distributions import t_quantile
+from pige_sym.identification.distributions import normal_quantile, t_quantile
+from pige_sym.verdict.checkup.scatter import INTERVAL, Posterior
 
 #: Family-wise false-alarm rate per check-up (all its PIGEs together).
 ALPHA = 0.01
@@ -59,61 +50,28 @@ ALPHA = 0.01
 #: a crash is flagged, and the quantile leaves floating point near 1e-16), above 0.5 a still machine is flagged at
 #: every other check-up.
 ALPHA_RANGE = (1e-6, 0.5)
-#: Degrees of freedom of the pooled scatter from which the learned limits replace the provisional ones.
-MIN_DOF = 4
-#: Degrees of freedom from which a check-up the learned limits flag leaves the chart (module docstring).
+#: Degrees of freedom of the population below which the limits are provisional (module docstring).
+MIN_DOF = 1
+#: What the posterior of a PIGE's scatter must be worth (degrees of freedom) for a check-up it flags to leave the
+#: centre and the scatter (module docstring).
 TRUST_DOF = 10
-#: Weight of the newest recursive residual in the EWMA.
+#: Weight of the newest innovation in the EWMA.
 LAMBDA = 0.4
-METHOD = ("per PIGE a Shewhart test of the value against the mean of the segment's earlier check-ups and an EWMA "
-          f"(lambda {LAMBDA:g}) of the segment's recursive residuals, both scaled by the pooled within-segment "
-          "standard deviation s on nu degrees of freedom, each at Student t_nu(1 - alpha/(4m)) (Bonferroni over the "
-          "2m tests: at most alpha per check-up); provisional limits from the runs' own standard errors before nu = "
-          f"{MIN_DOF}")
-
-
-@dataclass
-class Point:
-    """One check-up value of one PIGE on the chart.
-
-    Attributes
-    ----------
-    value, std : float [µm, µrad]
-        Estimate and its standard error (the run's own).
-    dof : int
-        Degrees of freedom of ``std``.
-    segment : int
-    in_control : bool
-        False when it leaves the chart (module docstring).
-    flagged : bool
-        The learned limits flagged it (it leaves the chart with its segment).
-    """
-
-    value: float
-    std: float
-    dof: int
-    segment: int
-    in_control: bool = True
-    flagged: bool = False
-
-
-@dataclass
-class Start:
-    """The level a segment starts from, the centre until the segment has check-ups of its own.
-
-    ``std`` is the standard error of the difference it makes to a check-up's value besides the check-up's own noise:
-    a full calibration's value and its held PIGEs' errors as they move the check-up's fit (``source = "full"``,
-    :func:`~pige_sym.verdict.checkup.routine.start_std`), or the previous check-up's standard error (``corrected``).
-    """
-
-    value: float
-    std: float
-    source: str = "full"
+#: The Shewhart test's share of a PIGE's α/m; the EWMA's is the rest (a drift of one standard deviation per run,
+#: which the EWMA sees first, was flagged within five runs in 81.5 % of the cases with this share, 65 % with half).
+SHEWHART_SHARE = 0.2
+#: Innovations the EWMA sums (the older ones weigh less than 0.6^60 ≈ 5e-14).
+EWMA_MEMORY = 60
+METHOD = ("per PIGE a Shewhart test of the value against the weighted mean of its segment's runs (full calibrations "
+          f"and check-ups) and an EWMA (lambda {LAMBDA:g}) of the segment's innovations, both from the posterior "
+          "predictive of the run-to-run scatter (learned from every run of the machine and, through a hierarchical "
+          f"prior, from its other PIGEs and the machine's fleet), at {SHEWHART_SHARE:g} and {1 - SHEWHART_SHARE:g} of "
+          "alpha/m (Bonferroni over the m PIGEs: at most alpha per check-up)")
 
 
 @dataclass
 class Limit:
-    """The control limits of one PIGE for the next check-up.
+    """The control limits of one PIGE for the next check-up, judged.
 
     Attributes
     ----------
@@ -121,16 +79,24 @@ class Limit:
     half_width : float
         Shewhart: outside when ``|x − centre| > half_width``.
     scatter : float or None
-        Pooled run-to-run standard deviation ``s`` (None while provisional).
+        The run-to-run scatter τ (posterior median; None while provisional) [unit].
+    scatter_low, scatter_high : float or None
+        Its 90 % posterior interval.
     dof : int
-        ν of the scatter (pooled; 0 when there is none).
+        What the posterior is worth in degrees of freedom (:meth:`~.scatter.Posterior.effective_dof`); 0 while
+        provisional.
     n_centre : int
-        Points the centre averages.
+        Runs the centre averages.
     provisional : bool
         From the runs' own standard errors (module docstring).
-    ewma, ewma_width : float or None
-        The EWMA of the recursive residuals with the new value, and its limit (None: provisional, or no earlier
-        check-up in the segment).
+    source : str
+        Where the limits were learned.
+    ewma : float or None
+        The EWMA of the standardized innovations (at the posterior median), with the new value.
+    p_shewhart, p_ewma : float or None
+        The tests' posterior p-values (the Shewhart's is below its share exactly when ``|z| > 1``).
+    alpha_test : float
+        The EWMA's level, ``(1 − SHEWHART_SHARE)·α/m``.
     z : float or None
         ``(x − centre)/half_width``: ±1 at the Shewhart limits.
     outside : bool or None
@@ -143,102 +109,127 @@ class Limit:
     dof: int
     n_centre: int
     provisional: bool
+    source: str = ""
+    scatter_low: float | None = None
+    scatter_high: float | None = None
     ewma: float | None = None
-    ewma_width: float | None = None
+    p_shewhart: float | None = None
+    p_ewma: float | None = None
+    alpha_test: float = ALPHA * (1.0 - SHEWHART_SHARE)
     z: float | None = None
     outside: bool | None = None
-
-    def judge(self, value: float) -> Limit:
-        """This limit with a value judged (``z``, ``outside``)."""
-        z = (value - self.centre) / self.half_width if self.half_width > 0 else math.inf
-        drift = self.ewma is not None and self.ewma_width is not None and abs(self.ewma) > self.ewma_width
-        return Limit(self.centre, self.half_width, self.scatter, self.dof, self.n_centre, self.provisional,
-                     self.ewma, self.ewma_width, float(z), bool(abs(z) > 1.0 or drift))
 
     @property
     def by(self) -> str:
         """Which test flagged the value: ``shewhart``, ``ewma``, both, or ``""``."""
         tests = ["shewhart"] * bool(self.z is not None and abs(self.z) > 1.0)
-        tests += ["ewma"] * bool(self.ewma is not None and self.ewma_width and abs(self.ewma) > self.ewma_width)
+        tests += ["ewma"] * bool(self.p_ewma is not None and self.p_ewma < self.alpha_test)
         return "+".join(tests)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"centre": self.centre, "half_width": self.half_width, "scatter": self.scatter, "dof": self.dof,
-                "n_centre": self.n_centre, "provisional": self.provisional, "ewma": self.ewma,
-                "ewma_width": self.ewma_width, "z": self.z, "outside": self.outside, "by": self.by}
+        return {"centre": self.centre, "half_width": self.half_width, "scatter": self.scatter,
+                "scatter_low": self.scatter_low, "scatter_high": self.scatter_high, "dof": self.dof,
+                "n_centre": self.n_centre, "provisional": self.provisional, "source": self.source,
+                "ewma": self.ewma, "p_shewhart": self.p_shewhart, "p_ewma": self.p_ewma,
+                "alpha_test": self.alpha_test, "z": self.z, "outside": self.outside, "by": self.by}
 
 
-def pooled_scatter(points: list[Point]) -> tuple[float | None, int]:
-    """``(s, ν)``: the pooled within-segment standard deviation of the in-control points (module docstring)."""
-    groups: dict[int, list[float]] = {}
-    for p in points:
-        if p.in_control:
-            groups.setdefault(p.segment, []).append(p.value)
-    ss = sum(float(((np.array(v) - np.mean(v)) ** 2).sum()) for v in groups.values())
-    dof = sum(len(v) - 1 for v in groups.values())
-    return (math.sqrt(ss / dof) if dof > 0 else None), dof
+def _tail(x: np.ndarray) -> np.ndarray:
+    """``P(|N(0, 1)| > x) = erfc(x/√2)`` elementwise, ``x ≥ 0``, to a relative 1.2e-7 (Chebyshev fit of Press et al.,
+    *Numerical Recipes* §6.2, ``erfcc``: no scipy on the check-up's path)."""
+    z = np.abs(np.asarray(x, dtype=float)) / math.sqrt(2.0)
+    t = 1.0 / (1.0 + 0.5 * z)
+    poly = -z * z - 1.26551223 + t * (1.00002368 + t * (0.37409196 + t * (0.09678418 + t * (
+        -0.18628806 + t * (0.27886807 + t * (-1.13520398 + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277))))))))
+    return t * np.exp(poly)
 
 
-def quantile(alpha: float, tests: int, dof: float) -> float:
-    """``t_dof(1 − α/(2·tests))``, the two-sided Bonferroni critical value (normal for infinite ``dof``)."""
-    return t_quantile(dof if math.isfinite(dof) else 1e12, 1.0 - alpha / (2.0 * tests))
+def mixture_point(weights: np.ndarray, variances: np.ndarray, tail: float) -> float:
+    """``h`` with ``Σ_g w_g P(|N(0, v_g)| > h) = tail``: the bracket between the normal points of the smallest and
+    the largest ``v_g`` narrowed sixteenfold six times (to a relative 1e-7 of its width in log h)."""
+    sd = np.sqrt(variances)
+    z = normal_quantile(1.0 - tail / 2.0)
+    low, high = math.log(z * float(sd.min())), math.log(z * float(sd.max()))
+    for _ in range(6):
+        if high - low < 1e-12:
+            break
+        h = np.linspace(low, high, 17)
+        p = weights @ _tail(np.exp(h)[None, :] / sd[:, None])
+        k = int(np.clip(np.searchsorted(-p, -tail), 1, 16))  # p falls with h: the first point at or below tail
+        low, high = float(h[k - 1]), float(h[k])
+    return math.exp(0.5 * (low + high))
 
 
-def ewma_of(values: list[float], lam: float = LAMBDA) -> tuple[float, float] | None:
-    """``(Z_k, √(λ/(2−λ)(1−(1−λ)^{2k})))`` of the recursive residuals of ``values`` (module docstring); None for
-    fewer than two values."""
-    if len(values) < 2:
-        return None
-    x = np.asarray(values, dtype=float)
-    j = np.arange(1, x.size)
-    means = np.cumsum(x)[:-1] / j
-    w = (x[1:] - means) / np.sqrt(1.0 + 1.0 / j)
-    z = 0.0
-    for v in w:
-        z = lam * float(v) + (1.0 - lam) * z
-    k = w.size
-    return z, math.sqrt(lam / (2.0 - lam) * (1.0 - (1.0 - lam) ** (2 * k)))
+def innovations(values: np.ndarray, variances: np.ndarray, tau2: np.ndarray) -> np.ndarray:
+    """The standardized innovations of a segment's runs for each ``τ²`` of the grid (module docstring), shape=(G,
+    n − 1): run ``j`` against the weighted mean of runs ``0 … j − 1``."""
+    v = tau2[:, None] + variances[None, :]
+    w = 1.0 / v
+    cw = np.cumsum(w, axis=1)[:, :-1]
+    mean = np.cumsum(w * values[None, :], axis=1)[:, :-1] / cw
+    return (values[None, 1:] - mean) / np.sqrt(v[:, 1:] + 1.0 / cw)
 
 
-def control_limit(points: list[Point], segment: int, start: Start | None, *, value: float, run_std: float,
-                  run_dof: int, m: int, alpha: float = ALPHA, min_dof: int = MIN_DOF) -> Limit | None:
-    """The limits of one PIGE for a new check-up ``value`` of ``segment``, judged (module docstring).
+def ewma_of(e: np.ndarray, lam: float = LAMBDA) -> tuple[np.ndarray, float]:
+    """``(Z_k, V_k)`` of innovations ``e`` (shape (G, k), the newest last; module docstring)."""
+    k = e.shape[1]
+    used = e[:, -EWMA_MEMORY:]
+    weights = lam * (1.0 - lam) ** np.arange(used.shape[1])[::-1]
+    return used @ weights, lam / (2.0 - lam) * (1.0 - (1.0 - lam) ** (2 * k))
+
+
+def provisional_limit(values: np.ndarray, variances: np.ndarray, *, value: float, variance: float, run_dof: int,
+                      m: int, alpha: float) -> Limit:
+    """The provisional limits (module docstring): ``τ = 0``."""
+    w = 1.0 / variances
+    centre = float(w @ values / w.sum())
+    width = t_quantile(max(run_dof, 1), 1.0 - alpha / (2.0 * m)) * math.sqrt(variance + 1.0 / float(w.sum()))
+    z = (value - centre) / width
+    return Limit(centre, width, None, 0, int(values.size), True, "the runs' own standard errors (the run-to-run "
+                 "scatter is not known yet)", alpha_test=alpha / (2.0 * m), z=z, outside=bool(abs(z) > 1.0))
+
+
+def control_limit(values: np.ndarray, variances: np.ndarray, post: Posterior | None, *, value: float,
+                  variance: float, run_dof: int, m: int, alpha: float = ALPHA) -> Limit | None:
+    """The limits of one PIGE for a new check-up ``value``, judged (module docstring).
 
     Parameters
     ----------
-    points : list of Point
-        Earlier check-ups with the same poses and PIGEs, in time order.
-    segment : int
-        The new check-up's segment.
-    start : Start or None
-        The segment's starting level (None: no centre until it has a check-up of its own).
-    value : float
-        The new check-up's value.
-    run_std, run_dof : float, int
-        The new check-up's own standard error and its degrees of freedom (provisional limits).
+    values, variances : ndarray, shape=(n,)
+        The segment's runs in control, in time order (its start first when it has one), and their own variances.
+    post : Posterior or None
+        The posterior of the PIGE's run-to-run variance (None: provisional limits).
+    value, variance : float
+        The new check-up's value and its own variance.
+    run_dof : int
+        Degrees of freedom of the new check-up's standard error (provisional limits).
     m : int
         PIGEs judged in the check-up (Bonferroni).
 
     Returns
     -------
     Limit or None
-        None when there is no centre yet (the first check-up of a segment without a starting level).
+        None when the segment has no run yet (nothing to compare with).
     """
-    kept = [p for p in points if p.segment == segment and p.in_control]
-    mine = [p.value for p in kept]
-    if mine:
-        centre, n_c = float(np.mean(mine)), len(mine)
-        centre_var = float(np.mean([p.std**2 for p in kept])) / n_c
-    elif start is not None:
-        centre, n_c, centre_var = start.value, 1, start.std**2
-    else:
+    if values.size == 0:
         return None
-    s, dof = pooled_scatter(points)
-    if s is None or dof < min_dof:
-        width = quantile(alpha, m, max(run_dof, 1)) * math.sqrt(run_std**2 + centre_var)
-        return Limit(centre, width, None, dof, n_c, True).judge(value)
-    q = quantile(alpha, 2 * m, dof)
-    spread = s * math.sqrt(1.0 + 1.0 / n_c) if mine else math.sqrt(s**2 + max(centre_var, s**2))
-    ew = ewma_of([*mine, value])
-    return Limit(centre, q * spread, s, dof, n_c, False, None if ew is None else ew[0],
-                 None if ew is None else q * s * ew[1]).judge(value)
+    if post is None:
+        return provisional_limit(values, variances, value=value, variance=variance, run_dof=run_dof, m=m,
+                                 alpha=alpha)
+    tail_s, tail_e = alpha / m * SHEWHART_SHARE, alpha / m * (1.0 - SHEWHART_SHARE)
+    tau2, w = post.tau2, post.weights
+    a = 1.0 / (post.median**2 + variances)
+    a /= a.sum()
+    centre = float(a @ values)
+    predictive = tau2 + variance + (a**2) @ (tau2[None, :] + variances[:, None])
+    half = mixture_point(w, predictive, tail_s)
+    d = value - centre
+    p_s = float(w @ _tail(abs(d) / np.sqrt(predictive)))
+    e = innovations(np.append(values, value), np.append(variances, variance), tau2)
+    z_ewma, v_ewma = ewma_of(e)
+    p_e = float(w @ _tail(np.abs(z_ewma) / math.sqrt(v_ewma)))
+    k = int(np.searchsorted(np.cumsum(w), 0.5))
+    dof = post.effective_dof(variance)
+    return Limit(centre, half, post.median, int(min(dof, 1e6)), int(values.size), False, post.source(),
+                 post.quantile(INTERVAL[0]), post.quantile(INTERVAL[1]), float(z_ewma[min(k, z_ewma.size - 1)]),
+                 p_s, p_e, tail_e, d / half, bool(p_s < tail_s or p_e < tail_e))

@@ -3,15 +3,18 @@
 1. The file (R-test or probe, the program ``pige program --checkup`` wrote) is fitted for the check-up's PIGEs with
    the others held (:mod:`~pige_sym.identification.subset`; the PIGEs are the program header's, else ``--pige``,
    else those of the machine's last check-up, else the axis lines' positions).
-2. Each PIGE is judged against its control limits (:mod:`~pige_sym.verdict.checkup.limits`, learned from the
-   check-ups of the machine with the same poses), against its tolerance (ISO 14253-1 decision rule,
-   :func:`~pige_sym.verdict.check.decide`), and its trend is fitted and forecast
+   Its standard errors include the held values' error (the last full calibration's covariance).
+2. Each PIGE is judged (:mod:`~pige_sym.verdict.checkup.judging`) against its control limits
+   (:mod:`~pige_sym.verdict.checkup.limits`, the run-to-run scatter learned from every run of the machine and its
+   fleet, :mod:`~pige_sym.verdict.checkup.scatter`), against its tolerance (ISO 14253-1 decision rule,
+   :func:`~pige_sym.verdict.check.decide`), and its trend is fitted and, where the drift is shown, forecast
    (:mod:`~pige_sym.verdict.checkup.trend`).
 3. **Verdict**: ``out`` when a PIGE is not shown within its tolerance (``fail`` or, under the guard rule,
    ``undecided``), else ``drifted`` when one is outside its control limits, else ``ok``.  Exit status 0 for ``ok``,
    1 for ``drifted`` and ``out``, 2 for bad input.
-4. **Changes to enter** (:mod:`~pige_sym.verdict.checkup.to_enter`): the check-up's PIGEs weighed by their uncertainty,
-   within ``--max-change``; with ``--controller`` as ``pige compensate --controller`` prints them.
+4. **Changes to enter** (:mod:`~pige_sym.verdict.checkup.to_enter`): the change of each re-measured PIGE since the
+   values in force, weighed by its uncertainty, within ``--max-change``; the held PIGEs stay at the values in force;
+   with ``--controller`` as ``pige compensate --controller`` prints them.
 5. The run is stored with ``kind = checkup`` and what was found (``runs.checkup_json``).
 """
 
@@ -24,12 +27,10 @@ from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from pige_sym.errors import InputError
-from pige_sym.verdict.checkup.limits import ALPHA, ALPHA_RANGE, METHOD, MIN_DOF, Limit, control_limit, pooled_scatter
-from pige_sym.verdict.checkup.reference import FORMAT, ChartState, chart_state, hours
-from pige_sym.verdict.checkup.trend import Trend, trend
+from pige_sym.verdict.checkup.judging import Item, flags, fleet_series, judge
+from pige_sym.verdict.checkup.limits import ALPHA, ALPHA_RANGE, METHOD, MIN_DOF
+from pige_sym.verdict.checkup.reference import FORMAT, chart_state, hours
 
 VERDICTS = ("ok", "drifted", "out")
 
@@ -52,29 +53,13 @@ class CheckupOptions:
     max_change: tuple[float, float] = (0.2, 0.1)
 
 
-@dataclass
-class Item:
-    """One PIGE of a check-up: value, limits, tolerance, trend."""
-
-    name: str
-    unit: str
-    value: float
-    std: float
-    limit: Limit | None
-    tolerance: float | None
-    status: str
-    reason: str
-    trend: Trend | None = None
-
-    def to_dict(self, origin: str) -> dict[str, Any]:
-        t = None if self.trend is None else self.trend.to_dict() | {
-            k: when(origin, self.trend_hours(k)) for k in ("leaves_at", "leaves_low", "leaves_high")}
-        return {"name": self.name, "unit": self.unit, "value": self.value, "std": self.std,
-                "limit": None if self.limit is None else self.limit.to_dict(), "tolerance": self.tolerance,
-                "status": self.status, "reason": self.reason, "trend": t}
-
-    def trend_hours(self, key: str) -> float | None:
-        return None if self.trend is None else getattr(self.trend, key)
+def item_dict(item: Item, origin: str) -> dict[str, Any]:
+    """One judged PIGE as JSON (times of the forecast as ISO times)."""
+    t = None if item.trend is None else item.trend.to_dict() | {
+        k: when(origin, getattr(item.trend, k)) for k in ("leaves_at", "leaves_low", "leaves_high")}
+    return {"name": item.name, "unit": item.unit, "value": item.value, "std": item.std, "left": item.left,
+            "limit": None if item.limit is None else item.limit.to_dict(), "tolerance": item.tolerance,
+            "status": item.status, "reason": item.reason, "trend": t}
 
 
 #: A forecast time past the calendar's end (year 9999) in words: no crossing within it.
@@ -118,6 +103,7 @@ class CheckupResult:
     correction: dict[str, float]
     changes: Any = None
     run_id: int | None = None
+    run_number: int = 0
     fit: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
@@ -128,18 +114,24 @@ class CheckupResult:
 
     def outside(self) -> dict[str, bool]:
         """Per PIGE: outside its control limits (learned or provisional)."""
-        return {i.name: bool(i.limit is not None and i.limit.outside) for i in self.items}
+        return flags(self.items)["outside"]
 
     def flagged(self) -> dict[str, bool]:
         """Per PIGE: outside its learned limits."""
-        return {i.name: bool(i.limit is not None and i.limit.outside and not i.limit.provisional) for i in self.items}
+        return flags(self.items)["flagged"]
 
     def in_control(self) -> dict[str, bool]:
-        """Per PIGE: stays in the chart (:mod:`~pige_sym.verdict.checkup.limits`, ``TRUST_DOF``)."""
-        from pige_sym.verdict.checkup.limits import TRUST_DOF
+        """Per PIGE: stays in the chart (:func:`~pige_sym.verdict.checkup.judging.flags`)."""
+        return flags(self.items)["in_control"]
 
-        return {i.name: not (self.flagged()[i.name] and i.limit is not None and i.limit.dof >= TRUST_DOF)
-                for i in self.items}
+    def limits_source(self) -> str:
+        """Where the limits came from (one sentence)."""
+        return limits_source(self.items)
+
+    def next_step(self) -> tuple[str, str]:
+        """What to do now and the command: :func:`next_step` (the CLI and the report print it)."""
+        return next_step(self.verdict, self.notes, None if self.changes is None else self.changes.entered,
+                         self.machine_id)
 
     def chart(self) -> dict[str, Any]:
         """What later check-ups read of this one (:mod:`~pige_sym.verdict.checkup.reference`)."""
@@ -154,13 +146,14 @@ class CheckupResult:
 
         return json_ready({
             "format": FORMAT, "machine_id": self.machine_id, "machine": self.machine, "file": self.file,
-            "measured_at": self.measured_at, "run": self.run_id, "verdict": self.verdict,
+            "measured_at": self.measured_at, "run": self.run_id, "run_number": self.run_number,
+            "verdict": self.verdict, "next_step": list(self.next_step()),
             "exit_status": self.exit_status,
             "free": [i.name for i in self.items], "held": self.held, "provisional": self.provisional,
             "method": METHOD, "alpha": self.alpha, "min_dof": MIN_DOF, "signature": self.signature,
             "segment": self.segment, "after_correction": self.corrected, "correction": self.correction,
             "in_control": self.in_control(), "outside": self.outside(), "flagged": self.flagged(),
-            "items": [i.to_dict(self.origin) for i in self.items],
+            "limits_source": self.limits_source(), "items": [item_dict(i, self.origin) for i in self.items],
             "tolerance": {i.name: i.tolerance for i in self.items if i.tolerance is not None},
             "to_enter": None if self.changes is None else self.changes.entered,
             "changes": None if self.changes is None else self.changes.to_dict(), "fit": self.fit,
@@ -206,11 +199,13 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
     if state.setup.instrument != instrument(m):
         raise InputError(f"{path} is an {instrument(m)} file, the last full calibration (run {state.full.id}) an "
                          f"{state.setup.instrument} run: a check-up repeats its instrument and set-up")
-    fit = identify_subset(m, free, state.held, **_rtest_noise(state.full) if instrument(m) == "rtest" else {})
+    fit = identify_subset(m, free, state.held, held_covariance=state.held_covariance,
+                          **_rtest_noise(state.full) if instrument(m) == "rtest" else {})
     _storable(fit, path)
     tol = _tolerances(opts, runs, kern.MACHINE_CODE, free)
-    items, verdict = judge(fit, state, tol, opts, hours(measured, state.origin))
-    changes = checkup_changes(fit, m, opts)
+    fleet = fleet_series(history.fleet(kern.MACHINE_CODE, machine_id), list(kern.LOCATION_PARAMETERS))
+    items, verdict = judge(fit, state, tol, opts, hours(measured, state.origin), fleet)
+    changes = checkup_changes(fit, m, opts, state)
     result = CheckupResult(machine_id, kern.MACHINE_CODE, str(Path(path).resolve()), measured, verdict, items,
                            state.held, any(i.limit is None or i.limit.provisional for i in items), state.origin,
                            opts.alpha, signature, state.segment, opts.corrected, state.correction, changes,
@@ -219,7 +214,7 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
 
     record = history.add_checkup(Path(path), machine_id, kern.MACHINE_CODE, (measured, source), fit,
                                  setup_of(m).to_dict(), verdict, result.to_dict(), result.chart())
-    result.run_id = record.id
+    result.run_id, result.run_number = record.id, len(runs) + 1
     return result
 
 
@@ -292,99 +287,43 @@ def _tolerances(opts: CheckupOptions, runs: list[Any], machine: str, free: list[
                      "kept for the next check-ups)")
 
 
-def start_std(full: Any, fit: Any) -> dict[str, float]:
-    """Standard error of a full calibration's value as a check-up's starting level [µm, µrad].
+def next_step(verdict: str, notes: list[str], entered: dict[str, float | None] | None,
+              machine_id: str) -> tuple[str, str]:
+    """What to do after a check-up, and the command (one sentence each; ``pige checkup`` and the report of the
+    machine's history print the same)."""
+    import shlex
 
-    The check-up holds the other PIGEs at the calibration's values, so their errors ``δ_H`` move its fit by
-    ``−K δ_H`` (:attr:`~pige_sym.identification.subset.SubsetFit.sensitivity`); the difference to the calibration's
-    own value ``x_F + δ_F`` carries ``−(δ_F + K δ_H)``, of covariance ``[I K] Σ [I K]ᵀ`` with Σ the calibration's
-    covariance of (F, H).
-    """
-    names = list(fit.parameters) + list(fit.held)
-    if fit.sensitivity is None or any(n not in full.parameters for n in names):
-        return {}
-    idx = [full.parameters.index(n) for n in names]
-    cov = np.asarray(full.covariance, dtype=float)[np.ix_(idx, idx)]
-    lift = np.hstack([np.eye(len(fit.parameters)), np.asarray(fit.sensitivity)])
-    var = np.diag(lift @ cov @ lift.T)
-    if not np.isfinite(var).all():
-        return {}
-    return {n: float(np.sqrt(max(v, 0.0))) for n, v in zip(fit.parameters, var, strict=True)}
-
-
-def _starts(state: ChartState, fit: Any) -> dict[str, Any]:
-    """The segment's starting levels, a full calibration's with its standard error as the fit sees it."""
-    from pige_sym.verdict.checkup.limits import Start
-
-    if not any(s.source == "full" for s in state.start.values()):
-        return dict(state.start)
-    std = start_std(state.full, fit)
-    return {n: Start(s.value, std.get(n, s.std), "full") if s.source == "full" else s for n, s in state.start.items()}
-
-
-def judge(fit: Any, state: ChartState, tol: dict[str, float], opts: CheckupOptions,
-          t_now: float) -> tuple[list[Item], str]:
-    """Every PIGE of a check-up fit against its limits, its tolerance and its trend; and the verdict."""
-    items = _items(fit, state, tol, opts, t_now)
-    return items, _verdict(items)
-
-
-def _items(fit: Any, state: ChartState, tol: dict[str, float], opts: CheckupOptions, t_now: float) -> list[Item]:
-    from pige_sym.verdict.check import decide
-
-    items = []
-    starts = _starts(state, fit)
-    for i, name in enumerate(fit.parameters):
-        value, std = float(fit.values[i]), float(fit.std[i])
-        limit = control_limit(state.points[name], state.segment, starts.get(name), value=value, run_std=std,
-                              run_dof=fit.dof, m=len(fit.parameters), alpha=opts.alpha)
-        if name in tol:
-            status, reason = decide(value, std, tol[name], rule=opts.rule, k=opts.k)
-        else:
-            status, reason = "no limit", "no tolerance given for it"
-        quiet = pooled_scatter([p for p in state.points[name] if p.in_control and not p.flagged])
-        tr = _trend(state.trend[name], (t_now, value), limit, quiet, (std, fit.dof), tol.get(name))
-        items.append(Item(name, fit.units[name], value, std, limit, tol.get(name), status, reason, tr))
-    return items
-
-
-def _trend(points: list[tuple[float, float, bool]], new: tuple[float, float], limit: Limit | None,
-           quiet: tuple[float | None, int], own: tuple[float, int], tolerance: float | None) -> Trend | None:
-    """The trend of the drift episode (the new value outside its limits: the flagged check-ups before it) or of the
-    segment (:mod:`~pige_sym.verdict.checkup.trend`), with the chart's scatter of the unflagged check-ups (``quiet``,
-    once learned; before: the run's own standard error, ``own``)."""
-    from pige_sym.verdict.checkup.trend import WINDOW
-
-    episode = bool(limit is not None and limit.outside)
-    if episode:
-        k = len(points)
-        while k > 0 and points[k - 1][2]:
-            k -= 1
-        window = [p[:2] for p in points[k:]]
-    else:
-        window = [p[:2] for p in points[-(WINDOW - 1):]]
-    window.append(new)
-    if not episode and len(window) < 3:  # two quiet check-ups differ by noise in one pair out of ten at 90 %
-        return None
-    learned = limit is not None and not limit.provisional and quiet[0] is not None and quiet[1] >= MIN_DOF
-    scale, nu = (float(quiet[0] or 0.0), quiet[1]) if learned else own
-    return trend(np.array([p[0] for p in window]), np.array([p[1] for p in window]), new[0], tolerance,
-                 scale=scale, dof=nu, episode=episode)
-
-
-def _verdict(items: list[Item]) -> str:
-    if any(i.status in ("fail", "undecided") for i in items):
-        return "out"
-    if any(i.limit is not None and i.limit.outside for i in items):
-        return "drifted"
-    return "ok"
+    checkup = f"pige checkup NEXT.csv --machine-id {shlex.quote(machine_id)}"
+    if any("calibrate the machine fully" in n for n in notes):
+        return ("calibrate the machine fully: the check-up's poses disagree with the PIGEs it held beyond their "
+                "uncertainty", f"pige history add FULL.csv --machine-id {shlex.quote(machine_id)}")
+    if verdict == "ok":
+        return "nothing to correct: the next check-up as usual (pige history fleet says when)", checkup
+    if not any(v for v in (entered or {}).values()):
+        return (f"{'out of tolerance' if verdict == 'out' else 'drifted'}, but no change is shown beyond its "
+                "uncertainty: run the next check-up now to confirm; calibrate fully if it says so again", checkup)
+    tail = "; if it is still out, calibrate fully" if verdict == "out" else ""
+    return f"enter the changes, then run the next check-up with --corrected{tail}", f"{checkup} --corrected"
 
 
 def _notes(items: list[Item]) -> list[str]:
     notes = []
     if any(i.limit is None for i in items):
-        notes.append("the first check-up of this segment has no centre to compare with: judged on its tolerance only")
+        notes.append("the first run of this segment has nothing to compare with: judged on its tolerance only")
     elif any(i.limit is not None and i.limit.provisional for i in items):
-        notes.append(f"provisional limits from the runs' own standard errors: the run-to-run scatter is learned from "
-                     f"{MIN_DOF + 1} in-control check-ups with the same poses on (docs/checkup.md)")
+        notes.append("provisional limits from the runs' own standard errors: the run-to-run scatter is learned once "
+                     "the machine (or a machine of its structure in this history) has two runs of a PIGE between "
+                     "corrections (docs/checkup.md)")
     return notes
+
+
+def limits_source(items: list[Item]) -> str:
+    """Where the limits of a check-up came from, in one sentence (the first learned PIGE's posterior speaks for
+    the population; each PIGE's own figures are in its limit)."""
+    lims = [i.limit for i in items if i.limit is not None]
+    if not lims:
+        return "no limits: the first run of this segment"
+    if all(lim.provisional for lim in lims):
+        return "provisional: from the runs' own standard errors (the run-to-run scatter is not known yet)"
+    learned = next(lim for lim in lims if not lim.provisional)
+    return f"learned from {learned.source}"

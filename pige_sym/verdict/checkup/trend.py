@@ -11,6 +11,10 @@ learned (``s`` on ν degrees of freedom; provisional: the check-ups' own standar
 the window: ``SE(b) = s/√S_tt`` with ``S_tt = Σ(t_i − t̄)²`` (the least-squares slope's; Theil–Sen's is a few per cent
 larger for normal scatter), the drift rate's interval ``b ± t_ν(0.95)·SE(b)`` at :data:`CONFIDENCE`.
 
+**Shown.**  A drift is *shown* when its slope differs from zero at the check-up's own false-alarm level: ``|b| >
+t_ν(1 − α'/2)·SE(b)`` with ``α' = α/m`` (``shown_alpha``; the chart's α over its ``m`` PIGEs): a machine that holds
+still gets a forecast in at most ``α`` of its check-ups.  Only a shown drift is forecast.
+
 **Forecast.**  The level follows the line ``ŷ(t) = ȳ + b(t − t̄)`` (``ȳ`` the line at the mean time); it leaves the
 tolerance ``±L`` when ``ŷ`` crosses ``L`` on the side it drifts to.  The interval is the inverse of the line's band
 ``ŷ(t) ± q·s·√(1/n + (t − t̄)²/S_tt)`` (Fieller's): its earliest time is where the band's outer edge meets ``L``, its
@@ -48,8 +52,13 @@ class Trend:
     episode : bool
         Fitted to a drift episode (the flagged check-ups) rather than the segment.
     leaves_at, leaves_low, leaves_high : float or None
-        When the line leaves ``±limit`` (None: no limit, or it does not drift towards one); the interval's earliest
-        and latest time (``leaves_high`` None: the drift is not shown, no latest time) [h].
+        When the line leaves ``±limit`` (None: no limit, the drift is not shown, or it does not drift towards one);
+        the interval's earliest and latest time (``leaves_high`` None: no latest time at this confidence) [h].
+    shown : bool
+        The drift is shown (module docstring): only then is it forecast.
+    now : float
+        ``t_now`` [h]: an earliest time at ``now`` means the line's band meets the tolerance already (the PIGE may
+        be outside it now).
     """
 
     rate: float
@@ -64,6 +73,13 @@ class Trend:
     leaves_at: float | None = None
     leaves_low: float | None = None
     leaves_high: float | None = None
+    shown: bool = False
+    now: float = 0.0
+
+    @property
+    def reached(self) -> bool:
+        """The forecast's band meets the tolerance at the check-up already (its earliest time is now)."""
+        return self.leaves_low is not None and self.leaves_low <= self.now
 
     @property
     def significant(self) -> bool:
@@ -73,8 +89,9 @@ class Trend:
     def to_dict(self) -> dict[str, Any]:
         return {"rate_per_h": self.rate, "rate_low": self.rate_low, "rate_high": self.rate_high,
                 "rate_std": self.rate_std, "level": self.level, "points": self.points, "confidence": self.confidence,
-                "significant": self.significant, "episode": self.episode, "limit": self.limit,
-                "leaves_at_h": self.leaves_at, "leaves_low_h": self.leaves_low, "leaves_high_h": self.leaves_high}
+                "significant": self.significant, "shown": self.shown, "episode": self.episode, "limit": self.limit,
+                "leaves_at_h": self.leaves_at, "leaves_low_h": self.leaves_low, "leaves_high_h": self.leaves_high,
+                "reached": self.reached}
 
 
 def theil_sen(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
@@ -91,7 +108,7 @@ def theil_sen(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
 
 
 def trend(t: np.ndarray, x: np.ndarray, t_now: float, limit: float | None = None, *, scale: float, dof: float,
-          episode: bool = False, confidence: float = CONFIDENCE) -> Trend | None:
+          episode: bool = False, confidence: float = CONFIDENCE, shown_alpha: float | None = None) -> Trend | None:
     """The trend and forecast of one PIGE (module docstring).
 
     Parameters
@@ -100,6 +117,9 @@ def trend(t: np.ndarray, x: np.ndarray, t_now: float, limit: float | None = None
         Times [h] and values of the window's check-ups, the new one last.
     scale, dof : float
         Run-to-run standard deviation and its degrees of freedom.
+    shown_alpha : float, optional
+        The two-sided level at which the drift must be shown to be forecast (module docstring); default: the
+        rate's interval excludes zero.
 
     Returns
     -------
@@ -115,8 +135,10 @@ def trend(t: np.ndarray, x: np.ndarray, t_now: float, limit: float | None = None
     s_tt = float(((t - t_bar) ** 2).sum())
     q = t_quantile(max(dof, 1.0), 0.5 + confidence / 2.0)
     se = scale / math.sqrt(s_tt)
-    out = Trend(b, b - q * se, b + q * se, se, a + b * t_now, int(t.size), confidence, episode, limit)
-    if limit is None or b == 0:
+    out = Trend(b, b - q * se, b + q * se, se, a + b * t_now, int(t.size), confidence, episode, limit, now=t_now)
+    out.shown = (out.significant if shown_alpha is None else
+                 abs(b) > t_quantile(max(dof, 1.0), 1.0 - shown_alpha / 2.0) * se)
+    if limit is None or b == 0 or not out.shown:
         return out
     sign = 1.0 if b > 0 else -1.0
     y_bar = sign * (a + b * t_bar)  # the drift taken upwards

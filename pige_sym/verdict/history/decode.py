@@ -15,7 +15,8 @@ plain columns.  A row is decoded (:func:`decode_run`) only when it is what
 - from schema version 2 (check-ups): ``kind`` is ``full`` or ``checkup``; ``chart_json`` (what later check-ups
   read) null or an object of exactly the items :meth:`~pige_sym.verdict.checkup.routine.CheckupResult.chart`
   writes, each of its type (names to booleans, to finite numbers); ``setup_json`` and ``checkup_json`` null or an
-  object.  A row of a version-1 file has none of these columns: a full calibration with no stored set-up.
+  object.  A row of a version-1 file has none of these columns: a full calibration with no stored set-up;
+- from schema version 3: ``after_correction`` 0 or 1 (a row of an older file: 0).
 
 Anything else raises :class:`~pige_sym.errors.SchemaRefusal` naming the column; the caller turns it into a
 one-line refusal naming the database, the run and how to recover
@@ -257,9 +258,12 @@ def _decode(get: Mapping[str, Any], light: bool, numbers: tuple[np.ndarray, np.n
         cov, checkup = np.diag(std**2), chart
     else:
         setup, checkup = _object(get, "setup_json"), _object(get, "checkup_json")
+    corrected = get.get("after_correction", 0)
+    if type(corrected) is not int or corrected not in (0, 1):
+        raise SchemaRefusal("after_correction", f"expected 0 or 1, got {_kind(corrected)}")
     return RunRecord(int(get["id"]), get["machine_id"], get["file_name"], get["file_sha256"], get["measured_at"],
                      get["time_source"], get["added_at"], get["machine_code"], get["method"], params, units, values,
-                     std, cov, dof, rms_um, effects, get["verdict"], check, kind, setup, checkup)
+                     std, cov, dof, rms_um, effects, get["verdict"], check, kind, setup, checkup, bool(corrected))
 
 
 def check_estimate(parameters: list[str], units: Mapping[str, str], values: Any, std: Any) -> None:

@@ -29,7 +29,7 @@ from typing import Any, Protocol
 from pige_sym.errors import HistoryError, InputError, SchemaRefusal
 
 #: The schema version this code writes: the last migration's (:mod:`~pige_sym.verdict.history.migrations`).
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 _RUNS_V1 = ("id", "machine_id", "file_sha256", "file_name", "measured_at", "time_source", "added_at", "machine_code",
             "method", "parameters", "units", "values_json", "std_json", "covariance_json", "dof", "rms_um",
@@ -44,6 +44,9 @@ COLUMNS: dict[int, dict[str, tuple[str, ...]]] = {
     2: {"schema_version": ("version", "description", "applied_at"),
         "machines": ("machine_id", "machine_code", "created_at"),
         "runs": (*_RUNS_V1, "kind", "setup_json", "checkup_json", "chart_json")},
+    3: {"schema_version": ("version", "description", "applied_at"),
+        "machines": ("machine_id", "machine_code", "created_at"),
+        "runs": (*_RUNS_V1, "kind", "setup_json", "checkup_json", "chart_json", "after_correction")},
 }
 
 

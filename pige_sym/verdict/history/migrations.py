@@ -67,9 +67,15 @@ def _v2(conn: sa.Connection) -> None:
         conn.execute(sa.text(ddl))
 
 
+def _v3(conn: sa.Connection) -> None:
+    """A run measured after a correction was entered (``--corrected``): it starts a segment of the check-ups' chart."""
+    conn.execute(sa.text("ALTER TABLE runs ADD COLUMN after_correction INTEGER DEFAULT 0 NOT NULL"))
+
+
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "machines and runs (estimate with full covariance, effects, verdict)", _v1),
     Migration(2, "check-ups: runs.kind (full or checkup), runs.setup_json, runs.checkup_json, runs.chart_json", _v2),
+    Migration(3, "runs.after_correction: measured after a correction was entered (--corrected)", _v3),
 )
 
 

@@ -71,6 +71,8 @@ class RunRecord:
         None for a set of files and for runs stored before schema version 2.
     checkup : dict or None
         What a check-up found (:mod:`pige_sym.verdict.checkup`).
+    after_correction : bool
+        Measured after a correction was entered (``--corrected``; False for runs stored before schema version 3).
     """
 
     id: int
@@ -95,6 +97,7 @@ class RunRecord:
     kind: str = "full"
     setup: dict[str, Any] | None = None
     checkup: dict[str, Any] | None = None
+    after_correction: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         from pige_sym.files import json_ready
@@ -108,6 +111,7 @@ class RunRecord:
             "covariance": {"parameters": self.parameters, "matrix": self.covariance}, "dof": self.dof,
             "rms_um": self.rms_um, "effects": [f.get("effect") for f in self.effects], "verdict": self.verdict,
             "check": self.check, "kind": self.kind, "setup": self.setup, "checkup": self.checkup,
+            "after_correction": self.after_correction,
         })
 
 
@@ -166,4 +170,15 @@ def checkup_values(path: Path, machine_id: str, code: str, measured: tuple[str, 
         "dof": int(fit.dof), "rms_um": float(fit.rms_um) if math.isfinite(fit.rms_um) else None,
         "effects_json": "[]", "verdict": verdict, "check_json": None, "kind": "checkup",
         "setup_json": dumps(setup), "checkup_json": dumps(checkup), "chart_json": dumps(chart),
+        "after_correction": int(bool(chart.get("after_correction"))),
     }
+
+
+def fleet_of(records: list[RunRecord], machine_code: str, machine_id: str) -> list[list[RunRecord]]:
+    """Per other machine of structure ``machine_code`` its runs in measurement order, by machine id (a check-up's
+    fleet, :mod:`pige_sym.verdict.checkup.scatter`)."""
+    by: dict[str, list[RunRecord]] = {}
+    for r in records:
+        if r.machine_code == machine_code and r.machine_id != machine_id:
+            by.setdefault(r.machine_id, []).append(r)
+    return [sorted(v, key=lambda r: (r.measured_at, r.id)) for _, v in sorted(by.items())]

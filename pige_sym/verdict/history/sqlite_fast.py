@@ -31,7 +31,7 @@ from urllib.parse import quote
 from pige_sym.errors import InputError, SchemaRefusal
 from pige_sym.verdict.history.decode import check_new_run, decode_run, not_stored
 from pige_sym.verdict.history.integrity import SCHEMA_VERSION, Checked, check_database, damaged
-from pige_sym.verdict.history.records import RunRecord, checkup_values, file_sha256, normalise_url
+from pige_sym.verdict.history.records import RunRecord, checkup_values, file_sha256, fleet_of, normalise_url
 
 __all__ = ["SCHEMA_VERSION", "SqliteHistory", "open_history"]
 
@@ -92,6 +92,10 @@ class SqliteHistory:
         if not light or not runs:
             return _engine(self.path).list_runs(machine_id, light=light)  # its refusal names the known machines
         return runs
+
+    def fleet(self, machine_code: str, machine_id: str) -> list[list[RunRecord]]:
+        """The runs of every other machine of the structure ``machine_code`` (each in measurement order, light)."""
+        return fleet_of(self.checked.records, machine_code, machine_id)
 
     def existing(self, path: Path) -> None:
         """Refuse a file already in the history (a run is added once)."""

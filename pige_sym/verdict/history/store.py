@@ -97,13 +97,16 @@ def _existing(conn: sa.Connection, sha: str) -> Any:
 
 def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], machine_id: str, *,
             method: str = "diagnosis", tolerances: str | os.PathLike[str] | None = None, rule: str = "guard",
-            k: float = 2.0, date: str | None = None) -> RunRecord:
+            k: float = 2.0, date: str | None = None, corrected: bool = False) -> RunRecord:
     """Identify/diagnose a measurement file (or a set of files of one machine) and store the run.
 
     A set (several files, or a ``pige-ballbar 1`` file) is stored as one run of method ``joint``
     (``joint-diagnosis`` with ``method="diagnosis"``): the joint PIGE estimate, each file's findings,
     the file names joined by ``; ``, the SHA-256 of the sorted files' SHA-256s (the same set is added
     once, in any order) and the latest of the files' times.
+
+    ``corrected``: the run was measured after a correction was entered (it starts a segment of the check-ups'
+    chart, :mod:`pige_sym.verdict.checkup`).
 
     Raises
     ------
@@ -149,6 +152,7 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.
         "verdict": None if chk is None else chk.verdict, "check_json": None if chk is None else dumps(chk.to_dict()),
         "kind": "full", "setup_json": dumps(setup_of(m.items[0]).to_dict())
         if len(m.items) == 1 and isinstance(m.items[0], Measurement) else None,
+        "after_correction": int(corrected),
     }
     _check_new(values, p)
     for attempt in range(3):
@@ -290,6 +294,12 @@ class EngineHistory:
 
     def list_runs(self, machine_id: str, *, light: bool = False) -> list[RunRecord]:
         return list_runs(self.engine, machine_id, light=light)
+
+    def fleet(self, machine_code: str, machine_id: str) -> list[list[RunRecord]]:
+        """The runs of every other machine of the structure ``machine_code`` (each in measurement order, light)."""
+        from pige_sym.verdict.history.records import fleet_of
+
+        return fleet_of(all_runs(self.engine, light=True), machine_code, machine_id)
 
     def existing(self, path: Path) -> None:
         existing_run(self.engine, path)

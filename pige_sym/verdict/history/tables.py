@@ -9,7 +9,9 @@ of ``pige check`` when tolerances were given (of a check-up: ``ok``, ``drifted``
 measured with (:mod:`~pige_sym.measurements.run_setup`: instrument, sphere or ball, pivots, sense, tool, the
 probing program's controller state), null for runs stored before schema version 2; ``checkup_json``: what a
 check-up found (control limits, trend, verdict, the changes to enter); ``chart_json``: the few items of it later
-check-ups read (signature, flags, correction, tolerance), small so that a long history reads fast.
+check-ups read (signature, flags, correction, tolerance), small so that a long history reads fast;
+``after_correction``: 1 when the run was measured after a correction was entered (``--corrected``: it starts a
+segment of the check-ups' chart), else 0.
 ``schema_version``: applied migrations.
 Times are ISO 8601 UTC text so that SQLite and PostgreSQL store them alike.
 """
@@ -59,4 +61,5 @@ runs = sa.Table(
     sa.Column("setup_json", sa.Text, nullable=True),
     sa.Column("checkup_json", sa.Text, nullable=True),
     sa.Column("chart_json", sa.Text, nullable=True),
+    sa.Column("after_correction", sa.Integer, nullable=False, server_default="0"),
 )

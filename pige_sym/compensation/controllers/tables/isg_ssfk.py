@@ -38,12 +38,13 @@ whose positions wrap stays inside).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from pige_sym.compensation.controllers.entry_checks import ChangeLimits, check_entries, check_integer
-from pige_sym.compensation.controllers.tables.positioning import PositioningMap, positioning_maps
+from pige_sym.compensation.controllers.tables.positioning import PositioningMap, entered_map_values, positioning_maps
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
 
@@ -164,3 +165,28 @@ def render_lines(params: CompensationParameters, unit_deg: float | None, limits:
                 f"{unit_deg:g} deg, {unit_deg * math.pi / 180 * 1e6:.3g} urad; outside the table the end values hold)",
                 *body]
     return out
+
+
+def entered_values(params: CompensationParameters, unit_deg: float | None, limits: Any = None) -> dict[str, float]:
+    """What the printed lists enter (:func:`~.positioning.entered_map_values`): every positioning map as its table's
+    integers times the unit, per direction; nothing without ``unit_deg`` (no list is written)."""
+    if unit_deg is None or not (math.isfinite(unit_deg) and unit_deg > 0):
+        return {}
+    out: dict[str, float] = {}
+    for pm in positioning_maps(params).values():
+        out |= entered_map_values(params, pm, _printed(pm, unit_deg, limits))
+    return out
+
+
+def _printed(pm: PositioningMap, unit_deg: float, limits: Any = None) -> Callable[[np.ndarray, int], np.ndarray]:
+    """The list's value [deg] at commanded angles for a commanded direction (pos for +1 and 0, neg for −1)."""
+    positions, pos, neg = ssfk_table(pm, unit_deg, limits)
+
+    def printed(theta_cmd_deg: np.ndarray, direction_cmd: int) -> np.ndarray:
+        at = np.round(np.asarray(theta_cmd_deg, dtype=float) / unit_deg).astype(np.int64)
+        idx = np.searchsorted(positions, at)
+        if (idx >= positions.size).any() or (positions[np.minimum(idx, positions.size - 1)] != at).any():
+            raise AssertionError(f"{pm.axis}: a grid angle is not a node of its kw.ssfk list")  # pragma: no cover
+        return np.asarray((neg if direction_cmd < 0 else pos)[idx] * unit_deg, dtype=float)
+
+    return printed

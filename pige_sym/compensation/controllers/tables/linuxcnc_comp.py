@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.compensation.controllers.entry_checks import check_entries
-from pige_sym.compensation.controllers.tables.positioning import PositioningMap, positioning_maps
+from pige_sym.compensation.controllers.tables.positioning import PositioningMap, entered_map_values, positioning_maps
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
 from pige_sym.kernels import load_kernels
@@ -167,4 +167,23 @@ def render_lines(params: CompensationParameters, limits: Any = None) -> list[str
     for t in tables:
         out += [f"#   {n}" for n in t.notes]
         out += [f"[JOINT_{t.joint}]", f"COMP_FILE = {t.file_name}", "COMP_FILE_TYPE = 1"]
+    return out
+
+
+def entered_values(params: CompensationParameters, limits: Any = None) -> dict[str, float]:
+    """What the compensation files enter (:func:`~.positioning.entered_map_values`): each joint's trims as printed,
+    forward and reverse (a trim is −e, module docstring)."""
+    out: dict[str, float] = {}
+    for pm in positioning_maps(params).values():
+        table = comp_table(params.machine, pm, limits=limits)
+        forward = np.round(table.forward_deg, TRIM_DECIMALS)
+        reverse = np.round(table.reverse_deg, TRIM_DECIMALS)
+
+        def printed(theta_cmd_deg: np.ndarray, direction_cmd: int, nominal: np.ndarray = table.nominal_deg,
+                    fwd: np.ndarray = forward, rev: np.ndarray = reverse) -> np.ndarray:
+            at = np.asarray(theta_cmd_deg, dtype=float)
+            idx = np.argmin(np.abs(nominal[None, :] - at[:, None]), axis=1)
+            return np.asarray(-(rev if direction_cmd < 0 else fwd)[idx], dtype=float)
+
+        out |= entered_map_values(params, pm, printed)
     return out

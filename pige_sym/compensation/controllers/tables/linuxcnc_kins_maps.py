@@ -117,15 +117,29 @@ def map_setp_lines(params: CompensationParameters, name: str, limits: Any = None
             out += [f"setp {pins.map_pin(name, stem, k)} {x + 0.0:.{VALUE_DECIMALS}f}"
                     for k, x in enumerate(np.nan_to_num(v))]
         out += after
-    for i, a in enumerate(_axes(params)):
-        if a in maps.axes and any(n.endswith(("+", "-", ":reversal")) for n in maps.axes[a].values):
-            out += [f"# {a}'s map is per direction: the component takes the direction of approach from joint {3 + i}'s "
-                    f"velocity command (if joint.{3 + i}.vel-cmd already drives a signal, link the pin to it instead)",
-                    f"net pige-vel-{a.lower()} joint.{3 + i}.vel-cmd => {name}.vel-{a.lower()}"]
     return out
 
 
-def _axes(params: CompensationParameters) -> tuple[str, ...]:
-    from pige_sym.kernels import load_kernels
-
-    return tuple(load_kernels(params.machine).ROTARY_AXES)
+def entered_map_values(params: CompensationParameters) -> dict[str, float]:
+    """What the ``setp`` lines of the maps enter, as printed (:data:`VALUE_DECIMALS`), in the weighing's names: a
+    map per direction as its printed mean ± half its printed reversal."""
+    maps = params.error_maps
+    if maps is None:
+        return {}
+    out: dict[str, float] = {}
+    for axis, axis_maps in maps.axes.items():
+        values, _ = slot_values(axis_maps)
+        printed = {m.name: np.round(np.nan_to_num(v), VALUE_DECIMALS)
+                   for m, v in zip(axis_motions(axis, per_direction=True), values, strict=True)}
+        angles = axis_maps.grid.angles_deg
+        for name in axis_maps.values:
+            phi = name[:-1]
+            if name.endswith(("+", "-")) and phi in printed:
+                sign = 0.5 if name.endswith("+") else -0.5
+                vals = printed[phi] + sign * printed[phi + ":reversal"]
+            elif name in printed:
+                vals = printed[name]
+            else:
+                continue
+            out |= {f"{axis}:{name}@{g:g}": float(v) for g, v in zip(angles, vals, strict=True)}
+    return out

@@ -23,6 +23,7 @@ Nodes: the map's grid angles in the commanded angle, over the travel of a full-t
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -163,4 +164,43 @@ def positioning_names(params: CompensationParameters) -> list[str]:
     for axis, axis_maps in maps.axes.items():
         phi = next(m.name for m in axis_motions(axis) if m.kind == "positioning")
         out += [f"{axis}:{n}" for n in axis_maps.values if n in (phi, phi + "+", phi + "-", phi + ":reversal")]
+    return out
+
+
+def entered_map_values(params: CompensationParameters, pm: PositioningMap,
+                       printed: Callable[[np.ndarray, int], np.ndarray], zero_elsewhere: bool = False,
+                       ) -> dict[str, float]:
+    """The map values a positioning table enters, as printed, in the weighing's names (``C:ECC+@30``) [µrad].
+
+    ``printed(theta_cmd_deg, direction_cmd)`` gives the table's value e [deg] at commanded angles for a commanded
+    direction of motion (+1, −1; 0 for a table that holds one value for both), as the table prints it (rounded to
+    its unit).  From ``e = σ·(E + φ^{σd}(σ·θ_cmd))`` (module docstring) the entered ``φ^d(θ) = σ·e − E``, E the
+    zero-position error the table carries with the map (0 when the file has none).  A map per direction in a table
+    that holds one value for both directions enters that value as φ⁺ and φ⁻ alike (their mean).  With
+    ``zero_elsewhere`` the controller's other entries enter E too (SINUMERIK's offset angle): the table's whole value
+    is counted as φ then (``φ = σ·e``), so that the two entries together count what they enter, E twice.
+    """
+    maps = params.error_maps
+    if maps is None or pm.axis not in maps.axes:
+        return {}
+    axis = pm.axis
+    s = pm.sense
+    phi = next(m.name for m in axis_motions(axis) if m.kind == "positioning")
+    theta = np.asarray(pm.grid.angles_deg, dtype=float)
+    zero = 0.0 if zero_elsewhere else (pm.zero_urad or 0.0)
+
+    def entered(direction_theta: int) -> np.ndarray:
+        e = printed(s * theta, s * direction_theta)
+        return np.asarray(s * np.asarray(e, dtype=float) / URAD_TO_DEG - zero)
+
+    names = maps.axes[axis].values
+    out: dict[str, float] = {}
+    if phi + "+" in names and phi + "-" in names:
+        plus, minus = entered(+1), entered(-1)
+        for name, vals in ((phi + "+", plus), (phi + "-", minus)):
+            out |= {f"{axis}:{name}@{g:g}": float(v) for g, v in zip(theta, vals, strict=True)}
+    elif phi in names:
+        out |= {f"{axis}:{phi}@{g:g}": float(v) for g, v in zip(theta, entered(0), strict=True)}
+    if pm.zero_urad is not None and not zero_elsewhere:
+        out[f"E{axis[0]}0{axis}"] = float(pm.zero_urad)
     return out

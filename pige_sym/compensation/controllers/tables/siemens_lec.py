@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from pige_sym.compensation.controllers.entry_checks import check_entries
-from pige_sym.compensation.controllers.tables.positioning import PositioningMap, positioning_maps
+from pige_sym.compensation.controllers.tables.positioning import PositioningMap, entered_map_values, positioning_maps
 from pige_sym.compensation.parameters import CompensationParameters
 from pige_sym.errors import InputError
 
@@ -137,3 +137,27 @@ def map_motions(params: CompensationParameters) -> list[str]:
         return []
     return [f"{ax}:{phi}" for ax, pm in positioning_maps(params).items() if not pm.per_direction
             for phi in maps.axes[ax].values if phi[1] == phi[2]]
+
+
+def entered_values(params: CompensationParameters, machine_axes: dict[str, str] | None) -> dict[str, float]:
+    """What the printed tables enter (:func:`~.positioning.entered_map_values`): each axis' one table for both
+    directions (a map per direction enters its mean as φ⁺ and φ⁻), as printed; nothing when an axis name is not
+    known (no table is printed)."""
+    maps = positioning_maps(params)
+    if not maps or any(not (machine_axes or {}).get(a) for a in maps):
+        return {}
+    out: dict[str, float] = {}
+    for pm in maps.values():
+        positions, values, modulo = lec_table(pm)
+        printed_values = np.round(values, VALUE_DECIMALS)
+
+        def printed(theta_cmd_deg: np.ndarray, _direction: int, positions: np.ndarray = positions,
+                    vals: np.ndarray = printed_values, modulo: bool = modulo) -> np.ndarray:
+            at = np.asarray(theta_cmd_deg, dtype=float)
+            if modulo:
+                at = np.mod(at - positions[0], 360.0) + positions[0]
+            idx = np.argmin(np.abs(positions[None, :] - at[:, None]), axis=1)
+            return np.asarray(vals[idx], dtype=float)
+
+        out |= entered_map_values(params, pm, printed, zero_elsewhere=True)  # the offset angle enters E too
+    return out

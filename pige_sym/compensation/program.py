@@ -25,6 +25,7 @@
 from __future__ import annotations
 
 import gc
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -112,10 +113,11 @@ class CompensationReport:
 
 @dataclass
 class CompensationResult:
-    """The compensated text and its report."""
+    """The compensated text, its report and the compensated poses of the chosen blocks (None: nothing chosen)."""
 
     text: str
     report: CompensationReport
+    poses: Any = None
 
 
 def with_rtcp_codes(dialect: Dialect, on: tuple[str, ...] = (), off: tuple[str, ...] = ()) -> Dialect:
@@ -153,7 +155,8 @@ def plan(program: Program) -> tuple[list[Block], list[dict[str, Any]]]:
 def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: str | None = None,
                   pass_through: bool = False, max_change_mm: float = DEFAULT_MAX_CHANGE_MM,
                   max_change_deg: float = DEFAULT_MAX_CHANGE_DEG, rtcp_on: tuple[str, ...] = (),
-                  rtcp_off: tuple[str, ...] = (), header: bool = True, enter: str = "weighed") -> CompensationResult:
+                  rtcp_off: tuple[str, ...] = (), header: bool = True, enter: str = "weighed",
+                  decide: Callable[[Weighing], Weighing] | None = None) -> CompensationResult:
     """Compensate a program with identified parameters (module docstring).
 
     Parameters
@@ -166,6 +169,9 @@ def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: s
     enter : {"weighed", "all"}
         Enter the values weighed by their uncertainty (:mod:`~pige_sym.compensation.weighing`), or every
         estimate as it is.
+    decide : callable, optional
+        Turns the weighing into the values to enter (the compensation stage's decision, e.g. a check-up's);
+        replaces ``enter``.
 
     Raises
     ------
@@ -180,7 +186,7 @@ def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: s
     gc.disable()  # ~10^6 short-lived objects, no cycles: the collector would only rescan them (~20 %)
     try:
         return _compensate_nc(text, params, path, dialect, pass_through, max_change_mm, max_change_deg, rtcp_on,
-                              rtcp_off, header, enter)
+                              rtcp_off, header, enter, decide)
     finally:
         if was_enabled:
             gc.enable()
@@ -188,7 +194,8 @@ def compensate_nc(text: str, params: Any, *, path: str = "<program>", dialect: s
 
 def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_through: bool,
                    max_change_mm: float, max_change_deg: float, rtcp_on: tuple[str, ...], rtcp_off: tuple[str, ...],
-                   header: bool, enter: str) -> CompensationResult:
+                   header: bool, enter: str, decide: Callable[[Weighing], Weighing] | None = None,
+                   ) -> CompensationResult:
     from pige_sym.errors import CompensationError
     from pige_sym.kernels import load_kernels
 
@@ -206,7 +213,7 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
     d = with_rtcp_codes(get_dialect(dialect or detect_dialect(text, path)), rtcp_on, rtcp_off)
     program = interpret(text, d, axes, path=path, pass_through=pass_through)
     chosen, passed = plan(program)
-    weighing, entered = _weighed(params, chosen, enter)
+    weighing, entered = _weighed(params, chosen, enter, decide)
     poses = _compensated_poses(entered, chosen, max_change_deg)
     _guard(chosen, poses, max_change_mm, max_change_deg, path, CompensationError)
     new_commanded = to_commanded(poses.new_angles_deg, params.axis_sense, axes)
@@ -229,11 +236,11 @@ def _compensate_nc(text: str, params: Any, path: str, dialect: str | None, pass_
         program.notes + _rtcp_note(program, chosen) + _arc_start_notes(program, check.read_back, rw.header_lines),
         check.max_change_mm, check.max_change_deg, {"mm": max_change_mm, "deg": max_change_deg}, True,
         list(params.ignored), weighing)
-    return CompensationResult(rw.text, report)
+    return CompensationResult(rw.text, report, poses if chosen else None)
 
 
-def _weighed(params: CompensationParameters, chosen: list[Block],
-             enter: str) -> tuple[Weighing | None, CompensationParameters]:
+def _weighed(params: CompensationParameters, chosen: list[Block], enter: str,
+             decide: Callable[[Weighing], Weighing] | None = None) -> tuple[Weighing | None, CompensationParameters]:
     """The weighing judged on the planned poses, and the parameters to compensate with (module docstring)."""
     from pige_sym.compensation.kinematics import workpiece_points
     from pige_sym.compensation.weighing import every_estimate, program_poses, weigh, with_entered
@@ -252,7 +259,9 @@ def _weighed(params: CompensationParameters, chosen: list[Block],
         pivots = {a: np.asarray(v, dtype=float) for a, v in params.pivots_mm.items()} or None
         points[~rtcp] = workpiece_points(kern, angles[~rtcp], points[~rtcp], pivots, params.tool_mm)
     weighing = weigh(params, program_poses(angles, points))
-    if enter == "all":
+    if decide is not None:
+        weighing = decide(weighing)
+    elif enter == "all":
         weighing = every_estimate(weighing)
     return weighing, with_entered(params, weighing)
 
@@ -362,7 +371,7 @@ def _changes(params: Any, chosen: list[Block], poses: Any, rw: Rewrite, out_prog
 
 def compensate_program(program_text: str, params: CompensationParameters, *, path: str = "<program>",
                        dialect: str | None = None, pass_through: bool = False, **guards: Any) -> str:
-    """Compensated program text, in the program's own dialect (:mod:`pige_sym.nc.compensate`).
+    """Compensated program text, in the program's own dialect (:mod:`pige_sym.compensation.program`).
 
     ``guards``: ``max_change_mm``, ``max_change_deg``, ``rtcp_on``, ``rtcp_off``, ``header``.
     """

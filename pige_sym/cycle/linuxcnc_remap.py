@@ -1,0 +1,260 @@
+"""The cycle's remap code: runs inside LinuxCNC's task (its embedded Python), installed as
+``pige_cycle/python/pige_cycle_remap.py`` by ``pige cycle install``.
+
+It uses the standard library and LinuxCNC's ``interpreter`` and ``emccanon`` modules only, never pige: pige runs in
+a separate process, so that its crash, hang or kill cannot take LinuxCNC down.  Each code is remapped as::
+
+    REMAP = M451 modalgroup=10 argspec=p prolog=pige_m451_prolog ngc=pige_m451 epilog=pige_m451_epilog
+    REMAP = M452 modalgroup=10 argspec=p prolog=pige_m452_prolog ngc=pige_m452 epilog=pige_m452_epilog
+
+and its NGC procedure (``pige_cycle/ngc/pige_m451.ngc``) saves the modal state (``M73``: coordinate system,
+tool length compensation, units, feed, ...) and runs four steps, the first and third as the same code called again
+with an internal ``P`` (only from inside the cycle: a call at the top level is refused)::
+
+    M451 P[100 + mode]          prepare: pige cycle step prepare (writes the run's probing procedure)
+    o<pige_cycle_probe> call    the probing program pige wrote for the configuration (P2: the switch to identity)
+    M451 P[200 + mode]          analyse (P0, P1, M452) or enter (P2): pige cycle step analyse|enter
+    o<pige_restore> call        the kinematics mode as it was found (``#<_pige_kins_before>``)
+
+``pige_on_abort.ngc`` (``[RS274NGC]ON_ABORT_COMMAND``) calls ``o<pige_restore>`` too, so that Esc or an E-stop
+in the middle of the cycle leaves the kinematics mode as it was found once the machine is on again.
+
+The prepare and analyse steps run in the *epilog* of the inner call, as a generator that yields
+``INTERP_EXECUTE_FINISH`` while pige's process runs: the interpreter stays responsive (Esc, E-stop, the GUI's
+status) and no line after it is read before pige is done (LinuxCNC's restartable Python handlers).  Each step has a
+timeout (``settings.json`` ``timeouts_s``): a process that runs longer is killed, and so is one still running when
+LinuxCNC drops the cycle (Esc, E-stop: the generator is closed, and ``pige_on_abort`` calls ``o<pige_cycle_abort>``).
+A step that fails (a refusal, a crash, a kill, a timeout) ends the cycle with an operator error naming the run's log;
+the outer epilog shows the last step's messages (``analyse.messages.json``, ``enter.messages.json``) as operator
+messages, or its error.
+
+In the AXIS preview (``self.task`` 0) every handler returns at once and the NGC procedure skips its body.
+"""
+
+import json
+import os
+import subprocess
+import time
+
+try:  # inside LinuxCNC
+    import emccanon
+    from interpreter import INTERP_ERROR, INTERP_EXECUTE_FINISH, INTERP_OK
+except ImportError:  # imported by pige's own tests: the values of src/emc/rs274ngc/interp_return.hh
+    emccanon = None
+    INTERP_OK, INTERP_EXECUTE_FINISH, INTERP_ERROR = 0, 2, 5
+
+CONFIG = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROOT = os.path.join(CONFIG, "pige_cycle")
+MODES = {"M451": {0: "check", 1: "optimise", 2: "enter"}, "M452": {0: "checkup"}}
+#: LinuxCNC's operator messages hold at most LINELEN (255) bytes with the terminating NUL
+MAX_MESSAGE = 254
+#: the interpreter parameters the request records (src/emc/rs274ngc: tool, coordinate system, G92, positions)
+PARAMETERS = {"tool": 5400, "tool_length": 5403, "system": 5220, "g92_on": 5210}
+
+
+def _settings():
+    with open(os.path.join(ROOT, "settings.json"), encoding="utf-8") as f:
+        return json.load(f)
+
+
+def _message(text):
+    """One operator message (display), cut to what LinuxCNC carries."""
+    if emccanon is not None:
+        emccanon.MESSAGE(text.encode("utf-8")[:MAX_MESSAGE].decode("utf-8", "ignore"))
+
+
+def _fail(self, text):
+    """End the cycle with an operator error (the generator's next yield)."""
+    self.set_errormsg(text.encode("utf-8")[:MAX_MESSAGE].decode("utf-8", "ignore"))
+    return INTERP_ERROR
+
+
+def _mode(code, words):
+    p = words.get("p")
+    step = int(round(p)) if p is not None else 0
+    if p is not None and (abs(p - step) > 1e-9 or step < 0):
+        return 0, None
+    return step // 100, MODES[code].get(step % 100)
+
+
+def _prolog(self, code, words):
+    if not self.task:
+        return INTERP_OK
+    phase, mode = _mode(code, words)
+    if mode is None or phase > 2:
+        valid = ", ".join(f"P{k}" for k in MODES[code])
+        return f"PIGE {code}: P{words.get('p', 0):g} is not a mode of the cycle ({valid})"
+    if phase and self.remap_level < 2:
+        return f"PIGE {code} P{words.get('p', 0):g} is a step of the cycle itself: call {code} with " + \
+            ", ".join(f"P{k}" for k in MODES[code])
+    if phase == 0:
+        self.params["_pige_phase"] = 0
+        kins = _switchkins(self)
+        self.params["_pige_kins_before"] = -1 if kins is None else kins
+        self.pige_run = None
+    else:
+        self.params["_pige_phase"] = phase
+    return INTERP_OK
+
+
+def _epilog(self, code, words):
+    if not self.task:
+        return INTERP_OK
+    phase, mode = _mode(code, words)
+    if phase == 1:
+        return _step(self, code, mode, "prepare")
+    if phase == 2:
+        return _step(self, code, mode, "enter" if mode == "enter" else "analyse")
+    return _finish(self, code, mode)
+
+
+def _request(self, code, mode):
+    """The run folder, with LinuxCNC's state at the start of the cycle (request.json) for pige to check."""
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    run = os.path.join(ROOT, "runs", f"{stamp}-{code}-{mode}")
+    n = 1
+    while os.path.exists(run):
+        n += 1
+        run = os.path.join(ROOT, "runs", f"{stamp}-{code}-{mode}-{n}")
+    os.makedirs(run)
+    system = int(round(self.params[PARAMETERS["system"]]))
+    base = 5201 + 20 * (system - 1)
+    request = {"format": "pige-cycle-request 1", "code": code, "mode": mode,
+               "started": time.strftime("%Y-%m-%dT%H:%M:%S+00:00", time.gmtime()),
+               "tool": int(round(self.params[PARAMETERS["tool"]])),
+               "system": system, "offset": [float(self.params[base + k]) for k in range(9)],
+               "rotation": float(self.params[base + 9]), "g92_on": float(self.params[PARAMETERS["g92_on"]]) != 0,
+               "position": [float(self.params[5420 + k]) for k in range(6)],
+               "switchkins_type": _switchkins(self)}
+    with open(os.path.join(run, "request.json"), "w", encoding="utf-8") as f:
+        json.dump(request, f, indent=1)
+    return run
+
+
+def _switchkins(self):
+    try:
+        return int(round(self.params["_hal[motion.switchkins-type]"]))
+    except Exception:  # no HAL_PIN_VARS, or no switchable kinematics
+        return None
+
+
+def _step(self, code, mode, step):
+    """A generator: wait for the motion queue, run ``pige cycle step STEP``, wait for it without blocking."""
+    yield INTERP_EXECUTE_FINISH  # the moves before are done: the machine is at rest, the probe log complete
+    try:
+        settings = _settings()
+        if step == "prepare":
+            self.pige_run = _request(self, code, mode)
+        run = self.pige_run
+        timeout = float(settings["timeouts_s"][step])
+        command = list(settings["pige_command"]) + ["cycle", "step", step, "--run", run]
+    except Exception as exc:
+        yield _fail(self, f"PIGE {code}: the cycle cannot start ({exc}); run pige cycle install again")
+        return
+    try:
+        proc = _start(command, run, step)
+    except OSError as exc:
+        yield _fail(self, f"PIGE {code}: cannot start pige ({exc}); run pige cycle install again")
+        return
+    end, timed_out = time.monotonic() + timeout, False
+    try:
+        while proc.poll() is None:
+            if time.monotonic() >= end:
+                timed_out = True
+                break
+            time.sleep(0.02)
+            yield INTERP_EXECUTE_FINISH
+    finally:  # a timeout, or LinuxCNC dropping the cycle (Esc, E-stop: GeneratorExit): the step never outlives it
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        RUNNING.pop("proc", None)
+    if timed_out:
+        yield _fail(self, f"PIGE {code}: pige's {step} step took longer than {timeout:g} s and was stopped, nothing "
+                          f"changed (log {os.path.relpath(run, CONFIG)}/{step}.out)")
+        return
+    result = _read_messages(run, step)
+    if step == "prepare" and result and result.get("error"):  # a refusal before anything moved: pige's own message
+        yield _fail(self, result["error"])
+        return
+    if result is None:  # a crash, a kill: no result written
+        why = f"ended by signal {-proc.returncode}" if proc.returncode < 0 else f"exit status {proc.returncode}"
+        yield _fail(self, f"PIGE {code}: pige's {step} step failed ({why}), nothing changed (log "
+                          f"{os.path.relpath(run, CONFIG)}/{step}.out){_first_line(run, step)}")
+        return
+
+
+#: the step process now running (at most one): pige_cycle_abort stops it after an abort
+RUNNING: dict = {}
+
+
+def _start(command, run, step):
+    """pige's step as a process of its own (its own session: a signal to LinuxCNC does not reach it)."""
+    with open(os.path.join(run, f"{step}.out"), "w") as output:
+        proc = subprocess.Popen(command, cwd=CONFIG, stdout=output, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, start_new_session=True)
+    RUNNING["proc"] = proc
+    with open(os.path.join(run, f"{step}.pid"), "w") as f:
+        f.write(f"{proc.pid}\n")
+    return proc
+
+
+def pige_cycle_abort(self, *args):
+    """O-word procedure ``o<pige_cycle_abort>`` (pige_on_abort.ngc): stop a step still running after an abort."""
+    proc = RUNNING.pop("proc", None)
+    if proc is not None and proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+def _read_messages(run, step):
+    """What a step wrote (``<step>.messages.json``: lines and error), or None."""
+    try:
+        with open(os.path.join(run, f"{step}.messages.json"), encoding="utf-8") as f:
+            out = json.load(f)
+        return out if isinstance(out, dict) and isinstance(out.get("lines"), list) else None
+    except (OSError, ValueError):
+        return None
+
+
+def _first_line(run, step):
+    """The first error line of pige's output, for the message."""
+    try:
+        with open(os.path.join(run, f"{step}.out"), encoding="utf-8", errors="replace") as f:
+            lines = [ln.strip() for ln in f if ln.strip()]
+    except OSError:
+        return ""
+    return (": " + lines[-1][:160]) if lines else ""
+
+
+def _finish(self, code, mode):
+    """The messages of the run's last step (``analyse`` or ``enter``) as operator messages, or its error."""
+    run = getattr(self, "pige_run", None)
+    self.pige_run = None
+    if run is None:
+        return f"PIGE {code}: the cycle did not run (no run folder)"
+    result = _read_messages(run, "enter" if mode == "enter" else "analyse")
+    if result is None:
+        return f"PIGE {code}: the run left no readable result, nothing changed (log {os.path.relpath(run, CONFIG)})"
+    for line in result["lines"]:
+        _message(str(line))
+    error = result.get("error")
+    if error:
+        return str(error).encode("utf-8")[:MAX_MESSAGE].decode("utf-8", "ignore")
+    return INTERP_OK
+
+
+def pige_m451_prolog(self, **words):
+    return _prolog(self, "M451", words)
+
+
+def pige_m451_epilog(self, **words):
+    return _epilog(self, "M451", words)
+
+
+def pige_m452_prolog(self, **words):
+    return _prolog(self, "M452", words)
+
+
+def pige_m452_epilog(self, **words):
+    return _epilog(self, "M452", words)

@@ -1,0 +1,207 @@
+"""The cycle's settings file ``pige_cycle/settings.json`` (format ``pige-cycle-settings 1``).
+
+Written by ``pige cycle install`` from its options, read (and checked) by every step of the cycle; a shop edits it
+to change a limit.  One JSON object::
+
+    {"format": "pige-cycle-settings 1",
+     "ini": "xyzac-trt.ini",               the INI of the configuration (in the same folder)
+     "machine": "wC'A'bXYZ(C1)t",          ISO 10791 code of the machine
+     "machine_id": "DMU50-2",              the machine's name in the history
+     "kinematics": "stock",                stock (xyzac-trt-kins / xyzbc-trt-kins) or pige (pige gen --target linuxcnc)
+     "module": "xyzac-trt-kins",           the kinematics module [KINS]KINEMATICS loads
+     "axis_sense": {"A": -1, "C": -1},     commanded sense of each rotary axis (CONVENTIONS §9)
+     "kinematics_switch": {"identity_code": "M429", "identity_type": 0, "tcp_code": "M428", "tcp_type": 1},
+                                           the codes that switch the kinematics (motion.switchkins-type values);
+                                           null: no switch, the kinematics always TCP
+     "sphere_mm": [20, 10, 15],            sphere centre, machine coordinates, every rotary axis at 0 [mm]
+     "sphere_radius_mm": 6.35, "stylus_radius_mm": 1.5, "stylus_tool": 9, "stylus_length_mm": 30,
+     "probing": {"poses": 12, "contacts": 5, "probe_feed_mm_min": 50, "clearance_mm": 1, "overtravel_mm": 1,
+                 "window_mm": 0.3},
+     "limits": {"max_change_mm": 0.2, "max_change_deg": 0.1, "sphere_radius_mm": 0.02, "proposal_hours": 8},
+     "tolerances": {"format": "pige-tolerances 1", "defaults": {"um": 10, "urad": 30}},
+     "timeouts_s": {"prepare": 180, "analyse": 600, "enter": 120},
+     "db": "pige_cycle/history.db",        the history: a path relative to the configuration folder, or a URL
+     "pige_command": ["/usr/bin/python3", "-m", "pige_sym"]}
+
+Limits (docs/linuxcnc-cycle.md): ``max_change_mm``/``max_change_deg`` the largest change ``M451 P2`` enters per
+value (position errors in mm, orientation errors in degrees: HEIDENHAIN's MP6600), ``sphere_radius_mm`` how far the
+radius the probe finds (R + r − pre-travel) may lie from the stated ``sphere_radius_mm + stylus_radius_mm``
+(MP6601: dirt on the sphere, a wrong stylus), ``proposal_hours`` how old a proposal ``M451 P2`` still enters.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from pige_sym.errors import FileFormatError, InputError
+from pige_sym.files import PathLike
+
+FORMAT = "pige-cycle-settings 1"
+KINEMATICS = ("stock", "pige")
+
+
+@dataclass(frozen=True)
+class Switch:
+    """The configuration's switchable kinematics: the code that selects identity kinematics and the TCP ones, and
+    the ``motion.switchkins-type`` each selects (``sparm=identityfirst``: identity 0, TCP 1)."""
+
+    identity_code: str
+    identity_type: int
+    tcp_code: str
+    tcp_type: int
+
+
+@dataclass(frozen=True)
+class Probing:
+    """How the sphere is probed (``pige program --instrument sphere-probe``'s options of the same names)."""
+
+    poses: int = 12
+    contacts: int = 5
+    probe_feed_mm_min: float = 50.0
+    clearance_mm: float = 1.0
+    overtravel_mm: float = 1.0
+    window_mm: float = 0.3
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What the cycle refuses (module docstring)."""
+
+    max_change_mm: float = 0.2
+    max_change_deg: float = 0.1
+    sphere_radius_mm: float = 0.02
+    proposal_hours: float = 8.0
+
+
+@dataclass(frozen=True)
+class Timeouts:
+    """How long LinuxCNC waits for pige's process in each step [s] before it ends the cycle with an error."""
+
+    prepare: float = 180.0
+    analyse: float = 600.0
+    enter: float = 120.0
+
+
+def default_tolerances() -> dict[str, Any]:
+    return {"format": "pige-tolerances 1", "defaults": {"um": 10, "urad": 30}}
+
+
+@dataclass(frozen=True)
+class CycleSettings:
+    """The settings file (module docstring)."""
+
+    format: str
+    ini: str
+    machine: str
+    machine_id: str
+    kinematics: str
+    module: str
+    axis_sense: dict[str, int]
+    kinematics_switch: Switch | None
+    sphere_mm: list[float] = field(metadata={"length": 3, "max_abs": 1e5})
+    sphere_radius_mm: float = field(default=0.0, metadata={"max_abs": 1e3})
+    stylus_radius_mm: float = field(default=0.0, metadata={"max_abs": 1e3})
+    stylus_tool: int = 0
+    stylus_length_mm: float = field(default=0.0, metadata={"max_abs": 1e5})
+    probing: Probing = field(default_factory=Probing)
+    limits: Limits = field(default_factory=Limits)
+    tolerances: dict[str, Any] = field(default_factory=default_tolerances)
+    timeouts_s: Timeouts = field(default_factory=Timeouts)
+    db: str = "pige_cycle/history.db"
+    pige_command: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def db_url(self, config: Path) -> str:
+        """The history's URL: ``db`` as given, a relative path taken from the configuration folder."""
+        if "://" in self.db or Path(self.db).is_absolute():
+            return self.db
+        return str((config / self.db).resolve())
+
+    def with_limits(self, **changes: float) -> CycleSettings:
+        return replace(self, limits=replace(self.limits, **changes))
+
+
+def _code(text: str) -> bool:
+    import re
+
+    return re.fullmatch(r"M\d{1,3}", text) is not None
+
+
+def _positive(value: float, what: str) -> None:
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"{what} must be a number > 0, got {value!r}")
+
+
+def check_settings(s: CycleSettings, where: str) -> CycleSettings:
+    """Refuse settings no cycle can run with, naming the field (``where``: the file, or the option).
+
+    Raises
+    ------
+    InputError
+    """
+    from pige_sym.kernels import load_kernels
+
+    try:
+        if s.format != FORMAT:
+            raise InputError(f"format is {s.format!r}, expected {FORMAT!r}")
+        if not s.ini or "/" in s.ini or not s.ini.endswith(".ini"):
+            raise InputError(f"ini {s.ini!r}: the INI's file name, in the configuration folder")
+        if s.kinematics not in KINEMATICS:
+            raise InputError(f"kinematics {s.kinematics!r}: use stock or pige")
+        axes = tuple(load_kernels(s.machine).ROTARY_AXES)
+        if set(s.axis_sense) - set(axes) or any(v not in (-1, 1) for v in s.axis_sense.values()):
+            raise InputError(f"axis_sense {s.axis_sense}: give -1 or 1 for the rotary axes {', '.join(axes)}")
+        sw = s.kinematics_switch
+        if sw is not None and (sw.identity_type == sw.tcp_type or not _code(sw.identity_code)
+                               or not _code(sw.tcp_code)):
+            raise InputError("kinematics_switch: two M-codes (e.g. M429, M428) selecting two different "
+                             "switchkins types")
+        for name in ("sphere_radius_mm", "stylus_radius_mm", "stylus_length_mm"):
+            _positive(getattr(s, name), name)
+        if s.stylus_tool <= 0:
+            raise InputError(f"stylus_tool must be a tool number > 0, got {s.stylus_tool}")
+        p = s.probing
+        if not 2 <= p.poses <= 100 or not 4 <= p.contacts <= 9:
+            raise InputError(f"probing: poses 2..100 and contacts 4..9, got {p.poses} and {p.contacts}")
+        for name in ("probe_feed_mm_min", "clearance_mm", "overtravel_mm", "window_mm"):
+            _positive(getattr(p, name), f"probing.{name}")
+        for name, value in asdict(s.limits).items():
+            _positive(value, f"limits.{name}")
+        for name, value in asdict(s.timeouts_s).items():
+            _positive(value, f"timeouts_s.{name}")
+        if not s.machine_id.strip():
+            raise InputError("machine_id must not be empty")
+        if len(s.pige_command) < 1:
+            raise InputError("pige_command must name the program that runs pige")
+    except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
+    return s
+
+
+def read_settings(path: PathLike) -> CycleSettings:
+    """The settings file, validated (:mod:`~pige_sym.measurements.schema`) and checked (:func:`check_settings`).
+
+    Raises
+    ------
+    FileFormatError, InputError
+        Naming the file and the field.
+    """
+    from pige_sym.measurements.schema import read_json_file
+
+    settings = read_json_file(path, CycleSettings, "cycle settings file")
+    try:
+        return check_settings(settings, str(path))
+    except InputError as exc:
+        raise FileFormatError(str(path), None, str(exc).removeprefix(f"{path}: ")) from None
+
+
+def settings_text(s: CycleSettings) -> str:
+    """The settings file's text: one key per line, the same settings always the same bytes."""
+    import json
+
+    return json.dumps(s.to_dict(), indent=1, sort_keys=False, ensure_ascii=False) + "\n"
