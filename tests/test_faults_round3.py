@@ -389,7 +389,8 @@ def checkup_history(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Pat
     (["--controller", "linuxcnc", "--carrier", "2"], "--carrier does not apply to --controller linuxcnc"),
     (["--controller", "fanuc", "--heidenhain-trans", "shift"],
      "--heidenhain-trans does not apply to --controller fanuc"),
-    (["--controller", "heidenhain", "--carrier", "1"], "--carrier does not apply to --controller heidenhain"),
+    (["--controller", "heidenhain", "--heidenhain-trans", "shift", "--carrier", "1"],
+     "--carrier does not apply to --controller heidenhain"),
     (["--carrier", "2"], "--carrier goes with --controller"),
     (["--current", "x-rot-point=100"], "--current goes with --controller"),
 ])
