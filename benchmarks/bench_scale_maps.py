@@ -275,7 +275,10 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--timeout", type=float, default=600.0, help="for --before's commands [s] (default %(default)s)")
     ap.add_argument("--only", choices=("compensate", "identify"), help="one of the two parts")
     args = ap.parse_args(argv)
+    from run import cpu_model, load_average
+
     load = os.getloadavg()[0]
+    load_start = load_average()
     grids = GRIDS[:2] if args.quick else GRIDS
     steps = STEPS[:2] + STEPS[-1:] if args.quick else STEPS
     with tempfile.TemporaryDirectory() as tmp:
@@ -299,6 +302,8 @@ def main(argv: list[str] | None = None) -> str:
     if ident:
         lines += ["**pige identify --map C,A** (docs/maps.md's map test: three probe setups × 48 poses, 30° grid):",
                   "", *_identify_lines(ident, before, args.timeout)]
+    lines += ["", f"Run {time.strftime('%Y-%m-%d %H:%M %Z')} on {cpu_model()}, {os.cpu_count()} cores; load average "
+              f"(1, 5, 15 min) at its start: {load_start}; at its end: {load_average()}."]
     text = "\n".join(lines)
     print(text)
     return text
