@@ -113,9 +113,20 @@ def map_parameters(folder: Path, axes: tuple[str, ...], step: float, a_range: tu
     name = f"maps_{'_'.join(axes)}_{step:g}"
     path, plain = folder / f"{name}.json", folder / f"{name}_pige.json"
     path.write_text(json.dumps(doc), encoding="utf-8")
-    plain.write_text(json.dumps({k: v for k, v in doc.items() if k not in ("error_motions", "map_undetermined",
-                                                                             "map_step_deg")}), encoding="utf-8")
+    plain.write_text(json.dumps(_without_maps(doc)), encoding="utf-8")
     return path, plain, values, fit_s
+
+
+def _without_maps(doc: dict[str, Any]) -> dict[str, Any]:
+    """The parameter file without its maps: no error motions, the covariance of the PIGEs alone (``identify --map``
+    writes the map values' rows too, named ``C:EXC@30``)."""
+    out = {k: v for k, v in doc.items() if k not in ("error_motions", "map_undetermined", "map_step_deg")}
+    cov = doc.get("covariance")
+    if isinstance(cov, dict) and any(":" in n for n in cov["parameters"]):
+        keep = [i for i, n in enumerate(cov["parameters"]) if ":" not in n]
+        out["covariance"] = {"parameters": [cov["parameters"][i] for i in keep],
+                             "matrix": [[cov["matrix"][i][j] for j in keep] for i in keep]}
+    return out
 
 
 def _program(folder: Path, poses: int = 2000) -> Path:
