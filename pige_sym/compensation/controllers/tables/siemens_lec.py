@@ -40,7 +40,11 @@ machine axis (two rotary axes given one name would write one table mixing both).
 (one ``$AA_ENC_COMP_STEP``), the point index N runs from 0 to MD38000 − 1 (K3 09/2009, 6FC5397-1BP20-0BA0, p. 361:
 "0 ≤ N ≤ MD38000 − 1"; the number printed as required), and "the size of the compensation value is not limited"
 (p. 361; 808D Function Manual 01/2017 p. 106: "not monitored … small compensation values must be selected"), so
-every value is held to ``--max-change`` (:mod:`..entry_checks`).
+every value is held to ``--max-change`` (:mod:`..entry_checks`).  No fixed upper bound of the points is checked:
+the pages read bound N by the machine's own MD38000 (03/2013 p. 240), configured per axis (its change reformats the
+static user memory, p. 237; 8 bytes a value, 09/2009 p. 364), which pige cannot know and prints as required; the
+largest value MD38000 accepts is stated in the Detailed Machine Data Description, not read here (the 808D's 200
+points, 808D p. 106, are that control's).
 """
 
 from __future__ import annotations
