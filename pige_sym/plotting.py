@@ -7,9 +7,10 @@ extent of every tick label, title and legend in a pass of its own before the dra
 30 % of the CPU time of a report's figures (issue 46: 4.8 s → 3.3 s for the ten figures of one R-test
 report).  The margins leave room for tick labels of up to about seven characters and an axis label.
 
-*Titles at the top of their axes.*  Every title but a polar plot's is set with ``y=1.0``, where matplotlib puts
-it anyway when no tick label sits above the axes; left to itself, matplotlib measured every tick label of the
-y axis again for each title at each drawing to find that out (a further 10 % of a report's figure time).
+*Titles at the top of their axes.*  Every title is set with ``y=1.0`` (a polar plot's ``y=1.1``, above its
+90° label), where matplotlib puts it anyway when no tick label sits above the axes; left to itself,
+matplotlib measured every tick label of the y axis again for each title at each drawing to find that out
+(a further 10 % of a report's figure time).
 """
 
 from __future__ import annotations

@@ -117,7 +117,7 @@ def polar_figure(m: Measurement, model_um: np.ndarray | None, axis_index: int) -
         ax.set_rlabel_position(_emptiest_direction(theta))
         for label in ax.get_yticklabels():
             label.set_bbox({"facecolor": "white", "edgecolor": "none", "alpha": 0.85, "pad": 1.0})
-        ax.set_title(f"d{c} [µm] vs {m.rotary_axes[axis_index]} [deg]", fontsize=10)
+        ax.set_title(f"d{c} [µm] vs {m.rotary_axes[axis_index]} [deg]", fontsize=10, y=1.1)  # above the 90° label
         ax.tick_params(axis="x", labelsize=7)
     handles, labels = axs[0].get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=2, frameon=False)
