@@ -115,7 +115,8 @@ def test_the_next_check_up_s_program_is_written_by_the_printed_command(history: 
     name = shlex.quote(str(db))
     assert commands[0] == f"pige program --checkup --machine-id 'DMU 9' --db {name} --dialect linuxcnc --out " \
                           "checkup_DMU_9_run5.ngc"
-    assert "the command below writes its program: run it on the machine, then pige checkup its measurement" in what and f"--machine-id 'DMU 9' --db {name}" in what
+    assert "the command below writes its program: run it on the machine, then pige checkup its measurement" in what
+    assert f"--machine-id 'DMU 9' --db {name}" in what
     assert ("--corrected" in what) == (case == "drifted")
     out = _run(commands[0], tmp_path / "cli", monkeypatch, capsys)
     program = tmp_path / "cli" / "checkup_DMU_9_run5.ngc"
