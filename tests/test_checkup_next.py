@@ -148,6 +148,32 @@ def test_the_program_written_as_printed_gives_the_next_check_up(history: dict, t
     assert _printed(out)[1] == [commands[0].replace("run5", "run6")]
 
 
+def test_a_check_up_program_written_with_its_own_controller_state_is_written_again_with_it(
+        history: dict, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """The check-up's program was written with another stylus (tool 98, 121.5 mm) and work offset than the full
+    calibration's, which the history holds: the printed command names them, and writes that program again."""
+    root = history["root"]
+    db = root / "stylus copy.db"
+    shutil.copy(history["db"], db)
+    program = root / "own.ngc"
+    assert _quiet("program", "--checkup", "--machine-id", "DMU 9", "--db", db, "--dialect", "linuxcnc", "--rtcp-off",
+                  "M429", "--rtcp-on", "M428", "--stylus-tool", "98", "--stylus-length", "121.5", "--work-offset",
+                  "G55=0,0,0.5", "--out", program) == 0
+    path = checkup_file(program, TRUTH, 711, root / "own.csv")
+    text = io.StringIO()
+    with contextlib.redirect_stdout(text):
+        assert main(["checkup", str(path), "--machine-id", "DMU 9", "--db", str(db), "--date",
+                     (T0 + timedelta(days=4)).isoformat()]) == 0
+    _, commands = _printed(text.getvalue())
+    assert commands[0].endswith(" --dialect linuxcnc --kinematics identity --rtcp-off M429 --rtcp-on M428 "
+                                "--stylus-tool 98 --stylus-length 121.5 --work-offset G55=0,0,0.5 --window 0.3 --out "
+                                "checkup_DMU_9_run5.ngc"), commands
+    _run(commands[0], tmp_path, monkeypatch, capsys)
+    assert (tmp_path / "checkup_DMU_9_run5.ngc").read_text(encoding="utf-8") == program.read_text(encoding="utf-8")
+    _, report = _report_commands(db, tmp_path / "report")
+    assert report == commands
+
+
 def test_calibrate_fully_says_what_to_do_without_a_made_up_file(history: dict, tmp_path: Path) -> None:
     db, code, text = _checkup(history, "full")
     assert code == 1 and "calibrate the machine fully" in text, text

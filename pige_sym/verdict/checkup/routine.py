@@ -109,6 +109,7 @@ class CheckupResult:
     notes: list[str] = field(default_factory=list)
     db: str | None = None
     dialect: str | None = None
+    program_options: str = ""
 
     @property
     def exit_status(self) -> int:
@@ -134,7 +135,7 @@ class CheckupResult:
     def next_step(self) -> tuple[str, str]:
         """What to do now and the command: :func:`next_step` (the CLI and the report print it)."""
         return next_step(self.verdict, self.notes, None if self.changes is None else self.changes.entered,
-                         self.machine_id, NextRun(self.db, self.dialect, self.run_number))
+                         self.machine_id, NextRun(self.db, self.dialect, self.run_number, self.program_options))
 
     def chart(self) -> dict[str, Any]:
         """What later check-ups read of this one (:mod:`~pige_sym.verdict.checkup.reference`)."""
@@ -202,6 +203,8 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
     if state.setup.instrument != instrument(m):
         raise InputError(f"{path} is an {instrument(m)} file, the last full calibration (run {state.full.id}) an "
                          f"{state.setup.instrument} run: a check-up repeats its instrument and set-up")
+    from pige_sym.measurements.run_setup import setup_of
+
     fit = identify_subset(m, free, state.held, held_covariance=state.held_covariance,
                           **_rtest_noise(state.full) if instrument(m) == "rtest" else {})
     _storable(fit, path)
@@ -213,8 +216,8 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
                            state.held, any(i.limit is None or i.limit.provisional for i in items), state.origin,
                            opts.alpha, signature, state.segment, opts.corrected, state.correction, changes,
                            run_number=len(runs) + 1, fit=fit.to_dict(), notes=list(fit.notes) + _notes(items),
-                           db=opts.db, dialect=_dialect(m, state.setup))
-    from pige_sym.measurements.run_setup import setup_of
+                           db=opts.db, dialect=_dialect(m, state.setup),
+                           program_options=controller_options(setup_of(m).probe, state.setup.probe))
 
     record = history.add_checkup(Path(path), machine_id, kern.MACHINE_CODE, (measured, source), fit,
                                  setup_of(m).to_dict(), verdict, result.to_dict(), result.chart())
@@ -306,11 +309,47 @@ PROGRAM_SUFFIX = {"siemens": ".mpf", "fanuc": ".nc", "linuxcnc": ".ngc", "heiden
 class NextRun:
     """Where the next check-up's program comes from: the history the check-up used (``--db`` as given, None for
     the default), the dialect of the check-up's program (None: not known, an R-test; ``pige program``'s default
-    applies) and the check-up's run number (the program is named for the next)."""
+    applies), the check-up's run number (the program is named for the next) and the controller options its program
+    was written with where the history does not hold them (:func:`controller_options`)."""
 
     db: str | None = None
     dialect: str | None = None
     run_number: int = 0
+    options: str = ""
+
+
+def controller_options(checkup_probe: dict[str, Any] | None, full_probe: dict[str, Any] | None) -> str:
+    """The controller options ``pige program --checkup`` needs to write the check-up's program again (`` --kinematics
+    … --window …``): none when the check-up's program stated the full calibration's controller state (the command
+    reads that from the history) or stated none; else the state the check-up's program stated.
+
+    ``checkup_probe``, ``full_probe``: the ``probe`` items of the check-up's and the full calibration's set-up
+    (:class:`~pige_sym.measurements.run_setup.RunSetup`)."""
+    import shlex
+
+    mine, full = _controller(checkup_probe), _controller(full_probe)
+    if mine is None or mine == full:
+        return ""
+    words = [f"--kinematics {mine.kinematics}"]
+    words += [f"--{name} {shlex.quote(code)}" for name, code in (("rtcp-off", mine.rtcp_off),
+                                                                 ("rtcp-on", mine.rtcp_on)) if code]
+    offset = ",".join(f"{x:.12g}" for x in mine.work_offset_mm)
+    words += [f"--stylus-tool {mine.stylus_tool}", f"--stylus-length {mine.stylus_length_mm:.12g}",
+              f"--work-offset {mine.work_offset}={offset}", f"--window {mine.window_mm:.12g}"]
+    return " " + " ".join(words)
+
+
+def _controller(probe: dict[str, Any] | None) -> Any:
+    """The controller state a stored probing set-up states (None: none stated)."""
+    from pige_sym.nc.probe_safety import controller_from_header
+
+    if not probe or not probe.get("program"):
+        return None
+    try:
+        return controller_from_header(dict(probe["program"]) | {"kinematics": str(probe.get("kinematics", "identity"))},
+                                      "the set-up")
+    except InputError:
+        return None
 
 
 def db_option(db: str | None) -> str:
@@ -343,8 +382,8 @@ def checkup_program_command(machine_id: str, run: NextRun) -> str:
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", machine_id).strip("._-") or "machine"
     dialect = f" --dialect {run.dialect}" if run.dialect in PROGRAM_SUFFIX else ""
     out = f"checkup_{stem}_run{run.run_number + 1}{PROGRAM_SUFFIX.get(run.dialect or 'siemens', '.mpf')}"
-    return (f"pige program --checkup --machine-id {shlex.quote(machine_id)}{db_option(run.db)}{dialect} "
-            f"--out {shlex.quote(out)}")
+    return (f"pige program --checkup --machine-id {shlex.quote(machine_id)}{db_option(run.db)}{dialect}"
+            f"{run.options} --out {shlex.quote(out)}")
 
 
 def next_step(verdict: str, notes: list[str], entered: dict[str, float | None] | None,
