@@ -203,9 +203,10 @@ def test_an_old_record_s_placeholder_command_is_not_printed_again() -> None:
     assert old[1].startswith("pige checkup NEXT.csv")
 
 
-def test_a_password_in_the_database_url_is_not_printed() -> None:
-    from pige_sym.verdict.checkup.routine import NextRun, checkup_program_command
+def test_a_password_in_the_database_url_is_not_printed_and_an_unknown_dialect_is_said() -> None:
+    from pige_sym.verdict.checkup.routine import NextRun, next_step
 
-    command = checkup_program_command("M1", NextRun("postgresql://pige:s3cret@dbhost:5432/cal", None, 2))
+    what, command = next_step("ok", [], None, "M1", NextRun("postgresql://pige:s3cret@dbhost:5432/cal", None, 2))
     assert command == "pige program --checkup --machine-id M1 --db postgresql://pige@dbhost:5432/cal --out " \
                       "checkup_M1_run3.mpf"
+    assert "s3cret" not in what and "add --dialect fanuc or linuxcnc for another" in what

@@ -404,7 +404,9 @@ def next_step(verdict: str, notes: list[str], entered: dict[str, float | None] |
     command = checkup_program_command(machine_id, run)
 
     def then(corrected: bool) -> str:
-        return ("; the command below writes its program: run it on the machine, then pige checkup its measurement "
+        written = "" if run.dialect else " (for a Siemens control: add --dialect fanuc or linuxcnc for another)"
+        return (f"; the command below writes its program{written}: run it on the machine, then pige checkup its "
+                "measurement "
                 f"(the log imported with pige import-probe, or pige acquire's file) with {again}"
                 + (" --corrected" if corrected else ""))
 
