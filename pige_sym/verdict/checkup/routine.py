@@ -399,15 +399,15 @@ def next_step(verdict: str, notes: list[str], entered: dict[str, float | None] |
     again = f"--machine-id {shlex.quote(machine_id)}{db_option(run.db)}"
     if any("calibrate the machine fully" in n for n in notes):
         return ("calibrate the machine fully: the check-up's poses disagree with the PIGEs it held beyond their "
-                "uncertainty; write the full calibration's program as before (pige program with its set-up), run it, "
-                f"and add its measurement to this history (pige history add, {again})", "")
+                "uncertainty; run the full calibration's program again (the history keeps its set-up, not its poses "
+                "nor its program: none is printed), and add its measurement to this history (pige history add, "
+                f"{again})", "")
     command = checkup_program_command(machine_id, run)
 
     def then(corrected: bool) -> str:
         written = "" if run.dialect else " (for a Siemens control: add --dialect fanuc or linuxcnc for another)"
         return (f"; the command below writes its program{written}: run it on the machine, then pige checkup its "
-                "measurement "
-                f"(the log imported with pige import-probe, or pige acquire's file) with {again}"
+                f"measurement (the log imported with pige import-probe, or pige acquire's file) with {again}"
                 + (" --corrected" if corrected else ""))
 
     if verdict == "ok":
