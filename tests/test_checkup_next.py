@@ -201,6 +201,10 @@ def test_an_old_record_s_placeholder_command_is_not_printed_again() -> None:
                                  "checkup_M_1_run8.nc"]
         assert "--corrected" in step.what and "NEXT.csv" not in step.what
     assert old[1].startswith("pige checkup NEXT.csv")
+    full = {"notes": ["... calibrate the machine fully"], "next_step": ["calibrate the machine fully: ...",
+                                                                    "pige history add FULL.csv --machine-id 'M 1'"]}
+    step = checkup_next(SimpleNamespace(verdict="drifted", machine_id="M 1", checkup=full, setup=None), "h.db", 7)
+    assert step.commands == [] and "FULL.csv" not in step.what and "--machine-id 'M 1' --db h.db" in step.what
 
 
 def test_a_password_in_the_database_url_is_not_printed_and_an_unknown_dialect_is_said() -> None:
