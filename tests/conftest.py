@@ -59,7 +59,7 @@ HEAVY_FIRST = (
     "test_checkup_stats.py", "test_probe.py", "test_checkup.py", "test_report_print.py", "test_report_commands.py",
     "test_gen_linuxcnc.py", "test_faults_files.py", "test_joint_diagnosis.py", "test_history.py", "test_maps.py",
     "test_acquisition.py", "test_kernels.py", "test_package.py", "test_nc_fastpath.py", "test_report_advice.py",
-    "test_faults_round3.py", "test_plan.py", "test_gen_linuxcnc_hal.py", "test_diagnosis.py",
+    "test_faults_round3.py", "test_plan.py", "test_gen_linuxcnc_hal.py", "test_checkup_next.py", "test_diagnosis.py",
     "test_decimal_fields.py", "test_checkup_display.py", "test_history_decode.py", "test_words.py", "test_demo.py",
     "test_probe_safety.py", "test_gen_linuxcnc_maps.py", "test_controller_heidenhain.py", "test_report_joint.py",
 )
