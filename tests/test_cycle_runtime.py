@@ -242,3 +242,28 @@ def test_the_remap_s_modes_phases_and_preview():
     inner = FakeInterp(remap_level=2)
     assert r.pige_m451_prolog(inner, p=201.0) == r.INTERP_OK and inner.params["_pige_phase"] == 2
     assert r._mode("M451", {"p": 102.0}) == (1, "enter") and r._mode("M452", {"p": 200.0}) == (2, "checkup")
+
+
+def test_the_analysis_identifies_once_and_the_history_stores_that_estimate(config, monkeypatch):
+    """``M451 P0``'s analysis hands its identification to the history (``add_run(identified=...)``) instead of
+    identifying the same file a second time (about 1 s of the cycle's wait)."""
+    from pige_sym.identification import least_squares
+    from pige_sym.verdict.history import connect, list_runs
+    from pige_sym.verdict.history.store import machine_ids
+
+    calls: list[int] = []
+    real = least_squares.identify
+
+    def counted(*args, **kw):
+        calls.append(1)
+        return real(*args, **kw)
+
+    monkeypatch.setattr(least_squares, "identify", counted)
+    run = measure(config, "p0", "check")
+    assert messages(run)["error"] is None
+    assert len(calls) == 1
+    rows = {r["name"]: r["value"] for r in json.loads((run / "result.json").read_text())["rows"]}
+    engine = connect(f"sqlite:///{config.default_db}")
+    (stored,) = list_runs(engine, machine_ids(engine)[0])
+    assert stored.method == "gauss-newton" and stored.kind == "full"
+    assert dict(zip(stored.parameters, stored.values.tolist(), strict=True)) == pytest.approx(rows, abs=1e-9)
