@@ -38,8 +38,8 @@ from pige_sym.cycle.settings import (
     Limits,
     Probing,
     Switch,
-    Timeouts,
     check_settings,
+    default_timeouts,
     default_tolerances,
 )
 from pige_sym.cycle.values import values_text
@@ -66,7 +66,7 @@ class InstallOptions:
     rtcp_off: str | None = None
     probing: Probing = field(default_factory=Probing)
     limits: Limits = field(default_factory=Limits)
-    timeouts: Timeouts = field(default_factory=Timeouts)
+    timeouts: dict[str, float] = field(default_factory=default_timeouts)
     tolerances: dict | None = None
 
 

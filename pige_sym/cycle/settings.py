@@ -76,13 +76,13 @@ class Limits:
     proposal_hours: float = 8.0
 
 
-@dataclass(frozen=True)
-class Timeouts:
-    """How long LinuxCNC waits for pige's process in each step [s] before it ends the cycle with an error."""
+#: how long LinuxCNC waits for pige's process in each step [s] before it ends the cycle with an error (the remap looks
+#: a step's timeout up by its name)
+TIMEOUTS_S = {"prepare": 180.0, "analyse": 600.0, "enter": 120.0}
 
-    prepare: float = 180.0
-    analyse: float = 600.0
-    enter: float = 120.0
+
+def default_timeouts() -> dict[str, float]:
+    return dict(TIMEOUTS_S)
 
 
 def default_tolerances() -> dict[str, Any]:
@@ -109,7 +109,7 @@ class CycleSettings:
     probing: Probing = field(default_factory=Probing)
     limits: Limits = field(default_factory=Limits)
     tolerances: dict[str, Any] = field(default_factory=default_tolerances)
-    timeouts_s: Timeouts = field(default_factory=Timeouts)
+    timeouts_s: dict[str, float] = field(default_factory=default_timeouts)
     db: str = "pige_cycle/history.db"
     pige_command: list[str] = field(default_factory=list)
 
@@ -172,7 +172,10 @@ def check_settings(s: CycleSettings, where: str) -> CycleSettings:
             _positive(getattr(p, name), f"probing.{name}")
         for name, value in asdict(s.limits).items():
             _positive(value, f"limits.{name}")
-        for name, value in asdict(s.timeouts_s).items():
+        if set(s.timeouts_s) != set(TIMEOUTS_S):
+            raise InputError(f"timeouts_s: give the seconds of each step {', '.join(TIMEOUTS_S)}, got "
+                             f"{', '.join(s.timeouts_s) or 'none'}")
+        for name, value in s.timeouts_s.items():
             _positive(value, f"timeouts_s.{name}")
         if not s.machine_id.strip():
             raise InputError("machine_id must not be empty")
