@@ -267,3 +267,46 @@ def test_the_analysis_identifies_once_and_the_history_stores_that_estimate(confi
     (stored,) = list_runs(engine, machine_ids(engine)[0])
     assert stored.method == "gauss-newton" and stored.kind == "full"
     assert dict(zip(stored.parameters, stored.values.tolist(), strict=True)) == pytest.approx(rows, abs=1e-9)
+
+
+def test_after_an_abort_the_mode_found_is_put_back_until_it_shows_and_never_later(monkeypatch):
+    """``o<pige_cycle_abort>`` (LinuxCNC's ON_ABORT_COMMAND): the mode the cycle found as a float in ``#<_value>``,
+    again at each abort until ``motion.switchkins-type`` shows it (LinuxCNC may run the handler twice for one abort
+    and drop what the first queued), then -1; -1 after ``REASSERT_S``, after the normal restore, with no cycle."""
+    from pige_sym.cycle import linuxcnc_remap as r
+
+    clock = [100.0]
+    monkeypatch.setattr(r.time, "monotonic", lambda: clock[0])
+    interp = FakeInterp()  # found in TCP kinematics (switchkins-type 1)
+    assert r.pige_cycle_abort(interp) == -1.0  # no cycle since LinuxCNC started
+    interp.params["_hal[motion.switchkins-type]"] = 0.0
+    assert r.pige_m451_prolog(interp) == r.INTERP_OK and interp.params["_pige_kins_before"] == 0  # found: identity
+    interp.params["_hal[motion.switchkins-type]"] = 1.0  # probing in TCP kinematics, then Esc
+    first = r.pige_cycle_abort(interp)
+    assert first == 0.0 and isinstance(first, float)
+    clock[0] += 0.01
+    assert r.pige_cycle_abort(interp) == 0.0  # the second handler of the same abort: again
+    interp.params["_hal[motion.switchkins-type]"] = 0.0  # the M68 reached motion
+    assert r.pige_cycle_abort(interp) == -1.0 and interp.params["_pige_kins_before"] == -1
+    interp.params["_hal[motion.switchkins-type]"] = 1.0  # the operator's own M428, then an abort of their program
+    assert r.pige_cycle_abort(interp) == -1.0
+    assert r.pige_m451_prolog(interp) == r.INTERP_OK and interp.params["_pige_kins_before"] == 1
+    interp.params["_hal[motion.switchkins-type]"] = 0.0
+    assert r.pige_cycle_abort(interp) == 1.0
+    clock[0] += r.REASSERT_S + 1  # the mode never showed: a later abort does not switch
+    assert r.pige_cycle_abort(interp) == -1.0 and interp.params["_pige_kins_before"] == -1
+
+
+def test_the_abort_handler_stops_pige_first_and_sets_the_switch_s_output_without_synchronising(tmp_path):
+    """pige_on_abort.ngc: ``o<pige_cycle_abort>`` first (it stops pige's step), then ``M68`` on the output that the
+    shipped M429/M428 set (found from the INI's net to motion.switchkins-type); no call of the codes, whose ``M66``
+    would suspend the handler at abort time."""
+    ini = write_stock(tmp_path)
+    assert main(install_args(ini, "--force")) == 0
+    settings = json.loads((tmp_path / "pige_cycle" / "settings.json").read_text())
+    assert settings["kinematics_switch"]["analog_out"] == 3
+    lines = [ln for ln in (tmp_path / "pige_cycle" / "ngc" / "pige_on_abort.ngc").read_text().splitlines()
+             if ln and not ln.startswith((";", "("))]
+    assert lines == ["o<pige_on_abort> sub", "o<pige_cycle_abort> call",
+                     "o100 if [[#<_value_returned> EQ 1] AND [#<_value> GE 0]]", "M68 E3 Q#<_value>", "o100 endif",
+                     "o<pige_on_abort> endsub", "M2"]

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import difflib
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -124,7 +124,7 @@ def plan_install(ini: Path, opts: InstallOptions) -> InstallPlan:
     _one_configuration(layout, ini)
     scan = scan_configuration(ini, doc)
     setup = read_kinematics(doc, scan, kinematics=opts.kinematics, machine=opts.machine)
-    settings = _settings(doc, setup, opts)
+    settings = _settings(doc, setup, opts, scan)
     edits, notes = _ini_edits(doc, layout, setup, scan)
     files = [PlannedFile(ini, text, ini_with_python(apply_edits(doc, edits), doc, layout))]
     files += _hal_file_edits(layout, setup)
@@ -155,10 +155,13 @@ def _check_target(path: Path) -> None:
         raise InputError(f"{path} is not a regular file: pige never replaces one")
 
 
-def _settings(doc: IniDocument, setup: KinematicsSetup, opts: InstallOptions) -> CycleSettings:
+def _settings(doc: IniDocument, setup: KinematicsSetup, opts: InstallOptions, scan: HalScan) -> CycleSettings:
     machine_id = opts.machine_id or doc.value("EMC", "MACHINE") or ""
+    switch = _switch(doc, opts)
+    if switch is not None:
+        switch = replace(switch, analog_out=switch_output(scan))
     s = CycleSettings(FORMAT, Path(doc.name).name, setup.machine, machine_id.strip(), setup.kinematics, setup.module,
-                      dict(setup.axis_sense), _switch(doc, opts), [float(v) for v in opts.sphere_mm],
+                      dict(setup.axis_sense), switch, [float(v) for v in opts.sphere_mm],
                       float(opts.sphere_radius_mm), float(opts.stylus_radius_mm), int(opts.stylus_tool),
                       float(opts.stylus_length_mm), opts.probing, opts.limits,
                       opts.tolerances or default_tolerances(),
@@ -187,6 +190,16 @@ def _switch(doc: IniDocument, opts: InstallOptions) -> Switch | None:
                          "INI selects the TCP ones (a procedure setting #<kinstype>): give --rtcp-on CODE and "
                          "--rtcp-off CODE")
     return None
+
+
+def switch_output(scan: HalScan) -> int | None:
+    """N of the ``motion.analog-out-N`` netted to ``motion.switchkins-type`` (the shipped sims: ``net :kinstype-select
+    <= motion.analog-out-03 => motion.switchkins-type``), or None (another writer, or no net)."""
+    signal = scan.nets.get("motion.switchkins-type")
+    outs = [pin for pin, sig in scan.nets.items() if sig == signal and pin.startswith("motion.analog-out-")]
+    if signal is None or len(outs) != 1 or not outs[0].removeprefix("motion.analog-out-").isdigit():
+        return None
+    return int(outs[0].removeprefix("motion.analog-out-"))
 
 
 def _switch_codes(doc: IniDocument) -> dict[int, str]:

@@ -16,8 +16,16 @@ with an internal ``P`` (only from inside the cycle: a call at the top level is r
     M451 P[200 + mode]          analyse (P0, P1, M452) or enter (P2): pige cycle step analyse|enter
     o<pige_restore> call        the kinematics mode as it was found (``#<_pige_kins_before>``)
 
-``pige_on_abort.ngc`` (``[RS274NGC]ON_ABORT_COMMAND``) calls ``o<pige_restore>`` too, so that Esc or an E-stop
-in the middle of the cycle leaves the kinematics mode as it was found once the machine is on again.
+**An abort** (Esc, E-stop, an error: LinuxCNC's task runs ``[RS274NGC]ON_ABORT_COMMAND``, ``pige_on_abort.ngc``,
+inside the interpreter after every abort) calls ``o<pige_cycle_abort>`` (:func:`pige_cycle_abort`): it kills a step
+still running and returns the kinematics mode the cycle found, which ``pige_on_abort.ngc`` sets at once with ``M68
+E<n> Q<type>`` on the ``motion.analog-out-<n>`` that drives ``motion.switchkins-type``.  Not the configuration's own
+code (``M429``): the shipped procedure synchronises (``M66 E0 L0``), which at abort time suspends the abort handler
+half-way (the rest then runs in place of the operator's next MDI line, which is lost) and leaves ``o<pige_cycle_abort>``
+unrun when it comes after.  LinuxCNC may run the handler twice for one abort and drop what the first queued between
+the two (an interpreter error in MDI: task's ``EMC_ABORT_INTERPRETER_ERROR_MDI``, then ``EMC_ABORT_TASK_EXEC_ERROR``,
+which clears the queue first; src/emc/task/emctaskmain.cc): so every abort within ``REASSERT_S`` of the first puts the
+mode back again until ``motion.switchkins-type`` shows it.
 
 The prepare and analyse steps run in the *epilog* of the inner call, as a generator that yields
 ``INTERP_EXECUTE_FINISH`` while pige's process runs: the interpreter stays responsive (Esc, E-stop, the GUI's
@@ -88,6 +96,7 @@ def _prolog(self, code, words):
         return f"PIGE {code} P{words.get('p', 0):g} is a step of the cycle itself: call {code} with " + \
             ", ".join(f"P{k}" for k in MODES[code])
     if phase == 0:
+        ABORTED.clear()
         self.params["_pige_phase"] = 0
         kins = _switchkins(self)
         self.params["_pige_kins_before"] = -1 if kins is None else kins
@@ -199,12 +208,35 @@ def _start(command, run, step):
     return proc
 
 
+#: when the first abort of a cycle came (time.monotonic()): the aborts that follow within REASSERT_S put the
+#: kinematics mode back again until it shows, after that none does (module docstring)
+ABORTED: dict = {}
+REASSERT_S = 10.0
+
+
 def pige_cycle_abort(self, *args):
-    """O-word procedure ``o<pige_cycle_abort>`` (pige_on_abort.ngc): stop a step still running after an abort."""
+    """O-word procedure ``o<pige_cycle_abort>`` (pige_on_abort.ngc, LinuxCNC's ``ON_ABORT_COMMAND``): stop a step
+    still running, and return (``#<_value>``) the ``motion.switchkins-type`` to put back, or -1 for none.
+
+    A float always: an O-word procedure that returns nothing leaves ``#<_value>`` 0, an int is taken for an error.
+    The mode to put back is the one the cycle found (``#<_pige_kins_before>``, -1 once ``o<pige_restore>`` ran);
+    once ``motion.switchkins-type`` shows it, or ``REASSERT_S`` after the cycle's first abort, nothing more is put
+    back: a later abort (of the operator's own program, in a mode chosen since) never switches the kinematics.
+    """
     proc = RUNNING.pop("proc", None)
     if proc is not None and proc.poll() is None:
         proc.kill()
         proc.wait()
+    try:
+        found = int(round(self.params["_pige_kins_before"]))
+    except Exception:  # no cycle ran since LinuxCNC started
+        return -1.0
+    first = ABORTED.setdefault("at", time.monotonic())
+    if found < 0 or _switchkins(self) == found or time.monotonic() - first > REASSERT_S:
+        self.params["_pige_kins_before"] = -1
+        ABORTED.clear()
+        return -1.0
+    return float(found)
 
 
 def _read_messages(run, step):

@@ -10,9 +10,11 @@ to change a limit.  One JSON object::
      "kinematics": "stock",                stock (xyzac-trt-kins / xyzbc-trt-kins) or pige (pige gen --target linuxcnc)
      "module": "xyzac-trt-kins",           the kinematics module [KINS]KINEMATICS loads
      "axis_sense": {"A": -1, "C": -1},     commanded sense of each rotary axis (CONVENTIONS §9)
-     "kinematics_switch": {"identity_code": "M429", "identity_type": 0, "tcp_code": "M428", "tcp_type": 1},
-                                           the codes that switch the kinematics (motion.switchkins-type values);
-                                           null: no switch, the kinematics always TCP
+     "kinematics_switch": {"identity_code": "M429", "identity_type": 0, "tcp_code": "M428", "tcp_type": 1,
+                           "analog_out": 3},
+                                           the codes that switch the kinematics (motion.switchkins-type values),
+                                           the motion.analog-out-NN that drives motion.switchkins-type (null:
+                                           none); null: no switch, the kinematics always TCP
      "sphere_mm": [20, 10, 15],            sphere centre, machine coordinates, every rotary axis at 0 [mm]
      "sphere_radius_mm": 6.35, "stylus_radius_mm": 1.5, "stylus_tool": 9, "stylus_length_mm": 30,
      "probing": {"poses": 12, "contacts": 5, "probe_feed_mm_min": 50, "clearance_mm": 1, "overtravel_mm": 1,
@@ -46,12 +48,15 @@ KINEMATICS = ("stock", "pige")
 @dataclass(frozen=True)
 class Switch:
     """The configuration's switchable kinematics: the code that selects identity kinematics and the TCP ones, and
-    the ``motion.switchkins-type`` each selects (``sparm=identityfirst``: identity 0, TCP 1)."""
+    the ``motion.switchkins-type`` each selects (``sparm=identityfirst``: identity 0, TCP 1); ``analog_out``: the
+    ``motion.analog-out-NN`` netted to ``motion.switchkins-type`` (what the codes set with ``M68 E<NN>``), through
+    which an abort puts the mode back without the codes' synchronisation (None: not found, the codes are called)."""
 
     identity_code: str
     identity_type: int
     tcp_code: str
     tcp_type: int
+    analog_out: int | None = None
 
 
 @dataclass(frozen=True)
@@ -161,6 +166,8 @@ def check_settings(s: CycleSettings, where: str) -> CycleSettings:
                                or not _code(sw.tcp_code)):
             raise InputError("kinematics_switch: two M-codes (e.g. M429, M428) selecting two different "
                              "switchkins types")
+        if sw is not None and sw.analog_out is not None and not 0 <= sw.analog_out <= 63:
+            raise InputError(f"kinematics_switch: analog_out {sw.analog_out}: the N of motion.analog-out-N, 0..63")
         for name in ("sphere_radius_mm", "stylus_radius_mm", "stylus_length_mm"):
             _positive(getattr(s, name), name)
         if s.stylus_tool <= 0:
