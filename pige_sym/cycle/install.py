@@ -288,8 +288,9 @@ def _rs274ngc_keys(doc: IniDocument, notes: list[str]) -> list[IniEdit]:
     if abort is None:
         out.append(IniEdit(end, "insert_after", f"ON_ABORT_COMMAND = {ours}", "the kinematics mode after an abort"))
     elif " ".join(abort.split()).lower() != ours.lower():
-        notes.append(f"[RS274NGC] ON_ABORT_COMMAND is the configuration's own ({abort}): call o<pige_restore> from it "
-                     "so that an abort in the middle of the cycle leaves the kinematics mode as it was found")
+        notes.append(f"[RS274NGC] ON_ABORT_COMMAND is the configuration's own ({abort}): call o<{ON_ABORT_SUB}> from "
+                     "it (first, before anything that synchronises) so that an abort in the middle of the cycle stops "
+                     "pige's step and leaves the kinematics mode as it was found")
     return out
 
 

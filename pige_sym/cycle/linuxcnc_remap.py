@@ -21,11 +21,13 @@ inside the interpreter after every abort) calls ``o<pige_cycle_abort>`` (:func:`
 still running and returns the kinematics mode the cycle found, which ``pige_on_abort.ngc`` sets at once with ``M68
 E<n> Q<type>`` on the ``motion.analog-out-<n>`` that drives ``motion.switchkins-type``.  Not the configuration's own
 code (``M429``): the shipped procedure synchronises (``M66 E0 L0``), which at abort time suspends the abort handler
-half-way (the rest then runs in place of the operator's next MDI line, which is lost) and leaves ``o<pige_cycle_abort>``
-unrun when it comes after.  LinuxCNC may run the handler twice for one abort and drop what the first queued between
-the two (an interpreter error in MDI: task's ``EMC_ABORT_INTERPRETER_ERROR_MDI``, then ``EMC_ABORT_TASK_EXEC_ERROR``,
-which clears the queue first; src/emc/task/emctaskmain.cc): so every abort within ``REASSERT_S`` of the first puts the
-mode back again until ``motion.switchkins-type`` shows it.
+half-way and leaves ``o<pige_cycle_abort>`` unrun when it comes after.  LinuxCNC may run the handler twice for one
+abort and drop what the first queued between the two (an interpreter error in MDI: task's
+``EMC_ABORT_INTERPRETER_ERROR_MDI``, then ``EMC_ABORT_TASK_EXEC_ERROR``, which clears the queue first;
+src/emc/task/emctaskmain.cc): so every abort within ``REASSERT_S`` of the first puts the mode back again until
+``motion.switchkins-type`` shows it.  And what the handler queues after such an error can wait behind the aborted
+interpreter until the next mode change drops it (``emcTaskSetMode`` calls ``emcTaskAbort``): so ``o<pige_cycle_abort>``
+also sends the value through LinuxCNC's command channel, from a process of its own (:data:`PUT_BACK`).
 
 The prepare and analyse steps run in the *epilog* of the inner call, as a generator that yields
 ``INTERP_EXECUTE_FINISH`` while pige's process runs: the interpreter stays responsive (Esc, E-stop, the GUI's
@@ -236,7 +238,51 @@ def pige_cycle_abort(self, *args):
         self.params["_pige_kins_before"] = -1
         ABORTED.clear()
         return -1.0
+    _put_back_through_the_command_channel(found, getattr(self, "pige_run", None) or os.path.join(ROOT, "runs"))
     return float(found)
+
+
+#: run by ``python3 -c`` (LinuxCNC's Python, its ``linuxcnc`` module) as a process of its own, arguments: the N of
+#: motion.analog-out-N, the switchkins type to put back, the log file.  It waits until task has handled the abort
+#: (interpreter idle, motion queue empty, in position), then, unless the output shows the type already, sends
+#: EMC_MOTION_SET_AOUT through LinuxCNC's command channel (task takes it in MDI, MANUAL and E-stop; not in AUTO)
+PUT_BACK = """
+import sys, time, linuxcnc
+n, found, log = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
+s, c = linuxcnc.stat(), linuxcnc.command()
+end, sent, why = time.monotonic() + 10.0, 0, "timed out"
+while time.monotonic() < end:
+    time.sleep(0.05)
+    s.poll()
+    if abs(s.aout[n] - found) < 1e-9:
+        why = "in force"
+        break
+    if s.task_mode == linuxcnc.MODE_AUTO:
+        why = "AUTO mode: task takes no analog output command"
+        break
+    if s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0 and s.inpos and sent < 3:
+        c.set_analog_output(n, found)
+        c.wait_complete(2)
+        sent += 1
+with open(log, "a") as f:
+    f.write(f"{time.strftime('%Y-%m-%dT%H:%M:%S')} analog-out-{n:02d} {found:g}: {why}, sent {sent}\\n")
+"""
+
+
+def _put_back_through_the_command_channel(found, folder):
+    """After an abort, the kinematics mode ``found`` also through LinuxCNC's command channel (:data:`PUT_BACK`, a
+    process of its own: task is not held up): ``M68`` queued by the abort handler can wait behind the aborted
+    interpreter and be dropped by the next mode change (after an interpreter error in MDI, measured: the kill).
+    Its note goes to ``abort.log`` in ``folder`` (the aborted run's folder)."""
+    try:
+        out = _settings()["kinematics_switch"]["analog_out"]
+        if out is None:
+            return
+        subprocess.Popen(["python3", "-c", PUT_BACK, str(int(out)), str(found), os.path.join(folder, "abort.log")],
+                         cwd=CONFIG, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         start_new_session=True)
+    except Exception:  # never in the way of LinuxCNC's abort
+        pass
 
 
 def _read_messages(run, step):

@@ -13,7 +13,8 @@ Six simulations at once (:mod:`cycle_setup`), each in its own folder and namespa
 - **the guards** (``xyzac-trt``, stock, 6 poses): a sphere 0.05 mm larger than stated (``M451 P1``); the A line's
   offset moved 0.5 mm (``M451 P1`` then ``M451 P2``); pige's analysis process killed (SIGKILL, by its id) while it
   identifies; Esc while probing; the E-stop while probing.  Around each: the configuration's files, the pins, the
-  cycle's record (proposal, journal, history) read before and after.
+  cycle's record (proposal, journal, history) read before and after; after the last three, 3 s to settle, the
+  kinematics mode read (identity again, as found), and the operator's next two MDI lines (both must run).
 """
 
 from __future__ import annotations
@@ -43,6 +44,8 @@ from lcnc_harness import RunResult, run_sim
 pytestmark = pytest.mark.linuxcnc
 LOOPS = [("AC", "stock"), ("BC", "stock"), ("AC", "pige"), ("BC", "pige")]
 WARM = {"EX0C": 5.0, "EZ0A": 5.0}
+#: after an abort, what the operator does first: look (the kinematics mode is read after it)
+SETTLE = {"op": "sleep", "seconds": 3, "allow_error": True}
 #: the probe's trips until the second logged contact: the three confirming contacts before the log opens, then two
 LOGGED = 5
 
@@ -88,22 +91,22 @@ def guard_steps(cs: CycleSim) -> list[dict[str, Any]]:
             *case("kill", {"op": "mdi_start", "line": "M451 P0"},
                   {"op": "wait_for", "glob": runs + "/status.txt", "contains": "identify", "timeout": 1200},
                   {"op": "kill", "pid_glob": runs + "/analyse.pid", "allow_error": True},
-                  {"op": "idle", "timeout": 300, "allow_error": True}),
+                  {"op": "idle", "timeout": 300, "allow_error": True}, SETTLE),
             alive("kill"),
             *case("esc", {"op": "mdi_start", "line": "M451 P0", "watch": ["ptt.trips"]},
                   {"op": "wait_for", "pin": "ptt.trips", "increase": LOGGED, "timeout": 600},
-                  {"op": "abort", "allow_error": True}, {"op": "idle", "timeout": 300, "allow_error": True}),
+                  {"op": "abort", "allow_error": True}, {"op": "idle", "timeout": 300, "allow_error": True}, SETTLE),
             alive("esc"),
             *case("estop", {"op": "mdi_start", "line": "M451 P0", "watch": ["ptt.trips"]},
                   {"op": "wait_for", "pin": "ptt.trips", "increase": LOGGED, "timeout": 600},
                   {"op": "estop", "allow_error": True}, {"op": "machine_on", "allow_error": True},
-                  {"op": "idle", "timeout": 300, "allow_error": True}),
+                  {"op": "idle", "timeout": 300, "allow_error": True}, SETTLE),
             alive("estop")]
 
 
 def alive(after: str) -> dict[str, Any]:
-    """The operator's next MDI lines after an abort: each must run (an abort handler left half-way would take the
-    first line's place), read as the commanded Z after each."""
+    """The operator's next MDI lines after an abort: each must run (LinuxCNC takes commands again, the abort handler
+    left nothing half-way that would get in their way), read as the commanded Z after each."""
     return {"op": "mdi", "lines": ["G0 Z61", "G0 Z62"], "read": ["axis.z.pos-cmd"], "label": f"alive-{after}"}
 
 
