@@ -328,9 +328,9 @@ def strict_loads_as_written(text: str) -> Any:
     return data
 
 
-_KEYS = st.sampled_from(["a", "b", "c", "[", "{"])
+_KEYS = st.sampled_from(["a", "b", "c", "[", "{", 'q"['])  # a quote in a key: an escape in the text
 _JSON_TEXT = st.recursive(
-    st.sampled_from(["1", "null", "true", '"x"', '"[["', "NaN", "12345678901234567890"]),
+    st.sampled_from(["1", "null", "true", '"x"', '"[["', '"a\\"["', '"\\\\"', "NaN", "12345678901234567890"]),
     lambda inner: st.one_of(
         st.lists(inner, max_size=3).map(lambda xs: "[" + ",".join(xs) + "]"),
         st.lists(st.tuples(_KEYS, inner), max_size=3).map(

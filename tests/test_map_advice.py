@@ -297,6 +297,92 @@ def test_sinumerik_enters_the_mean_of_a_map_per_direction_and_counts_it(tmp_path
         assert entered[f"C:ECC-@{theta:g}"] == pytest.approx(printed, abs=1e-6)
 
 
+@pytest.mark.parametrize(("controller", "module", "builder", "options"), [
+    ("isg", "isg_ssfk", "ssfk_table", {"isg_unit_deg": 1e-4}),
+    ("linuxcnc", "linuxcnc_comp", "comp_table", {}),
+    ("linuxcnc", "linuxcnc_kins_maps", "slot_values", {}),
+    ("siemens", "siemens_lec", "lec_table", {"machine_axes": {"C": "C1", "A": "A1"}}),
+])
+def test_the_compensation_stage_builds_each_table_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                       controller: str, module: str, builder: str,
+                                                       options: dict[str, Any]) -> None:
+    """One compensate run builds each axis' table once: the printed lines and the prediction read that object
+    (before: ISG built each list twice, LinuxCNC each COMP_FILE five times and each axis' component pins three
+    times, SINUMERIK each table twice)."""
+    import importlib
+
+    from pige_sym.compensation.controllers import ControllerOptions
+    from pige_sym.compensation.controllers.tables.positioning import PositioningMap
+    from pige_sym.compensation.parameters import load_parameters
+    from pige_sym.compensation.stage import compensate
+    from pige_sym.model.error_motions import AxisMaps
+
+    tables = importlib.import_module(f"pige_sym.compensation.controllers.tables.{module}")
+    real, built = getattr(tables, builder), []
+
+    def counting(*args: Any, **kwargs: Any) -> Any:
+        if kwargs.get("values", True):  # SINUMERIK's format check lays the grid out without values
+            table = next(a for a in args if isinstance(a, (PositioningMap, AxisMaps)))
+            built.append(table.axis if isinstance(table, PositioningMap) else table.grid.axis)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(tables, builder, counting)
+    result = compensate(load_parameters(_params_file(tmp_path)), controller=controller,
+                        options=ControllerOptions(**options))
+    assert sorted(built) == ["A", "C"], built
+    assert result.controller is not None and sorted({t.axis for t in result.controller.tables}) == ["A", "C"]
+
+
+def _zero_and_maps_file(tmp_path: Path, sigma: int) -> tuple[Path, dict[str, float], dict[str, np.ndarray]]:
+    """A parameter file that gives both mapped axes a zero-position error E (EC0C, EA0A) beside their maps φ."""
+    zeros = {"EC0C": 30.0, "EA0A": -20.0}
+    a_grid = np.arange(0.0, 90.1, 30.0)
+    phi = {"C": 6.0 * np.cos(3 * np.radians(C_GRID)) + 4.0 * np.sin(2 * np.radians(C_GRID)),
+           "A": 8.0 * np.cos(2 * np.radians(a_grid))}
+    doc = {"machine": AC, "pige": PIGE | zeros, "std": dict.fromkeys(PIGE | zeros, 0.3),
+           "axis_sense": {"A": sigma, "C": sigma},
+           "error_motions": {
+               "C": {"angle_deg": list(C_GRID), "full_turn": True,
+                     "ECC": {"value": list(phi["C"]), "std": [0.4] * 12}},
+               "A": {"angle_deg": list(a_grid), "full_turn": False,
+                     "EAA": {"value": list(phi["A"]), "std": [0.4] * 4}}}}
+    path = tmp_path / "zeros.json"
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    return path, zeros, phi
+
+
+@pytest.mark.parametrize("sigma", [1, -1])
+def test_sinumerik_enters_a_mapped_axis_zero_once_and_the_prediction_counts_it_once(tmp_path: Path, capsys: Any,
+                                                                                   sigma: int) -> None:
+    """The controller rebuilt here from its manuals: TRAORI turns rotary axis 1 (2) by the axis position minus the
+    offset angle ``$TC_CARR24 + $TC_CARR64`` (``25 + 65``; W1 "Rotary axis offset"), and the LEC drives the machine
+    axis to commanded − value, the value interpolated in the ``$AA_ENC_COMP`` table (K3 pp. 237-240).  For a
+    commanded m the axis then stands at m + e − v while TRAORI takes it at m − o: the two printed entries correct
+    σ·(v − o) of the axis' error E + φ (CONVENTIONS §9-§10).  Before, E was in both (the table held σ(E + φ)): 2E."""
+    from test_table_positioning import siemens_tables, siemens_value
+
+    params, zeros, phi = _zero_and_maps_file(tmp_path, sigma)
+    args = ["--controller", "siemens", "--machine-axis", "C=C1", "--machine-axis", "A=A1", "--enter", "all"]
+    choices = _choices(capsys, params, *args)
+    assert main(["compensate", "--params", str(params), *args]) == 0
+    text = capsys.readouterr().out
+    axis_one = re.search(r"rotary axis 1 = ([AC]) ", text).group(1)  # type: ignore[union-attr]
+    offsets = {k: float(v) for k, v in re.findall(r"^\$TC_CARR(6[45])\[1\]=\$TC_CARR6[45]\[1\]([+-][\d.]+)$", text,
+                                                  flags=re.M)}
+    tables = siemens_tables(text[: text.index("\nM17") + 4])  # the advice lines follow the program
+    model = choices["the swivel data record and the $AA_ENC_COMP tables"]["entered"]
+    urad = math.pi / 180 * 1e6
+    for axis, grid in (("C", C_GRID), ("A", np.arange(0.0, 90.1, 30.0))):
+        offset = offsets["64" if axis == axis_one else "65"]
+        zero = f"E{axis}0{axis}"
+        for k, theta in enumerate(grid):
+            corrected = sigma * (siemens_value(tables[f"{axis}1"], sigma * theta) - offset) * urad
+            assert corrected == pytest.approx(zeros[zero] + phi[axis][k], abs=0.01), (axis, theta)  # E once
+            counted = model.get(zero, 0.0) + model[f"{axis}:E{axis}{axis}@{theta:g}"]
+            assert counted == pytest.approx(corrected, abs=0.01), (axis, theta)  # the prediction counts that
+    assert "is entered by the swivel data record's offset angle ($TC_CARR64/65), not by this table" in text
+
+
 # -------------------------------------------------------------------------------------- item 6: tolerance names
 
 def test_a_tolerance_applies_to_every_accepted_harmonic_of_its_effect(tmp_path: Path) -> None:

@@ -135,19 +135,22 @@ def test_every_verdict_state_says_what_to_do_next(readme_report: tuple[Path, str
     folder, html = readme_report
     what, _, commands = _next_step(html)  # FAIL: correct with the estimate used, measure again, compare
     assert what.startswith("Out of tolerance (EY0C): correct the machine with the estimate this report used")
-    assert commands[:2] == [f"pige diagnose {folder / 'run.csv'} --json > diagnosis.json",
-                            f"pige compensate {folder / 'rtest.mpf'} --params diagnosis.json --out "
-                            f"{folder / 'rtest_comp.mpf'}"] and commands[2].startswith("pige compare ")
+    assert commands == [f"pige diagnose {folder / 'run.csv'} --json > diagnosis.json",
+                        f"pige compensate {folder / 'rtest.mpf'} --params diagnosis.json --out "
+                        f"{folder / 'rtest_comp.mpf'}"]  # the measurement after it is named in words
+    assert "then measure the same test again and compare the two files (pige compare, this file first)" in what
     what, _, commands = _next_step(render_html(gather_report([folder / "run.csv"])))  # not judged
-    assert what.startswith("Judge the estimate") and commands[0].startswith("pige check ")
+    assert what.startswith("Judge the estimate against your tolerances (pige check this file with --tolerances")
+    assert commands == [f"pige diagnose {folder / 'run.csv'} --json > diagnosis.json",
+                        "pige compensate --params diagnosis.json --controller table"]
     assert main(["simulate", "--machine", AC, "--pige", "EX0C=0.4,EY0C=-0.3,EB0A=2", "--seed", "2", "--out",
                  str(tmp_path / "after.csv")]) == 0
     what, _, commands = _next_step(render_html(gather_report([tmp_path / "after.csv"], tolerances=TOLERANCES)))
-    assert what.startswith("In tolerance: nothing to correct") and commands[0].startswith("pige history add ")
+    assert what.startswith("In tolerance: nothing to correct") and "(pige history add this file" in what
+    assert commands == []  # the machine's name in a history is the user's: said in words
     compare = render_html(gather_report([], compare=(folder / "run.csv", tmp_path / "after.csv")))
     what, _, commands = _next_step(compare)
-    assert "removed 97% of the RMS deviation" in what and commands == [f"pige check {tmp_path / 'after.csv'} "
-                                                                       "--tolerances TOL.json"]
+    assert "removed 97% of the RMS deviation" in what and commands == [f"pige diagnose {tmp_path / 'after.csv'}"]
 
 
 def test_an_undecided_rtest_verdict_names_the_test_that_decides_it(readme_report: tuple[Path, str], tmp_path: Path,
@@ -210,15 +213,16 @@ def test_a_history_report_says_what_to_do_next(readme_report: tuple[Path, str], 
     assert main(["report", "--history", "M-5", "--db", db, "--out", str(tmp_path / "h")]) == 0
     what, _, commands = _next_step((tmp_path / "h" / "report.html").read_text(encoding="utf-8"))
     assert "changed in the last run: measure again to confirm before acting" in what and "EY0C" in what
-    assert commands == ["pige history add NEXT.csv --machine-id M-5"]
+    assert "and add it to this history (pige history add, --machine-id M-5)" in what and commands == []
 
 
 def test_the_ballbar_next_step_runs(ballbar_report: tuple[list[str], str], tmp_path: Path,
                                     capsys: pytest.CaptureFixture[str]) -> None:
-    """The joint section's advice: compensate from `pige diagnose FILES --json` (before, compensate refused the
-    joint JSON's keys: 'unknown key agreement')."""
+    """The joint section's advice: compensate from `pige diagnose F1 F2 … --json` (before, compensate refused the
+    joint JSON's keys: 'unknown key agreement'); the commands are printed with the files' names
+    (tests/test_report_commands.py runs them)."""
     files, html = ballbar_report
-    assert "pige compensate PROGRAM --params joint.json (with pige diagnose FILES --json &gt; joint.json)" in html
+    assert f'<code class="cmd">pige diagnose {" ".join(files)} --json &gt; diagnosis.json</code>' in html
     capsys.readouterr()
     assert main(["diagnose", *files, "--json"]) == 0
     (tmp_path / "joint.json").write_text(capsys.readouterr().out)

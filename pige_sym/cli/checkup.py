@@ -16,17 +16,34 @@ from typing import Any
 from pige_sym.cli.history import DB_HELP
 
 
+def _check_controller_options(args: argparse.Namespace) -> None:
+    """The controller's options each read by ``--controller`` (as ``pige compensate`` checks them: each controller
+    module's ``OPTIONS``), none without it."""
+    from pige_sym.cli.compensate import given_controller_options
+    from pige_sym.compensation.controllers import check_options
+    from pige_sym.errors import InputError
+
+    given = given_controller_options(args)
+    if args.controller:
+        check_options(args.controller, given)
+    elif given:
+        raise InputError(f"{given[0]} goes with --controller (the changes printed as that controller's entries): "
+                         "leave it out, or give --controller")
+
+
 def _options(args: argparse.Namespace) -> Any:
     from pige_sym.cli.compensate import _max_change
     from pige_sym.verdict.checkup.routine import CheckupOptions
 
+    _check_controller_options(args)
     current = None
     if args.current:
         from pige_sym.compensation.controllers.hal_config import read_current
 
         current = read_current(args.current)
     return CheckupOptions(args.tolerances, args.rule, args.k, args.alpha, args.pige, args.corrected, args.date,
-                          args.controller, current, args.carrier, args.heidenhain_trans, _max_change(args.max_change))
+                          args.controller, current, 1 if args.carrier is None else args.carrier, args.heidenhain_trans,
+                          _max_change(args.max_change))
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -37,7 +54,8 @@ def _run(args: argparse.Namespace) -> int:
 
     if not args.machine_id.strip():
         raise InputError("--machine-id must not be empty")
-    result = run_checkup(open_history(args.db), args.file, args.machine_id, _options(args))
+    options = _options(args)  # checked before the history is opened
+    result = run_checkup(open_history(args.db), args.file, args.machine_id, options)
     print(to_json(result.to_dict()) if args.json else format_checkup(result))
     return result.exit_status
 
@@ -179,7 +197,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--controller", choices=list(controller_names()), help="print the changes as this controller's "
                                                                            "entries (as pige compensate --controller)")
     p.add_argument("--current", help="LinuxCNC: today's trt pins (PIN=VALUE,... or the INI/HAL file)")
-    p.add_argument("--carrier", type=int, default=1, help="Siemens swivel data record (default %(default)s)")
+    p.add_argument("--carrier", type=int, help="Siemens swivel data record (default 1)")
     p.add_argument("--heidenhain-trans", choices=["position", "shift"], help="Heidenhain: what a Trans row holds")
     p.add_argument("--max-change", default="0.2,0.1", metavar="MM[,DEG]",
                    help="largest change entered (default %(default)s, as pige compensate)")

@@ -145,14 +145,17 @@ CONTROLLER_OPTIONS = {"--carrier": "carrier", "--heidenhain-trans": "heidenhain_
                       "--comp-dir": "comp_dir"}
 
 
-def _given(args: argparse.Namespace) -> list[str]:
-    return [option for option, attr in CONTROLLER_OPTIONS.items() if getattr(args, attr) is not None]
+def given_controller_options(args: argparse.Namespace) -> list[str]:
+    """The options of :data:`CONTROLLER_OPTIONS` given on the command line (``pige compensate``, ``pige checkup``:
+    a command without one of them has none given)."""
+    return [option for option, attr in CONTROLLER_OPTIONS.items() if getattr(args, attr, None) is not None]
 
 
 def _no_controller_options(args: argparse.Namespace) -> None:
     """The NC rewrite reads none of the controllers' options (``--current``, ``--comp-dir``: their own messages), nor
     ``--travel`` (it judges the program's own poses)."""
-    extra = [o for o in _given(args) if o not in ("--current", "--comp-dir")] + (["--travel"] if args.travel else [])
+    extra = ([o for o in given_controller_options(args) if o not in ("--current", "--comp-dir")]
+             + (["--travel"] if args.travel else []))
     if extra:
         raise InputError(f"{extra[0]} goes with --controller (the controller's entries), not with the NC rewrite: "
                          "leave it out, or give --controller")
@@ -163,7 +166,7 @@ def _controller_options(args: argparse.Namespace, current: Any, max_change: tupl
     from pige_sym.compensation.controllers import ControllerOptions, check_options
     from pige_sym.compensation.controllers.entry_checks import ChangeLimits
 
-    check_options(args.controller, _given(args))
+    check_options(args.controller, given_controller_options(args))
     return ControllerOptions(carrier=1 if args.carrier is None else args.carrier, current=current,
                              heidenhain_trans=args.heidenhain_trans, machine_axes=_machine_axes(args),
                              isg_unit_deg=args.isg_unit_deg, limits=ChangeLimits(*max_change))

@@ -44,9 +44,9 @@ def run_numbers(runs: list[Any]) -> dict[int, int]:
 
 def history_comparisons(runs: list[Any], alpha: float) -> list[Any]:
     """Comparisons of consecutive runs."""
-    from pige_sym.verdict.history import compare_runs
+    from pige_sym.verdict.history.changes import compare_consecutive
 
-    return [compare_runs(a, b, alpha=alpha, from_run=a.id, to_run=b.id) for a, b in zip(runs, runs[1:], strict=False)]
+    return compare_consecutive(runs, alpha=alpha)
 
 
 def _num(x: float | None, fmt: str = ".3f") -> str:

@@ -15,11 +15,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from pige_sym.compensation.covariance import BlockCovariance
+
 #: A value beside another is named as the reason when their correlation is at least this.
 CORRELATED = 0.3
 
 
-def why_entered(i: int, names: Sequence[str], estimate: np.ndarray, covariance: np.ndarray,
+def why_entered(i: int, names: Sequence[str], estimate: np.ndarray, covariance: np.ndarray | BlockCovariance,
                 entered: np.ndarray, unit: str = "") -> str:
     """Why value ``i`` is entered as ``entered[i]`` (module docstring), in plain words.
 
@@ -28,12 +30,13 @@ def why_entered(i: int, names: Sequence[str], estimate: np.ndarray, covariance: 
     i : int
     names : sequence of str
     estimate, entered : (q,) [µm, µrad]
-    covariance : (q, q)
+    covariance : (q, q) or BlockCovariance
     unit : str
         Of value ``i``, for the text.
     """
     x, c = float(estimate[i]), float(entered[i])
-    std = math.sqrt(max(float(covariance[i, i]), 0.0))
+    row = _row(covariance, i)
+    std = math.sqrt(max(float(row[i]), 0.0))
     said = f"{x:+.4g} ± {std:.2g}{(' ' + unit) if unit else ''}"
     if c == 0.0:
         return f"not entered: the data do not show it beyond its uncertainty ({said})"
@@ -50,16 +53,22 @@ def why_entered(i: int, names: Sequence[str], estimate: np.ndarray, covariance: 
             f"{partners}; with those as entered, the same data put it at {c:+.4g}")
 
 
-def _weighed_down_beside(i: int, names: Sequence[str], estimate: np.ndarray, covariance: np.ndarray,
-                         entered: np.ndarray) -> list[tuple[int, float]]:
+def _row(covariance: np.ndarray | BlockCovariance, i: int) -> np.ndarray:
+    """Row ``i`` of the covariance, shape=(q,)."""
+    return covariance.row(i) if isinstance(covariance, BlockCovariance) else np.asarray(covariance, dtype=float)[i]
+
+
+def _weighed_down_beside(i: int, names: Sequence[str], estimate: np.ndarray,
+                         covariance: np.ndarray | BlockCovariance, entered: np.ndarray) -> list[tuple[int, float]]:
     """The values correlated with ``i`` (|ρ| ≥ :data:`CORRELATED`) that are not entered as estimated, strongest
     first, as (index, correlation)."""
-    sd = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    sd = np.sqrt(np.clip(np.asarray(covariance.diagonal(), dtype=float), 0.0, None))
+    row = _row(covariance, i)
     out = []
     for j in range(len(names)):
-        if j == i or sd[i] == 0 or sd[j] == 0:
+        if j == i or sd[i] == 0 or sd[j] == 0 or row[j] == 0:
             continue
-        rho = float(covariance[i, j] / (sd[i] * sd[j]))
+        rho = float(row[j] / (sd[i] * sd[j]))
         moved = entered[j] == 0.0 or abs(entered[j] - estimate[j]) > 0.05 * abs(estimate[j])
         if abs(rho) >= CORRELATED and moved:
             out.append((j, rho))

@@ -12,8 +12,9 @@ What it holds:
   entered values): what every controller's entries and the NC rewrite are made from;
 - the **program** (:class:`ProgramCorrection`): the corrected text, its change report and the compensated poses;
 - the **controller** (:class:`ControllerEntries`): the printed entries, in sections a user pastes whole (or
-  writes as files), and per way of entering them (:class:`EntryChoice`) exactly the values the printed lines
-  carry and the error they leave;
+  writes as files), the compensation tables they print (built once), and per way of entering them
+  (:class:`EntryChoice`) exactly the values the printed lines carry, read from those tables, and the error they
+  leave;
 - **undetermined** values (no number in the parameter file) with why and what would determine them, and
   **advice** in plain words (:mod:`~pige_sym.compensation.advice`);
 - for poses given without a program (the report's measured trajectory), the **corrected poses**.
@@ -112,6 +113,10 @@ class ControllerEntries:
         The parameters holding those values: what the entries are made from.
     complete : ErrorPrediction or None
         The error left by every entered value (the NC rewrite).
+    tables : list
+        The controller's compensation tables (error maps) as built once by the stage: the printed lines and the
+        values ``choices`` count are both read from them (LinuxCNC ``CompTable``, ISG ``SsfkList``, SINUMERIK
+        ``LecTable``; empty for a controller without tables).
     """
 
     name: str
@@ -122,6 +127,7 @@ class ControllerEntries:
     weighing: Weighing
     entered_parameters: CompensationParameters
     complete: ErrorPrediction | None = None
+    tables: list[Any] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "choices": [c.to_dict() for c in self.choices],

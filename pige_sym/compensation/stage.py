@@ -144,7 +144,8 @@ def _decide(weighing: Weighing, enter: str, decided: Decision | None) -> Weighin
 def _controller(params: CompensationParameters, name: str, options: ControllerOptions,
                 travel: Mapping[str, tuple[float, float]] | None, enter: str,
                 decided: Decision | None) -> ControllerEntries:
-    """Weigh over the travel, compute what each way of entering carries and leaves, render the entries."""
+    """Weigh over the travel, build the controller's tables once, compute what each way of entering carries and
+    leaves from them, render the entries (from the same tables and, by target file, the same sections)."""
     from pige_sym.compensation.controllers.scope import controller_scope
 
     module = get_controller(name)
@@ -152,12 +153,15 @@ def _controller(params: CompensationParameters, name: str, options: ControllerOp
     weighing = _decide(weigh(params, travel_poses(params, dict(travel or {}))), enter, decided)
     entered = with_entered(params, weighing)
     check_before_writing(entered, name, options=options)  # and the values entered
-    scope = controller_scope(entered, name, options)
-    rendered = dataclasses.replace(options, scope=scope)
-    text = str(module.render(entered, rendered))
+    tables = list(getattr(module, "tables", lambda _p, _o: [])(entered, options))  # built once: printed and counted
+    built = dataclasses.replace(options, tables=tables)
+    scope = controller_scope(entered, name, built)
+    rendered = dataclasses.replace(built, scope=scope)
     sections = list(getattr(module, "sections", lambda _p, _o: [])(entered, rendered))
+    render_sections = getattr(module, "render_sections", None)
+    text = str(render_sections(sections) if render_sections is not None else module.render(entered, rendered))
     return ControllerEntries(name, text, sections, scope.choices, scope.not_representable, weighing, entered,
-                             scope.complete)
+                             scope.complete, tables)
 
 
 def _poses(params: CompensationParameters, req: PosesRequest, enter: str,

@@ -35,6 +35,9 @@ from typing import Any
 
 import numpy as np
 
+from pige_sym.compensation.covariance import BlockCovariance, as_blocks
+from pige_sym.compensation.covariance import correlated_groups as _correlated_groups  # noqa: F401 (its tests)
+from pige_sym.compensation.draws import DRAWS, Draws, ErrorPrediction  # noqa: F401 (DRAWS: the rule's constant)
 from pige_sym.compensation.entry_words import why_entered
 from pige_sym.compensation.kinematics import raw_offset
 from pige_sym.compensation.parameters import AngleExtension, CompensationParameters, extension_prefixes
@@ -42,8 +45,6 @@ from pige_sym.constants import DEFAULT_BALL_MM, DEFAULT_TILT_TRAVEL_DEG
 from pige_sym.kernels import load_kernels
 from pige_sym.model.trajectories import approach_directions
 
-#: Draws of the parameters for the predicted error (fixed seed: the same file gives the same numbers).
-DRAWS = 4000
 #: Poses at most: a longer program is judged on this many, evenly spaced along it.
 MAX_POSES = 20000
 #: Grid step of the travel poses [deg].
@@ -56,22 +57,6 @@ NOT_HERE = "not representable in this controller (below); weighed for the NC rew
 RULE = ("posterior mean under a prior N(0, diag(tau^2)) whose variances the estimates and their covariance "
         "determine (tau^2 = max(x^2 - std^2, 0) for an uncorrelated value): what the data do not show is not "
         "entered, a well-determined value is entered as estimated")
-
-
-@dataclass(frozen=True)
-class ErrorPrediction:
-    """Predicted RMS tool-point error over the judged poses [µm]: expected value and 95 % bound."""
-
-    expected_um: float
-    p95_um: float
-
-    def to_dict(self) -> dict[str, float]:
-        return {"expected": self.expected_um, "p95": self.p95_um}
-
-    def text(self) -> str:
-        if self.p95_um == self.expected_um:
-            return f"{self.expected_um:.2f} um (if the values were exact: no uncertainty stated)"
-        return f"{self.expected_um:.2f} um (95 % <= {self.p95_um:.2f})"
 
 
 @dataclass(frozen=True)
@@ -126,16 +111,17 @@ class Weighing:
     rule: str = RULE
     covariance_from: str = "covariance"
     notes: list[str] = field(default_factory=list)
-    covariance: np.ndarray | None = field(default=None, repr=False)
-    moments: np.ndarray | None = field(default=None, repr=False)
+    covariance: BlockCovariance | None = field(default=None, repr=False)
+    moments: Any = field(default=None, repr=False)
+    draws: Draws | None = field(default=None, repr=False)
 
     def predicted_for(self, values: dict[str, float]) -> ErrorPrediction | None:
         """The RMS tool-point error left by entering ``values`` (others not entered) on the judged poses."""
-        if self.covariance is None or self.moments is None:
+        if self.draws is None:
             return None
         names = list(self.estimate)
         est = np.array([self.estimate[n] for n in names])
-        return predict(est, self.covariance, self.moments, np.array([values.get(n, 0.0) for n in names]))
+        return self.draws.left(est - np.array([values.get(n, 0.0) for n in names]))
 
     def rows(self) -> list[str]:
         """What is entered other than as estimated, one line per value or map (:func:`weighing_rows`)."""
@@ -149,32 +135,32 @@ class Weighing:
                 "predicted_all_estimates_um": pred.get("all_estimates"), "notes": list(self.notes)}
 
 
-def entered_values(estimate: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+def entered_values(estimate: np.ndarray, covariance: np.ndarray | BlockCovariance) -> np.ndarray:
     """The values to enter, shape=(q,) [µm, µrad]: ``c = T (T + Σ)⁻¹ x̂`` with T of :func:`prior_variances`.
 
     Parameters
     ----------
     estimate : (q,) [µm, µrad]
-    covariance : (q, q)
-        Positive semi-definite, its diagonal positive (a singular one as :func:`regular` makes it).
+    covariance : (q, q) or BlockCovariance
+        Positive semi-definite, its diagonal positive (a singular one as :func:`regular` makes it); solved group by
+        group of correlated values.
     """
     x = np.asarray(estimate, dtype=float)
-    cov = regular(np.asarray(covariance, dtype=float))
-    tau2 = prior_variances(x, cov)
-    return np.where(tau2 > 0, tau2 * np.linalg.solve(np.diag(tau2) + cov, x), 0.0)
+    blocks = regular(covariance)
+    tau2 = prior_variances(x, blocks)
+    return np.where(tau2 > 0, tau2 * blocks.solve_shifted(tau2, x), 0.0)
 
 
-def regular(covariance: np.ndarray) -> np.ndarray:
+def regular(covariance: np.ndarray | BlockCovariance) -> BlockCovariance:
     """``covariance`` if positive definite, else with :data:`SINGULAR_RIDGE` of each variance added to its diagonal:
-    a combination stated as known exactly is taken as known to 3e-5 of its values' standard errors."""
-    try:
-        np.linalg.cholesky(covariance)
-    except np.linalg.LinAlgError:
-        return np.asarray(covariance + np.diag(SINGULAR_RIDGE * np.diag(covariance)))
-    return covariance
+    a combination stated as known exactly is taken as known to 3e-5 of its values' standard errors (the whole
+    matrix is positive definite when each of its groups is: each group is checked, the ridge goes to every one)."""
+    blocks = as_blocks(covariance)
+    return blocks if blocks.positive_definite() else blocks.ridged(SINGULAR_RIDGE)
 
 
-def prior_variances(estimate: np.ndarray, covariance: np.ndarray, *, sweeps: int = 500) -> np.ndarray:
+def prior_variances(estimate: np.ndarray, covariance: np.ndarray | BlockCovariance, *, sweeps: int = 500,
+                    ) -> np.ndarray:
     """τ² that maximise the evidence ``N(x̂; 0, Σ + diag τ²)`` one at a time (type-II maximum likelihood), shape=(q,).
 
     Coordinate ascent with each coordinate's exact maximum (Tipping & Faul 2003, "Fast marginal likelihood
@@ -189,35 +175,11 @@ def prior_variances(estimate: np.ndarray, covariance: np.ndarray, *, sweeps: int
     with each other are solved apart.
     """
     x = np.asarray(estimate, dtype=float)
-    cov = np.asarray(covariance, dtype=float)
-    tau2 = np.clip(x**2 - np.diag(cov), 0.0, None)
-    for group in _correlated_groups(cov):
-        if group.size > 1:
-            tau2[group] = _coordinate_ascent(x[group], cov[np.ix_(group, group)], tau2[group], sweeps)
+    blocks = as_blocks(covariance)
+    tau2 = np.clip(x**2 - blocks.diagonal(), 0.0, None)
+    for group, block in blocks.groups:
+        tau2[group] = _coordinate_ascent(x[group], block, tau2[group], sweeps)
     return tau2
-
-
-def _correlated_groups(cov: np.ndarray) -> list[np.ndarray]:
-    """Index groups of the estimates that are correlated (connected through non-zero covariances), each sorted,
-    in the order of their first index (``scipy.sparse.csgraph.connected_components``' groups, without its 0.4 s
-    import on ``pige checkup``'s path: the matrices here are a few dozen rows)."""
-    linked = np.abs(cov) > 0
-    linked |= linked.T
-    seen = np.zeros(len(cov), dtype=bool)
-    groups = []
-    for start in range(len(cov)):
-        if seen[start]:
-            continue
-        member = np.zeros(len(cov), dtype=bool)
-        member[start] = True
-        while True:
-            grown = member | linked[member].any(axis=0)
-            if (grown == member).all():
-                break
-            member = grown
-        seen |= member
-        groups.append(np.flatnonzero(member))
-    return groups
 
 
 def _log_evidence(x: np.ndarray, cov: np.ndarray, tau2: np.ndarray) -> float:
@@ -269,8 +231,10 @@ def _slope_left(x: np.ndarray, cov: np.ndarray, tau2: np.ndarray, scale: np.ndar
     return float(np.max(np.where(tau2 > 0, np.abs(slope), slope)))
 
 
-def error_moments(params: CompensationParameters, names: list[str], poses: JudgedPoses) -> np.ndarray:
-    """``M = Dᵀ D / n`` of the tool-point error per unit parameter over the poses, shape=(q, q).
+def error_moments(params: CompensationParameters, names: list[str], poses: JudgedPoses) -> Any:
+    """``M = Dᵀ D / n`` of the tool-point error per unit parameter over the poses, shape=(q, q): an array, or with
+    maps a ``scipy.sparse.csr_array`` (a map value acts only near its grid angle: :mod:`~pige_sym.compensation.
+    map_moments`).
 
     ``(x − c)ᵀ M (x − c)`` is the mean square tool-point error [µm²] left by entering ``c``.
     """
@@ -278,12 +242,10 @@ def error_moments(params: CompensationParameters, names: list[str], poses: Judge
     pivots = {a: np.asarray(v, dtype=float) for a, v in params.pivots_mm.items()} or None
     a, pts = poses.angles_deg, poses.points_mm
     by_name = dict(_effect_columns(params.extensions))
-    maps = _map_columns(params, kern, poses, pivots)
+    maps = params.error_maps.values() if params.error_maps is not None else {}
+    plain = [name for name in names if name not in maps]
     cols = []
-    for name in names:
-        if name in maps:
-            cols.append(maps[name].reshape(-1))
-            continue
+    for name in plain:
         p = np.zeros((a.shape[0], len(kern.PARAMETERS)))
         if name in by_name:
             ext, key = by_name[name]
@@ -295,20 +257,12 @@ def error_moments(params: CompensationParameters, names: list[str], poses: Judge
             p[:, kern.PARAMETERS.index(name)] = 1.0
         cols.append(raw_offset(kern, a, pts, p, pivots, params.tool_mm).reshape(-1))
     d = np.stack(cols, axis=1) if cols else np.zeros((3 * a.shape[0], 0))
-    return np.asarray(d.T @ d / max(a.shape[0], 1))
+    if len(plain) == len(names):
+        return np.asarray(d.T @ d / max(a.shape[0], 1))
+    from pige_sym.compensation.map_moments import map_design, sparse_moments
 
-
-def _map_columns(params: CompensationParameters, kern: Any, poses: JudgedPoses,
-                 pivots: dict | None) -> dict[str, np.ndarray]:
-    """Tool-point error per unit map value at each pose, name → (n, 3) [µm per µm or µrad]."""
-    if params.error_maps is None or not poses.angles_deg.shape[0]:
-        return {}
-    a, pts = poses.angles_deg, poses.points_mm
-    names, weights, comps = params.error_maps.value_columns(kern, a, poses.approach)
-    base = kern.motion_jacobian(a, np.zeros(3), pivots, params.tool_mm)
-    per_point = base + sum(pts[:, j, None, None] * (kern.motion_jacobian(a, e, pivots, params.tool_mm) - base)
-                           for j, e in enumerate(np.eye(3)))
-    return {n: per_point[:, :, comps[i]] * weights[:, i, None] for i, n in enumerate(names)}
+    map_names, map_part = map_design(params, kern, poses, pivots)
+    return sparse_moments(d, plain, map_part, map_names, names, a.shape[0])
 
 
 def _effect_columns(extensions: list[AngleExtension]) -> list[tuple[str, tuple[AngleExtension, str]]]:
@@ -317,15 +271,11 @@ def _effect_columns(extensions: list[AngleExtension]) -> list[tuple[str, tuple[A
             for k in e.params]
 
 
-def predict(estimate: np.ndarray, covariance: np.ndarray, moments: np.ndarray, entered: np.ndarray,
+def predict(estimate: np.ndarray, covariance: np.ndarray | BlockCovariance, moments: Any, entered: np.ndarray,
             seed: int = 0) -> ErrorPrediction:
-    """RMS tool-point error left by ``entered`` for parameters drawn from N(estimate, covariance) [µm]."""
-    rng = np.random.default_rng(seed)
-    vals, vecs = np.linalg.eigh(covariance)
-    root = vecs * np.sqrt(np.clip(vals, 0.0, None))
-    left = (estimate - entered)[None, :] + rng.standard_normal((DRAWS, estimate.size)) @ root.T
-    rms = np.sqrt(np.clip(np.einsum("si,ij,sj->s", left, moments, left), 0.0, None))
-    return ErrorPrediction(float(rms.mean()), float(np.quantile(rms, 0.95)))
+    """RMS tool-point error left by ``entered`` for parameters drawn from N(estimate, covariance) [µm]
+    (:class:`~pige_sym.compensation.draws.Draws`: to predict several corrections, keep one)."""
+    return Draws(covariance, moments, seed).left(np.asarray(estimate, dtype=float) - np.asarray(entered, dtype=float))
 
 
 def weigh(params: CompensationParameters, poses: JudgedPoses) -> Weighing:
@@ -345,13 +295,14 @@ def weigh(params: CompensationParameters, poses: JudgedPoses) -> Weighing:
     undetermined: dict[str, float | None] = {n: None for n in params.set_to_zero}
     notes = [f"the error left is not predicted: {no_tool}"] if no_tool else []
     if cov is None:
-        cov = np.zeros((len(names), len(names)))
+        cov = BlockCovariance(len(names), (), np.arange(len(names)), np.zeros(len(names)))
         entered, std, source = values, {}, "none"
         why = {n: "entered as given: the file states no uncertainty" for n in names}
         notes.append("the parameter file states no standard errors: nothing is weighed, and the errors are "
                      "predicted as if its values were exact (pige identify --json writes them)")
     else:
-        std = {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(names)}
+        variance = cov.diagonal()
+        std = {n: float(np.sqrt(variance[i])) for i, n in enumerate(names)}
         entered = entered_values(values, cov)
         why = {n: why_entered(i, names, values, cov, entered, params.units.get(n, "")) for i, n in enumerate(names)}
         if source != "covariance":
@@ -361,43 +312,51 @@ def weigh(params: CompensationParameters, poses: JudgedPoses) -> Weighing:
             notes.append("the PIGEs are weighed with their covariance, each map value by its own standard error (the "
                          "maps' covariance is singular: the §10 projection leaves their left-out functions no "
                          "variance)")
-    predicted = {} if moments is None else {
-        "none": predict(values, cov, moments, np.zeros_like(values)), "entered": predict(values, cov, moments, entered)}
-    if moments is not None and source != "none":
-        predicted["all_estimates"] = predict(values, cov, moments, values)
+    draws = None if moments is None else Draws(cov, moments)
+    predicted = {} if draws is None else {"none": draws.left(values), "entered": draws.left(values - entered)}
+    if draws is not None and source != "none":
+        predicted["all_estimates"] = draws.left(np.zeros_like(values))
     chosen: dict[str, float | None] = {n: float(v) for n, v in zip(names, entered, strict=True)}
     return Weighing(est, std, chosen | undetermined,
                     why | {n: "not determined by the data: not entered" for n in undetermined}, predicted,
-                    poses.description, covariance_from=source, notes=notes, covariance=cov, moments=moments)
+                    poses.description, covariance_from=source, notes=notes, covariance=cov, moments=moments,
+                    draws=draws)
 
 
-def _covariance(params: CompensationParameters, names: list[str]) -> tuple[np.ndarray | None, str]:
-    """The estimates' covariance: the file's for the PIGEs and effects (``pige identify --map --json`` writes it with
-    the maps), the map values' standard errors as uncorrelated ones (their covariance is singular: the §10
+def _covariance(params: CompensationParameters, names: list[str]) -> tuple[BlockCovariance | None, str]:
+    """The estimates' covariance as blocks: the file's for the PIGEs and effects (``pige identify --map --json`` writes
+    it with the maps), the map values' standard errors as uncorrelated ones (their covariance is singular: the §10
     projection leaves the left-out functions no variance, and a singular Σ + T has no evidence to maximise); None
     when any value has no uncertainty."""
     maps = set(params.error_maps.values()) if params.error_maps is not None else set()
     plain = [n for n in names if n not in maps]
     cov, source = params.covariance_of(plain)
-    if not maps or cov is None:
-        return cov, source
-    std = []
-    for n in names:
-        if n in maps:
-            axis, rest = n.split(":", 1)
-            motion, angle = rest.split("@")
-            grid = params.error_maps.axes[axis].grid.angles_deg
-            g = int(np.flatnonzero(np.isclose(grid, float(angle)))[0])
-            s = params.error_map_std.get(axis, {}).get(motion, ())
-            std.append(s[g] if g < len(s) else np.nan)
-    if not all(np.isfinite(x) and x > 0 for x in std):
+    if cov is None:
+        return None, source
+    blocks = BlockCovariance.from_dense(cov)
+    if len(plain) == len(names):
+        return blocks, source
+    stds = _map_std(params)
+    index = {n: k for k, n in enumerate(names)}
+    mapped = [n for n in names if n in maps]
+    std = np.array([stds.get(n, np.nan) for n in mapped])
+    if not (np.isfinite(std) & (std > 0)).all():
         return None, "none"
-    out = np.zeros((len(names), len(names)))
-    idx = [names.index(n) for n in plain]
-    out[np.ix_(idx, idx)] = cov
-    midx = [names.index(n) for n in names if n in maps]
-    out[midx, midx] = np.square(std)
-    return out, source
+    return BlockCovariance.with_singles(blocks, np.array([index[n] for n in plain], dtype=int),
+                                        np.array([index[n] for n in mapped], dtype=int), np.square(std),
+                                        len(names)), source
+
+
+def _map_std(params: CompensationParameters) -> dict[str, float]:
+    """Each map value's standard error, by its name (:meth:`~pige_sym.model.error_motions.ErrorMaps.values`); NaN
+    where the file gives none."""
+    out = {}
+    for axis, m in params.error_maps.axes.items():
+        for motion in m.values:
+            s = params.error_map_std.get(axis, {}).get(motion, ())
+            for g, angle in enumerate(m.grid.angles_deg):
+                out[f"{axis}:{motion}@{angle:g}"] = float(s[g]) if g < len(s) and s[g] is not None else np.nan
+    return out
 
 
 def every_estimate(weighing: Weighing) -> Weighing:

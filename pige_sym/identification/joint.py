@@ -28,7 +28,7 @@ import numpy as np
 
 from pige_sym.errors import IdentificationError, InputError
 from pige_sym.identification.instruments import instrument, whitened_rows
-from pige_sym.identification.problem import ExtraColumns, build_problem
+from pige_sym.identification.problem import ExtraColumns, design_rows
 from pige_sym.identification.result import IdentificationResult, json_float, not_identifiable
 from pige_sym.identification.spectrum import observability, solve_scaled
 from pige_sym.kernels import load_kernels
@@ -92,14 +92,13 @@ def _pige_names(machine: str, with_zero: bool) -> tuple[list[str], list[int]]:
 def measurement_block(m: Measurement, label: str, with_zero: bool, extra: ExtraColumns | None = None) -> Block:
     """The block of an R-test or probe measurement (full 3-D projection, every row but the reference); ``extra``
     columns (all rows, zeroed) follow the PIGEs'."""
-    prob = build_problem(m, "xyz", with_zero=with_zero, extra=extra, explicit=True)
-    assert prob.design is not None and prob.data is not None
+    design, data, rows = design_rows(m, with_zero=with_zero, extra=extra)  # no (P + q)² normal matrix
     if instrument(m) == "rtest":
-        a = prob.design[prob.rows].reshape(-1, prob.design.shape[2])
-        y = prob.data[prob.rows].reshape(-1)
+        a = design[rows].reshape(-1, design.shape[2])
+        y = data[rows].reshape(-1)
     else:
         rot = load_kernels(m.machine).workpiece_rotation(m.angles_deg)
-        a, y = whitened_rows(m, prob.design, prob.data, rot, prob.rows)
+        a, y = whitened_rows(m, design, data, rot, rows)
     return Block(label, instrument(m), a, y, np.zeros((y.size, 0)), [])
 
 

@@ -56,13 +56,20 @@ def local_check(blocks: list[Any], sigmas: list[float], p: int,
     a = np.vstack([b.design[:, p:] / s for b, s in zip(blocks, sigmas, strict=True)])
     kept = np.ones(len(layout.columns), dtype=bool)
     out: list[Undetermined] = []
+    at_angle: dict[tuple[str, int], list[int]] = {}  # each grid angle's columns, found in one pass
+    for j, (m, g) in enumerate(layout.columns):
+        at_angle.setdefault((m.axis, g), []).append(j)
     for ax, grid in layout.grids.items():
+        coarse: list[float | None] = []  # the files' own step, found once per axis (at its first unseen angle)
         for g in range(grid.n):
-            idx = [j for j, (m, gg) in enumerate(layout.columns) if m.axis == ax and gg == g]
+            idx = at_angle.get((ax, g), [])
             cols = a[:, idx]
             if not np.any(cols):
                 kept[idx] = False
-                out.append(Undetermined(f"{ax} maps", float(grid.angles_deg[g]), *_no_pose(ax, grid, g, layout)))
+                if not coarse:
+                    coarse.append(measured_step(layout.measured_deg[ax], _step(grid), grid.full_turn)
+                                  if ax in layout.measured_deg else None)
+                out.append(Undetermined(f"{ax} maps", float(grid.angles_deg[g]), *_no_pose(ax, grid, g, coarse[0])))
                 continue
             sol = solve_scaled(cols.T @ cols, np.zeros(len(idx)), 0.0)
             seen = len(idx) - sol.null_space.dimension  # near-null directions are not seen (the PIGEs' rule)
@@ -141,12 +148,11 @@ def measured_step(angles_deg: np.ndarray, step_deg: float, full_turn: bool) -> f
     return best
 
 
-def _no_pose(ax: str, grid: MapGrid, g: int, layout: MapLayout) -> tuple[str, str]:
-    """Why and remedy of a grid angle no measured pose comes near: the files' own step, when they were measured on a
-    coarser grid (identify on it), else poses at that angle."""
+def _no_pose(ax: str, grid: MapGrid, g: int, coarse: float | None) -> tuple[str, str]:
+    """Why and remedy of a grid angle no measured pose comes near: the files' own step ``coarse``
+    (:func:`measured_step`), when they were measured on a coarser grid (identify on it), else poses at that angle."""
     angle = float(grid.angles_deg[g])
     why = f"no measured pose within {_step(grid):g}° of {ax} {angle:g}°"
-    coarse = measured_step(layout.measured_deg[ax], _step(grid), grid.full_turn) if ax in layout.measured_deg else None
     if coarse is not None:
         return (f"{why}: the files measure {ax} every {coarse:g}°, the grid is every {_step(grid):g}°",
                 f"identify on the files' grid: --map-step {coarse:g} (or measure poses at {ax} {angle:g}° too)")

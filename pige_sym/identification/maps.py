@@ -236,8 +236,12 @@ def design_maps(names: list[str], layout: MapLayout, blocks: list[Block], sigmas
     ``fitted_zero``."""
     p = len(names)
     undetermined, kept = local_check(blocks, sigmas, p, layout)
-    transform, new_names, groups = _projection(layout, kept, p, fitted_zero)
-    fitted = [Block(b.label, b.instrument, b.design @ transform, b.data, b.nuisance, b.nuisance_names) for b in blocks]
+    live = np.zeros(len(layout.columns), dtype=bool)
+    for b in blocks:
+        live |= np.any(b.design[:, p:] != 0, axis=0)
+    projection, new_names, groups = _projection(layout, kept, live, fitted_zero)
+    fitted = [Block(b.label, b.instrument, projection.apply(b.design, p), b.data, b.nuisance, b.nuisance_names)
+              for b in blocks]
     shared = [names[j] for j in fitted_zero] + new_names
     nuisance = [j for j, n in enumerate(shared) if n.endswith(":left-out")]
     return MapDesign(shared, _orthogonalised(fitted, sigmas, nuisance, len(fitted_zero)), groups, undetermined)
@@ -295,19 +299,36 @@ def _without_maps(b: Block, p: int) -> Block:
     return Block(b.label, b.instrument, b.design[:, :p], b.data, b.nuisance, b.nuisance_names)
 
 
-def _projection(layout: MapLayout, kept: np.ndarray, p: int,
-                fitted_zero: list[int]) -> tuple[np.ndarray, list[str], dict[str, Any]]:
-    """The column transform from (PIGEs, map values) to (the PIGEs fitted, z per motion, the left-out functions
-    of each motion, the held values), the new names, and per motion its reported grid indices, Q and z columns.
+@dataclass
+class _Projection:
+    """The fitted columns from a block's (PIGEs and zero-position errors, map values) columns: the PIGE columns
+    ``fitted_zero``, then per piece its map columns times its matrix (z per motion, then each motion's left-out
+    functions), then the held map columns — ``design @ T`` for the sparse T, piece by piece (T itself would be
+    (p + M)², M the map values)."""
+
+    fitted_zero: list[int]
+    pieces: list[tuple[np.ndarray, np.ndarray]]
+    held: np.ndarray
+
+    def apply(self, design: np.ndarray, p: int) -> np.ndarray:
+        """The fitted columns of ``design`` (r, p + M), shape=(r, fitted)."""
+        return np.hstack([design[:, self.fitted_zero], *(design[:, p + idx] @ mat for idx, mat in self.pieces),
+                          design[:, p + self.held]])
+
+
+def _projection(layout: MapLayout, kept: np.ndarray, live: np.ndarray,
+                fitted_zero: list[int]) -> tuple[_Projection, list[str], dict[str, Any]]:
+    """The column map from (PIGEs, map values) to (the PIGEs fitted, z per motion, the left-out functions of each
+    motion, the held values), the new names, and per motion its reported grid indices, Q and z columns.
 
     The left-out functions (named ``<motion>:left-out``) are fitted beside the map so that what of them the
     PIGEs do not describe (a counter-rotating first harmonic, an axial one) does not bias it
-    (:func:`_orthogonalised`); they are not reported.
+    (:func:`_orthogonalised`); they are not reported.  A held value no row sees (``live`` false: no measured pose
+    near its angle) is left out of the fit: its column is zero, it would take nothing and only add an unknown.
     """
-    m_cols = len(layout.columns)
-    parts: list[np.ndarray] = []
+    parts: list[tuple[np.ndarray, np.ndarray]] = []
     names: list[str] = []
-    left: list[np.ndarray] = []
+    left: list[tuple[np.ndarray, np.ndarray]] = []
     left_names: list[str] = []
     groups: dict[str, Any] = {}
     col_of = {(m.name, g): j for j, (m, g) in enumerate(layout.columns)}
@@ -317,24 +338,17 @@ def _projection(layout: MapLayout, kept: np.ndarray, p: int,
             nodes = [g for g in range(grid.n) if kept[col_of[(m.name, g)]]]
             q = complement(m, grid.angles_deg[nodes]) if len(nodes) > m.left_out else np.zeros((len(nodes), 0))
             basis = left_out_basis(m, grid.angles_deg[nodes]) if q.shape[1] else np.eye(len(nodes))
-            for cols, out in ((q, parts), (basis, left)):
-                t = np.zeros((m_cols, cols.shape[1]))
-                for r, g in enumerate(nodes):
-                    t[col_of[(m.name, g)]] = cols[r]
-                out.append(t)
+            idx = np.array([col_of[(m.name, g)] for g in nodes], dtype=int)
+            parts.append((idx, q))
+            left.append((idx, basis))
             names += [f"{m.name}:z{i}" for i in range(q.shape[1])]
             left_names += [f"{m.name}:left-out"] * basis.shape[1]
             groups[m.name] = {"motion": m, "nodes": nodes, "q": q, "columns": list(range(start, start + q.shape[1]))}
             start += q.shape[1]
-    held = np.flatnonzero(~kept)
-    t_held = np.zeros((m_cols, held.size))
-    t_held[held, np.arange(held.size)] = 1.0
-    names += left_names + [f"{layout.names()[j]}:held" for j in held]
-    maps = np.hstack([*parts, *left, t_held])
-    transform = np.zeros((p + m_cols, len(fitted_zero) + maps.shape[1]))
-    transform[fitted_zero, np.arange(len(fitted_zero))] = 1.0
-    transform[p:, len(fitted_zero):] = maps
-    return transform, names, groups
+    held = np.flatnonzero(~kept & live)
+    all_names = layout.names()
+    names += left_names + [f"{all_names[j]}:held" for j in held]
+    return _Projection(list(fitted_zero), parts + left, held), names, groups
 
 
 def _orthogonalised(blocks: list[Block], sigmas: list[float], columns: list[int], p: int) -> list[Block]:

@@ -112,16 +112,8 @@ def build_problem(measurement: Measurement, projection: str | Projection = "xyz"
         explicit = probe or extra is not None or n * m * (len(names) + q) <= 5_000_000
     g = kern.coefficients(measurement.ball_mm, measurement.pivots_mm or None, measurement.tool_mm)[:, :, p_idx]
     if explicit or dirs_rows is not None:
-        jac = kern.basis(measurement.angles_deg) @ g.reshape(g.shape[0], -1)
-        jac = jac.reshape(n, 3, len(names))
-        if dirs_rows is None:
-            design = np.einsum("mi,nip->nmp", dirs, jac)
-        else:
-            design = np.einsum("nmi,nip->nmp", dirs_rows, jac)
+        design = _explicit_design(kern, measurement, g, dirs, dirs_rows, extra)
         if extra is not None:
-            ex = extra.columns
-            ex_p = np.einsum("mi,niq->nmq", dirs, ex) if dirs_rows is None else np.einsum("nmi,niq->nmq", dirs_rows, ex)
-            design = np.concatenate([design, ex_p], axis=2)
             names = names + list(extra.names)
             units = units | dict(extra.units)
         if probe:
@@ -140,3 +132,49 @@ def build_problem(measurement: Measurement, projection: str | Projection = "xyz"
     rhs = np.einsum("mkp,km->p", g_d, by)
     yy = float((y_all[rows] ** 2).sum())
     return Problem(names, units, normal, rhs, yy, rows.size * m, n, m, None, y_all, rows)
+
+
+def _explicit_design(kern: object, measurement: Measurement, g: np.ndarray, dirs: np.ndarray,
+                     dirs_rows: np.ndarray | None, extra: ExtraColumns | None) -> np.ndarray:
+    """The design of every row (reference included), shape=(n, m, P + q): the PIGE columns ``basis(θ) @ G``, then
+    the extra columns, projected on ``dirs`` (m, 3) or per row on ``dirs_rows`` (n, m, 3)."""
+    n = measurement.n_rows
+    jac = kern.basis(measurement.angles_deg) @ g.reshape(g.shape[0], -1)  # type: ignore[attr-defined]
+    jac = jac.reshape(n, 3, g.shape[2])
+    if dirs_rows is None:
+        design = np.einsum("mi,nip->nmp", dirs, jac)
+    else:
+        design = np.einsum("nmi,nip->nmp", dirs_rows, jac)
+    if extra is not None:
+        ex = extra.columns
+        ex_p = np.einsum("mi,niq->nmq", dirs, ex) if dirs_rows is None else np.einsum("nmi,niq->nmq", dirs_rows, ex)
+        design = np.concatenate([design, ex_p], axis=2)
+    return np.asarray(design)
+
+
+def design_rows(measurement: Measurement, *, with_zero: bool = False, extra: ExtraColumns | None = None,
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The full 3-D (xyz) design of every row (reference included), shape=(n, 3, P + q), the deviations (n, 3) [µm]
+    and the rows fitted (every row but the reference): what :func:`build_problem` forms its normal equations from,
+    without them (a joint fit with thousands of map columns stacks the rows; their (P + q)² normal matrix is not
+    needed).  The same checks and refusals as :func:`build_problem`."""
+    kern = load_kernels(measurement.machine)
+    why = missing_tool(kern.MACHINE_CODE, measurement.tool_mm, "tool_mm=(x, y, z) in the measurement")
+    if why:
+        raise InputError(why)
+    rows = np.arange(1, measurement.n_rows)
+    if rows.size == 0:
+        raise IdentificationError("no data rows to fit (only the reference row)")
+    proj = parse_projection("xyz")
+    dirs_rows = None
+    if measurement.frame == "table":
+        rot = kern.workpiece_rotation(measurement.angles_deg)
+        dirs_rows = np.einsum("nij,mj->nmi", rot, proj.directions)
+    if instrument(measurement) != "rtest" and measurement.frame != "machine":
+        raise InputError(f"a {instrument(measurement)} measurement is identified with the full 3-D projection "
+                         f"(xyz) in the machine frame, not {proj.name!r}")
+    names = list(kern.LOCATION_PARAMETERS) + (list(kern.ZERO_PARAMETERS) if with_zero else [])
+    p_idx = [kern.PARAMETERS.index(n) for n in names]
+    g = kern.coefficients(measurement.ball_mm, measurement.pivots_mm or None, measurement.tool_mm)[:, :, p_idx]
+    design = _explicit_design(kern, measurement, g, proj.directions, dirs_rows, extra)
+    return design, proj.apply_data(measurement.deviation_um), rows

@@ -33,7 +33,7 @@ map is ``<positioning>+`` minus ``<positioning>-`` and is named ``ECC:reversal``
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -123,8 +123,11 @@ class MapGrid:
     def n(self) -> int:
         return int(self.angles_deg.size)
 
-    def weights(self, theta_deg: np.ndarray) -> np.ndarray:
-        """Hat-function weights of each angle on the grid nodes, shape=(m, n): rows sum to 1."""
+    def hat(self, theta_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The two grid nodes each angle lies between and their hat-function weights: ``(k0, k1, w0, w1)``, each
+        shape=(m,) (node indices, weights summing to 1; ``k0 == k1`` on a grid of one node).  :meth:`weights` is
+        this as a dense matrix; a map's value at the angle is ``w0·v[k0] + w1·v[k1]`` (linear in the angles, however
+        fine the grid)."""
         theta = np.asarray(theta_deg, dtype=float).reshape(-1)
         g = self.angles_deg
         if self.full_turn:
@@ -133,17 +136,21 @@ class MapGrid:
         else:
             nodes = g
             t = np.clip(theta, g[0], g[-1])
-        k = np.clip(np.searchsorted(nodes, t, side="right") - 1, 0, nodes.size - 2) if nodes.size > 1 else (
-            np.zeros(t.size, dtype=int))
-        w = np.zeros((t.size, g.size))
         if nodes.size == 1:
-            w[:, 0] = 1.0
-            return w
+            zero = np.zeros(t.size, dtype=int)
+            return zero, zero, np.ones(t.size), np.zeros(t.size)
+        k = np.clip(np.searchsorted(nodes, t, side="right") - 1, 0, nodes.size - 2)
         span = nodes[k + 1] - nodes[k]
         frac = np.clip((t - nodes[k]) / span, 0.0, 1.0)
-        rows = np.arange(t.size)
-        np.add.at(w, (rows, k % g.size), 1.0 - frac)
-        np.add.at(w, (rows, (k + 1) % g.size), frac)
+        return k % g.size, (k + 1) % g.size, 1.0 - frac, frac
+
+    def weights(self, theta_deg: np.ndarray) -> np.ndarray:
+        """Hat-function weights of each angle on the grid nodes, shape=(m, n): rows sum to 1 (:meth:`hat`)."""
+        k0, k1, w0, w1 = self.hat(theta_deg)
+        w = np.zeros((k0.size, self.n))
+        rows = np.arange(k0.size)
+        np.add.at(w, (rows, k0), w0)
+        np.add.at(w, (rows, k1), w1)
         return w
 
     def interpolate(self, values: np.ndarray, theta_deg: np.ndarray) -> np.ndarray:
@@ -266,6 +273,17 @@ class AxisMaps:
         return out
 
 
+class MapAction(NamedTuple):
+    """How one map of one axis acts at some poses (:meth:`ErrorMaps.acting`)."""
+
+    axis: str
+    name: str
+    values: np.ndarray  # (n_grid,) [µm or µrad], NaN: no value
+    column: int  # the kernels' motion column it drives
+    factor: np.ndarray  # (m,) per pose: the direction of approach times the sense of φ
+    hat: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # MapGrid.hat of the poses
+
+
 @dataclass(frozen=True)
 class ErrorMaps:
     """Error maps of some rotary axes of a machine (CONVENTIONS §10), axis → :class:`AxisMaps`."""
@@ -291,19 +309,17 @@ class ErrorMaps:
                                                              for g in m.grid.angles_deg]) for n in m.values})
                           for ax, m in self.axes.items()})
 
-    def value_columns(self, kernels: Any, angles_deg: np.ndarray,
-                      approach: np.ndarray | None = None) -> tuple[list[str], np.ndarray, np.ndarray]:
-        """How each map value acts: its name (:meth:`values`), its weight at each pose (n, V) (interpolation,
-        direction of approach and the sense of φ included) and the kernels' motion column it drives (V,)."""
+    def acting(self, kernels: Any, angles_deg: np.ndarray, approach: np.ndarray | None = None) -> list[MapAction]:
+        """How each map acts at the poses (m of them), per axis and map name (:class:`MapAction`)."""
         from pige_sym.model.trajectories import approach_directions
 
         a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
         appr = approach_directions(a) if approach is None else np.atleast_2d(approach)
         axes = tuple(kernels.ROTARY_AXES)
-        names, cols, comps = [], [], []
+        out: list[MapAction] = []
         for ax, maps in self.axes.items():
             k = axes.index(ax)
-            weights = maps.grid.weights(a[:, k])
+            hat = maps.grid.hat(a[:, k])
             by_name = {m.name: m for m in axis_motions(ax, per_direction=True)}
             phi = next(m for m in by_name.values() if m.kind == "positioning")
             for name, vals in maps.values.items():
@@ -313,21 +329,48 @@ class ErrorMaps:
                 else:  # φ per direction: ECC+ acts approached with θ increasing, ECC- decreasing, half each at rest
                     direction = 0.5 * (1 + appr[:, k]) if name.endswith("+") else 0.5 * (1 - appr[:, k])
                 sign = -1.0 if motion.kind in ("positioning", "reversal") and ax in kernels.WORKPIECE_ROTARY else 1.0
-                for g, v in enumerate(vals):
-                    if np.isfinite(v):
-                        names.append(f"{ax}:{name}@{maps.grid.angles_deg[g]:g}")
-                        cols.append(sign * weights[:, g] * direction)
-                        comps.append(6 * k + MOTION_COMPONENTS.index(motion.component))
-        w = np.stack(cols, axis=1) if cols else np.zeros((a.shape[0], 0))
-        return names, w, np.array(comps, dtype=int)
+                out.append(MapAction(ax, name, np.asarray(vals, dtype=float),
+                                     6 * k + MOTION_COMPONENTS.index(motion.component), sign * direction, hat))
+        return out
+
+    def value_weights(self, kernels: Any, angles_deg: np.ndarray, approach: np.ndarray | None = None,
+                      ) -> tuple[list[str], Any, np.ndarray]:
+        """How each map value acts: its name (:meth:`values`), its weight at each pose (m, V) as a sparse matrix
+        (``scipy.sparse.csr_array``: two grid nodes per pose and map, interpolation, direction of approach and the sense
+        of φ included) and the kernels' motion column it drives (V,)."""
+        from scipy.sparse import coo_array
+
+        names: list[str] = []
+        comps: list[int] = []
+        rows, cols, data = [], [], []
+        n = np.atleast_2d(np.asarray(angles_deg, dtype=float)).shape[0]
+        for ax, name, vals, comp, factor, (k0, k1, w0, w1) in self.acting(kernels, angles_deg, approach):
+            column = np.full(vals.size, -1)
+            finite = np.flatnonzero(np.isfinite(vals))
+            column[finite] = len(names) + np.arange(finite.size)
+            grid = self.axes[ax].grid.angles_deg
+            names += [f"{ax}:{name}@{grid[g]:g}" for g in finite]
+            comps += [comp] * finite.size
+            for node, w in ((k0, w0), (k1, w1)):
+                keep = np.flatnonzero(column[node] >= 0)
+                rows.append(keep)
+                cols.append(column[node][keep])
+                data.append(factor[keep] * w[keep])
+        shape = (n, len(names))
+        if not names:
+            return names, coo_array(shape).tocsr(), np.zeros(0, dtype=int)
+        w = coo_array((np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
+        return names, w.tocsr(), np.array(comps, dtype=int)
 
     def pose_motions(self, kernels: Any, angles_deg: np.ndarray, approach: np.ndarray | None = None) -> np.ndarray:
         """The carried bodies' error motions at each pose in the kernels' columns (``MOTION_PARAMETERS``: per
-        axis dx, dy, dz [µm], rx, ry, rz [µrad]), shape=(n, 6k); a value without a number adds nothing."""
-        names, w, comps = self.value_columns(kernels, angles_deg, approach)
-        values = self.values()
-        out = np.zeros((w.shape[0], 6 * len(kernels.ROTARY_AXES)))
-        np.add.at(out.T, comps, (w * np.array([values[n] for n in names])).T)
+        axis dx, dy, dz [µm], rx, ry, rz [µrad]), shape=(n, 6k); a value without a number adds nothing.  Two grid
+        nodes per pose and map (:meth:`MapGrid.hat`): linear in the poses and in the map's values."""
+        a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+        out = np.zeros((a.shape[0], 6 * len(kernels.ROTARY_AXES)))
+        for _, _, vals, comp, factor, (k0, k1, w0, w1) in self.acting(kernels, a, approach):
+            v = np.where(np.isfinite(vals), vals, 0.0)
+            out[:, comp] += factor * (w0 * v[k0] + w1 * v[k1])
         return out
 
     def raw_deviation(self, kernels: Any, angles_deg: np.ndarray, point_mm: Any, pivots_mm: Any = None,

@@ -46,27 +46,52 @@ def _colour(item: dict[str, Any] | None) -> str:
 
 
 def _panel(ax: Any, name: str, runs: list[Any]) -> None:
-    """One PIGE against the run order (check-ups and the full calibrations between them)."""
+    """One PIGE against the run order (check-ups and the full calibrations between them): a fixed number of artists
+    whatever the number of runs (the segments of each kind in one line broken by NaN, the check-ups of each colour in
+    one errorbar), so a history of 10,000 runs draws as fast as its points."""
+    full: list[tuple[int, float]] = []
+    points: dict[str, list[tuple[int, float, float]]] = {}
+    limits: list[tuple[float, float, float]] = []
+    tolerance: list[tuple[float, float, float]] = []
+    corrections: list[float] = []
     for x, r in enumerate(runs):
         if name not in r.parameters:
             continue
         i = r.parameters.index(name)
         value, std = float(r.values[i]), float(r.std[i])
         if r.kind == "full":
-            ax.plot(x, value, "kD", ms=5)
+            full.append((x, value))
             continue
         item = _item(r, name)
         lim = (item or {}).get("limit")
         if lim:
-            for sign in (1, -1):
-                ax.plot([x - 0.35, x + 0.35], [lim["centre"] + sign * lim["half_width"]] * 2, color="0.55", lw=0.9)
+            limits += [(x - 0.35, x + 0.35, lim["centre"] + sign * lim["half_width"]) for sign in (1, -1)]
         if (r.checkup or {}).get("after_correction"):
-            ax.axvline(x - 0.5, color="k", ls="--", lw=0.8)
-        ax.errorbar(x, value, yerr=2 * std if math.isfinite(std) else 0, fmt="o", ms=4, capsize=2,
-                    color=_colour(item))
+            corrections.append(x - 0.5)
+        points.setdefault(_colour(item), []).append((x, value, 2 * std if math.isfinite(std) else 0))
         if item and item.get("tolerance"):
-            ax.plot([x - 0.5, x + 0.5], [item["tolerance"]] * 2, color="tab:green", lw=1.2)
-            ax.plot([x - 0.5, x + 0.5], [-item["tolerance"]] * 2, color="tab:green", lw=1.2)
+            tolerance += [(x - 0.5, x + 0.5, sign * item["tolerance"]) for sign in (1, -1)]
+    if full:
+        ax.plot(*zip(*full, strict=True), "kD", ms=5)
+    if limits:
+        ax.plot(*_segments(limits), color="0.55", lw=0.9)
+    if corrections:
+        ax.vlines(corrections, 0, 1, transform=ax.get_xaxis_transform(), colors="k", linestyles="--", lw=0.8)
+    for colour, pts in points.items():
+        xs, values, errs = zip(*pts, strict=True)
+        ax.errorbar(xs, values, yerr=errs, fmt="o", ms=4, capsize=2, color=colour)
+    if tolerance:
+        ax.plot(*_segments(tolerance), color="tab:green", lw=1.2)
+
+
+def _segments(segments: list[tuple[float, float, float]]) -> tuple[list[float], list[float]]:
+    """Horizontal segments ``(x0, x1, y)`` as the x and y of one line, broken by NaN between them."""
+    xs: list[float] = []
+    ys: list[float] = []
+    for x0, x1, y in segments:
+        xs += [x0, x1, math.nan]
+        ys += [y, y, math.nan]
+    return xs, ys
 
 
 def _forecast_text(last: Any, name: str) -> str:

@@ -381,18 +381,19 @@ def trend_figure(history: HistoryData) -> Any:
             ax.axhline(limit, color="tab:green", lw=0.8)
             ax.axhline(-limit, color="tab:green", lw=0.8)
         ax.errorbar(x, vals, yerr=2 * np.nan_to_num(std), fmt="o-", ms=4, capsize=3, lw=1, color="tab:blue")
-        for i, r in enumerate(runs):
-            if (r.id, name) in flagged:
-                ax.plot(x[i], vals[i], "o", ms=11, mfc="none", mec="crimson", mew=1.8)
+        ringed = [i for i, r in enumerate(runs) if (r.id, name) in flagged]
+        if ringed:
+            ax.plot(x[ringed], vals[ringed], "o", ms=11, mfc="none", mec="crimson", mew=1.8, ls="none")
         ax.axhline(0, color="k", lw=0.5)
         ax.set_title(f"{name} [{UNIT_TEXT.get(kern.UNITS[name], kern.UNITS[name])}]", fontsize=9)
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=7)
     for ax in axs.ravel()[len(names):]:
         ax.set_visible(False)
+    step = max(1, -(-len(runs) // 16))  # at most 16 dates: a label per run of a long history is unreadable and slow
     for ax in axs[-1]:
-        ax.set_xticks(x)
-        ax.set_xticklabels([r.measured_at[:10] for r in runs], rotation=45, ha="right", fontsize=7)
+        ax.set_xticks(x[::step])
+        ax.set_xticklabels([r.measured_at[:10] for r in runs[::step]], rotation=45, ha="right", fontsize=7)
     fig.suptitle(f"{history.machine_id}: value ± 2 std per run; green band = tolerance; red ring = significant "
                  "change from the previous run", fontsize=9)
     fig.tight_layout()

@@ -24,7 +24,7 @@ def verdict_html(rep: MeasurementReport) -> str:
     chk = rep.check
     if chk is None:
         return ('<span data-verdict="none" class="badge none">not judged</span> <small>no tolerances given '
-                "(pige report --tolerances TOL.json)</small>")
+                "(give pige report your tolerance file with --tolerances)</small>")
     rule = f"|v| ± {chk.k:g}u vs limit (ISO 14253-1)" if chk.rule == "guard" else "simple acceptance"
     odd = [f"{i.name} {i.status}" for i in chk.items if i.status != "pass"]
     tail = f": {', '.join(odd)}" if odd else f": all {len(chk.items)} items pass"
@@ -87,7 +87,7 @@ def _answer_history(data: ReportData) -> str:
                    f"{_BADGE.get(last.verdict, last.verdict)}</span> <small>run {len(h.runs)}, {what}</small>")
     else:
         verdict = ('<span data-verdict="none" class="badge none">not judged</span> <small>no tolerances stored with '
-                   "the run or given (pige report --history ID --tolerances TOL.json)</small>")
+                   "the run or given (give pige report --history your tolerance file with --tolerances)</small>")
     number = run_numbers(h.runs)
     moved = [f"{c.parameter} {num(c.change, '+.3g')} ± {num(c.std, '.2g')} {units(c.unit)} "
              f"(run {number[c.from_run]} → {number[c.to_run]})"

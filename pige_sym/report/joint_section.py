@@ -29,6 +29,7 @@ from pige_sym.diagnosis.joint import JointDiagnosis
 from pige_sym.report.data import JointReport
 from pige_sym.report.html_blocks import esc, kvs, num, path_html, table, units
 from pige_sym.report.html_verdict import check_table_html
+from pige_sym.report.next_step import CORRECT_WORDS, NextStep, commands_html, correct_commands, shell_word
 from pige_sym.report.words import count, value_std
 
 
@@ -74,7 +75,7 @@ def answer_joint_html(i: int, jr: JointReport) -> str:
     d = jr.diagnosis
     if jr.check is None:
         verdict = ('<span data-verdict="none" class="badge none">not judged</span> <small>no tolerances given '
-                   "(pige report --tolerances TOL.json)</small>")
+                   "(give pige report your tolerance file with --tolerances)</small>")
     else:
         odd = [f"{it.name} {it.status}" for it in jr.check.items if it.status != "pass"]
         verdict = (f'<span data-verdict="{esc(jr.check.verdict)}" class="badge {esc(jr.check.verdict)}">'
@@ -93,31 +94,36 @@ def answer_joint_html(i: int, jr: JointReport) -> str:
              ("determined", esc(f"{len(known)} of {len(piges)} PIGEs"
                                 + (f"; not determined by these setups: {', '.join(res.unidentifiable)}"
                                    if res.unidentifiable else ""))),
-             ("next step", esc(_next_step(jr)))]
+             ("next step", _step_html(_next_step(jr)))]
     return (f'<div class="answer" id="answer-j{i + 1}"><div class="facts">{kvs(facts)}</div>'
             f'<div class="used"><p class="cap">PIGEs of the joint estimate</p>{_pige_table(jr, compact=True)}'
             "</div></div>")
 
 
-def _next_step(jr: JointReport) -> str:
-    """What to do with this result, in one sentence."""
+def _next_step(jr: JointReport) -> NextStep:
+    """What to do with this result: one sentence and the commands, each runnable as printed."""
     d, res = jr.diagnosis, jr.diagnosis.final
     undetermined = [n for n, v in zip(res.parameters, res.values, strict=True) if not math.isfinite(float(v))]
     if d.agreement_status == "disagree":
-        return ("measure the disagreeing setup again (after the machine has settled), or find what changed "
-                "between the setups; do not compensate with this estimate")
+        return NextStep("measure the disagreeing setup again (after the machine has settled), or find what changed "
+                        "between the setups; do not compensate with this estimate")
     if undetermined:
-        return (f"add setups: pige plan --instrument ballbar --machine \"{jr.machine}\" names the smallest set "
-                "that determines every PIGE")
+        return NextStep("add setups: this names the smallest set that determines every PIGE:",
+                        [f"pige plan --instrument ballbar --machine {shell_word(jr.machine)}"])
     if jr.check is not None and jr.check.verdict == "pass":
-        return "in tolerance: nothing to correct; keep the run (pige history add) to see drift later"
+        return NextStep("in tolerance: nothing to correct; keep the run (pige history add) to see drift later")
     if jr.check is not None and jr.check.verdict == "undecided":
         return _undecided_step(jr)
-    return ("correct the machine: pige compensate PROGRAM --params joint.json (with pige diagnose FILES --json > "
-            "joint.json), or --controller STYLE for the kinematic description; then measure again")
+    return NextStep(f"correct the machine with the joint estimate{CORRECT_WORDS}; then measure again:",
+                    correct_commands([str(p) for p in jr.paths], "diagnosis"))
 
 
-def _undecided_step(jr: JointReport) -> str:
+def _step_html(step: NextStep) -> str:
+    """The sentence, then each command on its own line (as the files' next step shows them)."""
+    return esc(step.what) + commands_html(step.commands)
+
+
+def _undecided_step(jr: JointReport) -> NextStep:
     """An undecided joint verdict: per item the standard uncertainty that decides it, how many times the points
     per setup reach it (u falls as 1/√points), and the ballbar plan whose worst std is that target."""
     assert jr.check is not None
@@ -133,8 +139,9 @@ def _undecided_step(jr: JointReport) -> str:
                      + (f"{(i.std / need) ** 2:.2g}× the points per setup" if need > 0 else "it lies on its limit"))
     sigma = float(np.median([f.sigma_um for f in jr.diagnosis.files]))
     target = f" --target {min(needs):.2g}" if needs and min(needs) > 0 else ""
-    return (f"undecided: {'; '.join(parts)} (u falls as 1/√points), or setups that see it better: pige plan "
-            f"--instrument ballbar --machine \"{jr.machine}\" --noise {sigma:.2g}{target} --out setups.json")
+    return NextStep(f"undecided: {'; '.join(parts)} (u falls as 1/√points), or setups that see it better:",
+                    [f"pige plan --instrument ballbar --machine {shell_word(jr.machine)} --noise {sigma:.2g}{target} "
+                     "--out setups.json"])
 
 
 def _files_table(jr: JointReport) -> str:

@@ -15,6 +15,11 @@
 - a diagnosis that failed: look at the file (its identification stands alone).
 
 The history and the measured before/after pages get their own (:func:`history_next`, :func:`compare_next`).
+
+Every command printed runs as printed (issue 50): the user's own file names, quoted for the shell; a correction
+without the report's ``--program`` gives the controller-neutral corrected axis lines (``--controller table``).  What
+the report cannot know — a measurement not made yet, a tolerance file not given, the name of the machine in a history
+— is said in words, never as a placeholder inside a command.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from __future__ import annotations
 import math
 import shlex
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from pige_sym.report.data import MeasurementReport, ReportData
@@ -47,8 +53,12 @@ class NextStep:
 def next_html(step: NextStep) -> str:
     """The step as HTML: the sentence, the reasons as a list, each command on its own line."""
     reasons = ("<ul>" + "".join(f"<li>{esc(r)}</li>" for r in step.reasons) + "</ul>") if step.reasons else ""
-    commands = "".join(f'<br><code class="cmd">{esc(c)}</code>' for c in step.commands)
-    return f'<span data-next-step="1">{esc(step.what)}</span>{reasons}{commands}'
+    return f'<span data-next-step="1">{esc(step.what)}</span>{reasons}{commands_html(step.commands)}'
+
+
+def commands_html(commands: list[str]) -> str:
+    """Each command on its own line, as the reports print follow-up commands (``<code class="cmd">``)."""
+    return "".join(f'<br><code class="cmd">{esc(c)}</code>' for c in commands)
 
 
 def shell_word(text: str) -> str:
@@ -80,16 +90,19 @@ def _decide(item: CheckItem, k: float, poses: int, instrument: str) -> tuple[str
             f"smaller): {n} poses of this test instead of {poses} (u falls as 1/√poses){lever}", n)
 
 
-def _plan_command(rep: MeasurementReport, poses: int) -> str:
-    """``pige plan`` for this file's machine, set-up and noise, with ``poses`` poses (a probe: their budget)."""
+def _plan_command(rep: MeasurementReport, poses: int) -> str | None:
+    """``pige plan`` for this file's machine, set-up and noise, with ``poses`` poses (a probe: their budget); None for
+    a probe file that does not state its sphere's and stylus' radii (the command needs them)."""
     m = rep.measurement
     tool = f" --tool {_vec(m.tool_mm)}" if m.tool_mm is not None else ""
     if m.metadata.get("instrument") == "sphere-probe":
+        radii = (m.metadata.get("sphere_radius_mm"), m.metadata.get("stylus_radius_mm"))
+        if None in radii:
+            return None
         contacts = m.optional.get("n_samples")
         per_pose = PROBE_POSE_S + PROBE_CONTACT_S * (float(contacts.mean()) if contacts is not None else 5.0)
         return (f"pige plan --instrument sphere-probe --machine {shell_word(rep.machine)} --sphere "
-                f"{_vec(m.ball_mm)} --sphere-radius {m.metadata.get('sphere_radius_mm', 'R')} --stylus-radius "
-                f"{m.metadata.get('stylus_radius_mm', 'r')} --noise "
+                f"{_vec(m.ball_mm)} --sphere-radius {radii[0]} --stylus-radius {radii[1]} --noise "
                 f"{float(m.metadata.get('contact_sigma_um', 0.5)):.2g}{tool} --budget {math.ceil(poses * per_pose)}")
     pivots = "".join(f" --pivot {a}={_vec(v)}" for a, v in m.pivots_mm.items() if any(float(x) for x in v))
     return (f"pige plan --machine {shell_word(rep.machine)} --points {poses} --noise {rep.primary.sigma_um:.2g} "
@@ -97,20 +110,34 @@ def _plan_command(rep: MeasurementReport, poses: int) -> str:
             "travel")
 
 
-def _correct(rep: MeasurementReport, data: ReportData) -> list[str]:
-    """Commands that correct the machine with the estimate the report used, then measure again."""
-    q = shlex.quote(str(rep.path))
-    if rep.primary_method == "diagnosis":
-        fit, params = f"pige diagnose {q} --json > diagnosis.json", "diagnosis.json"
+#: What the correction commands leave to the user, in words (a command pige prints runs as printed).
+CORRECT_WORDS = ("; for your controller's own entries use --controller siemens, heidenhain, fanuc, linuxcnc or isg "
+                 "instead of table, for a part program give its path before --params")
+MEASURE_AGAIN = "then measure the same test again and compare the two files (pige compare, this file first)"
+
+
+def correct_commands(files: list[str], method: str, program: Any = None) -> list[str]:
+    """The fit of ``files`` that compensation uses (``method``: ``diagnosis`` or an identification method) and the
+    compensation from it: of ``program`` when the report has one, else the controller-neutral corrected axis lines
+    (``--controller table``); every file name the user's, every command runnable as printed."""
+    names = " ".join(shlex.quote(str(f)) for f in files)
+    if method == "diagnosis":
+        fit, params = f"pige diagnose {names} --json > diagnosis.json", "diagnosis.json"
     else:
-        fit, params = f"pige identify {q} --method {rep.primary_method} --json > identify.json", "identify.json"
-    program = data.program
+        fit, params = f"pige identify {names} --method {method} --json > identify.json", "identify.json"
     if program is None:
-        compensate = f"pige compensate PROGRAM --params {params} --out PROGRAM_comp"
-    else:
-        out = program.with_name(f"{program.stem}_comp{program.suffix}")
-        compensate = f"pige compensate {shlex.quote(str(program))} --params {params} --out {shlex.quote(str(out))}"
-    return [fit, compensate, f"pige compare {q} AFTER.csv   # the same test measured after the correction"]
+        return [fit, f"pige compensate --params {params} --controller table"]
+    out = program.with_name(f"{program.stem}_comp{program.suffix}")
+    return [fit, f"pige compensate {shlex.quote(str(program))} --params {params} --out {shlex.quote(str(out))}"]
+
+
+def _correct(rep: MeasurementReport, data: ReportData) -> list[str]:
+    """Commands that correct the machine with the estimate the report used."""
+    return correct_commands([str(rep.path)], rep.primary_method, data.program)
+
+
+def _correct_words(data: ReportData) -> str:
+    return CORRECT_WORDS if data.program is None else ""
 
 
 def measurement_next(rep: MeasurementReport, data: ReportData) -> NextStep:
@@ -126,12 +153,13 @@ def measurement_next(rep: MeasurementReport, data: ReportData) -> NextStep:
                         [f"pige identify {q}"])
     chk = rep.check
     if chk is None:
-        return NextStep("Judge the estimate against your tolerances, then correct the machine if it is out.",
-                        [f"pige check {q} --tolerances TOL.json", *_correct(rep, data)[:2]])
+        return NextStep("Judge the estimate against your tolerances (pige check this file with --tolerances and your "
+                        "tolerance file; its format: pige check --help), then correct the machine if it is out"
+                        f"{_correct_words(data)}:", _correct(rep, data))
     if chk.verdict == "pass":
-        return NextStep("In tolerance: nothing to correct. Keep the run in the machine's history, to see a change "
-                        "in the next one.", [f"pige history add {q} --machine-id MACHINE --tolerances "
-                                             f"{shlex.quote(chk.tolerances)}"])
+        return NextStep("In tolerance: nothing to correct. Keep the run in the machine's history (pige history add "
+                        "this file with --machine-id, the name you give the machine, and --tolerances "
+                        f"{chk.tolerances}), to see a change in the next one.")
     poses = rep.measurement.n_rows - 1
     decided = [_decide(i, chk.k, poses, str(rep.measurement.metadata.get("instrument", "rtest")))
                for i in chk.items if i.status == "undecided"]
@@ -142,13 +170,17 @@ def measurement_next(rep: MeasurementReport, data: ReportData) -> NextStep:
                    if rep.compensated_program is not None else "")
         also = f" Undecided as well: {', '.join(r.split(' ')[0] for r in reasons)} (why below)." if reasons else ""
         return NextStep(f"Out of tolerance ({bad}): correct the machine with the estimate this report used"
-                        f"{program}, then measure the same test again and compare.{also}", _correct(rep, data),
-                        reasons)
+                        f"{program}{_correct_words(data)}; {MEASURE_AGAIN}.{also}", _correct(rep, data), reasons)
     counts = [n for _, n in decided if n is not None]
     plan = _plan_command(rep, max(counts)) if counts else _plan_command(rep, poses)
     names = [i.name for i in chk.items if i.status == "undecided"]
+    them = "it" if len(names) == 1 else "them"
+    if plan is None:
+        return NextStep(f"Undecided: {', '.join(names)} cannot be called in or out of tolerance with this uncertainty. "
+                        f"pige plan --instrument sphere-probe names a test that decides {them}, given the sphere's "
+                        "and the stylus' radii (this file does not state them).", [], reasons)
     return NextStep(f"Undecided: {', '.join(names)} cannot be called in or out of tolerance with this uncertainty. "
-                    f"A test that decides {'it' if len(names) == 1 else 'them'}:", [plan], reasons)
+                    f"A test that decides {them}:", [plan], reasons)
 
 
 def checkup_next(run: Any) -> NextStep:
@@ -167,28 +199,31 @@ def checkup_next(run: Any) -> NextStep:
 
 def history_next(data: ReportData) -> NextStep:
     """The next step of a machine's history: the last check-up's (as ``pige checkup`` printed it); else act on a
-    change or on the last verdict, else measure as planned."""
+    change or on the last verdict, else measure as planned.  A run yet to be measured is named in words: a command
+    printed runs as printed."""
     h = data.history
     assert h is not None
     if h.runs[-1].kind == "checkup" and h.check is None:
         return checkup_next(h.runs[-1])
     changed = [c.parameter for comp in h.comparisons[-1:] for c in comp.changes if c.significant]
     verdict = h.check.verdict if h.check is not None else (h.runs[-1].verdict or "none")
-    last = shlex.quote(h.runs[-1].file_name)
+    add = f"add it to this history (pige history add, --machine-id {shlex.quote(h.machine_id)})"
     if verdict == "fail":
-        return NextStep("The last run is out of tolerance: correct the machine from it, then add the run after the "
-                        "correction.", [f"pige diagnose {last} --json > diagnosis.json",
-                                        "pige compensate PROGRAM --params diagnosis.json --out PROGRAM_comp",
-                                        f"pige history add AFTER.csv --machine-id {shlex.quote(h.machine_id)}"])
-    add = f"pige history add NEXT.csv --machine-id {shlex.quote(h.machine_id)}"
+        files = h.runs[-1].file_name.split("; ")
+        if not all(Path(f).is_file() for f in files):
+            return NextStep(f"The last run is out of tolerance: correct the machine from it (its file, added as "
+                            f"{'; '.join(files)}, is not there any more: pige diagnose it where it is now --json, then "
+                            f"pige compensate --params with that output); then measure again and {add}.")
+        return NextStep(f"The last run is out of tolerance: correct the machine from it{CORRECT_WORDS}; then measure "
+                        f"again and {add}.", correct_commands(files, "diagnosis"))
     if changed:
         return NextStep(f"{', '.join(changed)} changed in the last run: measure again to confirm before acting (a "
-                        "real change repeats).", [add])
+                        f"real change repeats), and {add}.")
     if verdict == "none":
-        return NextStep("Nothing changed significantly; judge the last run against your tolerances.",
-                        [f"pige report --history {shlex.quote(h.machine_id)} --tolerances TOL.json --out REPORT"])
+        return NextStep("Nothing changed significantly; judge the last run against your tolerances (pige report "
+                        f"--history {shlex.quote(h.machine_id)} with --tolerances and your tolerance file).")
     state = " and the last run is in tolerance" if verdict == "pass" else f"; the last run is {verdict}"
-    return NextStep(f"Nothing changed significantly{state}: measure again as planned.", [add])
+    return NextStep(f"Nothing changed significantly{state}: measure again as planned, and {add}.")
 
 
 def compare_next(data: ReportData) -> NextStep:
@@ -197,7 +232,8 @@ def compare_next(data: ReportData) -> NextStep:
     assert c is not None
     after = shlex.quote(c.after)
     if c.improvement > 0:
-        return NextStep(f"The correction removed {c.improvement:.0%} of the RMS deviation: judge what is left.",
-                        [f"pige check {after} --tolerances TOL.json"])
+        return NextStep(f"The correction removed {c.improvement:.0%} of the RMS deviation: judge what is left "
+                        "against your tolerances (pige check the after file with --tolerances and your tolerance "
+                        "file), or see what is left, by cause:", [f"pige diagnose {after}"])
     return NextStep("The deviation did not shrink: find out why before correcting again (what is left, by cause).",
                     [f"pige diagnose {after}"])

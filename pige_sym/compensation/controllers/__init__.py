@@ -24,9 +24,13 @@ and one whose lines go into several files (LinuxCNC: HAL, INI, compensation file
                                                        pige compensate --out-dir)
 
 and one that writes compensation tables (error maps, CONVENTIONS §10) checks their format before any value is
-weighed or computed (the table modules of :mod:`.tables`, each citing the source of its limits)::
+weighed or computed (the table modules of :mod:`.tables`, each citing the source of its limits), and builds them
+once from the entered values::
 
     check_tables(params, options) -> None             refuses what the tables cannot hold
+    tables(params, options) -> list                   the tables, built once by the compensation stage and passed
+                                                       as ``options.tables`` to entries, render and sections: what
+                                                       is printed and what the prediction counts are one object
 
 ``OPTIONS`` names the ``pige compensate`` options a controller reads beyond the parameters (``--carrier``,
 ``--machine-axis``, …); another controller refuses them (:func:`check_options`).
@@ -41,6 +45,7 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
@@ -72,6 +77,9 @@ class ControllerOptions:
     scope : ControllerScope, optional
         What the entries carry and leave, as the compensation stage computed it (:mod:`.scope`); rendered, not
         computed again.
+    tables : list, optional
+        The controller's compensation tables as the compensation stage built them (the module's ``tables``):
+        printed and counted, not built again (:func:`built_tables`).
     limits : ChangeLimits, optional
         ``--max-change`` (:class:`.entry_checks.ChangeLimits`) every entry is held to; None: its default.
     """
@@ -83,12 +91,22 @@ class ControllerOptions:
     isg_unit_deg: float | None = None
     scope: Any = None
     limits: Any = None
+    tables: Any = None
 
     def change_limits(self) -> Any:
         """``limits``, or the default ``--max-change``."""
         from pige_sym.compensation.controllers.entry_checks import ChangeLimits
 
         return self.limits if self.limits is not None else ChangeLimits()
+
+
+def built_tables(build: Callable[[Any, ControllerOptions], list[Any]], params: Any,
+                 options: ControllerOptions | None) -> list[Any]:
+    """A controller's tables: ``options.tables`` as the compensation stage built them, else ``build(params,
+    options)`` (a caller outside the stage, which prints or counts once)."""
+    if options is not None and options.tables is not None:
+        return list(options.tables)
+    return list(build(params, options if options is not None else ControllerOptions()))
 
 
 def controller_names() -> tuple[str, ...]:

@@ -9,8 +9,9 @@ page of its parameters was read; the scope lines name every PIGE as not represen
 
 from __future__ import annotations
 
-from pige_sym.compensation.controllers import ControllerOptions
+from pige_sym.compensation.controllers import ControllerOptions, built_tables
 from pige_sym.compensation.controllers.scope import scope_lines
+from pige_sym.compensation.controllers.tables.isg_ssfk import SsfkList, ssfk_lists
 from pige_sym.compensation.controllers.tables.isg_ssfk import check_format as ssfk_format
 from pige_sym.compensation.controllers.tables.isg_ssfk import entered_values as ssfk_values
 from pige_sym.compensation.controllers.tables.isg_ssfk import render_lines as ssfk_lines
@@ -39,18 +40,21 @@ def map_motions(params: CompensationParameters) -> list[str]:
     return positioning_names(params)
 
 
+def tables(params: CompensationParameters, options: ControllerOptions) -> list[SsfkList]:
+    """The ``kw.ssfk`` lists, built once (:func:`.tables.isg_ssfk.ssfk_lists`; none without ``--isg-unit-deg``)."""
+    return ssfk_lists(params, options.isg_unit_deg, options.change_limits())
+
+
 def entries(params: CompensationParameters, options: ControllerOptions | None) -> list[tuple[str, dict[str, float]]]:
     """The lists enter the positioning maps as printed (rounded to the list's unit), nothing else."""
-    if options is None:
-        return [("the kw.ssfk lists", ssfk_values(params, None))]
-    return [("the kw.ssfk lists", ssfk_values(params, options.isg_unit_deg, options.change_limits()))]
+    return [("the kw.ssfk lists", ssfk_values(params, built_tables(tables, params, options)))]
 
 
 def render(params: CompensationParameters, options: ControllerOptions) -> str:
     """The lists' notes and bodies, the volumetric refusal and what the lists leave at the tool."""
     out = [f"# ISG kernel / TwinCAT CNC compensation lists of {params.machine}; parameters from {params.source}",
            *scope_lines(params, "isg", "# ", options)]
-    body = ssfk_lines(params, options.isg_unit_deg, options.change_limits())
+    body = ssfk_lines(params, options.isg_unit_deg, options.change_limits(), built_tables(tables, params, options))
     if not body:
         out.append("# the parameter file holds no positioning map (identify with --map): no kw.ssfk list")
     return "\n".join(out + body + isg_volumetric_lines(params))

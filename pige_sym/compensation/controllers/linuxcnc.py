@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pige_sym.compensation.controllers import ControllerOptions
+from pige_sym.compensation.controllers import ControllerOptions, built_tables
 from pige_sym.compensation.controllers.axis_lines import MM_DECIMALS, origin_pivots_note, signed
 from pige_sym.compensation.controllers.hal_config import HalConfig
 from pige_sym.compensation.controllers.scope import scope_lines
@@ -78,11 +78,11 @@ def entries(params: CompensationParameters, options: ControllerOptions | None) -
     """Each way of entering the printed lines, with exactly what it carries: the stock trt pins (the four axis-line
     positions), those and the COMP_FILEs (the positioning maps' trims, as printed), and pige's component (every
     PIGE, zero-position error and map value, as its ``setp`` lines print them)."""
-    from pige_sym.codegen.targets import linuxcnc_pins as pins
     from pige_sym.compensation.controllers.scope import kinematic_values
     from pige_sym.compensation.controllers.tables.linuxcnc_comp import entered_values as comp_values
     from pige_sym.compensation.controllers.tables.linuxcnc_kins_maps import entered_map_values
 
+    built = built_tables(tables, params, options)
     out: list[tuple[Any, ...]] = []
     try:
         linuxcnc_trt_deltas(params)
@@ -91,19 +91,32 @@ def entries(params: CompensationParameters, options: ControllerOptions | None) -
     else:
         trt = kinematic_values(params, "linuxcnc")
         out.append(("the trt pins", trt))
-        comp = comp_values(params, options.change_limits() if options is not None else None)
+        comp = comp_values(params, [t for t in built if isinstance(t, linuxcnc_comp.CompTable)])
         if comp:
             out.append(("the trt pins and the COMP_FILEs", trt | comp))
-    try:
-        from pige_sym.codegen.machine_code import parse_machine_code
-
-        pins.check_machine(parse_machine_code(params.machine))
-    except (InputError, UnsupportedMachineError):
+    if not _component_describes(params):
         return out
     unset = {s.split()[0] for s in params.ignored}
     kern = load_kernels(params.machine)
     values = {n: round(params.values[n], 4) for n in kern.PARAMETERS if n in params.values and n not in unset}
-    return [*out, ("pige's kinematics component", values | entered_map_values(params), False)]
+    return [*out, ("pige's kinematics component", values | entered_map_values(_component_maps(built)), False)]
+
+
+def _component_describes(params: CompensationParameters) -> bool:
+    """Whether pige's kinematics component can describe the machine (:func:`~pige_sym.codegen.targets.
+    linuxcnc_pins.check_machine`)."""
+    from pige_sym.codegen.machine_code import parse_machine_code
+    from pige_sym.codegen.targets import linuxcnc_pins as pins
+
+    try:
+        pins.check_machine(parse_machine_code(params.machine))
+    except (InputError, UnsupportedMachineError):
+        return False
+    return True
+
+
+def _component_maps(built: list[Any]) -> list[linuxcnc_kins_maps.ComponentMap]:
+    return [t for t in built if isinstance(t, linuxcnc_kins_maps.ComponentMap)]
 
 
 def linuxcnc_trt_deltas(params: CompensationParameters) -> tuple[str, dict[str, float]]:
@@ -129,6 +142,21 @@ def linuxcnc_trt_deltas(params: CompensationParameters) -> tuple[str, dict[str, 
     return TRT_MODULES[tilt], deltas
 
 
+def tables(params: CompensationParameters, options: ControllerOptions) -> list[Any]:
+    """Built once: the COMP_FILEs of the stock kinematics, every trim held to ``--max-change``
+    (:func:`.tables.linuxcnc_comp.comp_tables`; none where the stock trt kinematics cannot describe the machine), and
+    the maps as pige's component's pins hold them (:func:`.tables.linuxcnc_kins_maps.component_maps`; none where the
+    component cannot)."""
+    out: list[Any] = []
+    try:
+        linuxcnc_trt_deltas(params)
+    except InputError:
+        pass
+    else:
+        out += linuxcnc_comp.comp_tables(params, options.change_limits())
+    return out + (linuxcnc_kins_maps.component_maps(params) if _component_describes(params) else [])
+
+
 def check_tables(params: CompensationParameters, options: ControllerOptions) -> None:
     """The COMP_FILEs' and the component's map limits (256 entries per joint, ``MAP_NODES`` uniform grid angles),
     before any value is weighed (:mod:`.tables.linuxcnc_comp`, :mod:`.tables.linuxcnc_kins_maps`)."""
@@ -146,8 +174,13 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
         Neither the stock trt kinematics nor pige's component can describe the machine, or today's
         configuration contradicts the parameters (:func:`check_current`).
     """
+    return render_sections(sections(params, options))
+
+
+def render_sections(parts: list[Section]) -> str:
+    """The printed text of the sections (:func:`render`): the compensation stage renders the sections it computed."""
     out = []
-    for sec in sections(params, options):
+    for sec in parts:
         if sec.kind == "comp":
             continue  # the compensation files themselves: --comp-dir or --out-dir writes them
         out += [f"# ==== {sec.name} ({sec.kind.upper()}; --out-dir writes it as {sec.file}) ====", sec.text]
@@ -160,6 +193,8 @@ def sections(params: CompensationParameters, options: ControllerOptions) -> list
     from pige_sym.compensation.controllers.tables.linuxcnc_comp import comp_files
 
     check_current(params, options.current)
+    built = built_tables(tables, params, options)
+    comp_tables = [t for t in built if isinstance(t, linuxcnc_comp.CompTable)]
     try:
         linuxcnc_trt_deltas(params)
     except InputError as exc:
@@ -169,7 +204,7 @@ def sections(params: CompensationParameters, options: ControllerOptions) -> list
     limits = options.change_limits()
     pige_refusal: str | None = None
     try:
-        ini, hal = pige_kinematics_lines(params, limits)
+        ini, hal = pige_kinematics_lines(params, limits, _component_maps(built))
     except (InputError, UnsupportedMachineError) as exc:
         if trt_refusal is not None:
             raise InputError(f"{trt_refusal}; pige's kinematics component: {exc}") from None
@@ -182,11 +217,11 @@ def sections(params: CompensationParameters, options: ControllerOptions) -> list
         if pige_refusal is not None:
             trt.append(f"# pige's kinematics component cannot describe this machine: {pige_refusal}")
         out.append(Section("the stock trt kinematics: HAL lines", "trt-kins.hal", "hal", "\n".join(trt)))
-        comp = comp_file_lines(params, limits)
+        comp = comp_file_lines(comp_tables)
         if comp:
             out.append(Section("with the stock kinematics, the positioning maps as COMP_FILEs: INI lines, each "
                                "under its [JOINT_n] section", "comp-files.ini", "ini", "\n".join(comp)))
-            out += [Section(f"compensation file {n}", n, "comp", t) for n, t in comp_files(params, limits).items()]
+            out += [Section(f"compensation file {n}", n, "comp", t) for n, t in comp_files(comp_tables).items()]
     else:
         summary.append(f"# LinuxCNC's stock trt kinematics: {trt_refusal}")
     if pige_refusal is None:
@@ -325,10 +360,11 @@ def _senses(params: CompensationParameters, axes: tuple[str, ...]) -> dict[str, 
     return {a: -1 if params.axis_sense.get(a, 1) < 0 else 1 for a in axes}
 
 
-def pige_kinematics_lines(params: CompensationParameters, limits: object = None) -> tuple[list[str], list[str]]:
+def pige_kinematics_lines(params: CompensationParameters, limits: object = None,
+                          maps: list[linuxcnc_kins_maps.ComponentMap] | None = None) -> tuple[list[str], list[str]]:
     """pige's kinematics component for ``params.machine``: its INI keys (how to load it), and its HAL lines: how to
-    build it, its ``setp`` lines (absolute), the map pins held to ``limits`` (``--max-change``, :mod:`.entry_checks`),
-    and the nets it needs (the tool length, each rotary joint's velocity).
+    build it, its ``setp`` lines (absolute), the map pins (``maps`` as built, None: built here) held to ``limits``
+    (``--max-change``, :mod:`.entry_checks`), and the nets it needs (the tool length, each rotary joint's velocity).
 
     Raises
     ------
@@ -383,7 +419,7 @@ def pige_kinematics_lines(params: CompensationParameters, limits: object = None)
             out.append(f"# {pin}: not estimated (the parameter file has no {n}; left as it is)")
         else:
             out.append(f"setp {pin} {params.values.get(n, 0.0):.4f}")
-    return ini, out + map_setp_lines(params, name, limits) + component_nets(params, name)
+    return ini, out + map_setp_lines(params, name, limits, maps) + component_nets(params, name)
 
 
 def component_nets(params: CompensationParameters, name: str) -> list[str]:

@@ -16,7 +16,9 @@ Ri turns about vi by the axis position minus its offset angle, right-handed ("co
 clockwise rotation facing the direction of the rotation vector"); vi is the axis direction, reversed for an
 axis that moves the workpiece.  So an axis line moved by δ changes the vectors that end or start at its
 pivot (:func:`vector_changes`), a tilt changes vi by ±(u' − u), and a zero-position error E (the axis
-stands at θ + E when θ is commanded, CONVENTIONS §3) needs the offset angle −σE (§9).
+stands at θ + E when θ is commanded, CONVENTIONS §3) needs the offset angle −σE (§9).  A positioning map's
+``$AA_ENC_COMP`` table (:mod:`.tables.siemens_lec`) holds the map without E: both act on the machine axis position,
+so E is entered once, by the offset angle, whether the table is entered or not.
 
 Sources: SINUMERIK Operate (IM9) Commissioning Manual 03/2013, 6FC5397-1DP40-3BA1, 22.6 "Swiveling",
 p. 502 (the three chains); Function Manual Tool Compensation (W1) 08/2005, 6FC5397-0BP10-0BA0,
@@ -39,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from pige_sym.compensation.controllers import ControllerOptions
+from pige_sym.compensation.controllers import ControllerOptions, built_tables
 from pige_sym.compensation.controllers.axis_lines import (
     DEG_DECIMALS,
     DIRECTION_DECIMALS,
@@ -50,6 +52,7 @@ from pige_sym.compensation.controllers.axis_lines import (
     structure,
 )
 from pige_sym.compensation.controllers.scope import positions_and_zeros, scope_lines
+from pige_sym.compensation.controllers.tables.siemens_lec import LecTable, lec_tables
 from pige_sym.compensation.controllers.tables.siemens_lec import check_format as lec_format
 from pige_sym.compensation.controllers.tables.siemens_lec import entered_values as lec_values
 from pige_sym.compensation.controllers.tables.siemens_lec import map_motions as map_motions
@@ -80,6 +83,12 @@ def check_tables(params: CompensationParameters, options: ControllerOptions) -> 
     """The ``$AA_ENC_COMP`` tables' machine axis names and grids, before any value is weighed (:mod:`.tables.
     siemens_lec`)."""
     lec_format(params, options.machine_axes)
+
+
+def tables(params: CompensationParameters, options: ControllerOptions) -> list[LecTable]:
+    """The ``$AA_ENC_COMP`` tables, built once (:func:`.tables.siemens_lec.lec_tables`; none without every mapped
+    axis' machine name)."""
+    return lec_tables(params, options.machine_axes, options.change_limits())
 
 
 def representable(params: CompensationParameters) -> list[str]:
@@ -118,7 +127,7 @@ def entries(params: CompensationParameters, options: ControllerOptions | None) -
     from pige_sym.compensation.controllers.scope import kinematic_values
 
     kinematic = kinematic_values(params, "siemens")
-    maps = lec_values(params, options.machine_axes if options is not None else None)
+    maps = lec_values(params, built_tables(tables, params, options))
     out = [("the swivel data record", kinematic)]
     return out + [("the swivel data record and the $AA_ENC_COMP tables", kinematic | maps)] if maps else out
 
@@ -150,7 +159,8 @@ def render(params: CompensationParameters, options: ControllerOptions) -> str:
                   for k in range(3)]
     lines += [f"$TC_CARR{k}[{carrier}]=$TC_CARR{k}[{carrier}]{signed(v, DEG_DECIMALS)}" for k, v in offsets.items()]
     return "\n".join(lines + _base_and_machine_data(params, st, carrier, vectors)
-                     + lec_lines(params, options.machine_axes, options.change_limits()))
+                     + lec_lines(params, options.machine_axes, options.change_limits(),
+                                 built_tables(tables, params, options)))
 
 
 def _senses_text(params: CompensationParameters, rows: tuple[dict[str, Any], ...]) -> str:

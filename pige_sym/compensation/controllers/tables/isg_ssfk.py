@@ -38,7 +38,7 @@ whose positions wrap stays inside).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -130,17 +130,68 @@ def ssfk_table(pm: PositioningMap, unit_deg: float, limits: ChangeLimits | None 
     return positions, out[0], out[1]
 
 
-def list_body(pm: PositioningMap, unit_deg: float, limits: ChangeLimits | None = None) -> list[str]:
-    """The ``kw.ssfk`` lines of one axis (module docstring)."""
-    positions, pos, neg = ssfk_table(pm, unit_deg, limits)
-    body = ["kw.ssfk.unit 1", f"kw.ssfk.interval {positions[1] - positions[0]}", f"kw.ssfk.kw_startpos {positions[0]}",
-            f"kw.ssfk.kw_nr_max {positions.size}", "kw.ssfk.bilateral 1", "kw.ssfk.modulo 0"]
-    body += [f"kw.ssfk.table[{i}].pos {v}" for i, v in enumerate(pos)]
-    return body + [f"kw.ssfk.table[{i}].neg {v}" for i, v in enumerate(neg)]
+@dataclass(frozen=True)
+class SsfkList:
+    """One axis' ``kw.ssfk`` list as printed (module docstring).
+
+    Attributes
+    ----------
+    pm : PositioningMap
+        The map it holds.
+    unit_deg : float
+        The angle of one unit [deg] (``--isg-unit-deg``).
+    positions, pos, neg : (n,) int
+        The points and the values moving in the positive / negative direction [units] (:func:`ssfk_table`).
+    """
+
+    pm: PositioningMap
+    unit_deg: float
+    positions: np.ndarray
+    pos: np.ndarray
+    neg: np.ndarray
+
+    @property
+    def axis(self) -> str:
+        return self.pm.axis
+
+    def body(self) -> list[str]:
+        """The ``kw.ssfk`` lines of the list (module docstring)."""
+        positions = self.positions
+        body = ["kw.ssfk.unit 1", f"kw.ssfk.interval {positions[1] - positions[0]}",
+                f"kw.ssfk.kw_startpos {positions[0]}", f"kw.ssfk.kw_nr_max {positions.size}", "kw.ssfk.bilateral 1",
+                "kw.ssfk.modulo 0"]
+        body += [f"kw.ssfk.table[{i}].pos {v}" for i, v in enumerate(self.pos)]
+        return body + [f"kw.ssfk.table[{i}].neg {v}" for i, v in enumerate(self.neg)]
+
+    def printed(self, theta_cmd_deg: np.ndarray, direction_cmd: int) -> np.ndarray:
+        """The list's value [deg] at commanded angles (its nodes) for a commanded direction (pos for +1 and 0, neg for
+        −1)."""
+        at = np.round(np.asarray(theta_cmd_deg, dtype=float) / self.unit_deg).astype(np.int64)
+        idx = np.searchsorted(self.positions, at)
+        if (idx >= self.positions.size).any() or (self.positions[np.minimum(idx, self.positions.size - 1)] != at).any():
+            raise AssertionError(f"{self.axis}: a grid angle is not a node of its kw.ssfk list")  # pragma: no cover
+        return np.asarray((self.neg if direction_cmd < 0 else self.pos)[idx] * self.unit_deg, dtype=float)
 
 
-def render_lines(params: CompensationParameters, unit_deg: float | None, limits: Any = None) -> list[str]:
+def ssfk_lists(params: CompensationParameters, unit_deg: float | None, limits: Any = None) -> list[SsfkList]:
+    """The list of every axis whose map holds φ, every value held to ``limits`` and SGN32 (:func:`ssfk_table`); none
+    without ``unit_deg`` (no list is written).
+
+    Raises
+    ------
+    InputError
+        A unit, a layout or a value the list cannot hold (module docstring).
+    """
+    check_format(params, unit_deg, limits)
+    if unit_deg is None:
+        return []
+    return [SsfkList(pm, unit_deg, *ssfk_table(pm, unit_deg, limits)) for pm in positioning_maps(params).values()]
+
+
+def render_lines(params: CompensationParameters, unit_deg: float | None, limits: Any = None,
+                 lists: list[SsfkList] | None = None) -> list[str]:
     """Per axis: the notes (``#``, outside the list) and the list body; the refusal when the unit is not given.
+    ``lists``: the lists as built (:func:`ssfk_lists`; None: built here).
 
     Raises
     ------
@@ -149,8 +200,7 @@ def render_lines(params: CompensationParameters, unit_deg: float | None, limits:
         (module docstring).
     """
     check_format(params, unit_deg, limits)
-    maps = positioning_maps(params)
-    if not maps:
+    if not positioning_maps(params):
         return []
     out = [f"# positioning maps (CONVENTIONS §10) as kw.ssfk lists ({SOURCE}): a value is the axis' error (actual "
            "minus programmed) in its commanded sense, pos/neg by the direction of motion"]
@@ -158,35 +208,19 @@ def render_lines(params: CompensationParameters, unit_deg: float | None, limits:
         return out + ["# not written: the unit of a rotary axis' kw.ssfk entries is not settled by the pages read "
                       "(P-COMP-00017: encoder increments or 0.1 um): give --isg-unit-deg U, the angle [deg] of one "
                       "unit of your axis' list (kw.ssfk.unit 1)"]
-    for axis, pm in maps.items():
-        body = list_body(pm, unit_deg, limits)
-        out += [f"# {n}" for n in pm.notes()]
-        out += [f"# {axis}: list body ({len(body)} lines, no comment inside; values rounded to 1 unit = "
+    for lst in (lists if lists is not None else ssfk_lists(params, unit_deg, limits)):
+        body = lst.body()
+        out += [f"# {n}" for n in lst.pm.notes()]
+        out += [f"# {lst.axis}: list body ({len(body)} lines, no comment inside; values rounded to 1 unit = "
                 f"{unit_deg:g} deg, {unit_deg * math.pi / 180 * 1e6:.3g} urad; outside the table the end values hold)",
                 *body]
     return out
 
 
-def entered_values(params: CompensationParameters, unit_deg: float | None, limits: Any = None) -> dict[str, float]:
-    """What the printed lists enter (:func:`~.positioning.entered_map_values`): every positioning map as its table's
-    integers times the unit, per direction; nothing without ``unit_deg`` (no list is written)."""
-    if unit_deg is None or not (math.isfinite(unit_deg) and unit_deg > 0):
-        return {}
+def entered_values(params: CompensationParameters, lists: list[SsfkList]) -> dict[str, float]:
+    """What the printed lists ``lists`` (:func:`ssfk_lists`) enter (:func:`~.positioning.entered_map_values`): every
+    positioning map as its table's integers times the unit, per direction; nothing without lists."""
     out: dict[str, float] = {}
-    for pm in positioning_maps(params).values():
-        out |= entered_map_values(params, pm, _printed(pm, unit_deg, limits))
+    for lst in lists:
+        out |= entered_map_values(params, lst.pm, lst.printed)
     return out
-
-
-def _printed(pm: PositioningMap, unit_deg: float, limits: Any = None) -> Callable[[np.ndarray, int], np.ndarray]:
-    """The list's value [deg] at commanded angles for a commanded direction (pos for +1 and 0, neg for −1)."""
-    positions, pos, neg = ssfk_table(pm, unit_deg, limits)
-
-    def printed(theta_cmd_deg: np.ndarray, direction_cmd: int) -> np.ndarray:
-        at = np.round(np.asarray(theta_cmd_deg, dtype=float) / unit_deg).astype(np.int64)
-        idx = np.searchsorted(positions, at)
-        if (idx >= positions.size).any() or (positions[np.minimum(idx, positions.size - 1)] != at).any():
-            raise AssertionError(f"{pm.axis}: a grid angle is not a node of its kw.ssfk list")  # pragma: no cover
-        return np.asarray((neg if direction_cmd < 0 else pos)[idx] * unit_deg, dtype=float)
-
-    return printed

@@ -147,14 +147,14 @@ def comp_tables(params: CompensationParameters, limits: Any = None) -> list[Comp
     return [comp_table(params.machine, pm, limits=limits) for pm in positioning_maps(params).values()]
 
 
-def comp_files(params: CompensationParameters, limits: Any = None) -> dict[str, str]:
+def comp_files(tables: list[CompTable]) -> dict[str, str]:
     """File name → text of every compensation file (what ``pige compensate --comp-dir`` writes)."""
-    return {t.file_name: t.text() for t in comp_tables(params, limits)}
+    return {t.file_name: t.text() for t in tables}
 
 
-def render_lines(params: CompensationParameters, limits: Any = None) -> list[str]:
-    """The INI lines that load the files, with what the files hold (comments); empty without maps."""
-    tables = comp_tables(params, limits)
+def render_lines(tables: list[CompTable]) -> list[str]:
+    """The INI lines that load the files ``tables`` (:func:`comp_tables`), with what the files hold (comments); empty
+    without maps."""
     if not tables:
         return []
     out = [f"# the positioning maps as [JOINT_n]COMP_FILE ({SOURCE}): COMP_FILE_TYPE 1, the trim [deg] is added to "
@@ -170,12 +170,14 @@ def render_lines(params: CompensationParameters, limits: Any = None) -> list[str
     return out
 
 
-def entered_values(params: CompensationParameters, limits: Any = None) -> dict[str, float]:
-    """What the compensation files enter (:func:`~.positioning.entered_map_values`): each joint's trims as printed,
-    forward and reverse (a trim is −e, module docstring)."""
+def entered_values(params: CompensationParameters, tables: list[CompTable]) -> dict[str, float]:
+    """What the compensation files ``tables`` (:func:`comp_tables`, the ones printed) enter
+    (:func:`~.positioning.entered_map_values`): each joint's trims as printed, forward and reverse (a trim is −e,
+    module docstring)."""
+    maps = positioning_maps(params)
     out: dict[str, float] = {}
-    for pm in positioning_maps(params).values():
-        table = comp_table(params.machine, pm, limits=limits)
+    for table in tables:
+        pm = maps[table.axis]
         forward = np.round(table.forward_deg, TRIM_DECIMALS)
         reverse = np.round(table.reverse_deg, TRIM_DECIMALS)
 

@@ -16,6 +16,7 @@ not uniform, or larger than the component's ``MAP_NODES``, is refused with the r
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -43,6 +44,35 @@ def slot_values(axis_maps: AxisMaps) -> tuple[list[np.ndarray], list[str]]:
         out.append(np.full(n, np.nan) if v is None else np.asarray(v, dtype=float))
         said.append("not in the file: 0" if v is None else "from the file")
     return out, said
+
+
+@dataclass(frozen=True)
+class ComponentMap:
+    """One axis' maps as the component's pins hold them (:func:`slot_values`), built once per run.
+
+    Attributes
+    ----------
+    axis : str
+    axis_maps : AxisMaps
+    slots : tuple of (n,) arrays [µm, µrad]
+        The seven slots' values at the grid angles (NaN: no value), in the component's slot order.
+    said : tuple of str
+        Per slot, what the file gives for it.
+    """
+
+    axis: str
+    axis_maps: AxisMaps
+    slots: tuple[np.ndarray, ...]
+    said: tuple[str, ...]
+
+
+def component_maps(params: CompensationParameters) -> list[ComponentMap]:
+    """Every axis' maps as the component's pins hold them (module docstring)."""
+    out = []
+    for axis, axis_maps in (params.error_maps.axes.items() if params.error_maps is not None else ()):
+        slots, said = slot_values(axis_maps)
+        out.append(ComponentMap(axis, axis_maps, tuple(slots), tuple(said)))
+    return out
 
 
 def check_format(params: CompensationParameters) -> None:
@@ -84,24 +114,25 @@ def _grid_lines(name: str, axis_maps: AxisMaps) -> tuple[list[str], list[str]]:
     return before, [f"setp {name}.map-{a}-nodes {g.n}"]
 
 
-def map_setp_lines(params: CompensationParameters, name: str, limits: Any = None) -> list[str]:
+def map_setp_lines(params: CompensationParameters, name: str, limits: Any = None,
+                   maps: list[ComponentMap] | None = None) -> list[str]:
     """The comments and ``setp``/``net`` lines that enter every map of ``params`` into component ``name``; every
-    value held to ``limits`` (:class:`~pige_sym.compensation.controllers.entry_checks.ChangeLimits`).
+    value held to ``limits`` (:class:`~pige_sym.compensation.controllers.entry_checks.ChangeLimits`).  ``maps``: the
+    slots as built (:func:`component_maps`; None: built here).
 
     Raises
     ------
     InputError
         A grid the component cannot hold (module docstring), or a value beyond ``limits``.
     """
-    maps = params.error_maps
-    if maps is None:
+    if params.error_maps is None:
         return []
     out = ["# error maps (CONVENTIONS §10) as pins of pige's kinematics component: it corrects the tool point for "
            "every motion (do not enter the COMP_FILEs as well: phi would be corrected twice)"]
-    for axis, axis_maps in maps.axes.items():
+    for cm in (maps if maps is not None else component_maps(params)):
+        axis, axis_maps, values, said = cm.axis, cm.axis_maps, cm.slots, cm.said
         g = axis_maps.grid
         before, after = _grid_lines(name, axis_maps)
-        values, said = slot_values(axis_maps)
         stems = pins.map_slot_names(axis)
         out.append(f"# {axis}: {g.n} grid angles theta {g.angles_deg[0]:g}..{g.angles_deg[-1]:g} deg"
                    + (" (full turn, wraps)" if g.full_turn else " (end values hold outside)") + "; "
@@ -120,15 +151,13 @@ def map_setp_lines(params: CompensationParameters, name: str, limits: Any = None
     return out
 
 
-def entered_map_values(params: CompensationParameters) -> dict[str, float]:
-    """What the ``setp`` lines of the maps enter, as printed (:data:`VALUE_DECIMALS`), in the weighing's names: a
-    map per direction as its printed mean ± half its printed reversal."""
-    maps = params.error_maps
-    if maps is None:
-        return {}
+def entered_map_values(maps: list[ComponentMap]) -> dict[str, float]:
+    """What the ``setp`` lines of the maps ``maps`` (:func:`component_maps`, the ones printed) enter, as printed
+    (:data:`VALUE_DECIMALS`), in the weighing's names: a map per direction as its printed mean ± half its printed
+    reversal."""
     out: dict[str, float] = {}
-    for axis, axis_maps in maps.axes.items():
-        values, _ = slot_values(axis_maps)
+    for cm in maps:
+        axis, axis_maps, values = cm.axis, cm.axis_maps, cm.slots
         printed = {m.name: np.round(np.nan_to_num(v), VALUE_DECIMALS)
                    for m, v in zip(axis_motions(axis, per_direction=True), values, strict=True)}
         angles = axis_maps.grid.angles_deg

@@ -14,7 +14,8 @@ The map values are the ones to enter (weighed by their uncertainty, :func:`~pige
 entered_for_controller`).  A grid angle without a value (the data did not determine it) gets 0 there, which is
 what the NC rewrite does with it (no correction at that angle), and every table says so.  E enters only where
 the parameter file gives it a value: a probe or an R-test cannot separate the inner axis' E from the set-up
-(CONVENTIONS §10), and the file then leaves it without one.
+(CONVENTIONS §10), and the file then leaves it without one.  A table whose controller enters E in another entry
+(SINUMERIK: the swivel data record's offset angle, :mod:`.siemens_lec`) holds φ alone, so E is entered once.
 
 Nodes: the map's grid angles in the commanded angle, over the travel of a full-turn axis (its grid repeats every
 360°) or the grid itself (outside it the nearest end value holds, §10, as in every table here).
@@ -73,21 +74,26 @@ class PositioningMap:
     def full_turn(self) -> bool:
         return bool(self.grid.full_turn)
 
-    def error_urad(self, theta_deg: np.ndarray, direction: np.ndarray | int = 0) -> np.ndarray:
-        """``E + φ^d(θ)`` [µrad] at θ (the §10 angle) approached in the θ direction d (+1, −1; 0: the mean)."""
+    def error_urad(self, theta_deg: np.ndarray, direction: np.ndarray | int = 0, with_zero: bool = True
+                   ) -> np.ndarray:
+        """``E + φ^d(θ)`` [µrad] at θ (the §10 angle) approached in the θ direction d (+1, −1; 0: the mean); without
+        ``with_zero``, ``φ^d(θ)`` (a table whose controller enters E elsewhere)."""
         theta = np.atleast_1d(np.asarray(theta_deg, dtype=float))
-        out = self.grid.interpolate(self.mean_urad, theta) + (self.zero_urad or 0.0)
+        out = self.grid.interpolate(self.mean_urad, theta) + ((self.zero_urad or 0.0) if with_zero else 0.0)
         if self.reversal_urad is not None:
             d = np.broadcast_to(np.sign(np.asarray(direction, dtype=float)), theta.shape)
             out = out + 0.5 * d * self.grid.interpolate(self.reversal_urad, theta)
         return np.asarray(out)
 
-    def commanded_error_deg(self, theta_cmd_deg: np.ndarray, direction_cmd: np.ndarray | int = 0) -> np.ndarray:
+    def commanded_error_deg(self, theta_cmd_deg: np.ndarray, direction_cmd: np.ndarray | int = 0,
+                            with_zero: bool = True) -> np.ndarray:
         """e [deg]: the axis stands at θ_cmd + e when θ_cmd is commanded, moving in the commanded direction
-        ``direction_cmd`` (+1: θ_cmd increasing; module docstring)."""
+        ``direction_cmd`` (+1: θ_cmd increasing; module docstring); without ``with_zero``, e less σE (the part of the
+        error a table holds when the controller enters E elsewhere)."""
         s = float(self.sense)
         d = s * np.sign(np.asarray(direction_cmd, dtype=float))
-        return np.asarray(s * self.error_urad(s * np.asarray(theta_cmd_deg, dtype=float), d) * URAD_TO_DEG)
+        theta = s * np.asarray(theta_cmd_deg, dtype=float)
+        return np.asarray(s * self.error_urad(theta, d, with_zero) * URAD_TO_DEG)
 
     def nodes_cmd(self, travel_cmd_deg: tuple[float, float] | None = None) -> np.ndarray:
         """The grid angles in the commanded angle, increasing [deg]: over ``travel_cmd_deg`` (lo, hi) for a
@@ -112,14 +118,18 @@ class PositioningMap:
         steps = np.diff(np.append(g, g[0] + 360.0) if self.full_turn else g)
         return float(steps[0]) if np.allclose(steps, steps[0], rtol=0.0, atol=1e-9) else None
 
-    def notes(self) -> list[str]:
-        """What the table holds and what it does not, in words (every table prints them)."""
+    def notes(self, zero_entered_by: str | None = None) -> list[str]:
+        """What the table holds and what it does not, in words (every table prints them); ``zero_entered_by``: the
+        controller's entry that carries E instead of the table (SINUMERIK's offset angle)."""
         out = [f"{self.axis}: positioning map of {self.grid.n} grid angles (CONVENTIONS §10), sigma = {self.sense:+d} "
                "(§9)" + (", per direction of motion (forward/reverse)" if self.per_direction else ", "
                          "one value for both directions (the map is not per direction)")]
         if self.zero_urad is None:
             out.append(f"{self.axis}: the zero-position error E{self.axis[0]}0{self.axis} has no value in the file "
                        "(not entered: the table holds the map's shape, its mean left out)")
+        elif zero_entered_by is not None:
+            out.append(f"{self.axis}: the zero-position error E{self.axis[0]}0{self.axis} = {self.zero_urad:.3f} urad "
+                       f"is entered by {zero_entered_by}, not by this table (it holds the map's shape, E left out)")
         else:
             out.append(f"{self.axis}: the zero-position error E{self.axis[0]}0{self.axis} = {self.zero_urad:.3f} urad "
                        "is entered with the map")
@@ -177,8 +187,9 @@ def entered_map_values(params: CompensationParameters, pm: PositioningMap,
     its unit).  From ``e = σ·(E + φ^{σd}(σ·θ_cmd))`` (module docstring) the entered ``φ^d(θ) = σ·e − E``, E the
     zero-position error the table carries with the map (0 when the file has none).  A map per direction in a table
     that holds one value for both directions enters that value as φ⁺ and φ⁻ alike (their mean).  With
-    ``zero_elsewhere`` the controller's other entries enter E too (SINUMERIK's offset angle): the table's whole value
-    is counted as φ then (``φ = σ·e``), so that the two entries together count what they enter, E twice.
+    ``zero_elsewhere`` the controller's other entries enter E (SINUMERIK's offset angle) and the table holds φ alone
+    (``commanded_error_deg(..., with_zero=False)``): its whole value is counted as φ (``φ = σ·e``) and E is not named
+    here, so that the two entries together count E once.
     """
     maps = params.error_maps
     if maps is None or pm.axis not in maps.axes:
