@@ -45,7 +45,7 @@ def test_with_force_every_file_is_written_and_the_changed_ones_backed_up(tmp_pat
     assert len(backups) == 1 and backups[0].read_text() == old
     new = ini.read_text()
     assert "SUBROUTINE_PATH = ./remap_subs:./pige_cycle/ngc:./pige_cycle/run" in new
-    assert "ON_ABORT_COMMAND = O <pige_on_abort> call" in new and "[PYTHON]" in new
+    assert "ON_ABORT_COMMAND = O <pige_cycle_abort> call" in new and "[PYTHON]" in new
     assert re.search(r"^# pige cycle install: moved to ./pige_cycle/values.hal: HALCMD = sets :y-offset\s+20$", new,
                      re.M)
     # the lines the INI kept are byte for byte the old ones

@@ -305,6 +305,12 @@ def test_the_abort_handler_stops_pige_first_and_sets_the_switch_s_output_without
     assert main(install_args(ini, "--force")) == 0
     settings = json.loads((tmp_path / "pige_cycle" / "settings.json").read_text())
     assert settings["kinematics_switch"]["analog_out"] == 3
+    # the INI's handler is the Python procedure's call itself (LinuxCNC may execute the handler's last block twice)
+    assert "\nON_ABORT_COMMAND = O <pige_cycle_abort> call\n" in ini.read_text()
+    # an earlier install's NGC handler is replaced, not left beside it
+    ini.write_text(ini.read_text().replace("O <pige_cycle_abort> call", "O <pige_on_abort> call"))
+    assert main(install_args(ini, "--force")) == 0
+    assert ini.read_text().count("ON_ABORT_COMMAND = ") == 1 and "O <pige_cycle_abort> call" in ini.read_text()
     lines = [ln for ln in (tmp_path / "pige_cycle" / "ngc" / "pige_on_abort.ngc").read_text().splitlines()
              if ln and not ln.startswith((";", "("))]
     assert lines == ["o<pige_on_abort> sub", "o<pige_cycle_abort> call",

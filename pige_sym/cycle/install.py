@@ -234,7 +234,7 @@ def _ini_edits(doc: IniDocument, layout: Layout, setup: KinematicsSetup,
     notes: list[str] = []
     edits += _subroutine_path(doc, layout)
     edits += _remaps(doc)
-    edits += _rs274ngc_keys(doc, notes)
+    edits += _rs274ngc_keys(doc, notes, scan)
     edits += _moved_values(doc, layout, setup, scan)
     _python(doc, layout)  # refuses a [PYTHON] section of the configuration's own
     return edits, notes
@@ -274,7 +274,17 @@ def _remaps(doc: IniDocument) -> list[IniEdit]:
     return [IniEdit(after, "insert_after", "\n".join(new), "the cycle's codes")] if new else []
 
 
-def _rs274ngc_keys(doc: IniDocument, notes: list[str]) -> list[IniEdit]:
+#: the ON_ABORT_COMMANDs an install writes: pige_cycle_abort's call itself when the switch's output is known (it
+#: sets the output from Python: nothing is left for LinuxCNC to execute again after the handler, see
+#: docs/linuxcnc-cycle.md §6), else the NGC handler, which puts the mode back with the configuration's code
+ABORT_COMMANDS = ("o <pige_cycle_abort> call", f"o <{ON_ABORT_SUB}> call")
+
+
+def abort_command(scan: HalScan) -> str:
+    return "O <pige_cycle_abort> call" if switch_output(scan) is not None else f"O <{ON_ABORT_SUB}> call"
+
+
+def _rs274ngc_keys(doc: IniDocument, notes: list[str], scan: HalScan) -> list[IniEdit]:
     out = []
     end = _section_end(doc, "RS274NGC")
     pins = doc.value("RS274NGC", "HAL_PIN_VARS")
@@ -284,10 +294,14 @@ def _rs274ngc_keys(doc: IniDocument, notes: list[str]) -> list[IniEdit]:
         raise InputError(f"{doc.name}: [RS274NGC] HAL_PIN_VARS = {pins}: the cycle reads motion.switchkins-type "
                          "(#<_hal[...]>): set it to 1")
     abort = doc.value("RS274NGC", "ON_ABORT_COMMAND")
-    ours = f"O <{ON_ABORT_SUB}> call"
+    ours = abort_command(scan)
+    given = None if abort is None else " ".join(abort.split()).lower()
     if abort is None:
         out.append(IniEdit(end, "insert_after", f"ON_ABORT_COMMAND = {ours}", "the kinematics mode after an abort"))
-    elif " ".join(abort.split()).lower() != ours.lower():
+    elif given in ABORT_COMMANDS and given != ours.lower():  # an earlier install's
+        line = doc.values("RS274NGC", "ON_ABORT_COMMAND")[0].line
+        out.append(IniEdit(line, "replace", f"ON_ABORT_COMMAND = {ours}", "the kinematics mode after an abort"))
+    elif given != ours.lower():
         notes.append(f"[RS274NGC] ON_ABORT_COMMAND is the configuration's own ({abort}): call o<{ON_ABORT_SUB}> from "
                      "it (first, before anything that synchronises) so that an abort in the middle of the cycle stops "
                      "pige's step and leaves the kinematics mode as it was found")

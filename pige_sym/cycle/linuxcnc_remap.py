@@ -16,10 +16,12 @@ with an internal ``P`` (only from inside the cycle: a call at the top level is r
     M451 P[200 + mode]          analyse (P0, P1, M452) or enter (P2): pige cycle step analyse|enter
     o<pige_restore> call        the kinematics mode as it was found (``#<_pige_kins_before>``)
 
-**An abort** (Esc, E-stop, an error: LinuxCNC's task runs ``[RS274NGC]ON_ABORT_COMMAND``, ``pige_on_abort.ngc``,
-inside the interpreter after every abort) calls ``o<pige_cycle_abort>`` (:func:`pige_cycle_abort`): it kills a step
-still running and returns the kinematics mode the cycle found, which ``pige_on_abort.ngc`` sets at once with ``M68
-E<n> Q<type>`` on the ``motion.analog-out-<n>`` that drives ``motion.switchkins-type``.  Not the configuration's own
+**An abort** (Esc, E-stop, an error: LinuxCNC's task runs ``[RS274NGC]ON_ABORT_COMMAND`` inside the interpreter
+after every abort, ``O <pige_cycle_abort> call``) calls :func:`pige_cycle_abort`: it kills a step still running and
+sets the kinematics mode the cycle found at once, as ``M68 E<n> Q<type>`` would, on the ``motion.analog-out-<n>``
+that drives ``motion.switchkins-type`` (``pige_on_abort.ngc``, for a handler of the configuration's own, does it with
+``M68`` from the value returned).  A Python call and not an NGC procedure: after an E-stop reset LinuxCNC executed
+the handler's last block a second time at call level 0, which for an ``endsub`` is an error.  Not the configuration's own
 code (``M429``): the shipped procedure synchronises (``M66 E0 L0``), which at abort time suspends the abort handler
 half-way and leaves ``o<pige_cycle_abort>`` unrun when it comes after.  LinuxCNC may run the handler twice for one
 abort and drop what the first queued between the two (an interpreter error in MDI: task's
@@ -238,8 +240,20 @@ def pige_cycle_abort(self, *args):
         self.params["_pige_kins_before"] = -1
         ABORTED.clear()
         return -1.0
+    out = _switch_output()
+    if out is not None and emccanon is not None:  # what M68 E<out> Q<found> queues
+        emccanon.SET_AUX_OUTPUT_VALUE(out, float(found))
     _put_back_through_the_command_channel(found, getattr(self, "pige_run", None) or os.path.join(ROOT, "runs"))
     return float(found)
+
+
+def _switch_output():
+    """N of the motion.analog-out-N that drives motion.switchkins-type (settings.json), or None."""
+    try:
+        out = _settings()["kinematics_switch"]["analog_out"]
+        return None if out is None else int(out)
+    except Exception:
+        return None
 
 
 #: run by ``python3 -c`` (LinuxCNC's Python, its ``linuxcnc`` module) as a process of its own, arguments: the N of
@@ -275,10 +289,10 @@ def _put_back_through_the_command_channel(found, folder):
     interpreter and be dropped by the next mode change (after an interpreter error in MDI, measured: the kill).
     Its note goes to ``abort.log`` in ``folder`` (the aborted run's folder)."""
     try:
-        out = _settings()["kinematics_switch"]["analog_out"]
+        out = _switch_output()
         if out is None:
             return
-        subprocess.Popen(["python3", "-c", PUT_BACK, str(int(out)), str(found), os.path.join(folder, "abort.log")],
+        subprocess.Popen(["python3", "-c", PUT_BACK, str(out), str(found), os.path.join(folder, "abort.log")],
                          cwd=CONFIG, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                          start_new_session=True)
     except Exception:  # never in the way of LinuxCNC's abort
