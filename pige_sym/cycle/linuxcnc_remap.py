@@ -22,8 +22,8 @@ sets the kinematics mode the cycle found at once, as ``M68 E<n> Q<type>`` would,
 that drives ``motion.switchkins-type`` (``pige_on_abort.ngc``, for a handler of the configuration's own, does it with
 ``M68`` from the value returned).  A Python call and not an NGC procedure: after an E-stop reset LinuxCNC executed
 the handler's last block a second time at call level 0, which for an ``endsub`` is an error.  Not the
-configuration's own code (``M429``): the shipped procedure synchronises (``M66 E0 L0``), which at abort time suspends the abort handler
-half-way and leaves ``o<pige_cycle_abort>`` unrun when it comes after.  LinuxCNC may run the handler twice for one
+configuration's own code (``M429``): the shipped procedure synchronises (``M66 E0 L0``), which at abort time
+suspends the abort handler half-way and leaves ``o<pige_cycle_abort>`` unrun when it comes after.  LinuxCNC may run the handler twice for one
 abort and drop what the first queued between the two (an interpreter error in MDI: task's
 ``EMC_ABORT_INTERPRETER_ERROR_MDI``, then ``EMC_ABORT_TASK_EXEC_ERROR``, which clears the queue first;
 src/emc/task/emctaskmain.cc): so every abort within ``REASSERT_S`` of the first puts the mode back again until
