@@ -19,17 +19,18 @@ with an internal ``P`` (only from inside the cycle: a call at the top level is r
 **An abort** (Esc, E-stop, an error: LinuxCNC's task runs ``[RS274NGC]ON_ABORT_COMMAND`` inside the interpreter
 after every abort, ``O <pige_cycle_abort> call``) calls :func:`pige_cycle_abort`: it kills a step still running and
 sets the kinematics mode the cycle found at once, as ``M68 E<n> Q<type>`` would, on the ``motion.analog-out-<n>``
-that drives ``motion.switchkins-type`` (``pige_on_abort.ngc``, for a handler of the configuration's own, does it with
-``M68`` from the value returned).  A Python call and not an NGC procedure: after an E-stop reset LinuxCNC executed
-the handler's last block a second time at call level 0, which for an ``endsub`` is an error.  Not the
+that drives ``motion.switchkins-type`` (``pige_on_abort.ngc``, for a handler of the configuration's own, does it
+with ``M68`` from the value returned).  A Python call and not an NGC procedure: after an E-stop reset LinuxCNC
+executed the handler's last block a second time at call level 0, which for an ``endsub`` is an error.  Not the
 configuration's own code (``M429``): the shipped procedure synchronises (``M66 E0 L0``), which at abort time
-suspends the abort handler half-way and leaves ``o<pige_cycle_abort>`` unrun when it comes after.  LinuxCNC may run the handler twice for one
-abort and drop what the first queued between the two (an interpreter error in MDI: task's
+suspends the abort handler half-way and leaves ``o<pige_cycle_abort>`` unrun when it comes after.  LinuxCNC may run
+the handler twice for one abort and drop what the first queued between the two (an interpreter error in MDI: task's
 ``EMC_ABORT_INTERPRETER_ERROR_MDI``, then ``EMC_ABORT_TASK_EXEC_ERROR``, which clears the queue first;
 src/emc/task/emctaskmain.cc): so every abort within ``REASSERT_S`` of the first puts the mode back again until
 ``motion.switchkins-type`` shows it.  And what the handler queues after such an error can wait behind the aborted
-interpreter until the next mode change drops it (``emcTaskSetMode`` calls ``emcTaskAbort``): so ``o<pige_cycle_abort>``
-also sends the value through LinuxCNC's command channel, from a process of its own (:data:`PUT_BACK`).
+interpreter until the next mode change drops it (``emcTaskSetMode`` calls ``emcTaskAbort``): so
+``o<pige_cycle_abort>`` also sends the value through LinuxCNC's command channel, from a process of its own
+(:data:`PUT_BACK`).
 
 The prepare and analyse steps run in the *epilog* of the inner call, as a generator that yields
 ``INTERP_EXECUTE_FINISH`` while pige's process runs: the interpreter stays responsive (Esc, E-stop, the GUI's
