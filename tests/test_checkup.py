@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import shlex
 from datetime import timedelta
 from pathlib import Path
 
@@ -528,9 +529,11 @@ def list_runs_of(how: str, db: Path) -> list:
     return history.list_runs("DMU-1", light=True)
 
 
-def test_an_r_test_check_up_from_a_simulated_nest(tmp_path: Path, capsys) -> None:
+def test_an_r_test_check_up_from_a_simulated_nest(tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch) -> None:
     """The R-test way: a full calibration, the check-up's poses as an angle file and its program, the nest's file of
-    those poses; the noise is the calibration's (three poses leave two degrees of freedom of their own)."""
+    those poses; the noise is the calibration's (three poses leave two degrees of freedom of their own).  The
+    drifted check-up's next step writes the next check-up's program as printed (Siemens: the R-test file does not
+    state the dialect, and the words say so)."""
     db = tmp_path / "h.db"
     truth = ",".join(f"{k}={v}" for k, v in TRUTH.items())
     assert pige("simulate", "--machine", MACHINE, "--pige", truth, "--seed", 1, "--out", tmp_path / "full.csv") == 0
@@ -552,6 +555,12 @@ def test_an_r_test_check_up_from_a_simulated_nest(tmp_path: Path, capsys) -> Non
         verdicts.append((code, json.loads(out)["verdict"], json.loads(out)["items"][2]["std"]))
     assert verdicts[0][:2] == (0, "ok") and verdicts[1][:2] == (1, "drifted")
     assert verdicts[0][2] < 0.3  # the calibration's noise, not two residual degrees of freedom
+    what, command = json.loads(out)["next_step"]
+    assert command == f"pige program --checkup --machine-id RT --db {db} --out checkup_RT_run4.mpf", command
+    assert "add --dialect fanuc or linuxcnc" in what and "--corrected" in what
+    monkeypatch.chdir(tmp_path)
+    code, _, _ = _run(capsys, *shlex.split(command)[1:])
+    assert code == 0 and "TRAFOOF" in (tmp_path / "checkup_RT_run4.mpf").read_text()
 
 
 @pytest.mark.parametrize(("argv", "said"), [

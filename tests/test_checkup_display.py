@@ -17,6 +17,7 @@ import json
 import re
 import shutil
 from datetime import datetime, timedelta, timezone
+from html import unescape
 from pathlib import Path
 
 import pytest
@@ -106,7 +107,7 @@ def test_the_report_names_what_the_cli_says(histories: dict, verdict: str) -> No
     said = re.search(r"^next step: (.*)$", h["text"], re.M)
     assert said is not None
     step = re.search(r'data-next-step="1">([^<]*)<', html)
-    assert step is not None and step.group(1).rstrip(".").lower() == said.group(1).lower(), (step.group(1), said)
+    assert step is not None and unescape(step.group(1)).rstrip(".").lower() == said.group(1).lower(), (step, said)
     section = html[html.index('data-section="checkup"'):]
     opening = section[:section.index("</p>")]
     assert "t_nu" not in html and "alpha/(" not in opening and "The last one's limits: learned from" in opening
@@ -158,13 +159,14 @@ def test_the_report_s_next_step_for_an_old_check_up_is_computed_as_the_cli_s() -
     from types import SimpleNamespace
 
     from pige_sym.report.next_step import checkup_next
-    from pige_sym.verdict.checkup.routine import next_step
+    from pige_sym.verdict.checkup.routine import NextRun, next_step
 
     run = SimpleNamespace(verdict="drifted", machine_id="M 1", checkup={"to_enter": {"EX0C": 2.0}, "notes": []})
-    step = checkup_next(run)
-    what, command = next_step("drifted", [], {"EX0C": 2.0}, "M 1")
+    step = checkup_next(run, "h.db", 3)
+    what, command = next_step("drifted", [], {"EX0C": 2.0}, "M 1", NextRun("h.db", None, 3))
     assert step.what.rstrip(".").lower() == what.lower() and step.commands == [command]
-    assert command == "pige checkup NEXT.csv --machine-id 'M 1' --corrected"
+    assert command == "pige program --checkup --machine-id 'M 1' --db h.db --out checkup_M_1_run4.mpf"
+    assert what.endswith("with --machine-id 'M 1' --db h.db --corrected")
 
 
 def test_due_dates_are_marked_overdue() -> None:

@@ -43,7 +43,7 @@ def _options(args: argparse.Namespace) -> Any:
         current = read_current(args.current)
     return CheckupOptions(args.tolerances, args.rule, args.k, args.alpha, args.pige, args.corrected, args.date,
                           args.controller, current, 1 if args.carrier is None else args.carrier, args.heidenhain_trans,
-                          _max_change(args.max_change))
+                          _max_change(args.max_change), args.db)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -145,7 +145,7 @@ def format_checkup(r: Any) -> str:
                       r.changes.controller_text]
     lines += [f"note: {n}" for n in r.notes]
     what, command = r.next_step()
-    lines += [f"next step: {what}", f"  {command}"]
+    lines += [f"next step: {what}", *([f"  {command}"] if command else [])]
     return "\n".join(lines)
 
 

@@ -183,18 +183,27 @@ def measurement_next(rep: MeasurementReport, data: ReportData) -> NextStep:
                     f"A test that decides {them}:", [plan], reasons)
 
 
-def checkup_next(run: Any) -> NextStep:
+def checkup_next(run: Any, database: str | None = None, run_number: int = 0, full: Any = None) -> NextStep:
     """The next step of a machine whose last run is a check-up: the one ``pige checkup`` printed
-    (:func:`pige_sym.verdict.checkup.routine.next_step`, stored with the run; for a check-up stored before it was,
-    the same function on what was stored)."""
-    from pige_sym.verdict.checkup.routine import next_step
+    (:func:`pige_sym.verdict.checkup.routine.next_step`, stored with the run).  For a check-up stored before it was,
+    or stored with the placeholder command pige printed then (``pige checkup NEXT.csv …``, ``pige history add
+    FULL.csv …``: files that do not exist), the same function on what was stored, with this history's
+    ``database`` and the controller options its program differs from the ``full`` calibration's run by (the stored
+    record is left as it is)."""
+    from pige_sym.verdict.checkup.routine import NextRun, controller_options, next_step
 
     info = run.checkup or {}
     stored = info.get("next_step")
-    if not (isinstance(stored, list) and len(stored) == 2 and all(isinstance(x, str) for x in stored)):
+    if not (isinstance(stored, list) and len(stored) == 2 and all(isinstance(x, str) for x in stored)) or any(
+            old in stored[1] for old in ("NEXT.csv", "FULL.csv")):
+        setup = getattr(run, "setup", None)
+        probe = setup.get("probe") if isinstance(setup, dict) else None
+        dialect = ((probe or {}).get("program") or {}).get("dialect") if isinstance(probe, dict) else None
+        full_setup = getattr(full, "setup", None)
+        options = controller_options(probe, full_setup.get("probe") if isinstance(full_setup, dict) else None)
         stored = next_step(str(run.verdict), [str(x) for x in info.get("notes", [])], info.get("to_enter"),
-                           run.machine_id)
-    return NextStep(f"{stored[0][:1].upper()}{stored[0][1:]}.", [stored[1]])
+                           run.machine_id, NextRun(database, dialect, run_number, options))
+    return NextStep(f"{stored[0][:1].upper()}{stored[0][1:]}.", [stored[1]] if stored[1] else [])
 
 
 def history_next(data: ReportData) -> NextStep:
@@ -204,7 +213,8 @@ def history_next(data: ReportData) -> NextStep:
     h = data.history
     assert h is not None
     if h.runs[-1].kind == "checkup" and h.check is None:
-        return checkup_next(h.runs[-1])
+        full = next((r for r in reversed(h.runs) if r.kind == "full"), None)
+        return checkup_next(h.runs[-1], h.database, len(h.runs), full)
     changed = [c.parameter for comp in h.comparisons[-1:] for c in comp.changes if c.significant]
     verdict = h.check.verdict if h.check is not None else (h.runs[-1].verdict or "none")
     add = f"add it to this history (pige history add, --machine-id {shlex.quote(h.machine_id)})"

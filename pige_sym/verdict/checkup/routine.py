@@ -51,6 +51,7 @@ class CheckupOptions:
     carrier: int = 1
     heidenhain_trans: str | None = None
     max_change: tuple[float, float] = (0.2, 0.1)
+    db: str | None = None
 
 
 def item_dict(item: Item, origin: str) -> dict[str, Any]:
@@ -106,6 +107,9 @@ class CheckupResult:
     run_number: int = 0
     fit: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    db: str | None = None
+    dialect: str | None = None
+    program_options: str = ""
 
     @property
     def exit_status(self) -> int:
@@ -131,7 +135,7 @@ class CheckupResult:
     def next_step(self) -> tuple[str, str]:
         """What to do now and the command: :func:`next_step` (the CLI and the report print it)."""
         return next_step(self.verdict, self.notes, None if self.changes is None else self.changes.entered,
-                         self.machine_id)
+                         self.machine_id, NextRun(self.db, self.dialect, self.run_number, self.program_options))
 
     def chart(self) -> dict[str, Any]:
         """What later check-ups read of this one (:mod:`~pige_sym.verdict.checkup.reference`)."""
@@ -199,6 +203,8 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
     if state.setup.instrument != instrument(m):
         raise InputError(f"{path} is an {instrument(m)} file, the last full calibration (run {state.full.id}) an "
                          f"{state.setup.instrument} run: a check-up repeats its instrument and set-up")
+    from pige_sym.measurements.run_setup import setup_of
+
     fit = identify_subset(m, free, state.held, held_covariance=state.held_covariance,
                           **_rtest_noise(state.full) if instrument(m) == "rtest" else {})
     _storable(fit, path)
@@ -209,13 +215,21 @@ def run_checkup(history: Any, path: str | os.PathLike[str], machine_id: str, opt
     result = CheckupResult(machine_id, kern.MACHINE_CODE, str(Path(path).resolve()), measured, verdict, items,
                            state.held, any(i.limit is None or i.limit.provisional for i in items), state.origin,
                            opts.alpha, signature, state.segment, opts.corrected, state.correction, changes,
-                           fit=fit.to_dict(), notes=list(fit.notes) + _notes(items))
-    from pige_sym.measurements.run_setup import setup_of
+                           run_number=len(runs) + 1, fit=fit.to_dict(), notes=list(fit.notes) + _notes(items),
+                           db=opts.db, dialect=_dialect(m, state.setup),
+                           program_options=controller_options(setup_of(m).probe, state.setup.probe))
 
     record = history.add_checkup(Path(path), machine_id, kern.MACHINE_CODE, (measured, source), fit,
                                  setup_of(m).to_dict(), verdict, result.to_dict(), result.chart())
-    result.run_id, result.run_number = record.id, len(runs) + 1
+    result.run_id = record.id
     return result
+
+
+def _dialect(m: Any, setup: Any) -> str | None:
+    """The dialect of the check-up's program: its header's (the probe file imported with ``--program``), else the
+    full calibration's program's; None for an R-test (not stated in its file)."""
+    stated = m.metadata.get("program_dialect") or ((setup.probe or {}).get("program") or {}).get("dialect")
+    return str(stated) if stated else None
 
 
 def _storable(fit: Any, path: str | os.PathLike[str]) -> None:
@@ -287,23 +301,123 @@ def _tolerances(opts: CheckupOptions, runs: list[Any], machine: str, free: list[
                      "kept for the next check-ups)")
 
 
-def next_step(verdict: str, notes: list[str], entered: dict[str, float | None] | None,
-              machine_id: str) -> tuple[str, str]:
-    """What to do after a check-up, and the command (one sentence each; ``pige checkup`` and the report of the
-    machine's history print the same)."""
+#: The program file name's extension per dialect (as ``pige plan`` names them).
+PROGRAM_SUFFIX = {"siemens": ".mpf", "fanuc": ".nc", "linuxcnc": ".ngc", "heidenhain": ".h"}
+
+
+@dataclass(frozen=True)
+class NextRun:
+    """Where the next check-up's program comes from: the history the check-up used (``--db`` as given, None for
+    the default), the dialect of the check-up's program (None: not known, an R-test; ``pige program``'s default
+    applies), the check-up's run number (the program is named for the next) and the controller options its program
+    was written with where the history does not hold them (:func:`controller_options`)."""
+
+    db: str | None = None
+    dialect: str | None = None
+    run_number: int = 0
+    options: str = ""
+
+
+def controller_options(checkup_probe: dict[str, Any] | None, full_probe: dict[str, Any] | None) -> str:
+    """The controller options ``pige program --checkup`` needs to write the check-up's program again (`` --kinematics
+    … --window …``): none when the check-up's program stated the full calibration's controller state (the command
+    reads that from the history) or stated none; else the state the check-up's program stated.
+
+    ``checkup_probe``, ``full_probe``: the ``probe`` items of the check-up's and the full calibration's set-up
+    (:class:`~pige_sym.measurements.run_setup.RunSetup`)."""
     import shlex
 
-    checkup = f"pige checkup NEXT.csv --machine-id {shlex.quote(machine_id)}"
+    mine, full = _controller(checkup_probe), _controller(full_probe)
+    if mine is None or mine == full:
+        return ""
+    words = [f"--kinematics {mine.kinematics}"]
+    words += [f"--{name} {shlex.quote(code)}" for name, code in (("rtcp-off", mine.rtcp_off),
+                                                                 ("rtcp-on", mine.rtcp_on)) if code]
+    offset = ",".join(f"{x:.12g}" for x in mine.work_offset_mm)
+    words += [f"--stylus-tool {mine.stylus_tool}", f"--stylus-length {mine.stylus_length_mm:.12g}",
+              f"--work-offset {mine.work_offset}={offset}", f"--window {mine.window_mm:.12g}"]
+    return " " + " ".join(words)
+
+
+def _controller(probe: dict[str, Any] | None) -> Any:
+    """The controller state a stored probing set-up states (None: none stated)."""
+    from pige_sym.nc.probe_safety import controller_from_header
+
+    if not probe or not probe.get("program"):
+        return None
+    try:
+        return controller_from_header(dict(probe["program"]) | {"kinematics": str(probe.get("kinematics", "identity"))},
+                                      "the set-up")
+    except InputError:
+        return None
+
+
+def db_option(db: str | None) -> str:
+    """`` --db URL`` for a command (empty for the default database); a password in the URL is left out (the
+    printed command is stored and shown in the report: PostgreSQL then reads it from ~/.pgpass or $PGPASSWORD)."""
+    import shlex
+
+    if db is None:
+        return ""
+    if "://" in db:
+        from sqlalchemy.engine import make_url
+        from sqlalchemy.exc import ArgumentError
+
+        try:
+            url = make_url(db)
+        except ArgumentError:
+            url = None
+        if url is not None and url.password is not None:
+            db = url.render_as_string(hide_password=True).replace(":***@", "@", 1)
+    return f" --db {shlex.quote(db)}"
+
+
+def checkup_program_command(machine_id: str, run: NextRun) -> str:
+    """``pige program --checkup`` writing the next check-up's program from the history, as printed after a check-up:
+    the machine id and database the check-up used, its program's dialect, a new file named for the next run (an
+    existing file is never replaced: no ``--force``)."""
+    import re
+    import shlex
+
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", machine_id).strip("._-") or "machine"
+    dialect = f" --dialect {run.dialect}" if run.dialect in PROGRAM_SUFFIX else ""
+    out = f"checkup_{stem}_run{run.run_number + 1}{PROGRAM_SUFFIX.get(run.dialect or 'siemens', '.mpf')}"
+    return (f"pige program --checkup --machine-id {shlex.quote(machine_id)}{db_option(run.db)}{dialect}"
+            f"{run.options} --out {shlex.quote(out)}")
+
+
+def next_step(verdict: str, notes: list[str], entered: dict[str, float | None] | None,
+              machine_id: str, run: NextRun | None = None) -> tuple[str, str]:
+    """What to do after a check-up, and the command (one sentence each; ``pige checkup`` and the report of the
+    machine's history print the same).  The command runs as printed now: the next check-up's program written from
+    the history (:func:`checkup_program_command`); what follows it (run it, ``pige checkup`` on its measurement) is
+    said in words.  "Calibrate fully" has no command (empty): the history keeps the full calibration's set-up but
+    not its poses nor its program's options, so pige cannot write its program again; the words say what to do."""
+    import shlex
+
+    run = NextRun() if run is None else run
+    again = f"--machine-id {shlex.quote(machine_id)}{db_option(run.db)}"
     if any("calibrate the machine fully" in n for n in notes):
         return ("calibrate the machine fully: the check-up's poses disagree with the PIGEs it held beyond their "
-                "uncertainty", f"pige history add FULL.csv --machine-id {shlex.quote(machine_id)}")
+                "uncertainty; run the full calibration's program again (the history keeps its set-up, not its poses "
+                "nor its program: none is printed), and add its measurement to this history (pige history add, "
+                f"{again})", "")
+    command = checkup_program_command(machine_id, run)
+
+    def then(corrected: bool) -> str:
+        written = "" if run.dialect else " (for a Siemens control: add --dialect fanuc or linuxcnc for another)"
+        return (f"; the command below writes its program{written}: run it on the machine, then pige checkup its "
+                f"measurement (the log imported with pige import-probe, or pige acquire's file) with {again}"
+                + (" --corrected" if corrected else ""))
+
     if verdict == "ok":
-        return "nothing to correct: the next check-up as usual (pige history fleet says when)", checkup
+        return f"nothing to correct: the next check-up as usual (pige history fleet says when){then(False)}", command
     if not any(v for v in (entered or {}).values()):
         return (f"{'out of tolerance' if verdict == 'out' else 'drifted'}, but no change is shown beyond its "
-                "uncertainty: run the next check-up now to confirm; calibrate fully if it says so again", checkup)
+                f"uncertainty: run the next check-up now to confirm (calibrate fully if it says so again){then(False)}",
+                command)
     tail = "; if it is still out, calibrate fully" if verdict == "out" else ""
-    return f"enter the changes, then run the next check-up with --corrected{tail}", f"{checkup} --corrected"
+    return f"enter the changes, then the next check-up{then(True)}{tail}", command
 
 
 def _notes(items: list[Item]) -> list[str]:
