@@ -45,7 +45,7 @@ def test_with_force_every_file_is_written_and_the_changed_ones_backed_up(tmp_pat
     assert len(backups) == 1 and backups[0].read_text() == old
     new = ini.read_text()
     assert "SUBROUTINE_PATH = ./remap_subs:./pige_cycle/ngc:./pige_cycle/run" in new
-    assert "ON_ABORT_COMMAND = O <pige_on_abort> call" in new and "[PYTHON]" in new
+    assert "ON_ABORT_COMMAND = O <pige_cycle_abort> call" in new and "[PYTHON]" in new
     assert re.search(r"^# pige cycle install: moved to ./pige_cycle/values.hal: HALCMD = sets :y-offset\s+20$", new,
                      re.M)
     # the lines the INI kept are byte for byte the old ones
@@ -180,3 +180,71 @@ def test_a_config_path_linuxcnc_cannot_take_in_a_comment_is_refused(tmp_path):
                            tmp_path / "log.txt", ["M428"]).splitlines() == [
         "o<pige_cycle_probe> sub", "M428", "G0 X1", f"(PROBEOPEN {tmp_path / 'log.txt'})", "G38.2 Z0 F50",
         "(PROBECLOSE)", "o<pige_cycle_probe> endsub", "M2"]
+
+
+# -- the shipped configurations themselves (LinuxCNC 2.9's files, copied into tmp) ------------------------------------
+
+#: where Debian's linuxcnc-uspace puts the shipped trt simulations (both INIs share the folder)
+SHIPPED = Path("/usr/share/doc/linuxcnc/examples/sample-configs/sim/axis/vismach/5axis/table-rotary-tilting")
+#: the stylus of each machine: a tool of the shipped tool table (T9 Z30 on xyzac; xyzbc's table has T2 Z10 only)
+SHIPPED_STYLUS = {"xyzac": ("9", "30"), "xyzbc": ("2", "10")}
+
+
+def shipped_copy(tmp_path: Path, kind: str) -> Path:
+    """The shipped folder copied into ``tmp_path`` as it is (skipped without LinuxCNC's files); the INI of ``kind``."""
+    import shutil
+
+    if not (SHIPPED / f"{kind}-trt.ini").is_file():
+        pytest.skip(f"LinuxCNC's shipped {kind}-trt configuration is not installed (apt: linuxcnc-uspace)")
+    folder = tmp_path / "table-rotary-tilting"
+    shutil.copytree(SHIPPED, folder)
+    return folder / f"{kind}-trt.ini"
+
+
+def shipped_args(ini: Path, kind: str, *extra: str) -> list[str]:
+    tool, length = SHIPPED_STYLUS[kind]
+    return ["cycle", "install", str(ini), "--sphere", "20,10,15", "--sphere-radius", "6.35", "--stylus-radius", "1.5",
+            "--stylus-tool", tool, "--stylus-length", length, *extra]
+
+
+@pytest.mark.parametrize("kind", ["xyzac", "xyzbc"])
+def test_on_the_shipped_configuration_without_force_the_diff_is_shown_and_no_file_changes(tmp_path, capsys, kind):
+    ini = shipped_copy(tmp_path, kind)
+    before = tree(tmp_path)
+    code, out, err = run(shipped_args(ini, kind), capsys)
+    assert code == 0, err
+    assert tree(tmp_path) == before  # byte for byte, no file added
+    off = "y" if kind == "xyzac" else "x"
+    assert "+REMAP = M451 modalgroup=10 argspec=p prolog=pige_m451_prolog ngc=pige_m451" in out
+    assert f"-HALCMD = sets :{off}-offset" in out and "+HALCMD = source ./pige_cycle/values.hal" in out
+    assert "nothing written" in out
+
+
+@pytest.mark.parametrize("kind", ["xyzac", "xyzbc"])
+def test_on_the_shipped_configuration_force_backs_up_keeps_its_remaps_and_twice_equals_once(tmp_path, capsys, kind):
+    ini = shipped_copy(tmp_path, kind)
+    folder = ini.parent
+    before = tree(tmp_path)
+    code, out, err = run(shipped_args(ini, kind, "--force"), capsys)
+    assert code == 0, err
+    after = tree(tmp_path)
+    changed = sorted(k for k in before if after[k] != before[k])
+    assert changed == [f"table-rotary-tilting/{kind}-trt.ini"]  # the other INI, the HAL files, remap_subs: as shipped
+    backups = sorted(folder.glob(f"{kind}-trt.ini.pige-backup-*"))
+    assert len(backups) == 1 and backups[0].read_bytes() == before[changed[0]]
+    old, new = before[changed[0]].decode().splitlines(), ini.read_text().splitlines()
+    for line in old:  # every line kept as it was, or commented out as moved (the values' lines), or extended
+        assert line in new or f"# pige cycle install: moved to ./pige_cycle/values.hal: {line.strip()}" in new \
+            or line.startswith("SUBROUTINE_PATH"), line
+    for code_ in ("M428", "M429", "M430"):
+        assert any(ln.split() == ["REMAP", "=", code_, "modalgroup=10", f"ngc={code_[1:]}remap"] for ln in new)
+    assert "SUBROUTINE_PATH = ./remap_subs:./pige_cycle/ngc:./pige_cycle/run" in new
+    settings_text = (folder / "pige_cycle" / "settings.json").read_text()
+    assert '"identity_code": "M429"' in settings_text and '"tcp_code": "M428"' in settings_text
+    once = {k: v for k, v in after.items() if ".pige-backup-" not in k}
+    code, out, err = run(shipped_args(ini, kind, "--force"), capsys)
+    assert code == 0 and "nothing to change" in out, (out, err)
+    again = tree(tmp_path)
+    assert {k: v for k, v in again.items() if ".pige-backup-" not in k} == once
+    assert sorted(k for k in again if ".pige-backup-" in k) == sorted(k for k in after if ".pige-backup-" in k)
+    assert run(shipped_args(ini, kind), capsys)[1].startswith(f"{ini}: the cycle is installed")

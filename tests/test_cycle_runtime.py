@@ -242,3 +242,77 @@ def test_the_remap_s_modes_phases_and_preview():
     inner = FakeInterp(remap_level=2)
     assert r.pige_m451_prolog(inner, p=201.0) == r.INTERP_OK and inner.params["_pige_phase"] == 2
     assert r._mode("M451", {"p": 102.0}) == (1, "enter") and r._mode("M452", {"p": 200.0}) == (2, "checkup")
+
+
+def test_the_analysis_identifies_once_and_the_history_stores_that_estimate(config, monkeypatch):
+    """``M451 P0``'s analysis hands its identification to the history (``add_run(identified=...)``) instead of
+    identifying the same file a second time (about 1 s of the cycle's wait)."""
+    from pige_sym.identification import least_squares
+    from pige_sym.verdict.history import connect, list_runs
+    from pige_sym.verdict.history.store import machine_ids
+
+    calls: list[int] = []
+    real = least_squares.identify
+
+    def counted(*args, **kw):
+        calls.append(1)
+        return real(*args, **kw)
+
+    monkeypatch.setattr(least_squares, "identify", counted)
+    run = measure(config, "p0", "check")
+    assert messages(run)["error"] is None
+    assert len(calls) == 1
+    rows = {r["name"]: r["value"] for r in json.loads((run / "result.json").read_text())["rows"]}
+    engine = connect(f"sqlite:///{config.default_db}")
+    (stored,) = list_runs(engine, machine_ids(engine)[0])
+    assert stored.method == "gauss-newton" and stored.kind == "full"
+    assert dict(zip(stored.parameters, stored.values.tolist(), strict=True)) == pytest.approx(rows, abs=1e-9)
+
+
+def test_after_an_abort_the_mode_found_is_put_back_until_it_shows_and_never_later(monkeypatch):
+    """``o<pige_cycle_abort>`` (LinuxCNC's ON_ABORT_COMMAND): the mode the cycle found as a float in ``#<_value>``,
+    again at each abort until ``motion.switchkins-type`` shows it (LinuxCNC may run the handler twice for one abort
+    and drop what the first queued), then -1; -1 after ``REASSERT_S``, after the normal restore, with no cycle."""
+    from pige_sym.cycle import linuxcnc_remap as r
+
+    clock = [100.0]
+    monkeypatch.setattr(r.time, "monotonic", lambda: clock[0])
+    interp = FakeInterp()  # found in TCP kinematics (switchkins-type 1)
+    assert r.pige_cycle_abort(interp) == -1.0  # no cycle since LinuxCNC started
+    interp.params["_hal[motion.switchkins-type]"] = 0.0
+    assert r.pige_m451_prolog(interp) == r.INTERP_OK and interp.params["_pige_kins_before"] == 0  # found: identity
+    interp.params["_hal[motion.switchkins-type]"] = 1.0  # probing in TCP kinematics, then Esc
+    first = r.pige_cycle_abort(interp)
+    assert first == 0.0 and isinstance(first, float)
+    clock[0] += 0.01
+    assert r.pige_cycle_abort(interp) == 0.0  # the second handler of the same abort: again
+    interp.params["_hal[motion.switchkins-type]"] = 0.0  # the M68 reached motion
+    assert r.pige_cycle_abort(interp) == -1.0 and interp.params["_pige_kins_before"] == -1
+    interp.params["_hal[motion.switchkins-type]"] = 1.0  # the operator's own M428, then an abort of their program
+    assert r.pige_cycle_abort(interp) == -1.0
+    assert r.pige_m451_prolog(interp) == r.INTERP_OK and interp.params["_pige_kins_before"] == 1
+    interp.params["_hal[motion.switchkins-type]"] = 0.0
+    assert r.pige_cycle_abort(interp) == 1.0
+    clock[0] += r.REASSERT_S + 1  # the mode never showed: a later abort does not switch
+    assert r.pige_cycle_abort(interp) == -1.0 and interp.params["_pige_kins_before"] == -1
+
+
+def test_the_abort_handler_stops_pige_first_and_sets_the_switch_s_output_without_synchronising(tmp_path):
+    """pige_on_abort.ngc: ``o<pige_cycle_abort>`` first (it stops pige's step), then ``M68`` on the output that the
+    shipped M429/M428 set (found from the INI's net to motion.switchkins-type); no call of the codes, whose ``M66``
+    would suspend the handler at abort time."""
+    ini = write_stock(tmp_path)
+    assert main(install_args(ini, "--force")) == 0
+    settings = json.loads((tmp_path / "pige_cycle" / "settings.json").read_text())
+    assert settings["kinematics_switch"]["analog_out"] == 3
+    # the INI's handler is the Python procedure's call itself (LinuxCNC may execute the handler's last block twice)
+    assert "\nON_ABORT_COMMAND = O <pige_cycle_abort> call\n" in ini.read_text()
+    # an earlier install's NGC handler is replaced, not left beside it
+    ini.write_text(ini.read_text().replace("O <pige_cycle_abort> call", "O <pige_on_abort> call"))
+    assert main(install_args(ini, "--force")) == 0
+    assert ini.read_text().count("ON_ABORT_COMMAND = ") == 1 and "O <pige_cycle_abort> call" in ini.read_text()
+    lines = [ln for ln in (tmp_path / "pige_cycle" / "ngc" / "pige_on_abort.ngc").read_text().splitlines()
+             if ln and not ln.startswith((";", "("))]
+    assert lines == ["o<pige_on_abort> sub", "o<pige_cycle_abort> call",
+                     "o100 if [[#<_value_returned> EQ 1] AND [#<_value> GE 0]]", "M68 E3 Q#<_value>", "o100 endif",
+                     "o<pige_on_abort> endsub", "M2"]

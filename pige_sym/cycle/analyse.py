@@ -184,8 +184,9 @@ def full_proposal(ctx: Context, req: Request, run: Path, result: Any, log: RunLo
                     not_entered=not_entered, predicted_um=predicted), predicted
 
 
-def store_full(ctx: Context, req: Request, run: Path, csv: Path) -> int:
-    """The run in the machine's history (``pige history add``'s function); its run id."""
+def store_full(ctx: Context, req: Request, run: Path, csv: Path, m: Any, result: Any) -> int:
+    """The run in the machine's history (``pige history add``'s function, with the identification ``result`` of the
+    measurement ``m`` read from ``csv``, made already); its run id."""
     import json
 
     from pige_sym.verdict.history import add_run, connect
@@ -194,23 +195,35 @@ def store_full(ctx: Context, req: Request, run: Path, csv: Path) -> int:
     tol = run / "tolerances.json"
     tol.write_text(json.dumps(ctx.settings.tolerances), encoding="utf-8")
     record = add_run(connect(ctx.settings.db_url(ctx.layout.config)), csv, ctx.settings.machine_id,
-                     method="gauss-newton", tolerances=tol, date=req.started)
+                     method="gauss-newton", tolerances=tol, date=req.started, identified=(m, result))
     return int(record.id)
 
 
-def analyse(ctx: Context, req: Request, run: Path, log: RunLog) -> RunMessages:
-    """The analysis of ``P0``/``P1`` (module docstring)."""
+def measure(ctx: Context, req: Request, run: Path, log: RunLog) -> tuple[dict[str, Any], Any, tuple[float, float]] | \
+        RunMessages:
+    """Steps 1-2 of every analysis (``M451 P0``/``P1`` and ``M452``): the prepared run's record, the import of its
+    probe log and the sphere-radius guard: ``(prepared info, measurement, (radius found, stated) [mm])``, or the
+    messages of a run the guard stopped (recorded in its folder only)."""
     from pige_sym.cycle.render import render_stopped
 
     info = prepared_info(ctx, run)
     m = import_log(run, req, log)
     try:
-        r_eff, stated = radius_guard(ctx, m)
+        radius = radius_guard(ctx, m)
     except GuardStopped as exc:
         record_stopped(ctx, req, run, info, str(exc), log)
         return render_stopped(req.code, req.mode, str(exc), relative_log(run))
+    return info, m, radius
+
+
+def analyse(ctx: Context, req: Request, run: Path, log: RunLog) -> RunMessages:
+    """The analysis of ``P0``/``P1`` (module docstring)."""
+    measured = measure(ctx, req, run, log)
+    if isinstance(measured, RunMessages):
+        return measured
+    info, m, radius = measured
     result = identify(m, run, log)
-    return conclude(ctx, req, run, log, info, m, result, (r_eff, stated))
+    return conclude(ctx, req, run, log, info, m, result, radius)
 
 
 def identify(m: Any, run: Path, log: RunLog) -> Any:
@@ -236,7 +249,7 @@ def conclude(ctx: Context, req: Request, run: Path, log: RunLog, info: dict[str,
     log.add("pige check (the PIGEs left with the values in force, against the settings' tolerances)", verdict.format())
     proposal, predicted = (full_proposal(ctx, req, run, result, log, info["fingerprint"], m.angles_deg)
                            if req.mode == "optimise" else (None, {}))
-    history_run = store_full(ctx, req, run, run / "probe.csv")
+    history_run = store_full(ctx, req, run, run / "probe.csv", m, result)
     tol = ctx.settings.tolerances.get("defaults", {})
     res = RunResult(req.code, req.mode, run.name, ctx.setup.module, m.n_rows, int(m.optional["n_samples"].sum()),
                     radius[0], radius[1], pige_rows(ctx, result), verdict.verdict,

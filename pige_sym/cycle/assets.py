@@ -3,7 +3,8 @@ the remap's Python, rendered to strings (an NGC procedure holds the configuratio
 
 ``pige_m451.ngc`` / ``pige_m452.ngc`` run the steps of :mod:`~pige_sym.cycle.linuxcnc_remap` (its docstring);
 ``pige_restore.ngc`` puts the kinematics mode back to the one found at the start (``#<_pige_kins_before>``, the
-``motion.switchkins-type`` the prolog read); ``pige_on_abort.ngc`` calls it after an abort.  The generated probing
+``motion.switchkins-type`` the prolog read); ``pige_on_abort.ngc`` puts it back after an abort
+(:func:`on_abort_procedure`).  The generated probing
 procedure ``pige_cycle_probe.ngc`` is written for every run (:func:`probe_procedure`); until the first run it aborts.
 """
 
@@ -55,11 +56,22 @@ def restore_procedure(switch: Switch | None) -> str:
         *body, "#<_pige_kins_before> = -1", "o103 endif", "o100 endif", f"o<{RESTORE_SUB}> endsub", "M2", ""])
 
 
-def on_abort_procedure() -> str:
-    """``[RS274NGC]ON_ABORT_COMMAND``: after Esc or an E-stop, no step of pige still running, and the kinematics mode
-    the cycle found."""
-    return "\n".join([HEADER.format(what="after an abort"), f"o<{ON_ABORT_SUB}> sub", f"o<{RESTORE_SUB}> call",
-                      "o<pige_cycle_abort> call", f"o<{ON_ABORT_SUB}> endsub", "M2", ""])
+def on_abort_procedure(switch: Switch | None) -> str:
+    """``[RS274NGC]ON_ABORT_COMMAND``: after any abort, no step of pige still running, and the kinematics mode the
+    cycle found (:func:`~pige_sym.cycle.linuxcnc_remap.pige_cycle_abort` says which, or -1): set at once on the
+    output that drives ``motion.switchkins-type`` (no synchronisation, so the handler runs to its end), or, when the
+    install found no such output, by the configuration's code (``o<pige_restore>``)."""
+    put_back = "o100 if [[#<_value_returned> EQ 1] AND [#<_value> GE 0]]"
+    if switch is None:
+        body = ["(no kinematics switch: nothing to put back)"]
+    elif switch.analog_out is not None:
+        body = [put_back, f"(motion.analog-out-{switch.analog_out:02d} drives motion.switchkins-type)",
+                f"M68 E{switch.analog_out} Q#<_value>", "o100 endif"]
+    else:
+        body = [put_back, "#<_pige_kins_before> = #<_value>", f"o<{RESTORE_SUB}> call", "o100 endif"]
+    return "\n".join([HEADER.format(what="after an abort"), f"o<{ON_ABORT_SUB}> sub",
+                      "(stop pige's step; the kinematics mode to put back in _value, or -1)",
+                      "o<pige_cycle_abort> call", *body, f"o<{ON_ABORT_SUB}> endsub", "M2", ""])
 
 
 def placeholder_procedure() -> str:
@@ -96,7 +108,7 @@ def asset_files(layout: Layout, settings: CycleSettings) -> dict[Path, str]:
     """Every file of the cycle's code with its text."""
     out = {layout.ngc / f"{CODES[c]}.ngc": code_procedure(c) for c in CODES}
     out[layout.ngc / f"{RESTORE_SUB}.ngc"] = restore_procedure(settings.kinematics_switch)
-    out[layout.ngc / f"{ON_ABORT_SUB}.ngc"] = on_abort_procedure()
+    out[layout.ngc / f"{ON_ABORT_SUB}.ngc"] = on_abort_procedure(settings.kinematics_switch)
     out[layout.python / "toplevel.py"] = toplevel_text()
     out[layout.python / "remap.py"] = remap_text()
     out[layout.python / "oword.py"] = oword_text()

@@ -15,21 +15,12 @@ import json
 from pathlib import Path
 from typing import Any
 
-from pige_sym.cycle.analyse import (
-    import_log,
-    in_force_list,
-    prepared_info,
-    radius_guard,
-    record,
-    record_stopped,
-    value_changes,
-)
+from pige_sym.cycle.analyse import in_force_list, measure, record, value_changes
 from pige_sym.cycle.context import Context, Request
 from pige_sym.cycle.messages import RunMessages, relative_log
 from pige_sym.cycle.proposal import Proposal
 from pige_sym.cycle.results import PigeRow, RunResult
 from pige_sym.cycle.steplog import RunLog, status
-from pige_sym.errors import GuardStopped
 
 
 def run_the_checkup(ctx: Context, req: Request, run: Path, corrected: bool, log: RunLog) -> Any:
@@ -71,15 +62,12 @@ def checkup_proposal(ctx: Context, run: Path, result: Any, fingerprint: dict[str
 def analyse_checkup(ctx: Context, req: Request, run: Path, log: RunLog) -> RunMessages:
     """The analysis of ``M452`` (module docstring)."""
     from pige_sym.cycle.proposal import beyond_limit
-    from pige_sym.cycle.render import render_run, render_stopped
+    from pige_sym.cycle.render import render_run
 
-    info = prepared_info(ctx, run)
-    m = import_log(run, req, log)
-    try:
-        r_eff, stated = radius_guard(ctx, m)
-    except GuardStopped as exc:
-        record_stopped(ctx, req, run, info, str(exc), log)
-        return render_stopped(req.code, req.mode, str(exc), relative_log(run))
+    measured = measure(ctx, req, run, log)
+    if isinstance(measured, RunMessages):
+        return measured
+    info, m, (r_eff, stated) = measured
     result = run_the_checkup(ctx, req, run, bool(info["basis"]["corrected"]), log)
     proposal = checkup_proposal(ctx, run, result, info["fingerprint"])
     rows = [PigeRow(i.name, i.unit, i.value, i.std, True, None, i.status,

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import difflib
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -38,8 +38,8 @@ from pige_sym.cycle.settings import (
     Limits,
     Probing,
     Switch,
-    Timeouts,
     check_settings,
+    default_timeouts,
     default_tolerances,
 )
 from pige_sym.cycle.values import values_text
@@ -66,7 +66,7 @@ class InstallOptions:
     rtcp_off: str | None = None
     probing: Probing = field(default_factory=Probing)
     limits: Limits = field(default_factory=Limits)
-    timeouts: Timeouts = field(default_factory=Timeouts)
+    timeouts: dict[str, float] = field(default_factory=default_timeouts)
     tolerances: dict | None = None
 
 
@@ -124,7 +124,7 @@ def plan_install(ini: Path, opts: InstallOptions) -> InstallPlan:
     _one_configuration(layout, ini)
     scan = scan_configuration(ini, doc)
     setup = read_kinematics(doc, scan, kinematics=opts.kinematics, machine=opts.machine)
-    settings = _settings(doc, setup, opts)
+    settings = _settings(doc, setup, opts, scan)
     edits, notes = _ini_edits(doc, layout, setup, scan)
     files = [PlannedFile(ini, text, ini_with_python(apply_edits(doc, edits), doc, layout))]
     files += _hal_file_edits(layout, setup)
@@ -155,10 +155,13 @@ def _check_target(path: Path) -> None:
         raise InputError(f"{path} is not a regular file: pige never replaces one")
 
 
-def _settings(doc: IniDocument, setup: KinematicsSetup, opts: InstallOptions) -> CycleSettings:
+def _settings(doc: IniDocument, setup: KinematicsSetup, opts: InstallOptions, scan: HalScan) -> CycleSettings:
     machine_id = opts.machine_id or doc.value("EMC", "MACHINE") or ""
+    switch = _switch(doc, opts)
+    if switch is not None:
+        switch = replace(switch, analog_out=switch_output(scan))
     s = CycleSettings(FORMAT, Path(doc.name).name, setup.machine, machine_id.strip(), setup.kinematics, setup.module,
-                      dict(setup.axis_sense), _switch(doc, opts), [float(v) for v in opts.sphere_mm],
+                      dict(setup.axis_sense), switch, [float(v) for v in opts.sphere_mm],
                       float(opts.sphere_radius_mm), float(opts.stylus_radius_mm), int(opts.stylus_tool),
                       float(opts.stylus_length_mm), opts.probing, opts.limits,
                       opts.tolerances or default_tolerances(),
@@ -187,6 +190,16 @@ def _switch(doc: IniDocument, opts: InstallOptions) -> Switch | None:
                          "INI selects the TCP ones (a procedure setting #<kinstype>): give --rtcp-on CODE and "
                          "--rtcp-off CODE")
     return None
+
+
+def switch_output(scan: HalScan) -> int | None:
+    """N of the ``motion.analog-out-N`` netted to ``motion.switchkins-type`` (the shipped sims: ``net :kinstype-select
+    <= motion.analog-out-03 => motion.switchkins-type``), or None (another writer, or no net)."""
+    signal = scan.nets.get("motion.switchkins-type")
+    outs = [pin for pin, sig in scan.nets.items() if sig == signal and pin.startswith("motion.analog-out-")]
+    if signal is None or len(outs) != 1 or not outs[0].removeprefix("motion.analog-out-").isdigit():
+        return None
+    return int(outs[0].removeprefix("motion.analog-out-"))
 
 
 def _switch_codes(doc: IniDocument) -> dict[int, str]:
@@ -221,7 +234,7 @@ def _ini_edits(doc: IniDocument, layout: Layout, setup: KinematicsSetup,
     notes: list[str] = []
     edits += _subroutine_path(doc, layout)
     edits += _remaps(doc)
-    edits += _rs274ngc_keys(doc, notes)
+    edits += _rs274ngc_keys(doc, notes, scan)
     edits += _moved_values(doc, layout, setup, scan)
     _python(doc, layout)  # refuses a [PYTHON] section of the configuration's own
     return edits, notes
@@ -261,7 +274,17 @@ def _remaps(doc: IniDocument) -> list[IniEdit]:
     return [IniEdit(after, "insert_after", "\n".join(new), "the cycle's codes")] if new else []
 
 
-def _rs274ngc_keys(doc: IniDocument, notes: list[str]) -> list[IniEdit]:
+#: the ON_ABORT_COMMANDs an install writes: pige_cycle_abort's call itself when the switch's output is known (it
+#: sets the output from Python: nothing is left for LinuxCNC to execute again after the handler, see
+#: docs/linuxcnc-cycle.md §6), else the NGC handler, which puts the mode back with the configuration's code
+ABORT_COMMANDS = ("o <pige_cycle_abort> call", f"o <{ON_ABORT_SUB}> call")
+
+
+def abort_command(scan: HalScan) -> str:
+    return "O <pige_cycle_abort> call" if switch_output(scan) is not None else f"O <{ON_ABORT_SUB}> call"
+
+
+def _rs274ngc_keys(doc: IniDocument, notes: list[str], scan: HalScan) -> list[IniEdit]:
     out = []
     end = _section_end(doc, "RS274NGC")
     pins = doc.value("RS274NGC", "HAL_PIN_VARS")
@@ -271,12 +294,17 @@ def _rs274ngc_keys(doc: IniDocument, notes: list[str]) -> list[IniEdit]:
         raise InputError(f"{doc.name}: [RS274NGC] HAL_PIN_VARS = {pins}: the cycle reads motion.switchkins-type "
                          "(#<_hal[...]>): set it to 1")
     abort = doc.value("RS274NGC", "ON_ABORT_COMMAND")
-    ours = f"O <{ON_ABORT_SUB}> call"
+    ours = abort_command(scan)
+    given = None if abort is None else " ".join(abort.split()).lower()
     if abort is None:
         out.append(IniEdit(end, "insert_after", f"ON_ABORT_COMMAND = {ours}", "the kinematics mode after an abort"))
-    elif " ".join(abort.split()).lower() != ours.lower():
-        notes.append(f"[RS274NGC] ON_ABORT_COMMAND is the configuration's own ({abort}): call o<pige_restore> from it "
-                     "so that an abort in the middle of the cycle leaves the kinematics mode as it was found")
+    elif given in ABORT_COMMANDS and given != ours.lower():  # an earlier install's
+        line = doc.values("RS274NGC", "ON_ABORT_COMMAND")[0].line
+        out.append(IniEdit(line, "replace", f"ON_ABORT_COMMAND = {ours}", "the kinematics mode after an abort"))
+    elif given != ours.lower():
+        notes.append(f"[RS274NGC] ON_ABORT_COMMAND is the configuration's own ({abort}): call o<{ON_ABORT_SUB}> from "
+                     "it (first, before anything that synchronises) so that an abort in the middle of the cycle stops "
+                     "pige's step and leaves the kinematics mode as it was found")
     return out
 
 

@@ -16,8 +16,21 @@ with an internal ``P`` (only from inside the cycle: a call at the top level is r
     M451 P[200 + mode]          analyse (P0, P1, M452) or enter (P2): pige cycle step analyse|enter
     o<pige_restore> call        the kinematics mode as it was found (``#<_pige_kins_before>``)
 
-``pige_on_abort.ngc`` (``[RS274NGC]ON_ABORT_COMMAND``) calls ``o<pige_restore>`` too, so that Esc or an E-stop
-in the middle of the cycle leaves the kinematics mode as it was found once the machine is on again.
+**An abort** (Esc, E-stop, an error: LinuxCNC's task runs ``[RS274NGC]ON_ABORT_COMMAND`` inside the interpreter
+after every abort, ``O <pige_cycle_abort> call``) calls :func:`pige_cycle_abort`: it kills a step still running and
+sets the kinematics mode the cycle found at once, as ``M68 E<n> Q<type>`` would, on the ``motion.analog-out-<n>``
+that drives ``motion.switchkins-type`` (``pige_on_abort.ngc``, for a handler of the configuration's own, does it
+with ``M68`` from the value returned).  A Python call and not an NGC procedure: after an E-stop reset LinuxCNC
+executed the handler's last block a second time at call level 0, which for an ``endsub`` is an error.  Not the
+configuration's own code (``M429``): the shipped procedure synchronises (``M66 E0 L0``), which at abort time
+suspends the abort handler half-way and leaves ``o<pige_cycle_abort>`` unrun when it comes after.  LinuxCNC may run
+the handler twice for one abort and drop what the first queued between the two (an interpreter error in MDI: task's
+``EMC_ABORT_INTERPRETER_ERROR_MDI``, then ``EMC_ABORT_TASK_EXEC_ERROR``, which clears the queue first;
+src/emc/task/emctaskmain.cc): so every abort within ``REASSERT_S`` of the first puts the mode back again until
+``motion.switchkins-type`` shows it.  And what the handler queues after such an error can wait behind the aborted
+interpreter until the next mode change drops it (``emcTaskSetMode`` calls ``emcTaskAbort``): so
+``o<pige_cycle_abort>`` also sends the value through LinuxCNC's command channel, from a process of its own
+(:data:`PUT_BACK`).
 
 The prepare and analyse steps run in the *epilog* of the inner call, as a generator that yields
 ``INTERP_EXECUTE_FINISH`` while pige's process runs: the interpreter stays responsive (Esc, E-stop, the GUI's
@@ -88,6 +101,7 @@ def _prolog(self, code, words):
         return f"PIGE {code} P{words.get('p', 0):g} is a step of the cycle itself: call {code} with " + \
             ", ".join(f"P{k}" for k in MODES[code])
     if phase == 0:
+        ABORTED.clear()
         self.params["_pige_phase"] = 0
         kins = _switchkins(self)
         self.params["_pige_kins_before"] = -1 if kins is None else kins
@@ -199,12 +213,91 @@ def _start(command, run, step):
     return proc
 
 
+#: when the first abort of a cycle came (time.monotonic()): the aborts that follow within REASSERT_S put the
+#: kinematics mode back again until it shows, after that none does (module docstring)
+ABORTED: dict = {}
+REASSERT_S = 10.0
+
+
 def pige_cycle_abort(self, *args):
-    """O-word procedure ``o<pige_cycle_abort>`` (pige_on_abort.ngc): stop a step still running after an abort."""
+    """O-word procedure ``o<pige_cycle_abort>`` (pige_on_abort.ngc, LinuxCNC's ``ON_ABORT_COMMAND``): stop a step
+    still running, and return (``#<_value>``) the ``motion.switchkins-type`` to put back, or -1 for none.
+
+    A float always: an O-word procedure that returns nothing leaves ``#<_value>`` 0, an int is taken for an error.
+    The mode to put back is the one the cycle found (``#<_pige_kins_before>``, -1 once ``o<pige_restore>`` ran);
+    once ``motion.switchkins-type`` shows it, or ``REASSERT_S`` after the cycle's first abort, nothing more is put
+    back: a later abort (of the operator's own program, in a mode chosen since) never switches the kinematics.
+    """
     proc = RUNNING.pop("proc", None)
     if proc is not None and proc.poll() is None:
         proc.kill()
         proc.wait()
+    try:
+        found = int(round(self.params["_pige_kins_before"]))
+    except Exception:  # no cycle ran since LinuxCNC started
+        return -1.0
+    first = ABORTED.setdefault("at", time.monotonic())
+    if found < 0 or _switchkins(self) == found or time.monotonic() - first > REASSERT_S:
+        self.params["_pige_kins_before"] = -1
+        ABORTED.clear()
+        return -1.0
+    out = _switch_output()
+    if out is not None and emccanon is not None:  # what M68 E<out> Q<found> queues
+        emccanon.SET_AUX_OUTPUT_VALUE(out, float(found))
+    _put_back_through_the_command_channel(found, getattr(self, "pige_run", None) or os.path.join(ROOT, "runs"))
+    return float(found)
+
+
+def _switch_output():
+    """N of the motion.analog-out-N that drives motion.switchkins-type (settings.json), or None."""
+    try:
+        out = _settings()["kinematics_switch"]["analog_out"]
+        return None if out is None else int(out)
+    except Exception:
+        return None
+
+
+#: run by ``python3 -c`` (LinuxCNC's Python, its ``linuxcnc`` module) as a process of its own, arguments: the N of
+#: motion.analog-out-N, the switchkins type to put back, the log file.  It waits until task has handled the abort
+#: (interpreter idle, motion queue empty, in position), then, unless the output shows the type already, sends
+#: EMC_MOTION_SET_AOUT through LinuxCNC's command channel (task takes it in MDI, MANUAL and E-stop; not in AUTO)
+PUT_BACK = """
+import sys, time, linuxcnc
+n, found, log = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
+s, c = linuxcnc.stat(), linuxcnc.command()
+end, sent, why = time.monotonic() + 10.0, 0, "timed out"
+while time.monotonic() < end:
+    time.sleep(0.05)
+    s.poll()
+    if abs(s.aout[n] - found) < 1e-9:
+        why = "in force"
+        break
+    if s.task_mode == linuxcnc.MODE_AUTO:
+        why = "AUTO mode: task takes no analog output command"
+        break
+    if s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0 and s.inpos and sent < 3:
+        c.set_analog_output(n, found)
+        c.wait_complete(2)
+        sent += 1
+with open(log, "a") as f:
+    f.write(f"{time.strftime('%Y-%m-%dT%H:%M:%S')} analog-out-{n:02d} {found:g}: {why}, sent {sent}\\n")
+"""
+
+
+def _put_back_through_the_command_channel(found, folder):
+    """After an abort, the kinematics mode ``found`` also through LinuxCNC's command channel (:data:`PUT_BACK`, a
+    process of its own: task is not held up): ``M68`` queued by the abort handler can wait behind the aborted
+    interpreter and be dropped by the next mode change (after an interpreter error in MDI, measured: the kill).
+    Its note goes to ``abort.log`` in ``folder`` (the aborted run's folder)."""
+    try:
+        out = _switch_output()
+        if out is None:
+            return
+        subprocess.Popen(["python3", "-c", PUT_BACK, str(out), str(found), os.path.join(folder, "abort.log")],
+                         cwd=CONFIG, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         start_new_session=True)
+    except Exception:  # never in the way of LinuxCNC's abort
+        pass
 
 
 def _read_messages(run, step):

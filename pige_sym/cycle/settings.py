@@ -10,9 +10,11 @@ to change a limit.  One JSON object::
      "kinematics": "stock",                stock (xyzac-trt-kins / xyzbc-trt-kins) or pige (pige gen --target linuxcnc)
      "module": "xyzac-trt-kins",           the kinematics module [KINS]KINEMATICS loads
      "axis_sense": {"A": -1, "C": -1},     commanded sense of each rotary axis (CONVENTIONS §9)
-     "kinematics_switch": {"identity_code": "M429", "identity_type": 0, "tcp_code": "M428", "tcp_type": 1},
-                                           the codes that switch the kinematics (motion.switchkins-type values);
-                                           null: no switch, the kinematics always TCP
+     "kinematics_switch": {"identity_code": "M429", "identity_type": 0, "tcp_code": "M428", "tcp_type": 1,
+                           "analog_out": 3},
+                                           the codes that switch the kinematics (motion.switchkins-type values),
+                                           the motion.analog-out-NN that drives motion.switchkins-type (null:
+                                           none); null: no switch, the kinematics always TCP
      "sphere_mm": [20, 10, 15],            sphere centre, machine coordinates, every rotary axis at 0 [mm]
      "sphere_radius_mm": 6.35, "stylus_radius_mm": 1.5, "stylus_tool": 9, "stylus_length_mm": 30,
      "probing": {"poses": 12, "contacts": 5, "probe_feed_mm_min": 50, "clearance_mm": 1, "overtravel_mm": 1,
@@ -46,12 +48,15 @@ KINEMATICS = ("stock", "pige")
 @dataclass(frozen=True)
 class Switch:
     """The configuration's switchable kinematics: the code that selects identity kinematics and the TCP ones, and
-    the ``motion.switchkins-type`` each selects (``sparm=identityfirst``: identity 0, TCP 1)."""
+    the ``motion.switchkins-type`` each selects (``sparm=identityfirst``: identity 0, TCP 1); ``analog_out``: the
+    ``motion.analog-out-NN`` netted to ``motion.switchkins-type`` (what the codes set with ``M68 E<NN>``), through
+    which an abort puts the mode back without the codes' synchronisation (None: not found, the codes are called)."""
 
     identity_code: str
     identity_type: int
     tcp_code: str
     tcp_type: int
+    analog_out: int | None = None
 
 
 @dataclass(frozen=True)
@@ -76,13 +81,13 @@ class Limits:
     proposal_hours: float = 8.0
 
 
-@dataclass(frozen=True)
-class Timeouts:
-    """How long LinuxCNC waits for pige's process in each step [s] before it ends the cycle with an error."""
+#: how long LinuxCNC waits for pige's process in each step [s] before it ends the cycle with an error (the remap looks
+#: a step's timeout up by its name)
+TIMEOUTS_S = {"prepare": 180.0, "analyse": 600.0, "enter": 120.0}
 
-    prepare: float = 180.0
-    analyse: float = 600.0
-    enter: float = 120.0
+
+def default_timeouts() -> dict[str, float]:
+    return dict(TIMEOUTS_S)
 
 
 def default_tolerances() -> dict[str, Any]:
@@ -109,7 +114,7 @@ class CycleSettings:
     probing: Probing = field(default_factory=Probing)
     limits: Limits = field(default_factory=Limits)
     tolerances: dict[str, Any] = field(default_factory=default_tolerances)
-    timeouts_s: Timeouts = field(default_factory=Timeouts)
+    timeouts_s: dict[str, float] = field(default_factory=default_timeouts)
     db: str = "pige_cycle/history.db"
     pige_command: list[str] = field(default_factory=list)
 
@@ -161,6 +166,8 @@ def check_settings(s: CycleSettings, where: str) -> CycleSettings:
                                or not _code(sw.tcp_code)):
             raise InputError("kinematics_switch: two M-codes (e.g. M429, M428) selecting two different "
                              "switchkins types")
+        if sw is not None and sw.analog_out is not None and not 0 <= sw.analog_out <= 63:
+            raise InputError(f"kinematics_switch: analog_out {sw.analog_out}: the N of motion.analog-out-N, 0..63")
         for name in ("sphere_radius_mm", "stylus_radius_mm", "stylus_length_mm"):
             _positive(getattr(s, name), name)
         if s.stylus_tool <= 0:
@@ -172,7 +179,10 @@ def check_settings(s: CycleSettings, where: str) -> CycleSettings:
             _positive(getattr(p, name), f"probing.{name}")
         for name, value in asdict(s.limits).items():
             _positive(value, f"limits.{name}")
-        for name, value in asdict(s.timeouts_s).items():
+        if set(s.timeouts_s) != set(TIMEOUTS_S):
+            raise InputError(f"timeouts_s: give the seconds of each step {', '.join(TIMEOUTS_S)}, got "
+                             f"{', '.join(s.timeouts_s) or 'none'}")
+        for name, value in s.timeouts_s.items():
             _positive(value, f"timeouts_s.{name}")
         if not s.machine_id.strip():
             raise InputError("machine_id must not be empty")

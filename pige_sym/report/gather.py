@@ -462,12 +462,11 @@ def _studies(rep: MeasurementReport, opt: _Options, bar: Any) -> None:
 
 def gather_history(machine_id: str, db: str | None, tol: Tolerances | None) -> HistoryData:
     """Runs and consecutive comparisons of a machine; tolerance band from ``tol`` or the last stored check."""
-    from pige_sym.verdict.history import connect, list_runs
-    from pige_sym.verdict.history.changes import compare_consecutive
+    from pige_sym.verdict.history import changes, connect, list_runs
 
     engine = connect(db, create=False)
     runs = list_runs(engine, machine_id)
-    comps = compare_consecutive(runs)
+    comps = changes.compare_consecutive(runs)
     judged = None
     if tol is not None:
         limits = tol.resolve(runs[-1].machine_code)

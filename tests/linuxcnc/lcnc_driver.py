@@ -48,6 +48,12 @@ import traceback
 import hal  # type: ignore[import-not-found]
 import linuxcnc  # type: ignore[import-not-found]
 
+#: ops that a copy of this file adds (name -> function(step) -> result dict): tests/linuxcnc/axis_screenshot.py's
+#: wait for AXIS and its screen shot
+EXTRA_OPS: dict = {}
+#: False when another program reads LinuxCNC's error channel (AXIS: it shows the operator messages itself)
+READ_ERRORS = True
+
 ERROR_KINDS = {linuxcnc.NML_ERROR: "error", linuxcnc.OPERATOR_ERROR: "error",
                linuxcnc.NML_TEXT: "text", linuxcnc.OPERATOR_TEXT: "text",
                linuxcnc.NML_DISPLAY: "display", linuxcnc.OPERATOR_DISPLAY: "display"}
@@ -68,13 +74,14 @@ class Driver:
     def drain(self) -> bool:
         """Collect the error channel; True when an error arrived."""
         bad = False
-        while True:
+        while READ_ERRORS:
             m = self.err.poll()
             if not m:
-                return bad
+                break
             kind = ERROR_KINDS.get(m[0], str(m[0]))
             self.messages.append([kind, m[1]])
             bad = bad or kind == "error"
+        return bad
 
     def wait(self, done, timeout: float, what: str) -> None:
         end = time.monotonic() + timeout
@@ -190,6 +197,22 @@ class Driver:
         os.kill(pid, signal.SIGKILL)
         return {"pid": pid, "pid_file": path}
 
+    def sleep(self, step: dict) -> dict:
+        """Wait ``seconds``, collecting messages."""
+        end = time.monotonic() + step["seconds"]
+        while time.monotonic() < end:
+            self.drain()
+            time.sleep(0.05)
+        return {}
+
+    def status(self, step: dict) -> dict:
+        """The task's and the interpreter's state as the status channel gives them."""
+        self.stat.poll()
+        s = self.stat
+        return {"status": {"task_mode": s.task_mode, "task_state": s.task_state, "interp_state": s.interp_state,
+                           "exec_state": s.exec_state, "call_level": s.call_level, "queue": s.queue,
+                           "state": s.state}}
+
     def idle_step(self, step: dict) -> dict:
         self.idle(step.get("timeout", 600), "idle")
         return {}
@@ -250,6 +273,8 @@ def run(job: dict) -> dict:
             first = len(drv.messages)
             if step["op"] == "read":
                 res = {"readings": [{p: hal.get_value(p) for p in step["pins"]}]}
+            elif step["op"] in EXTRA_OPS:
+                res = EXTRA_OPS[step["op"]](step)
             else:
                 res = getattr(drv, "idle_step" if step["op"] == "idle" else step["op"])(step)
             drv.drain()

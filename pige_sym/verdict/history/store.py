@@ -52,10 +52,16 @@ class _Read:
     items: list[Any]
 
 
-def _estimate_set(paths: list[Path], method: str) -> tuple[_Read, Any, list[dict[str, Any]], str]:
-    """(what was read, result with parameters/values/covariance/dof, accepted findings, stored method)."""
+def _estimate_set(paths: list[Path], method: str, identified: tuple[Measurement, Any] | None = None
+                  ) -> tuple[_Read, Any, list[dict[str, Any]], str]:
+    """(what was read, result with parameters/values/covariance/dof, accepted findings, stored method);
+    ``identified``: the single file's measurement and its Gauss-Newton result, made already (not made again)."""
     from pige_sym.measurements.ballbar import is_ballbar_file
 
+    if identified is not None:
+        if len(paths) != 1 or method != "gauss-newton":
+            raise InputError("an identification made already is stored only for one file, method gauss-newton")
+        return _Read(identified[0].machine, [identified[0]]), identified[1], [], method
     if len(paths) == 1 and not is_ballbar_file(paths[0]):
         m, result, effects = _estimate(paths[0], method)
         return _Read(m.machine, [m]), result, effects, method
@@ -97,7 +103,8 @@ def _existing(conn: sa.Connection, sha: str) -> Any:
 
 def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], machine_id: str, *,
             method: str = "diagnosis", tolerances: str | os.PathLike[str] | None = None, rule: str = "guard",
-            k: float = 2.0, date: str | None = None, corrected: bool = False) -> RunRecord:
+            k: float = 2.0, date: str | None = None, corrected: bool = False,
+            identified: tuple[Measurement, Any] | None = None) -> RunRecord:
     """Identify/diagnose a measurement file (or a set of files of one machine) and store the run.
 
     A set (several files, or a ``pige-ballbar 1`` file) is stored as one run of method ``joint``
@@ -107,6 +114,9 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.
 
     ``corrected``: the run was measured after a correction was entered (it starts a segment of the check-ups'
     chart, :mod:`pige_sym.verdict.checkup`).
+
+    ``identified``: ``(measurement, result)`` of the one file, read from it and identified with ``method``
+    ``"gauss-newton"`` by the caller already (the cycle's analysis): stored as it is, not identified again.
 
     Raises
     ------
@@ -135,7 +145,7 @@ def add_run(engine: sa.Engine, path: str | os.PathLike[str] | Sequence[str | os.
         raise InputError(f"{p}: this {what} is already in the history (run {dup.id} of machine {dup.machine_id}, "
                          f"added as {dup.file_name}): a run is added once")
     tol = read_tolerances(tolerances) if tolerances is not None else None
-    m, result, effects, method = _estimate_set(paths, method)
+    m, result, effects, method = _estimate_set(paths, method, identified)
     final = getattr(result, "final", result)
     code = load_kernels(m.machine).MACHINE_CODE
     times = [measurement_time(x, getattr(item, "metadata", {}), date) for x, item in zip(paths, m.items, strict=True)]
