@@ -33,11 +33,18 @@ gen-all: $(STAMP)  ## regenerate every shipped machine's kernels in generated/
 check-generated: $(STAMP)  ## regenerate shipped kernels in memory and fail on any code difference
 	$(PY) -m pige_sym gen --check --all-shipped
 
+# Whole files to each process, in the order tests/conftest.py gives them (the heaviest first), not xdist's (most tests
+# first).  Under PYTHONDONTWRITEBYTECODE (set on some build machines) the suite's bytecode (its own, the pige commands'
+# and the libraries') goes to .venv/pycache and is kept from one run to the next: never beside the sources, and not
+# compiled again by every process (collection: 13.6 -> 7.0 s CPU).  A PYTHONPYCACHEPREFIX of your own wins.
+TEST_OPTS := -n $(TEST_JOBS) --dist loadfile --no-loadscope-reorder
+TEST_ENV  := $(if $(and $(PYTHONDONTWRITEBYTECODE),$(if $(PYTHONPYCACHEPREFIX),,x)),env -u PYTHONDONTWRITEBYTECODE PYTHONPYCACHEPREFIX=$(CURDIR)/$(VENV)/pycache)
+
 test: $(STAMP)  ## run the default test suite (slow studies excluded), one process per core
-	$(PY) -m pytest -q -n $(TEST_JOBS) --dist loadfile
+	$(TEST_ENV) $(PY) -m pytest -q $(TEST_OPTS)
 
 test-slow: $(STAMP)  ## run the slow studies too (not the LinuxCNC runs: make test-linuxcnc)
-	$(PY) -m pytest -q -m 'not linuxcnc' -n $(TEST_JOBS) --dist loadfile
+	$(TEST_ENV) $(PY) -m pytest -q -m 'not linuxcnc' $(TEST_OPTS)
 
 test-linuxcnc: $(STAMP)  ## the loop on real LinuxCNC 2.9 simulations, side by side (tests/linuxcnc; skips without linuxcnc-uspace)
 	$(PY) -m pytest -q -rsP -m linuxcnc -n $(LCNC_JOBS) --dist loadfile --durations=40 tests/linuxcnc

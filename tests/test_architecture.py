@@ -4,7 +4,7 @@ The layers of :mod:`pige_sym`, lowest first (the README's "How it is built" stat
 module may import from its own layer and from any layer below it, never from one above:
 
 ==============  =====================================================================================
-foundation      ``errors``, ``constants``, ``options``, ``files``: what every layer shares
+foundation      ``errors``, ``constants``, ``options``, ``files``, ``plotting``: what every layer shares
 codegen         code string → symbolic model → kernel source (the only SymPy user)
 kernels         loading the generated kernels (``generated/``, shipped or user cache)
 measurements    file formats, readers and writers of every instrument; the JSON schema
@@ -30,6 +30,7 @@ re-exports a few names lazily and stands above everything; nothing inside import
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -38,7 +39,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "pige_sym"
 MAX_MODULE_LINES = 500
 
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
-    ("foundation", ("errors", "constants", "options", "files")),
+    ("foundation", ("errors", "constants", "options", "files", "plotting")),
     ("codegen", ("codegen",)),
     ("kernels", ("kernels",)),
     ("measurements", ("measurements",)),
@@ -70,6 +71,7 @@ def _module_name(path: Path) -> str:
     return ".".join(parts)
 
 
+@functools.cache  # the tree does not change during a run: read once, not once per test (262 of them)
 def _modules() -> dict[str, Path]:
     return {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py")) if not _is_generated(p)}
 
@@ -78,7 +80,7 @@ def _imports(name: str, path: Path, known: set[str]) -> set[str]:
     """Every pige_sym module ``name`` imports (``from a import b`` counts ``a.b`` when that is a module)."""
     is_pkg = path.name == "__init__.py"
     out: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in ast.walk(_tree(path)):
         if isinstance(node, ast.Import):
             targets = [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -98,6 +100,13 @@ def _imports(name: str, path: Path, known: set[str]) -> set[str]:
     return out
 
 
+@functools.cache
+def _tree(path: Path) -> ast.Module:
+    """A module's syntax tree, parsed once per run."""
+    return ast.parse(path.read_text(encoding="utf-8"))
+
+
+@functools.cache
 def _graph() -> dict[str, set[str]]:
     mods = _modules()
     known = set(mods)

@@ -18,6 +18,7 @@ from pige_sym.constants import DEFAULT_BALL_MM
 from pige_sym.files import make_folder
 from pige_sym.kernels import load_kernels
 from pige_sym.model.trajectories import approach_directions
+from pige_sym.plotting import fixed_layout, pyplot, save_png
 
 
 @dataclass
@@ -127,11 +128,7 @@ def before_after(machine: str, truth: dict[str, float], comp: Any, *, descriptio
 
 def plot_compensation(rows: list[CompensationStudyRow], out_dir: str | Path) -> list[str]:
     """Deviation per point before/after (paper Figures 9 and 10 style); returns PNG paths."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     out = Path(out_dir)
     make_folder(out, what="--out")
     paths = []
@@ -150,8 +147,6 @@ def plot_compensation(rows: list[CompensationStudyRow], out_dir: str | Path) -> 
         axs[1].set_ylabel("|error| [µm]")
         axs[1].legend(fontsize=8)
         fig.suptitle(r.trajectory, fontsize=9)
-        fig.tight_layout()
-        paths.append(str(out / f"compensation_{i}.png"))
-        fig.savefig(paths[-1], dpi=90)
-        plt.close(fig)
+        fixed_layout(fig, left=0.7, right=0.15, bottom=0.5, top=0.35, wspace=0.8)
+        paths.append(str(save_png(fig, out / f"compensation_{i}.png", dpi=90)))
     return paths

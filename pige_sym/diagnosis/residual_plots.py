@@ -18,6 +18,7 @@ from pige_sym.files import make_folder
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.measurement import Measurement
 from pige_sym.model.effects import EffectContext
+from pige_sym.plotting import fixed_layout, outside_legend_room, save_png
 
 
 def axis_frames(m: Measurement, kern: Any) -> dict[str, np.ndarray]:
@@ -58,12 +59,11 @@ def axis_frames(m: Measurement, kern: Any) -> dict[str, np.ndarray]:
 
 
 def save_figure(fig: Any, path: Path) -> str:
-    """Lay out, write (PNG, 90 dpi) and close a figure; returns the path."""
-    import matplotlib.pyplot as plt
-
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    """Lay out (fixed margins, room for the legends outside the axes), write (PNG, 90 dpi) and close a figure;
+    returns the path."""
+    legends = [ax.get_legend() for ax in fig.axes]
+    fixed_layout(fig, right=outside_legend_room(fig, *legends), top=0.35, bottom=0.55, wspace=0.6)
+    save_png(fig, path, dpi=90)
     return str(path)
 
 
@@ -94,7 +94,7 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
         ax.plot(t, resid[:, i], ".-", label=f"d{c}")
     ax.set_xlabel("pose (its order in the log)" if probe else "t [s]")
     ax.set_ylabel("residual [µm]")
-    ax.set_title("PIGE-fit residual vs pose order" if probe else "PIGE-fit residual vs time")
+    ax.set_title("PIGE-fit residual vs pose order" if probe else "PIGE-fit residual vs time", y=1.0)
     _legend_outside(ax)
     paths.append(save_figure(fig, out / "residual_time.png"))
     frames = axis_frames(m, kern)
@@ -107,7 +107,7 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
             ax.plot(m.angles_deg[:, k], comp[:, i], "o", ms=3, label=name)
         ax.set_xlabel(f"{axis} [deg]")
         ax.set_ylabel("residual [µm]")
-        ax.set_title(f"residual in the frame of axis {axis}")
+        ax.set_title(f"residual in the frame of axis {axis}", y=1.0)
         _legend_outside(ax)
         paths.append(save_figure(fig, out / f"residual_{axis}.png"))
     appr = EffectContext(kern, m.angles_deg, m.t_s, m.ball_mm).approach
@@ -119,12 +119,12 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
         axs[0].bar([r], [norms[r]], color="red")
     axs[0].set_xlabel("row")
     axs[0].set_ylabel("|residual| [µm]")
-    axs[0].set_title("per row (red: outliers)")
+    axs[0].set_title("per row (red: outliers)", y=1.0)
     r = resid[1:] - resid[1:].mean(axis=0)
     ac = [1.0] + [float((r[:-lag] * r[lag:]).sum() / max((r * r).sum(), 1e-300)) for lag in range(1, min(15, len(r)))]
     axs[1].stem(range(len(ac)), ac)
     axs[1].set_xlabel("lag [rows]")
-    axs[1].set_title("autocorrelation in time")
+    axs[1].set_title("autocorrelation in time", y=1.0)
     paths.append(save_figure(fig, out / "residual_rows.png"))
     if (appr != 0).any():
         fig, ax = plt.subplots(figsize=(7, 3.5))
@@ -136,7 +136,7 @@ def residual_plots(m: Measurement, result: DiagnosisResult, out_dir: str | Path)
                     ax.plot(m.angles_deg[sel, k], tang[sel], mk, label=f"{axis} approached {'+' if sgn > 0 else '-'}")
         ax.set_xlabel("angle [deg]")
         ax.set_ylabel("tangential residual [µm]")
-        ax.set_title("residual by direction of approach")
+        ax.set_title("residual by direction of approach", y=1.0)
         _legend_outside(ax)
         paths.append(save_figure(fig, out / "residual_approach.png"))
     result.plots = paths

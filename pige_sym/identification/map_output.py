@@ -116,7 +116,7 @@ def map_figure(result: MapResult, axis: str) -> Any:
         panel.grid(alpha=0.3)
         if panel.get_legend_handles_labels()[0]:
             panel.legend(fontsize=8, ncol=3)
-    axes[0].set_title(f"error motions of the {axis} axis (±2σ bands)")
+    axes[0].set_title(f"error motions of the {axis} axis (±2σ bands)", y=1.0)
     axes[1].set_xlabel(f"{axis} [deg]")
     return fig
 

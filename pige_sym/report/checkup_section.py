@@ -16,6 +16,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from pige_sym.plotting import fixed_layout, pyplot, save_png
 from pige_sym.report.data import ReportData, ReportFigure
 from pige_sym.report.html_blocks import esc, img, num, table
 
@@ -114,11 +115,7 @@ def _forecast_text(last: Any, name: str) -> str:
 
 def checkup_figure(data: ReportData) -> Any:
     """The check-ups' trend plot (module docstring); matplotlib Figure."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     assert data.history is not None
     runs = [r for r in data.history.runs if r.kind == "checkup" or r.kind == "full"]
     last = checkups(data)[-1]
@@ -129,7 +126,7 @@ def checkup_figure(data: ReportData) -> Any:
     for ax, name in zip(axs.ravel(), names, strict=False):
         _panel(ax, name, runs)
         unit = last.units.get(name, "").replace("um", "µm").replace("urad", "µrad")
-        ax.set_title(f"{name} [{unit}]{_forecast_text(last, name)}", fontsize=8)
+        ax.set_title(f"{name} [{unit}]{_forecast_text(last, name)}", fontsize=8, y=1.0)
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=7)
     for ax in axs.ravel()[len(names):]:
@@ -142,7 +139,7 @@ def checkup_figure(data: ReportData) -> Any:
     fig.suptitle(f"{data.history.machine_id}: each check-up ± 2 std in run order (blue ok, orange outside its control "
                  "limits, red not within its tolerance),\nfull calibrations (black), the limits each was judged by "
                  "(grey), tolerance (green), corrections entered (dashed)", fontsize=8)
-    fig.tight_layout()
+    fixed_layout(fig, left=0.6, right=0.15, bottom=0.95, top=0.6, wspace=0.55, hspace=0.45)
     return fig
 
 
@@ -150,13 +147,8 @@ def checkup_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
     """The check-ups' figure written into ``out_dir`` (none without check-ups)."""
     if not checkups(data):
         return []
-    import matplotlib.pyplot as plt
-
     out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / "checkup_trend.png"
-    fig = checkup_figure(data)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    path = save_png(checkup_figure(data), out_dir / "checkup_trend.png", dpi=110)
     assert data.history is not None
     return [ReportFigure(KEY, path, f"Check-ups of machine {data.history.machine_id}: each re-measured PIGE against "
                                     "time with its control limits, tolerance and forecast.")]

@@ -22,23 +22,9 @@ from pige_sym.errors import InputError
 from pige_sym.identification.result import IdentificationResult
 from pige_sym.identification.studies import SobolStudy
 from pige_sym.measurements.measurement import Measurement
+from pige_sym.plotting import fixed_layout, outside_legend_room, pyplot, save_png
 from pige_sym.report.data import UNIT_TEXT, HistoryData, MeasurementReport, ReportData, ReportFigure, Truth
 from pige_sym.report.words import small_um, vocabulary
-
-
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save(fig: Any, path: Path) -> Path:
-    fig.savefig(path, dpi=90)
-    _pyplot().close(fig)
-    return path
 
 
 def deviation_figure(m: Measurement, model_um: np.ndarray | None) -> Any:
@@ -54,7 +40,7 @@ def deviation_figure(m: Measurement, model_um: np.ndarray | None) -> Any:
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot()
+    plt = pyplot()
     words = vocabulary(m)
     dev = m.deviation_machine_um()
     idx = np.arange(m.n_rows)
@@ -67,8 +53,8 @@ def deviation_figure(m: Measurement, model_um: np.ndarray | None) -> Any:
     ax0.axhline(0, color="k", lw=0.6)
     ax0.set_ylabel(words.deviation_axis)
     ax0.set_title(f"{words.measurand}, machine frame" + (" (converted from the table frame)" if m.frame == "table"
-                                                         else ""), fontsize=10)
-    _legend_outside(ax0)
+                                                         else ""), fontsize=10, y=1.0)
+    legends = [_legend_outside(ax0)]
     ax0.grid(alpha=0.3)
     commanded = m.commanded_deg  # as the program and the controller hold them (axis_sense)
     for k, a in enumerate(m.rotary_axes):
@@ -76,15 +62,16 @@ def deviation_figure(m: Measurement, model_um: np.ndarray | None) -> Any:
                                                                      else ""))
     ax1.set_xlabel(f"{words.row} (0 = reference pose)")
     ax1.set_ylabel("commanded angle [deg]")
-    _legend_outside(ax1)
+    legends.append(_legend_outside(ax1))
     ax1.grid(alpha=0.3)
-    fig.tight_layout()
+    fixed_layout(fig, right=outside_legend_room(fig, *legends), top=0.3, hspace=0.15)
     return fig
 
 
-def _legend_outside(ax: Any, **kwargs: Any) -> None:
-    """The legend right of the axes, never over a curve (tight_layout makes room for it)."""
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kwargs)
+def _legend_outside(ax: Any, **kwargs: Any) -> Any:
+    """The legend right of the axes, never over a curve (:func:`~pige_sym.plotting.outside_legend_room` makes
+    room for it); returns it."""
+    return ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kwargs)
 
 
 def polar_axis(m: Measurement) -> int | None:
@@ -105,7 +92,7 @@ def polar_figure(m: Measurement, model_um: np.ndarray | None, axis_index: int) -
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot()
+    plt = pyplot()
     dev = m.deviation_machine_um()
     theta = np.radians(m.angles_deg[:, axis_index])
     peak = float(np.abs(dev).max())
@@ -130,12 +117,12 @@ def polar_figure(m: Measurement, model_um: np.ndarray | None, axis_index: int) -
         ax.set_rlabel_position(_emptiest_direction(theta))
         for label in ax.get_yticklabels():
             label.set_bbox({"facecolor": "white", "edgecolor": "none", "alpha": 0.85, "pad": 1.0})
-        ax.set_title(f"d{c} [µm] vs {m.rotary_axes[axis_index]} [deg]", fontsize=10)
+        ax.set_title(f"d{c} [µm] vs {m.rotary_axes[axis_index]} [deg]", fontsize=10, y=1.1)  # above the 90° label
         ax.tick_params(axis="x", labelsize=7)
     handles, labels = axs[0].get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=2, frameon=False)
     fig.suptitle(f"deviation about the nominal circle (dashed = 0 µm, ring step {step:g} µm)", fontsize=10)
-    fig.tight_layout(rect=(0, 0.06, 1, 0.93))
+    fixed_layout(fig, left=0.45, right=0.45, bottom=0.5, top=0.85, wspace=0.9)
     return fig
 
 
@@ -166,7 +153,7 @@ def identification_figure(results: dict[str, IdentificationResult], truth: Truth
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib.transforms import blended_transform_factory
 
     first = next(iter(results.values()))
@@ -198,12 +185,12 @@ def identification_figure(results: dict[str, IdentificationResult], truth: Truth
         ax.set_xticklabels(names)
         ax.set_xlim(-0.6, len(names) - 0.4)
         ax.set_ylabel(f"value [{UNIT_TEXT.get(unit, unit)}]")
-        ax.set_title(f"{title} (95 % intervals)", fontsize=10)
+        ax.set_title(f"{title} (95 % intervals)", fontsize=10, y=1.0)
         ax.grid(alpha=0.3)
     handles, labels = axs[0].get_legend_handles_labels()
     if handles:  # one legend for both panels, below them: it covers no interval
         fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=len(handles), frameon=False)
-    fig.tight_layout(rect=(0, 0.07 if handles else 0, 1, 1))
+    fixed_layout(fig, bottom=0.65 if handles else 0.45, top=0.3, wspace=0.8)
     return fig
 
 
@@ -214,7 +201,7 @@ def sobol_figure(study: SobolStudy) -> Any:
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 3.6))
     n_proj = len(study.projections)
     x = np.arange(len(study.parameters))
@@ -224,10 +211,10 @@ def sobol_figure(study: SobolStudy) -> Any:
     ax.set_xticks(x)
     ax.set_xticklabels(study.parameters)
     ax.set_ylabel("total Sobol index [-]")
-    ax.set_title("sensitivity of the mean-square projected deviation to each PIGE", fontsize=10)
-    _legend_outside(ax)
+    ax.set_title("sensitivity of the mean-square projected deviation to each PIGE", fontsize=10, y=1.0)
+    legend = _legend_outside(ax)
     ax.grid(alpha=0.3, axis="y")
-    fig.tight_layout()
+    fixed_layout(fig, right=outside_legend_room(fig, legend), top=0.3, bottom=0.45)
     return fig
 
 
@@ -239,18 +226,18 @@ def draw_figures(rep: MeasurementReport, out_dir: Path) -> list[ReportFigure]:
     overlay = "; dashed: PIGE model of the " + rep.primary_method + " estimate" if rep.model_um is not None else (
         "; no model overlay: a parameter is undetermined")
     words = vocabulary(m)
-    figs.append(ReportFigure("deviation", _save(deviation_figure(m, rep.model_um), out_dir / "deviation.png"),
+    figs.append(ReportFigure("deviation", save_png(deviation_figure(m, rep.model_um), out_dir / "deviation.png"),
                              f"{words.measurand[0].upper() + words.measurand[1:]} per {words.row} [µm], machine "
                              f"frame, with the commanded rotary angles [deg]{overlay}."))
     k = polar_axis(m)
     if k is not None:
-        figs.append(ReportFigure("polar", _save(polar_figure(m, rep.model_um, k), out_dir / "deviation_polar.png"),
+        figs.append(ReportFigure("polar", save_png(polar_figure(m, rep.model_um, k), out_dir / "deviation_polar.png"),
                                  f"Deviation components against the {m.rotary_axes[k]} angle, magnified about a "
                                  f"nominal circle (dashed line = zero deviation; radial labels in µm)."))
     shown = dict(rep.identification)
     if rep.primary is not rep.identification.get(rep.primary_method):  # the diagnosis' fit, with its effects
         shown = {"used for compensation (diagnosis)": rep.primary, **shown}
-    figs.append(ReportFigure("identification", _save(identification_figure(shown, rep.truth),
+    figs.append(ReportFigure("identification", save_png(identification_figure(shown, rep.truth),
                                                      out_dir / "identification.png"),
                              "Identified PIGEs with 95 % confidence intervals: "
                              + ("the estimate used for compensation (green: the diagnosis' final fit) and the "
@@ -278,11 +265,11 @@ def draw_figures(rep: MeasurementReport, out_dir: Path) -> list[ReportFigure]:
              "what the compensation algorithm itself leaves, not a prediction for the real machine")
     for i, row in enumerate(rep.compensation):
         fig = before_after_figure(row, BASIS_LABEL[rep.compensation_basis])
-        figs.append(ReportFigure("compensation", _save(fig, out_dir / f"compensation_{i}.png"),
+        figs.append(ReportFigure("compensation", save_png(fig, out_dir / f"compensation_{i}.png"),
                                  f"Tool-point error before (top) and after compensation (bottom, its own scale) [µm], "
                                  f"{row.trajectory} ({basis})."))
     if rep.sobol is not None and rep.sobol_same_as is None:
-        figs.append(ReportFigure("sobol", _save(sobol_figure(rep.sobol), out_dir / "sobol.png"),
+        figs.append(ReportFigure("sobol", save_png(sobol_figure(rep.sobol), out_dir / "sobol.png"),
                                  "Total Sobol indices of the mean-square projected deviation, per projection."))
     return figs
 
@@ -304,8 +291,9 @@ def before_after_figure(row: CompensationStudyRow, label: str) -> Any:
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, axs = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True)
+    legends = []
     idx = np.arange(row.before_um.shape[0])
     colors = ("tab:blue", "tab:orange", "tab:green")
     for ax, err, when, rms in ((axs[0], row.before_um, "before", row.rmse_before_um),
@@ -315,11 +303,11 @@ def before_after_figure(row: CompensationStudyRow, label: str) -> Any:
         ax.plot(idx, np.linalg.norm(err, axis=1), "k.-", lw=1, ms=3, label="|error|")
         ax.axhline(0, color="k", lw=0.5)
         ax.set_ylabel("tool-point error [µm]")
-        ax.set_title(f"{when} compensation ({label}): RMSE {small_um(rms)} µm", fontsize=9)
+        ax.set_title(f"{when} compensation ({label}): RMSE {small_um(rms)} µm", fontsize=9, y=1.0)
         ax.grid(alpha=0.3)
-        _legend_outside(ax)
+        legends.append(_legend_outside(ax))
     axs[1].set_xlabel("pose of the test")
-    fig.tight_layout()
+    fixed_layout(fig, right=outside_legend_room(fig, *legends), top=0.3, hspace=0.35)
     return fig
 
 
@@ -334,8 +322,9 @@ def compare_figure(result: Any) -> Any:
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, axs = plt.subplots(2, 1, figsize=(9, 5.2), sharex=True)
+    legends = []
     idx = np.arange(result.before_um.shape[0])
     panels = ((axs[0], result.before_um, result.before_parts, "before", result.rms_before_um),
               (axs[1], result.after_um, result.after_parts, "after", result.rms_after_um))
@@ -345,11 +334,11 @@ def compare_figure(result: Any) -> Any:
             if part.values_um is not None:
                 ax.plot(idx, np.linalg.norm(part.values_um, axis=1), "--", lw=0.9, label=f"|{part.name} part|")
         ax.set_ylabel("|d| [µm]")
-        ax.set_title(f"{when} (measured): RMS {small_um(rms)} µm", fontsize=9)
+        ax.set_title(f"{when} (measured): RMS {small_um(rms)} µm", fontsize=9, y=1.0)
         ax.grid(alpha=0.3)
-        _legend_outside(ax)
+        legends.append(_legend_outside(ax))
     axs[1].set_xlabel("pose")
-    fig.tight_layout()
+    fixed_layout(fig, right=outside_legend_room(fig, *legends), top=0.3, hspace=0.35)
     return fig
 
 
@@ -362,7 +351,7 @@ def trend_figure(history: HistoryData) -> Any:
     """
     from pige_sym.kernels import load_kernels
 
-    plt = _pyplot()
+    plt = pyplot()
     runs = history.runs
     kern = load_kernels(runs[-1].machine_code)
     names = list(kern.LOCATION_PARAMETERS)
@@ -385,7 +374,7 @@ def trend_figure(history: HistoryData) -> Any:
         if ringed:
             ax.plot(x[ringed], vals[ringed], "o", ms=11, mfc="none", mec="crimson", mew=1.8, ls="none")
         ax.axhline(0, color="k", lw=0.5)
-        ax.set_title(f"{name} [{UNIT_TEXT.get(kern.UNITS[name], kern.UNITS[name])}]", fontsize=9)
+        ax.set_title(f"{name} [{UNIT_TEXT.get(kern.UNITS[name], kern.UNITS[name])}]", fontsize=9, y=1.0)
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=7)
     for ax in axs.ravel()[len(names):]:
@@ -396,7 +385,7 @@ def trend_figure(history: HistoryData) -> Any:
         ax.set_xticklabels([r.measured_at[:10] for r in runs[::step]], rotation=45, ha="right", fontsize=7)
     fig.suptitle(f"{history.machine_id}: value ± 2 std per run; green band = tolerance; red ring = significant "
                  "change from the previous run", fontsize=9)
-    fig.tight_layout()
+    fixed_layout(fig, left=0.6, right=0.15, bottom=0.85, top=0.5, wspace=0.55, hspace=0.4)
     return fig
 
 
@@ -411,7 +400,7 @@ def ballbar_figure(curves: list[tuple[str, np.ndarray, np.ndarray]]) -> Any:
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot()
+    plt = pyplot()
     cols = min(3, len(curves))
     rows = math.ceil(len(curves) / cols)
     fig, axs = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.4 * rows), squeeze=False)
@@ -420,7 +409,7 @@ def ballbar_figure(curves: list[tuple[str, np.ndarray, np.ndarray]]) -> Any:
         ax.plot(idx, measured, "k.", ms=3, label="ΔL measured")
         ax.plot(idx, fitted, "-", lw=1.2, label="joint fit")
         rms = float(np.sqrt(np.mean((measured - fitted) ** 2)))
-        ax.set_title(f"{label[-30:]}: rest {small_um(rms, '.2g')} µm", fontsize=8)
+        ax.set_title(f"{label[-30:]}: rest {small_um(rms, '.2g')} µm", fontsize=8, y=1.0)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
         ax.set_xlabel("pose", fontsize=7)
@@ -429,7 +418,7 @@ def ballbar_figure(curves: list[tuple[str, np.ndarray, np.ndarray]]) -> Any:
         ax.axis("off")
     handles, labels = axs.flat[0].get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=2, frameon=False)
-    fig.tight_layout(rect=(0, 0.04 if rows > 1 else 0.1, 1, 1))
+    fixed_layout(fig, left=0.6, right=0.15, bottom=0.75, top=0.3, wspace=0.6, hspace=0.75)
     return fig
 
 
@@ -438,13 +427,13 @@ def draw_report_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
     figs: list[ReportFigure] = []
     if data.comparison is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
-        figs.append(ReportFigure("measured-compare", _save(compare_figure(data.comparison),
+        figs.append(ReportFigure("measured-compare", save_png(compare_figure(data.comparison),
                                                            out_dir / "measured_before_after.png"),
                                  "Measured |d| per pose [µm] before (top) and after (bottom, its own scale), with "
                                  "the model parts of each (PIGEs, accepted effects, unexplained rest)."))
     if data.history is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
-        figs.append(ReportFigure("trend", _save(trend_figure(data.history), out_dir / "history_trend.png"),
+        figs.append(ReportFigure("trend", save_png(trend_figure(data.history), out_dir / "history_trend.png"),
                                  f"History of machine {data.history.machine_id}: each PIGE per run with ± 2 std, "
                                  "the tolerance band and the significant changes."))
         from pige_sym.report.checkup_section import checkup_figures
@@ -455,13 +444,14 @@ def draw_report_figures(data: ReportData, out_dir: Path) -> list[ReportFigure]:
 
         out_dir.mkdir(parents=True, exist_ok=True)
         for axis in data.maps.result.maps:
-            figs.append(ReportFigure("maps", _save(map_figure(data.maps.result, axis), out_dir / f"map_{axis}.png"),
+            figs.append(ReportFigure("maps", save_png(map_figure(data.maps.result, axis), out_dir / f"map_{axis}.png"),
                                      f"The error motions of {axis} (conventions §10) with ±2σ bands: translations "
                                      "[µm] above, rotations [µrad] below."))
     for i, jr in enumerate(data.joints):
         if jr.curves:
             out_dir.mkdir(parents=True, exist_ok=True)
-            figs.append(ReportFigure(f"joint-{i + 1}", _save(ballbar_figure(jr.curves), out_dir / f"joint_{i + 1}.png"),
+            png = save_png(ballbar_figure(jr.curves), out_dir / f"joint_{i + 1}.png")
+            figs.append(ReportFigure(f"joint-{i + 1}", png,
                                      "Each ballbar setup's measured length change ΔL per pose [µm] and the joint "
                                      "fit of it (the PIGEs, the effects seen jointly and the file's constant): the "
                                      "rest is noise, or a setup that disagrees."))

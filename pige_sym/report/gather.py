@@ -33,7 +33,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -50,11 +50,6 @@ from pige_sym.measurements.ballbar import BallbarRun
 from pige_sym.measurements.measurement import Measurement
 from pige_sym.measurements.sets import read_files
 from pige_sym.nc.program_file import read_program
-from pige_sym.simulation.simulator import normalise_parameter_name
-from pige_sym.verdict.check import Estimates, Tolerances, check, estimates_from_result, read_tolerances
-
-if TYPE_CHECKING:
-    pass
 from pige_sym.report.before_after import compensation_before_after, measured_trajectory, program_section
 from pige_sym.report.data import (
     PRIMARY_METHODS,
@@ -66,6 +61,8 @@ from pige_sym.report.data import (
     ReportData,
     Truth,
 )
+from pige_sym.simulation.simulator import normalise_parameter_name
+from pige_sym.verdict.check import Estimates, Tolerances, check, estimates_from_result, read_tolerances
 
 
 def parse_studies(text: str | Iterable[str] | None) -> tuple[str, ...]:

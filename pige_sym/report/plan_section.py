@@ -25,20 +25,12 @@ import numpy as np
 
 from pige_sym.planning import Plan
 from pige_sym.planning.plan import default_cone
-
-
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+from pige_sym.plotting import fixed_layout, pyplot, save_png
 
 
 def plan_figure(plan: Plan) -> Any:
     """Figure of a plan: std per PIGE (planned vs default cone) and the poses in the angle plane."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, (ax_s, ax_t) = plt.subplots(1, 2, figsize=(11, 4.2))
     names = plan.prediction.names
     x = np.arange(len(names))
@@ -50,10 +42,10 @@ def plan_figure(plan: Plan) -> Any:
     ax_s.set_xticks(x, [f"{n}\n[{plan.prediction.units.get(n, '')}]" for n in names], fontsize=7)
     ax_s.set_yscale("log")
     ax_s.set_ylabel("predicted standard error [µm or µrad]")
-    ax_s.set_title(f"noise {plan.setup.noise_um:g} µm, {plan.points} poses")
+    ax_s.set_title(f"noise {plan.setup.noise_um:g} µm, {plan.points} poses", y=1.0)
     ax_s.legend(fontsize=8)
     _trajectory_axes(ax_t, plan)
-    fig.tight_layout()
+    fixed_layout(fig, left=0.8, right=0.2, bottom=0.7, top=0.35, wspace=0.9)
     return fig
 
 
@@ -79,7 +71,7 @@ def _trajectory_axes(ax: Any, plan: Plan) -> None:
             ax.axvspan(lo1, hi1, color="tab:orange", alpha=0.06, label=f"{axes[1]} limits")
     ax.set_xlabel(f"{axes[1]} [deg]")
     ax.set_ylabel(f"{axes[0]} [deg]")
-    ax.set_title("poses in the angle plane (colour: test order)")
+    ax.set_title("poses in the angle plane (colour: test order)", y=1.0)
     ax.legend(fontsize=7, loc="best")
 
 
@@ -111,9 +103,7 @@ def plan_section(plan: Plan, out_dir: str | Path, *, name: str = "plan.png") -> 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     png = out / name
-    fig = plan_figure(plan)
-    fig.savefig(png, dpi=90)
-    _pyplot().close(fig)
+    save_png(plan_figure(plan), png, dpi=90)
     pred, base = plan.prediction, plan.baseline
     bstd = base.std_dict() if base is not None else {}
     rows = "".join(f"<tr><td>{_e(n)}</td><td>{_num(s)}</td><td>{_num(bstd.get(n))}</td>"
