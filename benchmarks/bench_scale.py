@@ -36,6 +36,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from commands import STEP  # noqa: E402
 
 from pige_sym.kernels import load_kernels  # noqa: E402
 from pige_sym.model.trajectories import cone_frustum  # noqa: E402
@@ -49,17 +52,6 @@ R, STYLUS = 12.7, 1.5
 SIZES = (1_000, 10_000, 100_000, 200_000)
 SPHERE_ARGS = ["--sphere-radius", str(R), "--stylus-radius", str(STYLUS)]
 
-STEP = r"""
-import json, resource, sys, time
-t0 = time.perf_counter()
-from pige_sym.cli.main import main
-code = main(sys.argv[1:])
-dt = time.perf_counter() - t0
-use = resource.getrusage(resource.RUSAGE_SELF)
-hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM:")][0].split()[1]
-print(json.dumps({"s": dt, "cpu_s": use.ru_utime + use.ru_stime, "rss_mb": int(hwm) / 1024, "code": code}),
-      file=sys.stderr)
-"""
 
 
 def contact_normals() -> tuple[np.ndarray, np.ndarray]:

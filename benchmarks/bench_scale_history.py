@@ -25,7 +25,6 @@ import os
 import shutil
 import sys
 import tempfile
-import time
 from datetime import timedelta
 from pathlib import Path
 from typing import Any
@@ -35,7 +34,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_checkup import T0, _checkup_file, build_history  # noqa: E402
-from commands import cell, run_pige  # noqa: E402
+from commands import cell, run_footer, run_pige  # noqa: E402
 
 SIZES = (100, 1_000, 10_000)
 
@@ -85,7 +84,7 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--before", type=Path, help="also time each command with this checkout's pige_sym")
     ap.add_argument("--timeout", type=float, default=600.0, help="for --before's commands [s] (default %(default)s)")
     args = ap.parse_args(argv)
-    from run import cpu_model, load_average
+    from run import load_average
 
     load = os.getloadavg()[0]
     load_start = load_average()
@@ -120,8 +119,7 @@ def main(argv: list[str] | None = None) -> str:
         lines.append(f"Target: `pige report --history` with 1,000 runs within 10 s: {rep['s']:.2f} s wall, "
                      f"{rep['cpu_s']:.2f} s CPU ({'PASS' if rep['cpu_s'] <= 10 else 'MISS'} on CPU time; "
                      f"{'PASS' if rep['s'] <= 10 else 'MISS'} on wall time at this load).")
-    lines += ["", f"Run {time.strftime('%Y-%m-%d %H:%M %Z')} on {cpu_model()}, {os.cpu_count()} cores; load average "
-              f"(1, 5, 15 min) at its start: {load_start}; at its end: {load_average()}."]
+    lines += ["", run_footer(load_start)]
     text = "\n".join(lines)
     print(text)
     return text

@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from commands import cell, run_pige  # noqa: E402
+from commands import cell, run_footer, run_pige  # noqa: E402
 
 from pige_sym.identification.maps import MapSpec, identify_maps  # noqa: E402
 from pige_sym.kernels import load_kernels  # noqa: E402
@@ -286,7 +286,7 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--timeout", type=float, default=600.0, help="for --before's commands [s] (default %(default)s)")
     ap.add_argument("--only", choices=("compensate", "identify"), help="one of the two parts")
     args = ap.parse_args(argv)
-    from run import cpu_model, load_average
+    from run import load_average
 
     load = os.getloadavg()[0]
     load_start = load_average()
@@ -313,8 +313,7 @@ def main(argv: list[str] | None = None) -> str:
     if ident:
         lines += ["**pige identify --map C,A** (docs/maps.md's map test: three probe setups × 48 poses, 30° grid):",
                   "", *_identify_lines(ident, before, args.timeout)]
-    lines += ["", f"Run {time.strftime('%Y-%m-%d %H:%M %Z')} on {cpu_model()}, {os.cpu_count()} cores; load average "
-              f"(1, 5, 15 min) at its start: {load_start}; at its end: {load_average()}."]
+    lines += ["", run_footer(load_start)]
     text = "\n".join(lines)
     print(text)
     return text

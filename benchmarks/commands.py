@@ -66,3 +66,14 @@ def cell(stats: dict[str, Any] | None, key: str, fmt: str = ".2f", timeout: floa
     if stats is None:
         return f"not done in {timeout:g} s" if timeout else "—"
     return format(stats[key], fmt)
+
+
+def run_footer(load_start: tuple[float, ...] | str) -> str:
+    """The line that ends a scale section: when and where it ran, and the load at its start and end."""
+    import os
+    import time
+
+    from run import cpu_model, load_average
+
+    return (f"Run {time.strftime('%Y-%m-%d %H:%M %Z')} on {cpu_model()}, {os.cpu_count()} cores; load average "
+            f"(1, 5, 15 min) at its start: {load_start}; at its end: {load_average()}.")
