@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -425,8 +426,8 @@ def test_the_history_refuses_absurd_estimates_when_adding_and_when_reading(tmp_p
         assert code == 2 and bad.read_bytes() == stored
     real = store._estimate_set
 
-    def absurd(paths: list[Path], method: str) -> tuple:
-        read, result, effects, stored = real(paths, method)
+    def absurd(paths: list[Path], method: str, identified: Any = None) -> tuple:
+        read, result, effects, stored = real(paths, method, identified)
         result.values[0] = 1e308  # what a faulty fit or a damaged input could hand on
         return read, result, effects, stored
 
