@@ -11,7 +11,8 @@ What it takes (each found by trying it on Debian's linuxcnc-uspace 2.9.0~pre1, c
   ``milltask``, ``linuxcncsvr`` … *by name*, and ``linuxcncsvr`` serves NML on TCP port 5005 (a second
   instance: ``bind error: 98``).  So every run gets its own IPC, PID, mount and network namespaces
   (``unshare --ipc --pid --mount --net --fork --mount-proc --kill-child``, loopback up) and a private
-  ``/tmp`` (tmpfs, mode 1777, the run folder bound back into it): concurrent runs (of this suite or of
+  ``/tmp`` (tmpfs, mode 1777, the run folder bound back into it, and the checkout and venv where they lie under
+  ``/tmp``): concurrent runs (of this suite or of
   anyone else on the machine) cannot see or kill each other, and killing ``unshare`` ends every process of
   the run.
 - **Modules.**  ``loadrt NAME`` loads ``/usr/lib/linuxcnc/modules/NAME.so`` and nothing else (halcmd waits
@@ -44,6 +45,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,12 +64,11 @@ NAMESPACES = ("--ipc", "--pid", "--mount", "--net", "--fork", "--mount-proc")
 #: module folder, then linuxcnc; its exit status is the wrapper's
 WRAPPER = f"""#!/bin/sh
 set -e
-RUN="$1"; INI="$2"; MODS="$3"
-mount --bind "$RUN" /mnt
+RUN="$1"; INI="$2"; MODS="$3"; shift 3
+mount -t tmpfs tmpfs /mnt
+i=0; for p in "$@" "$RUN"; do mkdir -p "/mnt/$i"; mount --bind "$p" "/mnt/$i"; i=$((i + 1)); done
 mount -t tmpfs -o mode=1777 tmpfs /tmp
-mkdir -p "$RUN"
-mount --bind /mnt "$RUN"
-umount /mnt
+i=0; for p in "$@" "$RUN"; do mkdir -p "$p"; mount --bind "/mnt/$i" "$p"; i=$((i + 1)); done
 ip link set lo up 2>/dev/null || true
 mount -t overlay overlay -o "lowerdir=$MODS:{MODULES}" {MODULES}
 export RTAPI_UID={FALLBACK_UID} RTAPI_FIFO_PATH=/tmp/rtapi_fifo PATH={SYSTEM_PATH} RUNTESTS=1 HOME="$RUN"
@@ -75,6 +76,14 @@ unset DISPLAY
 set +e
 linuxcnc "$INI"
 """
+
+
+def kept_under_tmp() -> list[Path]:
+    """The checkout and the venv, where they lie under ``/tmp``: bound back into the run's private ``/tmp`` (the
+    cycle's remaps start pige from the venv inside the simulation; a clone in ``/tmp`` would otherwise vanish)."""
+    tmp = Path("/tmp").resolve()
+    found = {p.resolve() for p in (Path(__file__).parents[2], Path(sys.prefix)) if tmp in p.resolve().parents}
+    return sorted(p for p in found if not any(q in p.parents for q in found))
 
 
 def unavailable() -> str | None:
@@ -262,7 +271,8 @@ def run_once(sim: Sim, steps: list[dict], timeout_s: float = 1800.0) -> RunResul
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "PYTHONPATH", "VIRTUAL_ENV")}
     env |= {"PIGE_LCNC_JOB": str(job), "PATH": SYSTEM_PATH}
     t0 = time.monotonic()
-    cmd = ["unshare", *NAMESPACES, "--kill-child", "sh", str(wrapper), str(sim.root), str(sim.ini), str(sim.modules)]
+    cmd = ["unshare", *NAMESPACES, "--kill-child", "sh", str(wrapper), str(sim.root), str(sim.ini), str(sim.modules),
+           *map(str, kept_under_tmp())]
     try:
         proc = subprocess.run(cmd, cwd=sim.cfg, env=env, capture_output=True, text=True, timeout=timeout_s,
                               stdin=subprocess.DEVNULL)
