@@ -16,11 +16,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from map_files import grid_poses, write_setups
 from map_oracle import OracleMachine, OracleMap
 
-from pige_sym import api
 from pige_sym.cli.main import main
-from pige_sym.measurements.measurement import Measurement
 
 AC = "wC'A'bXYZ(C1)t"
 STEP = 30.0
@@ -45,25 +44,12 @@ def _maps(rng: np.random.Generator, a_map: bool = True) -> dict[str, OracleMap]:
 
 
 def _poses() -> list[dict[str, float]]:
-    out = [{"A": 0.0, "C": 0.0}]
-    for a in A_GRID[::-1]:
-        out += [{"A": float(a), "C": float(c)} for c in C_GRID]
-    return out
+    return grid_poses(A_GRID, C_GRID)
 
 
 def _write(folder: Path, oracle: OracleMachine, setups: tuple[tuple[float, float, float], ...], noise: float,
            seed: int) -> list[str]:
-    rng = np.random.default_rng(seed)
-    poses = _poses()
-    angles = np.array([[p["A"], p["C"]] for p in poses])
-    paths = []
-    for i, ball in enumerate(setups):
-        dev = oracle.rtest(poses, np.array(ball))
-        dev[1:] += rng.normal(scale=noise, size=dev[1:].shape)
-        m = Measurement(machine=AC, ball_mm=np.array(ball), t_s=np.arange(len(poses)) * 8.0, angles_deg=angles,
-                        deviation_um=dev, rotary_axes=("A", "C"), metadata={"machine": AC, "source": "map oracle"})
-        paths.append(str(api.write(m, folder / f"setup{i + 1}.csv")))
-    return paths
+    return write_setups(folder, oracle, setups, _poses(), noise, seed, first=1)
 
 
 @pytest.fixture(scope="module")
