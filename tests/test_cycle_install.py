@@ -30,7 +30,7 @@ def test_without_force_the_diff_is_printed_and_nothing_written(tmp_path, capsys,
     before = tree(tmp_path)
     code, out, _ = run(install_args(ini), capsys)
     assert code == 0 and tree(tmp_path) == before
-    assert "+REMAP = M451 modalgroup=10 argspec=p prolog=pige_m451_prolog ngc=pige_m451" in out
+    assert "+REMAP = M451 modalgroup=10 argspec=pq prolog=pige_m451_prolog ngc=pige_m451" in out
     assert "+HALCMD = source ./pige_cycle/values.hal" in out
     assert f"-HALCMD = sets :{'y' if kind == 'xyzac' else 'x'}-offset" in out
     assert "nothing written" in out
@@ -215,7 +215,7 @@ def test_on_the_shipped_configuration_without_force_the_diff_is_shown_and_no_fil
     assert code == 0, err
     assert tree(tmp_path) == before  # byte for byte, no file added
     off = "y" if kind == "xyzac" else "x"
-    assert "+REMAP = M451 modalgroup=10 argspec=p prolog=pige_m451_prolog ngc=pige_m451" in out
+    assert "+REMAP = M451 modalgroup=10 argspec=pq prolog=pige_m451_prolog ngc=pige_m451" in out
     assert f"-HALCMD = sets :{off}-offset" in out and "+HALCMD = source ./pige_cycle/values.hal" in out
     assert "nothing written" in out
 

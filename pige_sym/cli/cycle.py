@@ -1,7 +1,8 @@
 """``pige cycle``: calibrate at the machine, one LinuxCNC cycle that probes, identifies, checks and corrects.
 
 ``pige cycle install INI ...`` adds the cycle to a LinuxCNC configuration: ``M451 P0`` check, ``M451 P1``
-optimise, ``M451 P2`` enter the last proposal, ``M452`` check-up (docs/linuxcnc-cycle.md).  Without ``--force`` it
+optimise, ``M451 P2`` enter the last proposal, ``M451 P3 Q<k>`` setup k of a map test (``--map``), ``M452``
+check-up (docs/linuxcnc-cycle.md).  Without ``--force`` it
 prints the changes as a diff and writes nothing; with ``--force`` it writes them, keeping a backup of every file it
 changes.  ``pige cycle step prepare|analyse|enter --run RUN`` are the steps LinuxCNC runs during the cycle (not
 for the command line).
@@ -43,7 +44,8 @@ def _install_options(args: argparse.Namespace) -> Any:
 
         read_tolerances(args.tolerances)  # refused here when it is not a tolerance file
         tolerances = load_json(args.tolerances, "tolerance file")
-    probing = replace(Probing(), poses=args.poses, probe_feed_mm_min=_positive(args.probe_feed, "--probe-feed"),
+    probing = replace(Probing(), poses=args.poses, contacts=args.contacts,
+                      probe_feed_mm_min=_positive(args.probe_feed, "--probe-feed"),
                       clearance_mm=_positive(args.clearance, "--clearance"))
     limits = Limits(max_mm, max_deg, _positive(args.radius_tolerance, "--radius-tolerance"),
                     _positive(args.proposal_hours, "--proposal-hours"))
@@ -52,7 +54,23 @@ def _install_options(args: argparse.Namespace) -> Any:
                           _positive(args.stylus_length, "--stylus-length"), [sys.executable, "-m", "pige_sym"],
                           kinematics=args.kinematics, machine=args.machine, machine_id=args.machine_id, db=args.db,
                           rtcp_on=args.rtcp_on, rtcp_off=args.rtcp_off, probing=probing, limits=limits,
-                          tolerances=tolerances)
+                          tolerances=tolerances, map=_map_test(args))
+
+
+def _map_test(args: argparse.Namespace) -> Any:
+    """``--map AXES`` and its options: the map test's settings (None without ``--map``)."""
+    from pige_sym.cli._maps import axes_option
+    from pige_sym.cycle.settings import MapTest
+    from pige_sym.errors import InputError
+
+    if args.map is None:
+        if args.map_sphere or args.map_range or args.map_per_direction:
+            raise InputError("--map-sphere, --map-range and --map-per-direction go with --map AXES")
+        return None
+    spheres = [list(_vec3(v, "--map-sphere")) for v in args.map_sphere or []]
+    return MapTest(list(axes_option(args.map, "--map")), _positive(args.map_step, "--map-step"), args.map_setups,
+                   list(axes_option(args.map_per_direction, "--map-per-direction")), list(args.map_range or []),
+                   spheres)
 
 
 def _install(args: argparse.Namespace) -> int:
@@ -151,6 +169,18 @@ def _register_install(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--proposal-hours", type=float, default=8.0,
                    help="how old a proposal M451 P2 still enters [h] (default %(default)s)")
     p.add_argument("--tolerances", metavar="TOL.json", help="tolerances of the verdict (default 10 um, 30 urad)")
+    p.add_argument("--contacts", type=int, default=5, help="contacts per probed pose, 4..9 (default %(default)s)")
+    g = p.add_argument_group("the map test at the machine, M451 P3 Q<k> (pige's component only; "
+                             "docs/linuxcnc-cycle.md)")
+    g.add_argument("--map", metavar="AXES", help="the axes whose error maps the map test measures, e.g. C,A")
+    g.add_argument("--map-step", type=float, default=15.0, metavar="DEG", help="grid step [deg] (default %(default)s)")
+    g.add_argument("--map-setups", type=int, default=3, metavar="N", help="sphere setups (default %(default)s)")
+    g.add_argument("--map-per-direction", metavar="AXES", help="map these axes' positioning per approach direction")
+    g.add_argument("--map-range", action="append", metavar="AXIS=lo:hi",
+                   help="range of an axis that does not turn fully [deg] (default 0:90 on a table)")
+    g.add_argument("--map-sphere", action="append", metavar="X,Y,Z",
+                   help="the sphere of setups 2, 3, ... in machine coordinates at the reference pose [mm] "
+                        "(repeatable; default: pige program --map's, --sphere turned about C)")
     p.add_argument("--force", action="store_true", help="write the changes (each changed file backed up first)")
     p.set_defaults(handler=_install)
 

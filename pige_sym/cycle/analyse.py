@@ -92,9 +92,12 @@ def pige_rows(ctx: Context, result: Any) -> list[PigeRow]:
 
 
 def in_force_list(ctx: Context) -> list[tuple[str, float, str]]:
-    """The values in force, by the name an operator reads (a pin without its module's prefix)."""
+    """The values in force, by the name an operator reads (a pin without its module's prefix); the map pins left out
+    (their node counts are in the proposal's lines)."""
+    from pige_sym.cycle.map_pins import is_map_pin
+
     module = ctx.setup.module + "."
-    return [(p.target.removeprefix(module), ctx.in_force[p.pin], p.unit) for p in ctx.setup.pins]
+    return [(p.target.removeprefix(module), ctx.in_force[p.pin], p.unit) for p in ctx.setup.pins if not is_map_pin(p)]
 
 
 def machine_parameters(result: Any, offset: list[float]) -> Any:

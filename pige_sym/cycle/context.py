@@ -24,7 +24,7 @@ from pige_sym.cycle.settings import CycleSettings, read_settings
 from pige_sym.errors import InputError
 
 REQUEST_FORMAT = "pige-cycle-request 1"
-MODES = ("check", "optimise", "enter", "checkup")
+MODES = ("check", "optimise", "enter", "checkup", "map")
 
 
 @dataclass(frozen=True)
@@ -32,7 +32,8 @@ class Request:
     """LinuxCNC's state at the start of the cycle (module docstring); written by the remap.
 
     ``offset`` is the active coordinate system's X Y Z A B C U V W [mm, deg], ``rotation`` its XY rotation [deg];
-    ``position`` X Y Z A B C in program coordinates; ``switchkins_type`` None without switchable kinematics.
+    ``position`` X Y Z A B C in program coordinates; ``switchkins_type`` None without switchable kinematics;
+    ``setup`` the map test's setup ``k`` of ``M451 P3 Q<k>`` (None for the other modes).
     """
 
     format: str
@@ -46,6 +47,7 @@ class Request:
     g92_on: bool = False
     position: list[float] = field(default_factory=list, metadata={"length": 6, "max_abs": 1e7})
     switchkins_type: int | None = None
+    setup: int | None = None
 
 
 def read_request(run: Path) -> Request:
@@ -85,6 +87,7 @@ def read_context(config: Path, *, live: bool = True) -> Context:
         An installation pige cannot read (the settings, the INI, the values file), naming the file.
     """
     from pige_sym.cycle.hal_live import hal_running, read_live
+    from pige_sym.cycle.map_pins import with_map_pins
     from pige_sym.cycle.values import read_values
     from pige_sym.files import read_input_text
 
@@ -93,7 +96,8 @@ def read_context(config: Path, *, live: bool = True) -> Context:
     ini = layout.config / settings.ini
     doc = parse_ini(read_input_text(ini, what="INI file"), str(ini))
     scan = scan_configuration(ini, doc)
-    setup = read_kinematics(doc, scan, kinematics=settings.kinematics, machine=settings.machine)
+    setup = with_map_pins(read_kinematics(doc, scan, kinematics=settings.kinematics, machine=settings.machine),
+                          settings, scan)
     if setup.module != settings.module:
         raise InputError(f"{ini}: the kinematics are {setup.module} now, {layout.settings} says {settings.module}: "
                          "install the cycle again")

@@ -36,6 +36,7 @@ from pige_sym.cycle.settings import (
     FORMAT,
     CycleSettings,
     Limits,
+    MapTest,
     Probing,
     Switch,
     check_settings,
@@ -68,6 +69,7 @@ class InstallOptions:
     limits: Limits = field(default_factory=Limits)
     timeouts: dict[str, float] = field(default_factory=default_timeouts)
     tolerances: dict | None = None
+    map: MapTest | None = None
 
 
 @dataclass(frozen=True)
@@ -113,6 +115,7 @@ def plan_install(ini: Path, opts: InstallOptions) -> InstallPlan:
     InputError, FileFormatError
         What the configuration or the options lack, naming the file, line or option.
     """
+    from pige_sym.cycle.map_pins import with_map_pins
     from pige_sym.files import read_input_text
 
     ini = Path(ini).absolute()
@@ -125,6 +128,7 @@ def plan_install(ini: Path, opts: InstallOptions) -> InstallPlan:
     scan = scan_configuration(ini, doc)
     setup = read_kinematics(doc, scan, kinematics=opts.kinematics, machine=opts.machine)
     settings = _settings(doc, setup, opts, scan)
+    setup = with_map_pins(setup, settings, scan)  # the map test's pins are values the cycle holds too
     edits, notes = _ini_edits(doc, layout, setup, scan)
     files = [PlannedFile(ini, text, ini_with_python(apply_edits(doc, edits), doc, layout))]
     files += _hal_file_edits(layout, setup)
@@ -165,7 +169,7 @@ def _settings(doc: IniDocument, setup: KinematicsSetup, opts: InstallOptions, sc
                       float(opts.sphere_radius_mm), float(opts.stylus_radius_mm), int(opts.stylus_tool),
                       float(opts.stylus_length_mm), opts.probing, opts.limits,
                       opts.tolerances or default_tolerances(),
-                      opts.timeouts, opts.db or "pige_cycle/history.db", list(opts.pige_command))
+                      opts.timeouts, opts.db or "pige_cycle/history.db", list(opts.pige_command), opts.map)
     if not s.machine_id:
         raise InputError(f"{doc.name}: no [EMC] MACHINE to name the machine in the history: give --machine-id ID")
     return check_settings(s, "pige cycle install")
@@ -225,7 +229,8 @@ def _switch_codes(doc: IniDocument) -> dict[int, str]:
 def remap_line(code: str) -> str:
     """The INI line that remaps ``code`` (:mod:`~pige_sym.cycle.linuxcnc_remap`)."""
     name = CODES[code]
-    return f"REMAP = {code} modalgroup=10 argspec=p prolog={name}_prolog ngc={name} epilog={name}_epilog"
+    argspec = "pq" if code == "M451" else "p"  # Q: the map test's setup (M451 P3 Q<k>)
+    return f"REMAP = {code} modalgroup=10 argspec={argspec} prolog={name}_prolog ngc={name} epilog={name}_epilog"
 
 
 def _ini_edits(doc: IniDocument, layout: Layout, setup: KinematicsSetup,
@@ -262,16 +267,21 @@ def _subroutine_path(doc: IniDocument, layout: Layout) -> list[IniEdit]:
 def _remaps(doc: IniDocument) -> list[IniEdit]:
     remaps = doc.values("RS274NGC", "REMAP")
     after = remaps[-1].line if remaps else doc.sections["RS274NGC"][0]
-    new = []
+    new: list[str] = []
+    replaced: list[IniEdit] = []
     for code in CODES:
         mine = [e for e in remaps if e.value.split() and e.value.split()[0].upper() == code]
-        if mine and " ".join(mine[0].value.split()) == remap_line(code)[len("REMAP = "):]:
+        given = " ".join(mine[0].value.split()) if mine else None
+        if given == remap_line(code)[len("REMAP = "):]:
             continue
+        if given is not None and given == remap_line(code)[len("REMAP = "):].replace("argspec=pq", "argspec=p"):
+            replaced.append(IniEdit(mine[0].line, "replace", remap_line(code), "Q: the map test's setup"))
+            continue  # an earlier install's, before M451 P3 Q<k>
         if mine:
             raise InputError(f"{doc.name}:{mine[0].line}: {code} is remapped already ({mine[0].value}): the cycle "
                              f"remaps {code}; remove that line, or that code's remap")
         new.append(remap_line(code))
-    return [IniEdit(after, "insert_after", "\n".join(new), "the cycle's codes")] if new else []
+    return replaced + ([IniEdit(after, "insert_after", "\n".join(new), "the cycle's codes")] if new else [])
 
 
 #: the ON_ABORT_COMMANDs an install writes: pige_cycle_abort's call itself when the switch's output is known (it

@@ -29,9 +29,10 @@ from pige_sym.errors import InputError, UnsupportedMachineError
 STOCK = {"xyzac-trt-kins": ("wC'A'bXYZ(C1)t", "A"), "xyzbc-trt-kins": ("wC'B'bXYZ(C1)t", "B")}
 ROT_POINTS = ("x-rot-point", "y-rot-point", "z-rot-point")
 TILT_OFFSETS = {"A": ("y-offset", "z-offset"), "B": ("x-offset", "z-offset")}
-#: Decimals a value is written with: pins in mm to 0.1 nm (as pige compensate prints them), PIGEs to 0.1 nm / nrad.
-DECIMALS = {"mm": 7, "um": 4, "urad": 4}
-MAX_VALUE = {"mm": 1e5, "um": 1e4, "urad": 1e4}
+#: Decimals a value is written with: pins in mm to 0.1 nm (as pige compensate prints them), PIGEs and map values to
+#: 0.1 nm / nrad; a map grid's angles [deg] to 1e-9 deg, its node count and full-turn bit [n] as integers.
+DECIMALS = {"mm": 7, "um": 4, "urad": 4, "deg": 9, "n": 0}
+MAX_VALUE = {"mm": 1e5, "um": 1e4, "urad": 1e4, "deg": 360.0, "n": 1e3}
 
 
 def format_value(value: float, unit: str) -> str:
@@ -176,14 +177,16 @@ def _number(setting: Setting, what: str, unit: str) -> float:
     return v
 
 
-def value_pin(scan: HalScan, pin: str, unit: str, holds: str, *, via_signal: bool = True) -> ValuePin:
+def value_pin(scan: HalScan, pin: str, unit: str, holds: str, *, via_signal: bool = True,
+              new_pin: bool = False) -> ValuePin:
     """Where ``pin`` gets its value in the configuration: its signal's ``sets``, its ``setp``, or nothing (0).
 
     Raises
     ------
     InputError
         A netted pin whose signal nothing sets, a netted pin where ``via_signal`` is False, or a pin that may be set
-        in a file pige cannot read.
+        in a file pige cannot read (``new_pin``: a pin LinuxCNC's own library files, ``LIB:``, cannot name, such as
+        the map pins of pige's component; the configuration's own unread files still count).
     """
     if pin in scan.nets:
         signal = scan.nets[pin]
@@ -198,9 +201,10 @@ def value_pin(scan: HalScan, pin: str, unit: str, holds: str, *, via_signal: boo
     if pin in scan.setp:
         s = scan.setp[pin]
         return ValuePin(pin, None, _number(s, pin, unit), s.where, unit, holds)
-    if scan.unread:
+    unread = [f for f in scan.unread if not (new_pin and f.startswith("LIB:"))]
+    if unread:
         raise InputError(f"{pin} is not set in the files pige reads, and the configuration loads "
-                         f"{', '.join(scan.unread)}, which pige does not read: set it in the INI (HALCMD = setp "
+                         f"{', '.join(unread)}, which pige does not read: set it in the INI (HALCMD = setp "
                          f"{pin} VALUE) so that the cycle knows its value")
     return ValuePin(pin, None, 0.0, None, unit, holds)
 

@@ -4,14 +4,15 @@
 It uses the standard library and LinuxCNC's ``interpreter`` and ``emccanon`` modules only, never pige: pige runs in
 a separate process, so that its crash, hang or kill cannot take LinuxCNC down.  Each code is remapped as::
 
-    REMAP = M451 modalgroup=10 argspec=p prolog=pige_m451_prolog ngc=pige_m451 epilog=pige_m451_epilog
+    REMAP = M451 modalgroup=10 argspec=pq prolog=pige_m451_prolog ngc=pige_m451 epilog=pige_m451_epilog
     REMAP = M452 modalgroup=10 argspec=p prolog=pige_m452_prolog ngc=pige_m452 epilog=pige_m452_epilog
 
 and its NGC procedure (``pige_cycle/ngc/pige_m451.ngc``) saves the modal state (``M73``: coordinate system,
 tool length compensation, units, feed, ...) and runs four steps, the first and third as the same code called again
 with an internal ``P`` (only from inside the cycle: a call at the top level is refused)::
 
-    M451 P[100 + mode]          prepare: pige cycle step prepare (writes the run's probing procedure)
+    M451 P[100 + mode]          prepare: pige cycle step prepare (writes the run's probing procedure; P3 Q<k>:
+                                the map test's setup k, which the prolog keeps from the outer call)
     o<pige_cycle_probe> call    the probing program pige wrote for the configuration (P2: the switch to identity)
     M451 P[200 + mode]          analyse (P0, P1, M452) or enter (P2): pige cycle step analyse|enter
     o<pige_restore> call        the kinematics mode as it was found (``#<_pige_kins_before>``)
@@ -58,7 +59,7 @@ except ImportError:  # imported by pige's own tests: the values of src/emc/rs274
 
 CONFIG = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 ROOT = os.path.join(CONFIG, "pige_cycle")
-MODES = {"M451": {0: "check", 1: "optimise", 2: "enter"}, "M452": {0: "checkup"}}
+MODES = {"M451": {0: "check", 1: "optimise", 2: "enter", 3: "map"}, "M452": {0: "checkup"}}
 #: LinuxCNC's operator messages hold at most LINELEN (255) bytes with the terminating NUL
 MAX_MESSAGE = 254
 #: the interpreter parameters the request records (src/emc/rs274ngc: tool, coordinate system, G92, positions)
@@ -101,6 +102,10 @@ def _prolog(self, code, words):
         return f"PIGE {code} P{words.get('p', 0):g} is a step of the cycle itself: call {code} with " + \
             ", ".join(f"P{k}" for k in MODES[code])
     if phase == 0:
+        setup = _map_setup(mode, words)
+        if isinstance(setup, str):
+            return setup
+        self.pige_setup = setup
         ABORTED.clear()
         self.params["_pige_phase"] = 0
         kins = _switchkins(self)
@@ -109,6 +114,16 @@ def _prolog(self, code, words):
     else:
         self.params["_pige_phase"] = phase
     return INTERP_OK
+
+
+def _map_setup(mode, words):
+    """``M451 P3 Q<k>``: the map test's setup k (an integer from 1), else None; a message when Q is wrong."""
+    q = words.get("q")
+    if mode != "map":
+        return None
+    if q is None or abs(q - round(q)) > 1e-9 or round(q) < 1:
+        return "PIGE M451 P3 probes one setup of the map test: give its number, M451 P3 Q1 (Q2, ...)"
+    return int(round(q))
 
 
 def _epilog(self, code, words):
@@ -139,7 +154,7 @@ def _request(self, code, mode):
                "system": system, "offset": [float(self.params[base + k]) for k in range(9)],
                "rotation": float(self.params[base + 9]), "g92_on": float(self.params[PARAMETERS["g92_on"]]) != 0,
                "position": [float(self.params[5420 + k]) for k in range(6)],
-               "switchkins_type": _switchkins(self)}
+               "switchkins_type": _switchkins(self), "setup": getattr(self, "pige_setup", None)}
     with open(os.path.join(run, "request.json"), "w", encoding="utf-8") as f:
         json.dump(request, f, indent=1)
     return run

@@ -9,7 +9,8 @@ as it is now, with its read-back: probed in the **TCP kinematics** (``--kinemati
 act and the PIGEs found are what is left with them (what a check shows, what an entry corrects); the nominal lines
 are those the kinematics hold (the stock trt pins, or pige's component's pivots), in the active coordinate system
 (``--work-offset G5x=`` its X Y Z: the sphere and the lines shifted by it; the program checks the values).
-``M452`` takes the check-up program ``pige program --checkup`` writes from the history.  ``M451 P2`` probes nothing:
+``M452`` takes the check-up program ``pige program --checkup`` writes from the history; ``M451 P3 Q<k>`` the
+program of setup k that ``pige program --map`` writes (:mod:`~pige_sym.cycle.map_prepare`).  ``M451 P2`` probes nothing:
 its procedure switches to identity kinematics, where the kinematics' pins act on nothing, so that entering them moves
 no axis.
 
@@ -71,6 +72,18 @@ def _g(v: float) -> str:
 
 def probing_program(ctx: Context, req: Request, run: Path, log: RunLog) -> Path:
     """``pige program`` for the configuration in force (module docstring); the program's path."""
+    p = ctx.settings.probing
+    argv = probe_argv(ctx, req, run / "program.ngc") + ["--trajectory", "cone-frustum", "--points", str(p.poses)]
+    return run_program(argv, run, log)
+
+
+def program_point(v: list[float], req: Request) -> str:
+    """A point in machine coordinates [mm] as the program takes it: in the active coordinate system."""
+    return ",".join(_g(x - req.offset[k]) for k, x in enumerate(v))
+
+
+def probe_argv(ctx: Context, req: Request, out: Path) -> list[str]:
+    """``pige program``'s words for the configuration in force, but the poses (module docstring)."""
     from pige_sym.cycle.kinematics import lines_of
     from pige_sym.nc.probe_safety import WORK_OFFSETS
 
@@ -78,20 +91,18 @@ def probing_program(ctx: Context, req: Request, run: Path, log: RunLog) -> Path:
     o = req.offset[:3]
     lines = lines_of(ctx.setup, ctx.in_force)
     pivots = [f"{a}=" + ",".join(_g(v - o[k]) for k, v in enumerate(xyz)) for a, xyz in lines.items()]
-    argv = ["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--machine", s.machine,
+    return ["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--machine", s.machine,
             "--axis-sense", ",".join(f"{a}={v}" for a, v in s.axis_sense.items()),
             *[w for piv in pivots for w in ("--pivot", piv)],
-            "--sphere", ",".join(_g(v - o[k]) for k, v in enumerate(s.sphere_mm)),
+            "--sphere", program_point(s.sphere_mm, req),
             "--sphere-radius", _g(s.sphere_radius_mm), "--stylus-radius", _g(s.stylus_radius_mm),
             "--kinematics", "tcp", "--stylus-tool", str(s.stylus_tool), "--stylus-length", _g(s.stylus_length_mm),
             "--work-offset", f"{WORK_OFFSETS[req.system - 1]}=" + ",".join(_g(v) for v in o),
-            "--trajectory", "cone-frustum", "--points", str(p.poses), "--contacts", str(p.contacts),
-            "--clearance", _g(p.clearance_mm), "--overtravel", _g(p.overtravel_mm),
-            "--probe-feed", _g(p.probe_feed_mm_min), "--window", _g(p.window_mm), "--out", str(run / "program.ngc")]
-    return _run_program(argv, run, log)
+            "--contacts", str(p.contacts), "--clearance", _g(p.clearance_mm), "--overtravel", _g(p.overtravel_mm),
+            "--probe-feed", _g(p.probe_feed_mm_min), "--window", _g(p.window_mm), "--out", str(out)]
 
 
-def _run_program(argv: list[str], run: Path, log: RunLog) -> Path:
+def run_program(argv: list[str], run: Path, log: RunLog) -> Path:
     code, out = pige_command(argv)
     log.add("pige " + " ".join(argv), out)
     if code != 0:
@@ -117,7 +128,7 @@ def checkup_program(ctx: Context, req: Request, run: Path, log: RunLog) -> tuple
     argv = ["program", "--checkup", "--machine-id", s.machine_id, "--db", db, "--dialect", "linuxcnc",
             "--probe-feed", _g(p.probe_feed_mm_min), "--clearance", _g(p.clearance_mm), "--overtravel",
             _g(p.overtravel_mm), "--out", str(run / "program.ngc")]
-    program = _run_program(argv, run, log)
+    program = run_program(argv, run, log)
     _same_work_offset(program, req)
     return program, {"full_run": basis.full_run, "corrected": basis.corrected}
 
@@ -154,6 +165,10 @@ def prepare(ctx: Context, req: Request, run: Path, log: RunLog) -> RunMessages:
         if req.mode == "checkup":
             program, basis = checkup_program(ctx, req, run, log)
             info["basis"] = basis
+        elif req.mode == "map":
+            from pige_sym.cycle.map_prepare import map_program
+
+            program = map_program(ctx, req, run, log)
         else:
             program = probing_program(ctx, req, run, log)
         before = [sw.tcp_code] if sw is not None and req.switchkins_type != sw.tcp_type else []

@@ -83,9 +83,10 @@ def proposed_values(setup: KinematicsSetup, in_force: dict[str, float],
 
 
 def limit_of(unit: str, limits: Limits) -> float:
-    """The change limit in ``unit`` (mm, µm or µrad)."""
+    """The change limit in ``unit`` (mm, µm or µrad; a map grid's pins, deg and n, have none: they say where the
+    values lie)."""
     return {"mm": limits.max_change_mm, "um": limits.max_change_mm * UM_PER_MM,
-            "urad": limits.max_change_deg * URAD_PER_DEG}[unit]
+            "urad": limits.max_change_deg * URAD_PER_DEG}.get(unit, math.inf)  # a map's grid: no geometry
 
 
 def beyond_limit(entries: list[ProposedValue], limits: Limits) -> list[str]:

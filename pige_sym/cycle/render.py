@@ -16,10 +16,10 @@ there are changes to enter.
 from __future__ import annotations
 
 from pige_sym.cycle.messages import RunMessages, fits, pack, relative_log, value_text
-from pige_sym.cycle.proposal import Proposal
+from pige_sym.cycle.proposal import Proposal, ProposedValue
 from pige_sym.cycle.results import RunResult
 
-MODE_WORDS = {"check": "P0 check", "optimise": "P1 optimise", "checkup": "check-up"}
+MODE_WORDS = {"check": "P0 check", "optimise": "P1 optimise", "checkup": "check-up", "map": "P3 map test"}
 
 
 def _head(r: RunResult, run_path: str) -> str:
@@ -45,10 +45,27 @@ def row_lines(r: RunResult) -> list[str]:
     return out
 
 
+def entry_items(entries: list[ProposedValue]) -> list[str]:
+    """Each entry as its HAL line and change; the map pins of an axis as one item: how many values, the largest
+    change in each unit, the grid (the lines are in the run's log and proposal.json)."""
+    from pige_sym.cycle.map_pins import axis_of, is_map_pin
+
+    items = [f"{e.line()} ({e.change:+.7g} {e.unit})" for e in entries if not is_map_pin(e)]
+    for axis in dict.fromkeys(axis_of(e) for e in entries if is_map_pin(e)):
+        mine = [e for e in entries if is_map_pin(e) and axis_of(e) == axis]
+        values = [e for e in mine if e.unit in ("um", "urad")]
+        largest = ", ".join(f"{max(abs(e.change) for e in values if e.unit == u):.3g} {u}" for u in ("um", "urad")
+                            if any(e.unit == u for e in values))
+        grid = ", ".join(f"{e.target.rsplit('-', 1)[-1]} {e.new:g}" for e in mine if e.unit in ("deg", "n"))
+        items.append(f"{axis} map: {len(values)} values (largest change {largest or '-'})"
+                     + (f", grid {grid}" if grid else ""))
+    return items
+
+
 def proposal_lines(p: Proposal, hours: float, beyond: list[str]) -> list[str]:
     if not p.entries:
         return ["proposal: nothing to enter (every change within its uncertainty)"]
-    items = [f"{e.line()} ({e.change:+.7g} {e.unit})" for e in p.entries]
+    items = entry_items(p.entries)
     tail = ([f"BEYOND THE CHANGE LIMIT, M451 P2 will refuse it: {'; '.join(beyond)}"] if beyond else
             [f"enter with M451 P2 within {hours:g} h"])
     return pack("proposal: ", items + tail, sep="; ")

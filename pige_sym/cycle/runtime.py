@@ -2,7 +2,8 @@
 
 A step reads the configuration (:mod:`~pige_sym.cycle.context`) and the run's request, does its work
 (:mod:`~pige_sym.cycle.prepare`, :mod:`~pige_sym.cycle.analyse`, :mod:`~pige_sym.cycle.checkup_step`,
-:mod:`~pige_sym.cycle.enter`) and writes, last, the run's ``messages.json`` (:mod:`~pige_sym.cycle.messages`).  A
+:mod:`~pige_sym.cycle.enter`, :mod:`~pige_sym.cycle.map_analyse`) and writes, last, the run's ``messages.json``
+(:mod:`~pige_sym.cycle.messages`).  A
 refusal (any :class:`~pige_sym.errors.PigeError`: a guard, bad settings, a stage's own refusal) is written there as
 the operator error, exit status 1; a crash or a kill leaves none (the remap then names the step's output).
 
@@ -56,6 +57,10 @@ def _dispatch(step: str, run: Path, config: Path, log: RunLog, live: bool) -> Ru
         from pige_sym.cycle.enter import enter
 
         return enter(ctx, request, run, log)
+    if request.mode == "map":
+        from pige_sym.cycle.map_analyse import analyse_map
+
+        return analyse_map(ctx, request, run, log)
     if request.mode == "checkup":
         from pige_sym.cycle.checkup_step import analyse_checkup
 

@@ -23,7 +23,15 @@ to change a limit.  One JSON object::
      "tolerances": {"format": "pige-tolerances 1", "defaults": {"um": 10, "urad": 30}},
      "timeouts_s": {"prepare": 180, "analyse": 600, "enter": 120},
      "db": "pige_cycle/history.db",        the history: a path relative to the configuration folder, or a URL
-     "pige_command": ["/usr/bin/python3", "-m", "pige_sym"]}
+     "pige_command": ["/usr/bin/python3", "-m", "pige_sym"],
+     "map": {"axes": ["C", "A"], "step_deg": 45, "setups": 3, "per_direction": [], "ranges": ["A=0:90"],
+             "spheres_mm": [[-25, 10, 10], [-15, -15, 10]]}}
+                                           the map test (M451 P3 Q<k>, pige's component only; null: none): the
+                                           mapped axes, the grid step, the number of sphere setups, the axes
+                                           mapped per approach direction, the ranges of the axes that do not turn
+                                           fully (default 0:90 on a table), the sphere of setups 2..n in machine
+                                           coordinates at the reference pose (empty: pige program --map's own,
+                                           sphere_mm turned about C by 360/n degrees each)
 
 Limits (docs/linuxcnc-cycle.md): ``max_change_mm``/``max_change_deg`` the largest change ``M451 P2`` enters per
 value (position errors in mm, orientation errors in degrees: HEIDENHAIN's MP6600), ``sphere_radius_mm`` how far the
@@ -81,6 +89,21 @@ class Limits:
     proposal_hours: float = 8.0
 
 
+@dataclass(frozen=True)
+class MapTest:
+    """The map test at the machine (``M451 P3 Q<k>``; ``pige program --instrument sphere-probe --map``'s options of
+    the same names: ``--map``, ``--map-step``, ``--map-setups``, ``--map-per-direction``, ``--map-range``,
+    ``--map-point``).  ``spheres_mm``: the sphere of setups 2..``setups`` [mm], machine coordinates at the reference
+    pose (setup 1 is ``sphere_mm``); empty: the program's defaults."""
+
+    axes: list[str]
+    step_deg: float
+    setups: int = 3
+    per_direction: list[str] = field(default_factory=list)
+    ranges: list[str] = field(default_factory=list)
+    spheres_mm: list[list[float]] = field(default_factory=list)
+
+
 #: how long LinuxCNC waits for pige's process in each step [s] before it ends the cycle with an error (the remap looks
 #: a step's timeout up by its name)
 TIMEOUTS_S = {"prepare": 180.0, "analyse": 600.0, "enter": 120.0}
@@ -117,6 +140,7 @@ class CycleSettings:
     timeouts_s: dict[str, float] = field(default_factory=default_timeouts)
     db: str = "pige_cycle/history.db"
     pige_command: list[str] = field(default_factory=list)
+    map: MapTest | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -188,9 +212,47 @@ def check_settings(s: CycleSettings, where: str) -> CycleSettings:
             raise InputError("machine_id must not be empty")
         if len(s.pige_command) < 1:
             raise InputError("pige_command must name the program that runs pige")
+        if s.map is not None:
+            check_map_test(s)
     except InputError as exc:
         raise InputError(f"{where}: {exc}") from None
     return s
+
+
+def check_map_test(s: CycleSettings) -> None:
+    """The map settings (:class:`MapTest`): pige's component (the stock trt kinematics hold no map), the machine's
+    rotary axes, a grid the component holds, 2..9 setups, a sphere for each setup after the first.
+
+    Raises
+    ------
+    InputError
+    """
+    from pige_sym.kernels import load_kernels
+    from pige_sym.model.error_motions import check_map_step
+
+    m = s.map
+    assert m is not None
+    if s.kinematics != "pige":
+        raise InputError(f"map: {s.module} holds no error map (LinuxCNC's trt kinematics place the axis lines only): "
+                         "the map test at the machine needs pige's kinematics component (docs/linux"
+                         "cnc-kinematics.md); with the stock kinematics, measure the maps at the desk and enter the "
+                         "positioning maps as COMP_FILEs (docs/maps.md, pige compensate --comp-dir)")
+    axes = tuple(load_kernels(s.machine).ROTARY_AXES)
+    if not m.axes or any(a not in axes for a in m.axes) or len(set(m.axes)) != len(m.axes) or \
+            any(a not in m.axes for a in m.per_direction):
+        raise InputError(f"map: axes {m.axes}, per_direction {m.per_direction}: give rotary axes of {s.machine} "
+                         f"({', '.join(axes)}), each once; an axis per direction is mapped too")
+    for a in m.axes:
+        check_map_step(m.step_deg, a)
+    if not 2 <= m.setups <= 9:
+        raise InputError(f"map: setups {m.setups}: a map test takes 2..9 sphere setups")
+    if m.spheres_mm and (len(m.spheres_mm) != m.setups - 1 or any(
+            len(v) != 3 or not all(math.isfinite(x) and abs(x) <= 1e5 for x in v) for v in m.spheres_mm)):
+        raise InputError(f"map: spheres_mm: give the sphere of setups 2..{m.setups} ({m.setups - 1} points x,y,z "
+                         "[mm]), or none for the program's own")
+    from pige_sym.cycle.map_pins import map_grids
+
+    map_grids(s.machine, m)
 
 
 def read_settings(path: PathLike) -> CycleSettings:

@@ -9,6 +9,10 @@ new one, never half of one).  The lines::
     # comments
     setp <pin> <value>        a pin set directly
     sets <signal> <value>     a pin netted to a signal (HAL refuses setp on it)
+
+With a map test (:mod:`~pige_sym.cycle.map_pins`) the map pins follow the PIGE pins in the safe order: each mapped
+axis' ``map-<a>-nodes`` set to 0 first, then the grids and the values, the node counts last (a node-count pin is the
+one pin set twice; its last line is its value).
 """
 
 from __future__ import annotations
@@ -26,7 +30,13 @@ def values_text(setup: KinematicsSetup, values: dict[str, float]) -> str:
            "./pige_cycle/values.hal)",
            "# M451 P2 rewrites this file (the one before is kept as values.hal.previous); edit it only with LinuxCNC "
            "stopped"]
+    from pige_sym.cycle.map_pins import is_map_pin, nodes_first
+
+    maps = False
     for p in setup.pins:
+        if is_map_pin(p) and not maps:
+            out += nodes_first(setup)
+            maps = True
         out.append(f"{p.command(values.get(p.pin, p.value))}    # {p.holds}")
     return "\n".join(out) + "\n"
 
@@ -39,6 +49,7 @@ def read_values(path: Path, setup: KinematicsSetup) -> dict[str, float]:
     FileFormatError
         A line that is not one of the setup's pins or signals with a number, or a value missing.
     """
+    from pige_sym.cycle.map_pins import is_nodes_pin
     from pige_sym.files import read_input_text
     from pige_sym.options import strict_float
 
@@ -53,6 +64,8 @@ def read_values(path: Path, setup: KinematicsSetup) -> dict[str, float]:
         if p is None or value is None or words[0] != ("sets" if p.signal else "setp"):
             raise FileFormatError(str(path), number, f"{raw.strip()[:60]!r}: expected setp/sets of one of "
                                   f"{', '.join(by_target)} with a number")
+        if p.pin in out and not is_nodes_pin(p):
+            raise FileFormatError(str(path), number, f"{p.target} is set twice: the file sets each value once")
         out[p.pin] = value
     missing = [p.target for p in setup.pins if p.pin not in out]
     if missing:
