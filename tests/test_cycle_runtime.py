@@ -232,7 +232,7 @@ def test_the_remap_s_modes_phases_and_preview():
 
     assert r.pige_m451_prolog(FakeInterp(task=0), p=7.0) == r.INTERP_OK  # AXIS preview: nothing happens
     assert r.pige_m451_epilog(FakeInterp(task=0), p=1.0) == r.INTERP_OK
-    assert "is not a mode of the cycle (P0, P1, P2)" in r.pige_m451_prolog(FakeInterp(), p=3.0)
+    assert "is not a mode of the cycle (P0, P1, P2, P3)" in r.pige_m451_prolog(FakeInterp(), p=4.0)
     assert "is not a mode" in r.pige_m451_prolog(FakeInterp(), p=1.5)
     assert "is not a mode of the cycle (P0)" in r.pige_m452_prolog(FakeInterp(), p=1.0)
     assert "is a step of the cycle itself" in r.pige_m451_prolog(FakeInterp(), p=101.0)

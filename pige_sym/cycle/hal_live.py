@@ -14,6 +14,8 @@ from collections.abc import Callable, Sequence
 from pige_sym.cycle.kinematics import KinematicsSetup, ValuePin
 from pige_sym.errors import InputError
 
+#: how ``halcmd getp`` shows a bit pin (a map's ``full-turn``)
+BITS = {"TRUE": 1.0, "FALSE": 0.0}
 Runner = Callable[[Sequence[str]], "subprocess.CompletedProcess[str]"]
 
 
@@ -45,8 +47,9 @@ def read_live(setup: KinematicsSetup, run: Runner | None = None) -> dict[str, fl
     for p in setup.pins:
         verb = "gets" if p.signal else "getp"
         proc = run(["halcmd", "-s", verb, p.target])
+        text = proc.stdout.strip()
         try:
-            out[p.pin] = float(proc.stdout.strip())
+            out[p.pin] = BITS[text] if text in BITS else float(text)
         except ValueError:
             raise InputError(f"halcmd {verb} {p.target}: {(proc.stdout + proc.stderr).strip()[:120]}: the running "
                              f"HAL has no such {'signal' if p.signal else 'pin'}; is this configuration's "

@@ -4,8 +4,8 @@ With a map test in the settings (``map``, :class:`~pige_sym.cycle.settings.MapTe
 PIGE pins and, per mapped axis, the component's grid pins and the map values on that grid
 (:mod:`pige_sym.codegen.targets.linuxcnc_pins`): ``map-<a>-start`` [deg], ``-step`` [deg], ``-full-turn`` (0/1), the
 seven slots' values at each grid angle (``<name>.exc-00`` … [µm, µrad]) and ``map-<a>-nodes`` (0: no map), in that
-order.  The grid is the map test's (:func:`map_grids`: every ``step_deg`` over the full turn of C, over
-``ranges`` of an axis that does not turn fully, as ``pige program --map`` visits it).  They are
+order.  The grid is the map test's (:func:`~pige_sym.cycle.settings.map_grids`: every ``step_deg`` over the full
+turn of C, over ``ranges`` of an axis that does not turn fully, as ``pige program --map`` visits it).  They are
 :class:`~pige_sym.cycle.kinematics.ValuePin` like the PIGE pins: where the configuration sets them (moved into
 ``values.hal`` by the install), else 0; read from the running HAL; in the fingerprint.
 
@@ -17,54 +17,19 @@ axis' values, the node count at the end).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from pige_sym.cycle.hal_scan import HalScan
 from pige_sym.cycle.kinematics import KinematicsSetup, ValuePin, value_pin
-from pige_sym.cycle.settings import CycleSettings, MapTest
+from pige_sym.cycle.settings import AxisGrid, CycleSettings, map_grids
 from pige_sym.errors import InputError
 
 #: ``holds`` of a map pin starts with this (the messages list the PIGE pins only)
 MAP_HOLDS = "map "
 GRID_UNITS = ("deg", "n")
-
-
-@dataclass(frozen=True)
-class AxisGrid:
-    """One mapped axis' grid as the component's pins hold it (CONVENTIONS angle θ [deg])."""
-
-    axis: str
-    start_deg: float
-    step_deg: float
-    nodes: int
-    full_turn: bool
-
-
-def map_grids(machine: str, test: MapTest) -> list[AxisGrid]:
-    """The grid of each mapped axis (module docstring), as ``pige program --map`` visits it.
-
-    Raises
-    ------
-    InputError
-        A range the planner refuses, or more grid angles than the component holds.
-    """
-    from pige_sym.codegen.targets.linuxcnc_pins import MAP_NODES
-    from pige_sym.kernels import load_kernels
-    from pige_sym.model.error_motions import is_full_turn
-    from pige_sym.planning.map_setups import axis_nodes, map_ranges
-
-    ranges = map_ranges(load_kernels(machine), list(test.ranges) or None)
-    out = []
-    for a in test.axes:
-        nodes = axis_nodes(a, test.step_deg, ranges)
-        if nodes.size > MAP_NODES:
-            raise InputError(f"map: {a} has {nodes.size} grid angles every {test.step_deg:g} deg; pige's component "
-                             f"holds at most {MAP_NODES}: give a larger step_deg")
-        out.append(AxisGrid(a, float(nodes[0]), float(test.step_deg), int(nodes.size), is_full_turn(a)))
-    return out
 
 
 def grid_targets(module: str, g: AxisGrid) -> dict[str, float]:

@@ -2,7 +2,7 @@
 
 The map test (docs/maps.md) measures the sphere at ``settings.map.setups`` places on the table; its programs are the
 ones ``pige program --map AXES --map-step S --map-setups N`` writes for the configuration in force (the same words
-as ``M451 P0``'s program, :func:`~pige_sym.cycle.prepare.probe_argv`: TCP kinematics, the values in force act, the
+as ``M451 P0``'s program, :func:`~pige_sym.cycle.program_words.probe_argv`: TCP kinematics, the values in force act, the
 active coordinate system), with ``--map-point`` the settings' spheres (``sphere_mm`` for setup 1, ``map.spheres_mm``
 for the others; none given: the program's own).  All N programs are written into the run's folder
 (``map_1.ngc`` … ``map_N.ngc``, each read back by pige program); setup k's becomes the run's ``program.ngc``, and the
@@ -49,7 +49,7 @@ def check_map_request(ctx: Context, req: Request) -> int:
 
 def map_argv(ctx: Context, req: Request, out: Path) -> list[str]:
     """``pige program --map``'s words for every setup of the settings' map test (module docstring)."""
-    from pige_sym.cycle.prepare import probe_argv, program_point
+    from pige_sym.cycle.program_words import probe_argv, program_point
 
     m = ctx.settings.map
     assert m is not None
@@ -67,7 +67,7 @@ def map_argv(ctx: Context, req: Request, out: Path) -> list[str]:
 
 def map_program(ctx: Context, req: Request, run: Path, log: RunLog) -> Path:
     """Every setup's program into ``run`` (``map_<i>.ngc``), setup k's as ``program.ngc``; that path."""
-    from pige_sym.cycle.prepare import run_program
+    from pige_sym.cycle.program_words import run_program
 
     k = check_map_request(ctx, req)
     run_program(map_argv(ctx, req, run / "map.ngc"), run, log)

@@ -24,7 +24,8 @@ from pathlib import Path
 
 from pige_sym.cycle.context import Context, Request
 from pige_sym.cycle.messages import RunMessages
-from pige_sym.cycle.steplog import RunLog, pige_command, status
+from pige_sym.cycle.program_words import probing_program, run_program, word
+from pige_sym.cycle.steplog import RunLog, status
 from pige_sym.errors import InputError
 
 TOLERANCE_DEG = 5e-4
@@ -66,50 +67,6 @@ def check_state(ctx: Context, req: Request) -> None:
                          "probing program starts there), then call the cycle again")
 
 
-def _g(v: float) -> str:
-    return repr(round(float(v), 9) + 0.0)
-
-
-def probing_program(ctx: Context, req: Request, run: Path, log: RunLog) -> Path:
-    """``pige program`` for the configuration in force (module docstring); the program's path."""
-    p = ctx.settings.probing
-    argv = probe_argv(ctx, req, run / "program.ngc") + ["--trajectory", "cone-frustum", "--points", str(p.poses)]
-    return run_program(argv, run, log)
-
-
-def program_point(v: list[float], req: Request) -> str:
-    """A point in machine coordinates [mm] as the program takes it: in the active coordinate system."""
-    return ",".join(_g(x - req.offset[k]) for k, x in enumerate(v))
-
-
-def probe_argv(ctx: Context, req: Request, out: Path) -> list[str]:
-    """``pige program``'s words for the configuration in force, but the poses (module docstring)."""
-    from pige_sym.cycle.kinematics import lines_of
-    from pige_sym.nc.probe_safety import WORK_OFFSETS
-
-    s, p = ctx.settings, ctx.settings.probing
-    o = req.offset[:3]
-    lines = lines_of(ctx.setup, ctx.in_force)
-    pivots = [f"{a}=" + ",".join(_g(v - o[k]) for k, v in enumerate(xyz)) for a, xyz in lines.items()]
-    return ["program", "--instrument", "sphere-probe", "--dialect", "linuxcnc", "--machine", s.machine,
-            "--axis-sense", ",".join(f"{a}={v}" for a, v in s.axis_sense.items()),
-            *[w for piv in pivots for w in ("--pivot", piv)],
-            "--sphere", program_point(s.sphere_mm, req),
-            "--sphere-radius", _g(s.sphere_radius_mm), "--stylus-radius", _g(s.stylus_radius_mm),
-            "--kinematics", "tcp", "--stylus-tool", str(s.stylus_tool), "--stylus-length", _g(s.stylus_length_mm),
-            "--work-offset", f"{WORK_OFFSETS[req.system - 1]}=" + ",".join(_g(v) for v in o),
-            "--contacts", str(p.contacts), "--clearance", _g(p.clearance_mm), "--overtravel", _g(p.overtravel_mm),
-            "--probe-feed", _g(p.probe_feed_mm_min), "--window", _g(p.window_mm), "--out", str(out)]
-
-
-def run_program(argv: list[str], run: Path, log: RunLog) -> Path:
-    code, out = pige_command(argv)
-    log.add("pige " + " ".join(argv), out)
-    if code != 0:
-        raise InputError(f"pige program refused: {out.strip().splitlines()[-1] if out.strip() else code}")
-    return run / "program.ngc"
-
-
 def checkup_program(ctx: Context, req: Request, run: Path, log: RunLog) -> tuple[Path, dict[str, object]]:
     """``pige program --checkup`` from the history, once the check-up's basis holds (:mod:`~pige_sym.cycle.journal`);
     the program and the basis."""
@@ -126,8 +83,8 @@ def checkup_program(ctx: Context, req: Request, run: Path, log: RunLog) -> tuple
                          f"not the cycle's (run {basis.full_run}): run M451 P0 first")
     p = s.probing
     argv = ["program", "--checkup", "--machine-id", s.machine_id, "--db", db, "--dialect", "linuxcnc",
-            "--probe-feed", _g(p.probe_feed_mm_min), "--clearance", _g(p.clearance_mm), "--overtravel",
-            _g(p.overtravel_mm), "--out", str(run / "program.ngc")]
+            "--probe-feed", word(p.probe_feed_mm_min), "--clearance", word(p.clearance_mm), "--overtravel",
+            word(p.overtravel_mm), "--out", str(run / "program.ngc")]
     program = run_program(argv, run, log)
     _same_work_offset(program, req)
     return program, {"full_run": basis.full_run, "corrected": basis.corrected}

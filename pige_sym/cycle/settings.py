@@ -250,9 +250,42 @@ def check_map_test(s: CycleSettings) -> None:
             len(v) != 3 or not all(math.isfinite(x) and abs(x) <= 1e5 for x in v) for v in m.spheres_mm)):
         raise InputError(f"map: spheres_mm: give the sphere of setups 2..{m.setups} ({m.setups - 1} points x,y,z "
                          "[mm]), or none for the program's own")
-    from pige_sym.cycle.map_pins import map_grids
-
     map_grids(s.machine, m)
+
+
+@dataclass(frozen=True)
+class AxisGrid:
+    """One mapped axis' grid as the component's pins hold it (CONVENTIONS angle θ [deg])."""
+
+    axis: str
+    start_deg: float
+    step_deg: float
+    nodes: int
+    full_turn: bool
+
+
+def map_grids(machine: str, test: MapTest) -> list[AxisGrid]:
+    """The grid of each mapped axis (module docstring), as ``pige program --map`` visits it.
+
+    Raises
+    ------
+    InputError
+        A range the planner refuses, or more grid angles than the component holds.
+    """
+    from pige_sym.codegen.targets.linuxcnc_pins import MAP_NODES
+    from pige_sym.kernels import load_kernels
+    from pige_sym.model.error_motions import is_full_turn
+    from pige_sym.planning.map_setups import axis_nodes, map_ranges
+
+    ranges = map_ranges(load_kernels(machine), list(test.ranges) or None)
+    out = []
+    for a in test.axes:
+        nodes = axis_nodes(a, test.step_deg, ranges)
+        if nodes.size > MAP_NODES:
+            raise InputError(f"map: {a} has {nodes.size} grid angles every {test.step_deg:g} deg; pige's component "
+                             f"holds at most {MAP_NODES}: give a larger step_deg")
+        out.append(AxisGrid(a, float(nodes[0]), float(test.step_deg), int(nodes.size), is_full_turn(a)))
+    return out
 
 
 def read_settings(path: PathLike) -> CycleSettings:
