@@ -198,3 +198,14 @@ def test_safe_order_sets_the_node_count_to_zero_first_and_undoes_in_reverse(maps
     order = [(p.pin, old, new) for p, old, new in safe_order(ctx.setup, in_force, changes)]
     assert order == [(f"{MODULE}.map-c-nodes", 8.0, 0.0), (f"{MODULE}.ex0c", 0.0, 1.0),
                      (f"{MODULE}.exc-01", 0.0, 0.4), (f"{MODULE}.map-c-nodes", 0.0, 8.0)]
+
+
+def test_an_earlier_install_s_remap_without_q_is_replaced(tmp_path):
+    ini = write_stock(tmp_path / "old")
+    assert main(install_args(ini, "--force")) == 0
+    text = ini.read_text()
+    assert "REMAP = M451 modalgroup=10 argspec=pq " in text
+    ini.write_text(text.replace("argspec=pq", "argspec=p"))  # as the install wrote it before M451 P3
+    assert main(install_args(ini, "--force")) == 0
+    again = ini.read_text()
+    assert again.count("REMAP = M451 ") == 1 and "REMAP = M451 modalgroup=10 argspec=pq " in again

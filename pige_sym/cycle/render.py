@@ -25,7 +25,8 @@ MODE_WORDS = {"check": "P0 check", "optimise": "P1 optimise", "checkup": "check-
 def _head(r: RunResult, run_path: str) -> str:
     what = MODE_WORDS.get(r.mode, r.mode)
     return (f"PIGE {r.code} {what}: {r.verdict.upper()} {r.verdict_on}; {r.poses} poses, {r.contacts} contacts; "
-            f"sphere radius found {r.r_eff_mm:.4f} mm (stated {r.stated_mm:g}); history run {r.history_run}; log "
+            f"sphere radius found {r.r_eff_mm:.4f} mm (stated {r.stated_mm:g}); "
+            + (f"history run {r.history_run}" if r.history_run is not None else "not in the history") + f"; log "
             f"{run_path}")
 
 

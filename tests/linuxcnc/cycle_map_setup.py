@@ -18,6 +18,7 @@ LinuxCNC started again and the pins read.
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -142,6 +143,7 @@ def loop_steps(cs: CycleMapSim) -> list[dict[str, Any]]:
 def run_map_cycle(cs: CycleMapSim) -> tuple[RunResult, RunResult]:
     """The map test, then LinuxCNC started again and the pins read."""
     run = run_sim(cs.sim, loop_steps(cs), timeout_s=4 * CYCLE_TIMEOUT_S, attempts=1)
+    shutil.copyfile(cs.sim.root / "result.json", cs.sim.root / "map_run.json")  # the restart writes result.json again
     restart = run_sim(cs.sim, [{"op": "read", "pins": map_pins(cs)}], attempts=1)
     return run, restart
 
