@@ -223,8 +223,9 @@ def map_notes(result: Any, setups: dict[int, tuple[Path, SetupRecord]]) -> list[
         out += pack(f"{axis} map every {amap.grid.angles_deg[1] - amap.grid.angles_deg[0]:g} deg, largest |value| "
                     "[um, urad]: ", largest)
     if result.undetermined:
-        out.append(f"{len(result.undetermined)} map values undetermined by these setups (entered as 0: nothing "
-                   "corrected there; the log names them)")
+        said = [u.motion if u.angle_deg is None else f"{u.motion}@{u.angle_deg:g}" for u in result.undetermined]
+        out += pack("undetermined by these setups (a whole motion, or motion@angle; entered as 0, nothing corrected "
+                    "there; the log says why): ", said)
     return out
 
 

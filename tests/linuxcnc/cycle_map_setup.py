@@ -38,6 +38,8 @@ CONTACTS = 4
 #: held-out (tilt, C) [deg, CONVENTIONS angles]: between the 45° grid angles of both maps (C at odd multiples of
 #: 22.5°, A at 22.5 and 67.5°, two at 30 and 60°)
 HELD_OUT = ((22.5, 22.5), (67.5, 112.5), (22.5, 202.5), (67.5, 292.5), (30.0, 157.5), (60.0, 337.5))
+#: grid angles, after the held-out ones: where the map test measured (printed beside the held-out errors)
+ON_GRID = ((45.0, 90.0), (90.0, 225.0), (0.0, 315.0))
 CYCLE_TIMEOUT_S = 1800.0
 MODULE = "pige_xyzac_trt"
 
@@ -120,7 +122,8 @@ def held_out_steps(cs: CycleMapSim, label: str) -> list[dict[str, Any]]:
     t = MACHINES["AC"].stylus[0]
     trip = cs.table.trip_radius_mm
     start = ["M429", "G49", "G53 G0 Z80", "G0 A0 C0", "M428", f"G43 H{t}"]
-    moves = [f"G0 X{p[0]:.4f} Y{p[1]:.4f} Z{p[2]:.4f} A{-a:g} C{-c:g}" for p, (a, c) in targets()]  # sigma -1
+    moves = [f"G0 X{p[0]:.4f} Y{p[1]:.4f} Z{p[2]:.4f} A{-a:g} C{-c:g}"  # sigma -1
+             for p, (a, c) in targets() + targets(ON_GRID)]
     return [{"op": "hal", "commands": ["setp ptm.trip-radius -1"]},
             {"op": "mdi", "lines": [*start, *moves], "read": TRUE_PINS[:3],
              "timeout": 900, "label": label},
@@ -148,14 +151,16 @@ def run_map_cycle(cs: CycleMapSim) -> tuple[RunResult, RunResult]:
     return run, restart
 
 
-def targets() -> list[tuple[np.ndarray, tuple[float, float]]]:
-    """Work points 6 mm around the first sphere at the held-out angles: (point [mm], (tilt, C) [deg])."""
-    return [(np.asarray(SETUPS[0], dtype=float) + np.array(off, dtype=float), th) for th in HELD_OUT
+def targets(angles: tuple[tuple[float, float], ...] = HELD_OUT) -> list[tuple[np.ndarray, tuple[float, float]]]:
+    """Work points 6 mm around the first sphere at ``angles``: (point [mm], (tilt, C) [deg])."""
+    return [(np.asarray(SETUPS[0], dtype=float) + np.array(off, dtype=float), th) for th in angles
             for off in TARGET_OFFSETS_MM]
 
 
-def held_out_errors(step: dict[str, Any]) -> np.ndarray:
-    """|true tool point − work point| at each held-out move [µm] (the readings after the 6 lines that start)."""
-    goal = np.array([p for p, _ in targets()])
-    tips = np.array([[r[p] for p in TRUE_PINS[:3]] for r in step["readings"][-len(goal):]])
+def held_out_errors(step: dict[str, Any], angles: tuple[tuple[float, float], ...] = HELD_OUT) -> np.ndarray:
+    """|true tool point − work point| at each move to ``angles`` [µm] (the readings after the 6 lines that
+    start: the held-out moves, then those on the grid)."""
+    goal = np.array([p for p, _ in targets(angles)])
+    first = 6 + (0 if angles == HELD_OUT else len(targets()))
+    tips = np.array([[r[p] for p in TRUE_PINS[:3]] for r in step["readings"][first:first + len(goal)]])
     return np.asarray(np.linalg.norm(tips - goal, axis=1) * 1e3)

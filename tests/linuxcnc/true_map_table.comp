@@ -63,8 +63,8 @@ static double at(int k, const double *v, double theta)
         u = fmod(theta - START[k], 360.0);
         if (u < 0.0) u += 360.0;
         u /= STEP[k];
+        if (u >= n) u = 0.0;  /* theta a rounding below a full turn: fmod + 360 gives 360 exactly, node 0 again */
         i0 = (int)floor(u);
-        if (i0 >= n) i0 = n - 1;
         i1 = (i0 + 1) % n;
     } else {
         u = (theta - START[k]) / STEP[k];
