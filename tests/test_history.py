@@ -339,8 +339,8 @@ def _race(func: str, rounds: list[list[list[object]]], folder: Path, preload: tu
 
 
 #: What ``pige history add`` imports, loaded once before the racers fork (``pige_sym.verdict.history`` alone is a
-#: lazy package: without its store each racer imported SQLAlchemy and the CLI's modules itself, 0.9 of its 1.3 s of
-#: CPU; measured: the test 16.1 -> 5 s CPU).
+#: lazy package: without its store each racer imported SQLAlchemy and the CLI's modules itself: one add 0.9 s of CPU
+#: after the fork, 0.26 s with them loaded; measured: the test 8.4-9.4 -> 2.6-3.5 s CPU).
 ADD_PRELOAD = ("pige_sym.cli.history", "pige_sym.verdict.history.store", "pige_sym.verdict.history.migrations",
                "sqlalchemy.dialects.sqlite", "pige_sym.cli.registry", "pige_sym.diagnosis.diagnose",
                "pige_sym.identification.least_squares", "pige_sym.measurements.rtest")
