@@ -523,9 +523,15 @@ def test_the_head_program_is_refused_when_edited_unsafely() -> None:
 
 
 @pytest.mark.parametrize("machine", [FORK, MIXED])
-def test_the_commands_tell_the_head_story(tmp_path, capsys, machine) -> None:
+def test_the_commands_tell_the_head_story(tmp_path, capsys, monkeypatch, machine) -> None:
+    """The chain of commands on a head, ending with the demo, whose report is made without its figures (what this
+    test reads is the demo's printed answer; test_words draws a head demo's report and reads its page)."""
+    import pige_sym.report.html as page
     from pige_sym.cli.main import main
     from pige_sym.measurements.rtest import read_measurement
+
+    monkeypatch.setattr(page, "draw_figures", lambda rep, folder: [])
+    monkeypatch.setattr(page, "draw_report_figures", lambda data, folder: [])
 
     prog, log, csv = tmp_path / "probe.ngc", tmp_path / "probe.txt", tmp_path / "probe.csv"
     common = ["--machine", machine, "--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius", "1.5",
