@@ -101,7 +101,8 @@ def main():
         sys.exit(255)
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
-        signal.signal(sig, signal.SIG_DFL)
+        if sig not in (signal.SIGKILL, signal.SIGSTOP):
+            signal.signal(sig, signal.SIG_DFL)
         os.kill(os.getpid(), sig)
         sys.exit(128 + sig)
     sys.exit(os.waitstatus_to_exitcode(status))
@@ -187,12 +188,12 @@ def _run_script(real: str) -> int:
             return e.code or 0
         print(e.code, file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        sys.excepthook(*sys.exc_info())
-        return -signal.SIGINT
-    except BaseException:  # noqa: BLE001 (the interpreter's own handling: the traceback, status 1)
-        sys.excepthook(*sys.exc_info())
-        return 1
+    except BaseException as e:  # noqa: BLE001 (the interpreter's own handling: the traceback, status 1)
+        tb = e.__traceback__  # from the script's frame on, as a fresh interpreter shows it (not runpy's)
+        while tb is not None and tb.tb_frame.f_code.co_filename != real:
+            tb = tb.tb_next
+        sys.excepthook(type(e), e.with_traceback(tb or e.__traceback__), tb or e.__traceback__)
+        return -signal.SIGINT if isinstance(e, KeyboardInterrupt) else 1
     return 0
 
 
@@ -375,12 +376,14 @@ class ForkServer:
     """A fork server process for the venv's ``pige``: started with ``env`` (the blocks' environment), stopped by
     :meth:`stop`, which reaps it, so its CPU and its children's count in the test that stops it."""
 
-    def __init__(self, folder: Path, env: dict[str, str], python: str = sys.executable) -> None:
+    def __init__(self, folder: Path, env: dict[str, str], python: str = sys.executable,
+                 real: str | None = None) -> None:
+        """``real``: the console script the children run (the venv's ``pige`` beside ``python`` by default)."""
         folder.mkdir(parents=True, exist_ok=True)
         self.socket = str(folder / "pige.sock")
         if len(os.fsencode(self.socket)) > 100:  # a Unix socket's path has room for 107 bytes
             self.socket = os.path.join(tempfile.mkdtemp(prefix="pige-fork-"), "pige.sock")
-        self.real = str(Path(python).parent / "pige")
+        self.real = real or str(Path(python).parent / "pige")
         self.python = python
         self.log = folder / "server.log"
         with open(self.log, "wb") as log:
@@ -415,9 +418,9 @@ class ForkServer:
 
 
 @contextmanager
-def started(folder: Path, env: dict[str, str]) -> Iterator[ForkServer]:
+def started(folder: Path, env: dict[str, str], real: str | None = None) -> Iterator[ForkServer]:
     """A :class:`ForkServer` in ``folder`` for the duration of a ``with`` (a test module's fixture)."""
-    server = ForkServer(folder, env)
+    server = ForkServer(folder, env, real=real)
     try:
         yield server
     finally:
