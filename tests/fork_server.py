@@ -31,6 +31,7 @@ Run as ``python fork_server.py SOCKET`` by :class:`ForkServer` (the tests start 
 
 from __future__ import annotations
 
+import io
 import os
 import re
 import signal
@@ -42,6 +43,7 @@ import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import IO
 
 #: Libraries the server imports once: what the README's and docs' commands import (measured with a
 #: ``sitecustomize`` listing ``sys.modules`` at exit), then every module of pige_sym but the code generator
@@ -144,14 +146,18 @@ def why_not_served(request: dict, server_env: dict[bytes, bytes]) -> str | None:
     return None
 
 
-def _stdio(fd: int, like: object, write: bool) -> object:
-    """A text stream on ``fd`` as Python makes ``sys.std*`` at start-up (encoding and errors of ``like``)."""
-    import io
-
-    buffer = open(fd, "wb" if write else "rb", closefd=False)
-    line_buffering = write and (os.isatty(fd) or fd == 2)
-    return io.TextIOWrapper(buffer, encoding=getattr(like, "encoding", None), errors=getattr(like, "errors", None),
-                            newline="\n", line_buffering=line_buffering)
+def _stdio(fd: int, like: io.TextIOWrapper, unbuffered: bool) -> io.TextIOWrapper:
+    """A text stream on ``fd`` as Python makes ``sys.std*`` at start-up (``create_stdio``): the encoding and
+    errors of the server's own (``like``: the same environment made them), unbuffered writes under
+    ``PYTHONUNBUFFERED``, else stdout line-buffered on a terminal and stderr always."""
+    write = fd != 0
+    raw_only = unbuffered and write
+    buffer = open(fd, "wb" if write else "rb", buffering=0 if raw_only else -1, closefd=False)
+    stream = io.TextIOWrapper(buffer, encoding=like.encoding, errors=like.errors, newline="\n",  # type: ignore[arg-type]
+                              line_buffering=not unbuffered and write and (os.isatty(fd) or fd == 2),
+                              write_through=unbuffered)
+    stream.mode = "w" if write else "r"  # type: ignore[misc]
+    return stream
 
 
 def _become_command(request: dict, fds: list[int], real: str) -> Callable[[], None]:
@@ -166,8 +172,9 @@ def _become_command(request: dict, fds: list[int], real: str) -> Callable[[], No
     os.umask(request["umask"])
     os.environb.clear()
     os.environb.update(request["env"])
+    unbuffered = sys.stdout.write_through  # the server's stdout, made as the environment says
     for name, fd in (("stdin", 0), ("stdout", 1), ("stderr", 2)):
-        stream = _stdio(fd, getattr(sys, name), write=fd != 0)
+        stream = _stdio(fd, getattr(sys, name), unbuffered)
         setattr(sys, name, stream)
         setattr(sys, f"__{name}__", stream)
     if "numpy.random" in sys.modules:
@@ -226,11 +233,11 @@ def _exit(status: int) -> None:
     os._exit(status & 0xFF)
 
 
-def _reap(children: dict[int, socket.socket], log) -> None:
-    """Send every finished child's wait status to its shim."""
+def _reap(children: dict[int, socket.socket], log: IO[str], block: bool = False) -> None:
+    """Send every finished child's wait status to its shim (``block``: wait for every child to finish)."""
     while children:
         try:
-            pid, status, usage = os.wait4(-1, os.WNOHANG)
+            pid, status, usage = os.wait4(-1, 0 if block else os.WNOHANG)
         except ChildProcessError:
             return
         if pid == 0:
@@ -309,8 +316,36 @@ def _preload() -> None:
         sys.stderr.write("preloaded SymPy: a module imports a module that imports it\n")
 
 
+def _fork_for(conn: socket.socket, server_env: dict[bytes, bytes], log: IO[str]) -> tuple[int, dict, list[int]]:
+    """Read a shim's request on ``conn``: fork its child (pid 0 in the child), or answer ``F`` (pid -1)."""
+    try:
+        payload, fds = _read_request(conn)
+        request = _decode(payload)
+    except (OSError, EOFError, ValueError, struct.error) as e:
+        log.write(f"bad request: {e}\n")
+        return -1, {}, []
+    reason = why_not_served(request, server_env) if len(fds) == 3 else "no descriptors"
+    if reason is not None:
+        log.write(f"fallback: {reason}: {request['argv'][1:3]}\n")
+        conn.sendall(b"F\n")
+        for fd in fds:
+            os.close(fd)
+        return -1, request, []
+    sys.stdout.flush()
+    log.flush()
+    pid = os.fork()
+    if pid:
+        for fd in fds:
+            os.close(fd)  # only the child holds the shim's descriptors: a pipe ends when the command does
+        log.write(f"served: {pid} {request['argv'][1:3]}\n")
+        log.flush()
+        conn.sendall(b"P%d\n" % pid)
+    return pid, request, fds
+
+
 def serve(path: str, real: str) -> Callable[[], None]:
-    """Serve on the Unix socket ``path``; returns only in a forked child, what runs its command."""
+    """Serve on the Unix socket ``path`` until stdin ends (the test that started it closed it, or died); returns
+    only in a forked child, what runs its command."""
     import gc
     import selectors
 
@@ -328,46 +363,32 @@ def serve(path: str, real: str) -> Callable[[], None]:
     listener.listen(64)
     children: dict[int, socket.socket] = {}
     select = selectors.DefaultSelector()
-    select.register(listener, selectors.EVENT_READ)
-    select.register(wake_r, selectors.EVENT_READ)
+    for watched in (listener, wake_r, 0):
+        select.register(watched, selectors.EVENT_READ)
     print("ready", flush=True)
     while True:
         for key, _ in select.select():
+            if key.fileobj == 0:
+                if not os.read(0, 512):
+                    _reap(children, log, block=True)
+                    raise SystemExit(0)
+                continue
             if key.fileobj == wake_r:
                 os.read(wake_r, 512)
                 _reap(children, log)
                 continue
             conn, _ = listener.accept()
-            try:
-                payload, fds = _read_request(conn)
-                request = _decode(payload)
-            except (OSError, EOFError, ValueError, struct.error) as e:
-                log.write(f"bad request: {e}\n")
-                conn.close()
-                continue
-            reason = why_not_served(request, server_env) if len(fds) == 3 else "no descriptors"
-            if reason is not None:
-                log.write(f"fallback: {reason}: {request['argv'][1:3]}\n")
-                conn.sendall(b"F\n")
-                conn.close()
-                for fd in fds:
-                    os.close(fd)
-                continue
-            sys.stdout.flush()
-            log.flush()
-            pid = os.fork()
+            pid, request, fds = _fork_for(conn, server_env, log)
             if pid == 0:
                 for other in (listener, *children.values(), conn):
                     other.close()
                 select.close()
-                os.close(wake_r)
-                os.close(wake_w)
+                for fd in (wake_r, wake_w):
+                    os.close(fd)
                 return _become_command(request, fds, real)
-            for fd in fds:
-                os.close(fd)
-            log.write(f"served: {pid} {request['argv'][1:3]}\n")
-            log.flush()
-            conn.sendall(b"P%d\n" % pid)
+            if pid < 0:
+                conn.close()
+                continue
             children[pid] = conn
             _reap(children, log)
 
@@ -388,8 +409,8 @@ class ForkServer:
         self.log = folder / "server.log"
         with open(self.log, "wb") as log:
             self.process = subprocess.Popen([python, str(Path(__file__).resolve()), self.socket, self.real],
-                                            cwd=folder, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                            stderr=log)
+                                            cwd=folder, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                            stderr=log, start_new_session=True)
         assert self.process.stdout is not None
         ready = self.process.stdout.readline()
         if ready.strip() != b"ready":
@@ -407,12 +428,16 @@ class ForkServer:
         return sum(x.startswith("served:") for x in lines), [x for x in lines if x.startswith("fallback:")]
 
     def stop(self) -> None:
-        """End the server (SIGTERM) and reap it."""
-        if self.process.poll() is None:
-            self.process.terminate()
-        self.process.wait(timeout=30)
-        if self.process.stdout is not None:
-            self.process.stdout.close()
+        """End the server (its stdin closed: it waits for a command still running, then exits) and reap it; a
+        server that does not end within 30 s is killed with what it still runs (its process group)."""
+        assert self.process.stdin is not None and self.process.stdout is not None
+        self.process.stdin.close()
+        try:
+            self.process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.process.pid, signal.SIGKILL)
+            self.process.wait()
+        self.process.stdout.close()
         if os.path.exists(self.socket):
             os.unlink(self.socket)
 

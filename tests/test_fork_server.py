@@ -47,6 +47,10 @@ if cmd == "sleep":
 if cmd == "random":
     import numpy
     print(numpy.random.random(), os.getpid())
+if cmd == "interleave":
+    for i in range(3):
+        print("out", i)
+        print("err", i, file=sys.stderr)
 if cmd == "message":
     sys.exit("refused: " + arg)
 '''
@@ -89,7 +93,7 @@ def served_lines(server: ForkServer) -> list[str]:
     "mkdir -p sub && cd sub && umask 027 && pige where",
     "PIGE_HISTORY_DB=/tmp/x.db pige env PIGE_HISTORY_DB", "pige env PIGE_KERNEL_DIR", "pige env NOT_SET",
     "pige signal 15; echo $?", "pige signal 9; echo $?", "pige signal 2; echo $?",
-    "pige message 'no such file'; echo $?",
+    "pige message 'no such file'; echo $?", "pige interleave 2>&1", "pige interleave 2>&1 > /dev/null",
     "pige many | head -2; echo ${PIPESTATUS[0]}", "pige sleep 10 & p=$!; sleep 0.5; kill $p; wait $p; echo $?",
 ])
 def test_a_served_command_behaves_as_a_fresh_one(setup: tuple[ForkServer, Path, dict[str, str]], line: str) -> None:
