@@ -49,7 +49,7 @@ from typing import IO
 #: ``sitecustomize`` listing ``sys.modules`` at exit), then every module of pige_sym but the code generator
 #: (:func:`_preload`; SymPy stays out: the code generator's modules that import it are not preloaded).
 PRELOAD = ("numpy", "scipy.linalg", "scipy.optimize", "scipy.sparse", "scipy.spatial", "scipy.special", "scipy.stats",
-           "matplotlib", "matplotlib.pyplot", "sqlalchemy", "sqlalchemy.orm", "sqlite3", "tqdm", "platformdirs",
+           "matplotlib", "matplotlib.pyplot", "sqlalchemy", "sqlite3", "tqdm", "platformdirs",
            "concurrent.futures", "pige_sym.cli.main")
 
 #: Environment variables a command may set or change and still be served (none of them is read while the
