@@ -87,13 +87,11 @@ def main():
     umask = os.umask(0o22)
     os.umask(umask)
     ignored = b"1" if _signal.getsignal(_signal.SIGINT) == _signal.SIG_IGN else b"0"
-    fields = [cwd, b"%d" % umask, ignored, b"%d" % len(sys.argv), *map(os.fsencode, sys.argv),
+    fields = [os.fsencode(REAL), cwd, b"%d" % umask, ignored, b"%d" % len(sys.argv), *map(os.fsencode, sys.argv),
               *(k + b"=" + v for k, v in os.environb.items())]
     payload = b"\\0".join(fields)
     payload = len(payload).to_bytes(4, "big") + payload
     fds = b"".join(fd.to_bytes(4, sys.byteorder) for fd in (0, 1, 2))  # C ints
-    sent = link.sendmsg([payload], [(_socket.SOL_SOCKET, _socket.SCM_RIGHTS, fds)])
-    link.sendall(payload[sent:])
     pending = [b""]
 
     def line():
@@ -105,7 +103,13 @@ def main():
         first, _, pending[0] = pending[0].partition(b"\\n")
         return first
 
-    first = line()
+    try:  # until the server answers, nothing ran: any failure falls back
+        sent = link.sendmsg([payload], [(_socket.SOL_SOCKET, _socket.SCM_RIGHTS, fds)])
+        if sent < len(payload):
+            link.sendall(payload[sent:])
+        first = line()
+    except OSError:
+        fallback()
     if not first.startswith(b"P"):
         fallback()
     child = int(first[1:])
@@ -141,12 +145,12 @@ def _read_request(conn: socket.socket) -> tuple[bytes, list[int]]:
 
 
 def _decode(payload: bytes) -> dict:
-    """The shim's fields: cwd, umask, SIGINT ignored, argv, environment (bytes)."""
+    """The shim's fields: the console script it stands for, cwd, umask, SIGINT ignored, argv, environment."""
     fields = payload.split(b"\0")
-    argc = int(fields[3])
-    env = dict(item.partition(b"=")[::2] for item in fields[4 + argc:] if item)
-    return {"cwd": fields[0], "umask": int(fields[1]), "sigint_ignored": fields[2] == b"1",
-            "argv": [os.fsdecode(a) for a in fields[4:4 + argc]], "env": env}
+    argc = int(fields[4])
+    env = dict(item.partition(b"=")[::2] for item in fields[5 + argc:] if item)
+    return {"real": os.fsdecode(fields[0]), "cwd": fields[1], "umask": int(fields[2]),
+            "sigint_ignored": fields[3] == b"1", "argv": [os.fsdecode(a) for a in fields[5:5 + argc]], "env": env}
 
 
 def why_not_served(request: dict, server_env: dict[bytes, bytes]) -> str | None:
@@ -174,8 +178,9 @@ def _stdio(fd: int, like: io.TextIOWrapper, unbuffered: bool) -> io.TextIOWrappe
     return stream
 
 
-def _become_command(request: dict, fds: list[int], real: str) -> Callable[[], None]:
-    """In the forked child: take the shim's state, and return what runs the real console script."""
+def _become_command(request: dict, fds: list[int]) -> Callable[[], None]:
+    """In the forked child: take the shim's state, and return what runs the console script it stands for."""
+    real = request["real"]
     signal.signal(signal.SIGCHLD, signal.SIG_DFL)
     signal.set_wakeup_fd(-1)
     signal.signal(signal.SIGINT, signal.SIG_IGN if request["sigint_ignored"] else signal.default_int_handler)
@@ -357,7 +362,7 @@ def _fork_for(conn: socket.socket, server_env: dict[bytes, bytes], log: IO[str])
     return pid, request, fds
 
 
-def serve(path: str, real: str) -> Callable[[], None]:
+def serve(path: str) -> Callable[[], None]:
     """Serve on the Unix socket ``path`` until stdin ends (the test that started it closed it, or died); returns
     only in a forked child, what runs its command."""
     import gc
@@ -399,7 +404,7 @@ def serve(path: str, real: str) -> Callable[[], None]:
                 select.close()
                 for fd in (wake_r, wake_w):
                     os.close(fd)
-                return _become_command(request, fds, real)
+                return _become_command(request, fds)
             if pid < 0:
                 conn.close()
                 continue
@@ -411,18 +416,16 @@ class ForkServer:
     """A fork server process for the venv's ``pige``: started with ``env`` (the blocks' environment), stopped by
     :meth:`stop`, which reaps it, so its CPU and its children's count in the test that stops it."""
 
-    def __init__(self, folder: Path, env: dict[str, str], python: str = sys.executable,
-                 real: str | None = None) -> None:
-        """``real``: the console script the children run (the venv's ``pige`` beside ``python`` by default)."""
+    def __init__(self, folder: Path, env: dict[str, str], python: str = sys.executable) -> None:
         folder.mkdir(parents=True, exist_ok=True)
         self.socket = str(folder / "pige.sock")
         if len(os.fsencode(self.socket)) > 100:  # a Unix socket's path has room for 107 bytes
             self.socket = os.path.join(tempfile.mkdtemp(prefix="pige-fork-"), "pige.sock")
-        self.real = real or str(Path(python).parent / "pige")
+        self.real = str(Path(python).parent / "pige")
         self.python = python
         self.log = folder / "server.log"
         with open(self.log, "wb") as log:
-            self.process = subprocess.Popen([python, str(Path(__file__).resolve()), self.socket, self.real],
+            self.process = subprocess.Popen([python, str(Path(__file__).resolve()), self.socket],
                                             cwd=folder, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                             stderr=log, start_new_session=True)
         assert self.process.stdout is not None
@@ -431,9 +434,10 @@ class ForkServer:
             self.stop()
             raise RuntimeError(f"the fork server did not start: {self.log.read_text()[-2000:]}")
 
-    def write_shim(self, path: Path) -> None:
-        """Write the shim as ``path`` (an executable ``pige``)."""
-        path.write_text(SHIM.format(python=self.python, socket=self.socket, real=self.real))
+    def write_shim(self, path: Path, real: str | None = None) -> None:
+        """Write the shim as ``path`` (an executable ``pige``): it stands for the console script ``real`` (the
+        venv's ``pige`` by default), which the server's children run."""
+        path.write_text(SHIM.format(python=self.python, socket=self.socket, real=real or self.real))
         path.chmod(0o755)
 
     def counts(self) -> tuple[int, list[str]]:
@@ -457,9 +461,9 @@ class ForkServer:
 
 
 @contextmanager
-def started(folder: Path, env: dict[str, str], real: str | None = None) -> Iterator[ForkServer]:
+def started(folder: Path, env: dict[str, str]) -> Iterator[ForkServer]:
     """A :class:`ForkServer` in ``folder`` for the duration of a ``with`` (a test module's fixture)."""
-    server = ForkServer(folder, env, real=real)
+    server = ForkServer(folder, env)
     try:
         yield server
     finally:
@@ -467,4 +471,4 @@ def started(folder: Path, env: dict[str, str], real: str | None = None) -> Itera
 
 
 if __name__ == "__main__":
-    serve(sys.argv[1], sys.argv[2])()
+    serve(sys.argv[1])()
