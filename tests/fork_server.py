@@ -1,32 +1,37 @@
 """A fork server for the ``pige`` commands the docs tests run as pasted: the imports paid once, not per command.
 
-The README's and the docs' shell blocks start some 120 ``pige`` commands; each spent 0.2–0.5 s of CPU starting
-Python and importing NumPy, SciPy, matplotlib and SQLAlchemy before it computed anything.  Here a server
-process imports those libraries once (:data:`PRELOAD`) and waits on a Unix socket; the scratch checkout's
-``.venv/bin/pige`` is a small shim (:data:`SHIM`, ``python -I -S``: about 20 ms) that hands the server its
-argv, its working folder, umask, environment and its stdin/stdout/stderr file descriptors (``SCM_RIGHTS``).
-The server forks; the child takes the working folder, umask, environment and descriptors, new ``sys.std*``
-on them, fresh random states, and runs the venv's real ``pige`` console script (``runpy``: the entry point the
-console script calls, exactly); the server waits for it and sends the shim its wait status, and the shim exits
-with it (with its signal when the child was killed by one, which it forwards too: SIGINT, SIGTERM, SIGHUP).
+The README's and the docs' shell blocks start some 135 ``pige`` commands; each spent 0.2–0.5 s of CPU starting
+Python and importing NumPy, SciPy, matplotlib, SQLAlchemy and pige_sym before it computed anything.  Here a
+server process imports them once (:data:`PRELOAD` and every pige_sym module that does not import SymPy),
+freezes them out of the garbage collector's sight (``gc.freeze``) and waits on a Unix socket.  The scratch
+checkout's ``.venv/bin/pige`` is a shim (:data:`SHIM`: ``python -I -S`` and built-in modules only, about 20 ms)
+that hands the server the console script it stands for, its argv, working folder, umask, environment and its
+stdin/stdout/stderr descriptors (``SCM_RIGHTS``).  The server forks; the child takes the working folder,
+umask, environment and descriptors, makes ``sys.std*`` on them as Python does at start-up, draws NumPy's
+global random state again, and runs the console script (``runpy``: the venv's ``pige``, which calls
+``pige_sym.cli:main``); it ends as the interpreter ends (threads joined, ``atexit``, streams flushed) but
+without tearing its modules down (that would copy every page it shares with the server).  The server sends
+the shim the child's wait status, and the shim exits with it (or with its signal, which it forwards too:
+SIGINT, SIGTERM, SIGHUP).
 
 Each command still starts from a fresh state: the child of a server that never ran a command, with the
-libraries imported and nothing else done.  What a fresh process would see differently, the server does not
+modules imported and nothing else done.  What a fresh process would see differently, the server does not
 serve: the shim then execs the real console script (the *fallback*), when
 
 - the environment differs from the server's in any variable but :data:`FREE_VARIABLES` (those nothing reads
-  while the preloaded libraries import: ``PATH``, the shell's ``PWD``…, pige's own ``PIGE_HISTORY_DB`` and
+  while the preloaded modules import: ``PATH``, the shell's ``PWD``…, pige's own ``PIGE_HISTORY_DB`` and
   ``PIGE_KERNEL_DIR``, read when a command runs); ``MPLBACKEND``, ``PYTHON*``, ``HOME``, locale variables…
   all fall back;
 - the working folder holds a ``matplotlibrc`` (matplotlib reads it from there when it is imported);
 - a standard descriptor is closed, the working folder is gone, or the server does not answer.
 
-What stays the server's: the hash seed (``PYTHONHASHSEED`` is drawn once per server, not per command),
-``sys.orig_argv`` and ``sys.flags`` (the server runs with none, as the console script does), the process's
-parent, group and session, and a traceback's outermost frames (``runpy`` between the interpreter and the
-script).  The server logs one line per command (``served`` or ``fallback: why``) for the tests to count.
+What stays the server's: the hash seed (drawn once per server, not per command), ``sys.orig_argv``, the
+process's parent, group and session; the modules a command would not have imported are there; an object
+still alive at exit is not finalized (its ``__del__`` does not run; ``weakref.finalize`` and ``atexit`` do).
+The server logs one line per command (``served``, ``ended`` with its CPU, or ``fallback: why``).
 
-Run as ``python fork_server.py SOCKET`` by :class:`ForkServer` (the tests start it and stop it).
+Run as ``python fork_server.py SOCKET`` by :class:`ForkServer` (the tests start it, and stop it: its CPU
+and its children's count in the test that stops it).
 """
 
 from __future__ import annotations
