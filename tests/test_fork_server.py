@@ -65,7 +65,9 @@ def setup(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[ForkServer
     fake = root / "fresh" / "pige"
     fake.write_text(FAKE.format(python=sys.executable))
     fake.chmod(0o755)
-    env = scratch_env(root, Path(os.environ.get("PYTHONPYCACHEPREFIX") or root / "pycache"))
+    env = scratch_env(root, root / "pycache")
+    env.pop("PYTHONPYCACHEPREFIX")  # the suite's bytecode as the test process has it: none compiled again
+    env.update({k: v for k, v in os.environ.items() if k == "PYTHONPYCACHEPREFIX"})
     with started(root / "server", env) as server:
         server.write_shim(root / "served" / "pige", real=str(fake))
         yield server, root, env
