@@ -324,14 +324,14 @@ def sympy_free_modules() -> list[str]:
     return [name for name in imports if name not in heavy and name != "pige_sym.__main__"]
 
 
-def _preload() -> None:
-    """Import :data:`PRELOAD` and pige_sym's modules but those that import SymPy; a module that fails to import
-    is left to the commands (they fail on it as a fresh process would)."""
+def _preload(only: list[str] | None = None) -> None:
+    """Import :data:`PRELOAD` and pige_sym's modules but those that import SymPy (or ``only`` those named); a
+    module that fails to import is left to the commands (they fail on it as a fresh process would)."""
     import importlib
 
-    for name in PRELOAD:
+    for name in PRELOAD if only is None else only:
         importlib.import_module(name)
-    for name in sympy_free_modules():
+    for name in sympy_free_modules() if only is None else []:
         try:
             importlib.import_module(name)
         except Exception as e:  # noqa: BLE001 (logged; the command meets it again)
@@ -367,13 +367,13 @@ def _fork_for(conn: socket.socket, server_env: dict[bytes, bytes], log: IO[str])
     return pid, request, fds
 
 
-def serve(path: str) -> Callable[[], None]:
+def serve(path: str, only: list[str] | None = None) -> Callable[[], None]:
     """Serve on the Unix socket ``path`` until stdin ends (the test that started it closed it, or died); returns
     only in a forked child, what runs its command."""
     import gc
     import selectors
 
-    _preload()
+    _preload(only)
     gc.collect()
     gc.freeze()  # the preloaded objects out of the collector's sight: a child's collections neither scan nor copy them
     server_env = dict(os.environb)
@@ -421,7 +421,9 @@ class ForkServer:
     """A fork server process for the venv's ``pige``: started with ``env`` (the blocks' environment), stopped by
     :meth:`stop`, which reaps it, so its CPU and its children's count in the test that stops it."""
 
-    def __init__(self, folder: Path, env: dict[str, str], python: str = sys.executable) -> None:
+    def __init__(self, folder: Path, env: dict[str, str], python: str = sys.executable,
+                 only: tuple[str, ...] | None = None) -> None:
+        """``only``: the modules to preload instead of :func:`_preload`'s (the server's own tests)."""
         folder.mkdir(parents=True, exist_ok=True)
         self.socket = str(folder / "pige.sock")
         if len(os.fsencode(self.socket)) > 100:  # a Unix socket's path has room for 107 bytes
@@ -430,7 +432,8 @@ class ForkServer:
         self.python = python
         self.log = folder / "server.log"
         with open(self.log, "wb") as log:
-            self.process = subprocess.Popen([python, str(Path(__file__).resolve()), self.socket],
+            self.process = subprocess.Popen([python, str(Path(__file__).resolve()), self.socket,
+                                             *([] if only is None else [",".join(only)])],
                                             cwd=folder, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                             stderr=log, start_new_session=True)
         assert self.process.stdout is not None
@@ -466,9 +469,9 @@ class ForkServer:
 
 
 @contextmanager
-def started(folder: Path, env: dict[str, str]) -> Iterator[ForkServer]:
+def started(folder: Path, env: dict[str, str], only: tuple[str, ...] | None = None) -> Iterator[ForkServer]:
     """A :class:`ForkServer` in ``folder`` for the duration of a ``with`` (a test module's fixture)."""
-    server = ForkServer(folder, env)
+    server = ForkServer(folder, env, only=only)
     try:
         yield server
     finally:
@@ -476,4 +479,4 @@ def started(folder: Path, env: dict[str, str]) -> Iterator[ForkServer]:
 
 
 if __name__ == "__main__":
-    serve(sys.argv[1])()
+    serve(sys.argv[1], sys.argv[2].split(",") if len(sys.argv) > 2 else None)()

@@ -68,7 +68,7 @@ def setup(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[ForkServer
     env = scratch_env(root, root / "pycache")
     env.pop("PYTHONPYCACHEPREFIX")  # the suite's bytecode as the test process has it: none compiled again
     env.update({k: v for k, v in os.environ.items() if k == "PYTHONPYCACHEPREFIX"})
-    with started(root / "server", env) as server:
+    with started(root / "server", env, only=("numpy", "pige_sym.cli.main")) as server:  # the docs tests: all
         server.write_shim(root / "served" / "pige", real=str(fake))
         yield server, root, env
 
