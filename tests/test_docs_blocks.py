@@ -9,6 +9,13 @@ that they did not. Every command must succeed: the script
 (:func:`testdata.strict_script`) checks the status of every top-level command, so ``a && b`` fails when ``a``
 fails (``set -e`` alone lets it pass), and a failure names the page and line.
 
+The pages' ``pige`` commands run in children of a fork server (``tests/fork_server.py``, one per module) that
+imported NumPy, SciPy, matplotlib, SQLAlchemy and pige_sym once: the scratch ``.venv/bin/pige`` is its shim,
+bash still runs every line as pasted, and each command still starts from a fresh state with its own argv,
+folder, environment, stdin/stdout/stderr and exit status; what the server cannot serve exactly runs the real
+console script (``tests/test_fork_server.py`` compares the two).  The slow test on another processor does not
+use it.
+
 A block that cannot run here (it needs a serial port, a controller, another terminal) is marked on the
 line before its fence with ``<!-- not-run: reason -->``; the reason is required. Pages added later are
 covered without touching this file. Plain ```` ``` ```` fences are output or file contents, not run.

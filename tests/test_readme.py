@@ -5,7 +5,9 @@ The blocks are taken from the README itself (so they cannot drift), run by bash 
 like the checkout's root (the README says: from the checkout's root; :func:`testdata.scratch_checkout`: a link to
 ``.venv``, copies of ``examples`` and ``tests``, history, kernels and bytecode in scratch folders), and every
 command must succeed: :func:`testdata.strict_script` checks every top-level command's status (``a && b``
-included, which ``set -e`` lets pass).  They must leave the checkout as it was.
+included, which ``set -e`` lets pass).  They must leave the checkout as it was.  Their ``pige`` commands run in
+children of a fork server that imported the libraries once (``tests/fork_server.py``; as in test_docs_blocks),
+and every one of them must have run there (none fell back to a fresh process).
 """
 
 from __future__ import annotations
