@@ -260,25 +260,28 @@ def _switch_output():
 #: run by ``python3 -c`` (LinuxCNC's Python, its ``linuxcnc`` module) as a process of its own, arguments: the N of
 #: motion.analog-out-N, the switchkins type to put back, the log file.  It waits until task has handled the abort
 #: (interpreter idle, motion queue empty, in position), then, unless the output shows the type already, sends
-#: EMC_MOTION_SET_AOUT through LinuxCNC's command channel (task takes it in MDI, MANUAL and E-stop; not in AUTO)
+#: EMC_MOTION_SET_AOUT through LinuxCNC's command channel (task takes it in MDI, MANUAL and E-stop; not in AUTO).
+#: Once it has seen AUTO it sends nothing (an operator's later mode change is not its to undo) and only watches
+#: until the output shows the type (the handler's own set) or 10 s pass: its note says which, and after how long
 PUT_BACK = """
 import sys, time, linuxcnc
 n, found, log = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
 s, c = linuxcnc.stat(), linuxcnc.command()
-end, sent, why = time.monotonic() + 10.0, 0, "timed out"
+t0 = time.monotonic()
+end, sent, auto, why = t0 + 10.0, 0, False, "timed out"
 while time.monotonic() < end:
     time.sleep(0.05)
     s.poll()
+    auto = auto or s.task_mode == linuxcnc.MODE_AUTO
     if abs(s.aout[n] - found) < 1e-9:
-        why = "in force"
+        why = f"in force after {time.monotonic() - t0:.2f} s"
         break
-    if s.task_mode == linuxcnc.MODE_AUTO:
-        why = "AUTO mode: task takes no analog output command"
-        break
-    if s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0 and s.inpos and sent < 3:
+    if not auto and s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0 and s.inpos and sent < 3:
         c.set_analog_output(n, found)
         c.wait_complete(2)
         sent += 1
+if auto:
+    why += " in AUTO mode (task takes no analog output command there: none sent)"
 with open(log, "a") as f:
     f.write(f"{time.strftime('%Y-%m-%dT%H:%M:%S')} analog-out-{n:02d} {found:g}: {why}, sent {sent}\\n")
 """

@@ -7,6 +7,8 @@ and its length taken, a move clear above the sphere, ``M451 P0``, a retract, ``M
 
 - **esc**: the GUI's Esc (task abort through the command channel) while probing, after the second logged contact;
 - **estop**: the E-stop while probing, then E-stop reset and machine on;
+- **miss**: a probing move that does not trip (the true machine's probe switched off while probing: LinuxCNC's
+  "G38.2 move finished without making contact");
 - **kill**: pige's analysis process killed (SIGKILL, by its id) while it identifies.
 
 Around each case the configuration's files, the pins (the stock kinematics' values and ``motion.switchkins-type``)
@@ -18,6 +20,7 @@ put the mode back.
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import pytest
@@ -28,7 +31,7 @@ pytestmark = pytest.mark.linuxcnc
 #: the probe's trips until the second logged contact (test_linuxcnc_cycle.LOGGED)
 LOGGED = 5
 SETTLE = {"op": "sleep", "seconds": 3, "allow_error": True}
-CASES = ["esc", "estop", "kill"]
+CASES = ["esc", "estop", "miss", "kill"]
 #: the operator's program around the cycle (``{tool}``: the stylus)
 PROGRAM = """%
 (PROGRAM: SPHERE CHECK BEFORE THE SHIFT)
@@ -53,16 +56,21 @@ def record_step(cs: CycleSim) -> dict[str, Any]:
 
 
 def interruption(cs: CycleSim, label: str) -> list[dict[str, Any]]:
-    """What cuts the program short in case ``label`` (module docstring), up to the abort handled."""
+    """What cuts the program short in case ``label`` (module docstring), up to the abort handled; the kinematics
+    mode is read just before the cut (``cut``: TCP, the probing's)."""
     runs = str(cs.sim.cfg / "pige_cycle" / "runs" / "*")
+    trip = cs.table.trip_radius_mm
     probing = {"op": "wait_for", "pin": "ptt.trips", "increase": LOGGED, "timeout": 600}
+    if label == "kill":
+        probing = {"op": "wait_for", "glob": runs + "/status.txt", "contains": "identify", "timeout": 1200}
+    cut = {"op": "read", "pins": ["motion.switchkins-type"], "label": f"cut-{label}"}
     rest = [{"op": "idle", "timeout": 300, "allow_error": True}, SETTLE, {"op": "status"}]
-    if label == "esc":
-        return [probing, {"op": "abort", "allow_error": True}, *rest]
-    if label == "estop":
-        return [probing, {"op": "estop", "allow_error": True}, {"op": "machine_on", "allow_error": True}, *rest]
-    return [{"op": "wait_for", "glob": runs + "/status.txt", "contains": "identify", "timeout": 1200},
-            {"op": "kill", "pid_glob": runs + "/analyse.pid", "allow_error": True}, *rest]
+    how = {"esc": [{"op": "abort", "allow_error": True}],
+           "estop": [{"op": "estop", "allow_error": True}, {"op": "machine_on", "allow_error": True}],
+           "miss": [{"op": "hal", "commands": ["setp ptt.trip-radius -1"], "allow_error": True}],
+           "kill": [{"op": "kill", "pid_glob": runs + "/analyse.pid", "allow_error": True}]}[label]
+    back = [{"op": "hal", "commands": [f"setp ptt.trip-radius {trip!r}"]}] if label == "miss" else []
+    return [probing, cut, *how, *rest, *back]
 
 
 def auto_steps(cs: CycleSim) -> list[dict[str, Any]]:
@@ -75,7 +83,7 @@ def auto_steps(cs: CycleSim) -> list[dict[str, Any]]:
     for label in CASES:
         around = [files_step(cs), pins_step(cs), record_step(cs)]
         start = {"op": "program_start", "file": str(program), "watch": ["ptt.trips"]}
-        out += [s | {"label": label} for s in [*around, start, *interruption(cs, label), *around]]
+        out += [{"label": label} | s for s in [*around, start, *interruption(cs, label), *around]]
         out += [{"op": "mdi", "lines": ["G0 Z61", "G0 Z62"], "read": ["axis.z.pos-cmd"], "label": f"mdi-{label}"},
                 {"op": "program", "file": str(after), "timeout": 120, "label": f"auto-{label}"},
                 {"op": "read", "pins": ["axis.z.pos-cmd", "motion.switchkins-type"], "label": f"auto-{label}"},
@@ -111,16 +119,19 @@ def test_an_abort_in_auto_changes_no_file_no_pin_and_no_record(auto_run, label):
     case = case_of(run, label)
     before, after = case[:3], case[-3:]
     errors = [t for x in case for kind, t in x["messages"] if kind == "error"]
-    print(f"{label} in AUTO: errors {errors}; status after {case[-4]['status']}; abort.log of the run "
+    (status,) = [x["status"] for x in case if x["op"] == "status"]
+    print(f"{label} in AUTO: errors {errors}; status after {status}; abort.log of the run "
           f"{abort_logs(cs).get(cs.runs[CASES.index(label)].name, '(none)')!r}")
     assert before[0]["files"] == after[0]["files"], "the configuration's files changed"
     values = [{k: v for k, v in x["readings"][0].items() if k != "motion.switchkins-type"}
               for x in (before[1], after[1])]
     assert values[0] == values[1], "the pins changed"
     assert before[2]["files"] == after[2]["files"], "the cycle's record (proposal, journal, history) changed"
-    assert case[-4]["status"]["task_mode"] == 2  # linuxcnc.MODE_AUTO: read before any other command
+    assert status["task_mode"] == 2  # linuxcnc.MODE_AUTO: read before any other command
     if label == "kill":
         assert any("pige's analyse step failed (ended by signal 9), nothing changed" in e for e in errors), errors
+    if label == "miss":
+        assert any("move finished without making contact" in e for e in errors), errors
 
 
 @pytest.mark.parametrize("label", CASES)
@@ -129,7 +140,9 @@ def test_after_an_abort_in_auto_the_kinematics_mode_is_the_one_found(auto_run, l
     is handled, with task still in AUTO (no command since that could have put it back)."""
     _, run = auto_run
     case = case_of(run, label)
+    (cut,) = case_of(run, f"cut-{label}")
     assert case[1]["readings"][0]["motion.switchkins-type"] == 0  # as found
+    assert cut["readings"][0]["motion.switchkins-type"] == 1  # cut short in TCP kinematics
     assert case[-2]["readings"][0]["motion.switchkins-type"] == 0, "left in TCP kinematics after the abort"
 
 
@@ -143,3 +156,17 @@ def test_after_an_abort_in_auto_mdi_and_the_next_program_run(auto_run, label):
     # the program's Z64 two above the MDI line's Z62 (the same offsets: the tool length taken before the abort)
     assert read["readings"][0]["axis.z.pos-cmd"] - z62 == pytest.approx(2.0, abs=1e-6), read["readings"]
     assert read["readings"][0]["motion.switchkins-type"] == 0
+
+
+@pytest.mark.parametrize("label", CASES)
+def test_after_an_abort_in_auto_the_handler_s_own_set_put_the_mode_back(auto_run, label):
+    """Task takes no command-channel command in AUTO: the run's ``abort.log`` (one line per abort the handler put the
+    mode back for) must show the mode in force with nothing sent, i.e. set by ``o<pige_cycle_abort>``'s own
+    ``SET_AUX_OUTPUT_VALUE``, and within the 3 s the test waits."""
+    cs, _ = auto_run
+    log = abort_logs(cs).get(cs.runs[CASES.index(label)].name, "")
+    lines = log.splitlines()
+    note = re.compile(r"analog-out-03 0: in force after (\d+\.\d+) s in AUTO mode \(.*\), sent 0$")
+    found = [note.search(ln) for ln in lines]
+    assert lines and all(found), log
+    assert max(float(m.group(1)) for m in found if m) < 3.0, log
