@@ -307,8 +307,7 @@ def program_start(self: Driver, step: dict) -> dict:
     self.at_start = {pin: hal.get_value(pin) for pin in step.get("watch", [])}
     self.cmd.program_open(os.path.abspath(step["file"]))
     self.cmd.wait_complete(10)
-    self.cmd.auto(linuxcnc.AUTO_RUN, 0)
-    self.cmd.wait_complete(10)
+    self.cmd.auto(linuxcnc.AUTO_RUN, 0)  # not wait_complete: task holds the run command until the program ends
     try:
         self.wait(lambda s: s.interp_state != linuxcnc.INTERP_IDLE, 10, f"program {step['file']} start")
     except RuntimeError:

@@ -48,6 +48,8 @@ M2
 %
 """
 AFTER = "(the operator's next program)\nG0 Z63\nG0 Z64\nM2\n"
+#: the operator's own job in TCP kinematics, started within seconds of the cycle's abort and aborted itself
+TCP_JOB = "(the operator's 5-axis job, TCP kinematics)\nM428\nG4 P30\nM429\nM2\n"
 
 
 def record_step(cs: CycleSim) -> dict[str, Any]:
@@ -84,11 +86,26 @@ def auto_steps(cs: CycleSim) -> list[dict[str, Any]]:
         around = [files_step(cs), pins_step(cs), record_step(cs)]
         start = {"op": "program_start", "file": str(program), "watch": ["ptt.trips"]}
         out += [{"label": label} | s for s in [*around, start, *interruption(cs, label), *around]]
+        if label == "esc":
+            out += later_steps(cs)
         out += [{"op": "mdi", "lines": ["G0 Z61", "G0 Z62"], "read": ["axis.z.pos-cmd"], "label": f"mdi-{label}"},
                 {"op": "program", "file": str(after), "timeout": 120, "label": f"auto-{label}"},
                 {"op": "read", "pins": ["axis.z.pos-cmd", "motion.switchkins-type"], "label": f"auto-{label}"},
                 {"op": "mdi", "lines": ["G0 Z60"], "label": f"auto-{label}"}]
     return out
+
+
+def later_steps(cs: CycleSim) -> list[dict[str, Any]]:
+    """Right after the Esc case (about 5 s after its abort, within the handler's window for aborts that follow):
+    the operator's own job switches to TCP kinematics and is aborted; the mode read after it must stay theirs,
+    then ``M429`` in MDI."""
+    job = cs.sim.cfg / "tcp_job.ngc"
+    job.write_text(TCP_JOB)
+    kins = {"op": "read", "pins": ["motion.switchkins-type"]}
+    steps = [{"op": "program_start", "file": str(job)}, {"op": "sleep", "seconds": 1}, kins,
+             {"op": "abort", "allow_error": True}, {"op": "idle", "timeout": 60, "allow_error": True}, SETTLE, kins,
+             {"op": "mdi", "lines": ["M429"]}, kins]
+    return [s | {"label": "later"} for s in steps]
 
 
 @pytest.fixture(scope="module")
@@ -170,3 +187,15 @@ def test_after_an_abort_in_auto_the_handler_s_own_set_put_the_mode_back(auto_run
     found = [note.search(ln) for ln in lines]
     assert lines and all(found), log
     assert max(float(m.group(1)) for m in found if m) < 3.0, log
+
+
+def test_a_later_abort_of_the_operator_s_own_job_keeps_the_mode_they_chose(auto_run):
+    """The cycle's abort handler puts the mode found back for the aborts of the cycle only: the operator's own job,
+    in TCP kinematics (``M428``), aborted seconds after the cycle's abort, stays in TCP kinematics (LinuxCNC's own
+    behaviour without the cycle)."""
+    _, run = auto_run
+    before, after, identity = (x["readings"][0]["motion.switchkins-type"]
+                               for x in case_of(run, "later") if x["op"] == "read")
+    assert before == 1, "the job's M428 did not take"
+    assert after == 1, "the operator's TCP kinematics switched back to identity by the cycle's abort handler"
+    assert identity == 0
