@@ -27,10 +27,10 @@ suspends the abort handler half-way and leaves ``o<pige_cycle_abort>`` unrun whe
 the handler twice for one abort and drop what the first queued between the two (an interpreter error in MDI: task's
 ``EMC_ABORT_INTERPRETER_ERROR_MDI``, then ``EMC_ABORT_TASK_EXEC_ERROR``, which clears the queue first;
 src/emc/task/emctaskmain.cc): so every abort within ``REASSERT_S`` of the first puts the mode back again until
-``motion.switchkins-type`` shows it.  And what the handler queues after such an error can wait behind the aborted
-interpreter until the next mode change drops it (``emcTaskSetMode`` calls ``emcTaskAbort``): so
-``o<pige_cycle_abort>`` also sends the value through LinuxCNC's command channel, from a process of its own
-(:data:`PUT_BACK`).
+``motion.switchkins-type`` shows it, at that abort or to the helper below (:data:`IN_FORCE`).  And what the
+handler queues after such an error can wait behind the aborted interpreter until the next mode change drops it
+(``emcTaskSetMode`` calls ``emcTaskAbort``): so ``o<pige_cycle_abort>`` also sends the value through LinuxCNC's
+command channel, from a process of its own (:data:`PUT_BACK`).
 
 The prepare and analyse steps run in the *epilog* of the inner call, as a generator that yields
 ``INTERP_EXECUTE_FINISH`` while pige's process runs: the interpreter stays responsive (Esc, E-stop, the GUI's
@@ -295,11 +295,11 @@ while time.monotonic() < end:
         c.set_analog_output(n, found)
         c.wait_complete(2)
         sent += 1
-try:
+try:  # a name of its own: the two helpers of one E-stop (the E-stop, its reset) write at once
     if why.startswith("in force"):
-        with open(in_force + ".new", "w") as f:
+        with open(f"{in_force}.{os.getpid()}.new", "w") as f:
             f.write(token + "\\n")
-        os.replace(in_force + ".new", in_force)
+        os.replace(f"{in_force}.{os.getpid()}.new", in_force)
 except OSError as exc:
     why += f" (not noted for the next abort: {exc})"
 if auto:

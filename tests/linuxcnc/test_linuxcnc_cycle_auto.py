@@ -15,7 +15,8 @@ Around each case the configuration's files, the pins (the stock kinematics' valu
 and the cycle's record (proposal, journal, history) are read before and after (3 s after the abort is handled, task
 still in AUTO, before any other command); then the operator's next two MDI lines must run, and a program of theirs
 run in AUTO.  The run folder's ``abort.log`` (the command-channel helper of ``o<pige_cycle_abort>``) says which path
-put the mode back.
+put the mode back.  Right after the Esc case the operator's own job (``M428``, a dwell) is started and aborted about
+4 s after the cycle's abort: its TCP kinematics must stay (the handler puts back the cycle's mode only).
 """
 
 from __future__ import annotations
