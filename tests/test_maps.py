@@ -378,7 +378,8 @@ def test_the_report_has_a_map_section(ac_case: Any, tmp_path: Path, monkeypatch:
     assert main(["report", *paths, "--map", "C,A", "--out", str(out)]) == 0
     html = (out / "report.html").read_text(encoding="utf-8")
     assert 'id="maps"' in html and "Error maps of the rotary axes" in html
-    assert html.count("map_C.png") + html.count("map_A.png") >= 0  # the plots are inlined as data URIs
+    maps_section = html[html.index('id="maps"'):]
+    assert maps_section.count("data:image/png;base64,") >= 2  # the C and A map plots, inlined as data URIs
     assert "What the maps leave" in html and "held-out by pose" in html
     assert "Every value of every map is determined" in html
     assert (out / "figures" / "map_C.png").is_file() or any(out.rglob("map_C.png"))
