@@ -43,8 +43,9 @@ TEST_ENV  := $(if $(and $(PYTHONDONTWRITEBYTECODE),$(if $(PYTHONPYCACHEPREFIX),,
 test: $(STAMP)  ## run the default test suite (slow studies excluded), one process per core
 	$(TEST_ENV) $(PY) -m pytest -q $(TEST_OPTS)
 
+# PIGE_TEST_SLOW=1: the costliest property tests draw all their examples (tests/property_budget.py; a third in make test).
 test-slow: $(STAMP)  ## run the slow studies too (not the LinuxCNC runs: make test-linuxcnc)
-	$(TEST_ENV) $(PY) -m pytest -q -m 'not linuxcnc' $(TEST_OPTS)
+	PIGE_TEST_SLOW=1 $(TEST_ENV) $(PY) -m pytest -q -m 'not linuxcnc' $(TEST_OPTS)
 
 test-linuxcnc: $(STAMP)  ## the loop on real LinuxCNC 2.9 simulations, side by side (tests/linuxcnc; skips without linuxcnc-uspace)
 	$(PY) -m pytest -q -rsP -m linuxcnc -n $(LCNC_JOBS) --dist loadfile --durations=40 tests/linuxcnc

@@ -55,13 +55,14 @@ def _bytecode_cache(tmp_path_factory: pytest.TempPathFactory):
 #: small files and neither process waits for the other at the end.  pytest-xdist's own order (the files with
 #: most tests first) left ``test_readme.py`` (one test, 45 s) for last.  The files not named keep their order.
 HEAVY_FIRST = (
-    "test_docs_blocks.py", "test_readme.py", "test_report.py", "test_probe_head.py", "test_map_plan.py",
-    "test_checkup_stats.py", "test_probe.py", "test_checkup.py", "test_report_print.py", "test_report_commands.py",
-    "test_gen_linuxcnc.py", "test_faults_files.py", "test_joint_diagnosis.py", "test_history.py", "test_maps.py",
-    "test_acquisition.py", "test_kernels.py", "test_package.py", "test_nc_fastpath.py", "test_report_advice.py",
-    "test_faults_round3.py", "test_plan.py", "test_gen_linuxcnc_hal.py", "test_checkup_next.py", "test_diagnosis.py",
-    "test_decimal_fields.py", "test_checkup_display.py", "test_history_decode.py", "test_words.py", "test_demo.py",
-    "test_probe_safety.py", "test_gen_linuxcnc_maps.py", "test_controller_heidenhain.py", "test_report_joint.py",
+    "test_docs_blocks.py", "test_readme.py", "test_report.py", "test_checkup.py", "test_probe.py",
+    "test_report_print.py", "test_checkup_stats.py", "test_gen_linuxcnc.py", "test_probe_head.py",
+    "test_faults_files.py", "test_map_plan.py", "test_acquisition.py", "test_report_advice.py",
+    "test_faults_round3.py", "test_plan.py", "test_gen_linuxcnc_hal.py", "test_kernels.py", "test_diagnosis.py",
+    "test_checkup_display.py", "test_history.py", "test_maps.py", "test_demo.py", "test_probe_safety.py",
+    "test_gen_linuxcnc_maps.py", "test_joint_diagnosis.py", "test_controller_heidenhain.py", "test_report_joint.py",
+    "test_package.py", "test_checkup_next.py", "test_nc_fastpath.py", "test_words.py", "test_decimal_fields.py",
+    "test_report_commands.py", "test_history_decode.py",
 )
 
 

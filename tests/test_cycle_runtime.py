@@ -316,3 +316,23 @@ def test_the_abort_handler_stops_pige_first_and_sets_the_switch_s_output_without
     assert lines == ["o<pige_on_abort> sub", "o<pige_cycle_abort> call",
                      "o100 if [[#<_value_returned> EQ 1] AND [#<_value> GE 0]]", "M68 E3 Q#<_value>", "o100 endif",
                      "o<pige_on_abort> endsub", "M2"]
+
+
+def test_once_the_helper_saw_the_mode_in_force_a_later_abort_puts_nothing_back(monkeypatch, tmp_path):
+    """The command-channel helper writes the abort's token into ``IN_FORCE`` once ``motion.switchkins-type`` shows
+    the mode: an abort after that, within ``REASSERT_S`` (the operator's own job, switched to TCP kinematics since),
+    puts nothing back; without the token (the set dropped, LinuxCNC's second handler of one abort) it does."""
+    from pige_sym.cycle import linuxcnc_remap as r
+
+    monkeypatch.setattr(r, "IN_FORCE", str(tmp_path / "abort.in_force"))
+    interp = FakeInterp()
+    interp.params["_hal[motion.switchkins-type]"] = 0.0
+    assert r.pige_m451_prolog(interp) == r.INTERP_OK  # found: identity
+    interp.params["_hal[motion.switchkins-type]"] = 1.0  # probing in TCP kinematics, then Esc
+    assert r.pige_cycle_abort(interp) == 0.0
+    (tmp_path / "abort.in_force").write_text("another abort's token\n")
+    assert r.pige_cycle_abort(interp) == 0.0  # not this abort's: again
+    (tmp_path / "abort.in_force").write_text(r.ABORTED["token"] + "\n")  # the helper saw identity
+    # the operator's M428 (TCP), then an abort of their job, a second later
+    assert r.pige_cycle_abort(interp) == -1.0 and interp.params["_pige_kins_before"] == -1
+    assert r.pige_cycle_abort(interp) == -1.0

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from property_budget import examples
 
 from pige_sym.measurements.decimal_fields import MAX_DIGITS, WINDOW, field_ends, parse_decimal_fields
 from pige_sym.options import strict_float
@@ -46,7 +47,7 @@ ALPHABET = "0123456789.+-eE \t"  # no separators: each generated text is one fie
 field_text = st.text(alphabet=ALPHABET, max_size=24)
 
 
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=examples(400), deadline=None)
 @given(st.lists(field_text, min_size=1, max_size=30))
 def test_random_numeric_text_matches_strict_float(fields) -> None:
     assert_bit_exact(fields)
@@ -59,7 +60,7 @@ written = st.one_of(doubles.map(repr), doubles.map(lambda x: f"{x:.17g}"), doubl
                     st.tuples(st.integers(-10**19, 10**19), st.integers(-30, 30)).map(lambda p: f"{p[0]}e{p[1]:+03d}"))
 
 
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=examples(400), deadline=None)
 @given(st.lists(written, min_size=1, max_size=30))
 def test_numbers_as_programs_write_them(fields) -> None:
     assert_bit_exact(fields)

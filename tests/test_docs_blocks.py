@@ -9,6 +9,13 @@ that they did not. Every command must succeed: the script
 (:func:`testdata.strict_script`) checks the status of every top-level command, so ``a && b`` fails when ``a``
 fails (``set -e`` alone lets it pass), and a failure names the page and line.
 
+The pages' ``pige`` commands run in children of a fork server (``tests/fork_server.py``, one per module) that
+imported NumPy, SciPy, matplotlib, SQLAlchemy and pige_sym once: the scratch ``.venv/bin/pige`` is its shim,
+bash still runs every line as pasted, and each command still starts from a fresh state with its own argv,
+folder, environment, stdin/stdout/stderr and exit status; what the server cannot serve exactly runs the real
+console script (``tests/test_fork_server.py`` compares the two).  The slow test on another processor does not
+use it.
+
 A block that cannot run here (it needs a serial port, a controller, another terminal) is marked on the
 line before its fence with ``<!-- not-run: reason -->``; the reason is required. Pages added later are
 covered without touching this file. Plain ```` ``` ```` fences are output or file contents, not run.
@@ -34,12 +41,14 @@ import os
 import re
 import subprocess
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from fork_server import ForkServer, started
 
-from testdata import changed_files, checkout_files, scratch_checkout, strict_script
+from testdata import changed_files, checkout_files, scratch_checkout, scratch_env, strict_script
 
 ROOT = Path(__file__).resolve().parents[1]
 NOT_RUN = re.compile(r"^<!--\s*not-run:\s*(\S.*?)\s*-->$")
@@ -133,12 +142,14 @@ def pages() -> list[Path]:
     return [p for p in sorted((ROOT / "docs").glob("*.md")) if shell_blocks(p.read_text(encoding="utf-8"))]
 
 
-def run_page(page: Path, folder: Path, pycache: Path, processor: int | None = None) -> subprocess.CompletedProcess[str]:
+def run_page(page: Path, folder: Path, pycache: Path, processor: int | None = None,
+             server: ForkServer | None = None) -> subprocess.CompletedProcess[str]:
     """Run a page's runnable blocks and its quoted ``$`` commands in page order in ``folder`` (a scratch layout of
     the checkout's root, :func:`testdata.scratch_checkout`; bytecode under ``pycache``); each one's output starts
     with a line :data:`MARK` of its first line number.  With ``processor`` (a seed) every Python they start
-    answers eigen-problems as another processor could (``tests/processor_site``)."""
-    env = scratch_checkout(folder, pycache)
+    answers eigen-problems as another processor could (``tests/processor_site``).  With a fork ``server`` its
+    ``pige`` commands run in children of that server (:mod:`fork_server`: the imports paid once)."""
+    env = scratch_checkout(folder, pycache, server)
     if processor is not None:
         env["PYTHONPATH"] = os.pathsep.join(x for x in (str(folder / "tests" / "processor_site"),
                                                          env.get("PYTHONPATH")) if x)
@@ -157,6 +168,15 @@ def pycache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     session's scratch ``PYTHONPYCACHEPREFIX`` when conftest set one, else a folder of this module's."""
     session = os.environ.get("PYTHONPYCACHEPREFIX")
     return Path(session) if session and Path(session).is_dir() else tmp_path_factory.mktemp("docs-pycache")
+
+
+@pytest.fixture(scope="module")
+def pige_server(tmp_path_factory: pytest.TempPathFactory, pycache: Path) -> Iterator[ForkServer]:
+    """One fork server for the pages' ``pige`` commands (:mod:`fork_server`), stopped (and its CPU counted) when
+    the module ends; started with a scratch layout's environment (the pages' differs only where it may)."""
+    home = tmp_path_factory.mktemp("fork-server")
+    with started(home, scratch_env(home, pycache)) as server:
+        yield server
 
 
 def test_blocks_and_markers_are_found() -> None:
@@ -226,15 +246,20 @@ def test_the_scratch_layout_keeps_what_the_blocks_write_out_of_the_checkout(tmp_
 
 
 @pytest.mark.parametrize("page", pages(), ids=lambda p: p.name)
-def test_every_shell_block_of_the_page_runs_as_pasted(page: Path, tmp_path: Path, pycache: Path) -> None:
+def test_every_shell_block_of_the_page_runs_as_pasted(page: Path, tmp_path: Path, pycache: Path,
+                                                     pige_server: ForkServer) -> None:
     if not (Path(sys.executable).parent / "pige").exists():
         pytest.skip("needs the pige console script (make venv)")
     before = checkout_files()
-    done = run_page(page, tmp_path, pycache)
+    served = pige_server.counts()[0]
+    done = run_page(page, tmp_path, pycache, server=pige_server)
     assert done.returncode == 0, done.stdout[-2000:] + "\n--- stderr ---\n" + done.stderr[-3000:]
     assert not changed_files(before, checkout_files()), f"{page.name}'s blocks changed the checkout"
     assert any(pycache.rglob("pige_sym/**/*.pyc")), "the blocks' bytecode did not go to the scratch folder"
     _check_quotes(page, done.stdout)
+    runs = [b.text for b in shell_blocks(page.read_text(encoding="utf-8")) if b.not_run is None]
+    if re.search(r"^\s*pige ", "\n".join(runs), re.M):
+        assert pige_server.counts()[0] > served, "the page's pige commands did not run in the fork server"
 
 
 def _check_quotes(page: Path, stdout: str) -> None:

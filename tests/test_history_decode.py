@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from property_budget import examples
 
 from pige_sym.errors import SchemaRefusal
 from pige_sym.verdict.history import decode
@@ -158,7 +159,7 @@ def damaged_rows(draw: st.DrawFn) -> list[dict[str, Any]]:
     return rows
 
 
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=examples(400), deadline=None)
 @given(damaged_rows(), st.booleans())
 def test_the_fast_reader_accepts_and_refuses_what_the_element_by_element_reader_does(rows: list[dict[str, Any]],
                                                                                      light: bool) -> None:

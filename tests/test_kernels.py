@@ -312,9 +312,10 @@ def test_unsupported_machines_are_refused(code, fragment) -> None:
         build_model(code)
 
 
+@pytest.mark.slow  # CI's own stage: .ci/run runs `make check-generated`, this very command (5 s of CPU here)
 def test_check_generated_is_clean(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """`pige gen --check` of the shipped machines, in this process (SymPy already imported here; `make
-    check-generated` runs the same command in CI)."""
+    check-generated` runs the same command in CI, a stage of its own: this test runs with make test-slow)."""
     from pige_sym.cli.main import main
 
     monkeypatch.delenv("PIGE_KERNEL_DIR", raising=False)

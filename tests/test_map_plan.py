@@ -102,7 +102,15 @@ def _identify(capsys: pytest.CaptureFixture[str], csvs: list[str], axes: str, *e
     return _json(capsys, ["identify", *csvs, "--map", axes, "--map-step", f"{STEP:g}", "--json", *extra])
 
 
-@pytest.fixture(scope="module", params=list(CASES))
+#: The default suite's round trips: the AC table (Heidenhain) and the table C with a head B (LinuxCNC, both sides of
+#: the machine); the fork head (Fanuc, its inner axis mapped with the stylus at three tools: 5.5 s of CPU) and the
+#: BC table (Siemens) run with ``make test-slow`` (every dialect's map programs are still written and read back by
+#: ``test_one_program_per_setup_in_every_dialect``, the fork head's among them).
+SLOW_TRIPS = (FORK, BC)
+
+
+@pytest.fixture(scope="module", params=[pytest.param(m, marks=pytest.mark.slow) if m in SLOW_TRIPS else m
+                                        for m in CASES])
 def case(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     machine = request.param
     dialect, extra = CASES[machine]

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from property_budget import examples
 
 from pige_sym.errors import PigeError
 from pige_sym.nc.dialects import get_dialect
@@ -111,7 +112,7 @@ def _summary(blocks: list | str) -> list | str:
              b.dwell_s, b.incremental_axes, _words(b)) for b in blocks]
 
 
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(400), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(programs())
 def test_batch_and_full_path_read_the_same_blocks(prog):
     dialect, text = prog
@@ -127,7 +128,7 @@ def _program(text: str, dialect: str, fast: bool) -> Program | None:
     return Program("p", blocks, get_dialect(dialect), interp.axes)
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(300), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(programs(), st.lists(st.floats(-0.2, 0.2, allow_nan=False), min_size=5, max_size=5),
        st.integers(0, 2**31))
 def test_batch_and_line_by_line_rewrites_are_identical(prog, shift, seed):

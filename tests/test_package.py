@@ -78,6 +78,9 @@ def _pige(installed: dict[str, Path], cwd: Path, *args: str) -> subprocess.Compl
         "HOME": str(home), "XDG_CACHE_HOME": str(home / "cache"), "XDG_DATA_HOME": str(home / "data"),
         "PYTHONDONTWRITEBYTECODE": "1", "MPLBACKEND": "Agg",
     })
+    if os.environ.get("PYTHONPYCACHEPREFIX"):  # the suite's bytecode folder (make test): never the installation,
+        env.pop("PYTHONDONTWRITEBYTECODE")  # and the libraries' bytecode is there already
+        env["PYTHONPYCACHEPREFIX"] = os.environ["PYTHONPYCACHEPREFIX"]
     cwd.mkdir(parents=True, exist_ok=True)
     return subprocess.run(
         [str(installed["venv"] / "bin" / "pige"), *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=300

@@ -257,7 +257,13 @@ def test_the_commands_tell_the_whole_story(tmp_path, capsys) -> None:
         identify(m, projection="x")
 
 
-def test_the_probe_demo_finds_the_truth(tmp_path, capsys) -> None:
+def test_the_probe_demo_finds_the_truth(tmp_path, capsys, monkeypatch) -> None:
+    """The demo's answer and its compensated part; its report is made without figures (test_report_print draws and
+    checks a probe report's)."""
+    import pige_sym.report.html as page
+
+    monkeypatch.setattr(page, "draw_figures", lambda rep, folder: [])
+    monkeypatch.setattr(page, "draw_report_figures", lambda data, folder: [])
     assert main(["demo", "--instrument", "sphere-probe", "--out", str(tmp_path / "demo")]) == 0
     out = capsys.readouterr().out
     assert "within" in out and "standard errors of its estimate: yes" in out

@@ -470,19 +470,24 @@ def test_head_programs_read_back_and_run_on_the_virtual_machine(tmp_path, machin
         assert abs(result.value(name) - truth[name]) <= 4 * result.std[i] + 0.3, name
 
 
-@pytest.mark.parametrize("machine", [FORK, MIXED])
-def test_the_virtual_machines_standard_errors_are_honest(tmp_path, machine) -> None:
+@pytest.mark.parametrize(("machine", "logs", "low", "high"), [
+    (FORK, 40, 0.7, 1.35), (MIXED, 40, 0.7, 1.35),  # default suite: the first 40 logs (measured 0.93-1.11, 0.75-1.08)
+    pytest.param(FORK, 100, 0.8, 1.25, marks=pytest.mark.slow),  # the study (make test-slow): 13 s of CPU
+    pytest.param(MIXED, 100, 0.8, 1.25, marks=pytest.mark.slow),
+])
+def test_the_virtual_machines_standard_errors_are_honest(tmp_path, machine, logs, low, high) -> None:
     """Over 100 logs of pige's own virtual machine (13-pose cone, 1 µm contact noise) the errors divided by the
-    reported standard errors spread 0.94–1.10 (fork head) and 1.01–1.08 (table C + head B)."""
+    reported standard errors spread 0.94–1.10 (fork head) and 1.01–1.08 (table C + head B); over the first 40 (the
+    default suite; the spread of 40 draws has a standard error of 0.11) 0.93–1.11 and 0.75–1.08."""
     z = []
     program = _vm_program(machine, "siemens", 12)  # the same program for every log
-    for seed in range(100):
+    for seed in range(logs):
         _, _, m = _vm_log(tmp_path, machine, "siemens", seed, points=12, noise_um=1.0, program=program)
         r = identify(m)
         truth = CASES[machine]["truth"]
         z.append([(r.value(n) - truth[n]) / r.std[i] for i, n in enumerate(r.parameters)])
     spread = np.std(np.array(z), axis=0)
-    assert np.all((spread > 0.8) & (spread < 1.25)), np.round(spread, 2)
+    assert np.all((spread > low) & (spread < high)), np.round(spread, 2)
 
 
 def test_the_head_program_is_refused_when_edited_unsafely() -> None:
@@ -518,9 +523,15 @@ def test_the_head_program_is_refused_when_edited_unsafely() -> None:
 
 
 @pytest.mark.parametrize("machine", [FORK, MIXED])
-def test_the_commands_tell_the_head_story(tmp_path, capsys, machine) -> None:
+def test_the_commands_tell_the_head_story(tmp_path, capsys, monkeypatch, machine) -> None:
+    """The chain of commands on a head, ending with the demo, whose report is made without its figures (what this
+    test reads is the demo's printed answer; test_words draws a head demo's report and reads its page)."""
+    import pige_sym.report.html as page
     from pige_sym.cli.main import main
     from pige_sym.measurements.rtest import read_measurement
+
+    monkeypatch.setattr(page, "draw_figures", lambda rep, folder: [])
+    monkeypatch.setattr(page, "draw_report_figures", lambda data, folder: [])
 
     prog, log, csv = tmp_path / "probe.ngc", tmp_path / "probe.txt", tmp_path / "probe.csv"
     common = ["--machine", machine, "--sphere", "100,20,60", "--sphere-radius", "12.7", "--stylus-radius", "1.5",

@@ -30,6 +30,17 @@ PLACEHOLDER = re.compile(r"\b(PROGRAM\w*|FILES?|PARAMS|TOL\.json|AFTER\.csv|NEXT
                          r"|<[a-z][a-z ]*>")
 
 
+@pytest.fixture(autouse=True)
+def _figures_not_drawn(monkeypatch: pytest.MonkeyPatch) -> None:
+    """These tests read the pages' commands and words, and run the commands: the figures, 60 % of a report's CPU
+    (drawn, embedded and checked by test_report.py, test_report_print.py and test_maps.py), are left out of the
+    reports made here (the pages' figure slots empty; every command and sentence unchanged)."""
+    import pige_sym.report.html as page
+
+    monkeypatch.setattr(page, "draw_figures", lambda rep, folder: [])
+    monkeypatch.setattr(page, "draw_report_figures", lambda data, folder: [])
+
+
 def _commands(page: str) -> list[str]:
     return [html.unescape(c) for c in re.findall(r'<code class="cmd">(.*?)</code>', page, flags=re.S)]
 

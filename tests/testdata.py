@@ -13,9 +13,13 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
+
+if TYPE_CHECKING:
+    from fork_server import ForkServer
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
@@ -132,19 +136,11 @@ def strict_script(blocks: list[tuple[str, int, str]]) -> str:
 CACHES = frozenset({".git", ".venv", "__pycache__", ".pytest_cache", ".hypothesis", ".mypy_cache", ".ruff_cache"})
 
 
-def scratch_checkout(folder: Path, pycache: Path) -> dict[str, str]:
-    """Lay ``folder`` out like the checkout's root for commands pasted from the docs, so that they cannot write
-    into the checkout, and return their environment.
-
-    ``.venv`` is a link to this interpreter's venv (its ``pige``); ``examples`` and ``tests`` are copies (a
-    command writing beside an example writes into the copy).  The environment puts ``.venv/bin`` first on
-    ``PATH``, the history and the generated kernels in ``folder`` (never the user's), and the bytecode of every
-    Python the commands start under ``pycache`` (``PYTHONPYCACHEPREFIX``: never beside the checkout's sources;
-    one folder a test module shares, so its pages compile pige once).
-    """
-    (folder / ".venv").symlink_to(Path(sys.executable).parent.parent)
-    for name in ("examples", "tests"):
-        shutil.copytree(REPO / name, folder / name, ignore=shutil.ignore_patterns(*CACHES))
+def scratch_env(folder: Path, pycache: Path) -> dict[str, str]:
+    """The environment of commands pasted in the scratch layout ``folder`` (:func:`scratch_checkout`): this
+    environment with ``folder/.venv/bin`` first on ``PATH``, the history and the generated kernels in ``folder``
+    (never the user's), and the bytecode of every Python the commands start under ``pycache``
+    (``PYTHONPYCACHEPREFIX``: never beside the checkout's sources)."""
     env = {k: v for k, v in os.environ.items() if k not in {"PIGE_HISTORY_DB", "PIGE_KERNEL_DIR",
                                                               "PYTHONDONTWRITEBYTECODE"}}
     env["PATH"] = f"{folder / '.venv' / 'bin'}{os.pathsep}{env.get('PATH', '')}"
@@ -152,6 +148,33 @@ def scratch_checkout(folder: Path, pycache: Path) -> dict[str, str]:
     env["PIGE_KERNEL_DIR"] = str(folder / "kernels")
     env["PYTHONPYCACHEPREFIX"] = str(pycache)
     return env
+
+
+def scratch_checkout(folder: Path, pycache: Path, server: ForkServer | None = None) -> dict[str, str]:
+    """Lay ``folder`` out like the checkout's root for commands pasted from the docs, so that they cannot write
+    into the checkout, and return their environment (:func:`scratch_env`; ``pycache``: one folder a test module
+    shares, so its pages compile pige once).
+
+    ``.venv`` is a link to this interpreter's venv (its ``pige``); ``examples`` and ``tests`` are copies (a
+    command writing beside an example writes into the copy).  With a fork ``server``
+    (:class:`fork_server.ForkServer`) ``.venv`` is a folder of links to the venv's entries instead, and its
+    ``bin/pige`` the server's shim: the same venv, whose ``pige`` commands the server runs.
+    """
+    venv = Path(sys.executable).parent.parent
+    if server is None:
+        (folder / ".venv").symlink_to(venv)
+    else:
+        (folder / ".venv" / "bin").mkdir(parents=True)
+        for entry in venv.iterdir():
+            if entry.name != "bin":
+                (folder / ".venv" / entry.name).symlink_to(entry)
+        for entry in (venv / "bin").iterdir():
+            if entry.name != "pige":
+                (folder / ".venv" / "bin" / entry.name).symlink_to(entry)
+        server.write_shim(folder / ".venv" / "bin" / "pige")
+    for name in ("examples", "tests"):
+        shutil.copytree(REPO / name, folder / name, ignore=shutil.ignore_patterns(*CACHES))
+    return scratch_env(folder, pycache)
 
 
 def checkout_files() -> dict[str, tuple[int, int]]:

@@ -27,9 +27,8 @@ def _run_target(args: argparse.Namespace) -> int:
     from pige_sym.codegen.machine_code import parse_machine_code
     from pige_sym.codegen.targets import load_target
     from pige_sym.errors import InputError
-    from pige_sym.files import atomic_write_text, check_output
+    from pige_sym.files import atomic_write_text, check_output, check_output_folder
 
-    target = load_target(args.target)
     if args.check or args.shipped:
         option = "--check" if args.check else "--shipped"
         raise InputError(f"{option} is for the numpy kernels, not --target {args.target}")
@@ -43,6 +42,8 @@ def _run_target(args: argparse.Namespace) -> int:
     out_dir = Path(args.out or ".")
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"--out {out_dir} is not a directory: give the folder the files go into")
+    check_output_folder(out_dir, what="--out")  # a dangling link or a read-only folder before SymPy's seconds
+    target = load_target(args.target)
     rendered = {}
     for code in codes:
         for fname, text in target.render(parse_machine_code(code), args.name).items():
@@ -58,7 +59,6 @@ def _run_target(args: argparse.Namespace) -> int:
 
 
 def _run_numpy(args: argparse.Namespace) -> int:
-    from pige_sym.codegen.emit import render_module, same_code, write_module
     from pige_sym.codegen.machine_code import parse_machine_code
     from pige_sym.kernels import cache_dir, generated_dir, in_checkout
 
@@ -77,11 +77,15 @@ def _run_numpy(args: argparse.Namespace) -> int:
     structures = [parse_machine_code(c) for c in codes]
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"--out {out_dir} is not a directory: give the folder the kernels go into")
+    if not args.check:  # every path before SymPy's seconds of derivation, and before any file is written
+        for st in structures:
+            _refuse_foreign(out_dir / f"{st.module_name}.py", args.force)
+    from pige_sym.codegen.emit import render_module, same_code, write_module  # SymPy
+
     status = 0
     for st in structures:
         path = out_dir / f"{st.module_name}.py"
         if not args.check:
-            _refuse_foreign(path, args.force)
             print(f"wrote {write_module(st, out_dir)}")
             continue
         if not path.exists():

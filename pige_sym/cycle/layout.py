@@ -7,7 +7,8 @@ Everything the cycle adds lives in one folder beside the INI, ``pige_cycle/``::
     pige_cycle/values.hal.previous  the file as it was before the last entry (M451 P2)
     pige_cycle/python/              the remap's Python (toplevel.py, remap.py): runs inside LinuxCNC's task
     pige_cycle/ngc/                 the remaps' NGC procedures (pige_m451.ngc, pige_m452.ngc, pige_on_abort.ngc)
-    pige_cycle/run/                 the current run's generated procedures (pige_cycle_probe/_restore.ngc)
+    pige_cycle/run/                 the current run's generated procedures (pige_cycle_probe/_restore.ngc); after
+                                    an abort, abort.in_force (the mode found seen in force: linuxcnc_remap)
     pige_cycle/runs/<id>/           one folder per run: request, program, probe log, results, messages, log
     pige_cycle/proposal.json        the last proposal (M451 P1, M452), entered by M451 P2
     pige_cycle/journal.jsonl        one line per measuring run and per entry

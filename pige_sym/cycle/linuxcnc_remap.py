@@ -28,10 +28,10 @@ suspends the abort handler half-way and leaves ``o<pige_cycle_abort>`` unrun whe
 the handler twice for one abort and drop what the first queued between the two (an interpreter error in MDI: task's
 ``EMC_ABORT_INTERPRETER_ERROR_MDI``, then ``EMC_ABORT_TASK_EXEC_ERROR``, which clears the queue first;
 src/emc/task/emctaskmain.cc): so every abort within ``REASSERT_S`` of the first puts the mode back again until
-``motion.switchkins-type`` shows it.  And what the handler queues after such an error can wait behind the aborted
-interpreter until the next mode change drops it (``emcTaskSetMode`` calls ``emcTaskAbort``): so
-``o<pige_cycle_abort>`` also sends the value through LinuxCNC's command channel, from a process of its own
-(:data:`PUT_BACK`).
+``motion.switchkins-type`` shows it, at that abort or to the helper below (:data:`IN_FORCE`).  And what the
+handler queues after such an error can wait behind the aborted interpreter until the next mode change drops it
+(``emcTaskSetMode`` calls ``emcTaskAbort``): so ``o<pige_cycle_abort>`` also sends the value through LinuxCNC's
+command channel, from a process of its own (:data:`PUT_BACK`).
 
 The prepare and analyse steps run in the *epilog* of the inner call, as a generator that yields
 ``INTERP_EXECUTE_FINISH`` while pige's process runs: the interpreter stays responsive (Esc, E-stop, the GUI's
@@ -228,10 +228,13 @@ def _start(command, run, step):
     return proc
 
 
-#: when the first abort of a cycle came (time.monotonic()): the aborts that follow within REASSERT_S put the
-#: kinematics mode back again until it shows, after that none does (module docstring)
+#: when the first abort of a cycle came (time.monotonic(), "at") and its token: the aborts that follow within
+#: REASSERT_S put the kinematics mode back again until it shows, after that none does (module docstring)
 ABORTED: dict = {}
 REASSERT_S = 10.0
+#: the command-channel helper (:data:`PUT_BACK`) writes the abort's token here once ``motion.switchkins-type`` shows
+#: the mode: an abort after that (of the operator's own job, in a mode chosen since) puts nothing back
+IN_FORCE = os.path.join(ROOT, "run", "abort.in_force")
 
 
 def pige_cycle_abort(self, *args):
@@ -240,8 +243,9 @@ def pige_cycle_abort(self, *args):
 
     A float always: an O-word procedure that returns nothing leaves ``#<_value>`` 0, an int is taken for an error.
     The mode to put back is the one the cycle found (``#<_pige_kins_before>``, -1 once ``o<pige_restore>`` ran);
-    once ``motion.switchkins-type`` shows it, or ``REASSERT_S`` after the cycle's first abort, nothing more is put
-    back: a later abort (of the operator's own program, in a mode chosen since) never switches the kinematics.
+    once ``motion.switchkins-type`` shows it (now, or as the helper saw it since: :data:`IN_FORCE`), or
+    ``REASSERT_S`` after the cycle's first abort, nothing more is put back: a later abort (of the operator's own
+    program, in a mode chosen since) never switches the kinematics.
     """
     proc = RUNNING.pop("proc", None)
     if proc is not None and proc.poll() is None:
@@ -252,15 +256,25 @@ def pige_cycle_abort(self, *args):
     except Exception:  # no cycle ran since LinuxCNC started
         return -1.0
     first = ABORTED.setdefault("at", time.monotonic())
-    if found < 0 or _switchkins(self) == found or time.monotonic() - first > REASSERT_S:
+    token = ABORTED.setdefault("token", f"{os.getpid()}-{time.time_ns()}")
+    if found < 0 or _switchkins(self) == found or _seen_in_force(token) or time.monotonic() - first > REASSERT_S:
         self.params["_pige_kins_before"] = -1
         ABORTED.clear()
         return -1.0
     out = _switch_output()
     if out is not None and emccanon is not None:  # what M68 E<out> Q<found> queues
         emccanon.SET_AUX_OUTPUT_VALUE(out, float(found))
-    _put_back_through_the_command_channel(found, getattr(self, "pige_run", None) or os.path.join(ROOT, "runs"))
+    _put_back_through_the_command_channel(found, getattr(self, "pige_run", None) or os.path.join(ROOT, "runs"), token)
     return float(found)
+
+
+def _seen_in_force(token):
+    """True when the helper of this abort (``token``) saw the mode in force (:data:`IN_FORCE`)."""
+    try:
+        with open(IN_FORCE, encoding="utf-8") as f:
+            return f.read().strip() == token
+    except OSError:
+        return False
 
 
 def _switch_output():
@@ -275,40 +289,53 @@ def _switch_output():
 #: run by ``python3 -c`` (LinuxCNC's Python, its ``linuxcnc`` module) as a process of its own, arguments: the N of
 #: motion.analog-out-N, the switchkins type to put back, the log file.  It waits until task has handled the abort
 #: (interpreter idle, motion queue empty, in position), then, unless the output shows the type already, sends
-#: EMC_MOTION_SET_AOUT through LinuxCNC's command channel (task takes it in MDI, MANUAL and E-stop; not in AUTO)
+#: EMC_MOTION_SET_AOUT through LinuxCNC's command channel (task takes it in MDI, MANUAL and E-stop; not in AUTO).
+#: Once it has seen AUTO it sends nothing (an operator's later mode change is not its to undo) and only watches
+#: until the output shows the type (the handler's own set) or 10 s pass: its note says which, and after how long.
+#: Once the output shows the type it writes the abort's token into the file IN_FORCE (renamed into place)
 PUT_BACK = """
-import sys, time, linuxcnc
-n, found, log = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
+import os, sys, time, linuxcnc
+n, found, log, in_force, token = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3], sys.argv[4], sys.argv[5]
 s, c = linuxcnc.stat(), linuxcnc.command()
-end, sent, why = time.monotonic() + 10.0, 0, "timed out"
+t0 = time.monotonic()
+end, sent, auto, why = t0 + 10.0, 0, False, "timed out"
 while time.monotonic() < end:
     time.sleep(0.05)
     s.poll()
+    auto = auto or s.task_mode == linuxcnc.MODE_AUTO
     if abs(s.aout[n] - found) < 1e-9:
-        why = "in force"
+        why = f"in force after {time.monotonic() - t0:.2f} s"
         break
-    if s.task_mode == linuxcnc.MODE_AUTO:
-        why = "AUTO mode: task takes no analog output command"
-        break
-    if s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0 and s.inpos and sent < 3:
+    if not auto and s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0 and s.inpos and sent < 3:
         c.set_analog_output(n, found)
         c.wait_complete(2)
         sent += 1
+try:  # a name of its own: the two helpers of one E-stop (the E-stop, its reset) write at once
+    if why.startswith("in force"):
+        with open(f"{in_force}.{os.getpid()}.new", "w") as f:
+            f.write(token + "\\n")
+        os.replace(f"{in_force}.{os.getpid()}.new", in_force)
+except OSError as exc:
+    why += f" (not noted for the next abort: {exc})"
+if auto:
+    why += " in AUTO mode (task takes no analog output command there: none sent)"
 with open(log, "a") as f:
     f.write(f"{time.strftime('%Y-%m-%dT%H:%M:%S')} analog-out-{n:02d} {found:g}: {why}, sent {sent}\\n")
 """
 
 
-def _put_back_through_the_command_channel(found, folder):
+def _put_back_through_the_command_channel(found, folder, token):
     """After an abort, the kinematics mode ``found`` also through LinuxCNC's command channel (:data:`PUT_BACK`, a
     process of its own: task is not held up): ``M68`` queued by the abort handler can wait behind the aborted
     interpreter and be dropped by the next mode change (after an interpreter error in MDI, measured: the kill).
-    Its note goes to ``abort.log`` in ``folder`` (the aborted run's folder)."""
+    Its note goes to ``abort.log`` in ``folder`` (the aborted run's folder), the abort's ``token`` to
+    :data:`IN_FORCE` once the mode shows."""
     try:
         out = _switch_output()
         if out is None:
             return
-        subprocess.Popen(["python3", "-c", PUT_BACK, str(out), str(found), os.path.join(folder, "abort.log")],
+        subprocess.Popen(["python3", "-c", PUT_BACK, str(out), str(found), os.path.join(folder, "abort.log"),
+                          IN_FORCE, token],
                          cwd=CONFIG, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                          start_new_session=True)
     except Exception:  # never in the way of LinuxCNC's abort

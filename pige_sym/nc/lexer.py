@@ -55,6 +55,7 @@ _ISO = re.compile(
     + r"|(?P<paren>\([^()]*\))"
     rf"|(?P<word>(?P<letter>[A-Z])[ \t]*(?P<num>{NUMBER}))(?![eE][-+]?\d|\.|\d)"
     rf"|(?P<bad>[A-Z][ \t]*{NUMBER}(?:[eE][-+]?\d+|\.)?)"
+    r"|(?P<others>[^A-Z;(\s\"]{2,})"  # where no other token can start: one "other" token per character
     r"|(?P<other>.)",
     re.IGNORECASE,
 )
@@ -123,6 +124,9 @@ class Token(NamedTuple):
         return cached
 
 
+_new = tuple.__new__  # a Token from all its fields, without the keyword handling of its generated __new__
+
+
 def _number(text: str, column: int) -> float:
     value = float(text)
     if not math.isfinite(value):  # pragma: no cover - the grammar has no exponent
@@ -160,6 +164,9 @@ def tokenize(line: str, *, siemens: bool) -> list[Token]:
             append(Token("call", m.group(), pos, end, key=m.group("cname").upper()))
         elif kind == "name":
             append(Token("name", m.group(), pos, end, key=m.group().upper()))
+        elif kind == "others":  # a macro expression's run of #, digits, brackets and operators (Fanuc IF[...])
+            for k, ch in enumerate(m.group(), pos):
+                append(_new(Token, ("other", ch, k, k + 1, ch, None, -1, -1, "")))
         elif kind == "bad":
             raise LexError(pos, f"malformed number in {m.group().strip()!r} (exponents such as 1e400 "
                            "and numbers with two points are not G-code)")

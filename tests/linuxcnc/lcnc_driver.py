@@ -299,6 +299,25 @@ def run(job: dict) -> dict:
     return out
 
 
+def program_start(self: Driver, step: dict) -> dict:
+    """The program ``file`` run in AUTO, not waited for (the op ``program_start``, :meth:`Driver.mdi_start`'s
+    counterpart): returns once the interpreter has left idle (or 10 s); ``watch`` as there."""
+    self.mode(linuxcnc.MODE_AUTO)
+    self.started = time.time()
+    self.at_start = {pin: hal.get_value(pin) for pin in step.get("watch", [])}
+    self.cmd.program_open(os.path.abspath(step["file"]))
+    self.cmd.wait_complete(10)
+    self.cmd.auto(linuxcnc.AUTO_RUN, 0)  # not wait_complete: task holds the run command until the program ends
+    try:
+        self.wait(lambda s: s.interp_state != linuxcnc.INTERP_IDLE, 10, f"program {step['file']} start")
+    except RuntimeError:
+        pass  # a program refused at once leaves the interpreter idle: its error is recorded
+    return {}
+
+
+Driver.program_start = program_start  # type: ignore[attr-defined]
+
+
 def main() -> int:
     with open(os.environ["PIGE_LCNC_JOB"]) as f:
         job = json.load(f)

@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from datetime import datetime
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -66,15 +67,25 @@ def correction_of(run: Any) -> dict[str, float]:
     """What pige printed to enter after ``run`` (module docstring) [µm, µrad]; 0 where nothing."""
     if run.kind == "checkup":
         return {n: float(v) for n, v in ((run.checkup or {}).get("to_enter") or {}).items() if v is not None}
-    from pige_sym.compensation.weighing import entered_values
-
     names = [p for p, v in zip(run.parameters, run.values, strict=True) if math.isfinite(float(v))]
     idx = [run.parameters.index(n) for n in names]
     cov = np.asarray(run.covariance, dtype=float)[np.ix_(idx, idx)]
     if not names or not np.isfinite(cov).all() or (np.diag(cov) <= 0).any():
         return {}
-    entered = entered_values(np.asarray(run.values, dtype=float)[idx], cov)
-    return {n: float(v) for n, v in zip(names, entered, strict=True)}
+    x = np.ascontiguousarray(np.asarray(run.values, dtype=float)[idx])
+    return dict(_weighed(tuple(names), x.tobytes(), np.ascontiguousarray(cov).tobytes()))
+
+
+@lru_cache(maxsize=64)
+def _weighed(names: tuple[str, ...], values: bytes, covariance: bytes) -> tuple[tuple[str, float], ...]:
+    """:func:`~pige_sym.compensation.weighing.entered_values` of one full calibration (its values and covariance as
+    bytes), once: every check-up after it asks for the same correction (a command's chart and segment starts, a
+    history's check-ups one after another)."""
+    from pige_sym.compensation.weighing import entered_values
+
+    x = np.frombuffer(values, dtype=float)
+    entered = entered_values(x, np.frombuffer(covariance, dtype=float).reshape(x.size, x.size))
+    return tuple((n, float(v)) for n, v in zip(names, entered, strict=True))
 
 
 @dataclass
