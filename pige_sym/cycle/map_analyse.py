@@ -163,12 +163,14 @@ def map_proposal(ctx: Context, req: Request, run: Path, result: Any, fingerprint
                  ) -> tuple[Proposal, dict[str, Any]]:
     """The proposal and the predicted tool-point error (module docstring, step 4)."""
     from pige_sym.compensation.controllers import entered_for_controller
+    from pige_sym.compensation.controllers.entry_checks import check_parameters
     from pige_sym.compensation.controllers.scope import tool_point_summary
     from pige_sym.cycle.analyse import machine_parameters, value_changes
     from pige_sym.cycle.proposal import FORMAT, proposed_values
 
     status(run, "weigh")
     entered = entered_for_controller(machine_parameters(result, req.offset), "weighed")
+    check_parameters(entered)  # the physical bounds every controller entry is held to (the change limit: M451 P2)
     scope = tool_point_summary(entered, "linuxcnc")
     predicted = {"over": scope.judged_on, "now": scope.before.to_dict() if scope.before else None,
                  "after": scope.complete.to_dict() if scope.complete else None}
