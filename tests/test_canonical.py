@@ -212,3 +212,14 @@ def test_the_identify_json_carries_the_basis_and_reads_back_as_a_parameter_file(
     (tmp_path / "p.json").write_text(text)
     params = read_params_file(tmp_path / "p.json", machine=AC, allow_missing=True)
     assert "EY0A" in params.set_to_zero
+
+
+def test_a_coefficient_at_a_rounding_tie_rounds_the_same_whichever_side_round_off_puts_it() -> None:
+    """Exact dyadic data give exact ties (93/128 = 0.7265625 at 6 digits): round-off must not decide them."""
+    from pige_sym.identification.canonical import rounded
+
+    for tie, up in ((0.7265625, 0.726563), (-0.7265625, -0.726563), (123456.5, 123457.0), (2.5e-7, 2.5e-7)):
+        assert {rounded(tie * (1 + e)) for e in (-1e-14, 0.0, 1e-14)} == {up}
+    assert rounded(0.7265624) == 0.726562 and rounded(0.7265626) == 0.726563  # away from a tie: plain rounding
+    assert rounded(0.7265625 + 1e-11, 2e-11) == rounded(0.7265625 - 1e-11, 2e-11) == 0.726563  # the given round-off
+    assert rounded(0.7265625 - 1e-11) == 0.726562  # beyond the round-off of 0.73 (1e-12 of it): plain rounding

@@ -42,8 +42,9 @@ singular value at ``NULL_RTOL`` or ``RANK_RTOL``, a weight at :data:`PIVOT_RTOL`
 a coefficient at half a unit of its last kept digit.  With round-off of the assumed 1e-12 a kept digit changes
 with a probability below 2/:data:`MARGIN` per coefficient, and the 3 printed digits (rounded from the kept ones)
 about a thousand times less often; real differences between BLAS are nearer 1e-15.  An exact tie at such a
-boundary (a coefficient exactly ``x.xxxxx5`` in its 7th digit) is decided by round-off: no fixed rounding avoids
-that, and the structures of real machines (ratios of lever arms) have not produced one.
+boundary (a coefficient exactly ``x.xxxxx5`` in its 7th digit, as exact dyadic data give) is not left to round-off:
+a coefficient within its round-off (``delta``, at least :data:`ROUNDOFF` of itself) of half a unit of its last kept
+digit is taken as that tie and rounded away from zero (:func:`rounded`).
 """
 
 from __future__ import annotations
@@ -210,6 +211,10 @@ def rounded(c: float, delta: float = 0.0) -> float:
     decimals = SIGNIFICANT - 1 - math.floor(math.log10(abs(c)))
     if delta > 0:
         decimals = min(decimals, -math.ceil(math.log10(delta * MARGIN)))
+    units = abs(c) * 10.0 ** decimals  # |c| in units of its last kept digit
+    tie = math.floor(units) + 0.5
+    if abs(units - tie) <= max(delta, ROUNDOFF * abs(c)) * 10.0 ** decimals:  # a tie, up to round-off
+        return float(round(math.copysign(math.ceil(tie) * 10.0 ** -decimals, c), max(decimals, 0) + 1))
     return float(round(c, decimals))
 
 
