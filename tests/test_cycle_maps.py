@@ -22,6 +22,7 @@ from test_cycle_runtime import FakeHal, messages, request
 from pige_sym.cli.main import main
 from pige_sym.cycle.layout import Layout
 from pige_sym.cycle.runtime import run_step
+from pige_sym.errors import InputError
 
 TRUTH = "EY0A=15,EZ0A=-10,EB0A=60,EC0A=-45,EX0C=12,EY0C=-8,EA0C=40,EB0C=-30"
 MODULE = "pige_xyzac_trt"
@@ -169,7 +170,7 @@ def test_a_map_in_force_is_read_back_and_the_proposal_adds_to_it(maps_config, pi
     from pige_sym.cycle.context import read_context
     from pige_sym.cycle.map_analyse import map_changes
 
-    pige_hal.values[f"{MODULE}.map-c-nodes"] = 8.0
+    pige_hal.values |= {f"{MODULE}.map-c-nodes": 8.0, f"{MODULE}.map-c-step": 45.0, f"{MODULE}.map-c-full-turn": 1.0}
     pige_hal.values[f"{MODULE}.exc-02"] = 1.25
     ctx = read_context(maps_config.config)
     assert ctx.live and ctx.in_force[f"{MODULE}.exc-02"] == 1.25
@@ -185,6 +186,9 @@ def test_a_map_in_force_is_read_back_and_the_proposal_adds_to_it(maps_config, pi
     changes = map_changes(ctx, entered)
     assert changes[f"{MODULE}.exc-02"] == 0.5  # in force 1.25 + 0.5: the setups were probed with it acting
     assert changes[f"{MODULE}.map-c-nodes"] == 0.0
+    pige_hal.values[f"{MODULE}.map-c-nodes"] = 12.0  # a map on another grid (30 deg) in force: refused
+    with pytest.raises(InputError, match="a map of C on another grid is in force"):
+        map_changes(read_context(maps_config.config), entered)
 
 
 def test_safe_order_sets_the_node_count_to_zero_first_and_undoes_in_reverse(maps_config):

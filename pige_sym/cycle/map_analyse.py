@@ -36,6 +36,7 @@ from pige_sym.cycle.context import Context, Request
 from pige_sym.cycle.messages import RunMessages, pack, relative_log
 from pige_sym.cycle.proposal import Proposal
 from pige_sym.cycle.steplog import RunLog, status
+from pige_sym.errors import InputError
 
 RECORD = "map_setup.json"
 
@@ -136,7 +137,7 @@ def map_changes(ctx: Context, entered: Any) -> dict[str, float]:
     Raises
     ------
     InputError
-        An identified grid that is not the map test's.
+        An identified grid that is not the map test's, or a map in force on another grid.
     """
     from pige_sym.codegen.targets.linuxcnc_pins import map_pin, map_slot_names
     from pige_sym.compensation.controllers.tables.linuxcnc_kins_maps import component_maps
@@ -151,6 +152,11 @@ def map_changes(ctx: Context, entered: Any) -> dict[str, float]:
         g = check_grid(grids, cm.axis, cm.axis_maps.grid.angles_deg, cm.axis_maps.grid.full_turn)
         targets = grid_targets(module, g)
         in_force = now[f"{module}.map-{g.axis.lower()}-nodes"] != 0.0
+        if in_force and any(abs(now[pin] - v) > 1e-9 for pin, v in targets.items()):
+            grid = ", ".join(f"{pin.rsplit('-', 1)[-1]} {now[pin]:g}" for pin in targets)
+            raise InputError(f"a map of {g.axis} on another grid is in force ({grid}); the map test adds to a map on "
+                             f"its own grid ({g.step_deg:g} deg, {g.nodes} angles) only: install with that map's grid, "
+                             f"or set map-{g.axis.lower()}-nodes 0 in values.hal with LinuxCNC stopped")
         out |= {pin: v - now[pin] for pin, v in targets.items()}
         for stem, values in zip(map_slot_names(cm.axis), cm.slots, strict=True):
             for node, v in enumerate(np.nan_to_num(values)):
