@@ -401,8 +401,11 @@ class _OncePort:
 def test_random_bytes_through_the_whole_acquisition_end_with_a_summary(tmp_path_factory, junk) -> None:
     program = load_test_program(AC, "cone-frustum", points=3)
     out = tmp_path_factory.mktemp("acq") / "a.csv"
+    # the stop comes from the reconnection bound: every reopening feeds the whole junk again, so the run reads it
+    # twice and stops after 0.1 s of silence, not after waiting out a time bound (0.3 s per example, 12 examples)
     s = acquire("fake", program, out, raw_log=None, settings=PortSettings(timeout_s=0.05),
-                options=AcquisitionOptions(reconnect_timeout_s=0.3), opener=lambda: _OncePort(junk))
+                options=AcquisitionOptions(reconnect_timeout_s=0.3, max_reconnects=1, retry_s=0.05),
+                opener=lambda: _OncePort(junk))
     assert not s.completed and s.stop_reason and s.rows_written == 0
     _tally("acquisition stream", "stopped with a reason")
 
