@@ -315,7 +315,7 @@ def test_an_interrupt_while_the_commands_are_loaded_ends_with_130(monkeypatch, c
 
     cli = importlib.import_module("pige_sym.cli.main")  # the module (pige_sym.cli.main is also the function)
 
-    def import_broken_by_the_interrupt() -> None:
+    def import_broken_by_the_interrupt(command: str | None = None) -> None:
         try:
             os.kill(os.getpid(), signal.SIGINT)
             time.sleep(0.01)

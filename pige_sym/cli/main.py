@@ -48,8 +48,16 @@ examples (a first session; every command has --help with more):
 exit status: 0 success, 1 the command ran but failed (not in tolerance, ...), 2 bad input (one line)."""
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``pige`` with every subcommand."""
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser of ``pige`` with every subcommand, or with only ``command``'s.
+
+    Parameters
+    ----------
+    command : str, optional
+        A command word (``identify``, ``import-probe``): only its module is imported and only its parser built
+        (the same parser as in the whole one; a command's parser is most of the 35 ms the whole one takes).  The
+        top-level help and an unknown word need the whole parser (None).
+    """
     parser = _Parser(
         prog="pige",
         description=("Identify and compensate the rotary-axis PIGEs of five-axis machines from an R-test, "
@@ -63,9 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
-    from pige_sym.cli.registry import register_all
+    from pige_sym.cli.registry import module_of, register_all
 
-    register_all(sub)
+    register_all(sub, None if command is None else module_of(command))
     return parser
 
 
@@ -130,7 +138,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     with _Interrupts() as interrupts:
         try:
-            parser = build_parser()  # imports every command's module: seconds on a loaded machine
+            parser = build_parser(_command_word(argv))  # imports the command's module: seconds on a loaded machine
             if not argv:  # `pige` alone: what it can do
                 parser.print_help()
                 return 0
@@ -142,6 +150,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return _interrupted(argv[0] if argv else "")
             raise
         return _run(args, interrupts)
+
+
+def _command_word(argv: Sequence[str]) -> str | None:
+    """The command ``argv`` names, when its first word is one (then only its parser is built), else None."""
+    from pige_sym.cli.registry import module_of
+
+    return argv[0] if argv and module_of(argv[0]) is not None else None
 
 
 def _run(args: argparse.Namespace, interrupts: _Interrupts) -> int:

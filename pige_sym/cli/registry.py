@@ -43,12 +43,26 @@ def _plain_parsers(parser: argparse.ArgumentParser) -> None:
                 _plain_parsers(sub)
 
 
-def register_all(subparsers: argparse._SubParsersAction) -> None:
-    """Import every command module of :mod:`pige_sym.cli` and let it register itself."""
-    for info in sorted(pkgutil.iter_modules([str(Path(__file__).parent)]), key=lambda i: i.name):
-        if info.name.startswith("_") or info.name in _NOT_COMMANDS:
+def command_modules() -> list[str]:
+    """The command modules of :mod:`pige_sym.cli`, in alphabetical order; module ``a_b`` registers command
+    ``a-b`` (tests/test_docs_cli.py holds every module to it)."""
+    return sorted(info.name for info in pkgutil.iter_modules([str(Path(__file__).parent)])
+                  if not info.name.startswith("_") and info.name not in _NOT_COMMANDS)
+
+
+def module_of(command: str) -> str | None:
+    """The module that registers ``command`` (a word of the command line), or None when no module does."""
+    name = command.replace("-", "_")
+    return name if name.replace("_", "-") == command and name in command_modules() else None
+
+
+def register_all(subparsers: argparse._SubParsersAction, only: str | None = None) -> None:
+    """Import every command module of :mod:`pige_sym.cli` (or only the module ``only``) and let it register
+    itself."""
+    for name in command_modules():
+        if only is not None and name != only:
             continue
-        module = importlib.import_module(f"{__package__}.{info.name}")
+        module = importlib.import_module(f"{__package__}.{name}")
         module.register(subparsers)
     for choice in subparsers._choices_actions:
         choice.help = plain_text(choice.help)
