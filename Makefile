@@ -20,6 +20,7 @@ $(STAMP): pyproject.toml setup.py
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev]'
+	$(if $(TEST_ENV),$(PY) tests/bytecode_prefix.py $(VENV)/pycache $(VENV)/lib)
 	touch $(STAMP)
 
 venv: $(STAMP)  ## create .venv and install pige_sym with dev tools
@@ -37,6 +38,8 @@ check-generated: $(STAMP)  ## regenerate shipped kernels in memory and fail on a
 # first).  Under PYTHONDONTWRITEBYTECODE (set on some build machines) the suite's bytecode (its own, the pige commands'
 # and the libraries') goes to .venv/pycache and is kept from one run to the next: never beside the sources, and not
 # compiled again by every process (collection: 13.6 -> 7.0 s CPU).  A PYTHONPYCACHEPREFIX of your own wins.
+# `make venv` links the bytecode pip compiled for the venv's packages into it (tests/bytecode_prefix.py): the first
+# run on a fresh clone no longer compiles NumPy, SciPy, matplotlib and SymPy again.
 TEST_OPTS := -n $(TEST_JOBS) --dist loadfile --no-loadscope-reorder
 TEST_ENV  := $(if $(and $(PYTHONDONTWRITEBYTECODE),$(if $(PYTHONPYCACHEPREFIX),,x)),env -u PYTHONDONTWRITEBYTECODE PYTHONPYCACHEPREFIX=$(CURDIR)/$(VENV)/pycache)
 
