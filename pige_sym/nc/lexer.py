@@ -124,9 +124,6 @@ class Token(NamedTuple):
         return cached
 
 
-_new = tuple.__new__  # a Token from all its fields, without the keyword handling of its generated __new__
-
-
 def _number(text: str, column: int) -> float:
     value = float(text)
     if not math.isfinite(value):  # pragma: no cover - the grammar has no exponent
@@ -166,7 +163,7 @@ def tokenize(line: str, *, siemens: bool) -> list[Token]:
             append(Token("name", m.group(), pos, end, key=m.group().upper()))
         elif kind == "others":  # a macro expression's run of #, digits, brackets and operators (Fanuc IF[...])
             for k, ch in enumerate(m.group(), pos):
-                append(_new(Token, ("other", ch, k, k + 1, ch, None, -1, -1, "")))
+                append(Token("other", ch, k, k + 1, ch))
         elif kind == "bad":
             raise LexError(pos, f"malformed number in {m.group().strip()!r} (exponents such as 1e400 "
                            "and numbers with two points are not G-code)")
