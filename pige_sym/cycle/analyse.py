@@ -158,12 +158,10 @@ def probed_prediction(params: Any, angles_deg: Any, entered: dict[str, float]) -
 def full_proposal(ctx: Context, req: Request, run: Path, result: Any, log: RunLog,
                   fingerprint: dict[str, str], m_angles: Any) -> tuple[Proposal, dict[str, Any]]:
     """The proposal of ``P1`` and the predicted tool-point error (module docstring, step 4)."""
-    from datetime import datetime, timezone
-
     from pige_sym.compensation.controllers import entered_for_controller
     from pige_sym.compensation.controllers.scope import tool_point_summary
     from pige_sym.compensation.stage import format_controller
-    from pige_sym.cycle.proposal import FORMAT, proposed_values
+    from pige_sym.cycle.proposal import new_proposal
 
     status(run, "weigh")
     params = machine_parameters(result, req.offset)
@@ -180,11 +178,8 @@ def full_proposal(ctx: Context, req: Request, run: Path, result: Any, log: RunLo
         except InputError as exc:  # a change beyond --max-change: the proposal says so, M451 P2 refuses it
             text = f"refused: {exc}"
         log.add("pige compensate --controller linuxcnc (the values in force as --current)", text)
-    entries = proposed_values(ctx.setup, ctx.in_force, value_changes(ctx, entered))
-    not_entered = [f"{n} {entered.values.get(n, 0.0):+.3g}" for n in result.parameters if n not in held]
-    created = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    return Proposal(FORMAT, created, run.name, "full", ctx.settings.machine, ctx.setup.module, fingerprint, entries,
-                    not_entered=not_entered, predicted_um=predicted), predicted
+    return new_proposal(ctx, run.name, "full", entered, value_changes(ctx, entered), result.parameters, fingerprint,
+                        predicted), predicted
 
 
 def store_full(ctx: Context, req: Request, run: Path, csv: Path, m: Any, result: Any) -> int:

@@ -172,7 +172,7 @@ def map_proposal(ctx: Context, req: Request, run: Path, result: Any, fingerprint
     from pige_sym.compensation.controllers.entry_checks import check_parameters
     from pige_sym.compensation.controllers.scope import tool_point_summary
     from pige_sym.cycle.analyse import machine_parameters, value_changes
-    from pige_sym.cycle.proposal import FORMAT, proposed_values
+    from pige_sym.cycle.proposal import new_proposal
 
     status(run, "weigh")
     entered = entered_for_controller(machine_parameters(result, req.offset), "weighed")
@@ -181,12 +181,8 @@ def map_proposal(ctx: Context, req: Request, run: Path, result: Any, fingerprint
     predicted = {"over": scope.judged_on, "now": scope.before.to_dict() if scope.before else None,
                  "after": scope.complete.to_dict() if scope.complete else None}
     changes = value_changes(ctx, entered) | map_changes(ctx, entered)
-    entries = proposed_values(ctx.setup, ctx.in_force, changes)
-    held = set(ctx.setup.held())
-    not_entered = [f"{n} {entered.values.get(n, 0.0):+.3g}" for n in result.result.parameters if n not in held]
-    created = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    return Proposal(FORMAT, created, run.name, "map", ctx.settings.machine, ctx.setup.module, fingerprint, entries,
-                    not_entered=not_entered, predicted_um=predicted), predicted
+    return new_proposal(ctx, run.name, "map", entered, changes, result.result.parameters, fingerprint,
+                        predicted), predicted
 
 
 def conclude_map(ctx: Context, req: Request, run: Path, log: RunLog, info: dict[str, Any],

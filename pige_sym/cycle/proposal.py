@@ -82,6 +82,20 @@ def proposed_values(setup: KinematicsSetup, in_force: dict[str, float],
     return out
 
 
+def new_proposal(ctx: Any, run_name: str, kind: str, entered: Any, changes: dict[str, float],
+                 parameters: list[str], fingerprint: dict[str, str], predicted: dict[str, Any]) -> Proposal:
+    """The proposal of a measuring run (``kind`` ``full`` for ``M451 P1``, ``map`` for a map test): the changes
+    (pin -> change) as :func:`proposed_values`, the identified ``parameters`` the kinematics do not hold named with
+    their weighed value in ``entered`` (never entered), made now."""
+    from datetime import timezone
+
+    held = set(ctx.setup.held())
+    not_entered = [f"{n} {entered.values.get(n, 0.0):+.3g}" for n in parameters if n not in held]
+    return Proposal(FORMAT, datetime.now(timezone.utc).isoformat(timespec="seconds"), run_name, kind,
+                    ctx.settings.machine, ctx.setup.module, fingerprint,
+                    proposed_values(ctx.setup, ctx.in_force, changes), not_entered=not_entered, predicted_um=predicted)
+
+
 def limit_of(unit: str, limits: Limits) -> float:
     """The change limit in ``unit`` (mm, µm or µrad; a map grid's pins, deg and n, have none: they say where the
     values lie)."""
