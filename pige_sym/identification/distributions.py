@@ -16,6 +16,7 @@ dof 1 to 1e8 and tail probabilities down to 1e-7, the chi-square tail to 1e-12):
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from statistics import NormalDist
 
 _EPS = 1e-15
@@ -59,8 +60,10 @@ def t_sf(dof: float, t: float) -> float:
     return tail if t >= 0 else 1.0 - tail
 
 
+@lru_cache(maxsize=4096)
 def t_quantile(dof: float, p: float) -> float:
-    """The ``p`` quantile of Student's t on ``dof`` degrees of freedom (``0 < p < 1``)."""
+    """The ``p`` quantile of Student's t on ``dof`` degrees of freedom (``0 < p < 1``); kept per ``(dof, p)`` (a
+    chart asks for the same few quantiles at every check-up, each a few hundred continued-fraction terms)."""
     if not 0.0 < p < 1.0:
         raise ValueError(f"probability {p} outside (0, 1)")
     if p < 0.5:

@@ -94,9 +94,10 @@ def log_likelihood(series: Series, tau2: np.ndarray) -> np.ndarray:
         return out
     order = np.argsort(series.segments, kind="stable")
     seg = series.segments[order]
-    starts = np.flatnonzero(np.r_[True, seg[1:] != seg[:-1]])
+    starts = np.flatnonzero(np.concatenate(([True], seg[1:] != seg[:-1])))
     x = series.values[order]
-    x = x - np.repeat(np.add.reduceat(x, starts) / np.diff(np.r_[starts, x.size]), np.diff(np.r_[starts, x.size]))
+    counts = np.diff(np.append(starts, x.size))
+    x = x - np.repeat(np.add.reduceat(x, starts) / counts, counts)
     v = tau2[:, None] + series.variances[order][None, :]
     w = 1.0 / v
     sw = np.add.reduceat(w, starts, axis=1)
@@ -129,13 +130,17 @@ def _kernels() -> np.ndarray:
     return np.exp(f - f.max(axis=1, keepdims=True))
 
 
+@lru_cache(maxsize=8)
 def _prior(size: int) -> np.ndarray:
     """``π(τ²|ν₀, s₀²)`` on a grid of ``size`` points (probabilities, each row sums to 1), rows (ν₀, s₀²) with the
-    scales every :data:`SCALE_EVERY` points away from the grid's ends, shape=(ν₀·S, G)."""
+    scales every :data:`SCALE_EVERY` points away from the grid's ends, shape=(ν₀·S, G); read-only (kept per
+    ``size``: a check-up and a chart ask again for the grids of the same sizes)."""
     scales = np.arange(2 * SCALE_EVERY, max(size - 2 * SCALE_EVERY, 2 * SCALE_EVERY + 1), SCALE_EVERY)
     offset = np.clip(np.arange(size)[None, :] - scales[:, None], -_KERNEL_REACH, _KERNEL_REACH) + _KERNEL_REACH
     p = _kernels()[:, offset].reshape(-1, size)
-    return p / np.maximum(p.sum(axis=1, keepdims=True), 1e-300)
+    p = p / np.maximum(p.sum(axis=1, keepdims=True), 1e-300)
+    p.flags.writeable = False
+    return p
 
 
 @dataclass
@@ -221,7 +226,8 @@ def posteriors(targets: list[Series], population: list[Series]) -> dict[str, Pos
     """
     tau2 = grid_for(population)
     prior = _prior(tau2.size)  # (θ, G)
-    informative = [s for s in population if s.dof > 0]
+    dof = {id(s): s.dof for s in population}
+    informative = [s for s in population if dof[id(s)] > 0]
     logl = {id(s): log_likelihood(s, tau2) for s in informative}
     marginal = {}
     for k, v in logl.items():  # log Σ_g π(g|θ) L(g), θ = (ν₀, s₀²) flattened
@@ -240,5 +246,5 @@ def posteriors(targets: list[Series], population: list[Series]) -> dict[str, Pos
         fleet = [s for s in others if s.machine_id != t.machine_id]
         out[t.name] = Posterior(tau2, w / w.sum(), int(t.values.size), t.dof, len(others) - len(fleet),
                                 len({s.machine_id for s in fleet}), _runs(fleet), len(others),
-                                sum(s.dof for s in others), float(hyper @ nu))
+                                sum(dof[id(s)] for s in others), float(hyper @ nu))
     return out
