@@ -20,6 +20,7 @@ stem) is refused as a whole (:func:`stylus_elevation_deg`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -81,13 +82,22 @@ def _point_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.asarray(np.linalg.norm(a + t[:, None] * d - p, axis=1))
 
 
+@lru_cache(maxsize=16)
+def _linspace(stop: float, samples: int) -> np.ndarray:
+    """``samples + 1`` points evenly from 0 to ``stop``, read-only (:func:`blocked` samples every leg and the shank
+    with the same few: a plan asks for them at every candidate contact)."""
+    out = np.linspace(0.0, stop, samples + 1)
+    out.flags.writeable = False
+    return out
+
+
 def blocked(path: list[np.ndarray], axis: np.ndarray, centre: np.ndarray, stem_dir: np.ndarray, stem: Stem,
             sphere_radius_mm: float, stylus_radius_mm: float, samples: int = 8) -> str | None:
     """``"stem"`` or ``"table"`` when the stylus along ``path`` (stylus-centre points, legs sampled) hits it."""
-    legs = [a + np.linspace(0.0, 1.0, samples + 1)[:, None] * (b - a) for a, b in zip(path[:-1], path[1:],
-                                                                                   strict=True)]
-    tips = np.vstack(legs)
-    shank = np.linspace(0.0, stem.shank_mm, samples + 1)
+    points = np.array(path)
+    a = points[:-1, None, :]
+    tips = (a + _linspace(1.0, samples)[None, :, None] * (points[1:, None, :] - a)).reshape(-1, 3)
+    shank = _linspace(stem.shank_mm, samples)
     stylus = (tips[:, None, :] + shank[None, :, None] * axis).reshape(-1, 3)
     below = (stylus - centre) @ stem_dir
     if below.max() > stem.length_mm - stylus_radius_mm - stem.margin_mm:
