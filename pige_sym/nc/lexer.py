@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import re
+from functools import lru_cache
 from typing import NamedTuple
 
 from pige_sym.errors import LexError as LexError
@@ -134,11 +135,28 @@ def _number(text: str, column: int) -> float:
 def tokenize(line: str, *, siemens: bool) -> list[Token]:
     """Tokens of one line (without its line ending), comments and whitespace included.
 
+    A line read again (a program's log statement, ``ENDIF``, ``STOPRE``: the same text at every pose) gets the
+    same tokens from a cache of the latest :data:`REMEMBERED_LINES` (tokens are immutable; the list is new).
+
     Raises
     ------
     LexError
         Unterminated comment/string, exponent notation (``1e400``), a number with two points.
     """
+    return list(_remembered(line, siemens))
+
+
+#: Lines whose tokens :func:`tokenize` keeps (least recently read dropped first).
+REMEMBERED_LINES = 512
+
+
+@lru_cache(maxsize=REMEMBERED_LINES)
+def _remembered(line: str, siemens: bool) -> tuple[Token, ...]:
+    return tuple(_tokens(line, siemens))
+
+
+def _tokens(line: str, siemens: bool) -> list[Token]:
+    """:func:`tokenize` itself."""
     pattern = _SIEMENS if siemens else _ISO
     tokens: list[Token] = []
     append = tokens.append
