@@ -468,16 +468,23 @@ def test_incomplete_trigger_columns_are_refused(tmp_path) -> None:
         read_sensitivities(bad)
 
 
-@pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc", "siemens", "heidenhain"])
-def test_nine_contacts_at_200_poses_still_end_past_the_overtravel_as_written(dialect) -> None:
-    """Regression: on the 50° ring the written decimals (coordinates and angles) took over 2e-4 mm off the
-    overtravel and the read-back refused the program; the planned target now carries a rounding margin."""
+@pytest.fixture(scope="module")
+def plan_200():
+    """Nine contacts at each of 200 poses of the cone frustum: (set-up, trajectory, plan), planned once for the
+    dialects that write it."""
     import dataclasses
 
     setup = dataclasses.replace(SETUP, contacts=9)
     traj = make_trajectory(AC, "cone-frustum", points=200)
-    check = verify_probe_program(render_probe_program(plan_probing(setup, traj.angles_deg), dialect), dialect, setup,
-                                 ("A", "C"))
+    return setup, traj, plan_probing(setup, traj.angles_deg)
+
+
+@pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc", "siemens", "heidenhain"])
+def test_nine_contacts_at_200_poses_still_end_past_the_overtravel_as_written(dialect, plan_200) -> None:
+    """Regression: on the 50° ring the written decimals (coordinates and angles) took over 2e-4 mm off the
+    overtravel and the read-back refused the program; the planned target now carries a rounding margin."""
+    setup, traj, plan = plan_200
+    check = verify_probe_program(render_probe_program(plan, dialect), dialect, setup, ("A", "C"))
     assert check.poses == traj.angles_deg.shape[0]
     assert setup.overtravel_mm <= check.min_overtravel_mm < setup.overtravel_mm + 0.003
 
