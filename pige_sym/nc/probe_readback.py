@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -98,8 +99,16 @@ def probe_operations(text: str, dialect: str, path: str = "<program>",
 
     The statements that set the controller state must be exactly what pige writes for the state the header
     states (``rotary_axes`` default: those named by the header's pivots); every guarded and confirming move
-    must carry exactly pige's check block.
+    must carry exactly pige's check block.  A program read again (a study runs one program on many virtual
+    machines) is parsed once: the latest four are kept, and each call gets operations of its own.
     """
+    ops = _operations(text, dialect, path, None if rotary_axes is None else tuple(rotary_axes))
+    return [Operation(o.kind, dict(o.words), o.line, o.axis, o.expected, o.window) for o in ops]
+
+
+@lru_cache(maxsize=4)
+def _operations(text: str, dialect: str, path: str, rotary_axes: tuple[str, ...] | None) -> tuple[Operation, ...]:
+    """:func:`probe_operations` itself."""
     lines = _lines(text, dialect)
     axes = rotary_axes if rotary_axes is not None else _header_axes(text, path)
     fixed = _fixed_blocks(lines, dialect, path, axes)
@@ -120,7 +129,7 @@ def probe_operations(text: str, dialect: str, path: str = "<program>",
             i += 1
         if ops[-1].kind in ("rapid", "guard", "confirm", "probe"):
             pos = np.array([ops[-1].words.get(a, pos[k]) for k, a in enumerate("XYZ")])
-    return ops
+    return tuple(ops)
 
 
 def _header_axes(text: str, path: str) -> tuple[str, ...]:
