@@ -25,6 +25,7 @@ probing and macro statements): a program it refuses is refused.
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from functools import lru_cache
@@ -249,8 +250,9 @@ def _guard_follows(lines: list[str], i: int, dialect: str) -> bool:
 
 def _segment_distance(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
     d = b - a
-    t = 0.0 if not d.any() else float(np.clip((c - a) @ d / (d @ d), 0.0, 1.0))
-    return float(np.linalg.norm(a + t * d - c))
+    t = 0.0 if not d.any() else float(min(max((c - a) @ d / (d @ d), 0.0), 1.0))
+    e = a + t * d - c
+    return math.sqrt(float(e @ e))  # np.linalg.norm's own sum, without its dispatch (one call per move)
 
 
 def _overtravel(a: np.ndarray, b: np.ndarray, c: np.ndarray, r: float) -> float:
@@ -326,6 +328,7 @@ class _Replay:
         self.tcp = setup.controller.kinematics == "tcp"
         self.work = np.full(3, np.nan)  # program coordinates (the machine's, but in TCP kinematics)
         self.frame = (np.eye(3), np.zeros(3))
+        self.plain_frame = True  # self.frame is (I, 0): a move's machine position is its program coordinates
         self.head = np.zeros(3)  # a head's offset of the stylus centre from the program's point (CONVENTIONS §7)
 
     def step(self, op: Operation) -> None:
@@ -359,7 +362,7 @@ class _Replay:
 
     def _machine(self, work: np.ndarray) -> np.ndarray:
         """Machine position of program coordinates (TCP kinematics: the nominal table motion of the pose)."""
-        if np.array_equal(self.frame[0], np.eye(3)) and not self.frame[1].any():
+        if self.plain_frame:
             return work + self.head  # keeps a coordinate not yet programmed unknown, and only that one
         return self.frame[0] @ work + self.frame[1]
 
@@ -377,6 +380,7 @@ class _Replay:
         if self.tcp:
             rot, t = table_frames(self.s.machine, self.angles[None], self.s.pivots)
             self.frame = (rot[0], t[0])
+            self.plain_frame = bool(np.array_equal(rot[0], np.eye(3)) and not t[0].any())
             self.pos = self._machine(self.work)
         if self.poses and self.poses[-1] == [0, 0]:
             self.poses.pop()  # a step of a positioning (TCP kinematics turn in steps)
