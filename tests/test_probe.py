@@ -24,7 +24,7 @@ from pige_sym.measurements.rtest import read_measurement
 from pige_sym.measurements.sphere_fit import fit_centres
 from pige_sym.model.trajectories import make_trajectory
 from pige_sym.nc.probe_program import ProbeSetup, plan_probing
-from pige_sym.nc.probe_readback import verify_probe_program
+from pige_sym.nc.probe_readback import probe_operations, verify_probe_program
 from pige_sym.nc.probe_render import render_probe_program
 from pige_sym.nc.probe_safety import ProbeController
 from pige_sym.simulation.probe_machine import ProbeMachine, run_probe_program
@@ -487,6 +487,31 @@ def test_nine_contacts_at_200_poses_still_end_past_the_overtravel_as_written(dia
     check = verify_probe_program(render_probe_program(plan, dialect), dialect, setup, ("A", "C"))
     assert check.poses == traj.angles_deg.shape[0]
     assert setup.overtravel_mm <= check.min_overtravel_mm < setup.overtravel_mm + 0.003
+
+
+def test_a_program_read_again_gives_the_same_operations_and_tokens_of_its_own() -> None:
+    """The operations of the latest programs and the tokens of the latest lines are kept (a study runs one program
+    many times): a second read equals a first read from scratch, and what a caller changes in its copy does not
+    reach the next caller."""
+    import dataclasses
+
+    from pige_sym.nc import lexer, probe_readback
+
+    traj = make_trajectory(AC, "cone-frustum", points=12)
+    text = render_probe_program(plan_probing(SETUP, traj.angles_deg, traj.description), "fanuc")
+    probe_readback._operations.cache_clear()
+    lexer._remembered.cache_clear()
+    first = probe_operations(text, "fanuc", "<program>", ("A", "C"))
+    fresh = [dataclasses.astuple(op) for op in first]
+    first[0].words["X"] = 1e9
+    first.pop()
+    again = probe_operations(text, "fanuc", "<program>", ("A", "C"))
+    assert [dataclasses.astuple(op) for op in again] == fresh
+    line = next(ln for ln in text.splitlines() if ln.startswith("DPRNT"))
+    tokens = lexer.tokenize(line, siemens=False)
+    expected = list(tokens)
+    tokens.clear()
+    assert lexer.tokenize(line, siemens=False) == expected and len(expected) > 20
 
 
 @pytest.mark.slow  # a study: 40 diagnoses (19 s of CPU); make test-slow runs it
