@@ -21,7 +21,6 @@ import time
 from pathlib import Path
 
 import pytest
-from test_history import postgres_url  # noqa: F401 - the throw-away PostgreSQL server fixture
 
 from pige_sym.cli.main import main
 from pige_sym.errors import FileFormatError
