@@ -49,6 +49,22 @@ def _bytecode_cache(tmp_path_factory: pytest.TempPathFactory):
     os.environ["PYTHONDONTWRITEBYTECODE"] = saved
 
 
+@pytest.fixture(scope="module")
+def chromium(tmp_path_factory: pytest.TempPathFactory):
+    """One headless Chromium for a test module's pages (``tests/chromium_pipe.py``), killed at its end (also
+    after a failure); the test is skipped without Chromium."""
+    from chromium_pipe import Browser
+
+    from testdata import CHROMIUM
+
+    if CHROMIUM is None:
+        pytest.skip("chromium is not installed (apt-get install chromium)")
+    browser = Browser(CHROMIUM, tmp_path_factory.mktemp("chromium") / "profile", timeout_s=180)
+    try:
+        yield browser
+    finally:
+        browser.close()
+
 #: The test files that cost most CPU, most first (docs/testing.md's table, measured with ``resource.getrusage``).
 #: ``make test`` hands whole files to its two processes in collection order (``--dist loadfile
 #: --no-loadscope-reorder``), each taking the next when it is done: the longest first, so that the run ends on

@@ -22,9 +22,10 @@ from pathlib import Path
 
 import pytest
 from checkup_sim import T0, TRUTH, checkup_file, checkup_program, full_calibration
+from chromium_pipe import Browser, window_viewport
 
 from pige_sym.cli.main import main
-from testdata import CHROMIUM, run_chromium
+from testdata import CHROMIUM
 
 TOL = Path(__file__).resolve().parents[1] / "examples" / "tolerances.json"
 SHIFT = {"ok": 0.0, "drifted": 2.0, "out": 10.0}
@@ -140,14 +141,16 @@ window.addEventListener('load', function () {
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt-get install chromium)")
 @pytest.mark.parametrize("verdict", list(SHIFT))
-def test_the_verdict_badge_is_visible_in_chromium(histories: dict, verdict: str, tmp_path: Path) -> None:
+def test_the_verdict_badge_is_visible_in_chromium(chromium: Browser, histories: dict, verdict: str,
+                                                   tmp_path: Path) -> None:
     """The first screen's verdict of the history is a coloured badge with readable text (WCAG contrast ≥ 4.5), and
     the page, its check-up tables too, fits a 1000 px window."""
     page = tmp_path / "page.html"
     page.write_text(histories[verdict]["html"].replace("</body>", BADGE_PROBE + "</body>"), encoding="utf-8")
-    run = run_chromium(tmp_path, "--window-size=1000,800", "--dump-dom", page.as_uri(), timeout_s=180)
-    found = re.search(r'<pre id="pige-badge">([^<]*)</pre>', run.stdout)
-    assert found, run.stderr[-2000:]
+    with chromium.load(page.as_uri(), window_viewport(1000, 800)) as loaded:  # as --window-size=1000,800
+        dom = loaded.dom()
+    found = re.search(r'<pre id="pige-badge">([^<]*)</pre>', dom)
+    assert found, chromium.stderr()
     got = dict(kv.split("=", 1) for kv in found.group(1).split())
     assert got["text"] == verdict.upper() and float(got["alpha"]) == 1.0, got
     assert float(got["contrast"]) >= 4.5 and int(got["width"]) > 20 and int(got["bottom"]) < 800, got

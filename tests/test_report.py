@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from chromium_pipe import Browser, window_viewport
 
 from pige_sym.cli.main import main
 from pige_sym.compensation.study import compensation_study
@@ -17,7 +18,7 @@ from pige_sym.model.trajectories import cone_frustum, figure_eight
 from pige_sym.nc.program import make_rtest_program
 from pige_sym.report import ReportData, build_report, gather_report, write_report
 from pige_sym.simulation.simulator import random_pige, simulate
-from testdata import CHROMIUM, REPO, run_chromium, simulated_probe_file
+from testdata import CHROMIUM, REPO, simulated_probe_file
 
 AC = "wC'A'bXYZ(C1)t"
 WEIRD = 'odd <b>&"name'
@@ -212,13 +213,14 @@ window.addEventListener('load', function () {
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt-get install chromium)")
-def test_renders_in_headless_chromium(built: tuple[ReportData, Path, str], tmp_path: Path) -> None:
+def test_renders_in_headless_chromium(chromium: Browser, built: tuple[ReportData, Path, str], tmp_path: Path) -> None:
     data, path, text = built
     probe = tmp_path / "probe.html"
     probe.write_text(text.replace("</body>", CHECK + "</body>"), encoding="utf-8")
-    run = run_chromium(tmp_path, "--dump-dom", probe.as_uri())
-    found = re.search(r'<pre id="pige-check">([^<]*)</pre>', run.stdout)
-    assert found, run.stderr[-2000:]
+    with chromium.load(probe.as_uri()) as page:
+        dom = page.dom()
+    found = re.search(r'<pre id="pige-check">([^<]*)</pre>', dom)
+    assert found, chromium.stderr()
     check = dict(kv.split("=", 1) for kv in found.group(1).split())
     assert int(check["images"]) == sum(len(m.figures) for m in data.measurements) + len(data.figures)
     assert check["broken"] == "0"
@@ -226,7 +228,8 @@ def test_renders_in_headless_chromium(built: tuple[ReportData, Path, str], tmp_p
     assert "answer:1" in sections and sections.count("identification:1") == 2 and sections.count("sobol:1") == 2
 
     shot = tmp_path / "shot.png"
-    run_chromium(tmp_path, f"--screenshot={shot}", "--window-size=1280,2400", path.as_uri())
+    with chromium.load(path.as_uri(), (1280, 2400)) as page:
+        page.screenshot(shot)
     assert shot.is_file() and shot.stat().st_size > 50_000
     import matplotlib.image
 
@@ -362,14 +365,15 @@ window.addEventListener('load', function () {
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt-get install chromium)")
-def test_fits_1000_px_and_the_verdict_is_on_the_first_screen(built: tuple[ReportData, Path, str],
+def test_fits_1000_px_and_the_verdict_is_on_the_first_screen(chromium: Browser, built: tuple[ReportData, Path, str],
                                                               tmp_path: Path) -> None:
     _, _, text = built
     probe = tmp_path / "layout.html"
     probe.write_text(text.replace("</body>", CHECK_LAYOUT + "</body>"), encoding="utf-8")
-    run = run_chromium(tmp_path, "--window-size=1000,800", "--dump-dom", probe.as_uri())
-    found = re.search(r'<pre id="pige-layout">([^<]*)</pre>', run.stdout)
-    assert found, run.stderr[-2000:]
+    with chromium.load(probe.as_uri(), window_viewport(1000, 800)) as page:  # as --window-size=1000,800
+        dom = page.dom()
+    found = re.search(r'<pre id="pige-layout">([^<]*)</pre>', dom)
+    assert found, chromium.stderr()
     check = {k: int(v) for k, v in (kv.split("=", 1) for kv in found.group(1).split())}
     assert check["width"] == 1000 and check["height"] >= 600, check  # a 1000 px wide, laptop-high viewport
     assert check["scroll"] <= 1000 and check["wide"] == 0, check  # no horizontal overflow

@@ -10,6 +10,9 @@ seen jointly.  Each is checked:
   collapsed ``<details>`` open;
 - the PDF Chromium prints: a PDF of pages; with ``pdftotext`` (poppler-utils) also every column heading of
   every table present (no lost column), no page that ends with a heading, no ``nan``.
+
+One Chromium serves the module (``tests/chromium_pipe.py``): each page is loaded, read and printed as the command
+line's ``--dump-dom`` and ``--print-to-pdf`` do, in a page as wide and high as ``--window-size`` gave.
 """
 
 from __future__ import annotations
@@ -20,10 +23,11 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from chromium_pipe import Browser, window_viewport
 
 from pige_sym.cli.main import main
 from pige_sym.simulation.simulator import random_pige
-from testdata import CHROMIUM, REPO, run_chromium, simulated_probe_file
+from testdata import CHROMIUM, REPO, simulated_probe_file
 
 PDFTOTEXT = shutil.which("pdftotext")
 TOLERANCES = REPO / "examples" / "tolerances.json"
@@ -89,22 +93,23 @@ def reports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return out
 
 
-def _layout(html: Path, tmp: Path, width: int, *, printed: bool = False) -> dict[str, str]:
+def _layout(chromium: Browser, html: Path, tmp: Path, width: int, *, printed: bool = False) -> dict[str, str]:
     text = html.read_text(encoding="utf-8")
     if printed:  # the print CSS on screen, at A4's printable width (210 - 2 × 12 mm at 96 px/in)
         text = text.replace("@media print{", "@media all{")
     probe = tmp / f"layout-{width}-{printed}.html"
     probe.write_text(text.replace("</body>", LAYOUT + "</body>"), encoding="utf-8")
-    run = run_chromium(tmp, f"--window-size={width},800", "--dump-dom", probe.as_uri(), timeout_s=180)
-    found = re.search(r'<pre id="pige-layout">([^<]*)</pre>', run.stdout)
-    assert found, run.stderr[-2000:]
+    with chromium.load(probe.as_uri(), window_viewport(width, 800)) as page:
+        dom = page.dom()
+    found = re.search(r'<pre id="pige-layout">([^<]*)</pre>', dom)
+    assert found, chromium.stderr()
     return dict(kv.split("=", 1) for kv in found.group(1).split())
 
 
 @pytest.mark.parametrize("kind", ["rtest", "probe", "ballbar"])
 @pytest.mark.parametrize("width", [1000, 1400])
-def test_the_page_fits_the_window_and_leads_with_the_answer(reports, kind, width, tmp_path) -> None:
-    got = _layout(reports[kind], tmp_path, width)
+def test_the_page_fits_the_window_and_leads_with_the_answer(chromium, reports, kind, width, tmp_path) -> None:
+    got = _layout(chromium, reports[kind], tmp_path, width)
     assert int(got["width"]) == width and int(got["scroll"]) <= width, got
     assert got["wide"] == "0" and got["hidden"] == "0", got  # no overflow, no column behind a scroll bar
     assert got["broken"] == "0", got  # file names break between words only
@@ -114,16 +119,17 @@ def test_the_page_fits_the_window_and_leads_with_the_answer(reports, kind, width
 
 
 @pytest.mark.parametrize("kind", ["rtest", "probe", "ballbar"])
-def test_the_printed_page_loses_no_column_and_opens_every_detail(reports, kind, tmp_path) -> None:
-    got = _layout(reports[kind], tmp_path, 703, printed=True)
+def test_the_printed_page_loses_no_column_and_opens_every_detail(chromium, reports, kind, tmp_path) -> None:
+    got = _layout(chromium, reports[kind], tmp_path, 703, printed=True)
     assert got["wide"] == "0" and got["hidden"] == "0", got
     assert got["closed"] == "0", got
 
 
 @pytest.mark.parametrize("kind", ["rtest", "probe", "ballbar"])
-def test_the_pdf_has_every_column_and_no_heading_alone_at_a_page_bottom(reports, kind, tmp_path) -> None:
+def test_the_pdf_has_every_column_and_no_heading_alone_at_a_page_bottom(chromium, reports, kind, tmp_path) -> None:
     pdf = tmp_path / f"{kind}.pdf"
-    run_chromium(tmp_path, "--no-pdf-header-footer", f"--print-to-pdf={pdf}", reports[kind].as_uri(), timeout_s=180)
+    with chromium.load(reports[kind].as_uri()) as page:
+        page.print_pdf(pdf)  # as --print-to-pdf --no-pdf-header-footer
     data = pdf.read_bytes()
     assert data.startswith(b"%PDF") and len(re.findall(rb"/Type\s*/Page\b", data)) >= 2
     if PDFTOTEXT is None:

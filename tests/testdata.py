@@ -68,15 +68,6 @@ def load_reference(path: Path) -> tuple[dict[str, str], dict[str, np.ndarray], d
     return meta, cols, truth
 
 
-def run_chromium(tmp: Path, *args: str, timeout_s: float = 120) -> subprocess.CompletedProcess[str]:
-    """Headless chromium with a throw-away profile in ``tmp`` and ``args`` (the caller skips without it)."""
-    assert CHROMIUM is not None
-    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-           "--disable-background-networking", "--disable-component-update", "--disable-sync", "--hide-scrollbars",
-           f"--user-data-dir={tmp / 'profile'}", "--virtual-time-budget=10000", *args]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False)
-
-
 def simulated_probe_file(folder: Path, seed: int, effect: str, *extra: str) -> Path:
     """``folder/probe.csv``: a LinuxCNC probing program, the virtual machine's log of it (``seed``, ``effect``,
     ``extra`` simulate options) and its import, as a user makes them."""
