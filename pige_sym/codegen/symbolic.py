@@ -101,11 +101,11 @@ def reduce_trig(expr: sp.Expr, pairs: list[tuple[sp.Symbol, sp.Symbol]]) -> sp.E
     for c, s in pairs:
         if not expr.has(s):
             continue
-        poly = sp.Poly(expr, s)
-        out = sp.Integer(0)
-        for (deg,), coeff in poly.terms():
-            out += coeff * s ** (deg % 2) * (1 - c**2) ** (deg // 2)
-        expr = sp.expand(out)
+        reduced = []  # term by term (an expanded sum): cheaper than a Poly in s, the same polynomial
+        for term in sp.Add.make_args(expr):
+            coeff, deg = term.as_coeff_exponent(s)
+            reduced.append(coeff * s ** (deg % 2) * (1 - c**2) ** (deg // 2) if deg >= 2 else term)
+        expr = sp.expand(sp.Add(*reduced))
     return expr
 
 
