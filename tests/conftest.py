@@ -17,6 +17,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import pytest  # noqa: E402
+from pg_server import postgres_server, postgres_url  # noqa: E402, F401 - a PostgreSQL server per process
 
 
 @pytest.fixture(autouse=True, scope="session")

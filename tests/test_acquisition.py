@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from terminal import as_from_a_terminal
 
 from pige_sym.acquisition.device import (
     GaugeQueryAdapter,
@@ -390,8 +391,39 @@ def test_all_faults_at_once_over_tcp(tmp_path) -> None:
 
 
 def _acquire_cmd(url: str, out: Path) -> list[str]:
+    """``pige acquire`` of ``FAULT_RUN``'s program; a held device's silence is no stall (``--timeout`` 600 s)."""
     return [sys.executable, "-m", "pige_sym", "acquire", "--port", url, "--program", "cone-frustum", "--points", "10",
-            "--out", str(out), "--no-progress", "--timeout", "0.25"]
+            "--out", str(out), "--no-progress", "--timeout", "600"]
+
+
+def _held_device(seed: int, poses: int, out: Path) -> _Server:
+    """The virtual device of ``FAULT_RUN`` and ``seed`` over TCP, holding the line after the first ``poses`` poses.
+
+    Once the acquisition of ``out`` has opened the port (its raw log exists: it is created after the port is open,
+    and pyserial discards what arrived before the opening ended), it sends the banner and every sample before the
+    arrival at pose ``poses`` at once, then nothing more while the connection stays open (a machine held
+    mid-program): the acquisition writes exactly ``poses`` rows and cannot end by itself, so a signal sent after
+    those rows lands mid-run by construction, however loaded the machine.  No later connection comes: the
+    acquisition's ``--timeout`` (600 s) outlasts the test.
+    """
+    cfg = _config(load_test_program(AC, "cone-frustum", points=10), seed=seed)
+    dev = VirtualRTest(cfg)
+    end = int(np.nonzero(dev.pose_of_sample == poses)[0][0])
+    banner = encode_info(f"pige-rtest-device 1;sensors=3;rate_hz={cfg.rate_hz:g};program={cfg.program.description}")
+    data = banner + b"".join(dev.record(k) for k in range(end))
+    opened = default_raw_log(out)
+    sent: list[bool] = []
+
+    def hold(conn, stop) -> None:
+        while not sent and not opened.exists():
+            if stop.wait(0.005):
+                return
+        if not sent:
+            sent.append(True)
+            conn.sendall(data)
+        stop.wait()
+
+    return _Server(hold)
 
 
 def _wait_rows(path: Path, rows: int, proc: subprocess.Popen, timeout_s: float = 60.0) -> None:
@@ -411,13 +443,14 @@ def test_kill_mid_run_then_resume_gives_the_same_file(tmp_path) -> None:
     with start_virtual_device(AC, "cone-frustum", seed=seed, time_scale=300, extra_args=FAULT_RUN) as dev:
         assert acquire(dev.url, program, full, settings=FAST).completed
     part = tmp_path / "part.csv"
-    with start_virtual_device(AC, "cone-frustum", seed=seed, time_scale=30, extra_args=FAULT_RUN) as dev:
-        proc = subprocess.Popen(_acquire_cmd(dev.url, part), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        _wait_rows(part, 4, proc)
+    with _held_device(seed, 5, part) as dev:  # the device's stream up to pose 5, then held: the crash is mid-run
+        proc = subprocess.Popen(_acquire_cmd(dev.url, part), stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+        _wait_rows(part, 5, proc)
         proc.kill()  # a crash: no clean-up at all
         proc.wait()
     partial = read_measurement(part)
-    assert 4 <= partial.n_rows < 11
+    assert partial.n_rows == 5
     with open(part, "a") as fh:
         fh.write("61.3,12.5")  # a row cut in the middle by the crash
     with start_virtual_device(AC, "cone-frustum", seed=seed, time_scale=300, extra_args=FAULT_RUN) as dev:
@@ -428,17 +461,21 @@ def test_kill_mid_run_then_resume_gives_the_same_file(tmp_path) -> None:
 
 
 def test_ctrl_c_leaves_a_valid_partial_file_and_summary(tmp_path) -> None:
-    """At 15x the run takes about 7 s: the interrupt lands mid-run (at 30x a fresh clone's run once ended first)."""
+    """Ctrl-C after two rows, the device holding the line after them: the interrupt lands mid-run by construction.
+
+    The command is started with SIGINT at its default, as from a terminal: under a test runner started in the
+    background SIGINT is ignored all the way down, and the run used to go on to its end (exit 0).
+    """
     out = tmp_path / "c.csv"
-    with start_virtual_device(AC, "cone-frustum", seed=6, time_scale=15, extra_args=FAULT_RUN) as dev:
-        proc = subprocess.Popen(_acquire_cmd(dev.url, out), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                text=True)
+    with _held_device(6, 2, out) as dev:
+        proc = subprocess.Popen(as_from_a_terminal(_acquire_cmd(dev.url, out)),
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         _wait_rows(out, 2, proc)
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=30)
+        _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     m = read_measurement(out)
-    assert 2 <= m.n_rows < 11
+    assert m.n_rows == 2
     session = json.loads(summary_path(out).read_text())["sessions"][-1]
     assert session["stop_reason"].startswith("interrupted") and session["rows_written"] == m.n_rows
     assert "interrupted" in err and "rows written" in err

@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 import sqlalchemy as sa
 from checkup_sim import FREE, MACHINE, T0, TRUTH, checkup_file, checkup_program, full_calibration, pige
-from test_history import postgres_url  # noqa: F401 - the throw-away PostgreSQL server fixture
 
 from pige_sym.cli.main import main
 from testdata import refused_in_one_line

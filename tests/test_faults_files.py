@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 import pytest
-from test_history import postgres_url  # noqa: F401 - the throw-away PostgreSQL server fixture
+from terminal import as_from_a_terminal
 
 from pige_sym.cli.main import main
 from pige_sym.errors import FileFormatError
@@ -209,7 +209,8 @@ def test_an_interrupt_while_the_report_is_written_leaves_nothing_partial(inputs,
     """The signal is sent once the staged folder exists (the figures are being drawn): the run ends with status
     130, no folder, no hidden leftovers, no traceback."""
     out = tmp_path / "rep"
-    proc = subprocess.Popen([sys.executable, "-m", "pige_sym", "report", str(inputs / "run.csv"), "--out", str(out)],
+    cmd = [sys.executable, "-m", "pige_sym", "report", str(inputs / "run.csv"), "--out", str(out)]
+    proc = subprocess.Popen(as_from_a_terminal(cmd),  # SIGINT not ignored even under a runner started in background
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
     while not any("pige-partial" in p.name for p in tmp_path.iterdir()) and proc.poll() is None:

@@ -2,14 +2,10 @@
 
 from __future__ import annotations
 
-import glob
 import json
 import os
 import shutil
-import socket
 import subprocess
-import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -42,64 +38,6 @@ def _write_run(path: Path, seed: int, shift_um: float = 0.0, date: str | None = 
 
 
 # --------------------------------------------------------------------------------------------- PostgreSQL
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _pg_bin() -> Path | None:
-    found = sorted(glob.glob("/usr/lib/postgresql/*/bin/initdb"))
-    if found:
-        return Path(found[-1]).parent
-    exe = shutil.which("initdb")
-    return Path(exe).parent if exe else None
-
-
-@pytest.fixture(scope="module")
-def postgres_url() -> Iterator[str]:
-    """A throw-away PostgreSQL server on 127.0.0.1 in a temporary directory (skips when none can start)."""
-    pytest.importorskip("psycopg", reason="psycopg is not installed (pip install 'pige_sym[postgres]')")
-    bindir = _pg_bin()
-    if bindir is None:
-        pytest.skip("PostgreSQL server binaries not found (apt-get install postgresql)")
-    root = Path(tempfile.mkdtemp(prefix="pige-pg-"))
-    prefix: list[str] = []
-    if os.geteuid() == 0:  # the server refuses to run as root: run it as the postgres user
-        runuser = shutil.which("runuser")
-        try:
-            import pwd
-
-            pw = pwd.getpwnam("postgres")
-        except KeyError:
-            pytest.skip("running as root and there is no postgres user to run the server")
-        if runuser is None:
-            pytest.skip("running as root without runuser")
-        os.chown(root, pw.pw_uid, pw.pw_gid)
-        prefix = [runuser, "-u", "postgres", "--"]
-    data, port = root / "data", _free_port()
-    log = root / "server.log"
-
-    def run(*cmd: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([*prefix, *cmd], capture_output=True, text=True, timeout=120, check=False)
-
-    init = run(str(bindir / "initdb"), "-D", str(data), "-U", "pige", "-A", "trust", "--no-sync", "-E", "UTF8")
-    if init.returncode != 0:
-        shutil.rmtree(root, ignore_errors=True)
-        pytest.skip(f"initdb failed: {init.stderr.strip()[-300:]}")
-    start = run(str(bindir / "pg_ctl"), "-D", str(data), "-l", str(log), "-w", "-t", "60", "-o",
-                f"-c listen_addresses=127.0.0.1 -p {port} -k {root} -c fsync=off", "start")
-    if start.returncode != 0:
-        text = log.read_text() if log.exists() else start.stderr
-        shutil.rmtree(root, ignore_errors=True)
-        pytest.skip(f"PostgreSQL did not start: {text.strip()[-300:]}")
-    try:
-        yield f"postgresql://pige@127.0.0.1:{port}/postgres"
-    finally:
-        run(str(bindir / "pg_ctl"), "-D", str(data), "-m", "immediate", "-w", "stop")
-        shutil.rmtree(root, ignore_errors=True)
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])
