@@ -14,7 +14,7 @@
 #    8  EB0B     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : 97dc8ce929f71ace
+# input hash   : 2fd363930869c12c
 """R-test kernels for wC'B'bXYZ(C1)t (generated; do not edit — pige gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -39,7 +39,7 @@ UNITS = {'EX0B': 'um', 'EZ0B': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EA0B': 'urad',
 BASIS = ('1', 'cos(B)', 'sin(B)', 'cos(C)', 'sin(C)', 'cos(B)*cos(C)', 'cos(B)*sin(C)', 'sin(B)*cos(C)', 'sin(B)*sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = '97dc8ce929f71ace'
+GENERATOR_HASH = '2fd363930869c12c'
 
 
 def _angles(angles_deg: Any) -> np.ndarray:

@@ -14,7 +14,7 @@
 #    8  EB0B     [urad]  (zero-position error)
 #    9  EC0C     [urad]  (zero-position error)
 # sympy version: 1.14.0
-# input hash   : b8a4ac05aab7e964
+# input hash   : 5b7827f820f1a743
 """R-test kernels for wC'bXYZB(C1)t (generated; do not edit — pige gen).
 
 First-order ball-minus-nest deviation (CONVENTIONS §4) in the machine frame,
@@ -39,7 +39,7 @@ UNITS = {'EX0B': 'um', 'EZ0B': 'um', 'EX0C': 'um', 'EY0C': 'um', 'EA0B': 'urad',
 BASIS = ('1', 'cos(B)', 'sin(B)', 'cos(C)', 'sin(C)')
 SPINDLE_DIRECTION = 2
 HAS_DIRECTION_SOLVER = True
-GENERATOR_HASH = 'b8a4ac05aab7e964'
+GENERATOR_HASH = '5b7827f820f1a743'
 
 
 def _angles(angles_deg: Any) -> np.ndarray:

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_results import shared_texts
 
 from pige_sym.codegen.c_model import render_model_c
 from pige_sym.codegen.machine_code import parse_machine_code
@@ -103,11 +104,11 @@ def compile_shared(tmp: Path, sources: dict[str, str], main: str) -> ctypes.CDLL
 class Model:
     """The compiled C model of one machine, called on arrays of poses."""
 
-    def __init__(self, code: str, tmp: Path) -> None:
+    def __init__(self, code: str, tmp: Path, model_h: str) -> None:
         self.code = code
         self.kin = load_kernels(code)
         self.k = len(self.kin.ROTARY_AXES)
-        lib = compile_shared(tmp, {"model.h": render_model_c(code, "pk"), "harness.c": HARNESS}, "harness.c")
+        lib = compile_shared(tmp, {"model.h": model_h, "harness.c": HARNESS}, "harness.c")
         lib.h_inverse.argtypes = [ctypes.c_int, _D, _D, _D, _D]
         lib.h_jacobian.argtypes = [ctypes.c_int, _D, _D, _D]
         lib.h_forward.argtypes = [ctypes.c_int, _D, _D, _D, ctypes.c_int, _D, _D, _I]
@@ -139,11 +140,23 @@ class Model:
         return world, residual, steps
 
 
+def model_pk(code: str) -> dict[str, str]:
+    """The C model every harness here and in test_gen_linuxcnc_maps.py includes (prefix ``pk``)."""
+    return {"model.h": render_model_c(code, "pk")}
+
+
+def linuxcnc_files(code: str) -> dict[str, str]:
+    """The linuxcnc target's files (test_gen_linuxcnc_hal.py compiles the same)."""
+    return linuxcnc.render(parse_machine_code(code))
+
+
 @pytest.fixture(scope="module")
 def models(tmp_path_factory) -> dict[str, Model]:
     if CC is None:
         pytest.skip("no C compiler (cc/gcc)")
-    return {code: Model(code, tmp_path_factory.mktemp(f"m{i}")) for i, code in enumerate(MACHINES)}
+    headers = shared_texts(tmp_path_factory, "model_pk", list(MACHINES), model_pk)  # once per run (shared_results)
+    return {code: Model(code, tmp_path_factory.mktemp(f"m{i}"), headers[code]["model.h"])
+            for i, code in enumerate(MACHINES)}
 
 
 def random_case(kin, n: int, seed: int, *, um: float = 50.0, urad: float = 1000.0, zero: bool = True) -> tuple:
@@ -353,11 +366,11 @@ void h_pose(int tcp, const double *g_pivots, const double *errors, double tool_o
 
 @needs_cc
 @pytest.mark.parametrize("code", MACHINES)
-def test_the_component_switches_between_identity_and_the_model(tmp_path, models, code: str) -> None:
+def test_the_component_switches_between_identity_and_the_model(tmp_path, tmp_path_factory, models, code: str) -> None:
     """The .comp's pose layer, compiled alone: identity copies, TCP is the model; joints X Y Z then letters."""
     st = parse_machine_code(code)
     name = linuxcnc.default_name(st)
-    comp = linuxcnc.render(st)[f"{name}.comp"]
+    comp = shared_texts(tmp_path_factory, "linuxcnc_files", [code], linuxcnc_files)[code][f"{name}.comp"]
     begin, end = comp.index(f"/* --- {name} pose layer (no HAL) --- */"), comp.index("/* --- end of the pose layer")
     model_h = render_model_c(code, name)
     lib = compile_shared(tmp_path, {"model.h": model_h, "pose_layer.h": comp[begin:end],

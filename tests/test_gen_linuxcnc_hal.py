@@ -22,6 +22,8 @@ import tempfile
 from pathlib import Path
 
 import pytest
+from shared_results import shared_texts
+from test_gen_linuxcnc import linuxcnc_files
 
 from pige_sym.cli.main import main
 from pige_sym.codegen.emit import render_module
@@ -106,9 +108,10 @@ def compiled(tmp_path_factory) -> dict[str, Path]:
     if HALCOMPILE is None:
         pytest.skip("halcompile not installed (Debian linuxcnc-uspace-dev)")
     out: dict[str, Path] = {}
+    rendered = shared_texts(tmp_path_factory, "linuxcnc_files", list(SHIPPED_MACHINES), linuxcnc_files)  # once a run
     for code in SHIPPED_MACHINES:
         folder = tmp_path_factory.mktemp("hc")
-        for fname, text in load_target("linuxcnc").render(parse_machine_code(code)).items():
+        for fname, text in rendered[code].items():
             (folder / fname).write_text(text, encoding="utf-8")
         comp = next(folder.glob("*.comp"))
         run = subprocess.run([HALCOMPILE, "--compile", comp.name], cwd=folder, capture_output=True, text=True,

@@ -20,9 +20,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_gen_linuxcnc import compile_shared, numpy_joints, random_case
+from shared_results import shared_texts
+from test_gen_linuxcnc import compile_shared, model_pk, numpy_joints, random_case
 
-from pige_sym.codegen.c_model import MAP_SLOTS, render_model_c
+from pige_sym.codegen.c_model import MAP_SLOTS
 from pige_sym.kernels import load_kernels
 from pige_sym.model.error_motions import AxisMaps, ErrorMaps, MapGrid, axis_motions
 
@@ -84,9 +85,9 @@ _I = np.ctypeslib.ndpointer(dtype=np.int32, flags="C_CONTIGUOUS")
 class MapModel:
     """The compiled C model of one machine with its map functions."""
 
-    def __init__(self, code: str, tmp: Path) -> None:
+    def __init__(self, code: str, tmp: Path, model_h: str) -> None:
         self.kin = load_kernels(code)
-        lib = compile_shared(tmp, {"model.h": render_model_c(code, "pk"), "harness.c": HARNESS}, "harness.c")
+        lib = compile_shared(tmp, {"model.h": model_h, "harness.c": HARNESS}, "harness.c")
         lib.h_inverse.argtypes = [ctypes.c_int, _D, _D, _D, _D, _D]
         lib.h_forward.argtypes = [ctypes.c_int, _D, _D, _D, _D, _D, _I]
         lib.h_weights.argtypes = [ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_int, ctypes.c_int, _D, _I,
@@ -128,7 +129,9 @@ class MapModel:
 def models(tmp_path_factory) -> dict[str, MapModel]:
     if CC is None:
         pytest.skip("no C compiler (cc/gcc)")
-    return {code: MapModel(code, tmp_path_factory.mktemp(f"mm{i}")) for i, code in enumerate(MACHINES)}
+    headers = shared_texts(tmp_path_factory, "model_pk", list(MACHINES), model_pk)  # test_gen_linuxcnc.py's
+    return {code: MapModel(code, tmp_path_factory.mktemp(f"mm{i}"), headers[code]["model.h"])
+            for i, code in enumerate(MACHINES)}
 
 
 def kernel_motion_offset(kin, geo: dict, motions: np.ndarray, world: np.ndarray, angles: np.ndarray) -> np.ndarray:

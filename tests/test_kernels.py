@@ -415,3 +415,34 @@ def test_kernels_never_modify_the_callers_angles(shape: tuple[int, ...]) -> None
         fn(angles)
     kern.jacobian(angles, None, [120, 0, 80])
     assert np.all(angles == 30.0)
+
+
+def test_reduce_trig_is_the_polynomial_reduction_by_cos2_plus_sin2() -> None:
+    """codegen.symbolic.reduce_trig (term by term) against the reduction of a Poly in each sin written here: the same
+    expression, of degree at most 1 in each sin, and equal to the input wherever cos² + sin² = 1."""
+    import sympy as sp
+
+    from pige_sym.codegen.symbolic import reduce_trig
+
+    c1, s1, c2, s2, x, y = sp.symbols("c1 s1 c2 s2 x y", real=True)
+    pairs = [(c1, s1), (c2, s2)]
+
+    def oracle(expr: sp.Expr) -> sp.Expr:
+        expr = sp.expand(expr)
+        for c, s in pairs:
+            poly = sp.Poly(expr, s)
+            expr = sp.expand(sum((coeff * s ** (d % 2) * (1 - c**2) ** (d // 2) for (d,), coeff in poly.terms()),
+                                 sp.Integer(0)))
+        return expr
+
+    rng = np.random.default_rng(5)
+    atoms = [c1, s1, c2, s2, x, y, sp.Rational(1, 1000)]
+    for _ in range(8):
+        expr = sum((int(rng.integers(-3, 4)) * sp.Mul(*[atoms[i] ** int(rng.integers(0, 4)) for i in range(7)])
+                    for _ in range(3)), sp.Integer(0)) * (s1 - 2 * c2 * s2 + x)
+        out = reduce_trig(expr, pairs)
+        assert out == oracle(expr)
+        assert sp.degree(out, s1) <= 1 and sp.degree(out, s2) <= 1
+        a, b = rng.uniform(0, 6.3, 2)
+        at = {c1: np.cos(a), s1: np.sin(a), c2: np.cos(b), s2: np.sin(b), x: 0.7, y: -1.3}
+        assert abs(float(out.subs(at)) - float(expr.subs(at))) < 1e-9 * (1 + abs(float(expr.subs(at))))

@@ -38,6 +38,7 @@ emitter renders exactly that.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import sympy as sp
@@ -100,11 +101,11 @@ def reduce_trig(expr: sp.Expr, pairs: list[tuple[sp.Symbol, sp.Symbol]]) -> sp.E
     for c, s in pairs:
         if not expr.has(s):
             continue
-        poly = sp.Poly(expr, s)
-        out = sp.Integer(0)
-        for (deg,), coeff in poly.terms():
-            out += coeff * s ** (deg % 2) * (1 - c**2) ** (deg // 2)
-        expr = sp.expand(out)
+        reduced = []  # term by term (an expanded sum): cheaper than a Poly in s, the same polynomial
+        for term in sp.Add.make_args(expr):
+            coeff, deg = term.as_coeff_exponent(s)
+            reduced.append(coeff * s ** (deg % 2) * (1 - c**2) ** (deg // 2) if deg >= 2 else term)
+        expr = sp.expand(sp.Add(*reduced))
     return expr
 
 
@@ -201,9 +202,9 @@ class SymbolicModel:
         return syms
 
 
-def _only(sym: sp.Symbol, active: sp.Symbol | None) -> sp.Expr:
-    """The error symbol itself if it is the active one, else 0 (one derivative at a time)."""
-    return sym if sym == active else sp.Integer(0)
+def _unit_if(sym: sp.Symbol, active: sp.Symbol | None) -> sp.Integer:
+    """1 if ``sym`` is the active error symbol, else 0: its derivative (one derivative at a time)."""
+    return sp.Integer(1 if sym == active else 0)
 
 
 def _axis_symbols(ax: Axis) -> RotaryAxisSymbols:
@@ -256,67 +257,68 @@ class _Chain:
         return m.applyfunc(lambda e: reduce_trig(e, self.pairs))
 
     def _perturbation(self, r: RotaryAxisSymbols, active: sp.Symbol) -> tuple[sp.Matrix, sp.Matrix, sp.Expr]:
-        """Offset of the axis line [mm], its tilt [rad] and the zero error [rad] for the active symbol."""
+        """Per unit of the active symbol: offset of the axis line [mm], its tilt [rad] and the zero error [rad]."""
         names = _LOCATION[r.axis.letter]
         delta = sp.zeros(3, 1)
         eps = sp.zeros(3, 1)
-        delta[names[0][1]] = _only(r.location[0], active) * UM_TO_MM
-        delta[names[1][1]] = _only(r.location[1], active) * UM_TO_MM
-        eps[names[2][1]] = _only(r.location[2], active) * URAD_TO_RAD
-        eps[names[3][1]] = _only(r.location[3], active) * URAD_TO_RAD
-        return delta, eps, _only(r.zero, active) * URAD_TO_RAD
+        delta[names[0][1]] = _unit_if(r.location[0], active) * UM_TO_MM
+        delta[names[1][1]] = _unit_if(r.location[1], active) * UM_TO_MM
+        eps[names[2][1]] = _unit_if(r.location[2], active) * URAD_TO_RAD
+        eps[names[3][1]] = _unit_if(r.location[3], active) * URAD_TO_RAD
+        return delta, eps, _unit_if(r.zero, active) * URAD_TO_RAD
 
-    def rotary_motion(
-        self, r: RotaryAxisSymbols, x: sp.Matrix, active: sp.Symbol | None
-    ) -> tuple[sp.Matrix, sp.Matrix]:
-        """(moved point, rotation matrix) of rotary axis ``r``, perturbed by the active error only."""
+    def rotary_motion(self, r: RotaryAxisSymbols, x: sp.Matrix, dx: sp.Matrix,
+                      active: sp.Symbol | None) -> tuple[sp.Matrix, sp.Matrix, sp.Matrix, sp.Matrix]:
+        """Rotary axis ``r`` moving the point ``x``: (moved point, rotation, and their derivatives).
+
+        ``dx`` is the derivative of ``x`` with respect to the active error symbol at 0; the derivatives returned are
+        the same, at every symbol 0 (first order: the chain is differentiated pose-wise, forward, instead of building
+        it with the symbol and differentiating the whole expression).
+        """
         u = _unit(r.axis.direction)
         sigma = r.axis.sign
         c, s = r.cos, r.sin
-        perturbed = active is not None and (active in r.location or active == r.zero or active in r.motion)
-        if perturbed:
-            assert active is not None
-            delta, eps, e = self._perturbation(r, active)
-            u_act, q = u + eps.cross(u), r.pivot + delta
-            cos_phi, sin_phi = c - e * s, sigma * (s + e * c)
-        else:
-            u_act, q, cos_phi, sin_phi = u, r.pivot, c, sigma * s
-        k_mat = _cross_matrix(u_act)
-        rot = sp.eye(3) + sin_phi * k_mat + (1 - cos_phi) * k_mat * k_mat
-        moved = q + rot * (x - q)
-        if perturbed:
-            # error motion of the carried body, applied after the axis' own motion
-            d = sp.Matrix([_only(m, active) for m in r.motion[:3]]) * UM_TO_MM
-            w = sp.Matrix([_only(m, active) for m in r.motion[3:]]) * URAD_TO_RAD
-            moved = moved + d + w.cross(moved - r.pivot)
-            rot = rot + _cross_matrix(w) * rot
-        return moved, rot
+        k_mat = _cross_matrix(u)
+        rot = sp.eye(3) + sigma * s * k_mat + (1 - c) * k_mat * k_mat
+        moved = r.pivot + rot * (x - r.pivot)
+        if active is None or not (active in r.location or active == r.zero or active in r.motion):
+            return moved, rot, rot * dx, sp.zeros(3, 3)
+        # the axis line moved by delta, tilted by eps (u' = u + eps x u), the angle by e, all per unit of the symbol
+        delta, eps, e = self._perturbation(r, active)
+        dk = _cross_matrix(eps.cross(u))
+        drot = sigma * e * c * k_mat + sigma * s * dk + e * s * k_mat * k_mat + (1 - c) * (dk * k_mat + k_mat * dk)
+        dmoved = delta + drot * (x - r.pivot) + rot * (dx - delta)
+        # error motion of the carried body, applied after the axis' own motion
+        d = sp.Matrix([_unit_if(m, active) for m in r.motion[:3]]) * UM_TO_MM
+        w = sp.Matrix([_unit_if(m, active) for m in r.motion[3:]]) * URAD_TO_RAD
+        return moved, rot, dmoved + d + w.cross(moved - r.pivot), drot + _cross_matrix(w) * rot
 
     def linear_motion(self, ax: Axis, x: sp.Matrix) -> sp.Matrix:
         if self.commanded[ax.direction] is not ax:
             return x  # parallel secondary axis held at its reference position
         return x + ax.sign * self.lin_syms[ax.direction] * _unit(ax.direction)
 
-    def evaluate(self, active: sp.Symbol | None) -> tuple[sp.Matrix, sp.Matrix, sp.Matrix, sp.Matrix]:
-        """(ball point, nest point, workpiece rotation, tool rotation) in the machine frame."""
-        x = self.ball  # workpiece side: nest point, from the workpiece outward
-        rot_w = sp.eye(3)
-        for ax in self.structure.workpiece_axes:
+    def _side(self, axes: Sequence[Axis], x: sp.Matrix, active: sp.Symbol | None) -> tuple[sp.Matrix, ...]:
+        """(point, rotation, their derivatives) after moving ``x`` through ``axes`` in that order."""
+        dx, rot_all, drot_all = sp.zeros(3, 1), sp.eye(3), sp.zeros(3, 3)
+        for ax in axes:
             if ax.kind == "rotary":
-                x, rot = self.rotary_motion(self.rotary[ax.name], x, active)
-                rot_w = rot * rot_w
+                x, rot, dx, drot = self.rotary_motion(self.rotary[ax.name], x, dx, active)
+                rot_all, drot_all = rot * rot_all, drot * rot_all + rot * drot_all
             else:
                 x = self.linear_motion(ax, x)
+        return x, rot_all, dx, drot_all
+
+    def evaluate(self, active: sp.Symbol | None) -> tuple[sp.Matrix, ...]:
+        """(ball point, nest point, workpiece rotation, tool rotation) in the machine frame, then their derivatives
+        with respect to the active error symbol at 0 (zeros without one)."""
+        # workpiece side: the nest point, from the workpiece outward
+        nest, rot_w, dnest, drot_w = self._side(self.structure.workpiece_axes, self.ball, active)
         tool_rot = [a for a in self.structure.tool_axes if a.kind == "rotary"]
         y = (self.rotary[tool_rot[-1].name].pivot + self.tool) if tool_rot else self.ball
-        rot_t = sp.eye(3)  # tool side: ball point, from the tool back to the bed
-        for ax in reversed(self.structure.tool_axes):
-            if ax.kind == "rotary":
-                y, rot = self.rotary_motion(self.rotary[ax.name], y, active)
-                rot_t = rot * rot_t
-            else:
-                y = self.linear_motion(ax, y)
-        return y, x, rot_w, rot_t
+        # tool side: the ball point, from the tool back to the bed
+        ball, rot_t, dball, drot_t = self._side(list(reversed(self.structure.tool_axes)), y, active)
+        return ball, nest, rot_w, rot_t, dball, dnest, drot_w, drot_t
 
 
 def _solve_rtcp(chain: _Chain, r_nom: sp.Matrix) -> sp.Matrix:
@@ -344,16 +346,20 @@ class _Derivatives:
 
 def _derivatives(chain: _Chain, params: list[sp.Symbol], motions: list[sp.Symbol], lin_subs: dict,
                  rel_nom: sp.Matrix) -> _Derivatives:
-    """Differentiate the chain one error symbol at a time (the others are 0, so expressions stay small)."""
+    """Differentiate the chain one error symbol at a time (the others are 0, so expressions stay small).
+
+    Forward: each axis passes on its motion's derivative (:meth:`_Chain.rotary_motion`), so no expression
+    is built with the symbol in it and differentiated whole (the same polynomials, reduced, in half the time).
+    """
     jac_cols: list[sp.Matrix] = []
     ori_cols: list[sp.Matrix] = []
     motion_cols: list[sp.Matrix] = []
     motion_ori_cols: list[sp.Matrix] = []
     for sym in params + motions:
-        ball_act, nest_act, rot_w_act, rot_t_act = chain.evaluate(sym)
-        col = (ball_act - nest_act).diff(sym).subs(sym, 0).subs(lin_subs)
+        _, _, rot_w, rot_t, dball, dnest, drot_w, drot_t = chain.evaluate(sym)
+        col = (dball - dnest).subs(lin_subs)
         # orientation of the spindle frame relative to W: R_rel_act = (I + [ω]x) R_rel_nom
-        dm = (rot_w_act.T * rot_t_act).diff(sym).subs(sym, 0) * rel_nom.T
+        dm = (drot_w.T * rot_t + rot_w.T * drot_t) * rel_nom.T
         ori = sp.Matrix([dm[2, 1], dm[0, 2], dm[1, 0]])
         (motion_cols if sym in motions else jac_cols).append(col)
         (motion_ori_cols if sym in motions else ori_cols).append(ori)
@@ -398,7 +404,7 @@ def build_model(code: str | MachineStructure) -> SymbolicModel:
     param_syms = [s for r in ordered for s in r.location] + [r.zero for r in ordered]
     motion_syms = [m for r in ordered for m in r.motion]
 
-    ball_nom, nest_nom, rot_w, rot_t = chain.evaluate(None)
+    ball_nom, nest_nom, rot_w, rot_t = chain.evaluate(None)[:4]
     rot_w, rot_t = chain.reduce(rot_w), chain.reduce(rot_t)
     lin_solution = _solve_rtcp(chain, ball_nom - nest_nom)
     lin_subs = {chain.lin_vec[d]: lin_solution[d] for d in range(3)}

@@ -168,16 +168,16 @@ def identification_figure(results: dict[str, IdentificationResult], truth: Truth
             ci = res.ci95()
             mk, col = markers.get(meth, ("^", "tab:gray"))
             off = (i - (len(results) - 1) / 2) * 0.22
-            for j, name in enumerate(names):
-                q = res.parameters.index(name)
-                v = res.values[q]
-                if math.isfinite(v):
-                    ax.errorbar(x[j] + off, v, yerr=[[v - ci[q, 0]], [ci[q, 1] - v]], fmt=mk, color=col, ms=5,
-                                capsize=3, label=meth if j == 0 else None)
-                else:  # no value: a label at mid-height (axes coordinates), never a number
-                    ax.text(x[j] + off, 0.5, "not identifiable", transform=blended_transform_factory(
-                        ax.transData, ax.transAxes), fontsize=6.5, color="crimson", ha="center", va="center",
-                        rotation=90)
+            q = np.array([res.parameters.index(name) for name in names], dtype=int)
+            v = res.values[q]
+            ok = np.isfinite(v)
+            if ok.any():  # one errorbar call per method: the same markers, bars and caps, not one artist set each
+                ax.errorbar(x[ok] + off, v[ok], yerr=[v[ok] - ci[q[ok], 0], ci[q[ok], 1] - v[ok]], fmt=mk,
+                            color=col, ms=5, capsize=3, label=meth if ok[0] else None)
+            for j in np.flatnonzero(~ok):  # no value: a label at mid-height (axes coordinates), never a number
+                ax.text(x[j] + off, 0.5, "not identifiable", transform=blended_transform_factory(
+                    ax.transData, ax.transAxes), fontsize=6.5, color="crimson", ha="center", va="center",
+                    rotation=90)
         if truth is not None:
             ax.plot(x, [truth.values.get(n, 0.0) for n in names], "x", color="crimson", ms=8, mew=2, label="truth")
         ax.axhline(0, color="k", lw=0.6)

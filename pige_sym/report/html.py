@@ -13,6 +13,7 @@ from typing import Any
 
 from pige_sym.constants import VERSION as __version__
 from pige_sym.files import atomic_write_text, staged_folder
+from pige_sym.plotting import collector_paused
 from pige_sym.report.checkup_section import checkup_html
 from pige_sym.report.data import MeasurementReport, ReportData
 from pige_sym.report.estimate_used import estimate_used_html
@@ -61,14 +62,16 @@ def _write_into(data: ReportData, out: Path, drawn: Path, final: Path) -> None:
     ``final`` is where the folder will be: the page names the compensated programs there, never in the stage."""
     for rep in data.measurements:
         sub = out / rep.label
-        rep.figures = draw_figures(rep, drawn / rep.label)
+        with collector_paused():
+            rep.figures = draw_figures(rep, drawn / rep.label)
         text = rep.compensated_program_text
         if text is not None and data.program is not None:
             sub.mkdir(parents=True, exist_ok=True)
             target = sub / f"{data.program.stem}_compensated{data.program.suffix or '.mpf'}"
             atomic_write_text(target, text, newline="")
             rep.compensated_program = final / target.relative_to(out)
-    data.figures = draw_report_figures(data, drawn / "_report")
+    with collector_paused():
+        data.figures = draw_report_figures(data, drawn / "_report")
     if data.plan is not None:
         from pige_sym.report.plan_section import plan_section
 
