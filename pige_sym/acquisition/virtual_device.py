@@ -47,7 +47,8 @@ than the outage to each other):
 ``spike``       one record with ``SPIKE_UM`` (50 µm) added to one sensor, its CRC valid (a glitch the
                 framer cannot see; the acquisition must not let it move a window or a pose)
 ``duplicate``   one record sent twice in a row (same sequence number)
-``stall``       nothing sent for ``stall_s`` wall seconds (no sample lost)
+``stall``       nothing sent for ``stall_s`` wall seconds (no sample lost); with ``--await-hello``, nothing
+                sent until the client has reconnected (said hello again; at most max(``stall_s``, 10 s))
 ``disconnect``  the link is dropped after the client has read everything (pty: closed
                 and re-created under the same ``/dev/pts/N``; TCP: connection closed,
                 a new one accepted); the ``outage_s`` of samples during the outage are

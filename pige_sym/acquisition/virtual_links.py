@@ -24,15 +24,30 @@ from pige_sym.errors import AcquisitionError
 
 
 class DeviceLink:
-    """Device end of a link: a client connects, the device sends."""
+    """Device end of a link: a client connects, the device sends.
+
+    pyserial discards the input that arrived while it opened a port (``reset_input_buffer`` at the end of
+    ``open``), so bytes sent before a client has finished opening are lost, a record cut in two leaving its tail
+    as noise.  By default the device waits ``CONNECT_SETTLE_S`` after a client connects, which a client slowed
+    down for longer (a loaded machine) can outlast; with ``await_hello`` it sends nothing on a connection until
+    the client has sent a byte (a client that writes once it has opened the port, as the tests' does).
+    """
 
     url = ""
+    await_hello = False
+    heard = False  # the client of the current connection has sent a byte
 
     def connected(self) -> bool:
         raise NotImplementedError
 
     def wait_client(self, timeout_s: float) -> bool:
         deadline = time.monotonic() + timeout_s
+        if self.await_hello:
+            while not (self.connected() and self.heard):
+                if time.monotonic() >= deadline:
+                    return False
+                time.sleep(0.002)
+            return True
         while not self.connected():
             if time.monotonic() >= deadline:
                 return False
@@ -62,7 +77,8 @@ def pts_index(name: str) -> int | None:
 class PtyLink(DeviceLink):
     """A pseudo-terminal; the client opens the slave path (``/dev/pts/N``)."""
 
-    def __init__(self) -> None:
+    def __init__(self, await_hello: bool = False) -> None:
+        self.await_hello = await_hello
         self.master, self.name = self._new()
         self.url = self.name
 
@@ -80,10 +96,12 @@ class PtyLink(DeviceLink):
         p.register(self.master, select.POLLIN)
         events = p.poll(0)
         if any(ev & select.POLLHUP for _, ev in events):
+            self.heard = False
             return False
         if any(ev & select.POLLIN for _, ev in events):
             with contextlib.suppress(OSError):
-                os.read(self.master, 4096)  # the protocol has no commands: discard what the client sends
+                if os.read(self.master, 4096):  # the protocol has no commands: discard what the client sends
+                    self.heard = True
         return True
 
     def send(self, data: bytes) -> bool:
@@ -127,6 +145,7 @@ class PtyLink(DeviceLink):
         """Close the pty and create it again under the same name (like a cable pulled and plugged back)."""
         want = pts_index(self.name)
         os.close(self.master)
+        self.heard = False
         held: list[int] = []
         deadline = time.monotonic() + 10.0
         try:
@@ -158,7 +177,8 @@ class PtyLink(DeviceLink):
 class TcpLink(DeviceLink):
     """A TCP server on 127.0.0.1; the client opens ``socket://127.0.0.1:PORT``."""
 
-    def __init__(self, port: int = 0) -> None:
+    def __init__(self, port: int = 0, await_hello: bool = False) -> None:
+        self.await_hello = await_hello
         try:
             self.listener = socket.create_server(("127.0.0.1", port))
         except OSError as exc:
@@ -183,17 +203,20 @@ class TcpLink(DeviceLink):
                 return False
             conn.setblocking(False)
             self.conn = conn
+            self.heard = False
         readable, _, _ = select.select([self.conn], [], [], 0)
         if readable:
+            data: bytes | None
             try:
                 data = self.conn.recv(4096)  # the protocol has no commands: discard
             except BlockingIOError:
-                data = b"-"
+                data = None
             except OSError:
                 data = b""
-            if not data:
+            if data == b"":
                 self._close_conn()
                 return False
+            self.heard = self.heard or data is not None
         return True
 
     def send(self, data: bytes) -> bool:

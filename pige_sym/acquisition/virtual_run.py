@@ -28,7 +28,8 @@ from pige_sym.kernels import DEFAULT_MACHINE
 
 
 def run_device(cfg: DeviceConfig, *, tcp_port: int | None = None, truth_path: str | os.PathLike[str] | None = None,
-               announce: Callable[[str], None] = print, connect_timeout_s: float = 300.0) -> dict[str, Any]:
+               announce: Callable[[str], None] = print, connect_timeout_s: float = 300.0,
+               await_hello: bool = False) -> dict[str, Any]:
     """Run the virtual device until its program ends; return the truth record.
 
     Parameters
@@ -42,9 +43,13 @@ def run_device(cfg: DeviceConfig, *, tcp_port: int | None = None, truth_path: st
         Receives the port URL once the link exists (``pige rtest-sim`` prints it).
     connect_timeout_s : float [s]
         Longest wait for the first client.
+    await_hello : bool
+        Send nothing on a connection until the client has sent a byte (it has opened the port), instead of
+        waiting a fixed time (:class:`~pige_sym.acquisition.virtual_links.DeviceLink`).
     """
     run = DeviceRun(cfg, truth_path)
-    link: DeviceLink = TcpLink(tcp_port) if tcp_port is not None else PtyLink()
+    link: DeviceLink = (TcpLink(tcp_port, await_hello) if tcp_port is not None
+                        else PtyLink(await_hello))
     run.truth["port"] = link.url
     run.save()
     announce(link.url)
@@ -151,7 +156,11 @@ class DeviceRun:
         if special == "stall":
             self.injected["stall"] += 1
             self.save()
-            time.sleep(cfg.stall_s)
+            if link.await_hello:  # silent until the client, having timed out, has reconnected and said hello
+                link.heard = False
+                self.streaming = link.wait_client(max(cfg.stall_s, 10.0))
+            else:
+                time.sleep(cfg.stall_s)
             return
         link.drain()
         link.drop_client()

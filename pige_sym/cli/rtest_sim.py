@@ -52,7 +52,7 @@ def _run(args: argparse.Namespace) -> int:
     )
     signal.signal(signal.SIGTERM, _terminate)
     truth = run_device(cfg, tcp_port=args.tcp, truth_path=args.truth, announce=lambda url: print(url, flush=True),
-                       connect_timeout_s=args.connect_timeout)
+                       connect_timeout_s=args.connect_timeout, await_hello=args.await_hello)
     inj = truth["injected"]
     faults = ", ".join(f"{k} {inj[k]}" for k in FAULT_KINDS if inj[k])
     print(f"rtest-sim: {'program finished' if truth['finished'] else truth.get('stop_reason', 'stopped')}: "
@@ -103,4 +103,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--outage-s", type=float, default=0.5, help="device time lost by an injected disconnect [s]")
     p.add_argument("--linger", type=float, default=2.0, help="wait for a client that left [wall s]")
     p.add_argument("--connect-timeout", type=float, default=300.0, help="wait for the first client [wall s]")
+    p.add_argument("--await-hello", action="store_true",
+                   help="send nothing on a connection until the client has sent a byte (a client that says it has "
+                        "opened the port; pyserial discards what arrives while it opens)")
     p.set_defaults(handler=_run)
