@@ -376,7 +376,7 @@ def test_each_injected_fault_is_counted_and_never_reaches_a_row(tmp_path, kind) 
                     opener=_opener(dev.url))
     truth = json.loads(truth_path.read_text())
     inj = truth["injected"]
-    assert inj[kind] == 3
+    assert inj[kind] == 3, (s.format(), truth.get("stop_reason"), truth["sent"])
     assert s.completed and s.rows_written == 11, s.format()
     assert s.noise_bytes == inj["garbage_bytes"] and s.noise_runs == inj["garbage"]
     assert s.rejected.get("checksum", 0) == inj["checksum"]
@@ -738,7 +738,7 @@ def test_bad_devices_end_the_run_quickly_with_a_summary(tmp_path, behave, opts, 
 def test_cli_reconnect_timeout_exits_1_with_a_summary(tmp_path, capsys) -> None:
     out = tmp_path / "silent.csv"
     cmd = ["acquire", "--program", "cone-frustum", "--points", "4", "--out", str(out), "--no-progress",
-           "--timeout", "0.25", "--reconnect-timeout", "0.5"]
+           "--timeout", "0.25", "--reconnect-timeout", "1"]
     with _Server(lambda conn, stop: stop.wait(0.1) or conn.sendall(b"hello") or stop.wait(30)) as server:
         status = main([*cmd, "--port", server.url])
     captured = capsys.readouterr()
