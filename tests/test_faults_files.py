@@ -27,7 +27,7 @@ from terminal import as_from_a_terminal
 from pige_sym.cli.main import main
 from pige_sym.errors import FileFormatError
 from pige_sym.files import peek_input, read_input_bytes, staged_folder
-from testdata import refused_in_one_line
+from testdata import figures_not_drawn, refused_in_one_line
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 PNG_END = b"IEND\xaeB`\x82"
@@ -195,19 +195,10 @@ def test_read_only_output_folders_and_unreadable_inputs_for_a_real_user(inputs) 
 # ---------------------------------------------------------------------------------------------- report folder
 
 
-def _figures_not_drawn(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The report's figures are not drawn (the page's figure slots empty, every word unchanged): for a report whose
-    figures no assertion reads (they are drawn and checked in test_report.py)."""
-    import pige_sym.report.html as page
-
-    monkeypatch.setattr(page, "draw_figures", lambda rep, folder: [])
-    monkeypatch.setattr(page, "draw_report_figures", lambda data, folder: [])
-
-
 def test_report_replaces_an_earlier_report_only_with_force(inputs, tmp_path, capsys, monkeypatch) -> None:
     out = tmp_path / "rep"
     with monkeypatch.context() as earlier:  # the earlier report's page only; the one that replaces it is drawn
-        _figures_not_drawn(earlier)
+        figures_not_drawn(earlier)  # (figures drawn and checked in test_report.py)
         assert main(["report", str(inputs / "run.csv"), "--out", str(out)]) == 0
     first = (out / "report.html").read_bytes()
     (out / "notes.txt").write_text("mine")
@@ -336,7 +327,7 @@ def test_an_interrupt_lost_in_a_finaliser_still_ends_the_report_with_130(inputs,
         return text
 
     monkeypatch.setattr(html, "render_html", render_and_lose_an_interrupt)
-    _figures_not_drawn(monkeypatch)  # the interrupt comes after the figures, into the page: they are not drawn
+    figures_not_drawn(monkeypatch)  # the interrupt comes after the figures, into the page: they are not drawn
     out = tmp_path / "rep"
     code, err = run(capsys, "report", str(inputs / "run.csv"), "--out", str(out), "--no-figures")
     assert [type(e) for e in lost] == [KeyboardInterrupt]  # the interrupt was indeed swallowed on its way

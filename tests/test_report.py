@@ -18,7 +18,7 @@ from pige_sym.model.trajectories import cone_frustum, figure_eight
 from pige_sym.nc.program import make_rtest_program
 from pige_sym.report import ReportData, build_report, gather_report, write_report
 from pige_sym.simulation.simulator import random_pige, simulate
-from testdata import CHROMIUM, REPO, simulated_probe_file
+from testdata import CHROMIUM, REPO, figures_not_drawn, simulated_probe_file
 
 AC = "wC'A'bXYZ(C1)t"
 WEIRD = 'odd <b>&"name'
@@ -59,15 +59,11 @@ def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[ReportData, Path, s
     return data, path, path.read_text(encoding="utf-8")
 
 
-@pytest.fixture
-def figures_not_drawn(monkeypatch: pytest.MonkeyPatch) -> None:
-    """For a test that reads a report's words or JSON only: its figures are not drawn (the page's figure slots
-    empty; every table, sentence and JSON field unchanged).  The same kind of report, R-test with the diagnosis,
-    with and without a truth sidecar, is drawn, embedded and checked by the module's ``built`` report."""
-    import pige_sym.report.html as page
-
-    monkeypatch.setattr(page, "draw_figures", lambda rep, folder: [])
-    monkeypatch.setattr(page, "draw_report_figures", lambda data, folder: [])
+@pytest.fixture(name="figures_not_drawn")
+def _figures_not_drawn(monkeypatch: pytest.MonkeyPatch) -> None:
+    """For a test that reads a report's words or JSON only: its figures are not drawn.  The same kind of report,
+    R-test with the diagnosis, with and without a truth sidecar, is drawn, embedded and checked in ``built``."""
+    figures_not_drawn(monkeypatch)
 
 
 def test_report_is_self_contained(built: tuple[ReportData, Path, str]) -> None:
