@@ -19,7 +19,7 @@ import sqlalchemy as sa
 from checkup_sim import FREE, MACHINE, T0, TRUTH, checkup_file, checkup_program, full_calibration, pige
 
 from pige_sym.cli.main import main
-from testdata import refused_in_one_line
+from testdata import figures_not_drawn, refused_in_one_line
 
 TOL = Path(__file__).resolve().parents[1] / "examples" / "tolerances.json"
 
@@ -94,11 +94,7 @@ def test_reading_a_schema_1_history_changes_nothing_and_a_check_up_migrates_it(m
     report reads the file without drawing its figures: the trend plot's test below draws them.)"""
     import shutil
 
-    import pige_sym.report.html as page
-
-    monkeypatch.setattr(page, "draw_figures", lambda rep, folder: [])
-    monkeypatch.setattr(page, "draw_report_figures", lambda data, folder: [])
-
+    figures_not_drawn(monkeypatch)
     db = tmp_path / "v1.db"
     shutil.copy(machine["db"], db)
     _to_schema_1(db)
@@ -470,7 +466,8 @@ def test_the_check_up_program_time_against_its_moves(machine: dict) -> None:
     assert 60 < t.seconds < 120
 
 
-def test_the_report_of_a_machine_with_check_ups_has_their_trend_plot(machine: dict, tmp_path: Path, capsys) -> None:
+def test_the_report_of_a_machine_with_check_ups_has_their_trend_plot(machine: dict, tmp_path: Path, capsys,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     path = checkup_file(machine["program"], TRUTH, 77, tmp_path / "c.csv")
     code, _, _ = _run(capsys, "checkup", path, "--machine-id", "DMU-1", "--db", machine["db"], "--date",
                       (T0 + timedelta(days=300)).isoformat())
@@ -479,6 +476,7 @@ def test_the_report_of_a_machine_with_check_ups_has_their_trend_plot(machine: di
     page = (tmp_path / "rep" / "report.html").read_text()
     assert code == 0 and 'data-section="checkup"' in page and 'data-figure="checkup-trend"' in page
     assert (tmp_path / "rep" / "_report" / "checkup_trend.png").stat().st_size > 10_000
+    figures_not_drawn(monkeypatch)  # the same page with --json: its status is read, its figures were drawn above
     code, out, _ = _run(capsys, "report", "--history", "DMU-1", "--db", machine["db"], "--out", tmp_path / "r2",
                         "--json")
     assert code == 0

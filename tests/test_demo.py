@@ -17,7 +17,7 @@ pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="the virtual dev
 
 def test_demo_finds_the_hidden_effect_and_writes_everything(tmp_path, capsys):
     out = tmp_path / "demo"
-    status = main(["demo", "--out", str(out), "--quiet", "--time-scale", "400"])
+    status = main(["demo", "--out", str(out), "--quiet", "--time-scale", "2000"])
     text = capsys.readouterr().out
     assert status == 0, text
     assert "hidden effect: angular_error_C; diagnosis found: angular_error_C -> FOUND" in text
@@ -48,7 +48,7 @@ def test_demo_finds_the_hidden_effect_and_writes_everything(tmp_path, capsys):
 def test_demo_says_when_the_hidden_effect_is_missed(tmp_path, capsys):
     """Exit status 1 when the diagnosis does not name the hidden effect (here: none big enough to find)."""
     out = tmp_path / "demo"
-    status = main(["demo", "--out", str(out), "--quiet", "--time-scale", "400",
+    status = main(["demo", "--out", str(out), "--quiet", "--time-scale", "2000",
                    "--effect", "squareness_XY:gamma_urad=0.01"])
     text = capsys.readouterr().out
     assert status == 1

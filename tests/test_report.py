@@ -18,7 +18,7 @@ from pige_sym.model.trajectories import cone_frustum, figure_eight
 from pige_sym.nc.program import make_rtest_program
 from pige_sym.report import ReportData, build_report, gather_report, write_report
 from pige_sym.simulation.simulator import random_pige, simulate
-from testdata import CHROMIUM, REPO, simulated_probe_file
+from testdata import CHROMIUM, REPO, figures_not_drawn, simulated_probe_file
 
 AC = "wC'A'bXYZ(C1)t"
 WEIRD = 'odd <b>&"name'
@@ -57,6 +57,13 @@ def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[ReportData, Path, s
                          sobol_samples=256, tolerances=TOLERANCES, compare=(first, second), history="M-1", db=db)
     path = write_report(data, root / "out")
     return data, path, path.read_text(encoding="utf-8")
+
+
+@pytest.fixture(name="figures_not_drawn")
+def _figures_not_drawn(monkeypatch: pytest.MonkeyPatch) -> None:
+    """For a test that reads a report's words or JSON only: its figures are not drawn.  The same kind of report,
+    R-test with the diagnosis, with and without a truth sidecar, is drawn, embedded and checked in ``built``."""
+    figures_not_drawn(monkeypatch)
 
 
 def test_report_is_self_contained(built: tuple[ReportData, Path, str]) -> None:
@@ -151,7 +158,7 @@ def test_unidentifiable_parameters_are_flagged(tmp_path: Path) -> None:
     assert flagged >= 2
 
 
-def test_cli_json_and_exit_status(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_json_and_exit_status(tmp_path: Path, capsys: pytest.CaptureFixture[str], figures_not_drawn: None) -> None:
     csv = _simulate(tmp_path / "run.csv", 8, truth=False)
     assert main(["report", str(csv), "--out", str(tmp_path / "out"), "--json"]) == 0
     out = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
@@ -286,7 +293,7 @@ def test_the_answer_leads(built: tuple[ReportData, Path, str]) -> None:
     assert f"{comp.rms_before_um:.3g} → {comp.rms_after_um:.3g} µm" in answer
 
 
-def test_model_predicted_never_claims_its_own_leftover(tmp_path: Path) -> None:
+def test_model_predicted_never_claims_its_own_leftover(tmp_path: Path, figures_not_drawn: None) -> None:
     from pige_sym.report.lead import improvement, unexplained_rms_um
 
     csv = _simulate(tmp_path / "run.csv", 12, truth=False)
@@ -387,24 +394,32 @@ def test_cli_methods_match_the_report() -> None:
     assert sorted(METHODS) == sorted(PRIMARY_METHODS)
 
 
-def test_report_grades_a_test_plan(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[str]]:
+    """One run and the arguments of its Gauss–Newton report graded on a test plan; that report, with its PNG files
+    beside the page, in ``<run folder>/both``."""
+    root = tmp_path_factory.mktemp("planned")
+    csv = _simulate(root / "run.csv", 12)
+    args = ["report", str(csv), "--method", "gauss-newton", "--plan", "figure-eight"]
+    assert main([*args, "--out", str(root / "both")]) == 0
+    return root, args
+
+
+def test_report_grades_a_test_plan(planned: tuple[Path, list[str]]) -> None:
     """`pige report --plan` adds the predicted std per PIGE (graded test vs default cone) and the pose figure."""
-    csv = _simulate(tmp_path / "run.csv", 12)
-    out = tmp_path / "rep"
-    assert main(["report", str(csv), "--out", str(out), "--method", "gauss-newton", "--plan", "figure-eight"]) == 0
-    text = (out / "report.html").read_text(encoding="utf-8")
+    root, _ = planned
+    text = (root / "both" / "report.html").read_text(encoding="utf-8")
     section = re.search(r'<section data-section="plan".*?</section>', text, re.DOTALL)
     assert section is not None and 'data-figure="plan"' in section.group(0)
     for name in load_kernels(AC).LOCATION_PARAMETERS:
         assert f"<td>{name}</td>" in section.group(0)
 
 
-def test_no_figures_keeps_them_only_in_the_page(tmp_path: Path) -> None:
+def test_no_figures_keeps_them_only_in_the_page(planned: tuple[Path, list[str]], tmp_path: Path) -> None:
     """`--no-figures`: the page embeds every figure and no PNG is written beside it (the PNGs are not kept twice)."""
-    csv = _simulate(tmp_path / "run.csv", 10)
-    assert main(["report", str(csv), "--out", str(tmp_path / "both"), "--method", "gauss-newton"]) == 0
-    assert main(["report", str(csv), "--out", str(tmp_path / "page"), "--method", "gauss-newton", "--no-figures"]) == 0
-    pngs = sorted(p.name for p in (tmp_path / "both").rglob("*.png"))
+    root, args = planned
+    assert main([*args, "--out", str(tmp_path / "page"), "--no-figures"]) == 0
+    pngs = sorted(p.name for p in (root / "both").rglob("*.png"))
     assert pngs and not list((tmp_path / "page").rglob("*.png"))
     page = (tmp_path / "page" / "report.html").read_text(encoding="utf-8")
     assert page.count("data:image/png;base64,") == len(pngs) and ".png)" not in page

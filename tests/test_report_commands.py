@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 
 from pige_sym.cli.main import main
-from testdata import REPO, simulated_probe_file
+from testdata import REPO, figures_not_drawn, simulated_probe_file
 
 AC = "wC'A'bXYZ(C1)t"
 TOLERANCES = REPO / "examples" / "tolerances.json"
@@ -35,10 +35,7 @@ def _figures_not_drawn(monkeypatch: pytest.MonkeyPatch) -> None:
     """These tests read the pages' commands and words, and run the commands: the figures, 60 % of a report's CPU
     (drawn, embedded and checked by test_report.py, test_report_print.py and test_maps.py), are left out of the
     reports made here (the pages' figure slots empty; every command and sentence unchanged)."""
-    import pige_sym.report.html as page
-
-    monkeypatch.setattr(page, "draw_figures", lambda rep, folder: [])
-    monkeypatch.setattr(page, "draw_report_figures", lambda data, folder: [])
+    figures_not_drawn(monkeypatch)
 
 
 def _commands(page: str) -> list[str]:

@@ -11,7 +11,7 @@ import pytest
 from pige_sym.cli.main import main
 from pige_sym.report import gather_report, write_report
 from pige_sym.simulation.simulator import random_pige
-from testdata import REPO
+from testdata import REPO, figures_not_drawn
 
 AC = "wC'A'bXYZ(C1)t"
 TOLERANCES = REPO / "examples" / "tolerances.json"
@@ -90,7 +90,8 @@ def test_one_setup_names_what_it_cannot_determine_and_json_carries_the_joint(fou
         v is None for v in diag["pige"].values())
 
 
-def test_mixed_rtest_and_ballbar_and_a_moved_setup_is_named(four_setups, tmp_path) -> None:
+def test_mixed_rtest_and_ballbar_and_a_moved_setup_is_named(four_setups, tmp_path, monkeypatch) -> None:
+    figures_not_drawn(monkeypatch)  # words only: the R-test and joint figures are drawn in test_report.py and above
     paths, truth = four_setups
     moved = _setup(tmp_path, "tangential", "C", -20.0, 9, _pige_text(truth | {"EX0C": truth["EX0C"] + 8.0}))
     rtest = tmp_path / "rtest.csv"

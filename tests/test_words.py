@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from pige_sym.cli.main import build_parser, main
-from testdata import REPO
+from testdata import REPO, figures_not_drawn
 
 AC = "wC'A'bXYZ(C1)t"
 TOLERANCES = REPO / "examples" / "tolerances.json"
@@ -116,7 +116,9 @@ def test_a_probe_program_counts_its_contacts_per_pose_once(tmp_path: Path, capsy
     assert "155 contacts (5 per pose)" in printed and "5-5" not in printed
 
 
-def test_a_history_report_with_tolerances_judges_the_last_run(readme_run: Path, tmp_path: Path) -> None:
+def test_a_history_report_with_tolerances_judges_the_last_run(readme_run: Path, tmp_path: Path,
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    figures_not_drawn(monkeypatch)  # words only: the trend figure is drawn and checked in test_report.py
     db = f"sqlite:///{tmp_path / 'history.db'}"
     assert main(["simulate", "--machine", AC, "--pige", "EX0C=0.4,EY0C=-0.3,EB0A=2", "--seed", "2", "--out",
                  str(tmp_path / "after.csv")]) == 0

@@ -68,6 +68,17 @@ def load_reference(path: Path) -> tuple[dict[str, str], dict[str, np.ndarray], d
     return meta, cols, truth
 
 
+def figures_not_drawn(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The reports made while ``monkeypatch`` holds draw no figure (the page's figure slots empty; every table,
+    sentence, command and JSON field unchanged): for a test that reads a report's words or JSON only, of a kind
+    whose figures another test draws and checks (test_report.py, test_report_print.py, test_report_joint.py,
+    test_maps.py).  A figure is 60-90 % of a report's CPU."""
+    import pige_sym.report.html as page
+
+    monkeypatch.setattr(page, "draw_figures", lambda rep, folder: [])
+    monkeypatch.setattr(page, "draw_report_figures", lambda data, folder: [])
+
+
 def simulated_probe_file(folder: Path, seed: int, effect: str, *extra: str) -> Path:
     """``folder/probe.csv``: a LinuxCNC probing program, the virtual machine's log of it (``seed``, ``effect``,
     ``extra`` simulate options) and its import, as a user makes them."""

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pige_sym.errors import InputError
-from pige_sym.identification.joint import ballbar_block
+from pige_sym.identification.joint import Block, ballbar_block
 from pige_sym.identification.spectrum import solve_scaled
 from pige_sym.kernels import load_kernels
 from pige_sym.measurements.ballbar import SETUPS
@@ -70,11 +70,19 @@ def setup_label(s: BallbarSetup) -> str:
     return f"{s.kind} {s.axis}" + (f" ({', '.join(held)})" if s.axis[0] == "C" else "")
 
 
-def evaluate(machine: str, setups: list[BallbarSetup], noise_um: float = 1.0) -> SetupSet:
-    """Rank and predicted standard errors of a set of setups (module docstring)."""
+def _block(machine: str, setup: BallbarSetup) -> Block:
+    """The identification's rows of one setup on the nominal machine, without noise (its design matrix)."""
+    return ballbar_block(simulate_ballbar(machine, setup, pige={}, noise_um=0.0), setup_label(setup), False)
+
+
+def evaluate(machine: str, setups: list[BallbarSetup], noise_um: float = 1.0,
+             blocks: list[Block] | None = None) -> SetupSet:
+    """Rank and predicted standard errors of a set of setups (module docstring); ``blocks``: their rows
+    (:func:`_block`, one per setup, in order) when already computed."""
     kern = load_kernels(machine)
     names = list(kern.LOCATION_PARAMETERS)
-    blocks = [ballbar_block(simulate_ballbar(machine, s, pige={}, noise_um=0.0), setup_label(s), False) for s in setups]
+    if blocks is None:
+        blocks = [_block(machine, s) for s in setups]
     q = len(blocks)
     rows = []
     for i, b in enumerate(blocks):
@@ -97,9 +105,11 @@ def plan_setups(machine: str, *, target: float, noise_um: float = 1.0, max_setup
                 tilt_deg: float = -45.0) -> tuple[SetupSet | None, list[SetupSet]]:
     """The smallest set of setups whose worst predicted std is within ``target``, and the best of each size."""
     cands = candidate_setups(machine, tilt_deg)
+    rows = [_block(machine, s) for s in cands]  # each candidate's rows once, not once per set that holds it
     best_by_size: list[SetupSet] = []
     for size in range(1, max_setups + 1):
-        sets = [evaluate(machine, list(c), noise_um) for c in itertools.combinations(cands, size)]
+        sets = [evaluate(machine, [cands[i] for i in c], noise_um, [rows[i] for i in c])
+                for c in itertools.combinations(range(len(cands)), size)]
         best = min(sets, key=lambda s: (-s.determined, -s.rank, s.worst_std))
         best_by_size.append(best)
         if best.determined == best.n_parameters and best.worst_std <= target:

@@ -15,9 +15,11 @@ generated kernels' first-order model).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
-from pige_sym.codegen.machine_code import parse_machine_code
+from pige_sym.codegen.machine_code import MachineStructure, parse_machine_code
 from pige_sym.errors import InputError
 
 _DIRECTION = {"A": 0, "B": 1, "C": 2}
@@ -40,6 +42,12 @@ def _axis_line(axis: str, values: dict[str, float], pivot: np.ndarray) -> tuple[
     return pivot + delta, direction / np.linalg.norm(direction), values.get(f"E{axis[0]}0{axis}", 0.0) * 1e-6
 
 
+@lru_cache(maxsize=64)
+def _structure(machine: str) -> MachineStructure:
+    """The parsed machine code, remembered (immutable; a ballbar plan asks again for every setup it tries)."""
+    return parse_machine_code(machine)
+
+
 def table_point(machine: str, angles_deg: np.ndarray, point_mm: np.ndarray, values: dict[str, float] | None = None,
                 pivots_mm: dict[str, np.ndarray] | None = None) -> np.ndarray:
     """True machine position of a table point at each pose, shape=(n, 3) [mm] (module docstring).
@@ -56,12 +64,13 @@ def table_point(machine: str, angles_deg: np.ndarray, point_mm: np.ndarray, valu
     pivots_mm : dict of axis to (3,) [mm], optional
         Nominal pivots (default: every axis line through the origin).
     """
-    st = parse_machine_code(machine)
+    st = _structure(machine)
     if st.tool_axes and any(a.kind == "rotary" for a in st.tool_axes):
         raise InputError(f"{st.canonical}: the exact table model needs every rotary axis on the workpiece side")
     order = [a.name for a in st.rotary_axes]
     a = np.atleast_2d(np.asarray(angles_deg, dtype=float))
-    x = np.tile(np.asarray(point_mm, dtype=float), (a.shape[0], 1))
+    x = np.empty((a.shape[0], 3))
+    x[:] = np.asarray(point_mm, dtype=float)  # one row per pose (np.tile's bookkeeping cost more than the work)
     for ax in (w.name for w in st.workpiece_axes if w.kind == "rotary"):  # from the workpiece towards the bed
         pivot = np.asarray((pivots_mm or {}).get(ax, np.zeros(3)), dtype=float)
         c, u, zero = _axis_line(ax, values or {}, pivot) if values else (pivot, np.eye(3)[_DIRECTION[ax[0]]], 0.0)
