@@ -42,16 +42,12 @@ class DeviceLink:
 
     def wait_client(self, timeout_s: float) -> bool:
         deadline = time.monotonic() + timeout_s
-        if self.await_hello:
-            while not (self.connected() and self.heard):
-                if time.monotonic() >= deadline:
-                    return False
-                time.sleep(0.002)
-            return True
-        while not self.connected():
+        while not (self.connected() and (self.heard or not self.await_hello)):
             if time.monotonic() >= deadline:
                 return False
-            time.sleep(0.01)
+            time.sleep(0.002 if self.await_hello else 0.01)
+        if self.await_hello:
+            return True
         time.sleep(CONNECT_SETTLE_S)  # let the client finish opening (pyserial flushes its input on open)
         return self.connected()
 

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -81,9 +81,10 @@ class Series:
         return Series(self.machine_id, self.name, self.values[keep], self.variances[keep], self.segments[keep],
                       [k for k, r in zip(self.kinds, self.recent, strict=True) if not r])
 
-    @property
+    @cached_property
     def dof(self) -> int:
-        """Degrees of freedom of the scatter: runs less segments (a segment of one run has none)."""
+        """Degrees of freedom of the scatter: runs less segments (a segment of one run has none); counted once (a
+        series is built whole and never changed, and the posteriors ask for it many times)."""
         return int(self.values.size - np.unique(self.segments).size) if self.values.size else 0
 
 
@@ -226,8 +227,7 @@ def posteriors(targets: list[Series], population: list[Series]) -> dict[str, Pos
     """
     tau2 = grid_for(population)
     prior = _prior(tau2.size)  # (θ, G)
-    dof = {id(s): s.dof for s in population}
-    informative = [s for s in population if dof[id(s)] > 0]
+    informative = [s for s in population if s.dof > 0]
     logl = {id(s): log_likelihood(s, tau2) for s in informative}
     marginal = {}
     for k, v in logl.items():  # log Σ_g π(g|θ) L(g), θ = (ν₀, s₀²) flattened
@@ -246,5 +246,5 @@ def posteriors(targets: list[Series], population: list[Series]) -> dict[str, Pos
         fleet = [s for s in others if s.machine_id != t.machine_id]
         out[t.name] = Posterior(tau2, w / w.sum(), int(t.values.size), t.dof, len(others) - len(fleet),
                                 len({s.machine_id for s in fleet}), _runs(fleet), len(others),
-                                sum(dof[id(s)] for s in others), float(hyper @ nu))
+                                sum(s.dof for s in others), float(hyper @ nu))
     return out
